@@ -1,0 +1,139 @@
+//! `arx:A;B;K` model strings (SPEC §3) and the ideal ARX plant of `--plant arx:...`.
+//!
+//! `arx:-1.8,0.81;-0.02,-0.01;1` is A = 1 − 1.8 q⁻¹ + 0.81 q⁻², B = −0.02 − 0.01 q⁻¹, k = 1:
+//! `y(t) = 1.8 y(t−1) − 0.81 y(t−2) − 0.02 u(t−1) − 0.01 u(t−2)`, with y the temperature minus
+//! the ambient and u the duty in [0, 1]. An optional fourth field gives C for the controller's
+//! T-filter: `arx:A;B;K;C`.
+
+use anyhow::{anyhow, bail, Result};
+use hter::control::model::{Model, MAX_K, MAX_NA, MAX_NB, MAX_NC};
+
+/// Parses `arx:A;B;K[;C]`.
+pub fn parse(spec: &str) -> Result<Model> {
+    let body = spec.strip_prefix("arx:").ok_or_else(|| anyhow!("model '{spec}' must start with 'arx:'"))?;
+    let parts: Vec<&str> = body.split(';').collect();
+    if !(3..=4).contains(&parts.len()) {
+        bail!("model '{spec}' must be arx:A;B;K (coefficients comma-separated, K the delay in samples)");
+    }
+    let coeffs = |name: &str, s: &str, max: usize, allow_empty: bool| -> Result<Vec<f32>> {
+        let s = s.trim();
+        if s.is_empty() {
+            return if allow_empty { Ok(vec![]) } else { bail!("model '{spec}': {name} is empty") };
+        }
+        let v = s
+            .split(',')
+            .map(|x| {
+                let v: f64 = x.trim().parse().map_err(|_| anyhow!("model '{spec}': '{}' in {name} is not a number", x.trim()))?;
+                if !v.is_finite() {
+                    bail!("model '{spec}': {name} has a non-finite coefficient");
+                }
+                Ok(v as f32)
+            })
+            .collect::<Result<Vec<f32>>>()?;
+        if v.len() > max {
+            bail!("model '{spec}': {name} has {} coefficients, at most {max} are supported", v.len());
+        }
+        Ok(v)
+    };
+    let a = coeffs("A", parts[0], MAX_NA, false)?;
+    let b = coeffs("B", parts[1], MAX_NB, false)?;
+    let k: usize = parts[2].trim().parse().map_err(|_| anyhow!("model '{spec}': delay K '{}' is not a whole number", parts[2].trim()))?;
+    if !(1..=MAX_K).contains(&k) {
+        bail!("model '{spec}': delay K must be 1..={MAX_K}, got {k}");
+    }
+    let c = match parts.get(3) {
+        Some(s) => coeffs("C", s, MAX_NC, true)?,
+        None => vec![],
+    };
+    Model::new(&a, &b, &c, k).map_err(|e| anyhow!("model '{spec}': {e:?}"))
+}
+
+/// The ideal ARX plant: y = temperature − ambient, exact measurement, duty applied as is.
+#[derive(Clone, Debug)]
+pub struct ArxPlant {
+    model: Model,
+    ambient_c: f64,
+    y: Vec<f64>, // y(t), y(t−1), …
+    u: Vec<f64>, // u(t−1), u(t−2), …
+}
+
+impl ArxPlant {
+    /// At steady state holding `temp_c`: past y and u at their steady values. Fails if the
+    /// model has no static gain or the steady duty lies outside [0, 1].
+    pub fn at_steady_state(model: Model, ambient_c: f64, temp_c: f64) -> Result<ArxPlant> {
+        let a1 = 1.0 + model.a[..model.na].iter().map(|&x| f64::from(x)).sum::<f64>();
+        let b1: f64 = model.b[..model.nb].iter().map(|&x| f64::from(x)).sum();
+        let y_ss = temp_c - ambient_c;
+        let u_ss = if y_ss == 0.0 {
+            0.0
+        } else if b1.abs() > 1e-12 {
+            y_ss * a1 / b1
+        } else {
+            bail!("the ARX plant has zero static gain and cannot hold {temp_c} °C at {ambient_c} °C ambient");
+        };
+        if !(0.0..=1.0).contains(&u_ss) {
+            bail!("the ARX plant cannot hold {temp_c} °C at {ambient_c} °C ambient: steady duty would be {u_ss:.3}");
+        }
+        Ok(ArxPlant { model, ambient_c, y: vec![y_ss; model.na + 1], u: vec![u_ss; model.nb + model.k] })
+    }
+
+    /// Temperature now, °C.
+    pub fn temp_c(&self) -> f64 {
+        self.ambient_c + self.y[0]
+    }
+
+    /// Applies duty `u` (clipped to [0, 1]) for one sample and advances y.
+    pub fn advance(&mut self, u: f64) {
+        let m = &self.model;
+        self.u.rotate_right(1);
+        self.u[0] = u.clamp(0.0, 1.0);
+        let mut y = 0.0;
+        for i in 0..m.na {
+            y -= f64::from(m.a[i]) * self.y[i];
+        }
+        for i in 0..m.nb {
+            y += f64::from(m.b[i]) * self.u[m.k + i - 1];
+        }
+        self.y.rotate_right(1);
+        self.y[0] = y;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_the_spec_example() {
+        let m = parse("arx:-1.8,0.81;-0.02,-0.01;1").unwrap();
+        assert_eq!((m.na, m.nb, m.k, m.nc), (2, 2, 1, 0));
+        assert_eq!(&m.a[..2], &[-1.8, 0.81]);
+        assert_eq!(&m.b[..2], &[-0.02, -0.01]);
+        let m = parse("arx:-0.9;0.1;2;0.5").unwrap();
+        assert_eq!((m.k, m.nc, m.c[0]), (2, 1, 0.5));
+    }
+
+    #[test]
+    fn rejects_malformed_models() {
+        for bad in ["-1.8;1;1", "arx:-1.8;1", "arx:-1.8;x;1", "arx:-1.8;1;0", "arx:;1;1", "arx:nan;1;1", "arx:1,2,3,4,5;1;1"] {
+            let e = parse(bad).unwrap_err().to_string();
+            assert!(!e.contains('\n'), "{e}");
+        }
+    }
+
+    #[test]
+    fn steady_state_holds_and_the_equation_is_the_spec_one() {
+        let m = parse("arx:-1.8,0.81;-0.02,-0.01;1").unwrap();
+        // A(1) = 0.01, B(1) = −0.03: holding 4 °C at 28 °C ambient needs u = −24·0.01/−0.03 = 0.8.
+        let mut p = ArxPlant::at_steady_state(m, 28.0, 4.0).unwrap();
+        for _ in 0..50 {
+            p.advance(0.8);
+        }
+        assert!((p.temp_c() - 4.0).abs() < 1e-4);
+        // One step at u = 1 from that steady state: y(t+1) = 1.8·(−24) − 0.81·(−24) − 0.02·1 − 0.01·0.8
+        let mut p = ArxPlant::at_steady_state(m, 28.0, 4.0).unwrap();
+        p.advance(1.0);
+        assert!((p.temp_c() - (28.0 + 1.8 * -24.0 - 0.81 * -24.0 - 0.02 * 1.0 - 0.01 * 0.8)).abs() < 1e-5);
+        assert!(ArxPlant::at_steady_state(m, 28.0, -30.0).is_err());
+    }
+}

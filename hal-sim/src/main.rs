@@ -1,0 +1,389 @@
+//! The `hter` command line (SPEC §3). `hter` alone runs a short demo.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+use hal_sim::plant::Load;
+use hal_sim::scenario::Scenario;
+use hal_sim::sim::{self, ControllerChoice, ControllerSpec, PlantChoice, SimOptions, SimOutput};
+use hal_sim::{identify_cmd, plot};
+use hter::rtd::Rtd;
+use hter::units::{Celsius, Ohms};
+
+/// Adaptive control of a thermoelectric (Peltier) vaccine carrier: simulate, identify, convert.
+#[derive(Parser, Debug)]
+#[command(name = "hter", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Run a closed-loop scenario: the firmware's per-sample step against the plant model.
+    Sim(SimArgs),
+    /// Identify an ARX/ARMAX model of the carrier from a logged run (CSV).
+    Identify(identify_cmd::IdentifyArgs),
+    /// Convert between RTD resistance and temperature (IEC 60751).
+    Rtd(RtdArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct SimArgs {
+    /// Scenario name (step, piecewise, half-load, disturbance) or a JSON scenario file.
+    #[arg(long, default_value = "step")]
+    scenario: String,
+    /// Controller.
+    #[arg(long, value_enum, default_value = "pi")]
+    controller: ControllerChoice,
+    /// Plant: hter1 (aluminium container), hter2 (stainless steel), or an ideal ARX model
+    /// arx:A;B;K (y = temperature − ambient, u = duty).
+    #[arg(long, default_value = "hter1")]
+    plant: String,
+    /// Fixed model for gmvc/igmvc/gpc, arx:A;B;K[;C] (without it they are self-tuning).
+    #[arg(long)]
+    model: Option<String>,
+    /// GPC: first predicted sample in the cost.
+    #[arg(long)]
+    n1: Option<usize>,
+    /// GPC: last predicted sample in the cost (≤ 30).
+    #[arg(long)]
+    n2: Option<usize>,
+    /// GPC: control horizon (≤ 5).
+    #[arg(long)]
+    nu: Option<usize>,
+    /// GPC and IGMVC: weight on the control increment (≥ 0).
+    #[arg(long, allow_negative_numbers = true)]
+    lambda: Option<f64>,
+    /// GMVC: output weight P.
+    #[arg(long, allow_negative_numbers = true)]
+    p_weight: Option<f64>,
+    /// GMVC: reference weight R.
+    #[arg(long, allow_negative_numbers = true)]
+    r_weight: Option<f64>,
+    /// GMVC: control weight S (≥ 0).
+    #[arg(long, allow_negative_numbers = true)]
+    s_weight: Option<f64>,
+    /// Water load: full (100 ml) or half (50 ml).
+    #[arg(long, value_enum, default_value = "full")]
+    load: LoadArg,
+    /// Ambient temperature, °C.
+    #[arg(long, default_value_t = 28.0, allow_negative_numbers = true)]
+    ambient: f64,
+    /// Duration, s (default: the scenario's own).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Seed of the measurement noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Write the trace as CSV (one row per control sample).
+    #[arg(long)]
+    csv: Option<PathBuf>,
+    /// Plot temperature, setpoint and duty to a .png or .svg file.
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    /// Print the metrics as one JSON object instead of the summary.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum LoadArg {
+    Full,
+    Half,
+}
+
+#[derive(clap::Args, Debug)]
+#[command(group(clap::ArgGroup::new("input").required(true).args(["ohms", "celsius"])))]
+struct RtdArgs {
+    /// Resistance to convert, Ω.
+    #[arg(long, allow_negative_numbers = true)]
+    ohms: Option<f64>,
+    /// Temperature to convert, °C.
+    #[arg(long, allow_negative_numbers = true)]
+    celsius: Option<f64>,
+    /// Nominal resistance at 0 °C: 100 (Pt100) or 1000 (Pt1000).
+    #[arg(long, default_value_t = 100)]
+    r0: u32,
+    /// Print one JSON object.
+    #[arg(long)]
+    json: bool,
+}
+
+fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) {
+                let _ = e.print();
+                return ExitCode::SUCCESS;
+            }
+            // clap's own message can span lines; keep the first, which names the problem.
+            let msg = e.to_string();
+            let first = msg.lines().next().unwrap_or("invalid arguments").trim_start_matches("error: ");
+            eprintln!("error: {first} (see 'hter --help')");
+            return ExitCode::from(2);
+        }
+    };
+    let result = match cli.command {
+        None => demo(),
+        Some(Command::Sim(a)) => sim_cmd(&a),
+        Some(Command::Identify(a)) => identify_cmd::run(&a),
+        Some(Command::Rtd(a)) => rtd_cmd(&a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", format!("{e:#}").replace('\n', " "));
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn finite(name: &str, x: f64) -> Result<f64> {
+    if x.is_finite() {
+        Ok(x)
+    } else {
+        bail!("--{name} must be a finite number, got {x}")
+    }
+}
+
+fn sim_options(a: &SimArgs) -> Result<SimOptions> {
+    let scenario = Scenario::resolve(&a.scenario)?;
+    let duration_s = match a.duration {
+        Some(d) => finite("duration", d)?,
+        None => scenario.duration_s,
+    };
+    let mut controller = ControllerSpec::new(a.controller);
+    if let Some(m) = &a.model {
+        controller.model = Some(hal_sim::arx::parse(m)?);
+    }
+    if let Some(n) = a.n1 {
+        controller.gpc.n1 = n;
+    }
+    if let Some(n) = a.n2 {
+        controller.gpc.n2 = n;
+    }
+    if let Some(n) = a.nu {
+        controller.gpc.nu = n;
+    }
+    if let Some(l) = a.lambda {
+        let l = finite("lambda", l)?;
+        if l < 0.0 {
+            bail!("--lambda must be ≥ 0, got {l}");
+        }
+        controller.gpc.lambda = l as f32;
+        controller.igmvc.lambda = l as f32;
+    }
+    let g = &controller.gpc;
+    if g.n1 < 1 || g.n2 < g.n1 || g.n2 > hter::control::gpc::MAX_N2 {
+        bail!("GPC horizons need 1 ≤ N1 ≤ N2 ≤ {}, got N1 = {}, N2 = {}", hter::control::gpc::MAX_N2, g.n1, g.n2);
+    }
+    if g.nu < 1 || g.nu > hter::control::gpc::MAX_NU || g.nu > g.n2 {
+        bail!("GPC control horizon needs 1 ≤ Nu ≤ min(N2, {}), got Nu = {}", hter::control::gpc::MAX_NU, g.nu);
+    }
+    if let Some(p) = a.p_weight {
+        controller.gmvc.p = finite("p-weight", p)? as f32;
+        if p == 0.0 {
+            bail!("--p-weight must not be 0");
+        }
+    }
+    if let Some(r) = a.r_weight {
+        controller.gmvc.r = finite("r-weight", r)? as f32;
+    }
+    if let Some(sw) = a.s_weight {
+        let sw = finite("s-weight", sw)?;
+        if sw < 0.0 {
+            bail!("--s-weight must be ≥ 0, got {sw}");
+        }
+        controller.gmvc.s = sw as f32;
+    }
+    Ok(SimOptions {
+        scenario,
+        controller,
+        plant: PlantChoice::parse(&a.plant)?,
+        load: match a.load {
+            LoadArg::Full => Load::Full,
+            LoadArg::Half => Load::Half,
+        },
+        ambient_c: finite("ambient", a.ambient)?,
+        duration_s,
+        seed: a.seed,
+    })
+}
+
+fn sim_cmd(a: &SimArgs) -> Result<()> {
+    let opts = sim_options(a)?;
+    let out = sim::run(&opts)?;
+    if let Some(path) = &a.csv {
+        write_csv(path, &out)?;
+    }
+    if let Some(path) = &a.plot {
+        plot_run(path, &opts, &out)?;
+    }
+    if a.json {
+        println!("{}", serde_json::to_string(&out.metrics)?);
+    } else {
+        print_summary(&opts, &out);
+        if let Some(p) = &a.csv {
+            println!("trace written to {}", p.display());
+        }
+        if let Some(p) = &a.plot {
+            println!("plot written to {}", p.display());
+        }
+    }
+    Ok(())
+}
+
+fn write_csv(path: &std::path::Path, out: &SimOutput) -> Result<()> {
+    let mut w = csv::Writer::from_path(path).with_context(|| format!("cannot write '{}'", path.display()))?;
+    for r in &out.rows {
+        w.serialize(r)?;
+    }
+    w.flush().with_context(|| format!("cannot write '{}'", path.display()))?;
+    Ok(())
+}
+
+fn plot_run(path: &std::path::Path, opts: &SimOptions, out: &SimOutput) -> Result<()> {
+    let minutes = |t: f64| t / 60.0;
+    let pts = |f: &dyn Fn(&sim::Row) -> f64| out.rows.iter().map(|r| (minutes(r.t_s), f(r))).collect();
+    let temp = plot::Panel {
+        title: "Load temperature".into(),
+        y_label: "°C".into(),
+        series: vec![
+            plot::Series { name: "setpoint".into(), points: pts(&|r| r.setpoint_c) },
+            plot::Series { name: "true load".into(), points: pts(&|r| r.true_temp_c) },
+            plot::Series { name: "measured (filtered)".into(), points: pts(&|r| r.temp_c) },
+            plot::Series { name: "2 °C limit".into(), points: pts(&|_| 2.0) },
+        ],
+        y_range: None,
+    };
+    let duty = plot::Panel {
+        title: "SSR duty".into(),
+        y_label: "duty".into(),
+        series: vec![plot::Series { name: "duty".into(), points: pts(&|r| r.duty) }],
+        y_range: Some((-0.02, 1.02)),
+    };
+    let title = format!(
+        "{} — {} on {}, {:?} load, {} °C ambient",
+        opts.scenario.name,
+        out.metrics.controller,
+        opts.plant.name(),
+        opts.scenario.load.unwrap_or(opts.load),
+        opts.ambient_c
+    );
+    plot::panels(path, &title, "time (min)", &[temp, duty])
+}
+
+fn print_summary(opts: &SimOptions, out: &SimOutput) {
+    let m = &out.metrics;
+    println!("scenario    {} — {}", opts.scenario.name, opts.scenario.description);
+    println!(
+        "plant       {}, {:?} load, ambient {} °C; controller {}; Ts = {} s",
+        opts.plant.name(),
+        opts.scenario.load.unwrap_or(opts.load),
+        opts.ambient_c,
+        m.controller,
+        out.ts_s
+    );
+    println!("IAE                         {:10.1} °C·s", m.iae);
+    match m.settle_time_s {
+        Some(s) => println!("settle time (±0.5 °C)       {:10.0} s", s),
+        None => println!("settle time (±0.5 °C)          never"),
+    }
+    println!("max |error| after settling  {:10.2} °C", m.max_abs_error_after_settle_c);
+    println!("steady-state |error|        {:10.2} °C", m.steady_state_error_c);
+    println!("overshoot                   {:10.2} °C", m.overshoot_c);
+    println!("min / max load temperature  {:6.2} / {:.2} °C", m.min_temp_c, m.max_temp_c);
+    println!("time outside 2–8 °C         {:10.0} s", m.time_outside_2_8_s);
+    println!("energy                      {:10.2} Wh", m.energy_wh);
+    println!("SSR switches                {:10}", m.ssr_switches);
+    if !m.faults_detected.is_empty() {
+        let list: Vec<String> = m.faults_detected.iter().map(|f| format!("{}@{}s", f.kind, f.t_s)).collect();
+        println!("faults detected             {}", list.join(", "));
+    }
+}
+
+fn demo() -> Result<()> {
+    println!("hter demo: the firmware's control step (PI, Ts = 10 s) pulls a full-load H-TER I vaccine");
+    println!("carrier (100 ml water, aluminium container) from 28 °C ambient down to 4 °C and holds it,");
+    println!("against a physical model of the Peltier modules, SSR PWM, RTD and ADC. The vaccines must");
+    println!("stay within +2…+8 °C and never freeze.\n");
+    let args = SimArgs {
+        scenario: "step".into(),
+        controller: ControllerChoice::Pi,
+        plant: "hter1".into(),
+        model: None,
+        n1: None,
+        n2: None,
+        nu: None,
+        lambda: None,
+        p_weight: None,
+        r_weight: None,
+        s_weight: None,
+        load: LoadArg::Full,
+        ambient: 28.0,
+        duration: None,
+        seed: 1,
+        csv: None,
+        plot: None,
+        json: false,
+    };
+    let opts = sim_options(&args)?;
+    let out = sim::run(&opts)?;
+    for r in out.rows.iter().filter(|r| (r.t_s as u64) % 900 == 0) {
+        let bar = "#".repeat((r.duty * 20.0).round() as usize);
+        println!(
+            "  t = {:5.0} min   load {:6.2} °C   measured {:6.2} °C   duty {:4.2} {bar}",
+            r.t_s / 60.0,
+            r.true_temp_c,
+            r.temp_c,
+            r.duty
+        );
+    }
+    println!();
+    print_summary(&opts, &out);
+    println!("\nTry next:");
+    println!("  hter sim --scenario piecewise --controller onoff --plot piecewise.png");
+    println!("  hter sim --scenario step --controller pi --plot step.png --json");
+    println!("  hter rtd --celsius 4");
+    println!("  hter --help");
+    Ok(())
+}
+
+fn rtd_cmd(a: &RtdArgs) -> Result<()> {
+    let rtd = match a.r0 {
+        100 => Rtd::PT100,
+        1000 => Rtd::PT1000,
+        other => bail!("--r0 must be 100 or 1000, got {other}"),
+    };
+    let (ohms, celsius) = match (a.ohms, a.celsius) {
+        (Some(r), _) => {
+            let r = finite("ohms", r)?;
+            if r <= 0.0 {
+                bail!("--ohms must be positive, got {r}");
+            }
+            let t = rtd.temperature(Ohms(r as f32)).map_err(|e| {
+                anyhow::anyhow!("{r} Ω is outside the Pt{} range of IEC 60751 (−200…850 °C): {e:?}", a.r0)
+            })?;
+            (r, f64::from(t.0))
+        }
+        (None, Some(t)) => {
+            let t = finite("celsius", t)?;
+            let r = rtd
+                .resistance(Celsius(t as f32))
+                .map_err(|e| anyhow::anyhow!("{t} °C is outside the IEC 60751 range −200…850 °C: {e:?}"))?;
+            (f64::from(r.0), t)
+        }
+        (None, None) => bail!("give --ohms or --celsius"),
+    };
+    if a.json {
+        println!("{}", serde_json::json!({ "ohms": ohms, "celsius": celsius }));
+    } else {
+        println!("Pt{}: {:.3} Ω  ⇔  {:.3} °C", a.r0, ohms, celsius);
+    }
+    Ok(())
+}

@@ -1,0 +1,118 @@
+//! Plots with plotters: stacked time-series panels in one PNG or SVG.
+//!
+//! plotters is built without system fonts (no fontconfig on the user's machine needed): the
+//! DejaVu Sans face shipped in `assets/` is registered once as "sans-serif".
+
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Result};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+/// One line on a panel.
+pub struct Series {
+    /// Legend label.
+    pub name: String,
+    /// (x, y) points.
+    pub points: Vec<(f64, f64)>,
+}
+
+/// One panel: a y axis with several series against a shared x axis.
+pub struct Panel {
+    /// Title shown above the panel.
+    pub title: String,
+    /// Y-axis label.
+    pub y_label: String,
+    /// The lines.
+    pub series: Vec<Series>,
+    /// Fixed y range, or `None` to fit the data.
+    pub y_range: Option<(f64, f64)>,
+}
+
+const COLOURS: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(127, 127, 127),
+];
+
+fn register_font() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        // The font is compiled in, so registration cannot fail on a user's machine.
+        let _ = plotters::style::register_font(
+            "sans-serif",
+            FontStyle::Normal,
+            include_bytes!("../assets/DejaVuSans.ttf"),
+        );
+    });
+}
+
+/// Draws `panels` stacked vertically into `path` (`.png` or `.svg`), x axis labelled `x_label`.
+pub fn panels(path: &Path, title: &str, x_label: &str, panels: &[Panel]) -> Result<()> {
+    register_font();
+    let height = 300 * panels.len() as u32 + 60;
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("png") => {
+            let root = BitMapBackend::new(path, (1100, height)).into_drawing_area();
+            draw(&root, title, x_label, panels)?;
+            root.present().map_err(|e| anyhow!("cannot write plot '{}': {e}", path.display()))
+        }
+        Some("svg") => {
+            let root = SVGBackend::new(path, (1100, height)).into_drawing_area();
+            draw(&root, title, x_label, panels)?;
+            root.present().map_err(|e| anyhow!("cannot write plot '{}': {e}", path.display()))
+        }
+        _ => bail!("plot file '{}' must end in .png or .svg", path.display()),
+    }
+}
+
+fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, title: &str, x_label: &str, panels: &[Panel]) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("plot: {e:?}");
+    root.fill(&WHITE).map_err(err)?;
+    let root = root.titled(title, ("sans-serif", 22)).map_err(err)?;
+    let areas = root.split_evenly((panels.len(), 1));
+    for (area, panel) in areas.iter().zip(panels) {
+        let all = || panel.series.iter().flat_map(|s| s.points.iter());
+        let (x0, x1) = all().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.0), b.max(p.0)));
+        let (y0, y1) = panel.y_range.unwrap_or_else(|| {
+            let (a, b) = all().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.1), b.max(p.1)));
+            let pad = ((b - a) * 0.05).max(0.1);
+            (a - pad, b + pad)
+        });
+        if !(x0.is_finite() && x1.is_finite() && y0.is_finite() && y1.is_finite()) {
+            bail!("plot: panel '{}' has no finite data", panel.title);
+        }
+        let x1 = if x1 > x0 { x1 } else { x0 + 1.0 };
+        let mut chart = ChartBuilder::on(area)
+            .caption(&panel.title, ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(36)
+            .y_label_area_size(56)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(err)?;
+        chart.configure_mesh().x_desc(x_label).y_desc(&panel.y_label).draw().map_err(err)?;
+        for (i, s) in panel.series.iter().enumerate() {
+            let colour = COLOURS[i % COLOURS.len()];
+            chart
+                .draw_series(LineSeries::new(s.points.iter().copied(), colour.stroke_width(2)))
+                .map_err(err)?
+                .label(s.name.clone())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2)));
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(err)?;
+    }
+    Ok(())
+}

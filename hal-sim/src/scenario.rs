@@ -1,0 +1,216 @@
+//! Scenarios (SPEC §5): what happens to the carrier during a simulated run.
+//!
+//! A scenario is a setpoint schedule, an initial condition, a default duration and timed
+//! changes of the surroundings (ambient, extra heat, supply voltage). Built-in scenarios are
+//! named; a JSON file with the same fields defines a custom one (see [`ScenarioFile`]).
+
+use anyhow::{bail, Context, Result};
+use serde::Deserialize;
+
+use crate::plant::Load;
+
+/// How a run starts.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Start {
+    /// Everything at ambient, cooling off: the carrier has just been switched on.
+    Ambient,
+    /// Holding the load at this temperature, °C, with the controller already running
+    /// (the closed loop is pre-rolled for [`PREROLL_S`] before t = 0).
+    Holding(f64),
+}
+
+/// Closed-loop pre-roll before t = 0 for [`Start::Holding`], s. Long enough for every
+/// controller (including the integral of PI and the estimator of the adaptive ones) to reach
+/// its own steady state, so the comparison starts fair.
+pub const PREROLL_S: f64 = 3600.0;
+
+/// A timed change of the surroundings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Change {
+    /// Ambient temperature, °C.
+    Ambient(f64),
+    /// Extra heat into the cabinet (lid open, warm item), W.
+    ExtraHeat(f64),
+    /// Supply voltage of the modules, V.
+    Supply(f64),
+}
+
+/// A complete scenario.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scenario {
+    /// Name (built-in name or file name).
+    pub name: String,
+    /// One-line description.
+    pub description: String,
+    /// Initial condition.
+    pub start: Start,
+    /// Setpoint schedule: (from time s, setpoint °C), sorted, first entry at t = 0.
+    pub setpoints: Vec<(f64, f64)>,
+    /// Timed changes: (at time s, change), sorted.
+    pub changes: Vec<(f64, Change)>,
+    /// Default duration, s.
+    pub duration_s: f64,
+    /// Load forced by the scenario (`half-load`), overriding `--load`.
+    pub load: Option<Load>,
+}
+
+/// Names of the built-in scenarios.
+pub const BUILT_IN: &[&str] = &["step", "piecewise", "half-load", "disturbance"];
+
+impl Scenario {
+    /// A built-in scenario by name, or a JSON scenario file.
+    pub fn resolve(name_or_file: &str) -> Result<Scenario> {
+        if let Some(s) = Self::built_in(name_or_file) {
+            return Ok(s);
+        }
+        let path = std::path::Path::new(name_or_file);
+        if path.extension().is_some_and(|e| e == "json") || path.exists() {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read scenario file '{name_or_file}'"))?;
+            let file: ScenarioFile = serde_json::from_str(&text)
+                .map_err(|e| anyhow::anyhow!("scenario file '{name_or_file}': {e}"))?;
+            return file.into_scenario(name_or_file);
+        }
+        bail!("unknown scenario '{name_or_file}' (expected one of {} or a .json file)", BUILT_IN.join(", "))
+    }
+
+    /// A built-in scenario.
+    pub fn built_in(name: &str) -> Option<Scenario> {
+        let piecewise = vec![(0.0, 4.0), (200.0, 6.0), (1320.0, 3.0), (2440.0, 4.0)];
+        let s = match name {
+            "step" => Scenario {
+                name: name.into(),
+                description: "carrier at ambient, setpoint 4 °C from t = 0 (pull-down and hold)".into(),
+                start: Start::Ambient,
+                setpoints: vec![(0.0, 4.0)],
+                changes: vec![],
+                duration_s: 3.0 * 3600.0,
+                load: None,
+            },
+            "piecewise" => Scenario {
+                name: name.into(),
+                description: "holding 4 °C; setpoint → 6 °C at 200 s, → 3 °C at 1320 s, → 4 °C at 2440 s".into(),
+                start: Start::Holding(4.0),
+                setpoints: piecewise,
+                changes: vec![],
+                duration_s: 3600.0,
+                load: None,
+            },
+            "half-load" => Scenario {
+                name: name.into(),
+                description: "piecewise with half the load (50 ml water)".into(),
+                start: Start::Holding(4.0),
+                setpoints: piecewise,
+                changes: vec![],
+                duration_s: 3600.0,
+                load: Some(Load::Half),
+            },
+            "disturbance" => Scenario {
+                name: name.into(),
+                description: "holding 4 °C; a 3 W step heat load (lid ajar / warm item) from t = 1800 s".into(),
+                start: Start::Holding(4.0),
+                setpoints: vec![(0.0, 4.0)],
+                changes: vec![(1800.0, Change::ExtraHeat(3.0))],
+                duration_s: 3.0 * 3600.0,
+                load: None,
+            },
+            _ => return None,
+        };
+        Some(s)
+    }
+
+    /// Setpoint in force at time `t_s`.
+    pub fn setpoint_at(&self, t_s: f64) -> f64 {
+        self.setpoints.iter().take_while(|(t, _)| *t <= t_s).last().map_or(self.setpoints[0].1, |(_, w)| *w)
+    }
+}
+
+/// A scenario file (JSON): `{"description": "...", "start_c": 4.0 | null, "setpoints": [[0, 4.0], ...],
+/// "ambient": [[0, 28.0], ...], "extra_heat_w": [[1800, 3.0]], "supply_v": [[...]], "duration_s": 3600}`.
+/// `start_c` null (or absent) starts at ambient.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioFile {
+    /// One-line description.
+    #[serde(default)]
+    pub description: String,
+    /// Holding temperature at t = 0, °C; absent = start at ambient.
+    pub start_c: Option<f64>,
+    /// Setpoint schedule (time s, °C).
+    pub setpoints: Vec<(f64, f64)>,
+    /// Ambient schedule (time s, °C).
+    #[serde(default)]
+    pub ambient: Vec<(f64, f64)>,
+    /// Extra heat schedule (time s, W).
+    #[serde(default)]
+    pub extra_heat_w: Vec<(f64, f64)>,
+    /// Supply voltage schedule (time s, V).
+    #[serde(default)]
+    pub supply_v: Vec<(f64, f64)>,
+    /// Duration, s.
+    pub duration_s: f64,
+}
+
+impl ScenarioFile {
+    fn into_scenario(self, name: &str) -> Result<Scenario> {
+        let finite = |v: &[(f64, f64)]| v.iter().all(|(a, b)| a.is_finite() && b.is_finite() && *a >= 0.0);
+        if self.setpoints.is_empty() {
+            bail!("scenario file '{name}': 'setpoints' is empty");
+        }
+        for (field, v) in
+            [("setpoints", &self.setpoints), ("ambient", &self.ambient), ("extra_heat_w", &self.extra_heat_w)]
+        {
+            if !finite(v) {
+                bail!("scenario file '{name}': '{field}' has a negative time or a non-finite number");
+            }
+            if v.windows(2).any(|w| w[1].0 < w[0].0) {
+                bail!("scenario file '{name}': '{field}' times are not increasing");
+            }
+        }
+        if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
+            bail!("scenario file '{name}': duration_s must be positive");
+        }
+        let mut setpoints = self.setpoints;
+        if setpoints[0].0 > 0.0 {
+            setpoints.insert(0, (0.0, setpoints[0].1));
+        }
+        let mut changes: Vec<(f64, Change)> = self
+            .ambient
+            .iter()
+            .map(|&(t, v)| (t, Change::Ambient(v)))
+            .chain(self.extra_heat_w.iter().map(|&(t, v)| (t, Change::ExtraHeat(v))))
+            .chain(self.supply_v.iter().map(|&(t, v)| (t, Change::Supply(v))))
+            .collect();
+        changes.sort_by(|a, b| a.0.total_cmp(&b.0));
+        Ok(Scenario {
+            name: name.into(),
+            description: if self.description.is_empty() { "custom scenario".into() } else { self.description },
+            start: self.start_c.map_or(Start::Ambient, Start::Holding),
+            setpoints,
+            changes,
+            duration_s: self.duration_s,
+            load: None,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn piecewise_schedule_matches_the_seed() {
+        let s = Scenario::resolve("piecewise").unwrap();
+        assert_eq!(s.setpoint_at(0.0), 4.0);
+        assert_eq!(s.setpoint_at(199.0), 4.0);
+        assert_eq!(s.setpoint_at(200.0), 6.0);
+        assert_eq!(s.setpoint_at(1320.0), 3.0);
+        assert_eq!(s.setpoint_at(3599.0), 4.0);
+    }
+
+    #[test]
+    fn unknown_scenario_is_a_one_line_error() {
+        let e = Scenario::resolve("nope").unwrap_err().to_string();
+        assert!(e.contains("unknown scenario 'nope'") && !e.contains('\n'), "{e}");
+    }
+}

@@ -1,0 +1,419 @@
+//! The closed-loop simulation: the library's per-sample step against the plant model, through
+//! the simulated ADC and SSR — exactly the data path of the firmware.
+//!
+//! Each control sample (every Ts):
+//! 1. the simulated ADC converts the plant's sensed (lagged, delayed) temperature to counts;
+//! 2. [`hter::step::Carrier::step`] turns counts into a duty and events;
+//! 3. the duty goes to the simulated SSR through [`hter::hal::apply_duty`];
+//! 4. the plant integrates Ts / PWM-period SSR periods, each switched on then off for real.
+
+use anyhow::{bail, Result};
+use hter::control::gpc::GpcConfig;
+use hter::control::model::Model;
+use hter::control::mv::{GmvcConfig, IgmvcConfig};
+use hter::control::{AnyController, FixedModel, Law, OnOff, OnOffConfig, Pi, PiConfig};
+use hter::event::EventKind;
+use hter::hal::{apply_duty, RtdSampler};
+use hter::control::Controller;
+use hter::step::{Carrier, CarrierConfig, Mode, StepInput, StepOutput};
+use hter::units::Celsius;
+
+use crate::arx::{self, ArxPlant};
+use crate::metrics::{self, Sample, SimMetrics, Stamped};
+use crate::periph::{SimAdc, SimSsr};
+use crate::plant::{Load, Plant, PlantParams};
+use crate::scenario::{Change, Scenario, Start, PREROLL_S};
+
+/// SSR PWM period, s. The seed drove its SSR from a DAQ with a slow software PWM; 1 s gives 1 %
+/// duty resolution against Ts = 10 s and is far faster than the modules' thermal response.
+pub const PWM_PERIOD_S: f64 = 1.0;
+
+/// Which controller runs in the step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ControllerChoice {
+    /// On-Off with ±0.5 °C hysteresis.
+    Onoff,
+    /// Proportional only (Ziegler–Nichols P gain).
+    P,
+    /// PI with anti-windup (Ziegler–Nichols, detuned).
+    Pi,
+    /// Generalized minimum variance (weights P, R, S).
+    Gmvc,
+    /// Incremental GMVC (weight λ on Δu).
+    Igmvc,
+    /// Generalized predictive control (N1, N2, Nu, λ).
+    Gpc,
+}
+
+/// A controller with its tuning and, for the model-based ones, an optional fixed model.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ControllerSpec {
+    /// Which controller.
+    pub choice: ControllerChoice,
+    /// Fixed model (`--model arx:...`); `None` = self-tuning for gmvc/igmvc/gpc.
+    pub model: Option<Model>,
+    /// GPC tuning.
+    pub gpc: GpcConfig,
+    /// GMVC weights.
+    pub gmvc: GmvcConfig,
+    /// IGMVC weight.
+    pub igmvc: IgmvcConfig,
+}
+
+impl ControllerSpec {
+    /// The controller with its default tuning.
+    pub fn new(choice: ControllerChoice) -> Self {
+        Self { choice, model: None, gpc: GpcConfig::DEFAULT, gmvc: GmvcConfig::DEFAULT, igmvc: IgmvcConfig::DEFAULT }
+    }
+
+    /// The law of a model-based controller.
+    pub fn law(&self) -> Option<Law> {
+        match self.choice {
+            ControllerChoice::Gmvc => Some(Law::Gmvc(self.gmvc)),
+            ControllerChoice::Igmvc => Some(Law::Igmvc(self.igmvc)),
+            ControllerChoice::Gpc => Some(Law::Gpc(self.gpc)),
+            _ => None,
+        }
+    }
+
+    /// Builds the controller for a loop sampled every `ts_s`, starting from duty `u0`.
+    pub fn build(&self, ts_s: f32, u0: f32) -> Result<AnyController> {
+        let pi = PiConfig { ts_s, ..PiConfig::HTER1_DEFAULT };
+        Ok(match (self.choice, self.law()) {
+            (ControllerChoice::Onoff, _) => AnyController::OnOff(OnOff::new(OnOffConfig::DEFAULT)),
+            // ZN P gain is Kp_PI / 0.9; the same 2× detuning as the PI.
+            (ControllerChoice::P, _) => {
+                AnyController::Pi(Pi::new(PiConfig { kp_per_c: pi.kp_per_c / 0.9, ti_s: f32::INFINITY, ..pi }))
+            }
+            (ControllerChoice::Pi, _) => AnyController::Pi(Pi::new(pi)),
+            (_, Some(law)) => match self.model {
+                Some(m) => AnyController::Fixed(FixedModel::new(law, m, u0)),
+                None => bail!("controller {} needs a model: give --model arx:A;B;K", law.name()),
+            },
+            (_, None) => bail!("no law for {:?}", self.choice),
+        })
+    }
+}
+
+impl ControllerChoice {
+    /// Builds the controller with default tuning (baselines only; model-based ones need a model).
+    pub fn build(self, ts_s: f32) -> AnyController {
+        match ControllerSpec::new(self).build(ts_s, 0.0) {
+            Ok(c) => c,
+            Err(_) => AnyController::Pi(Pi::new(PiConfig { ts_s, ..PiConfig::HTER1_DEFAULT })),
+        }
+    }
+}
+
+/// Which plant the controller drives.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PlantChoice {
+    /// H-TER I: aluminium container.
+    Hter1,
+    /// H-TER II: stainless-steel container.
+    Hter2,
+    /// An ideal ARX plant at the controller's sampling period (`--plant arx:A;B;K`).
+    Arx(Model),
+}
+
+impl PlantChoice {
+    /// Parses `hter1`, `hter2` or `arx:A;B;K`.
+    pub fn parse(s: &str) -> Result<Self> {
+        match s {
+            "hter1" => Ok(PlantChoice::Hter1),
+            "hter2" => Ok(PlantChoice::Hter2),
+            _ if s.starts_with("arx:") => Ok(PlantChoice::Arx(arx::parse(s)?)),
+            _ => bail!("unknown plant '{s}' (expected hter1, hter2 or arx:A;B;K)"),
+        }
+    }
+
+    /// Short name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            PlantChoice::Hter1 => "H-TER I",
+            PlantChoice::Hter2 => "H-TER II",
+            PlantChoice::Arx(_) => "ARX model",
+        }
+    }
+}
+
+/// Everything a run needs.
+#[derive(Clone, Debug)]
+pub struct SimOptions {
+    /// The scenario.
+    pub scenario: Scenario,
+    /// Controller.
+    pub controller: ControllerSpec,
+    /// Plant.
+    pub plant: PlantChoice,
+    /// Load (overridden by a scenario that fixes it).
+    pub load: Load,
+    /// Initial ambient temperature, °C.
+    pub ambient_c: f64,
+    /// Duration, s.
+    pub duration_s: f64,
+    /// Seed of the ADC noise.
+    pub seed: u64,
+}
+
+/// One control sample of a run (one CSV row).
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct Row {
+    /// Sample time, s.
+    pub t_s: f64,
+    /// Setpoint in force, °C.
+    pub setpoint_c: f64,
+    /// Temperature the controller saw (filtered, calibrated), °C.
+    pub temp_c: f64,
+    /// Duty applied, [0, 1].
+    pub duty: f64,
+    /// True load temperature, °C.
+    pub true_temp_c: f64,
+    /// Ambient, °C.
+    pub ambient_c: f64,
+    /// Safety mode of the step.
+    pub mode: &'static str,
+    /// Raw RTD conversion the step received, counts (replayable through the step).
+    pub counts: u32,
+}
+
+/// A finished run.
+pub struct SimOutput {
+    /// The samples.
+    pub rows: Vec<Row>,
+    /// The metrics of the `--json` contract.
+    pub metrics: SimMetrics,
+    /// Sample period, s.
+    pub ts_s: f64,
+}
+
+fn mode_name(m: Mode) -> &'static str {
+    match m {
+        Mode::Normal => "normal",
+        Mode::SensorFault => "sensor_fault",
+        Mode::FreezeGuard => "freeze_guard",
+    }
+}
+
+/// snake_case name of an event kind, as it appears in JSON.
+pub fn event_name(k: EventKind) -> &'static str {
+    match k {
+        EventKind::SensorOpen => "sensor_open",
+        EventKind::SensorShort => "sensor_short",
+        EventKind::SensorOutOfRange => "sensor_out_of_range",
+        EventKind::SensorRecovered => "sensor_recovered",
+        EventKind::FreezeGuardTripped => "freeze_guard_tripped",
+        EventKind::FreezeGuardReleased => "freeze_guard_released",
+        EventKind::SetpointClamped => "setpoint_clamped",
+        EventKind::ControllerNonFinite => "controller_non_finite",
+        EventKind::AdaptiveEngaged => "adaptive_engaged",
+        EventKind::AdaptiveFrozen => "adaptive_frozen",
+        EventKind::FallbackEngaged => "fallback_engaged",
+    }
+}
+
+fn is_fault(k: EventKind) -> bool {
+    matches!(k, EventKind::SensorOpen | EventKind::SensorShort | EventKind::SensorOutOfRange)
+}
+
+/// The simulated hardware: the physical carrier behind a simulated ADC and SSR, or an ideal
+/// ARX plant read and driven directly.
+enum Rig {
+    Physical { plant: Box<Plant>, adc: SimAdc, ssr: SimSsr },
+    Arx(ArxPlant),
+}
+
+impl Rig {
+    fn new(opts: &SimOptions) -> Result<(Rig, f64)> {
+        let sc = &opts.scenario;
+        let load = sc.load.unwrap_or(opts.load);
+        let params = match opts.plant {
+            PlantChoice::Hter1 => PlantParams::hter1(load),
+            PlantChoice::Hter2 => PlantParams::hter2(load),
+            PlantChoice::Arx(m) => {
+                let t0 = match sc.start {
+                    Start::Ambient => opts.ambient_c,
+                    Start::Holding(t) => t,
+                };
+                let p = ArxPlant::at_steady_state(m, opts.ambient_c, t0)?;
+                return Ok((Rig::Arx(p), 0.0));
+            }
+        };
+        let (plant, u0) = match sc.start {
+            Start::Ambient => (Plant::at_ambient(params, opts.ambient_c), 0.0),
+            Start::Holding(t) => match Plant::at_load_temperature(params, opts.ambient_c, t) {
+                Some(p) => p,
+                None => bail!("the plant cannot hold {t} °C at {} °C ambient", opts.ambient_c),
+            },
+        };
+        Ok((Rig::Physical { plant: Box::new(plant), adc: SimAdc::new(opts.seed), ssr: SimSsr::new() }, u0))
+    }
+
+    /// Samples the sensor and runs the step; returns its output and the counts it got.
+    fn step<C: Controller>(&mut self, carrier: &mut Carrier<C>, t_s: f64, w: f64) -> (StepOutput, u32) {
+        match self {
+            Rig::Physical { plant, adc, .. } => {
+                adc.set_temperature_c(plant.sensed_temp_c());
+                let counts = match adc.sample() {
+                    Ok(c) => c,
+                    Err(never) => match never {},
+                };
+                (carrier.step(&StepInput { t_s: t_s as f32, counts, setpoint_c: w as f32 }), counts)
+            }
+            Rig::Arx(p) => (carrier.step_celsius(t_s as f32, Celsius(p.temp_c() as f32), w as f32), 0),
+        }
+    }
+
+    /// Drives the actuator; returns the duty the plant really gets.
+    fn actuate(&mut self, out: &StepOutput) -> f64 {
+        match self {
+            Rig::Physical { ssr, .. } => {
+                // SimSsr's error type is Infallible.
+                let _ = apply_duty(ssr, out.duty);
+                ssr.set_supply_enabled(out.supply_enable);
+                ssr.effective_duty()
+            }
+            Rig::Arx(_) => {
+                if out.supply_enable {
+                    f64::from(out.duty.get())
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
+
+    /// Advances one sample period at duty `d` in PWM periods; returns SSR turn-ons.
+    fn advance(&mut self, d: f64, ts: f64, last_on: &mut bool, count: bool) -> u64 {
+        let periods = match self {
+            Rig::Physical { .. } => (ts / PWM_PERIOD_S).round() as usize,
+            Rig::Arx(_) => 1,
+        };
+        let mut switches = 0;
+        for _ in 0..periods {
+            if count && d > 0.0 && !*last_on {
+                switches += 1;
+            }
+            *last_on = d >= 1.0;
+            if let Rig::Physical { plant, .. } = self {
+                plant.advance_pwm_period(PWM_PERIOD_S, d);
+            }
+        }
+        if let Rig::Arx(p) = self {
+            p.advance(d);
+        }
+        switches
+    }
+
+    fn true_temp_c(&self) -> f64 {
+        match self {
+            Rig::Physical { plant, .. } => plant.load_temp_c(),
+            Rig::Arx(p) => p.temp_c(),
+        }
+    }
+
+    fn ambient_c(&self, default: f64) -> f64 {
+        match self {
+            Rig::Physical { plant, .. } => plant.ambient_c(),
+            Rig::Arx(_) => default,
+        }
+    }
+
+    fn energy_wh(&self) -> f64 {
+        match self {
+            Rig::Physical { plant, .. } => plant.energy_wh(),
+            Rig::Arx(_) => 0.0,
+        }
+    }
+
+    fn change(&mut self, c: Change) {
+        if let Rig::Physical { plant, .. } = self {
+            match c {
+                Change::Ambient(a) => plant.set_ambient_c(a),
+                Change::ExtraHeat(w) => plant.set_extra_heat_w(w),
+                Change::Supply(v) => plant.set_supply_v(v),
+            }
+        }
+    }
+}
+
+/// Runs a scenario.
+pub fn run(opts: &SimOptions) -> Result<SimOutput> {
+    if !(opts.ambient_c.is_finite() && (-10.0..=50.0).contains(&opts.ambient_c)) {
+        bail!("ambient {} °C is outside the supported -10..50 °C", opts.ambient_c);
+    }
+    if !(opts.duration_s.is_finite() && opts.duration_s > 0.0 && opts.duration_s <= 90.0 * 86400.0) {
+        bail!("duration {} s must be positive and at most 90 days", opts.duration_s);
+    }
+    let sc = &opts.scenario;
+    let mut cfg = CarrierConfig::DEFAULT;
+    if let PlantChoice::Arx(_) = opts.plant {
+        // Ideal measurement: no filter between the model's output and the controller.
+        cfg.filter.fa = 0.0;
+    }
+    let ts = f64::from(cfg.ts_s);
+    let (mut rig, u0) = Rig::new(opts)?;
+    let mut carrier = Carrier::new(cfg, opts.controller.build(cfg.ts_s, u0 as f32)?);
+    let name = carrier.controller().name().to_string();
+
+    // Pre-roll: the loop has been holding the initial temperature for an hour.
+    let preroll = match (sc.start, opts.plant) {
+        (Start::Holding(_), PlantChoice::Hter1 | PlantChoice::Hter2) => (PREROLL_S / ts).round() as i64,
+        _ => 0,
+    };
+    let n = (opts.duration_s / ts).round() as i64;
+    let mut rows = Vec::with_capacity(n as usize);
+    let mut faults = Vec::new();
+    let mut switches = 0u64;
+    let mut last_on = false;
+    let mut next_change = 0;
+    let mut energy0_wh = 0.0;
+    for k in -preroll..n {
+        let t_s = k as f64 * ts;
+        while k >= 0 && next_change < sc.changes.len() && sc.changes[next_change].0 <= t_s {
+            rig.change(sc.changes[next_change].1);
+            next_change += 1;
+        }
+        let w = if k >= 0 { sc.setpoint_at(t_s) } else { sc.setpoint_at(0.0) };
+        let (out, counts) = rig.step(&mut carrier, t_s, w);
+        let d = rig.actuate(&out);
+        if k >= 0 {
+            for e in out.events.iter().filter(|e| is_fault(e.kind)) {
+                faults.push(Stamped { kind: event_name(e.kind).into(), t_s: f64::from(e.t_s) });
+            }
+            rows.push(Row {
+                t_s,
+                setpoint_c: w,
+                temp_c: f64::from(out.temp_c.0),
+                duty: d,
+                true_temp_c: rig.true_temp_c(),
+                ambient_c: rig.ambient_c(opts.ambient_c),
+                mode: mode_name(out.mode),
+                counts,
+            });
+        }
+        if k == 0 {
+            energy0_wh = rig.energy_wh();
+        }
+        switches += rig.advance(d, ts, &mut last_on, k >= 0);
+    }
+    let samples: Vec<Sample> =
+        rows.iter().map(|r| Sample { t_s: r.t_s, setpoint_c: r.setpoint_c, true_temp_c: r.true_temp_c }).collect();
+    let f = metrics::tracking(&samples, ts);
+    let metrics = SimMetrics {
+        controller: name,
+        iae: f.iae,
+        max_abs_error_after_settle_c: f.max_abs_error_after_settle_c,
+        steady_state_error_c: f.steady_state_error_c,
+        overshoot_c: f.overshoot_c,
+        settle_time_s: f.settle_time_s,
+        min_temp_c: f.min_temp_c,
+        max_temp_c: f.max_temp_c,
+        time_outside_2_8_s: f.time_outside_2_8_s,
+        energy_wh: rig.energy_wh() - energy0_wh,
+        ssr_switches: switches,
+        alarms: Vec::new(),
+        faults_detected: faults,
+    };
+    Ok(SimOutput { rows, metrics, ts_s: ts })
+}

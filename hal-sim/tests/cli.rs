@@ -1,0 +1,91 @@
+//! The `hter` binary as a user runs it: bad input gives one line on stderr and a non-zero exit.
+
+use std::process::{Command, Output};
+
+fn hter(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hter")).args(args).output().expect("run hter")
+}
+
+fn assert_one_line_error(args: &[&str], needle: &str) {
+    let out = hter(args);
+    assert!(!out.status.success(), "{args:?} should fail");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: not one line: {err}");
+    assert!(err.starts_with("error: "), "{args:?}: {err}");
+    assert!(err.contains(needle), "{args:?}: '{needle}' not in: {err}");
+    assert!(!err.contains("panicked"), "{args:?}: {err}");
+}
+
+#[test]
+fn bad_input_is_a_one_line_error() {
+    assert_one_line_error(&["sim", "--scenario", "nope"], "unknown scenario 'nope'");
+    assert_one_line_error(&["sim", "--controller", "magic"], "magic");
+    assert_one_line_error(&["sim", "--ambient", "NaN"], "finite");
+    assert_one_line_error(&["sim", "--duration", "-5"], "duration");
+    assert_one_line_error(&["sim", "--scenario", "/no/such/file.json"], "cannot read scenario file");
+    assert_one_line_error(&["rtd", "--ohms", "-3"], "positive");
+    assert_one_line_error(&["rtd", "--ohms", "nan"], "finite");
+    assert_one_line_error(&["rtd", "--celsius", "inf"], "finite");
+    assert_one_line_error(&["rtd", "--celsius", "2000"], "outside");
+    assert_one_line_error(&["rtd", "--ohms", "100", "--r0", "500"], "--r0");
+    assert_one_line_error(&["rtd"], "required");
+    assert_one_line_error(&["identify", "--input", "/no/such/log.csv"], "/no/such/log.csv");
+}
+
+#[test]
+fn rtd_json_matches_iec_60751() {
+    let out = hter(&["rtd", "--celsius", "4", "--json"]);
+    assert!(out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!((v["ohms"].as_f64().unwrap() - 101.56).abs() < 0.005, "{v}");
+    let out = hter(&["rtd", "--ohms", "1385.1", "--r0", "1000", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!((v["celsius"].as_f64().unwrap() - 100.0).abs() < 0.01, "{v}");
+}
+
+#[test]
+fn sim_json_has_every_contract_field_and_writes_csv_and_plot() {
+    let dir = std::env::temp_dir().join(format!("hter-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("run.csv");
+    let png = dir.join("run.png");
+    let out = hter(&[
+        "sim",
+        "--scenario",
+        "piecewise",
+        "--controller",
+        "pi",
+        "--json",
+        "--csv",
+        csv.to_str().unwrap(),
+        "--plot",
+        png.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in [
+        "controller",
+        "iae",
+        "max_abs_error_after_settle_c",
+        "overshoot_c",
+        "settle_time_s",
+        "min_temp_c",
+        "max_temp_c",
+        "time_outside_2_8_s",
+        "energy_wh",
+        "ssr_switches",
+        "alarms",
+        "faults_detected",
+    ] {
+        assert!(v.get(key).is_some(), "missing {key} in {v}");
+    }
+    assert_eq!(v["controller"], "pi");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let header = text.lines().next().unwrap();
+    assert!(header.starts_with("t_s,setpoint_c,temp_c,duty"), "{header}");
+    assert_eq!(text.lines().count(), 1 + 360, "one row per 10 s sample over 3600 s");
+    let png_bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&png_bytes[1..4], b"PNG");
+    assert!(png_bytes.len() > 10_000);
+    let _ = std::fs::remove_dir_all(&dir);
+}

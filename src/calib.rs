@@ -1,0 +1,97 @@
+//! Two-point calibration of the measurement chain (seed, Appendix A and §3.4.1).
+//!
+//! The seed calibrated its RTD channel in an ice-water bath against a reference thermometer
+//! (SIRIM) and fitted a straight line. We do the same with two points: the ice bath (the
+//! reference reads ≈ 0 °C) and a second reference point (e.g. room temperature or a warm
+//! bath), and correct every reading with
+//!
+//! ```text
+//! T_cal = gain · T_meas + offset_c,   gain = (r₁ − r₀)/(m₁ − m₀),   offset_c = r₀ − gain · m₀
+//! ```
+//!
+//! where mᵢ is what the channel read and rᵢ what the reference read at point i. A straight line
+//! absorbs lead-resistance offset, reference-resistor tolerance and amplifier gain error.
+
+use crate::units::Celsius;
+
+/// Why a calibration was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalError {
+    /// A point was NaN or infinite.
+    NonFinite,
+    /// The two measured points are closer than 1 °C: the slope would be meaningless.
+    PointsTooClose,
+    /// The fitted gain is outside 0.9…1.1: the channel is broken, not mis-calibrated.
+    ImplausibleGain,
+}
+
+/// A straight-line correction `T_cal = gain · T_meas + offset_c`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TwoPoint {
+    /// Slope, dimensionless.
+    pub gain: f32,
+    /// Offset, °C.
+    pub offset_c: f32,
+}
+
+impl Default for TwoPoint {
+    fn default() -> Self {
+        Self::IDENTITY
+    }
+}
+
+impl TwoPoint {
+    /// No correction.
+    pub const IDENTITY: TwoPoint = TwoPoint { gain: 1.0, offset_c: 0.0 };
+
+    /// Fits the line through (measured, reference) at the ice bath and at a second point.
+    pub fn from_points(
+        measured_ice: Celsius,
+        reference_ice: Celsius,
+        measured_hot: Celsius,
+        reference_hot: Celsius,
+    ) -> Result<TwoPoint, CalError> {
+        let (m0, r0, m1, r1) = (measured_ice.0, reference_ice.0, measured_hot.0, reference_hot.0);
+        if ![m0, r0, m1, r1].iter().all(|x| x.is_finite()) {
+            return Err(CalError::NonFinite);
+        }
+        if (m1 - m0).abs() < 1.0 {
+            return Err(CalError::PointsTooClose);
+        }
+        let gain = (r1 - r0) / (m1 - m0);
+        if !(0.9..=1.1).contains(&gain) {
+            return Err(CalError::ImplausibleGain);
+        }
+        Ok(TwoPoint { gain, offset_c: r0 - gain * m0 })
+    }
+
+    /// The corrected temperature.
+    pub fn apply(&self, t: Celsius) -> Celsius {
+        Celsius(self.gain * t.0 + self.offset_c)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn corrects_offset_and_gain_exactly_at_both_points() {
+        // Channel reads 0.3 °C in the ice bath and 25.6 °C where the reference says 25.0 °C.
+        let cal = TwoPoint::from_points(Celsius(0.3), Celsius(0.0), Celsius(25.6), Celsius(25.0)).unwrap();
+        assert!((cal.apply(Celsius(0.3)).0 - 0.0).abs() < 1e-5);
+        assert!((cal.apply(Celsius(25.6)).0 - 25.0).abs() < 1e-5);
+        // Linear in between.
+        assert!((cal.apply(Celsius(12.95)).0 - 12.5).abs() < 1e-4);
+    }
+
+    #[test]
+    fn refuses_degenerate_points() {
+        let c = Celsius;
+        assert_eq!(TwoPoint::from_points(c(0.1), c(0.0), c(0.5), c(0.4)), Err(CalError::PointsTooClose));
+        assert_eq!(TwoPoint::from_points(c(0.0), c(0.0), c(20.0), c(30.0)), Err(CalError::ImplausibleGain));
+        assert_eq!(TwoPoint::from_points(c(f32::NAN), c(0.0), c(20.0), c(20.0)), Err(CalError::NonFinite));
+    }
+}

@@ -1,0 +1,212 @@
+//! Self-tuning control (certainty equivalence; Åström & Wittenmark, *Adaptive Control*, 2nd
+//! ed., ch. 3–4; seed ch. 5–6): every sample the recursive least-squares estimate of a
+//! second-order model is updated and the law (GMVC, IGMVC or GPC) is redesigned from it.
+//!
+//! **What is estimated.** The incremental ARX model
+//!
+//! ```text
+//! Δy(t) = −a1 Δy(t−1) − a2 Δy(t−2) + b0 Δu(t−k) + b1 Δu(t−k−1) + ε(t),   θ = [a1 a2 b0 b1]
+//! ```
+//!
+//! Differencing removes the operating point (ambient, mean duty) without knowing it, and is the
+//! model GPC and IGMVC are designed on (CARIMA with C = 1). The RLS runs with forgetting λ_f and
+//! a bounded covariance ([`crate::ident`] documents the f32 safeguards).
+//!
+//! **When the estimate is trusted** (all must hold, else the law runs on the last trusted
+//! model, and with no trusted model the bumpless fallback PI drives the SSR):
+//! - every θ finite and the estimator healthy;
+//! - parameter projection: A stable (Schur–Cohn), static gain B(1)/A(1) negative (cooling)
+//!   and within [`AdaptiveConfig::gain_min_c_per_duty`]…[`AdaptiveConfig::gain_max_c_per_duty`];
+//! - at least [`AdaptiveConfig::warmup_samples`] updates since start or reset.
+//!
+//! Mode changes ([`AdaptiveMode`]) are reported through [`Controller::status`] so the step can
+//! log each one as an event. The fallback PI tracks the applied duty all the time, so switching
+//! in either direction is bumpless; the law's histories also track the applied duty.
+
+use super::fixed::{Law, LawState};
+use super::model::{Model, MAX_K};
+use super::pi::{Pi, PiConfig};
+use super::{AdaptiveMode, ControlInput, Controller, ControllerStatus};
+use crate::ident::rls::{Rls, RlsConfig};
+use nalgebra::SVector;
+
+/// Self-tuning configuration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AdaptiveConfig {
+    /// Control law.
+    pub law: Law,
+    /// Delay k of the estimated model, samples.
+    pub k: usize,
+    /// Estimator settings.
+    pub rls: RlsConfig,
+    /// Model to start from (stored on the board, or identified offline), if any.
+    pub initial: Option<Model>,
+    /// Updates before a fresh estimate is trusted.
+    pub warmup_samples: u32,
+    /// Most negative plausible static gain, °C per unit duty.
+    pub gain_min_c_per_duty: f32,
+    /// Least negative plausible static gain, °C per unit duty.
+    pub gain_max_c_per_duty: f32,
+    /// Fallback PI.
+    pub fallback: PiConfig,
+}
+
+/// Self-tuning state.
+#[derive(Clone, Debug)]
+pub struct SelfTuning {
+    cfg: AdaptiveConfig,
+    rls: Rls<4>,
+    law_state: LawState,
+    fallback: Pi,
+    trusted: Option<Model>,
+    mode: AdaptiveMode,
+    updates: u32,
+    y_hist: [f32; 4],
+    filled: u8,
+    du_hist: [f32; MAX_K + 2],
+    u_prev: f32,
+    last_error: f32,
+}
+
+impl SelfTuning {
+    /// A controller starting from duty `u0`.
+    pub fn new(cfg: AdaptiveConfig, u0: f32) -> Self {
+        let theta0 = match cfg.initial {
+            Some(m) => SVector::<f32, 4>::new(m.a[0], m.a[1], m.b[0], m.b[1]),
+            // A slow stable pole pair and a small cooling gain: a neutral start for RLS.
+            None => SVector::<f32, 4>::new(-1.5, 0.5, -0.01, 0.0),
+        };
+        let trusted = cfg.initial.filter(|m| plausible(&cfg, m));
+        let mut fallback = Pi::new(PiConfig { bias: u0, ..cfg.fallback });
+        fallback.track(&ControlInput { t_s: 0.0, y_c: 0.0, w_c: 0.0 }, u0);
+        Self {
+            cfg,
+            rls: Rls::new(&cfg.rls, theta0),
+            law_state: LawState::new(u0),
+            fallback,
+            trusted,
+            mode: if trusted.is_some() { AdaptiveMode::Frozen } else { AdaptiveMode::Fallback },
+            updates: 0,
+            y_hist: [0.0; 4],
+            filled: 0,
+            du_hist: [0.0; MAX_K + 2],
+            u_prev: u0,
+            last_error: 0.0,
+        }
+    }
+
+    /// The current estimate as a model.
+    pub fn estimate(&self) -> Option<Model> {
+        let th = self.rls.theta();
+        Model::new(&[th[0], th[1]], &[th[2], th[3]], &[], self.cfg.k).ok()
+    }
+
+    /// θ = [a1 a2 b0 b1].
+    pub fn theta(&self) -> [f32; 4] {
+        let th = self.rls.theta();
+        [th[0], th[1], th[2], th[3]]
+    }
+
+    /// trace(P) of the estimator.
+    pub fn trace_p(&self) -> f32 {
+        self.rls.trace_p()
+    }
+
+    /// Last a-priori prediction error of Δy, °C.
+    pub fn prediction_error(&self) -> f32 {
+        self.last_error
+    }
+
+    /// Which controller drives.
+    pub fn mode(&self) -> AdaptiveMode {
+        self.mode
+    }
+
+    /// The last trusted model (what a board would persist).
+    pub fn trusted_model(&self) -> Option<Model> {
+        self.trusted
+    }
+
+    /// Updates the estimator with y(t); returns true if an update was made.
+    fn estimate_step(&mut self, y: f32) -> bool {
+        if !y.is_finite() {
+            return false;
+        }
+        if self.filled == 0 {
+            self.y_hist = [y; 4];
+        } else {
+            self.y_hist.copy_within(0..3, 1);
+            self.y_hist[0] = y;
+        }
+        self.filled = self.filled.saturating_add(1);
+        if self.filled < 4 {
+            return false;
+        }
+        let h = &self.y_hist;
+        let k = self.cfg.k;
+        let du = |m: usize| self.du_hist.get(m - 1).copied().unwrap_or(0.0);
+        let phi = SVector::<f32, 4>::new(-(h[1] - h[2]), -(h[2] - h[3]), du(k), du(k + 1));
+        match self.rls.update(&self.cfg.rls, &phi, h[0] - h[1]) {
+            Ok(e) => {
+                self.last_error = e;
+                self.updates = self.updates.saturating_add(1);
+                true
+            }
+            Err(_) => false,
+        }
+    }
+}
+
+/// Parameter projection: is `m` a model the laws may be designed from?
+fn plausible(cfg: &AdaptiveConfig, m: &Model) -> bool {
+    m.a_is_stable()
+        && m.static_gain().is_some_and(|g| (cfg.gain_min_c_per_duty..=cfg.gain_max_c_per_duty).contains(&g))
+}
+
+impl Controller for SelfTuning {
+    fn update(&mut self, input: &ControlInput) -> f32 {
+        let healthy = self.estimate_step(input.y_c);
+        if healthy && self.updates >= self.cfg.warmup_samples {
+            if let Some(m) = self.estimate().filter(|m| plausible(&self.cfg, m)) {
+                self.trusted = Some(m);
+                self.mode = AdaptiveMode::Adaptive;
+            } else if self.trusted.is_some() {
+                self.mode = AdaptiveMode::Frozen;
+            }
+        }
+        let law_u = self.law_state.update(&self.cfg.law, self.trusted.as_ref(), input.y_c, input.w_c);
+        let pi_u = self.fallback.update(input);
+        match law_u {
+            Some(u) if self.mode != AdaptiveMode::Fallback => u,
+            _ => {
+                self.mode = AdaptiveMode::Fallback;
+                pi_u
+            }
+        }
+    }
+
+    fn track(&mut self, input: &ControlInput, applied: f32) {
+        if !applied.is_finite() {
+            return;
+        }
+        self.law_state.track(applied);
+        self.fallback.track(input, applied);
+        self.du_hist.copy_within(0..self.du_hist.len() - 1, 1);
+        self.du_hist[0] = applied - self.u_prev;
+        self.u_prev = applied;
+    }
+
+    fn name(&self) -> &'static str {
+        self.cfg.law.name()
+    }
+
+    fn status(&self) -> Option<ControllerStatus> {
+        Some(ControllerStatus {
+            mode: self.mode,
+            theta: self.theta(),
+            trace_p: self.trace_p(),
+            prediction_error: self.last_error,
+        })
+    }
+}

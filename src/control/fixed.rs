@@ -1,0 +1,107 @@
+//! Model-based controllers on a fixed, known model (certainty-equivalence design for a model
+//! identified offline or taken from the literature): GMVC, IGMVC and GPC behind the
+//! [`Controller`] trait. The self-tuning versions redesign the same laws from the RLS estimate
+//! every sample.
+
+use super::gpc::{GpcConfig, GpcState};
+use super::model::Model;
+use super::mv::{GmvcConfig, IgmvcConfig, MvState};
+use super::{ControlInput, Controller};
+
+/// Which law, with its tuning.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Law {
+    /// Generalized minimum variance (weights P, R, S).
+    Gmvc(GmvcConfig),
+    /// Incremental GMVC (weight λ on Δu).
+    Igmvc(IgmvcConfig),
+    /// Generalized predictive control (N1, N2, Nu, λ).
+    Gpc(GpcConfig),
+}
+
+impl Law {
+    /// Short name for logs.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Law::Gmvc(_) => "gmvc",
+            Law::Igmvc(_) => "igmvc",
+            Law::Gpc(_) => "gpc",
+        }
+    }
+}
+
+/// The histories of every law, so a law can be evaluated on any model at any sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LawState {
+    mv: MvState,
+    gpc: GpcState,
+}
+
+impl LawState {
+    /// Empty histories holding the duty `u0`.
+    pub fn new(u0: f32) -> Self {
+        Self { mv: MvState::new(u0), gpc: GpcState::new(u0) }
+    }
+
+    /// Computes the unclipped u(t) for measurement `y`, setpoint `w`, model `m`; `None` on
+    /// any numerical failure or without a model (the caller falls back to its safe
+    /// behaviour). The histories advance either way.
+    pub fn update(&mut self, law: &Law, m: Option<&Model>, y: f32, w: f32) -> Option<f32> {
+        let neutral = Model::NEUTRAL;
+        let (m, have_model) = match m {
+            Some(m) => (m, true),
+            None => (&neutral, false),
+        };
+        let ok_mv = self.mv.push_y(y, m).is_ok() && have_model;
+        let ok_gpc = self.gpc.push_y(y, m).is_ok() && have_model;
+        let u = match law {
+            Law::Gmvc(c) if ok_mv => self.mv.gmvc(m, c, w).ok(),
+            Law::Igmvc(c) if ok_mv => self.mv.igmvc(m, c, w).ok(),
+            Law::Gpc(c) if ok_gpc => self.gpc.design(m, c, w).ok().map(|d| self.gpc.u_prev() + d.du),
+            _ => None,
+        };
+        u.filter(|u| u.is_finite())
+    }
+
+    /// Records the applied u.
+    pub fn track(&mut self, applied: f32) {
+        self.mv.track(applied);
+        self.gpc.track(applied);
+    }
+}
+
+/// A law on a fixed model.
+#[derive(Clone, Debug)]
+pub struct FixedModel {
+    law: Law,
+    model: Model,
+    state: LawState,
+}
+
+impl FixedModel {
+    /// A controller starting from duty `u0`.
+    pub fn new(law: Law, model: Model, u0: f32) -> Self {
+        Self { law, model, state: LawState::new(u0) }
+    }
+
+    /// The model.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+}
+
+impl Controller for FixedModel {
+    fn update(&mut self, input: &ControlInput) -> f32 {
+        // NaN tells the step the law failed: it applies the safe state and raises an event.
+        self.state.update(&self.law, Some(&self.model), input.y_c, input.w_c).unwrap_or(f32::NAN)
+    }
+
+    fn track(&mut self, _input: &ControlInput, applied: f32) {
+        self.state.track(applied);
+    }
+
+    fn name(&self) -> &'static str {
+        self.law.name()
+    }
+}

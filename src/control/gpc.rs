@@ -1,0 +1,446 @@
+//! Generalized Predictive Control (Clarke, Mohtadi & Tuffs, "Generalized predictive control —
+//! Part I. The basic algorithm", Automatica 23(2), 1987), SPEC §3.
+//!
+//! Model (CARIMA, [`Model`]): `A y(t) = q^−k B u(t) + C e(t)/Δ`, Δ = 1 − q⁻¹. Cost
+//!
+//! ```text
+//! J = Σ_{j=N1..N2} (ŷ(t+j|t) − w)² + λ Σ_{j=1..Nu} Δu(t+j−1)²
+//! ```
+//!
+//! with w the current setpoint (no preview). The j-step predictor splits into a free response
+//! f_j (past data, future increments zero) and a forced response `Σ g_i Δu(t+j−i)` with g the
+//! step response of `q^−k B/A` (eq. 8–11 of the paper):
+//!
+//! ```text
+//! ŷ = G Δũ + f,   Δũ = (GᵀG + λI)⁻¹ Gᵀ (w − f),   only Δu(t) = first element is applied.
+//! ```
+//!
+//! **How the free response is computed.** Instead of solving the Diophantine identity
+//! `C = E_j ÃΔ... ` for every j, the predictor is evaluated by running the incremental model
+//! `Ã ŷ(t+j) = B Δu(t+j−k) + C ê(t+j)` forward with future Δu and future ê set to zero, where
+//! ê(t) is reconstructed each sample from the model (ê(t) = Ã y(t) − B Δu(t−k) − Σ c_i ê(t−i)).
+//! This is algebraically the same predictor as `F_j y(t)/C + …` from the Diophantine solution
+//! (Clarke et al., §3; Camacho & Bordons, *Model Predictive Control*, 2nd ed., §4.2), costs
+//! O(N2·(na+nb+nc)) flops with no polynomial division, and needs no storage for E_j, F_j.
+//! [`crate::control::diophantine`] solves the identity explicitly for GMVC/IGMVC and for the
+//! tests that cross-check the two.
+//!
+//! The Nu×Nu normal matrix `GᵀG + λI` is symmetric positive definite for λ > 0 and is solved by
+//! Cholesky (no general inverse). u is clipped to [0, 1] and the *applied* u is fed back
+//! through [`GpcState::track`], so saturation never winds anything up.
+//!
+//! Glossary: N1/N2 — first/last predicted sample in the cost; Nu — control horizon (number of
+//! free future increments); λ — weight on the control increments; f — free response;
+//! g — step response coefficients; w — setpoint.
+#![allow(non_snake_case)]
+
+use super::model::{Model, MAX_K, MAX_NA, MAX_NB, MAX_NC};
+
+/// Largest prediction horizon N2.
+pub const MAX_N2: usize = 30;
+/// Largest control horizon Nu.
+pub const MAX_NU: usize = 5;
+
+/// Why GPC could not produce an increment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum GpcError {
+    /// N1, N2, Nu or λ out of range: need 1 ≤ N1 ≤ N2 ≤ 30, 1 ≤ Nu ≤ min(5, N2), λ ≥ 0 finite.
+    Config,
+    /// `GᵀG + λI` is not positive definite (λ = 0 with a step response that is zero over the horizon).
+    Singular,
+    /// A non-finite number appeared (model or measurement).
+    NonFinite,
+}
+
+/// GPC tuning.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct GpcConfig {
+    /// First predicted sample in the cost.
+    pub n1: usize,
+    /// Last predicted sample in the cost (≤ [`MAX_N2`]).
+    pub n2: usize,
+    /// Control horizon (≤ [`MAX_NU`]).
+    pub nu: usize,
+    /// Weight on the squared control increments, (°C per unit duty)².
+    pub lambda: f32,
+}
+
+impl GpcConfig {
+    /// N1 = 1, N2 = 30 (5 min at Ts = 10 s, the closed-loop settling scale), Nu = 3, λ = 0.1
+    /// (the seed's middle value, §6.5.2).
+    pub const DEFAULT: GpcConfig = GpcConfig { n1: 1, n2: 30, nu: 3, lambda: 0.1 };
+
+    /// Checks the ranges of [`GpcError::Config`].
+    pub fn validate(&self) -> Result<(), GpcError> {
+        let ok = self.n1 >= 1
+            && self.n1 <= self.n2
+            && self.n2 <= MAX_N2
+            && self.nu >= 1
+            && self.nu <= MAX_NU
+            && self.nu <= self.n2
+            && self.lambda.is_finite()
+            && self.lambda >= 0.0;
+        if ok {
+            Ok(())
+        } else {
+            Err(GpcError::Config)
+        }
+    }
+}
+
+const HY: usize = MAX_NA + 2; // y(t) … y(t − na − 1)
+const HU: usize = MAX_NB + MAX_K; // Δu(t−1) … Δu(t − k − nb)
+const HE: usize = MAX_NC + 1; // ê(t) … ê(t − nc)
+
+/// Past data the predictor needs, and the last applied u.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GpcState {
+    y: [f32; HY],
+    du: [f32; HU],
+    e: [f32; HE],
+    u_prev: f32,
+    primed: bool,
+}
+
+/// The design of one sample, for logging and tests.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GpcDesign {
+    /// Step response g_1 … g_N2 (index 0 is g_1).
+    pub g: [f32; MAX_N2],
+    /// Free response f_1 … f_N2.
+    pub f: [f32; MAX_N2],
+    /// First row of (GᵀG + λI)⁻¹Gᵀ over j = N1 … N2 (index 0 is j = N1).
+    pub k1: [f32; MAX_N2],
+    /// The increment Δu(t) before clipping.
+    pub du: f32,
+}
+
+impl GpcState {
+    /// Empty history, holding `u0`.
+    pub fn new(u0: f32) -> Self {
+        Self { y: [0.0; HY], du: [0.0; HU], e: [0.0; HE], u_prev: u0, primed: false }
+    }
+
+    /// The last applied u.
+    pub fn u_prev(&self) -> f32 {
+        self.u_prev
+    }
+
+    /// Takes the new measurement y(t). The first call fills the whole y history with it (the
+    /// plant is assumed at rest), so there is no start-up kick.
+    pub fn push_y(&mut self, y: f32, m: &Model) -> Result<(), GpcError> {
+        if !y.is_finite() {
+            return Err(GpcError::NonFinite);
+        }
+        if !self.primed {
+            self.y = [y; HY];
+            self.primed = true;
+        } else {
+            self.y.copy_within(0..HY - 1, 1);
+            self.y[0] = y;
+        }
+        // ê(t) = Ã y(t) − B Δu(t−k) − Σ c_i ê(t−i)
+        let at = m.atilde();
+        let mut e = 0.0;
+        for (i, ai) in at.iter().enumerate().take(m.na + 2) {
+            e += ai * self.y[i];
+        }
+        for i in 0..m.nb {
+            e -= m.b[i] * self.du_past(m.k + i);
+        }
+        self.e.copy_within(0..HE - 1, 1);
+        for i in 0..m.nc {
+            e -= m.c[i] * self.e[i + 1];
+        }
+        self.e[0] = if e.is_finite() { e } else { 0.0 };
+        Ok(())
+    }
+
+    /// Δu(t − m), m ≥ 1 (zero beyond the stored history).
+    fn du_past(&self, m: usize) -> f32 {
+        m.checked_sub(1).and_then(|i| self.du.get(i)).copied().unwrap_or(0.0)
+    }
+
+    /// The GPC increment Δu(t) for setpoint `w`, after [`push_y`](Self::push_y).
+    pub fn design(&self, m: &Model, cfg: &GpcConfig, w: f32) -> Result<GpcDesign, GpcError> {
+        cfg.validate()?;
+        if !w.is_finite() {
+            return Err(GpcError::NonFinite);
+        }
+        let n2 = cfg.n2;
+        let mut d = GpcDesign { g: [0.0; MAX_N2], f: [0.0; MAX_N2], k1: [0.0; MAX_N2], du: 0.0 };
+
+        // Step response of q^−k B/A: y(j) = −Σ a_i y(j−i) + Σ b_i u(j−k−i), u = 1 from j = 0.
+        let mut ys = [0.0f32; MAX_N2 + 1]; // ys[j] = y(j), j = 0..=n2; y(j<0) = 0
+        for j in 1..=n2 {
+            let mut v = 0.0;
+            for i in 1..=m.na {
+                if let Some(yp) = j.checked_sub(i).and_then(|x| ys.get(x)) {
+                    v -= m.a[i - 1] * yp;
+                }
+            }
+            for i in 0..m.nb {
+                if j >= m.k + i {
+                    v += m.b[i];
+                }
+            }
+            ys[j] = v;
+            d.g[j - 1] = v;
+        }
+
+        // Free response: run Ã ŷ(t+j) = B Δu(t+j−k) + C ê(t+j) with future Δu, ê = 0.
+        let at = m.atilde();
+        let mut yy = [0.0f32; HY + MAX_N2]; // yy[HY-1-i] = y(t−i); yy[HY-1+j] = ŷ(t+j)
+        for i in 0..HY {
+            yy[HY - 1 - i] = self.y[i];
+        }
+        for j in 1..=n2 {
+            let mut v = 0.0;
+            for i in 1..=m.na + 1 {
+                v -= at[i] * yy[HY - 1 + j - i];
+            }
+            for i in 0..m.nb {
+                // Δu(t + j − k − i) is known only when j − k − i ≤ −1.
+                if m.k + i > j {
+                    v += m.b[i] * self.du_past(m.k + i - j);
+                }
+            }
+            for i in j..=m.nc {
+                v += m.c[i - 1] * self.e[i - j];
+            }
+            yy[HY - 1 + j] = v;
+            d.f[j - 1] = v;
+        }
+        if d.f.iter().chain(d.g.iter()).any(|x| !x.is_finite()) {
+            return Err(GpcError::NonFinite);
+        }
+
+        // Normal equations H x = Gᵀ(w − f), H = GᵀG + λI, rows j = N1..N2, G[j][c] = g_{j−c}.
+        let nu = cfg.nu;
+        let gjc = |j: usize, c: usize| if j > c { d.g[j - c - 1] } else { 0.0 };
+        let mut h = [[0.0f32; MAX_NU]; MAX_NU];
+        for (r, row) in h.iter_mut().enumerate().take(nu) {
+            for (c, hrc) in row.iter_mut().enumerate().take(nu) {
+                let mut s = if r == c { cfg.lambda } else { 0.0 };
+                for j in cfg.n1..=n2 {
+                    s += gjc(j, r) * gjc(j, c);
+                }
+                *hrc = s;
+            }
+        }
+        let l = cholesky(&h, nu).ok_or(GpcError::Singular)?;
+        // First row of H⁻¹Gᵀ: solve H z = e₁ once, then k1_j = Σ_c z_c G[j][c].
+        let mut z = [0.0f32; MAX_NU];
+        z[0] = 1.0;
+        chol_solve(&l, nu, &mut z);
+        let mut du = 0.0;
+        for j in cfg.n1..=n2 {
+            let mut kj = 0.0;
+            for (c, zc) in z.iter().enumerate().take(nu) {
+                kj += zc * gjc(j, c);
+            }
+            d.k1[j - cfg.n1] = kj;
+            du += kj * (w - d.f[j - 1]);
+        }
+        if !du.is_finite() {
+            return Err(GpcError::NonFinite);
+        }
+        d.du = du;
+        Ok(d)
+    }
+
+    /// Records the u actually applied this sample (after clipping or an override).
+    pub fn track(&mut self, applied: f32) {
+        if !applied.is_finite() {
+            return;
+        }
+        self.du.copy_within(0..HU - 1, 1);
+        self.du[0] = applied - self.u_prev;
+        self.u_prev = applied;
+    }
+}
+
+/// Lower Cholesky factor of the leading n×n block, or `None` if not positive definite.
+fn cholesky(h: &[[f32; MAX_NU]; MAX_NU], n: usize) -> Option<[[f32; MAX_NU]; MAX_NU]> {
+    let mut l = [[0.0f32; MAX_NU]; MAX_NU];
+    for i in 0..n {
+        for j in 0..=i {
+            let mut s = h[i][j];
+            for p in 0..j {
+                s -= l[i][p] * l[j][p];
+            }
+            if i == j {
+                if !(s > 1e-12) {
+                    return None;
+                }
+                l[i][i] = libm::sqrtf(s);
+            } else {
+                l[i][j] = s / l[j][j];
+            }
+        }
+    }
+    Some(l)
+}
+
+/// Solves L Lᵀ x = b in place.
+fn chol_solve(l: &[[f32; MAX_NU]; MAX_NU], n: usize, b: &mut [f32; MAX_NU]) {
+    for i in 0..n {
+        let mut s = b[i];
+        for p in 0..i {
+            s -= l[i][p] * b[p];
+        }
+        b[i] = s / l[i][i];
+    }
+    for i in (0..n).rev() {
+        let mut s = b[i];
+        for p in i + 1..n {
+            s -= l[p][i] * b[p];
+        }
+        b[i] = s / l[i][i];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Independent f64 reference: build G explicitly and solve the normal equations by
+    /// Gaussian elimination.
+    fn reference_k1(g: &[f64], n1: usize, n2: usize, nu: usize, lambda: f64) -> Vec<f64> {
+        let rows = n2 - n1 + 1;
+        let gm = |j: usize, c: usize| if j > c { g[j - c - 1] } else { 0.0 };
+        let mut h = vec![vec![0.0; nu]; nu];
+        for r in 0..nu {
+            for c in 0..nu {
+                h[r][c] = (n1..=n2).map(|j| gm(j, r) * gm(j, c)).sum::<f64>() + if r == c { lambda } else { 0.0 };
+            }
+        }
+        // inverse of h by Gauss–Jordan
+        let mut a: Vec<Vec<f64>> = h.iter().cloned().collect();
+        let mut inv = vec![vec![0.0; nu]; nu];
+        for i in 0..nu {
+            inv[i][i] = 1.0;
+        }
+        for i in 0..nu {
+            let p = a[i][i];
+            for c in 0..nu {
+                a[i][c] /= p;
+                inv[i][c] /= p;
+            }
+            for r in 0..nu {
+                if r != i {
+                    let f = a[r][i];
+                    for c in 0..nu {
+                        a[r][c] -= f * a[i][c];
+                        inv[r][c] -= f * inv[i][c];
+                    }
+                }
+            }
+        }
+        (0..rows).map(|jj| (0..nu).map(|c| inv[0][c] * gm(n1 + jj, c)).sum()).collect()
+    }
+
+    #[test]
+    fn step_response_and_gains_match_an_independent_f64_solution() {
+        let m = Model::new(&[-1.8, 0.81], &[-0.02, -0.01], &[], 1).unwrap();
+        let cfg = GpcConfig { n1: 1, n2: 30, nu: 3, lambda: 0.1 };
+        let mut s = GpcState::new(0.4);
+        s.push_y(4.0, &m).unwrap();
+        let d = s.design(&m, &cfg, 4.0).unwrap();
+        // Step response by direct simulation in f64.
+        let mut y = vec![0.0f64; 32];
+        for j in 1..=30 {
+            let mut v = 1.8 * y[j - 1] - if j >= 2 { 0.81 * y[j - 2] } else { 0.0 };
+            v += -0.02 + if j >= 2 { -0.01 } else { 0.0 };
+            y[j] = v;
+        }
+        for j in 1..=30 {
+            assert!((f64::from(d.g[j - 1]) - y[j]).abs() < 1e-4 * y[j].abs().max(1e-3), "g{j}");
+        }
+        let k1 = reference_k1(&y[1..], 1, 30, 3, 0.1);
+        for (j, r) in k1.iter().enumerate() {
+            assert!((f64::from(d.k1[j]) - r).abs() < 2e-3 * r.abs().max(1e-2), "k1[{j}] {} vs {r}", d.k1[j]);
+        }
+        // At rest at the setpoint the free response is flat and the increment is zero.
+        assert!(d.f[..30].iter().all(|f| (f - 4.0).abs() < 1e-5));
+        assert!(d.du.abs() < 1e-5);
+    }
+
+    #[test]
+    fn free_response_continues_a_past_increment() {
+        // First-order y(t) = 0.9 y(t−1) + 0.1 u(t−1): after Δu(t−1) = 1 from rest, the free
+        // response is the remainder of that step: f_j = 1 − 0.9^{j+1}.
+        let m = Model::new(&[-0.9], &[0.1], &[], 1).unwrap();
+        let mut s = GpcState::new(0.0);
+        s.push_y(0.0, &m).unwrap();
+        s.track(1.0); // u(t−1) = 1
+        s.push_y(0.1, &m).unwrap(); // y(t) = 0.1
+        let d = s.design(&m, &GpcConfig { n1: 1, n2: 10, nu: 1, lambda: 1.0 }, 0.0).unwrap();
+        for j in 1..=10 {
+            let want = 1.0 - 0.9f32.powi(j as i32 + 1);
+            assert!((d.f[j - 1] - want).abs() < 1e-5, "f{j} = {} want {want}", d.f[j - 1]);
+        }
+    }
+
+    /// Camacho & Bordons, *Model Predictive Control* (2nd ed., 2007), §4.2, worked example:
+    /// (1 − 0.8 z⁻¹) y(t) = (0.4 + 0.6 z⁻¹) u(t−1) + e(t)/Δ, N1 = 1, N2 = Nu = 3, λ = 0.8.
+    /// Published: G = [0.4; 1.32; 2.056] (lower-triangular Toeplitz), F1 = 1.8 − 0.8 z⁻¹,
+    /// F2 = 2.44 − 1.44 z⁻¹, F3 = 2.952 − 1.952 z⁻¹, and the control law
+    /// Δu(t) = −0.6042 Δu(t−1) − 1.371 y(t) + 0.805 y(t−1) + 0.1334 w(t+1) + 0.2861 w(t+2) + 0.1474 w(t+3).
+    #[test]
+    fn camacho_bordons_worked_example() {
+        let m = Model::new(&[-0.8], &[0.4, 0.6], &[], 1).unwrap();
+        let cfg = GpcConfig { n1: 1, n2: 3, nu: 3, lambda: 0.8 };
+        // G and K from a state at rest.
+        let mut s = GpcState::new(0.0);
+        s.push_y(0.0, &m).unwrap();
+        let d = s.design(&m, &cfg, 0.0).unwrap();
+        for (g, want) in d.g.iter().zip([0.4, 1.32, 2.056]) {
+            assert!((g - want).abs() < 1e-5, "g = {:?}", &d.g[..3]);
+        }
+        for (k, want) in d.k1.iter().zip([0.1334, 0.2861, 0.1474]) {
+            assert!((k - want).abs() < 5e-4, "k1 = {:?}", &d.k1[..3]);
+        }
+        // The Diophantine F_j for Ã = 1 − 1.8 z⁻¹ + 0.8 z⁻².
+        for (j, want) in [(1, [1.8, -0.8]), (2, [2.44, -1.44]), (3, [2.952, -1.952])] {
+            let sol = crate::control::diophantine::solve(&[1.0, -1.8, 0.8], &[1.0], j).unwrap();
+            assert!((sol.f[0] - want[0]).abs() < 1e-5 && (sol.f[1] - want[1]).abs() < 1e-5, "F{j}");
+        }
+        // The control law's coefficients, probed one past value at a time (the law is linear):
+        // history (oldest first) of y, with Δu(t−1) applied before the last sample.
+        let probe = |ys: &[f32], du_t1: f32| {
+            let mut s = GpcState::new(0.0);
+            for (i, y) in ys.iter().enumerate() {
+                if i + 1 == ys.len() {
+                    s.track(du_t1);
+                }
+                s.push_y(*y, &m).unwrap();
+            }
+            s.design(&m, &cfg, 0.0).unwrap().du
+        };
+        let c_y = probe(&[0.0, 1.0], 0.0);
+        let c_y1 = probe(&[0.0, 1.0, 0.0], 0.0);
+        let c_du = probe(&[0.0, 0.0], 1.0);
+        assert!((c_y + 1.371).abs() < 2e-3, "y(t) coefficient {c_y}");
+        assert!((c_y1 - 0.805).abs() < 2e-3, "y(t−1) coefficient {c_y1}");
+        assert!((c_du + 0.6042).abs() < 2e-3, "Δu(t−1) coefficient {c_du}");
+    }
+
+    #[test]
+    fn config_ranges_are_enforced() {
+        let bad = [
+            GpcConfig { n1: 0, ..GpcConfig::DEFAULT },
+            GpcConfig { n1: 5, n2: 4, ..GpcConfig::DEFAULT },
+            GpcConfig { n2: 31, ..GpcConfig::DEFAULT },
+            GpcConfig { nu: 6, ..GpcConfig::DEFAULT },
+            GpcConfig { lambda: -1.0, ..GpcConfig::DEFAULT },
+            GpcConfig { lambda: f32::NAN, ..GpcConfig::DEFAULT },
+        ];
+        for c in bad {
+            assert_eq!(c.validate(), Err(GpcError::Config), "{c:?}");
+        }
+        assert_eq!(GpcConfig::DEFAULT.validate(), Ok(()));
+    }
+}

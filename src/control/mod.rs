@@ -1,0 +1,126 @@
+//! Controllers behind one small trait.
+//!
+//! Sign convention: the actuator cools, so more duty means a colder load. Every controller
+//! works on the error `e = y − w` (measured minus setpoint, °C): positive when the load is too
+//! warm, which asks for more duty.
+//!
+//! The per-sample step ([`crate::step::Carrier`]) calls [`Controller::update`] with the filtered
+//! measurement, then tells the controller what was really applied with [`Controller::track`]
+//! (after saturation and any supervisor override), so every controller can stay bumpless and
+//! free of integrator wind-up.
+
+pub mod diophantine;
+pub mod fixed;
+pub mod gpc;
+pub mod model;
+pub mod mv;
+pub mod onoff;
+pub mod pi;
+pub mod zn;
+
+pub use fixed::{FixedModel, Law};
+pub use onoff::{OnOff, OnOffConfig};
+pub use pi::{Pi, PiConfig};
+
+/// What a controller sees each sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ControlInput {
+    /// Sample time, s.
+    pub t_s: f32,
+    /// Filtered, calibrated load temperature, °C.
+    pub y_c: f32,
+    /// Setpoint, °C (already clamped to the safe band by the step).
+    pub w_c: f32,
+}
+
+/// A feedback controller for the cooler.
+pub trait Controller {
+    /// Computes the duty request for this sample. The value need not be clipped; the step
+    /// saturates it to [0, 1] and treats a non-finite request as a fault.
+    fn update(&mut self, input: &ControlInput) -> f32;
+
+    /// Informs the controller of the duty actually applied this sample, in [0, 1].
+    fn track(&mut self, input: &ControlInput, applied: f32);
+
+    /// Short name for logs ("onoff", "pi", …).
+    fn name(&self) -> &'static str;
+
+    /// State of an adaptive controller, for telemetry and mode-change events.
+    fn status(&self) -> Option<ControllerStatus> {
+        None
+    }
+}
+
+/// Which controller drives the SSR.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum AdaptiveMode {
+    /// The law runs on the current RLS estimate.
+    Adaptive,
+    /// The estimate is not trustworthy: the law runs on the last trusted model.
+    Frozen,
+    /// No trusted model at all: the fallback PI drives.
+    Fallback,
+}
+
+/// What an adaptive controller exposes for logging.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ControllerStatus {
+    /// Which controller drives the SSR.
+    pub mode: AdaptiveMode,
+    /// Estimated θ = [a1 a2 b0 b1].
+    pub theta: [f32; 4],
+    /// trace(P) of the estimator.
+    pub trace_p: f32,
+    /// Last a-priori prediction error, °C.
+    pub prediction_error: f32,
+}
+
+/// Selects a controller at run time without a heap: the host CLI and the firmware config pick
+/// one of these.
+// No heap to box into: the enum is as large as its largest controller, which is the one the
+// firmware runs by default anyway.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Debug)]
+pub enum AnyController {
+    /// On-Off with hysteresis.
+    OnOff(OnOff),
+    /// PI (or P when the integral time is infinite).
+    Pi(Pi),
+    /// GMVC, IGMVC or GPC on a fixed model.
+    Fixed(FixedModel),
+}
+
+impl Controller for AnyController {
+    fn update(&mut self, input: &ControlInput) -> f32 {
+        match self {
+            AnyController::OnOff(c) => c.update(input),
+            AnyController::Pi(c) => c.update(input),
+            AnyController::Fixed(c) => c.update(input),
+        }
+    }
+
+    fn track(&mut self, input: &ControlInput, applied: f32) {
+        match self {
+            AnyController::OnOff(c) => c.track(input, applied),
+            AnyController::Pi(c) => c.track(input, applied),
+            AnyController::Fixed(c) => c.track(input, applied),
+        }
+    }
+
+    fn status(&self) -> Option<ControllerStatus> {
+        match self {
+            _ => None,
+        }
+    }
+
+    fn name(&self) -> &'static str {
+        match self {
+            AnyController::OnOff(c) => c.name(),
+            AnyController::Pi(c) => c.name(),
+            AnyController::Fixed(c) => c.name(),
+        }
+    }
+}

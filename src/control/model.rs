@@ -1,0 +1,149 @@
+//! The linear discrete-time model the model-based controllers are designed from.
+//!
+//! ```text
+//! A(q⁻¹) y(t) = q^−k B(q⁻¹) u(t) + C(q⁻¹) e(t) / Δ         (CARIMA, Clarke et al. 1987)
+//! A = 1 + a1 q⁻¹ + … + a_na q⁻na,   B = b0 + b1 q⁻¹ + … + b_{nb−1} q^−(nb−1),   C = 1 + c1 q⁻¹ + …
+//! ```
+//!
+//! Orders are bounded at compile time ([`MAX_NA`], [`MAX_NB`], [`MAX_NC`], [`MAX_K`]) so the
+//! model is `Copy` and lives on the stack; unused coefficients are zero.
+
+/// Largest A order.
+pub const MAX_NA: usize = 4;
+/// Most B coefficients.
+pub const MAX_NB: usize = 4;
+/// Largest C order.
+pub const MAX_NC: usize = 2;
+/// Largest delay, samples.
+pub const MAX_K: usize = 10;
+
+/// Why a model was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ModelError {
+    /// An order or the delay is outside the supported range (k ≥ 1, na ≥ 1, nb ≥ 1).
+    Order,
+    /// A coefficient is NaN or infinite.
+    NonFinite,
+}
+
+/// A CARIMA/ARX model with bounded orders.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Model {
+    /// a1 … a_na (without the leading 1), zero-padded.
+    pub a: [f32; MAX_NA],
+    /// b0 … b_{nb−1}, zero-padded.
+    pub b: [f32; MAX_NB],
+    /// c1 … c_nc (without the leading 1), zero-padded.
+    pub c: [f32; MAX_NC],
+    /// A order.
+    pub na: usize,
+    /// Number of B coefficients.
+    pub nb: usize,
+    /// C order.
+    pub nc: usize,
+    /// Delay in samples, ≥ 1.
+    pub k: usize,
+}
+
+impl Model {
+    /// y(t) = y(t−1) + u(t−1)·0: a placeholder that lets histories advance when no model is known.
+    pub const NEUTRAL: Model = Model { a: [-1.0, 0.0, 0.0, 0.0], b: [0.0; MAX_NB], c: [0.0; MAX_NC], na: 1, nb: 1, nc: 0, k: 1 };
+
+    /// Builds a model from coefficient slices (a without the leading 1, c likewise).
+    pub fn new(a: &[f32], b: &[f32], c: &[f32], k: usize) -> Result<Model, ModelError> {
+        if a.is_empty() || a.len() > MAX_NA || b.is_empty() || b.len() > MAX_NB || c.len() > MAX_NC {
+            return Err(ModelError::Order);
+        }
+        if k == 0 || k > MAX_K {
+            return Err(ModelError::Order);
+        }
+        if a.iter().chain(b).chain(c).any(|x| !x.is_finite()) {
+            return Err(ModelError::NonFinite);
+        }
+        let mut m = Model { a: [0.0; MAX_NA], b: [0.0; MAX_NB], c: [0.0; MAX_NC], na: a.len(), nb: b.len(), nc: c.len(), k };
+        m.a[..a.len()].copy_from_slice(a);
+        m.b[..b.len()].copy_from_slice(b);
+        m.c[..c.len()].copy_from_slice(c);
+        Ok(m)
+    }
+
+    /// Steady-state gain B(1)/A(1), output units per input unit (`None` if A(1) ≈ 0).
+    pub fn static_gain(&self) -> Option<f32> {
+        let a1 = 1.0 + self.a.iter().sum::<f32>();
+        let b1: f32 = self.b.iter().sum();
+        (a1.abs() > 1e-9).then(|| b1 / a1)
+    }
+
+    /// Ã = Δ·A = (1 − q⁻¹) A: coefficients ã_0 = 1, ã_1 … ã_{na+1}.
+    pub fn atilde(&self) -> [f32; MAX_NA + 2] {
+        let mut at = [0.0f32; MAX_NA + 2];
+        at[0] = 1.0;
+        for i in 1..=self.na + 1 {
+            let ai = if i <= self.na { self.a[i - 1] } else { 0.0 };
+            let aim1 = if i == 1 { 1.0 } else { self.a[i - 2] };
+            at[i] = ai - aim1;
+        }
+        at
+    }
+
+    /// True if all roots of A lie strictly inside the unit circle (Jury's criterion for
+    /// orders 1 and 2; for higher orders, Schur–Cohn reduction).
+    pub fn a_is_stable(&self) -> bool {
+        schur_stable(&self.a[..self.na])
+    }
+}
+
+/// Schur–Cohn test: are all roots of 1 + a1 z⁻¹ + … + an z⁻ⁿ inside the unit circle?
+pub fn schur_stable(a: &[f32]) -> bool {
+    // Step-down (Levinson) recursion on the coefficients, in f64 for margin near |z| = 1.
+    let n = a.len();
+    let mut p = [0.0f64; MAX_NA + 1];
+    p[0] = 1.0;
+    for (dst, src) in p[1..=n].iter_mut().zip(a) {
+        *dst = f64::from(*src);
+    }
+    let mut m = n;
+    while m > 0 {
+        let km = p[m];
+        if !(km.abs() < 1.0) {
+            return false;
+        }
+        let den = 1.0 - km * km;
+        let mut q = [0.0f64; MAX_NA + 1];
+        for i in 0..m {
+            q[i] = (p[i] - km * p[m - i]) / den;
+        }
+        p = q;
+        m -= 1;
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stability_of_known_polynomials() {
+        assert!(schur_stable(&[-0.9]));
+        assert!(!schur_stable(&[-1.0]));
+        assert!(schur_stable(&[-1.8, 0.81])); // double pole at 0.9
+        assert!(!schur_stable(&[-2.1, 1.1])); // poles 1.0 and 1.1
+        assert!(schur_stable(&[-1.995, 0.99501])); // poles ≈ 0.9975 ± small
+        // (1 − 0.5 q⁻¹)(1 − 1.2 q⁻¹) = 1 − 1.7 q⁻¹ + 0.6 q⁻²
+        assert!(!schur_stable(&[-1.7, 0.6]));
+        // 4th order: (1 − 0.9 q⁻¹)² (1 − 0.5 q⁻¹)² = 1 − 2.8 q⁻¹ + 2.86 q⁻² − 1.26 q⁻³ + 0.2025 q⁻⁴
+        assert!(schur_stable(&[-2.8, 2.86, -1.26, 0.2025]));
+    }
+
+    #[test]
+    fn rejects_bad_orders_and_values() {
+        assert_eq!(Model::new(&[], &[1.0], &[], 1), Err(ModelError::Order));
+        assert_eq!(Model::new(&[-0.9], &[1.0], &[], 0), Err(ModelError::Order));
+        assert_eq!(Model::new(&[f32::NAN], &[1.0], &[], 1), Err(ModelError::NonFinite));
+        let m = Model::new(&[-1.8, 0.81], &[-0.02, -0.01], &[], 1).unwrap();
+        assert!((m.static_gain().unwrap() - (-0.03 / 0.01)).abs() < 1e-3);
+    }
+}

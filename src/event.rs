@@ -1,0 +1,101 @@
+//! Events: what the step reports besides the duty — every detection, guard action and mode
+//! change, stamped with the sample time. The glue logs them (defmt on the board, JSON/CSV on
+//! the host); the cold-chain record is built from them.
+
+/// What happened.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum EventKind {
+    /// The RTD reads open circuit (counts at full scale).
+    SensorOpen,
+    /// The RTD reads short circuit.
+    SensorShort,
+    /// The RTD reads a temperature outside the plausible range of the carrier.
+    SensorOutOfRange,
+    /// The sensor reads plausibly again after a fault.
+    SensorRecovered,
+    /// The freeze guard cut cooling: the measured load came too close to 0 °C.
+    FreezeGuardTripped,
+    /// The freeze guard released: the load is warm enough again.
+    FreezeGuardReleased,
+    /// The requested setpoint was outside 2…8 °C and was clamped.
+    SetpointClamped,
+    /// The controller asked for a non-finite duty; the step applied the safe state instead.
+    ControllerNonFinite,
+    /// Self-tuning: the law now runs on the current estimate.
+    AdaptiveEngaged,
+    /// Self-tuning: the estimate is not trusted; the law runs on the last trusted model.
+    AdaptiveFrozen,
+    /// Self-tuning: no trusted model or the law failed; the fallback PI drives.
+    FallbackEngaged,
+}
+
+/// One timestamped event.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Event {
+    /// Sample time, s.
+    pub t_s: f32,
+    /// What happened.
+    pub kind: EventKind,
+}
+
+/// Most events one step can raise; more are counted in [`Events::dropped`] (never silently lost).
+pub const MAX_EVENTS_PER_STEP: usize = 8;
+
+/// The events of one step: a fixed-capacity list.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Events {
+    items: [Option<Event>; MAX_EVENTS_PER_STEP],
+    len: usize,
+    dropped: u16,
+}
+
+impl Events {
+    /// Records an event, or counts it as dropped if the list is full.
+    pub fn push(&mut self, e: Event) {
+        match self.items.get_mut(self.len) {
+            Some(slot) => {
+                *slot = Some(e);
+                self.len += 1;
+            }
+            None => self.dropped = self.dropped.saturating_add(1),
+        }
+    }
+
+    /// The recorded events, oldest first.
+    pub fn iter(&self) -> impl Iterator<Item = &Event> {
+        self.items.iter().flatten()
+    }
+
+    /// Number of recorded events.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// True if nothing happened.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Events that did not fit.
+    pub fn dropped(&self) -> u16 {
+        self.dropped
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn overflow_is_counted_not_lost_silently() {
+        let mut ev = Events::default();
+        for i in 0..MAX_EVENTS_PER_STEP + 3 {
+            ev.push(Event { t_s: i as f32, kind: EventKind::SensorOpen });
+        }
+        assert_eq!(ev.len(), MAX_EVENTS_PER_STEP);
+        assert_eq!(ev.dropped(), 3);
+        assert_eq!(ev.iter().next().map(|e| e.t_s), Some(0.0));
+    }
+}

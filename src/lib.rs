@@ -1,0 +1,35 @@
+//! # hter — adaptive firmware core for a thermoelectric vaccine carrier
+//!
+//! Everything that is math and no hardware: the RTD measurement chain, filtering,
+//! black-box identification, the controllers, and the one per-sample step object
+//! ([`step::Carrier`]) that the firmware and the host simulator both drive.
+//!
+//! The crate is `no_std`, allocation-free and works in `f32` with fixed sizes, so
+//! exactly the same code runs on the STM32L476 and in `hal-sim`.
+//!
+//! Layout:
+//! - [`units`]: `Celsius`, `Ohms`, `Duty` newtypes for values that cross modules.
+//! - [`rtd`], [`adc`], [`calib`], [`filter`]: counts → ohms → °C → calibrated → filtered.
+//! - [`control`]: the [`control::Controller`] trait and the baseline controllers.
+//! - [`ident`]: ARX/ARMAX models, LS/RLS/RELS estimators, PRBS, validation.
+//! - [`event`]: timestamped events the step reports (sensor faults, guard actions, mode changes).
+//! - [`hal`]: the small hardware seams the firmware and `hal-sim` implement.
+//! - [`step`]: the per-sample application step.
+#![cfg_attr(not(test), no_std)]
+#![warn(missing_docs)]
+// `!(x > 0.0)` is deliberate throughout: unlike `x <= 0.0` it is also true for NaN, which is
+// exactly the case a numerical guard must catch.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+// Index loops mirror the textbook sums (Σ_i a_i y(t−i)) they implement.
+#![allow(clippy::needless_range_loop)]
+
+pub mod adc;
+pub mod calib;
+pub mod control;
+pub mod event;
+pub mod filter;
+pub mod hal;
+pub mod ident;
+pub mod rtd;
+pub mod step;
+pub mod units;

@@ -1,0 +1,384 @@
+//! The per-sample application step: raw ADC counts (and time) in → temperature, duty, events out.
+//!
+//! [`Carrier`] is the whole application minus the peripherals. The firmware calls
+//! [`Carrier::step`] once per sample period with the oversampled RTD counts and writes the
+//! returned duty to the SSR timer and the supply-enable output; `hal-sim` does the same with its
+//! simulated ADC and SSR. A trace of counts therefore reproduces a board's behaviour on the host.
+//!
+//! Pipeline per sample:
+//! 1. counts → ohms (ratiometric front end, [`crate::adc`]); open/short detection;
+//! 2. ohms → °C (Callendar–Van Dusen, [`crate::rtd`]); plausibility range check;
+//! 3. two-point calibration ([`crate::calib`]) and first-order filter F_a ([`crate::filter`]);
+//! 4. setpoint clamped to the vaccine band 2…8 °C (a controller may never aim below +2 °C);
+//! 5. controller ([`crate::control`]);
+//! 6. safety: on a sensor fault cooling stops (the safe state for vaccines that freeze); the
+//!    freeze guard cuts cooling when the measured load falls to `freeze_cut_c` and holds it off
+//!    until it is back above `freeze_release_c`;
+//! 7. the applied duty is fed back to the controller (anti-windup, bumpless transfer).
+//!
+//! ## Sampling period
+//! Default Ts = 10 s. The carrier's dominant time constant is tens of minutes and its apparent
+//! dead time tens of seconds, so 10 s gives 6+ samples per dead time and ~100–300 per time
+//! constant (Åström & Wittenmark's rule of 4–10 samples per rise time is met many times over),
+//! while keeping the identified poles away from 1 far enough for f32 RLS (at Ts = 1 s,
+//! `1 + a1 + a2` would shrink another 100-fold). It also matches a GPC horizon of N2 = 30
+//! samples = 5 minutes, the scale of the closed-loop settling time, and lets open/short faults be
+//! confirmed within two samples = 20 s.
+
+use crate::adc::{AdcError, AdcFrontEnd};
+use crate::calib::TwoPoint;
+use crate::control::{AdaptiveMode, ControlInput, Controller, ControllerStatus};
+use crate::event::{Event, EventKind, Events};
+use crate::filter::{FirstOrder, FirstOrderConfig};
+use crate::rtd::Rtd;
+use crate::units::{Celsius, Duty};
+
+/// Everything the step needs to know that does not change while it runs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct CarrierConfig {
+    /// Sample period, s (see the module docs for the choice of 10 s).
+    pub ts_s: f32,
+    /// ADC front end of the RTD channel.
+    pub adc: AdcFrontEnd,
+    /// The RTD (Pt100 on the reference board).
+    pub rtd: Rtd,
+    /// Two-point calibration of the channel.
+    pub cal: TwoPoint,
+    /// Measurement filter.
+    pub filter: FirstOrderConfig,
+    /// Readings below this are implausible for a vaccine carrier (sensor fault), °C.
+    pub plausible_min_c: f32,
+    /// Readings above this are implausible for a vaccine carrier (sensor fault), °C.
+    pub plausible_max_c: f32,
+    /// Lowest setpoint accepted, °C (vaccines freeze below; SPEC §6).
+    pub setpoint_min_c: f32,
+    /// Highest setpoint accepted, °C.
+    pub setpoint_max_c: f32,
+    /// Freeze guard: cooling is cut when the measured load is at or below this, °C.
+    /// 1.5 °C leaves 0.5 °C of margin to the +1 °C limit of SPEC §6 for the sensor lag.
+    pub freeze_cut_c: f32,
+    /// Freeze guard: cooling may resume once the measured load is at or above this, °C.
+    pub freeze_release_c: f32,
+}
+
+impl CarrierConfig {
+    /// Defaults for the reference board: Pt100 on the default front end, Ts = 10 s, F_a = 0.5.
+    pub const DEFAULT: CarrierConfig = CarrierConfig {
+        ts_s: 10.0,
+        adc: AdcFrontEnd::DEFAULT,
+        rtd: Rtd::PT100,
+        cal: TwoPoint::IDENTITY,
+        filter: FirstOrderConfig { fa: 0.5 },
+        // The carrier lives between a freezer pack (−25 °C) and a car in the sun (+70 °C).
+        plausible_min_c: -30.0,
+        plausible_max_c: 75.0,
+        setpoint_min_c: 2.0,
+        setpoint_max_c: 8.0,
+        freeze_cut_c: 1.5,
+        freeze_release_c: 2.5,
+    };
+}
+
+/// One sample's input.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StepInput {
+    /// Sample time, s (f32: 0.25 s resolution after 30 days, ample at Ts = 10 s).
+    pub t_s: f32,
+    /// Oversampled RTD conversion, counts of the front end's full scale.
+    pub counts: u32,
+    /// Requested setpoint, °C.
+    pub setpoint_c: f32,
+}
+
+/// What the step is doing about safety.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Mode {
+    /// The controller drives the SSR.
+    Normal,
+    /// The sensor is faulty: cooling off until it reads plausibly again.
+    SensorFault,
+    /// The freeze guard holds cooling off.
+    FreezeGuard,
+}
+
+/// One sample's output.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepOutput {
+    /// Calibrated temperature of this sample, °C (`None` on a sensor fault).
+    pub raw_c: Option<Celsius>,
+    /// Filtered temperature the controller saw, °C (the last good value on a sensor fault).
+    pub temp_c: Celsius,
+    /// Setpoint after clamping, °C.
+    pub setpoint_c: Celsius,
+    /// What the controller asked for (before saturation and safety), duty.
+    pub requested: f32,
+    /// Duty to apply to the SSR.
+    pub duty: Duty,
+    /// Level of the supply-enable output (false opens the modules' supply switch).
+    pub supply_enable: bool,
+    /// Safety mode after this sample.
+    pub mode: Mode,
+    /// What happened this sample.
+    pub events: Events,
+    /// Estimator and mode of an adaptive controller (θ, trace P, prediction error).
+    pub status: Option<ControllerStatus>,
+}
+
+/// The per-sample application step.
+#[derive(Clone, Debug)]
+pub struct Carrier<C: Controller> {
+    cfg: CarrierConfig,
+    controller: C,
+    filter: FirstOrder,
+    sensor_fault: Option<EventKind>,
+    freeze_guard: bool,
+    setpoint_clamped: bool,
+    adaptive_mode: Option<AdaptiveMode>,
+}
+
+impl<C: Controller> Carrier<C> {
+    /// A carrier that has not seen a sample yet.
+    pub fn new(cfg: CarrierConfig, controller: C) -> Self {
+        Self {
+            cfg,
+            controller,
+            filter: FirstOrder::default(),
+            sensor_fault: None,
+            freeze_guard: false,
+            setpoint_clamped: false,
+            adaptive_mode: None,
+        }
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &CarrierConfig {
+        &self.cfg
+    }
+
+    /// The controller, for logging its state.
+    pub fn controller(&self) -> &C {
+        &self.controller
+    }
+
+    /// Runs one sample from raw ADC counts (the firmware's and the simulator's entry).
+    pub fn step(&mut self, input: &StepInput) -> StepOutput {
+        let measured = self.measure(input.counts);
+        self.run(input.t_s, measured, input.setpoint_c)
+    }
+
+    /// Runs one sample from an already converted temperature, skipping the ADC and RTD
+    /// conversion (ideal-measurement plants, replay of temperature logs). The plausibility
+    /// check, filter, controller and safety still apply.
+    pub fn step_celsius(&mut self, t_s: f32, temp: Celsius, setpoint_c: f32) -> StepOutput {
+        let measured = self.plausible(temp);
+        self.run(t_s, measured, setpoint_c)
+    }
+
+    fn run(&mut self, t_s: f32, raw: Result<Celsius, EventKind>, setpoint_c: f32) -> StepOutput {
+        let mut events = Events::default();
+        let mut emit = |kind| events.push(Event { t_s, kind });
+
+        // 1–3: measurement chain.
+        match (raw, self.sensor_fault) {
+            (Err(kind), None) => {
+                emit(kind);
+                self.sensor_fault = Some(kind);
+            }
+            (Err(kind), Some(prev)) if kind != prev => {
+                emit(kind);
+                self.sensor_fault = Some(kind);
+            }
+            (Ok(_), Some(_)) => {
+                emit(EventKind::SensorRecovered);
+                self.sensor_fault = None;
+                // The filter state predates the fault; start afresh from the first good reading.
+                self.filter.reset();
+            }
+            _ => {}
+        }
+        let raw_c = raw.ok();
+        let temp_c = match raw_c {
+            Some(t) => self.filter.step(&self.cfg.filter, t.0),
+            None => self.filter.output().unwrap_or(f32::NAN),
+        };
+
+        // 4: setpoint.
+        let w = if setpoint_c.is_finite() {
+            setpoint_c.clamp(self.cfg.setpoint_min_c, self.cfg.setpoint_max_c)
+        } else {
+            self.cfg.setpoint_min_c.max(4.0).min(self.cfg.setpoint_max_c)
+        };
+        let clamped = w != setpoint_c;
+        if clamped && !self.setpoint_clamped {
+            emit(EventKind::SetpointClamped);
+        }
+        self.setpoint_clamped = clamped;
+
+        // 5: controller (only with a trustworthy measurement).
+        let ci = ControlInput { t_s, y_c: temp_c, w_c: w };
+        let requested = if self.sensor_fault.is_none() { self.controller.update(&ci) } else { 0.0 };
+        let mut duty = if requested.is_finite() {
+            Duty::saturating(requested)
+        } else {
+            emit(EventKind::ControllerNonFinite);
+            Duty::OFF
+        };
+
+        let status = self.controller.status();
+        if let Some(st) = status {
+            if self.adaptive_mode != Some(st.mode) {
+                emit(match st.mode {
+                    AdaptiveMode::Adaptive => EventKind::AdaptiveEngaged,
+                    AdaptiveMode::Frozen => EventKind::AdaptiveFrozen,
+                    AdaptiveMode::Fallback => EventKind::FallbackEngaged,
+                });
+                self.adaptive_mode = Some(st.mode);
+            }
+        }
+
+        // 6: safety, independent of what the controller wanted.
+        if self.sensor_fault.is_none() {
+            if !self.freeze_guard && temp_c <= self.cfg.freeze_cut_c {
+                self.freeze_guard = true;
+                emit(EventKind::FreezeGuardTripped);
+            } else if self.freeze_guard && temp_c >= self.cfg.freeze_release_c {
+                self.freeze_guard = false;
+                emit(EventKind::FreezeGuardReleased);
+            }
+        }
+        let mode = if self.sensor_fault.is_some() {
+            Mode::SensorFault
+        } else if self.freeze_guard {
+            Mode::FreezeGuard
+        } else {
+            Mode::Normal
+        };
+        if mode != Mode::Normal {
+            duty = Duty::OFF;
+        }
+
+        // 7: tell the controller what was really applied.
+        if self.sensor_fault.is_none() {
+            self.controller.track(&ci, duty.get());
+        }
+
+        StepOutput {
+            raw_c,
+            temp_c: Celsius(temp_c),
+            setpoint_c: Celsius(w),
+            requested,
+            duty,
+            supply_enable: true,
+            mode,
+            events,
+            status,
+        }
+    }
+
+    /// Counts → calibrated °C, or the fault the counts reveal.
+    fn measure(&self, counts: u32) -> Result<Celsius, EventKind> {
+        let ohms = self.cfg.adc.ohms(counts).map_err(|e| match e {
+            AdcError::Open => EventKind::SensorOpen,
+            AdcError::Short => EventKind::SensorShort,
+        })?;
+        let t = self.cfg.rtd.temperature(ohms).map_err(|_| EventKind::SensorOutOfRange)?;
+        self.plausible(self.cfg.cal.apply(t))
+    }
+
+    /// The plausibility range check of a calibrated temperature.
+    fn plausible(&self, t: Celsius) -> Result<Celsius, EventKind> {
+        if t.0.is_finite() && (self.cfg.plausible_min_c..=self.cfg.plausible_max_c).contains(&t.0) {
+            Ok(t)
+        } else {
+            Err(EventKind::SensorOutOfRange)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::{AnyController, OnOff, OnOffConfig, Pi, PiConfig};
+    use crate::units::Ohms;
+
+    fn counts_at(t: f32) -> u32 {
+        let cfg = CarrierConfig::DEFAULT;
+        cfg.adc.counts(cfg.rtd.resistance(Celsius(t)).unwrap())
+    }
+
+    fn pi_carrier() -> Carrier<AnyController> {
+        Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)))
+    }
+
+    #[test]
+    fn measures_within_the_resolution() {
+        let mut c = pi_carrier();
+        let out = c.step(&StepInput { t_s: 0.0, counts: counts_at(4.0), setpoint_c: 4.0 });
+        assert!((out.temp_c.0 - 4.0).abs() < 0.01, "{:?}", out.temp_c);
+        assert_eq!(out.mode, Mode::Normal);
+        assert!(out.supply_enable);
+    }
+
+    #[test]
+    fn open_sensor_stops_cooling_on_the_first_sample_and_recovers() {
+        let mut c = pi_carrier();
+        let warm = c.step(&StepInput { t_s: 0.0, counts: counts_at(10.0), setpoint_c: 4.0 });
+        assert!(warm.duty.get() > 0.5);
+        let open = c.step(&StepInput { t_s: 10.0, counts: 65_535, setpoint_c: 4.0 });
+        assert_eq!(open.duty, Duty::OFF);
+        assert_eq!(open.mode, Mode::SensorFault);
+        assert_eq!(open.events.iter().next().map(|e| (e.kind, e.t_s)), Some((EventKind::SensorOpen, 10.0)));
+        // No repeated event while the fault persists.
+        let still = c.step(&StepInput { t_s: 20.0, counts: 65_535, setpoint_c: 4.0 });
+        assert!(still.events.is_empty());
+        let back = c.step(&StepInput { t_s: 30.0, counts: counts_at(5.0), setpoint_c: 4.0 });
+        assert_eq!(back.mode, Mode::Normal);
+        assert_eq!(back.events.iter().next().map(|e| e.kind), Some(EventKind::SensorRecovered));
+    }
+
+    #[test]
+    fn short_and_implausible_readings_are_faults() {
+        let mut c = pi_carrier();
+        let short = c.step(&StepInput { t_s: 0.0, counts: 10, setpoint_c: 4.0 });
+        assert_eq!(short.events.iter().next().map(|e| e.kind), Some(EventKind::SensorShort));
+        let cold = CarrierConfig::DEFAULT.adc.counts(Ohms(80.0)); // ≈ −50 °C
+        let out = c.step(&StepInput { t_s: 10.0, counts: cold, setpoint_c: 4.0 });
+        assert_eq!(out.events.iter().next().map(|e| e.kind), Some(EventKind::SensorOutOfRange));
+        assert_eq!(out.duty, Duty::OFF);
+    }
+
+    #[test]
+    fn setpoint_below_two_degrees_is_clamped() {
+        let mut c = pi_carrier();
+        let out = c.step(&StepInput { t_s: 0.0, counts: counts_at(4.0), setpoint_c: -5.0 });
+        assert_eq!(out.setpoint_c.0, 2.0);
+        assert_eq!(out.events.iter().next().map(|e| e.kind), Some(EventKind::SetpointClamped));
+        let nan = c.step(&StepInput { t_s: 10.0, counts: counts_at(4.0), setpoint_c: f32::NAN });
+        assert!((2.0..=8.0).contains(&nan.setpoint_c.0));
+    }
+
+    #[test]
+    fn freeze_guard_overrides_an_on_off_controller_stuck_on() {
+        // On-Off with a huge band keeps asking for cooling; the guard must cut it at 1.5 °C.
+        let onoff = OnOff::new(OnOffConfig { hysteresis_c: 0.1 });
+        let mut c = Carrier::new(CarrierConfig::DEFAULT, AnyController::OnOff(onoff));
+        let _ = c.step(&StepInput { t_s: 0.0, counts: counts_at(9.0), setpoint_c: 4.0 });
+        let mut t = 10.0;
+        let mut temp = 9.0f32;
+        let mut tripped_at = None;
+        while temp > 0.0 {
+            let out = c.step(&StepInput { t_s: t, counts: counts_at(temp), setpoint_c: 2.0 });
+            if out.mode == Mode::FreezeGuard {
+                tripped_at.get_or_insert(out.temp_c.0);
+                assert_eq!(out.duty, Duty::OFF);
+            }
+            temp -= 0.1;
+            t += 10.0;
+        }
+        let at = tripped_at.expect("guard never tripped");
+        assert!(at <= 1.5 && at > 1.0, "tripped at {at}");
+    }
+}

@@ -1,0 +1,68 @@
+//! Units as types for values that cross module boundaries.
+//!
+//! Inside a module, plain `f32` with a unit suffix (`_c`, `_s`, `_ohm`) is used; when a value
+//! leaves a module it carries its unit in its type so a resistance can never be passed where a
+//! temperature is expected.
+
+/// A temperature in degrees Celsius.
+#[derive(Clone, Copy, Debug, PartialEq, PartialOrd, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Celsius(pub f32);
+
+/// A resistance in ohms.
+#[derive(Clone, Copy, Debug, PartialEq, PartialOrd, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Ohms(pub f32);
+
+/// A PWM duty cycle, guaranteed finite and within [0, 1].
+#[derive(Clone, Copy, Debug, PartialEq, PartialOrd, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Duty(f32);
+
+impl Duty {
+    /// Cooling off.
+    pub const OFF: Duty = Duty(0.0);
+    /// Cooling fully on.
+    pub const FULL: Duty = Duty(1.0);
+
+    /// Checked constructor: `None` unless `x` is finite and within [0, 1].
+    pub fn new(x: f32) -> Option<Duty> {
+        if x.is_finite() && (0.0..=1.0).contains(&x) {
+            Some(Duty(x))
+        } else {
+            None
+        }
+    }
+
+    /// Saturating constructor: clips to [0, 1]; a non-finite request becomes [`Duty::OFF`]
+    /// (the safe state for a cooler that could freeze its load).
+    pub fn saturating(x: f32) -> Duty {
+        if x.is_finite() {
+            Duty(x.clamp(0.0, 1.0))
+        } else {
+            Duty::OFF
+        }
+    }
+
+    /// The duty as a fraction in [0, 1].
+    pub fn get(self) -> f32 {
+        self.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn duty_rejects_out_of_range_and_nan() {
+        assert!(Duty::new(-0.01).is_none());
+        assert!(Duty::new(1.01).is_none());
+        assert!(Duty::new(f32::NAN).is_none());
+        assert_eq!(Duty::new(0.25).map(Duty::get), Some(0.25));
+        assert_eq!(Duty::saturating(f32::NAN), Duty::OFF);
+        assert_eq!(Duty::saturating(f32::INFINITY), Duty::OFF);
+        assert_eq!(Duty::saturating(3.0), Duty::FULL);
+        assert_eq!(Duty::saturating(-3.0), Duty::OFF);
+    }
+}

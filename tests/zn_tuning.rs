@@ -1,0 +1,33 @@
+//! The default PI gains come from the seed's method: Ziegler–Nichols on the open-loop step
+//! response of the full-load H-TER I carrier (seed Table 5.1). This re-derives them from the
+//! simulated plant, so the documented origin of `PiConfig::HTER1_DEFAULT` stays true.
+
+use hal_sim::plant::{Load, Plant, PlantParams};
+use hter::control::zn::ReactionCurve;
+use hter::control::PiConfig;
+
+#[test]
+fn default_pi_gains_are_detuned_ziegler_nichols_of_the_plant() {
+    // Open-loop step: from the steady state holding 6 °C, the duty steps up by 0.2.
+    let params = PlantParams::hter1(Load::Full);
+    let (mut plant, duty0) = Plant::at_load_temperature(params, 28.0, 6.0).unwrap();
+    let du = 0.2;
+    let ts = 10.0;
+    let mut y = vec![plant.sensed_temp_c() as f32];
+    for _ in 0..(6 * 3600 / 10) {
+        for _ in 0..10 {
+            plant.advance_pwm_period(1.0, duty0 + du);
+        }
+        y.push(plant.sensed_temp_c() as f32);
+    }
+    let rc = ReactionCurve::from_step(&y, ts, du as f32).unwrap();
+    let (kp, ti) = rc.pi_gains();
+    println!("reaction curve {rc:?}: ZN PI Kp = {kp:.3} /°C, Ti = {ti:.0} s");
+    assert!(rc.gain_c_per_duty < 0.0, "a cooler has a negative gain");
+    let d = PiConfig::HTER1_DEFAULT;
+    // Detuned by 2 on Kp and ×2 on Ti, within 25 % (the plant model is a documented table,
+    // the defaults are rounded).
+    let rel = |a: f32, b: f32| (a - b).abs() / b;
+    assert!(rel(d.kp_per_c, kp / 2.0) < 0.25, "default Kp {} vs ZN/2 {}", d.kp_per_c, kp / 2.0);
+    assert!(rel(d.ti_s, 2.0 * ti) < 0.25, "default Ti {} vs 2·ZN {}", d.ti_s, 2.0 * ti);
+}
