@@ -25,6 +25,7 @@
 
 pub mod adc;
 pub mod calib;
+pub mod coldchain;
 pub mod control;
 pub mod event;
 pub mod filter;

@@ -60,6 +60,12 @@ pub struct CarrierConfig {
     pub freeze_cut_c: f32,
     /// Freeze guard: cooling may resume once the measured load is at or above this, °C.
     pub freeze_release_c: f32,
+    /// Freeze guard look-ahead, s: the guard acts on the measured temperature extrapolated
+    /// this far along its current downward slope. Cut at full cooling, the cold side (≈ −10 °C)
+    /// keeps pulling the load down for minutes and the sensor lags the load by ≈ 50 s, so a
+    /// guard on the present reading alone lets the load coast ≈ 1 °C past it (measured on the
+    /// hal-sim plant with On-Off at a 3 °C setpoint).
+    pub freeze_lookahead_s: f32,
 }
 
 impl CarrierConfig {
@@ -77,6 +83,7 @@ impl CarrierConfig {
         setpoint_max_c: 8.0,
         freeze_cut_c: 1.5,
         freeze_release_c: 2.5,
+        freeze_lookahead_s: 120.0,
     };
 }
 
@@ -137,6 +144,8 @@ pub struct Carrier<C: Controller> {
     freeze_guard: bool,
     setpoint_clamped: bool,
     adaptive_mode: Option<AdaptiveMode>,
+    last_temp_c: Option<f32>,
+    slope_c_per_s: f32,
 }
 
 impl<C: Controller> Carrier<C> {
@@ -150,6 +159,8 @@ impl<C: Controller> Carrier<C> {
             freeze_guard: false,
             setpoint_clamped: false,
             adaptive_mode: None,
+            last_temp_c: None,
+            slope_c_per_s: 0.0,
         }
     }
 
@@ -196,6 +207,8 @@ impl<C: Controller> Carrier<C> {
                 self.sensor_fault = None;
                 // The filter state predates the fault; start afresh from the first good reading.
                 self.filter.reset();
+                self.last_temp_c = None;
+                self.slope_c_per_s = 0.0;
             }
             _ => {}
         }
@@ -218,8 +231,16 @@ impl<C: Controller> Carrier<C> {
         self.setpoint_clamped = clamped;
 
         // 5: controller (only with a trustworthy measurement).
-        let ci = ControlInput { t_s, y_c: temp_c, w_c: w };
-        let requested = if self.sensor_fault.is_none() { self.controller.update(&ci) } else { 0.0 };
+        let ci = ControlInput {
+            t_s,
+            y_c: temp_c,
+            w_c: w,
+        };
+        let requested = if self.sensor_fault.is_none() {
+            self.controller.update(&ci)
+        } else {
+            0.0
+        };
         let mut duty = if requested.is_finite() {
             Duty::saturating(requested)
         } else {
@@ -241,10 +262,19 @@ impl<C: Controller> Carrier<C> {
 
         // 6: safety, independent of what the controller wanted.
         if self.sensor_fault.is_none() {
-            if !self.freeze_guard && temp_c <= self.cfg.freeze_cut_c {
+            if let Some(prev) = self.last_temp_c.filter(|p| p.is_finite()) {
+                let raw_slope = (temp_c - prev) / self.cfg.ts_s;
+                if raw_slope.is_finite() {
+                    // Smoothed over ≈ 3 samples so one noisy reading cannot trip the guard.
+                    self.slope_c_per_s = 0.7 * self.slope_c_per_s + 0.3 * raw_slope;
+                }
+            }
+            self.last_temp_c = Some(temp_c);
+            let predicted = temp_c + self.slope_c_per_s.min(0.0) * self.cfg.freeze_lookahead_s;
+            if !self.freeze_guard && predicted <= self.cfg.freeze_cut_c {
                 self.freeze_guard = true;
                 emit(EventKind::FreezeGuardTripped);
-            } else if self.freeze_guard && temp_c >= self.cfg.freeze_release_c {
+            } else if self.freeze_guard && temp_c >= self.cfg.freeze_release_c && predicted > self.cfg.freeze_cut_c {
                 self.freeze_guard = false;
                 emit(EventKind::FreezeGuardReleased);
             }
@@ -284,7 +314,11 @@ impl<C: Controller> Carrier<C> {
             AdcError::Open => EventKind::SensorOpen,
             AdcError::Short => EventKind::SensorShort,
         })?;
-        let t = self.cfg.rtd.temperature(ohms).map_err(|_| EventKind::SensorOutOfRange)?;
+        let t = self
+            .cfg
+            .rtd
+            .temperature(ohms)
+            .map_err(|_| EventKind::SensorOutOfRange)?;
         self.plausible(self.cfg.cal.apply(t))
     }
 
@@ -310,13 +344,20 @@ mod tests {
     }
 
     fn pi_carrier() -> Carrier<AnyController> {
-        Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)))
+        Carrier::new(
+            CarrierConfig::DEFAULT,
+            AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)),
+        )
     }
 
     #[test]
     fn measures_within_the_resolution() {
         let mut c = pi_carrier();
-        let out = c.step(&StepInput { t_s: 0.0, counts: counts_at(4.0), setpoint_c: 4.0 });
+        let out = c.step(&StepInput {
+            t_s: 0.0,
+            counts: counts_at(4.0),
+            setpoint_c: 4.0,
+        });
         assert!((out.temp_c.0 - 4.0).abs() < 0.01, "{:?}", out.temp_c);
         assert_eq!(out.mode, Mode::Normal);
         assert!(out.supply_enable);
@@ -325,60 +366,135 @@ mod tests {
     #[test]
     fn open_sensor_stops_cooling_on_the_first_sample_and_recovers() {
         let mut c = pi_carrier();
-        let warm = c.step(&StepInput { t_s: 0.0, counts: counts_at(10.0), setpoint_c: 4.0 });
+        let warm = c.step(&StepInput {
+            t_s: 0.0,
+            counts: counts_at(10.0),
+            setpoint_c: 4.0,
+        });
         assert!(warm.duty.get() > 0.5);
-        let open = c.step(&StepInput { t_s: 10.0, counts: 65_535, setpoint_c: 4.0 });
+        let open = c.step(&StepInput {
+            t_s: 10.0,
+            counts: 65_535,
+            setpoint_c: 4.0,
+        });
         assert_eq!(open.duty, Duty::OFF);
         assert_eq!(open.mode, Mode::SensorFault);
-        assert_eq!(open.events.iter().next().map(|e| (e.kind, e.t_s)), Some((EventKind::SensorOpen, 10.0)));
+        assert_eq!(
+            open.events.iter().next().map(|e| (e.kind, e.t_s)),
+            Some((EventKind::SensorOpen, 10.0))
+        );
         // No repeated event while the fault persists.
-        let still = c.step(&StepInput { t_s: 20.0, counts: 65_535, setpoint_c: 4.0 });
+        let still = c.step(&StepInput {
+            t_s: 20.0,
+            counts: 65_535,
+            setpoint_c: 4.0,
+        });
         assert!(still.events.is_empty());
-        let back = c.step(&StepInput { t_s: 30.0, counts: counts_at(5.0), setpoint_c: 4.0 });
+        let back = c.step(&StepInput {
+            t_s: 30.0,
+            counts: counts_at(5.0),
+            setpoint_c: 4.0,
+        });
         assert_eq!(back.mode, Mode::Normal);
-        assert_eq!(back.events.iter().next().map(|e| e.kind), Some(EventKind::SensorRecovered));
+        assert_eq!(
+            back.events.iter().next().map(|e| e.kind),
+            Some(EventKind::SensorRecovered)
+        );
     }
 
     #[test]
     fn short_and_implausible_readings_are_faults() {
         let mut c = pi_carrier();
-        let short = c.step(&StepInput { t_s: 0.0, counts: 10, setpoint_c: 4.0 });
+        let short = c.step(&StepInput {
+            t_s: 0.0,
+            counts: 10,
+            setpoint_c: 4.0,
+        });
         assert_eq!(short.events.iter().next().map(|e| e.kind), Some(EventKind::SensorShort));
         let cold = CarrierConfig::DEFAULT.adc.counts(Ohms(80.0)); // ≈ −50 °C
-        let out = c.step(&StepInput { t_s: 10.0, counts: cold, setpoint_c: 4.0 });
-        assert_eq!(out.events.iter().next().map(|e| e.kind), Some(EventKind::SensorOutOfRange));
+        let out = c.step(&StepInput {
+            t_s: 10.0,
+            counts: cold,
+            setpoint_c: 4.0,
+        });
+        assert_eq!(
+            out.events.iter().next().map(|e| e.kind),
+            Some(EventKind::SensorOutOfRange)
+        );
         assert_eq!(out.duty, Duty::OFF);
     }
 
     #[test]
     fn setpoint_below_two_degrees_is_clamped() {
         let mut c = pi_carrier();
-        let out = c.step(&StepInput { t_s: 0.0, counts: counts_at(4.0), setpoint_c: -5.0 });
+        let out = c.step(&StepInput {
+            t_s: 0.0,
+            counts: counts_at(4.0),
+            setpoint_c: -5.0,
+        });
         assert_eq!(out.setpoint_c.0, 2.0);
-        assert_eq!(out.events.iter().next().map(|e| e.kind), Some(EventKind::SetpointClamped));
-        let nan = c.step(&StepInput { t_s: 10.0, counts: counts_at(4.0), setpoint_c: f32::NAN });
+        assert_eq!(
+            out.events.iter().next().map(|e| e.kind),
+            Some(EventKind::SetpointClamped)
+        );
+        let nan = c.step(&StepInput {
+            t_s: 10.0,
+            counts: counts_at(4.0),
+            setpoint_c: f32::NAN,
+        });
         assert!((2.0..=8.0).contains(&nan.setpoint_c.0));
     }
 
-    #[test]
-    fn freeze_guard_overrides_an_on_off_controller_stuck_on() {
-        // On-Off with a huge band keeps asking for cooling; the guard must cut it at 1.5 °C.
+    /// Feeds a load falling at `rate_c_per_s` from 9 °C under an On-Off controller that keeps
+    /// asking for cooling; returns the measured temperature at which the guard cut it.
+    fn guard_trip(rate_c_per_s: f32) -> f32 {
         let onoff = OnOff::new(OnOffConfig { hysteresis_c: 0.1 });
         let mut c = Carrier::new(CarrierConfig::DEFAULT, AnyController::OnOff(onoff));
-        let _ = c.step(&StepInput { t_s: 0.0, counts: counts_at(9.0), setpoint_c: 4.0 });
-        let mut t = 10.0;
         let mut temp = 9.0f32;
-        let mut tripped_at = None;
+        let mut t = 0.0;
         while temp > 0.0 {
-            let out = c.step(&StepInput { t_s: t, counts: counts_at(temp), setpoint_c: 2.0 });
+            let out = c.step(&StepInput {
+                t_s: t,
+                counts: counts_at(temp),
+                setpoint_c: 2.0,
+            });
             if out.mode == Mode::FreezeGuard {
-                tripped_at.get_or_insert(out.temp_c.0);
                 assert_eq!(out.duty, Duty::OFF);
+                assert!(out.events.iter().any(|e| e.kind == EventKind::FreezeGuardTripped));
+                // It holds until the load is back above the release threshold.
+                for k in 1..20 {
+                    let back = c.step(&StepInput {
+                        t_s: t + 10.0 * k as f32,
+                        counts: counts_at(2.2),
+                        setpoint_c: 2.0,
+                    });
+                    assert_eq!(back.duty, Duty::OFF);
+                }
+                // Back above 2.5 °C (through the filter): cooling may resume.
+                let released = (0..3).any(|k| {
+                    let warm = c.step(&StepInput {
+                        t_s: t + 200.0 + 10.0 * k as f32,
+                        counts: counts_at(2.8),
+                        setpoint_c: 2.0,
+                    });
+                    warm.mode == Mode::Normal && warm.events.iter().any(|e| e.kind == EventKind::FreezeGuardReleased)
+                });
+                assert!(released);
+                return out.temp_c.0;
             }
-            temp -= 0.1;
+            temp -= rate_c_per_s * 10.0;
             t += 10.0;
         }
-        let at = tripped_at.expect("guard never tripped");
-        assert!(at <= 1.5 && at > 1.0, "tripped at {at}");
+        panic!("guard never tripped");
+    }
+
+    #[test]
+    fn freeze_guard_cuts_cooling_ahead_of_a_falling_load() {
+        // Slow fall (0.06 °C/min): the guard acts close to its 1.5 °C threshold.
+        let slow = guard_trip(0.001);
+        assert!(slow <= 1.7 && slow > 1.0, "slow fall tripped at {slow}");
+        // Fast fall (0.6 °C/min, full cooling): it acts ≈ 120 s ahead, above 2 °C.
+        let fast = guard_trip(0.01);
+        assert!(fast > 2.0 && fast <= 2.8, "fast fall tripped at {fast}");
     }
 }

@@ -7,7 +7,16 @@ use hal_sim::sim::{run, ControllerChoice, ControllerSpec, PlantChoice, SimOption
 fn sim(scenario: &str, controller: ControllerChoice, plant: PlantChoice, load: Load) -> SimOutput {
     let scenario = Scenario::resolve(scenario).unwrap();
     let duration_s = scenario.duration_s;
-    run(&SimOptions { scenario, controller: ControllerSpec::new(controller), plant, load, ambient_c: 28.0, duration_s, seed: 7 }).unwrap()
+    run(&SimOptions {
+        scenario,
+        controller: ControllerSpec::new(controller),
+        plant,
+        load,
+        ambient_c: 28.0,
+        duration_s,
+        seed: 7,
+    })
+    .unwrap()
 }
 
 /// Issue 2's acceptance run: PI pulls the full-load H-TER I carrier from 28 °C to 4 °C without
@@ -27,7 +36,11 @@ fn pi_pulls_down_from_28_to_4_without_freezing_and_holds() {
 #[test]
 fn baselines_never_take_the_load_below_2_on_piecewise() {
     for c in [ControllerChoice::Onoff, ControllerChoice::P, ControllerChoice::Pi] {
-        for (plant, load) in [(PlantChoice::Hter1, Load::Full), (PlantChoice::Hter1, Load::Half), (PlantChoice::Hter2, Load::Full)] {
+        for (plant, load) in [
+            (PlantChoice::Hter1, Load::Full),
+            (PlantChoice::Hter1, Load::Half),
+            (PlantChoice::Hter2, Load::Full),
+        ] {
             let m = sim("piecewise", c, plant, load).metrics;
             assert!(m.min_temp_c >= 2.0, "{c:?} {plant:?} {load:?}: min {}", m.min_temp_c);
             assert!(m.max_temp_c <= 8.0, "{c:?} {plant:?} {load:?}: max {}", m.max_temp_c);
@@ -40,7 +53,10 @@ fn pi_has_less_steady_state_error_than_onoff() {
     // The seed's finding (§5.2): PI beats On-Off on steady-state error.
     let pi = sim("piecewise", ControllerChoice::Pi, PlantChoice::Hter1, Load::Full).metrics;
     let onoff = sim("piecewise", ControllerChoice::Onoff, PlantChoice::Hter1, Load::Full).metrics;
-    assert!(pi.steady_state_error_c < onoff.steady_state_error_c, "pi {pi:?}\nonoff {onoff:?}");
+    assert!(
+        pi.steady_state_error_c < onoff.steady_state_error_c,
+        "pi {pi:?}\nonoff {onoff:?}"
+    );
 }
 
 #[test]

@@ -10,7 +10,9 @@ use hter::control::model::{Model, MAX_K, MAX_NA, MAX_NB, MAX_NC};
 
 /// Parses `arx:A;B;K[;C]`.
 pub fn parse(spec: &str) -> Result<Model> {
-    let body = spec.strip_prefix("arx:").ok_or_else(|| anyhow!("model '{spec}' must start with 'arx:'"))?;
+    let body = spec
+        .strip_prefix("arx:")
+        .ok_or_else(|| anyhow!("model '{spec}' must start with 'arx:'"))?;
     let parts: Vec<&str> = body.split(';').collect();
     if !(3..=4).contains(&parts.len()) {
         bail!("model '{spec}' must be arx:A;B;K (coefficients comma-separated, K the delay in samples)");
@@ -18,12 +20,19 @@ pub fn parse(spec: &str) -> Result<Model> {
     let coeffs = |name: &str, s: &str, max: usize, allow_empty: bool| -> Result<Vec<f32>> {
         let s = s.trim();
         if s.is_empty() {
-            return if allow_empty { Ok(vec![]) } else { bail!("model '{spec}': {name} is empty") };
+            return if allow_empty {
+                Ok(vec![])
+            } else {
+                bail!("model '{spec}': {name} is empty")
+            };
         }
         let v = s
             .split(',')
             .map(|x| {
-                let v: f64 = x.trim().parse().map_err(|_| anyhow!("model '{spec}': '{}' in {name} is not a number", x.trim()))?;
+                let v: f64 = x
+                    .trim()
+                    .parse()
+                    .map_err(|_| anyhow!("model '{spec}': '{}' in {name} is not a number", x.trim()))?;
                 if !v.is_finite() {
                     bail!("model '{spec}': {name} has a non-finite coefficient");
                 }
@@ -31,13 +40,19 @@ pub fn parse(spec: &str) -> Result<Model> {
             })
             .collect::<Result<Vec<f32>>>()?;
         if v.len() > max {
-            bail!("model '{spec}': {name} has {} coefficients, at most {max} are supported", v.len());
+            bail!(
+                "model '{spec}': {name} has {} coefficients, at most {max} are supported",
+                v.len()
+            );
         }
         Ok(v)
     };
     let a = coeffs("A", parts[0], MAX_NA, false)?;
     let b = coeffs("B", parts[1], MAX_NB, false)?;
-    let k: usize = parts[2].trim().parse().map_err(|_| anyhow!("model '{spec}': delay K '{}' is not a whole number", parts[2].trim()))?;
+    let k: usize = parts[2]
+        .trim()
+        .parse()
+        .map_err(|_| anyhow!("model '{spec}': delay K '{}' is not a whole number", parts[2].trim()))?;
     if !(1..=MAX_K).contains(&k) {
         bail!("model '{spec}': delay K must be 1..={MAX_K}, got {k}");
     }
@@ -74,12 +89,22 @@ impl ArxPlant {
         if !(0.0..=1.0).contains(&u_ss) {
             bail!("the ARX plant cannot hold {temp_c} °C at {ambient_c} °C ambient: steady duty would be {u_ss:.3}");
         }
-        Ok(ArxPlant { model, ambient_c, y: vec![y_ss; model.na + 1], u: vec![u_ss; model.nb + model.k] })
+        Ok(ArxPlant {
+            model,
+            ambient_c,
+            y: vec![y_ss; model.na + 1],
+            u: vec![u_ss; model.nb + model.k],
+        })
     }
 
     /// Temperature now, °C.
     pub fn temp_c(&self) -> f64 {
         self.ambient_c + self.y[0]
+    }
+
+    /// The duty applied last (the steady duty right after construction).
+    pub fn last_duty(&self) -> f64 {
+        self.u[0]
     }
 
     /// Applies duty `u` (clipped to [0, 1]) for one sample and advances y.
@@ -115,7 +140,15 @@ mod tests {
 
     #[test]
     fn rejects_malformed_models() {
-        for bad in ["-1.8;1;1", "arx:-1.8;1", "arx:-1.8;x;1", "arx:-1.8;1;0", "arx:;1;1", "arx:nan;1;1", "arx:1,2,3,4,5;1;1"] {
+        for bad in [
+            "-1.8;1;1",
+            "arx:-1.8;1",
+            "arx:-1.8;x;1",
+            "arx:-1.8;1;0",
+            "arx:;1;1",
+            "arx:nan;1;1",
+            "arx:1,2,3,4,5;1;1",
+        ] {
             let e = parse(bad).unwrap_err().to_string();
             assert!(!e.contains('\n'), "{e}");
         }
@@ -123,17 +156,24 @@ mod tests {
 
     #[test]
     fn steady_state_holds_and_the_equation_is_the_spec_one() {
-        let m = parse("arx:-1.8,0.81;-0.02,-0.01;1").unwrap();
-        // A(1) = 0.01, B(1) = −0.03: holding 4 °C at 28 °C ambient needs u = −24·0.01/−0.03 = 0.8.
+        // The SPEC's example has a static gain of −3 °C per unit duty: it cannot hold 4 °C at
+        // 28 °C ambient (it would need u = 8).
+        let spec = parse("arx:-1.8,0.81;-0.02,-0.01;1").unwrap();
+        assert!(ArxPlant::at_steady_state(spec, 28.0, 4.0).is_err());
+        let m = parse("arx:-1.8,0.81;-0.2,-0.1;1").unwrap();
+        // A(1) = 0.01, B(1) = −0.3: holding 4 °C at 28 °C ambient needs u = −24·0.01/−0.3 = 0.8.
         let mut p = ArxPlant::at_steady_state(m, 28.0, 4.0).unwrap();
+        let u_ss = p.last_duty();
+        assert!((u_ss - 0.8).abs() < 1e-4, "{u_ss}");
         for _ in 0..50 {
-            p.advance(0.8);
+            p.advance(u_ss);
         }
-        assert!((p.temp_c() - 4.0).abs() < 1e-4);
-        // One step at u = 1 from that steady state: y(t+1) = 1.8·(−24) − 0.81·(−24) − 0.02·1 − 0.01·0.8
+        assert!((p.temp_c() - 4.0).abs() < 1e-6);
+        // One step at u = 1 from that steady state: y(t+1) = 1.8·(−24) − 0.81·(−24) − 0.2·1 − 0.1·0.8
         let mut p = ArxPlant::at_steady_state(m, 28.0, 4.0).unwrap();
         p.advance(1.0);
-        assert!((p.temp_c() - (28.0 + 1.8 * -24.0 - 0.81 * -24.0 - 0.02 * 1.0 - 0.01 * 0.8)).abs() < 1e-5);
+        let want = 28.0 + 1.8 * -24.0 - 0.81 * -24.0 - 0.2 * 1.0 - 0.1 * u_ss;
+        assert!((p.temp_c() - want).abs() < 1e-4, "{} vs {want}", p.temp_c());
         assert!(ArxPlant::at_steady_state(m, 28.0, -30.0).is_err());
     }
 }

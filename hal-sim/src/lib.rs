@@ -3,6 +3,12 @@
 #![warn(missing_docs)]
 
 pub mod arx;
+pub mod identify_cmd;
+pub mod log;
 pub mod metrics;
+pub mod monitor_cmd;
+pub mod periph;
 pub mod plant;
 pub mod plot;
+pub mod scenario;
+pub mod sim;

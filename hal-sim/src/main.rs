@@ -8,7 +8,7 @@ use clap::{Parser, Subcommand};
 use hal_sim::plant::Load;
 use hal_sim::scenario::Scenario;
 use hal_sim::sim::{self, ControllerChoice, ControllerSpec, PlantChoice, SimOptions, SimOutput};
-use hal_sim::{identify_cmd, plot};
+use hal_sim::{identify_cmd, monitor_cmd, plot};
 use hter::rtd::Rtd;
 use hter::units::{Celsius, Ohms};
 
@@ -28,6 +28,8 @@ enum Command {
     Identify(identify_cmd::IdentifyArgs),
     /// Convert between RTD resistance and temperature (IEC 60751).
     Rtd(RtdArgs),
+    /// Cold-chain record of a CSV log: WHO-style alarms, mean kinetic temperature, excursions.
+    Monitor(monitor_cmd::MonitorArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -73,7 +75,7 @@ struct SimArgs {
     #[arg(long, default_value_t = 28.0, allow_negative_numbers = true)]
     ambient: f64,
     /// Duration, s (default: the scenario's own).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     duration: Option<f64>,
     /// Seed of the measurement noise.
     #[arg(long, default_value_t = 1)]
@@ -123,7 +125,11 @@ fn main() -> ExitCode {
             }
             // clap's own message can span lines; keep the first, which names the problem.
             let msg = e.to_string();
-            let first = msg.lines().next().unwrap_or("invalid arguments").trim_start_matches("error: ");
+            let first = msg
+                .lines()
+                .next()
+                .unwrap_or("invalid arguments")
+                .trim_start_matches("error: ");
             eprintln!("error: {first} (see 'hter --help')");
             return ExitCode::from(2);
         }
@@ -133,6 +139,7 @@ fn main() -> ExitCode {
         Some(Command::Sim(a)) => sim_cmd(&a),
         Some(Command::Identify(a)) => identify_cmd::run(&a),
         Some(Command::Rtd(a)) => rtd_cmd(&a),
+        Some(Command::Monitor(a)) => monitor_cmd::run(&a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -180,10 +187,19 @@ fn sim_options(a: &SimArgs) -> Result<SimOptions> {
     }
     let g = &controller.gpc;
     if g.n1 < 1 || g.n2 < g.n1 || g.n2 > hter::control::gpc::MAX_N2 {
-        bail!("GPC horizons need 1 ≤ N1 ≤ N2 ≤ {}, got N1 = {}, N2 = {}", hter::control::gpc::MAX_N2, g.n1, g.n2);
+        bail!(
+            "GPC horizons need 1 ≤ N1 ≤ N2 ≤ {}, got N1 = {}, N2 = {}",
+            hter::control::gpc::MAX_N2,
+            g.n1,
+            g.n2
+        );
     }
     if g.nu < 1 || g.nu > hter::control::gpc::MAX_NU || g.nu > g.n2 {
-        bail!("GPC control horizon needs 1 ≤ Nu ≤ min(N2, {}), got Nu = {}", hter::control::gpc::MAX_NU, g.nu);
+        bail!(
+            "GPC control horizon needs 1 ≤ Nu ≤ min(N2, {}), got Nu = {}",
+            hter::control::gpc::MAX_NU,
+            g.nu
+        );
     }
     if let Some(p) = a.p_weight {
         controller.gmvc.p = finite("p-weight", p)? as f32;
@@ -243,7 +259,8 @@ fn write_csv(path: &std::path::Path, out: &SimOutput) -> Result<()> {
     for r in &out.rows {
         w.serialize(r)?;
     }
-    w.flush().with_context(|| format!("cannot write '{}'", path.display()))?;
+    w.flush()
+        .with_context(|| format!("cannot write '{}'", path.display()))?;
     Ok(())
 }
 
@@ -254,17 +271,32 @@ fn plot_run(path: &std::path::Path, opts: &SimOptions, out: &SimOutput) -> Resul
         title: "Load temperature".into(),
         y_label: "°C".into(),
         series: vec![
-            plot::Series { name: "setpoint".into(), points: pts(&|r| r.setpoint_c) },
-            plot::Series { name: "true load".into(), points: pts(&|r| r.true_temp_c) },
-            plot::Series { name: "measured (filtered)".into(), points: pts(&|r| r.temp_c) },
-            plot::Series { name: "2 °C limit".into(), points: pts(&|_| 2.0) },
+            plot::Series {
+                name: "setpoint".into(),
+                points: pts(&|r| r.setpoint_c),
+            },
+            plot::Series {
+                name: "true load".into(),
+                points: pts(&|r| r.true_temp_c),
+            },
+            plot::Series {
+                name: "measured (filtered)".into(),
+                points: pts(&|r| r.temp_c),
+            },
+            plot::Series {
+                name: "2 °C limit".into(),
+                points: pts(&|_| 2.0),
+            },
         ],
         y_range: None,
     };
     let duty = plot::Panel {
         title: "SSR duty".into(),
         y_label: "duty".into(),
-        series: vec![plot::Series { name: "duty".into(), points: pts(&|r| r.duty) }],
+        series: vec![plot::Series {
+            name: "duty".into(),
+            points: pts(&|r| r.duty),
+        }],
         y_range: Some((-0.02, 1.02)),
     };
     let title = format!(
@@ -297,12 +329,19 @@ fn print_summary(opts: &SimOptions, out: &SimOutput) {
     println!("max |error| after settling  {:10.2} °C", m.max_abs_error_after_settle_c);
     println!("steady-state |error|        {:10.2} °C", m.steady_state_error_c);
     println!("overshoot                   {:10.2} °C", m.overshoot_c);
-    println!("min / max load temperature  {:6.2} / {:.2} °C", m.min_temp_c, m.max_temp_c);
+    println!(
+        "min / max load temperature  {:6.2} / {:.2} °C",
+        m.min_temp_c, m.max_temp_c
+    );
     println!("time outside 2–8 °C         {:10.0} s", m.time_outside_2_8_s);
     println!("energy                      {:10.2} Wh", m.energy_wh);
     println!("SSR switches                {:10}", m.ssr_switches);
     if !m.faults_detected.is_empty() {
-        let list: Vec<String> = m.faults_detected.iter().map(|f| format!("{}@{}s", f.kind, f.t_s)).collect();
+        let list: Vec<String> = m
+            .faults_detected
+            .iter()
+            .map(|f| format!("{}@{}s", f.kind, f.t_s))
+            .collect();
         println!("faults detected             {}", list.join(", "));
     }
 }
@@ -367,7 +406,10 @@ fn rtd_cmd(a: &RtdArgs) -> Result<()> {
                 bail!("--ohms must be positive, got {r}");
             }
             let t = rtd.temperature(Ohms(r as f32)).map_err(|e| {
-                anyhow::anyhow!("{r} Ω is outside the Pt{} range of IEC 60751 (−200…850 °C): {e:?}", a.r0)
+                anyhow::anyhow!(
+                    "{r} Ω is outside the Pt{} range of IEC 60751 (−200…850 °C): {e:?}",
+                    a.r0
+                )
             })?;
             (r, f64::from(t.0))
         }

@@ -1,1 +1,538 @@
-//! placeholder
+//! Physical model of the thermoelectric vaccine carrier (SPEC §4), in f64.
+//!
+//! A lumped thermal network of five nodes, integrated with explicit Euler at ≤ 0.1 s (the
+//! fastest node, the modules' cold side, has a time constant of ≈ 15 s), with the SSR switched
+//! for real inside each PWM period:
+//!
+//! ```text
+//!            G_h                      Peltier module (N in parallel)
+//! ambient ───────── hot sink T_h ◄──── Q_h = N(α I T_h + ½I²R − K ΔT)
+//!                                      Q_c = N(α I T_c − ½I²R − K ΔT),  ΔT = T_h − T_c
+//!                   cold side T_c ───► pumps Q_c out of the cabinet
+//!                     │ G_cw (direct module)   │ G_ca (air-to-air module)
+//!            container wall T_wl ── G_aw ── cabinet air + liner T_a ── G_leak ── ambient
+//!                     │ G_ww
+//!                water load T_w ──► RTD (dead time L, first-order lag τ_rtd) ──► T_sensed
+//! ```
+//!
+//! Electrical: each module sees the supply V through the SSR; its current is
+//! `I = (V − α ΔT)/R` (the Seebeck back-EMF reduces it) when on and 0 when off, and it draws
+//! `P = N(α I ΔT + I² R) = Q_h − Q_c`. Switched off, the module is a plain conductance K: heat
+//! flows back from the hot sink into the cabinet, which is why the carrier warms quickly with
+//! the SSR open (SPEC §1). Equations: Rowe (ed.), *CRC Handbook of Thermoelectrics*, 1995,
+//! ch. 54; Huang et al., "Design of thermoelectric coolers", Int. J. Refrig. 23, 2000.
+//!
+//! ## Parameters
+//!
+//! | parameter | H-TER I | H-TER II | unit | source / reasoning |
+//! | --- | --- | --- | --- | --- |
+//! | modules N | 1 | 1 | – | one 12 V module per carrier (the seed's direct + air-to-air heat pumps lumped into one cold side) |
+//! | Seebeck α | 0.053 | 0.053 | V/K | TEC1-12706 class (127 couples × 0.42 mV/K) |
+//! | resistance R | 2.0 | 2.0 | Ω | TEC1-12706 datasheet, at 25–50 °C |
+//! | conductance K | 0.55 | 0.55 | W/K | TEC1-12706 datasheet (ΔT_max 66 K, Q_max 50 W) |
+//! | supply V | 12 | 12 | V | seed: 12 V supply through the Crydom CMX60D10 SSR |
+//! | hot sink C_h / G_h | 500 / 4.0 | 500 / 4.0 | J/K, W/K | 0.55 kg finned aluminium; 0.25 K/W with its fan |
+//! | cold side C_c | 120 | 120 | J/K | cold block + inner fin sink, ≈ 0.13 kg aluminium |
+//! | cold side → wall G_cw | 4.0 | 1.5 | W/K | direct module clamped on the container; stainless spreads heat ≈ 13× worse than aluminium |
+//! | cold side → air G_ca | 2.5 | 2.5 | W/K | air-to-air module: inner fin sink with fan, h ≈ 25 W/(m²K) on 0.1 m² |
+//! | wall C_wl | 180 | 200 | J/K | 0.2 kg Al (900 J/(kg K)) vs 0.4 kg stainless (500 J/(kg K)) |
+//! | wall → water G_ww | 6.0 | 1.5 | W/K | wetted area ≈ 0.02 m²; conduction through the wall dominates for stainless (k = 16 vs 205 W/(m K)) |
+//! | air ↔ wall G_aw | 1.2 | 1.2 | W/K | natural + fan convection on the container's outer surface |
+//! | air + liner C_a | 1500 | 1500 | J/K | ≈ 1 kg of inner liner, racks and vials |
+//! | insulation leak G_leak | 0.20 | 0.20 | W/K | 0.3 m² of 4 cm PU foam (k = 0.025) plus lid seal |
+//! | water C_w | 419 / 209 | 419 / 209 | J/K | 100 ml (full) / 50 ml (half) × 4186 J/(kg K) |
+//! | RTD lag τ_rtd | 20 | 20 | s | Pt100 in a stainless sheath in still water |
+//! | dead time L | 20 | 20 | s | transport through the water to the probe; the seed's step responses show tens of seconds |
+//!
+//! Resulting open-loop behaviour (`cargo test -p hal-sim plant`): H-TER I full load pulls down
+//! from 28 °C to 4 °C in ≈ 30 min with the SSR fully on; the duty that holds 4 °C is ≈ 0.40,
+//! 0.46 and 0.54 at 25, 28 and 32 °C ambient; fully on, the load would go far below 0 °C
+//! (the freeze guard's job); switched off at 4 °C it warms by 1 °C in ≈ 2 min.
+
+/// Container material.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Container {
+    /// H-TER I.
+    Aluminium,
+    /// H-TER II.
+    StainlessSteel,
+}
+
+/// Water load.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Load {
+    /// 100 ml.
+    Full,
+    /// 50 ml.
+    Half,
+}
+
+/// Every physical parameter of the model (see the table in the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlantParams {
+    /// Container material.
+    pub container: Container,
+    /// Water load.
+    pub load: Load,
+    /// Number of modules in parallel.
+    pub modules: f64,
+    /// Module Seebeck coefficient, V/K.
+    pub alpha_v_per_k: f64,
+    /// Module electrical resistance, Ω.
+    pub r_ohm: f64,
+    /// Module thermal conductance, W/K.
+    pub k_w_per_k: f64,
+    /// Nominal supply, V.
+    pub supply_v: f64,
+    /// Hot sink heat capacity, J/K.
+    pub c_hot_j_per_k: f64,
+    /// Hot sink to ambient, W/K.
+    pub g_hot_w_per_k: f64,
+    /// Cold side heat capacity, J/K.
+    pub c_cold_j_per_k: f64,
+    /// Cold side to container wall, W/K.
+    pub g_cold_wall_w_per_k: f64,
+    /// Cold side to cabinet air, W/K.
+    pub g_cold_air_w_per_k: f64,
+    /// Container wall heat capacity, J/K.
+    pub c_wall_j_per_k: f64,
+    /// Wall to water, W/K.
+    pub g_wall_water_w_per_k: f64,
+    /// Cabinet air to wall, W/K.
+    pub g_air_wall_w_per_k: f64,
+    /// Cabinet air and liner heat capacity, J/K.
+    pub c_air_j_per_k: f64,
+    /// Insulation leak, W/K.
+    pub g_leak_w_per_k: f64,
+    /// Water heat capacity, J/K.
+    pub c_water_j_per_k: f64,
+    /// RTD time constant, s.
+    pub rtd_tau_s: f64,
+    /// Dead time between the water and the RTD, s (whole seconds).
+    pub dead_time_s: f64,
+}
+
+impl PlantParams {
+    fn common(load: Load) -> Self {
+        PlantParams {
+            container: Container::Aluminium,
+            load,
+            modules: 1.0,
+            alpha_v_per_k: 0.053,
+            r_ohm: 2.0,
+            k_w_per_k: 0.55,
+            supply_v: 12.0,
+            c_hot_j_per_k: 500.0,
+            g_hot_w_per_k: 4.0,
+            c_cold_j_per_k: 120.0,
+            g_cold_wall_w_per_k: 4.0,
+            g_cold_air_w_per_k: 2.5,
+            c_wall_j_per_k: 180.0,
+            g_wall_water_w_per_k: 6.0,
+            g_air_wall_w_per_k: 1.2,
+            c_air_j_per_k: 1500.0,
+            g_leak_w_per_k: 0.20,
+            c_water_j_per_k: 4186.0
+                * match load {
+                    Load::Full => 0.100,
+                    Load::Half => 0.050,
+                },
+            rtd_tau_s: 20.0,
+            dead_time_s: 20.0,
+        }
+    }
+
+    /// H-TER I: aluminium container.
+    pub fn hter1(load: Load) -> Self {
+        Self::common(load)
+    }
+
+    /// H-TER II: stainless-steel container.
+    pub fn hter2(load: Load) -> Self {
+        PlantParams {
+            container: Container::StainlessSteel,
+            g_cold_wall_w_per_k: 1.5,
+            c_wall_j_per_k: 200.0,
+            g_wall_water_w_per_k: 1.5,
+            ..Self::common(load)
+        }
+    }
+}
+
+/// Instantaneous heat flows, W (positive in the direction named).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HeatFlows {
+    /// Heat the modules take from their cold side (negative: back-conduction into the cabinet).
+    pub pumped_from_cold_w: f64,
+    /// Heat the modules deliver into the hot sink.
+    pub into_hot_sink_w: f64,
+    /// Electrical power drawn by the modules.
+    pub electrical_w: f64,
+    /// Hot sink to ambient.
+    pub hot_sink_to_ambient_w: f64,
+    /// Ambient into the cabinet through the insulation.
+    pub leak_in_w: f64,
+    /// Extra heat into the cabinet (disturbance).
+    pub extra_w: f64,
+    /// Net heat into each node: water, wall, air, cold side, hot sink.
+    pub net_w: [f64; 5],
+}
+
+const W: usize = 0;
+const WALL: usize = 1;
+const AIR: usize = 2;
+const COLD: usize = 3;
+const HOT: usize = 4;
+
+/// Largest integration step, s.
+const MAX_DT_S: f64 = 0.1;
+/// Length of the dead-time line, s (one entry per second).
+const DELAY_LEN: usize = 64;
+
+/// The plant's state.
+#[derive(Clone, Debug)]
+pub struct Plant {
+    p: PlantParams,
+    t: [f64; 5],
+    rtd_c: f64,
+    delay: [f64; DELAY_LEN],
+    delay_head: usize,
+    next_delay_s: f64,
+    ambient_c: f64,
+    supply_v: f64,
+    extra_w: f64,
+    energy_j: f64,
+    time_s: f64,
+}
+
+impl Plant {
+    /// All nodes at `ambient_c`, SSR off.
+    pub fn at_ambient(params: PlantParams, ambient_c: f64) -> Self {
+        Self::with_state(params, ambient_c, [ambient_c; 5])
+    }
+
+    fn with_state(p: PlantParams, ambient_c: f64, t: [f64; 5]) -> Self {
+        Plant {
+            p,
+            t,
+            rtd_c: t[W],
+            delay: [t[W]; DELAY_LEN],
+            delay_head: 0,
+            next_delay_s: 1.0,
+            ambient_c,
+            supply_v: p.supply_v,
+            extra_w: 0.0,
+            energy_j: 0.0,
+            time_s: 0.0,
+        }
+    }
+
+    /// Steady state holding the water at `load_c` with a constant average duty (the averaged,
+    /// not switched, model); returns it with that duty, or `None` if no duty in [0, 1] holds it.
+    pub fn at_load_temperature(params: PlantParams, ambient_c: f64, load_c: f64) -> Option<(Self, f64)> {
+        let settle = |d: f64| {
+            let mut pl = Plant::at_ambient(params, ambient_c);
+            // The averaged model at 4 s steps (stable: the fastest node's time constant is ≈ 15 s)
+            // for 10 h: the slowest mode (≈ 1 h) has settled.
+            for _ in 0..10 * 900 {
+                pl.euler_averaged(4.0, d);
+            }
+            pl
+        };
+        let (mut lo, mut hi) = (0.0, 1.0);
+        if settle(1.0).t[W] > load_c || settle(0.0).t[W] < load_c {
+            return None;
+        }
+        for _ in 0..30 {
+            let mid = 0.5 * (lo + hi);
+            if settle(mid).t[W] > load_c {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let d = 0.5 * (lo + hi);
+        let s = settle(d);
+        Some((Self::with_state(params, ambient_c, s.t), d))
+    }
+
+    fn current_a(&self, on: bool) -> f64 {
+        if !on {
+            return 0.0;
+        }
+        let dt = self.t[HOT] - self.t[COLD];
+        ((self.supply_v - self.p.alpha_v_per_k * dt) / self.p.r_ohm).max(0.0)
+    }
+
+    /// Heat flows with the modules on or off.
+    pub fn heat_flows(&self, on: bool) -> HeatFlows {
+        let p = &self.p;
+        let i = self.current_a(on);
+        let t = &self.t;
+        let dt = t[HOT] - t[COLD];
+        let (tc_k, th_k) = (t[COLD] + 273.15, t[HOT] + 273.15);
+        let qc = p.modules * (p.alpha_v_per_k * i * tc_k - 0.5 * i * i * p.r_ohm - p.k_w_per_k * dt);
+        let qh = p.modules * (p.alpha_v_per_k * i * th_k + 0.5 * i * i * p.r_ohm - p.k_w_per_k * dt);
+        let ww = p.g_wall_water_w_per_k * (t[WALL] - t[W]);
+        let aw = p.g_air_wall_w_per_k * (t[AIR] - t[WALL]);
+        let cw = p.g_cold_wall_w_per_k * (t[WALL] - t[COLD]);
+        let ca = p.g_cold_air_w_per_k * (t[AIR] - t[COLD]);
+        let leak = p.g_leak_w_per_k * (self.ambient_c - t[AIR]);
+        let hs = p.g_hot_w_per_k * (t[HOT] - self.ambient_c);
+        HeatFlows {
+            pumped_from_cold_w: qc,
+            into_hot_sink_w: qh,
+            electrical_w: qh - qc,
+            hot_sink_to_ambient_w: hs,
+            leak_in_w: leak,
+            extra_w: self.extra_w,
+            net_w: [ww, -ww + aw - cw, leak + self.extra_w - aw - ca, cw + ca - qc, qh - hs],
+        }
+    }
+
+    fn euler(&mut self, h: f64, on: bool) {
+        let f = self.heat_flows(on);
+        self.step_nodes(h, &f.net_w);
+        self.energy_j += f.electrical_w * h;
+        self.time_s += h;
+        self.advance_sensor(h);
+    }
+
+    /// One step of the duty-averaged model (for steady states only).
+    fn euler_averaged(&mut self, h: f64, d: f64) {
+        let on = self.heat_flows(true).net_w;
+        let off = self.heat_flows(false).net_w;
+        let mut net = [0.0; 5];
+        for i in 0..5 {
+            net[i] = d * on[i] + (1.0 - d) * off[i];
+        }
+        self.step_nodes(h, &net);
+        self.rtd_c = self.t[W];
+    }
+
+    fn step_nodes(&mut self, h: f64, net: &[f64; 5]) {
+        let p = &self.p;
+        let c = [
+            p.c_water_j_per_k,
+            p.c_wall_j_per_k,
+            p.c_air_j_per_k,
+            p.c_cold_j_per_k,
+            p.c_hot_j_per_k,
+        ];
+        for i in 0..5 {
+            self.t[i] += h * net[i] / c[i];
+        }
+    }
+
+    fn advance_sensor(&mut self, h: f64) {
+        // Dead time: the water temperature enters a 1 s delay line; the RTD sees its tail.
+        while self.time_s >= self.next_delay_s {
+            self.delay_head = (self.delay_head + 1) % DELAY_LEN;
+            self.delay[self.delay_head] = self.t[W];
+            self.next_delay_s += 1.0;
+        }
+        let lag = (self.p.dead_time_s.round() as usize).min(DELAY_LEN - 1);
+        let delayed = self.delay[(self.delay_head + DELAY_LEN - lag) % DELAY_LEN];
+        self.rtd_c += h * (delayed - self.rtd_c) / self.p.rtd_tau_s;
+    }
+
+    /// Advances by `dt_s` with the modules on or off.
+    pub fn advance(&mut self, dt_s: f64, on: bool) {
+        if !(dt_s > 0.0) {
+            return;
+        }
+        let n = (dt_s / MAX_DT_S).ceil().max(1.0);
+        let h = dt_s / n;
+        for _ in 0..n as usize {
+            self.euler(h, on);
+        }
+    }
+
+    /// One SSR PWM period: on for `duty · period_s`, then off for the rest.
+    pub fn advance_pwm_period(&mut self, period_s: f64, duty: f64) {
+        let d = if duty.is_finite() { duty.clamp(0.0, 1.0) } else { 0.0 };
+        self.advance(d * period_s, true);
+        self.advance((1.0 - d) * period_s, false);
+    }
+
+    /// True water temperature, °C.
+    pub fn load_temp_c(&self) -> f64 {
+        self.t[W]
+    }
+
+    /// Temperature of the RTD (after the dead time and its lag), °C.
+    pub fn sensed_temp_c(&self) -> f64 {
+        self.rtd_c
+    }
+
+    /// Node temperatures: water, wall, air, cold side, hot sink, °C.
+    pub fn node_temps_c(&self) -> [f64; 5] {
+        self.t
+    }
+
+    /// Ambient, °C.
+    pub fn ambient_c(&self) -> f64 {
+        self.ambient_c
+    }
+
+    /// Sets the ambient, °C.
+    pub fn set_ambient_c(&mut self, t: f64) {
+        self.ambient_c = t;
+    }
+
+    /// Sets the supply voltage of the modules, V.
+    pub fn set_supply_v(&mut self, v: f64) {
+        self.supply_v = v.max(0.0);
+    }
+
+    /// Supply voltage, V.
+    pub fn supply_v(&self) -> f64 {
+        self.supply_v
+    }
+
+    /// Extra heat into the cabinet (lid open, warm item), W.
+    pub fn set_extra_heat_w(&mut self, w: f64) {
+        self.extra_w = w;
+    }
+
+    /// Electrical energy drawn by the modules since the start, Wh.
+    pub fn energy_wh(&self) -> f64 {
+        self.energy_j / 3600.0
+    }
+
+    /// Simulated time, s.
+    pub fn time_s(&self) -> f64 {
+        self.time_s
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &PlantParams {
+        &self.p
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(p: &mut Plant, secs: f64, duty: f64) {
+        for _ in 0..secs as usize {
+            p.advance_pwm_period(1.0, duty);
+        }
+    }
+
+    #[test]
+    fn steady_state_energy_balance() {
+        // Fully on for 10 h: every node settles; heat in = heat out at each boundary.
+        let mut p = Plant::at_ambient(PlantParams::hter1(Load::Full), 28.0);
+        p.advance(36_000.0, true);
+        let f = p.heat_flows(true);
+        for (i, n) in f.net_w.iter().enumerate() {
+            assert!(n.abs() < 1e-3, "node {i} not settled: {n} W");
+        }
+        // Everything that leaks in is pumped out, and the hot sink rejects pumped heat + power.
+        assert!((f.leak_in_w - f.pumped_from_cold_w).abs() < 1e-3, "{f:?}");
+        assert!(
+            (f.hot_sink_to_ambient_w - (f.pumped_from_cold_w + f.electrical_w)).abs() < 1e-3,
+            "{f:?}"
+        );
+        assert!(f.electrical_w > 0.0 && f.pumped_from_cold_w > 0.0);
+        // Integrated energy matches power × time at steady state.
+        let e0 = p.energy_wh();
+        p.advance(3600.0, true);
+        assert!((p.energy_wh() - e0 - f.electrical_w).abs() < 1e-3 * f.electrical_w);
+    }
+
+    #[test]
+    fn switched_off_module_conducts_heat_back() {
+        let (mut p, _) = Plant::at_load_temperature(PlantParams::hter1(Load::Full), 28.0, 4.0).unwrap();
+        p.advance(1.0, false);
+        let f = p.heat_flows(false);
+        let t = p.node_temps_c();
+        assert!(t[HOT] > t[COLD]);
+        assert!(
+            f.pumped_from_cold_w < -1.0,
+            "back-conduction {} W",
+            -f.pumped_from_cold_w
+        );
+        assert_eq!(f.electrical_w, 0.0);
+    }
+
+    fn pull_down_s(params: PlantParams) -> f64 {
+        let mut p = Plant::at_ambient(params, 28.0);
+        while p.load_temp_c() > 4.0 && p.time_s() < 6.0 * 3600.0 {
+            p.advance(10.0, true);
+        }
+        p.time_s()
+    }
+
+    #[test]
+    fn pull_down_times_and_their_order() {
+        let a_full = pull_down_s(PlantParams::hter1(Load::Full));
+        let a_half = pull_down_s(PlantParams::hter1(Load::Half));
+        let s_full = pull_down_s(PlantParams::hter2(Load::Full));
+        assert!((1500.0..=3600.0).contains(&a_full), "H-TER I full: {a_full} s");
+        assert!(a_half < a_full, "half {a_half} vs full {a_full}");
+        assert!(s_full > a_full, "stainless {s_full} vs aluminium {a_full}");
+    }
+
+    #[test]
+    fn holding_duty_leaves_authority_both_ways() {
+        let d = |amb| {
+            Plant::at_load_temperature(PlantParams::hter1(Load::Full), amb, 4.0)
+                .unwrap()
+                .1
+        };
+        let (d25, d28, d32) = (d(25.0), d(28.0), d(32.0));
+        assert!(d25 > 0.2 && d32 < 0.8 && d25 < d28 && d28 < d32, "{d25} {d28} {d32}");
+        assert!((0.3..=0.6).contains(&d28), "{d28}");
+        // Fully on, the load would freeze: the freeze guard is needed.
+        let mut p = Plant::at_ambient(PlantParams::hter1(Load::Full), 28.0);
+        p.advance(6.0 * 3600.0, true);
+        assert!(p.load_temp_c() < 0.0, "{}", p.load_temp_c());
+    }
+
+    #[test]
+    fn steady_state_holds_under_real_switching() {
+        let (mut p, d) = Plant::at_load_temperature(PlantParams::hter1(Load::Full), 28.0, 4.0).unwrap();
+        run(&mut p, 3600.0, d);
+        assert!((p.load_temp_c() - 4.0).abs() < 0.15, "{}", p.load_temp_c());
+    }
+
+    #[test]
+    fn sensor_shows_dead_time_and_lag() {
+        let (mut p, _) = Plant::at_load_temperature(PlantParams::hter1(Load::Full), 28.0, 4.0).unwrap();
+        let sensed0 = p.sensed_temp_c();
+        // Switch off: the water warms at once, the RTD only after the dead time.
+        run(&mut p, 15.0, 0.0);
+        assert!(p.load_temp_c() > 4.01);
+        assert!(
+            (p.sensed_temp_c() - sensed0).abs() < 1e-9,
+            "RTD moved within the dead time"
+        );
+        run(&mut p, 120.0, 0.0);
+        assert!(p.sensed_temp_c() > sensed0 + 0.1);
+        assert!(p.sensed_temp_c() < p.load_temp_c(), "the RTD lags a warming load");
+    }
+
+    #[test]
+    fn pwm_lies_between_off_and_on() {
+        let (base, _) = Plant::at_load_temperature(PlantParams::hter1(Load::Full), 28.0, 4.0).unwrap();
+        let (mut on, mut off, mut half) = (base.clone(), base.clone(), base.clone());
+        run(&mut on, 600.0, 1.0);
+        run(&mut off, 600.0, 0.0);
+        run(&mut half, 600.0, 0.5);
+        assert!(on.load_temp_c() < half.load_temp_c() && half.load_temp_c() < off.load_temp_c());
+    }
+
+    #[test]
+    fn supply_sag_weakens_cooling() {
+        let (base, d) = Plant::at_load_temperature(PlantParams::hter1(Load::Full), 28.0, 4.0).unwrap();
+        let mut sag = base.clone();
+        sag.set_supply_v(9.0);
+        let mut nominal = base;
+        run(&mut nominal, 1800.0, d);
+        run(&mut sag, 1800.0, d);
+        assert!(sag.load_temp_c() > nominal.load_temp_c() + 0.5);
+    }
+}

@@ -111,9 +111,7 @@ impl Controller for AnyController {
     }
 
     fn status(&self) -> Option<ControllerStatus> {
-        match self {
-            _ => None,
-        }
+        None
     }
 
     fn name(&self) -> &'static str {

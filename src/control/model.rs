@@ -49,7 +49,15 @@ pub struct Model {
 
 impl Model {
     /// y(t) = y(t−1) + u(t−1)·0: a placeholder that lets histories advance when no model is known.
-    pub const NEUTRAL: Model = Model { a: [-1.0, 0.0, 0.0, 0.0], b: [0.0; MAX_NB], c: [0.0; MAX_NC], na: 1, nb: 1, nc: 0, k: 1 };
+    pub const NEUTRAL: Model = Model {
+        a: [-1.0, 0.0, 0.0, 0.0],
+        b: [0.0; MAX_NB],
+        c: [0.0; MAX_NC],
+        na: 1,
+        nb: 1,
+        nc: 0,
+        k: 1,
+    };
 
     /// Builds a model from coefficient slices (a without the leading 1, c likewise).
     pub fn new(a: &[f32], b: &[f32], c: &[f32], k: usize) -> Result<Model, ModelError> {
@@ -62,7 +70,15 @@ impl Model {
         if a.iter().chain(b).chain(c).any(|x| !x.is_finite()) {
             return Err(ModelError::NonFinite);
         }
-        let mut m = Model { a: [0.0; MAX_NA], b: [0.0; MAX_NB], c: [0.0; MAX_NC], na: a.len(), nb: b.len(), nc: c.len(), k };
+        let mut m = Model {
+            a: [0.0; MAX_NA],
+            b: [0.0; MAX_NB],
+            c: [0.0; MAX_NC],
+            na: a.len(),
+            nb: b.len(),
+            nc: c.len(),
+            k,
+        };
         m.a[..a.len()].copy_from_slice(a);
         m.b[..b.len()].copy_from_slice(b);
         m.c[..c.len()].copy_from_slice(c);
@@ -132,7 +148,7 @@ mod tests {
         assert!(schur_stable(&[-1.8, 0.81])); // double pole at 0.9
         assert!(!schur_stable(&[-2.1, 1.1])); // poles 1.0 and 1.1
         assert!(schur_stable(&[-1.995, 0.99501])); // poles ≈ 0.9975 ± small
-        // (1 − 0.5 q⁻¹)(1 − 1.2 q⁻¹) = 1 − 1.7 q⁻¹ + 0.6 q⁻²
+                                                   // (1 − 0.5 q⁻¹)(1 − 1.2 q⁻¹) = 1 − 1.7 q⁻¹ + 0.6 q⁻²
         assert!(!schur_stable(&[-1.7, 0.6]));
         // 4th order: (1 − 0.9 q⁻¹)² (1 − 0.5 q⁻¹)² = 1 − 2.8 q⁻¹ + 2.86 q⁻² − 1.26 q⁻³ + 0.2025 q⁻⁴
         assert!(schur_stable(&[-2.8, 2.86, -1.26, 0.2025]));

@@ -1,0 +1,106 @@
+//! Reading `hter` CSV logs: a header row, then one row per sample; columns are found by name in
+//! any order, extra columns are ignored. Every problem is reported on one line with the file,
+//! the 1-based line number (the header is line 1) and the column.
+
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Context, Result};
+
+/// Reads the named columns of a CSV log, in the order asked. Rows must have finite numbers in
+/// those columns.
+pub fn read_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>> {
+    let shown = path.display();
+    let file = std::fs::File::open(path).with_context(|| format!("cannot read '{shown}'"))?;
+    let mut rdr = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .flexible(false)
+        .trim(csv::Trim::All)
+        .from_reader(file);
+    let headers = rdr.headers().map_err(|e| anyhow!("'{shown}' line 1: {e}"))?.clone();
+    let idx: Vec<usize> = names
+        .iter()
+        .map(|n| {
+            headers.iter().position(|h| h == *n).ok_or_else(|| {
+                anyhow!(
+                    "'{shown}': missing column '{n}' (header has: {})",
+                    headers.iter().collect::<Vec<_>>().join(", ")
+                )
+            })
+        })
+        .collect::<Result<_>>()?;
+    let mut cols = vec![Vec::new(); names.len()];
+    for (i, rec) in rdr.records().enumerate() {
+        let line = i + 2;
+        let rec = rec.map_err(|e| anyhow!("'{shown}' line {line}: {}", first_line(&e.to_string())))?;
+        for (c, (&j, name)) in idx.iter().zip(names).enumerate() {
+            let cell = rec.get(j).unwrap_or("");
+            let v: f64 = cell
+                .parse()
+                .map_err(|_| anyhow!("'{shown}' line {line}, column '{name}': '{cell}' is not a number"))?;
+            if !v.is_finite() {
+                bail!("'{shown}' line {line}, column '{name}': '{cell}' is not a finite number");
+            }
+            cols[c].push(v);
+        }
+    }
+    Ok(cols)
+}
+
+/// Checks that times strictly increase; names the first offending line.
+pub fn check_increasing(path: &Path, t: &[f64]) -> Result<()> {
+    if let Some(i) = t.windows(2).position(|w| w[1] <= w[0]) {
+        bail!(
+            "'{}' line {}: t_s = {} does not increase (previous {})",
+            path.display(),
+            i + 3,
+            t[i + 1],
+            t[i]
+        );
+    }
+    Ok(())
+}
+
+fn first_line(s: &str) -> &str {
+    s.lines().next().unwrap_or(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(name: &str, text: &str) -> std::path::PathBuf {
+        let p = std::env::temp_dir().join(format!("hter-log-{}-{name}.csv", std::process::id()));
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    #[test]
+    fn reads_by_name_in_any_order() {
+        let p = write("ok", "temp_c,x,t_s\n4.0,a,0\n4.5,b,10\n");
+        let c = read_columns(&p, &["t_s", "temp_c"]).unwrap();
+        assert_eq!(c, vec![vec![0.0, 10.0], vec![4.0, 4.5]]);
+    }
+
+    #[test]
+    fn errors_name_the_line_and_column() {
+        let p = write("bad", "t_s,temp_c\n0,4.0\n10,warm\n");
+        let e = read_columns(&p, &["t_s", "temp_c"]).unwrap_err().to_string();
+        assert!(
+            e.contains("line 3") && e.contains("temp_c") && e.contains("warm"),
+            "{e}"
+        );
+        let p = write("nan", "t_s,temp_c\n0,NaN\n");
+        let e = read_columns(&p, &["t_s", "temp_c"]).unwrap_err().to_string();
+        assert!(e.contains("line 2") && e.contains("finite"), "{e}");
+        let p = write("missing", "t_s,duty\n0,1\n");
+        let e = read_columns(&p, &["t_s", "temp_c"]).unwrap_err().to_string();
+        assert!(e.contains("missing column 'temp_c'"), "{e}");
+        let p = write("short", "t_s,temp_c\n0,4.0\n10\n");
+        let e = read_columns(&p, &["t_s", "temp_c"]).unwrap_err().to_string();
+        assert!(e.contains("line 3"), "{e}");
+        assert!(check_increasing(&p, &[0.0, 10.0, 10.0])
+            .unwrap_err()
+            .to_string()
+            .contains("line 4"));
+    }
+}

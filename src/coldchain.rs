@@ -1,0 +1,454 @@
+//! Cold-chain monitoring (SPEC §6): WHO PQS E006-style temperature-recorder alarms, shipping
+//! indicator alarms, mean kinetic temperature, extremes, time out of range and an excursion log.
+//!
+//! Alarm rules (durations from sample times):
+//! - *continuous*: a run starts at the first sample t0 that meets the condition; the alarm
+//!   triggers at the first sample t with t − t0 ≥ duration while every sample since t0 met it;
+//!   it triggers once per run (a new run after the condition cleared can trigger again);
+//! - *cumulative*: each interval (t_i, t_{i+1}) whose start sample meets the condition adds
+//!   t_{i+1} − t_i; the alarm triggers at the first sample at which the sum reaches the
+//!   duration, once per record.
+//!
+//! | kind | condition | duration |
+//! | --- | --- | --- |
+//! | `heat_10h` | T > +8.0 °C | 10 h continuous |
+//! | `freeze_60min` | T ≤ −0.5 °C | 60 min continuous |
+//! | `ship_45c_1h` | T ≥ +45 °C | 1 h continuous |
+//! | `ship_30c_10h` | T ≥ +30 °C | 10 h cumulative |
+//!
+//! Mean kinetic temperature (Haynes 1971; USP <1079.2>), time-weighted over the intervals:
+//!
+//! ```text
+//! T_mk = (ΔH/R) / −ln( Σ Δt_i · exp(−ΔH/(R·T_i)) / Σ Δt_i ),   ΔH = 83.144 kJ/mol, R = 8.314 J/(mol·K)
+//! ```
+//!
+//! evaluated as an offset from a 5 °C reference so the exponentials stay near 1 in f32, with a
+//! running mean (no growing sum to lose precision over a 30-day record).
+
+/// ΔH/R of the mean kinetic temperature, K (83 144 / 8.314).
+pub const MKT_DH_OVER_R_K: f32 = 83_144.0 / 8.314;
+const T_REF_K: f32 = 278.15;
+
+/// Alarm kinds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum AlarmKind {
+    /// Above +8 °C for 10 h continuously.
+    Heat10h,
+    /// At or below −0.5 °C for 60 min continuously.
+    Freeze60min,
+    /// At or above +45 °C for 1 h continuously.
+    Ship45c1h,
+    /// At or above +30 °C for 10 h in total.
+    Ship30c10h,
+}
+
+impl AlarmKind {
+    /// The contract name (`heat_10h`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            AlarmKind::Heat10h => "heat_10h",
+            AlarmKind::Freeze60min => "freeze_60min",
+            AlarmKind::Ship45c1h => "ship_45c_1h",
+            AlarmKind::Ship30c10h => "ship_30c_10h",
+        }
+    }
+
+    const ALL: [AlarmKind; 4] = [
+        AlarmKind::Heat10h,
+        AlarmKind::Freeze60min,
+        AlarmKind::Ship45c1h,
+        AlarmKind::Ship30c10h,
+    ];
+
+    fn meets(self, t_c: f32) -> bool {
+        match self {
+            AlarmKind::Heat10h => t_c > 8.0,
+            AlarmKind::Freeze60min => t_c <= -0.5,
+            AlarmKind::Ship45c1h => t_c >= 45.0,
+            AlarmKind::Ship30c10h => t_c >= 30.0,
+        }
+    }
+
+    fn duration_s(self) -> f32 {
+        match self {
+            AlarmKind::Heat10h => 10.0 * 3600.0,
+            AlarmKind::Freeze60min => 3600.0,
+            AlarmKind::Ship45c1h => 3600.0,
+            AlarmKind::Ship30c10h => 10.0 * 3600.0,
+        }
+    }
+
+    fn cumulative(self) -> bool {
+        matches!(self, AlarmKind::Ship30c10h)
+    }
+}
+
+/// A raised alarm.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Alarm {
+    /// Kind.
+    pub kind: AlarmKind,
+    /// Start of the run (continuous) or first qualifying sample (cumulative), s.
+    pub start_s: f32,
+    /// Sample at which it triggered, s.
+    pub trigger_s: f32,
+}
+
+/// Which side of 2…8 °C an excursion is on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Side {
+    /// Below +2 °C.
+    Cold,
+    /// Above +8 °C.
+    Warm,
+}
+
+/// One excursion outside 2…8 °C.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Excursion {
+    /// Which side.
+    pub side: Side,
+    /// First sample outside, s.
+    pub start_s: f32,
+    /// Last sample outside so far, s.
+    pub end_s: f32,
+    /// Coldest or warmest temperature reached, °C.
+    pub extreme_c: f32,
+}
+
+/// Excursions kept (the newest; older ones are overwritten and counted).
+pub const EXCURSION_LOG: usize = 16;
+
+#[derive(Clone, Copy, Debug, Default)]
+struct Tracker {
+    start: Option<f32>,
+    acc_s: f32,
+    fired: bool,
+}
+
+/// The monitor's state and results.
+#[derive(Clone, Debug)]
+pub struct ColdChainMonitor {
+    trackers: [Tracker; 4],
+    last: Option<(f32, f32)>,
+    elapsed_s: f32,
+    mkt_mean: f32,
+    min_c: f32,
+    max_c: f32,
+    below_2_s: f32,
+    above_8_s: f32,
+    log: [Option<Excursion>; EXCURSION_LOG],
+    log_next: usize,
+    excursions: u32,
+    open: Option<usize>,
+}
+
+impl Default for ColdChainMonitor {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Alarms raised by one sample (at most one per kind).
+pub type Raised = [Option<Alarm>; 4];
+
+impl ColdChainMonitor {
+    /// An empty record.
+    pub const fn new() -> Self {
+        Self {
+            trackers: [Tracker {
+                start: None,
+                acc_s: 0.0,
+                fired: false,
+            }; 4],
+            last: None,
+            elapsed_s: 0.0,
+            mkt_mean: 0.0,
+            min_c: f32::INFINITY,
+            max_c: f32::NEG_INFINITY,
+            below_2_s: 0.0,
+            above_8_s: 0.0,
+            log: [None; EXCURSION_LOG],
+            log_next: 0,
+            excursions: 0,
+            open: None,
+        }
+    }
+
+    /// Adds a sample. Times must increase; a sample that is not later than the previous one or
+    /// not finite is ignored (returns no alarm) so a glitch cannot corrupt the record.
+    pub fn push(&mut self, t_s: f32, temp_c: f32) -> Raised {
+        let mut raised: Raised = [None; 4];
+        if !(t_s.is_finite() && temp_c.is_finite()) {
+            return raised;
+        }
+        if let Some((t_prev, c_prev)) = self.last {
+            if !(t_s > t_prev) {
+                return raised;
+            }
+            // The interval (t_prev, t_s) belongs to the previous sample.
+            let dt = t_s - t_prev;
+            self.elapsed_s += dt;
+            let x = libm::expf(-MKT_DH_OVER_R_K * (1.0 / (c_prev + 273.15) - 1.0 / T_REF_K));
+            self.mkt_mean += (x - self.mkt_mean) * dt / self.elapsed_s;
+            if c_prev < 2.0 {
+                self.below_2_s += dt;
+            }
+            if c_prev > 8.0 {
+                self.above_8_s += dt;
+            }
+            for (tr, kind) in self.trackers.iter_mut().zip(AlarmKind::ALL) {
+                if kind.cumulative() && kind.meets(c_prev) {
+                    tr.acc_s += dt;
+                }
+            }
+        }
+        self.last = Some((t_s, temp_c));
+        self.min_c = self.min_c.min(temp_c);
+        self.max_c = self.max_c.max(temp_c);
+
+        for (i, (tr, kind)) in self.trackers.iter_mut().zip(AlarmKind::ALL).enumerate() {
+            let meets = kind.meets(temp_c);
+            if kind.cumulative() {
+                if meets && tr.start.is_none() {
+                    tr.start = Some(t_s);
+                }
+                if !tr.fired && tr.acc_s >= kind.duration_s() {
+                    tr.fired = true;
+                    raised[i] = Some(Alarm {
+                        kind,
+                        start_s: tr.start.unwrap_or(t_s),
+                        trigger_s: t_s,
+                    });
+                }
+            } else if meets {
+                let t0 = *tr.start.get_or_insert(t_s);
+                if !tr.fired && t_s - t0 >= kind.duration_s() {
+                    tr.fired = true;
+                    raised[i] = Some(Alarm {
+                        kind,
+                        start_s: t0,
+                        trigger_s: t_s,
+                    });
+                }
+            } else {
+                *tr = Tracker::default();
+            }
+        }
+        self.log_excursion(t_s, temp_c);
+        raised
+    }
+
+    fn log_excursion(&mut self, t_s: f32, temp_c: f32) {
+        let side = if temp_c < 2.0 {
+            Some(Side::Cold)
+        } else if temp_c > 8.0 {
+            Some(Side::Warm)
+        } else {
+            None
+        };
+        match (side, self.open) {
+            (Some(s), Some(i)) if self.log[i].is_some_and(|e| e.side == s) => {
+                if let Some(e) = self.log[i].as_mut() {
+                    e.end_s = t_s;
+                    e.extreme_c = if s == Side::Cold {
+                        e.extreme_c.min(temp_c)
+                    } else {
+                        e.extreme_c.max(temp_c)
+                    };
+                }
+            }
+            (Some(s), _) => {
+                let i = self.log_next;
+                self.log[i] = Some(Excursion {
+                    side: s,
+                    start_s: t_s,
+                    end_s: t_s,
+                    extreme_c: temp_c,
+                });
+                self.log_next = (i + 1) % EXCURSION_LOG;
+                self.excursions = self.excursions.saturating_add(1);
+                self.open = Some(i);
+            }
+            (None, _) => self.open = None,
+        }
+    }
+
+    /// Mean kinetic temperature so far, °C (`None` before two samples).
+    pub fn mkt_c(&self) -> Option<f32> {
+        (self.elapsed_s > 0.0 && self.mkt_mean > 0.0)
+            .then(|| 1.0 / (1.0 / T_REF_K - libm::logf(self.mkt_mean) / MKT_DH_OVER_R_K) - 273.15)
+    }
+
+    /// Lowest temperature, °C.
+    pub fn min_c(&self) -> Option<f32> {
+        self.last.map(|_| self.min_c)
+    }
+
+    /// Highest temperature, °C.
+    pub fn max_c(&self) -> Option<f32> {
+        self.last.map(|_| self.max_c)
+    }
+
+    /// Time below +2 °C, s.
+    pub fn time_below_2_s(&self) -> f32 {
+        self.below_2_s
+    }
+
+    /// Time above +8 °C, s.
+    pub fn time_above_8_s(&self) -> f32 {
+        self.above_8_s
+    }
+
+    /// The newest excursions, oldest first.
+    pub fn excursions(&self) -> impl Iterator<Item = &Excursion> {
+        let (newer, older) = self.log.split_at(self.log_next);
+        older.iter().chain(newer.iter()).flatten()
+    }
+
+    /// Excursions since start (including those overwritten in the log).
+    pub fn excursion_count(&self) -> u32 {
+        self.excursions
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn feed(m: &mut ColdChainMonitor, samples: impl IntoIterator<Item = (f32, f32)>) -> std::vec::Vec<Alarm> {
+        samples.into_iter().flat_map(|(t, c)| m.push(t, c)).flatten().collect()
+    }
+
+    /// One sample either side of every continuous threshold: with 60 s samples the run that
+    /// lasts exactly `duration` triggers at that sample, one that is broken one sample
+    /// before does not.
+    #[test]
+    fn continuous_alarms_trigger_exactly_at_the_duration() {
+        for (kind, hot, cold, dur) in [
+            (AlarmKind::Heat10h, 8.01f32, 8.0f32, 36_000u32),
+            (AlarmKind::Freeze60min, -0.5, -0.49, 3_600),
+            (AlarmKind::Ship45c1h, 45.0, 44.99, 3_600),
+        ] {
+            let step = 60u32;
+            // Run from t0 = 600 s, exactly `dur` long: triggers at 600 + dur.
+            let mut m = ColdChainMonitor::new();
+            let s = (0..=(600 + dur) / step).map(|i| {
+                let t = i * step;
+                (t as f32, if t >= 600 { hot } else { 5.0 })
+            });
+            let a = feed(&mut m, s);
+            assert_eq!(a.len(), 1, "{kind:?}: {a:?}");
+            assert_eq!(
+                (a[0].kind, a[0].start_s, a[0].trigger_s),
+                (kind, 600.0, (600 + dur) as f32)
+            );
+            // One sample short: no alarm.
+            let mut m = ColdChainMonitor::new();
+            let s = (0..(600 + dur) / step).map(|i| {
+                let t = i * step;
+                (t as f32, if t >= 600 { hot } else { 5.0 })
+            });
+            assert!(feed(&mut m, s).is_empty(), "{kind:?} fired early");
+            // Interrupted by one sample just on the safe side of the threshold: no alarm.
+            let mut m = ColdChainMonitor::new();
+            let s = (0..=(600 + dur) / step).map(|i| {
+                let t = i * step;
+                (
+                    t as f32,
+                    if t == 1200 {
+                        cold
+                    } else if t >= 600 {
+                        hot
+                    } else {
+                        5.0
+                    },
+                )
+            });
+            assert!(feed(&mut m, s).is_empty(), "{kind:?} fired across a break");
+        }
+    }
+
+    #[test]
+    fn cumulative_alarm_counts_intervals_by_their_start_sample() {
+        // Alternate an hour at 31 °C with an hour at 20 °C, sampled every 600 s.
+        let mut m = ColdChainMonitor::new();
+        let mut alarms = std::vec::Vec::new();
+        let mut t = 0u32;
+        while t <= 20 * 3600 {
+            let hot = (t / 3600) % 2 == 0;
+            alarms.extend(m.push(t as f32, if hot { 31.0 } else { 20.0 }).into_iter().flatten());
+            t += 600;
+        }
+        // The 10th hot hour ends at 19 h: (0–1 h, 2–3 h, …, 18–19 h) — trigger at 19 h = 68 400 s.
+        let a: std::vec::Vec<_> = alarms.iter().filter(|a| a.kind == AlarmKind::Ship30c10h).collect();
+        assert_eq!(a.len(), 1);
+        assert_eq!((a[0].start_s, a[0].trigger_s), (0.0, 68_400.0));
+        // One sample earlier the sum is 9 h 50 min.
+        let mut m = ColdChainMonitor::new();
+        let mut n = 0;
+        let mut t = 0u32;
+        while t < 68_400 {
+            let hot = (t / 3600) % 2 == 0;
+            n += m
+                .push(t as f32, if hot { 31.0 } else { 20.0 })
+                .iter()
+                .flatten()
+                .filter(|a| a.kind == AlarmKind::Ship30c10h)
+                .count();
+            t += 600;
+        }
+        assert_eq!(n, 0);
+    }
+
+    #[test]
+    fn mkt_of_a_constant_is_that_constant_and_weights_heat() {
+        let mut m = ColdChainMonitor::new();
+        for i in 0..100 {
+            m.push(i as f32 * 10.0, 5.0);
+        }
+        assert!((m.mkt_c().unwrap() - 5.0).abs() < 1e-3);
+        // Half the time at 2 °C, half at 8 °C: MKT is above the 5 °C arithmetic mean.
+        // Reference (f64): Tk = 10000/−ln((e^{−10000/275.15} + e^{−10000/281.15})/2) − 273.15 = 5.1277 °C.
+        let mut m = ColdChainMonitor::new();
+        for i in 0..=1000 {
+            m.push(i as f32 * 10.0, if i % 2 == 0 { 2.0 } else { 8.0 });
+        }
+        let mkt = m.mkt_c().unwrap();
+        let want = {
+            let k = 83_144.0f64 / 8.314;
+            let s = ((-k / 275.15).exp() + (-k / 281.15).exp()) / 2.0;
+            k / -s.ln() - 273.15
+        };
+        assert!((f64::from(mkt) - want).abs() < 2e-3, "{mkt} vs {want}");
+        assert!(mkt > 5.0);
+    }
+
+    #[test]
+    fn extremes_time_out_of_range_and_excursions() {
+        let mut m = ColdChainMonitor::new();
+        let temps = [5.0, 1.5, 1.0, 5.0, 9.0, 10.0, 9.5, 5.0];
+        for (i, c) in temps.iter().enumerate() {
+            m.push(i as f32 * 10.0, *c);
+        }
+        assert_eq!(m.min_c(), Some(1.0));
+        assert_eq!(m.max_c(), Some(10.0));
+        assert_eq!(m.time_below_2_s(), 20.0);
+        assert_eq!(m.time_above_8_s(), 30.0);
+        let ex: std::vec::Vec<_> = m.excursions().copied().collect();
+        assert_eq!(ex.len(), 2);
+        assert_eq!(
+            (ex[0].side, ex[0].start_s, ex[0].end_s, ex[0].extreme_c),
+            (Side::Cold, 10.0, 20.0, 1.0)
+        );
+        assert_eq!((ex[1].side, ex[1].extreme_c), (Side::Warm, 10.0));
+        // Glitches are ignored.
+        m.push(f32::NAN, 5.0);
+        m.push(5.0, 5.0);
+        assert_eq!(m.max_c(), Some(10.0));
+    }
+}
