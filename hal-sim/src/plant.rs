@@ -338,7 +338,7 @@ impl Plant {
 
     /// Advances by `dt_s` with the modules on or off.
     pub fn advance(&mut self, dt_s: f64, on: bool) {
-        if !(dt_s > 0.0) {
+        if dt_s.is_nan() || dt_s <= 0.0 {
             return;
         }
         let n = (dt_s / MAX_DT_S).ceil().max(1.0);

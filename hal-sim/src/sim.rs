@@ -236,6 +236,8 @@ fn is_fault(k: EventKind) -> bool {
 
 /// The simulated hardware: the physical carrier behind a simulated ADC and SSR, or an ideal
 /// ARX plant read and driven directly.
+// One Rig per run: the size difference between variants costs nothing.
+#[allow(clippy::large_enum_variant)]
 enum Rig {
     Physical {
         plant: Box<Plant>,
