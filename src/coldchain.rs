@@ -380,7 +380,7 @@ mod tests {
         let mut alarms = std::vec::Vec::new();
         let mut t = 0u32;
         while t <= 20 * 3600 {
-            let hot = (t / 3600) % 2 == 0;
+            let hot = (t / 3600).is_multiple_of(2);
             alarms.extend(m.push(t as f32, if hot { 31.0 } else { 20.0 }).into_iter().flatten());
             t += 600;
         }
@@ -393,7 +393,7 @@ mod tests {
         let mut n = 0;
         let mut t = 0u32;
         while t < 68_400 {
-            let hot = (t / 3600) % 2 == 0;
+            let hot = (t / 3600).is_multiple_of(2);
             n += m
                 .push(t as f32, if hot { 31.0 } else { 20.0 })
                 .iter()

@@ -334,7 +334,7 @@ mod tests {
             }
         }
         // inverse of h by Gauss–Jordan
-        let mut a: Vec<Vec<f64>> = h.iter().cloned().collect();
+        let mut a: Vec<Vec<f64>> = h.to_vec();
         let mut inv = vec![vec![0.0; nu]; nu];
         for i in 0..nu {
             inv[i][i] = 1.0;
