@@ -1,1 +1,168 @@
-fn main() {}
+//! hter firmware: the vaccine carrier controller on a NUCLEO-L476RG.
+//!
+//! One task per concern, talking through static channels (STYLE.md, layer 3); `main` only
+//! initialises and spawns:
+//!
+//! ```text
+//! sample ──(t, counts)──► control ──(duty, supply)──► actuate ──► SSR PWM, supply enable, LED
+//!   every Ts               Carrier::step                    │
+//!                           └──(telemetry record)──► telemetry ──► defmt over RTT
+//! ```
+//!
+//! The control math is the library's [`hter::step::Carrier`], the very object the host
+//! simulator and the tests drive: this crate only moves data between peripherals and it.
+#![no_std]
+#![no_main]
+
+mod board;
+mod config;
+
+use defmt::{info, warn};
+use embassy_executor::Spawner;
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::channel::Channel;
+use embassy_sync::signal::Signal;
+use embassy_time::{Duration, Instant, Ticker};
+use hter::event::Event;
+use hter::hal::{apply_duty, RtdSampler};
+use hter::step::{Carrier, Mode, StepInput};
+use hter::units::Duty;
+use {defmt_rtt as _, panic_probe as _};
+
+/// One RTD conversion and when it was taken.
+#[derive(Clone, Copy)]
+struct Sample {
+    t_s: f32,
+    counts: u32,
+}
+
+/// What the actuator must do.
+#[derive(Clone, Copy)]
+struct Actuation {
+    duty: Duty,
+    supply_enable: bool,
+}
+
+/// One telemetry record per sample.
+#[derive(Clone, Copy, defmt::Format)]
+struct Telemetry {
+    t_s: f32,
+    temp_c: f32,
+    setpoint_c: f32,
+    duty: f32,
+    mode: Mode,
+}
+
+static SAMPLES: Channel<CriticalSectionRawMutex, Sample, 2> = Channel::new();
+static ACTUATION: Signal<CriticalSectionRawMutex, Actuation> = Signal::new();
+static TELEMETRY: Channel<CriticalSectionRawMutex, Telemetry, 4> = Channel::new();
+static EVENTS: Channel<CriticalSectionRawMutex, Event, 16> = Channel::new();
+
+#[embassy_executor::main]
+async fn main(spawner: Spawner) {
+    let b = board::init();
+    info!(
+        "hter firmware {}: Ts = {} s, setpoint {} °C",
+        env!("CARGO_PKG_VERSION"),
+        config::CARRIER.ts_s,
+        config::SETPOINT_C
+    );
+    let mut wdg = IndependentWatchdog::new(b.iwdg, config::WATCHDOG_TIMEOUT_US);
+    wdg.unleash();
+    spawner.spawn(sample(b.rtd).unwrap());
+    spawner.spawn(control(wdg).unwrap());
+    spawner.spawn(actuate(b.ssr, b.supply_enable, b.led).unwrap());
+    spawner.spawn(telemetry().unwrap());
+}
+
+/// Takes one oversampled RTD conversion every Ts.
+#[embassy_executor::task]
+async fn sample(mut rtd: board::RtdAdc) {
+    let period = Duration::from_millis((config::CARRIER.ts_s * 1000.0) as u64);
+    let mut ticker = Ticker::every(period);
+    let start = Instant::now();
+    loop {
+        let Ok(counts) = rtd.sample();
+        let t_s = (Instant::now() - start).as_millis() as f32 / 1000.0;
+        SAMPLES.send(Sample { t_s, counts }).await;
+        ticker.next().await;
+    }
+}
+
+/// Runs the library's per-sample step on each conversion; feeds the watchdog after each one.
+#[embassy_executor::task]
+async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>) {
+    let mut carrier = Carrier::new(config::CARRIER, config::controller());
+    loop {
+        let s = SAMPLES.receive().await;
+        let out = carrier.step(&StepInput {
+            t_s: s.t_s,
+            counts: s.counts,
+            setpoint_c: config::SETPOINT_C,
+        });
+        ACTUATION.signal(Actuation {
+            duty: out.duty,
+            supply_enable: out.supply_enable,
+        });
+        for e in out.events.iter() {
+            // Never block the loop on logging: a full queue drops the event, and says so.
+            if EVENTS.try_send(*e).is_err() {
+                warn!("event queue full, dropped {}", e);
+            }
+        }
+        let _ = TELEMETRY.try_send(Telemetry {
+            t_s: s.t_s,
+            temp_c: out.temp_c.0,
+            setpoint_c: out.setpoint_c.0,
+            duty: out.duty.get(),
+            mode: out.mode,
+        });
+        wdg.pet();
+    }
+}
+
+/// Applies each actuation to the SSR timer and the supply-enable switch.
+#[embassy_executor::task]
+async fn actuate(
+    mut ssr: embassy_stm32::timer::simple_pwm::SimplePwm<'static, embassy_stm32::peripherals::TIM3>,
+    mut supply_enable: embassy_stm32::gpio::Output<'static>,
+    mut led: embassy_stm32::gpio::Output<'static>,
+) {
+    ssr.ch1().enable();
+    loop {
+        let a = ACTUATION.wait().await;
+        // Switch the supply first when cutting, last when enabling: the modules never see a
+        // duty the supervisor did not allow.
+        if !a.supply_enable {
+            supply_enable.set_low();
+        }
+        let mut ch = ssr.ch1();
+        if apply_duty(&mut ch, a.duty).is_err() {
+            warn!("SSR duty write failed");
+        }
+        if a.supply_enable {
+            supply_enable.set_high();
+        }
+        if a.supply_enable && a.duty.get() > 0.0 {
+            led.set_high();
+        } else {
+            led.set_low();
+        }
+    }
+}
+
+/// Streams one record per sample and every event over defmt/RTT.
+#[embassy_executor::task]
+async fn telemetry() {
+    loop {
+        let r = TELEMETRY.receive().await;
+        info!(
+            "t={} temp={} sp={} duty={} mode={}",
+            r.t_s, r.temp_c, r.setpoint_c, r.duty, r.mode
+        );
+        while let Ok(e) = EVENTS.try_receive() {
+            warn!("event t={} {}", e.t_s, e.kind);
+        }
+    }
+}
