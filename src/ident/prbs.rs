@@ -1,0 +1,198 @@
+//! Pseudo-random binary sequence from a maximum-length linear feedback shift register
+//! (Ljung 1999, §13.3; taps from Xilinx XAPP052, "Efficient shift registers, LFSR counters and
+//! long pseudo-random sequence generators", 1996). Runs on the MCU: an n-bit register gives a
+//! period of 2ⁿ − 1 bits with 2ⁿ⁻¹ ones and 2ⁿ⁻¹ − 1 zeros; each bit is held for `hold`
+//! samples, and mapped to the duty levels `low`/`high`.
+
+/// Why a PRBS configuration was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum PrbsError {
+    /// Register length outside 3…16 bits.
+    Bits,
+    /// hold is zero, or the levels are not finite with low < high.
+    Levels,
+}
+
+/// Feedback taps (1-based bit positions) of maximum-length registers, XAPP052 table 3.
+const TAPS: [(u8, u16); 14] = [
+    (3, 0b110),
+    (4, 0b1100),
+    (5, 0b1_0100),
+    (6, 0b11_0000),
+    (7, 0b110_0000),
+    (8, 0b1011_1000),
+    (9, 0b1_0001_0000),
+    (10, 0b10_0100_0000),
+    (11, 0b101_0000_0000),
+    (12, 0b1000_0010_1001),
+    (13, 0b1_0000_0000_1101),
+    (14, 0b10_0000_0001_0101),
+    (15, 0b110_0000_0000_0000),
+    (16, 0b1101_0000_0000_1000),
+];
+
+/// PRBS settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PrbsConfig {
+    /// Register length, bits (3…16): period 2ⁿ − 1 bits.
+    pub bits: u8,
+    /// Samples each bit is held (≥ 1): sets the lowest excited frequency's resolution.
+    pub hold: u16,
+    /// Output for a 0 bit (a duty in [0, 1] when it drives the SSR).
+    pub low: f32,
+    /// Output for a 1 bit.
+    pub high: f32,
+}
+
+/// The generator.
+#[derive(Clone, Debug)]
+pub struct Prbs {
+    cfg: PrbsConfig,
+    mask: u16,
+    taps: u16,
+    state: u16,
+    held: u16,
+    bit: bool,
+}
+
+impl Prbs {
+    /// A generator seeded with all ones (any non-zero seed gives the same sequence, shifted).
+    pub fn new(cfg: PrbsConfig) -> Result<Self, PrbsError> {
+        let taps = TAPS
+            .iter()
+            .find(|(b, _)| *b == cfg.bits)
+            .map(|(_, t)| *t)
+            .ok_or(PrbsError::Bits)?;
+        if cfg.hold == 0 || !cfg.low.is_finite() || !cfg.high.is_finite() || !(cfg.low < cfg.high) {
+            return Err(PrbsError::Levels);
+        }
+        let mask = if cfg.bits == 16 {
+            u16::MAX
+        } else {
+            (1u16 << cfg.bits) - 1
+        };
+        let mut p = Self {
+            cfg,
+            mask,
+            taps,
+            state: mask,
+            held: 0,
+            bit: false,
+        };
+        p.bit = p.shift();
+        Ok(p)
+    }
+
+    /// Period of the bit sequence, 2ⁿ − 1.
+    pub fn period_bits(&self) -> u32 {
+        (1u32 << self.cfg.bits) - 1
+    }
+
+    fn shift(&mut self) -> bool {
+        // Fibonacci form: the new bit is the parity of the tapped bits.
+        let fb = (self.state & self.taps).count_ones() & 1 == 1;
+        self.state = ((self.state << 1) | u16::from(fb)) & self.mask;
+        fb
+    }
+
+    /// The next sample's duty.
+    pub fn next_duty(&mut self) -> f32 {
+        if self.held >= self.cfg.hold {
+            self.bit = self.shift();
+            self.held = 0;
+        }
+        self.held += 1;
+        if self.bit {
+            self.cfg.high
+        } else {
+            self.cfg.low
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_register_is_maximum_length_and_balanced() {
+        for bits in 3..=16u8 {
+            let mut p = Prbs::new(PrbsConfig {
+                bits,
+                hold: 1,
+                low: 0.0,
+                high: 1.0,
+            })
+            .unwrap();
+            let n = p.period_bits() as usize;
+            let seq: std::vec::Vec<bool> = (0..2 * n).map(|_| p.next_duty() > 0.5).collect();
+            let ones = seq[..n].iter().filter(|b| **b).count();
+            assert_eq!(ones, n.div_ceil(2), "{bits} bits: {ones} ones in {n}");
+            assert_eq!(&seq[..n], &seq[n..], "{bits} bits: not periodic with 2^n − 1");
+            // No shorter period.
+            for d in 1..n {
+                if n % d == 0 && d < n {
+                    assert_ne!(&seq[..n - d], &seq[d..n], "{bits} bits: period {d}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn hold_repeats_each_bit() {
+        let mut p = Prbs::new(PrbsConfig {
+            bits: 7,
+            hold: 3,
+            low: 0.2,
+            high: 0.8,
+        })
+        .unwrap();
+        let seq: std::vec::Vec<f32> = (0..300).map(|_| p.next_duty()).collect();
+        for chunk in seq.chunks(3) {
+            assert!(chunk.iter().all(|x| *x == chunk[0]));
+            assert!(chunk[0] == 0.2 || chunk[0] == 0.8);
+        }
+        assert_eq!(
+            Prbs::new(PrbsConfig {
+                bits: 2,
+                hold: 1,
+                low: 0.0,
+                high: 1.0
+            })
+            .err(),
+            Some(PrbsError::Bits)
+        );
+        assert_eq!(
+            Prbs::new(PrbsConfig {
+                bits: 7,
+                hold: 0,
+                low: 0.0,
+                high: 1.0
+            })
+            .err(),
+            Some(PrbsError::Levels)
+        );
+        assert_eq!(
+            Prbs::new(PrbsConfig {
+                bits: 7,
+                hold: 1,
+                low: 0.9,
+                high: 0.1
+            })
+            .err(),
+            Some(PrbsError::Levels)
+        );
+        assert_eq!(
+            Prbs::new(PrbsConfig {
+                bits: 7,
+                hold: 1,
+                low: f32::NAN,
+                high: 0.1
+            })
+            .err(),
+            Some(PrbsError::Levels)
+        );
+    }
+}
