@@ -52,10 +52,13 @@ pub struct Scenario {
     pub duration_s: f64,
     /// Load forced by the scenario (`half-load`), overriding `--load`.
     pub load: Option<Load>,
+    /// Open-loop identification run: a PRBS on the SSR around the holding duty instead of the
+    /// controller (`prbs`).
+    pub excitation: bool,
 }
 
 /// Names of the built-in scenarios.
-pub const BUILT_IN: &[&str] = &["step", "piecewise", "half-load", "disturbance"];
+pub const BUILT_IN: &[&str] = &["step", "piecewise", "half-load", "disturbance", "prbs"];
 
 impl Scenario {
     /// A built-in scenario by name, or a JSON scenario file.
@@ -89,6 +92,7 @@ impl Scenario {
                 changes: vec![],
                 duration_s: 3.0 * 3600.0,
                 load: None,
+                excitation: false,
             },
             "piecewise" => Scenario {
                 name: name.into(),
@@ -98,6 +102,7 @@ impl Scenario {
                 changes: vec![],
                 duration_s: 3600.0,
                 load: None,
+                excitation: false,
             },
             "half-load" => Scenario {
                 name: name.into(),
@@ -107,6 +112,7 @@ impl Scenario {
                 changes: vec![],
                 duration_s: 3600.0,
                 load: Some(Load::Half),
+                excitation: false,
             },
             "disturbance" => Scenario {
                 name: name.into(),
@@ -116,6 +122,17 @@ impl Scenario {
                 changes: vec![(1800.0, Change::ExtraHeat(3.0))],
                 duration_s: 3.0 * 3600.0,
                 load: None,
+                excitation: false,
+            },
+            "prbs" => Scenario {
+                name: name.into(),
+                description: "open loop: PRBS (6-bit register, 300 s bits, period 5.25 h) on the SSR, holding duty ± 0.2, from 4 °C".into(),
+                start: Start::Holding(4.0),
+                setpoints: vec![(0.0, 4.0)],
+                changes: vec![],
+                duration_s: 6.0 * 3600.0,
+                load: None,
+                excitation: true,
             },
             _ => return None,
         };
@@ -203,6 +220,7 @@ impl ScenarioFile {
             changes,
             duration_s: self.duration_s,
             load: None,
+            excitation: false,
         })
     }
 }

@@ -9,6 +9,7 @@
 
 use anyhow::{bail, Result};
 use hter::coldchain::ColdChainMonitor;
+use hter::control::excite::PrbsExcitation;
 use hter::control::gpc::GpcConfig;
 use hter::control::model::Model;
 use hter::control::mv::{GmvcConfig, IgmvcConfig};
@@ -16,6 +17,7 @@ use hter::control::Controller;
 use hter::control::{AnyController, FixedModel, Law, OnOff, OnOffConfig, Pi, PiConfig};
 use hter::event::EventKind;
 use hter::hal::{apply_duty, RtdSampler};
+use hter::ident::prbs::PrbsConfig;
 use hter::step::{Carrier, CarrierConfig, Mode, StepInput, StepOutput};
 use hter::units::Celsius;
 
@@ -182,6 +184,8 @@ pub struct Row {
     pub temp_c: f64,
     /// Duty applied, [0, 1].
     pub duty: f64,
+    /// Calibrated reading before the filter, °C (empty on a sensor fault).
+    pub raw_temp_c: Option<f64>,
     /// True load temperature, °C.
     pub true_temp_c: f64,
     /// Ambient, °C.
@@ -394,11 +398,23 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
     }
     let ts = f64::from(cfg.ts_s);
     let (mut rig, u0) = Rig::new(opts)?;
-    let mut carrier = Carrier::new(cfg, opts.controller.build(cfg.ts_s, u0 as f32)?);
+    let controller = if sc.excitation {
+        let prbs = PrbsConfig {
+            bits: 6,
+            hold: 30,
+            low: (u0 - 0.2).max(0.0) as f32,
+            high: (u0 + 0.2).min(1.0) as f32,
+        };
+        AnyController::Prbs(PrbsExcitation::new(prbs).map_err(|e| anyhow::anyhow!("PRBS: {e:?}"))?)
+    } else {
+        opts.controller.build(cfg.ts_s, u0 as f32)?
+    };
+    let mut carrier = Carrier::new(cfg, controller);
     let name = carrier.controller().name().to_string();
 
     // Pre-roll: the loop has been holding the initial temperature for an hour.
     let preroll = match (sc.start, opts.plant) {
+        _ if sc.excitation => 0,
         (Start::Holding(_), PlantChoice::Hter1 | PlantChoice::Hter2) => (PREROLL_S / ts).round() as i64,
         _ => 0,
     };
@@ -434,6 +450,7 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
                 setpoint_c: w,
                 temp_c: f64::from(out.temp_c.0),
                 duty: d,
+                raw_temp_c: out.raw_c.map(|c| f64::from(c.0)),
                 true_temp_c: rig.true_temp_c(),
                 ambient_c: rig.ambient_c(opts.ambient_c),
                 mode: mode_name(out.mode),

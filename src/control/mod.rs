@@ -10,6 +10,7 @@
 //! free of integrator wind-up.
 
 pub mod diophantine;
+pub mod excite;
 pub mod fixed;
 pub mod gpc;
 pub mod model;
@@ -91,6 +92,8 @@ pub enum AnyController {
     Pi(Pi),
     /// GMVC, IGMVC or GPC on a fixed model.
     Fixed(FixedModel),
+    /// Open-loop PRBS for identification.
+    Prbs(excite::PrbsExcitation),
 }
 
 impl Controller for AnyController {
@@ -99,6 +102,7 @@ impl Controller for AnyController {
             AnyController::OnOff(c) => c.update(input),
             AnyController::Pi(c) => c.update(input),
             AnyController::Fixed(c) => c.update(input),
+            AnyController::Prbs(c) => c.update(input),
         }
     }
 
@@ -107,6 +111,7 @@ impl Controller for AnyController {
             AnyController::OnOff(c) => c.track(input, applied),
             AnyController::Pi(c) => c.track(input, applied),
             AnyController::Fixed(c) => c.track(input, applied),
+            AnyController::Prbs(c) => c.track(input, applied),
         }
     }
 
@@ -119,6 +124,7 @@ impl Controller for AnyController {
             AnyController::OnOff(c) => c.name(),
             AnyController::Pi(c) => c.name(),
             AnyController::Fixed(c) => c.name(),
+            AnyController::Prbs(c) => c.name(),
         }
     }
 }

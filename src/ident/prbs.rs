@@ -133,7 +133,7 @@ mod tests {
             assert_eq!(&seq[..n], &seq[n..], "{bits} bits: not periodic with 2^n − 1");
             // No shorter period.
             for d in 1..n {
-                if n % d == 0 && d < n {
+                if n.is_multiple_of(d) {
                     assert_ne!(&seq[..n - d], &seq[d..n], "{bits} bits: period {d}");
                 }
             }
