@@ -9,10 +9,12 @@
 
 use anyhow::{bail, Result};
 use hter::coldchain::ColdChainMonitor;
+use hter::control::adaptive::{AdaptiveConfig, SelfTuning};
 use hter::control::excite::PrbsExcitation;
 use hter::control::gpc::GpcConfig;
 use hter::control::model::Model;
 use hter::control::mv::{GmvcConfig, IgmvcConfig};
+use hter::control::AdaptiveMode;
 use hter::control::Controller;
 use hter::control::{AnyController, FixedModel, Law, OnOff, OnOffConfig, Pi, PiConfig};
 use hter::event::EventKind;
@@ -102,7 +104,13 @@ impl ControllerSpec {
             (ControllerChoice::Pi, _) => AnyController::Pi(Pi::new(pi)),
             (_, Some(law)) => match self.model {
                 Some(m) => AnyController::Fixed(FixedModel::new(law, m, u0)),
-                None => bail!("controller {} needs a model: give --model arx:A;B;K", law.name()),
+                None => AnyController::SelfTuning(SelfTuning::new(
+                    AdaptiveConfig {
+                        fallback: pi,
+                        ..AdaptiveConfig::default_for(law)
+                    },
+                    u0,
+                )),
             },
             (_, None) => bail!("no law for {:?}", self.choice),
         })
@@ -194,6 +202,18 @@ pub struct Row {
     pub mode: &'static str,
     /// Raw RTD conversion the step received, counts (replayable through the step).
     pub counts: u32,
+    /// Self-tuning estimate a1 (empty for other controllers).
+    pub a1: Option<f32>,
+    /// Self-tuning estimate a2.
+    pub a2: Option<f32>,
+    /// Self-tuning estimate b0.
+    pub b0: Option<f32>,
+    /// Self-tuning estimate b1.
+    pub b1: Option<f32>,
+    /// trace(P) of the estimator.
+    pub trace_p: Option<f32>,
+    /// Self-tuning mode (adaptive, frozen, fallback).
+    pub adaptive_mode: Option<&'static str>,
 }
 
 /// A finished run.
@@ -455,6 +475,16 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
                 ambient_c: rig.ambient_c(opts.ambient_c),
                 mode: mode_name(out.mode),
                 counts,
+                a1: out.status.map(|st| st.theta[0]),
+                a2: out.status.map(|st| st.theta[1]),
+                b0: out.status.map(|st| st.theta[2]),
+                b1: out.status.map(|st| st.theta[3]),
+                trace_p: out.status.map(|st| st.trace_p),
+                adaptive_mode: out.status.map(|st| match st.mode {
+                    AdaptiveMode::Adaptive => "adaptive",
+                    AdaptiveMode::Frozen => "frozen",
+                    AdaptiveMode::Fallback => "fallback",
+                }),
             });
         }
         if k == 0 {

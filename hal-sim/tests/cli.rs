@@ -36,6 +36,19 @@ fn bad_input_is_a_one_line_error() {
     assert_one_line_error(&["rtd", "--ohms", "100", "--r0", "500"], "--r0");
     assert_one_line_error(&["rtd"], "required");
     assert_one_line_error(&["identify", "--input", "/no/such/log.csv"], "/no/such/log.csv");
+    assert_one_line_error(&["sim", "--controller", "gpc", "--lambda", "-1"], "--lambda");
+    assert_one_line_error(&["sim", "--controller", "gpc", "--n2", "0"], "N2");
+    assert_one_line_error(&["sim", "--controller", "gpc", "--n1", "5", "--n2", "4"], "N1");
+    assert_one_line_error(&["sim", "--controller", "gpc", "--nu", "9"], "Nu");
+    assert_one_line_error(&["sim", "--controller", "gpc", "--lambda", "inf"], "finite");
+    assert_one_line_error(&["sim", "--plant", "arx:1;x;1"], "not a number");
+    assert_one_line_error(&["sim", "--model", "arx:-0.9;0.1;0"], "delay");
+    assert_one_line_error(&["sim", "--plant", "hter3"], "unknown plant");
+    assert_one_line_error(
+        &["identify", "--input", "/dev/null", "--forgetting", "0"],
+        "--forgetting",
+    );
+    assert_one_line_error(&["monitor", "--input", "/no/such/log.csv"], "/no/such/log.csv");
 }
 
 #[test]

@@ -52,6 +52,44 @@ pub struct AdaptiveConfig {
     pub fallback: PiConfig,
 }
 
+impl AdaptiveConfig {
+    /// Starting model of the full-load H-TER I carrier at Ts = 10 s: batch LS on the filtered
+    /// temperature of `hter sim --scenario prbs` (`hter identify --method ls --nk 5`, fit 63 %):
+    /// A = 1 − 1.7493 q⁻¹ + 0.7514 q⁻², B = −0.02708 − 0.02987 q⁻¹, k = 5 (the dead time, RTD
+    /// lag and filter add up to ≈ 50 s; with k = 1 the model's fast pole stands in for them
+    /// and GPC designed on it limit-cycles on the real plant). Static gain −27 °C per unit duty.
+    pub const HTER1_MODEL: Model = Model {
+        a: [-1.749_27, 0.751_376, 0.0, 0.0],
+        b: [-0.027_079_1, -0.029_865, 0.0, 0.0],
+        c: [0.0; super::model::MAX_NC],
+        na: 2,
+        nb: 2,
+        nc: 0,
+        k: 5,
+    };
+
+    /// Self-tuning `law` with the defaults: λ_f = 0.995 (memory ≈ 200 samples, half an hour),
+    /// P(0) = I (a weak prior around the starting model), trace(P) ≤ 10, 30 samples (5 min) of
+    /// warm-up, plausible static gains −300…−3 °C per unit duty (the model's −25 and the
+    /// plant's −41 at 4 °C, with a wide margin for load, supply and ambient), fallback PI.
+    pub const fn default_for(law: Law) -> Self {
+        AdaptiveConfig {
+            law,
+            k: 5,
+            rls: RlsConfig {
+                forgetting: 0.995,
+                p0: 1.0,
+                trace_max: 10.0,
+            },
+            initial: Some(Self::HTER1_MODEL),
+            warmup_samples: 30,
+            gain_min_c_per_duty: -1000.0,
+            gain_max_c_per_duty: -10.0,
+            fallback: PiConfig::HTER1_DEFAULT,
+        }
+    }
+}
+
 /// Self-tuning state.
 #[derive(Clone, Debug)]
 pub struct SelfTuning {
@@ -78,15 +116,29 @@ impl SelfTuning {
             None => SVector::<f32, 4>::new(-1.5, 0.5, -0.01, 0.0),
         };
         let trusted = cfg.initial.filter(|m| plausible(&cfg, m));
-        let mut fallback = Pi::new(PiConfig { bias: u0, ..cfg.fallback });
-        fallback.track(&ControlInput { t_s: 0.0, y_c: 0.0, w_c: 0.0 }, u0);
+        let mut fallback = Pi::new(PiConfig {
+            bias: u0,
+            ..cfg.fallback
+        });
+        fallback.track(
+            &ControlInput {
+                t_s: 0.0,
+                y_c: 0.0,
+                w_c: 0.0,
+            },
+            u0,
+        );
         Self {
             cfg,
             rls: Rls::new(&cfg.rls, theta0),
             law_state: LawState::new(u0),
             fallback,
             trusted,
-            mode: if trusted.is_some() { AdaptiveMode::Frozen } else { AdaptiveMode::Fallback },
+            mode: if trusted.is_some() {
+                AdaptiveMode::Frozen
+            } else {
+                AdaptiveMode::Fallback
+            },
             updates: 0,
             y_hist: [0.0; 4],
             filled: 0,
@@ -98,13 +150,13 @@ impl SelfTuning {
 
     /// The current estimate as a model.
     pub fn estimate(&self) -> Option<Model> {
-        let th = self.rls.theta();
+        let th = *self.rls.theta();
         Model::new(&[th[0], th[1]], &[th[2], th[3]], &[], self.cfg.k).ok()
     }
 
     /// θ = [a1 a2 b0 b1].
     pub fn theta(&self) -> [f32; 4] {
-        let th = self.rls.theta();
+        let th = *self.rls.theta();
         [th[0], th[1], th[2], th[3]]
     }
 
@@ -161,7 +213,8 @@ impl SelfTuning {
 /// Parameter projection: is `m` a model the laws may be designed from?
 fn plausible(cfg: &AdaptiveConfig, m: &Model) -> bool {
     m.a_is_stable()
-        && m.static_gain().is_some_and(|g| (cfg.gain_min_c_per_duty..=cfg.gain_max_c_per_duty).contains(&g))
+        && m.static_gain()
+            .is_some_and(|g| (cfg.gain_min_c_per_duty..=cfg.gain_max_c_per_duty).contains(&g))
 }
 
 impl Controller for SelfTuning {
@@ -175,7 +228,9 @@ impl Controller for SelfTuning {
                 self.mode = AdaptiveMode::Frozen;
             }
         }
-        let law_u = self.law_state.update(&self.cfg.law, self.trusted.as_ref(), input.y_c, input.w_c);
+        let law_u = self
+            .law_state
+            .update(&self.cfg.law, self.trusted.as_ref(), input.y_c, input.w_c);
         let pi_u = self.fallback.update(input);
         match law_u {
             Some(u) if self.mode != AdaptiveMode::Fallback => u,
@@ -192,7 +247,8 @@ impl Controller for SelfTuning {
         }
         self.law_state.track(applied);
         self.fallback.track(input, applied);
-        self.du_hist.copy_within(0..self.du_hist.len() - 1, 1);
+        let n = self.du_hist.len();
+        self.du_hist.copy_within(0..n - 1, 1);
         self.du_hist[0] = applied - self.u_prev;
         self.u_prev = applied;
     }

@@ -9,6 +9,7 @@
 //! (after saturation and any supervisor override), so every controller can stay bumpless and
 //! free of integrator wind-up.
 
+pub mod adaptive;
 pub mod diophantine;
 pub mod excite;
 pub mod fixed;
@@ -94,6 +95,8 @@ pub enum AnyController {
     Fixed(FixedModel),
     /// Open-loop PRBS for identification.
     Prbs(excite::PrbsExcitation),
+    /// Self-tuning GMVC, IGMVC or GPC.
+    SelfTuning(adaptive::SelfTuning),
 }
 
 impl Controller for AnyController {
@@ -103,6 +106,7 @@ impl Controller for AnyController {
             AnyController::Pi(c) => c.update(input),
             AnyController::Fixed(c) => c.update(input),
             AnyController::Prbs(c) => c.update(input),
+            AnyController::SelfTuning(c) => c.update(input),
         }
     }
 
@@ -112,11 +116,15 @@ impl Controller for AnyController {
             AnyController::Pi(c) => c.track(input, applied),
             AnyController::Fixed(c) => c.track(input, applied),
             AnyController::Prbs(c) => c.track(input, applied),
+            AnyController::SelfTuning(c) => c.track(input, applied),
         }
     }
 
     fn status(&self) -> Option<ControllerStatus> {
-        None
+        match self {
+            AnyController::SelfTuning(c) => c.status(),
+            _ => None,
+        }
     }
 
     fn name(&self) -> &'static str {
@@ -125,6 +133,7 @@ impl Controller for AnyController {
             AnyController::Pi(c) => c.name(),
             AnyController::Fixed(c) => c.name(),
             AnyController::Prbs(c) => c.name(),
+            AnyController::SelfTuning(c) => c.name(),
         }
     }
 }
