@@ -5,18 +5,7 @@ use hal_sim::scenario::Scenario;
 use hal_sim::sim::{run, ControllerChoice, ControllerSpec, PlantChoice, SimOptions, SimOutput};
 
 fn sim(scenario: &str, controller: ControllerChoice, plant: PlantChoice, load: Load) -> SimOutput {
-    let scenario = Scenario::resolve(scenario).unwrap();
-    let duration_s = scenario.duration_s;
-    run(&SimOptions {
-        scenario,
-        controller: ControllerSpec::new(controller),
-        plant,
-        load,
-        ambient_c: 28.0,
-        duration_s,
-        seed: 7,
-    })
-    .unwrap()
+    sim_spec(scenario, ControllerSpec::new(controller), plant, load)
 }
 
 /// Issue 2's acceptance run: PI pulls the full-load H-TER I carrier from 28 °C to 4 °C without

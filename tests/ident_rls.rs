@@ -43,41 +43,45 @@ fn plant_data(n: usize, noise: f64, seed: u64) -> (Vec<f64>, Vec<f64>) {
     (y, u)
 }
 
+/// f64 batch least squares of the 2nd-order ARX (nk = 1): the independent reference.
+fn batch_arx2(y: &[f64], u: &[f64]) -> [f64; 4] {
+    let s = Structure::new(2, 2, 0, 1).unwrap();
+    let mut ls = BatchLs::new(4).unwrap();
+    let mut phi = [0.0f64; 4];
+    for t in s.first_index()..y.len() {
+        assert!(s.regressor(y, u, &[], t, &mut phi));
+        ls.add(&phi, y[t]).unwrap();
+    }
+    let mut th = [0.0f64; 4];
+    ls.solve(&mut th).unwrap();
+    th
+}
+
+/// The f32 recursive estimator (RLS for nc = 0, RELS otherwise) over the record, λ_f = 1.
+fn recursive_f32<const N: usize>(s: &Structure, p0: f32, y: &[f64], u: &[f64]) -> (Vec<f64>, u32) {
+    let yf: Vec<f32> = y.iter().map(|&v| v as f32).collect();
+    let uf: Vec<f32> = u.iter().map(|&v| v as f32).collect();
+    let cfg = RlsConfig {
+        forgetting: 1.0,
+        p0,
+        trace_max: 1e6,
+    };
+    let (r, skipped) = recursive::run::<N>(s, &cfg, SVector::zeros(), &yf, &uf, |_, _, _| {}).unwrap();
+    (r.theta().iter().map(|&v| f64::from(v)).collect(), skipped)
+}
+
 #[test]
 fn f32_rls_matches_f64_batch_least_squares_on_a_near_integrating_plant() {
     let n = 100_000;
     let (y, u) = plant_data(n, 0.002, 7);
     let s = Structure::new(2, 2, 0, 1).unwrap();
-    // f64 batch reference on the same regressors.
-    let mut ls = BatchLs::new(4).unwrap();
-    let mut phi = [0.0f64; 4];
-    for t in s.first_index()..n {
-        assert!(s.regressor(&y, &u, &[], t, &mut phi));
-        ls.add(&phi, y[t]).unwrap();
-    }
-    let mut th_ls = [0.0f64; 4];
-    ls.solve(&mut th_ls).unwrap();
+    let th_ls = batch_arx2(&y, &u);
     // f32 RLS, λ_f = 1, large P(0) so the prior's weight is negligible.
-    let yf: Vec<f32> = y.iter().map(|&v| v as f32).collect();
-    let uf: Vec<f32> = u.iter().map(|&v| v as f32).collect();
-    let cfg = RlsConfig {
-        forgetting: 1.0,
-        p0: 1e4,
-        trace_max: 1e6,
-    };
-    let (rls, skipped) = recursive::run::<4>(&s, &cfg, SVector::zeros(), &yf, &uf, |_, _, _| {}).unwrap();
+    let (th, skipped) = recursive_f32::<4>(&s, 1e4, &y, &u);
     assert_eq!(skipped, 0);
-    let th = rls.theta();
-    let diff: f64 = (0..4)
-        .map(|i| (f64::from(th[i]) - th_ls[i]).powi(2))
-        .sum::<f64>()
-        .sqrt();
+    let diff: f64 = th.iter().zip(&th_ls).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
     let norm: f64 = th_ls.iter().map(|v| v * v).sum::<f64>().sqrt();
-    println!(
-        "LS {th_ls:?}\nRLS {:?}\nrelative difference {:.2e}",
-        th.as_slice(),
-        diff / norm
-    );
+    println!("LS {th_ls:?}\nRLS {th:?}\nrelative difference {:.2e}", diff / norm);
     assert!(diff / norm <= 1e-3, "relative difference {}", diff / norm);
     // And both are close to the truth (the data are informative).
     assert!((th_ls[0] - A1).abs() < 1e-3 && (th_ls[1] - A2).abs() < 1e-3);
@@ -150,26 +154,9 @@ fn rels_recovers_c_where_least_squares_is_biased() {
     let truth = [-1.5, 0.7, 1.0, 0.5];
     let err = |th: &[f64]| truth.iter().zip(th).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
 
-    let arx = Structure::new(2, 2, 0, 1).unwrap();
-    let mut ls = BatchLs::new(4).unwrap();
-    let mut phi = [0.0f64; 4];
-    for t in arx.first_index()..n {
-        arx.regressor(&y, &u, &[], t, &mut phi);
-        ls.add(&phi, y[t]).unwrap();
-    }
-    let mut th_ls = [0.0; 4];
-    ls.solve(&mut th_ls).unwrap();
-
+    let th_ls = batch_arx2(&y, &u);
     let armax = Structure::new(2, 2, 1, 1).unwrap();
-    let yf: Vec<f32> = y.iter().map(|&v| v as f32).collect();
-    let uf: Vec<f32> = u.iter().map(|&v| v as f32).collect();
-    let cfg = RlsConfig {
-        forgetting: 1.0,
-        p0: 100.0,
-        trace_max: 1e6,
-    };
-    let (rels, _) = recursive::run::<5>(&armax, &cfg, SVector::zeros(), &yf, &uf, |_, _, _| {}).unwrap();
-    let th_rels: Vec<f64> = rels.theta().iter().map(|&v| f64::from(v)).collect();
+    let (th_rels, _) = recursive_f32::<5>(&armax, 100.0, &y, &u);
     println!(
         "LS   {th_ls:?} error {:.4}\nRELS {th_rels:?} error {:.4}",
         err(&th_ls),

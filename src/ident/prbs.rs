@@ -154,45 +154,18 @@ mod tests {
             assert!(chunk.iter().all(|x| *x == chunk[0]));
             assert!(chunk[0] == 0.2 || chunk[0] == 0.8);
         }
-        assert_eq!(
-            Prbs::new(PrbsConfig {
-                bits: 2,
-                hold: 1,
-                low: 0.0,
-                high: 1.0
-            })
-            .err(),
-            Some(PrbsError::Bits)
-        );
-        assert_eq!(
-            Prbs::new(PrbsConfig {
-                bits: 7,
-                hold: 0,
-                low: 0.0,
-                high: 1.0
-            })
-            .err(),
-            Some(PrbsError::Levels)
-        );
-        assert_eq!(
-            Prbs::new(PrbsConfig {
-                bits: 7,
-                hold: 1,
-                low: 0.9,
-                high: 0.1
-            })
-            .err(),
-            Some(PrbsError::Levels)
-        );
-        assert_eq!(
-            Prbs::new(PrbsConfig {
-                bits: 7,
-                hold: 1,
-                low: f32::NAN,
-                high: 0.1
-            })
-            .err(),
-            Some(PrbsError::Levels)
-        );
+        let bad = [
+            (2, 1, 0.0, 1.0, PrbsError::Bits),
+            (7, 0, 0.0, 1.0, PrbsError::Levels),
+            (7, 1, 0.9, 0.1, PrbsError::Levels),
+            (7, 1, f32::NAN, 0.1, PrbsError::Levels),
+        ];
+        for (bits, hold, low, high, want) in bad {
+            assert_eq!(
+                Prbs::new(PrbsConfig { bits, hold, low, high }).err(),
+                Some(want),
+                "{bits} {hold} {low} {high}"
+            );
+        }
     }
 }
