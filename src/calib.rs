@@ -44,10 +44,7 @@ impl Default for TwoPoint {
 
 impl TwoPoint {
     /// No correction.
-    pub const IDENTITY: TwoPoint = TwoPoint {
-        gain: 1.0,
-        offset_c: 0.0,
-    };
+    pub const IDENTITY: TwoPoint = TwoPoint { gain: 1.0, offset_c: 0.0 };
 
     /// Fits the line through (measured, reference) at the ice bath and at a second point.
     pub fn from_points(
@@ -67,10 +64,7 @@ impl TwoPoint {
         if !(0.9..=1.1).contains(&gain) {
             return Err(CalError::ImplausibleGain);
         }
-        Ok(TwoPoint {
-            gain,
-            offset_c: r0 - gain * m0,
-        })
+        Ok(TwoPoint { gain, offset_c: r0 - gain * m0 })
     }
 
     /// The corrected temperature.
@@ -96,17 +90,8 @@ mod tests {
     #[test]
     fn refuses_degenerate_points() {
         let c = Celsius;
-        assert_eq!(
-            TwoPoint::from_points(c(0.1), c(0.0), c(0.5), c(0.4)),
-            Err(CalError::PointsTooClose)
-        );
-        assert_eq!(
-            TwoPoint::from_points(c(0.0), c(0.0), c(20.0), c(30.0)),
-            Err(CalError::ImplausibleGain)
-        );
-        assert_eq!(
-            TwoPoint::from_points(c(f32::NAN), c(0.0), c(20.0), c(20.0)),
-            Err(CalError::NonFinite)
-        );
+        assert_eq!(TwoPoint::from_points(c(0.1), c(0.0), c(0.5), c(0.4)), Err(CalError::PointsTooClose));
+        assert_eq!(TwoPoint::from_points(c(0.0), c(0.0), c(20.0), c(30.0)), Err(CalError::ImplausibleGain));
+        assert_eq!(TwoPoint::from_points(c(f32::NAN), c(0.0), c(20.0), c(20.0)), Err(CalError::NonFinite));
     }
 }

@@ -54,12 +54,8 @@ impl AlarmKind {
         }
     }
 
-    const ALL: [AlarmKind; 4] = [
-        AlarmKind::Heat10h,
-        AlarmKind::Freeze60min,
-        AlarmKind::Ship45c1h,
-        AlarmKind::Ship30c10h,
-    ];
+    const ALL: [AlarmKind; 4] =
+        [AlarmKind::Heat10h, AlarmKind::Freeze60min, AlarmKind::Ship45c1h, AlarmKind::Ship30c10h];
 
     fn meets(self, t_c: f32) -> bool {
         match self {
@@ -160,11 +156,7 @@ impl ColdChainMonitor {
     /// An empty record.
     pub const fn new() -> Self {
         Self {
-            trackers: [Tracker {
-                start: None,
-                acc_s: 0.0,
-                fired: false,
-            }; 4],
+            trackers: [Tracker { start: None, acc_s: 0.0, fired: false }; 4],
             last: None,
             elapsed_s: 0.0,
             mkt_mean: 0.0,
@@ -219,21 +211,13 @@ impl ColdChainMonitor {
                 }
                 if !tr.fired && tr.acc_s >= kind.duration_s() {
                     tr.fired = true;
-                    raised[i] = Some(Alarm {
-                        kind,
-                        start_s: tr.start.unwrap_or(t_s),
-                        trigger_s: t_s,
-                    });
+                    raised[i] = Some(Alarm { kind, start_s: tr.start.unwrap_or(t_s), trigger_s: t_s });
                 }
             } else if meets {
                 let t0 = *tr.start.get_or_insert(t_s);
                 if !tr.fired && t_s - t0 >= kind.duration_s() {
                     tr.fired = true;
-                    raised[i] = Some(Alarm {
-                        kind,
-                        start_s: t0,
-                        trigger_s: t_s,
-                    });
+                    raised[i] = Some(Alarm { kind, start_s: t0, trigger_s: t_s });
                 }
             } else {
                 *tr = Tracker::default();
@@ -255,21 +239,12 @@ impl ColdChainMonitor {
             (Some(s), Some(i)) if self.log[i].is_some_and(|e| e.side == s) => {
                 if let Some(e) = self.log[i].as_mut() {
                     e.end_s = t_s;
-                    e.extreme_c = if s == Side::Cold {
-                        e.extreme_c.min(temp_c)
-                    } else {
-                        e.extreme_c.max(temp_c)
-                    };
+                    e.extreme_c = if s == Side::Cold { e.extreme_c.min(temp_c) } else { e.extreme_c.max(temp_c) };
                 }
             }
             (Some(s), _) => {
                 let i = self.log_next;
-                self.log[i] = Some(Excursion {
-                    side: s,
-                    start_s: t_s,
-                    end_s: t_s,
-                    extreme_c: temp_c,
-                });
+                self.log[i] = Some(Excursion { side: s, start_s: t_s, end_s: t_s, extreme_c: temp_c });
                 self.log_next = (i + 1) % EXCURSION_LOG;
                 self.excursions = self.excursions.saturating_add(1);
                 self.open = Some(i);
@@ -343,10 +318,7 @@ mod tests {
             });
             let a = feed(&mut m, s);
             assert_eq!(a.len(), 1, "{kind:?}: {a:?}");
-            assert_eq!(
-                (a[0].kind, a[0].start_s, a[0].trigger_s),
-                (kind, 600.0, (600 + dur) as f32)
-            );
+            assert_eq!((a[0].kind, a[0].start_s, a[0].trigger_s), (kind, 600.0, (600 + dur) as f32));
             // One sample short: no alarm.
             let mut m = ColdChainMonitor::new();
             let s = (0..(600 + dur) / step).map(|i| {
@@ -441,10 +413,7 @@ mod tests {
         assert_eq!(m.time_above_8_s(), 30.0);
         let ex: std::vec::Vec<_> = m.excursions().copied().collect();
         assert_eq!(ex.len(), 2);
-        assert_eq!(
-            (ex[0].side, ex[0].start_s, ex[0].end_s, ex[0].extreme_c),
-            (Side::Cold, 10.0, 20.0, 1.0)
-        );
+        assert_eq!((ex[0].side, ex[0].start_s, ex[0].end_s, ex[0].extreme_c), (Side::Cold, 10.0, 20.0, 1.0));
         assert_eq!((ex[1].side, ex[1].extreme_c), (Side::Warm, 10.0));
         // Glitches are ignored.
         m.push(f32::NAN, 5.0);

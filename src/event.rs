@@ -92,10 +92,7 @@ mod tests {
     fn overflow_is_counted_not_lost_silently() {
         let mut ev = Events::default();
         for i in 0..MAX_EVENTS_PER_STEP + 3 {
-            ev.push(Event {
-                t_s: i as f32,
-                kind: EventKind::SensorOpen,
-            });
+            ev.push(Event { t_s: i as f32, kind: EventKind::SensorOpen });
         }
         assert_eq!(ev.len(), MAX_EVENTS_PER_STEP);
         assert_eq!(ev.dropped(), 3);

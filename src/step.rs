@@ -231,16 +231,8 @@ impl<C: Controller> Carrier<C> {
         self.setpoint_clamped = clamped;
 
         // 5: controller (only with a trustworthy measurement).
-        let ci = ControlInput {
-            t_s,
-            y_c: temp_c,
-            w_c: w,
-        };
-        let requested = if self.sensor_fault.is_none() {
-            self.controller.update(&ci)
-        } else {
-            0.0
-        };
+        let ci = ControlInput { t_s, y_c: temp_c, w_c: w };
+        let requested = if self.sensor_fault.is_none() { self.controller.update(&ci) } else { 0.0 };
         let mut duty = if requested.is_finite() {
             Duty::saturating(requested)
         } else {
@@ -314,11 +306,7 @@ impl<C: Controller> Carrier<C> {
             AdcError::Open => EventKind::SensorOpen,
             AdcError::Short => EventKind::SensorShort,
         })?;
-        let t = self
-            .cfg
-            .rtd
-            .temperature(ohms)
-            .map_err(|_| EventKind::SensorOutOfRange)?;
+        let t = self.cfg.rtd.temperature(ohms).map_err(|_| EventKind::SensorOutOfRange)?;
         self.plausible(self.cfg.cal.apply(t))
     }
 
@@ -344,20 +332,13 @@ mod tests {
     }
 
     fn pi_carrier() -> Carrier<AnyController> {
-        Carrier::new(
-            CarrierConfig::DEFAULT,
-            AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)),
-        )
+        Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)))
     }
 
     #[test]
     fn measures_within_the_resolution() {
         let mut c = pi_carrier();
-        let out = c.step(&StepInput {
-            t_s: 0.0,
-            counts: counts_at(4.0),
-            setpoint_c: 4.0,
-        });
+        let out = c.step(&StepInput { t_s: 0.0, counts: counts_at(4.0), setpoint_c: 4.0 });
         assert!((out.temp_c.0 - 4.0).abs() < 0.01, "{:?}", out.temp_c);
         assert_eq!(out.mode, Mode::Normal);
         assert!(out.supply_enable);
@@ -366,82 +347,38 @@ mod tests {
     #[test]
     fn open_sensor_stops_cooling_on_the_first_sample_and_recovers() {
         let mut c = pi_carrier();
-        let warm = c.step(&StepInput {
-            t_s: 0.0,
-            counts: counts_at(10.0),
-            setpoint_c: 4.0,
-        });
+        let warm = c.step(&StepInput { t_s: 0.0, counts: counts_at(10.0), setpoint_c: 4.0 });
         assert!(warm.duty.get() > 0.5);
-        let open = c.step(&StepInput {
-            t_s: 10.0,
-            counts: 65_535,
-            setpoint_c: 4.0,
-        });
+        let open = c.step(&StepInput { t_s: 10.0, counts: 65_535, setpoint_c: 4.0 });
         assert_eq!(open.duty, Duty::OFF);
         assert_eq!(open.mode, Mode::SensorFault);
-        assert_eq!(
-            open.events.iter().next().map(|e| (e.kind, e.t_s)),
-            Some((EventKind::SensorOpen, 10.0))
-        );
+        assert_eq!(open.events.iter().next().map(|e| (e.kind, e.t_s)), Some((EventKind::SensorOpen, 10.0)));
         // No repeated event while the fault persists.
-        let still = c.step(&StepInput {
-            t_s: 20.0,
-            counts: 65_535,
-            setpoint_c: 4.0,
-        });
+        let still = c.step(&StepInput { t_s: 20.0, counts: 65_535, setpoint_c: 4.0 });
         assert!(still.events.is_empty());
-        let back = c.step(&StepInput {
-            t_s: 30.0,
-            counts: counts_at(5.0),
-            setpoint_c: 4.0,
-        });
+        let back = c.step(&StepInput { t_s: 30.0, counts: counts_at(5.0), setpoint_c: 4.0 });
         assert_eq!(back.mode, Mode::Normal);
-        assert_eq!(
-            back.events.iter().next().map(|e| e.kind),
-            Some(EventKind::SensorRecovered)
-        );
+        assert_eq!(back.events.iter().next().map(|e| e.kind), Some(EventKind::SensorRecovered));
     }
 
     #[test]
     fn short_and_implausible_readings_are_faults() {
         let mut c = pi_carrier();
-        let short = c.step(&StepInput {
-            t_s: 0.0,
-            counts: 10,
-            setpoint_c: 4.0,
-        });
+        let short = c.step(&StepInput { t_s: 0.0, counts: 10, setpoint_c: 4.0 });
         assert_eq!(short.events.iter().next().map(|e| e.kind), Some(EventKind::SensorShort));
         let cold = CarrierConfig::DEFAULT.adc.counts(Ohms(80.0)); // ≈ −50 °C
-        let out = c.step(&StepInput {
-            t_s: 10.0,
-            counts: cold,
-            setpoint_c: 4.0,
-        });
-        assert_eq!(
-            out.events.iter().next().map(|e| e.kind),
-            Some(EventKind::SensorOutOfRange)
-        );
+        let out = c.step(&StepInput { t_s: 10.0, counts: cold, setpoint_c: 4.0 });
+        assert_eq!(out.events.iter().next().map(|e| e.kind), Some(EventKind::SensorOutOfRange));
         assert_eq!(out.duty, Duty::OFF);
     }
 
     #[test]
     fn setpoint_below_two_degrees_is_clamped() {
         let mut c = pi_carrier();
-        let out = c.step(&StepInput {
-            t_s: 0.0,
-            counts: counts_at(4.0),
-            setpoint_c: -5.0,
-        });
+        let out = c.step(&StepInput { t_s: 0.0, counts: counts_at(4.0), setpoint_c: -5.0 });
         assert_eq!(out.setpoint_c.0, 2.0);
-        assert_eq!(
-            out.events.iter().next().map(|e| e.kind),
-            Some(EventKind::SetpointClamped)
-        );
-        let nan = c.step(&StepInput {
-            t_s: 10.0,
-            counts: counts_at(4.0),
-            setpoint_c: f32::NAN,
-        });
+        assert_eq!(out.events.iter().next().map(|e| e.kind), Some(EventKind::SetpointClamped));
+        let nan = c.step(&StepInput { t_s: 10.0, counts: counts_at(4.0), setpoint_c: f32::NAN });
         assert!((2.0..=8.0).contains(&nan.setpoint_c.0));
     }
 
@@ -453,21 +390,13 @@ mod tests {
         let mut temp = 9.0f32;
         let mut t = 0.0;
         while temp > 0.0 {
-            let out = c.step(&StepInput {
-                t_s: t,
-                counts: counts_at(temp),
-                setpoint_c: 2.0,
-            });
+            let out = c.step(&StepInput { t_s: t, counts: counts_at(temp), setpoint_c: 2.0 });
             if out.mode == Mode::FreezeGuard {
                 assert_eq!(out.duty, Duty::OFF);
                 assert!(out.events.iter().any(|e| e.kind == EventKind::FreezeGuardTripped));
                 // It holds until the load is back above the release threshold.
                 for k in 1..20 {
-                    let back = c.step(&StepInput {
-                        t_s: t + 10.0 * k as f32,
-                        counts: counts_at(2.2),
-                        setpoint_c: 2.0,
-                    });
+                    let back = c.step(&StepInput { t_s: t + 10.0 * k as f32, counts: counts_at(2.2), setpoint_c: 2.0 });
                     assert_eq!(back.duty, Duty::OFF);
                 }
                 // Back above 2.5 °C (through the filter): cooling may resume.

@@ -25,11 +25,9 @@ fn pi_pulls_down_from_28_to_4_without_freezing_and_holds() {
 #[test]
 fn baselines_never_take_the_load_below_2_on_piecewise() {
     for c in [ControllerChoice::Onoff, ControllerChoice::P, ControllerChoice::Pi] {
-        for (plant, load) in [
-            (PlantChoice::Hter1, Load::Full),
-            (PlantChoice::Hter1, Load::Half),
-            (PlantChoice::Hter2, Load::Full),
-        ] {
+        for (plant, load) in
+            [(PlantChoice::Hter1, Load::Full), (PlantChoice::Hter1, Load::Half), (PlantChoice::Hter2, Load::Full)]
+        {
             let m = sim("piecewise", c, plant, load).metrics;
             assert!(m.min_temp_c >= 2.0, "{c:?} {plant:?} {load:?}: min {}", m.min_temp_c);
             assert!(m.max_temp_c <= 8.0, "{c:?} {plant:?} {load:?}: max {}", m.max_temp_c);
@@ -42,10 +40,7 @@ fn pi_has_less_steady_state_error_than_onoff() {
     // The seed's finding (§5.2): PI beats On-Off on steady-state error.
     let pi = sim("piecewise", ControllerChoice::Pi, PlantChoice::Hter1, Load::Full).metrics;
     let onoff = sim("piecewise", ControllerChoice::Onoff, PlantChoice::Hter1, Load::Full).metrics;
-    assert!(
-        pi.steady_state_error_c < onoff.steady_state_error_c,
-        "pi {pi:?}\nonoff {onoff:?}"
-    );
+    assert!(pi.steady_state_error_c < onoff.steady_state_error_c, "pi {pi:?}\nonoff {onoff:?}");
 }
 
 #[test]
@@ -87,11 +82,9 @@ fn gpc_on_its_own_arx_model_tracks_piecewise_without_offset() {
 /// mode changes, and survives a supply sag from 12 to 10 V mid-run.
 #[test]
 fn self_tuning_gpc_stays_in_range_and_reports_its_modes() {
-    for (plant, load) in [
-        (PlantChoice::Hter1, Load::Full),
-        (PlantChoice::Hter1, Load::Half),
-        (PlantChoice::Hter2, Load::Full),
-    ] {
+    for (plant, load) in
+        [(PlantChoice::Hter1, Load::Full), (PlantChoice::Hter1, Load::Half), (PlantChoice::Hter2, Load::Full)]
+    {
         let m = sim_spec("piecewise", spec(ControllerChoice::Gpc), plant, load).metrics;
         assert!(m.min_temp_c >= 2.0 && m.max_temp_c <= 8.0, "{plant:?} {load:?}: {m:?}");
     }
@@ -107,29 +100,13 @@ fn self_tuning_gpc_stays_in_range_and_reports_its_modes() {
         seed: 3,
     })
     .unwrap();
-    assert!(
-        out.metrics.min_temp_c >= 2.0 && out.metrics.max_temp_c <= 8.0,
-        "{:?}",
-        out.metrics
-    );
-    assert!(
-        out.rows.iter().all(|r| r.adaptive_mode.is_some()),
-        "the self-tuning status is logged every sample"
-    );
+    assert!(out.metrics.min_temp_c >= 2.0 && out.metrics.max_temp_c <= 8.0, "{:?}", out.metrics);
+    assert!(out.rows.iter().all(|r| r.adaptive_mode.is_some()), "the self-tuning status is logged every sample");
     assert!(out.rows.iter().any(|r| r.a1.is_some_and(|a| a.is_finite())));
 }
 
 fn sim_spec(scenario: &str, controller: ControllerSpec, plant: PlantChoice, load: Load) -> SimOutput {
     let scenario = Scenario::resolve(scenario).unwrap();
     let duration_s = scenario.duration_s;
-    run(&SimOptions {
-        scenario,
-        controller,
-        plant,
-        load,
-        ambient_c: 28.0,
-        duration_s,
-        seed: 7,
-    })
-    .unwrap()
+    run(&SimOptions { scenario, controller, plant, load, ambient_c: 28.0, duration_s, seed: 7 }).unwrap()
 }

@@ -12,10 +12,7 @@ use proptest::prelude::*;
 struct Lcg(u64);
 impl Lcg {
     fn uniform(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
+        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         (self.0 >> 11) as f64 / (1u64 << 53) as f64 - 0.5
     }
 }
@@ -27,13 +24,7 @@ const B0: f64 = 0.02;
 const B1: f64 = 0.01;
 
 fn plant_data(n: usize, noise: f64, seed: u64) -> (Vec<f64>, Vec<f64>) {
-    let mut prbs = Prbs::new(PrbsConfig {
-        bits: 11,
-        hold: 3,
-        low: -0.5,
-        high: 0.5,
-    })
-    .unwrap();
+    let mut prbs = Prbs::new(PrbsConfig { bits: 11, hold: 3, low: -0.5, high: 0.5 }).unwrap();
     let mut rng = Lcg(seed);
     let u: Vec<f64> = (0..n).map(|_| f64::from(prbs.next_duty())).collect();
     let mut y = vec![0.0; n];
@@ -61,11 +52,7 @@ fn batch_arx2(y: &[f64], u: &[f64]) -> [f64; 4] {
 fn recursive_f32<const N: usize>(s: &Structure, p0: f32, y: &[f64], u: &[f64]) -> (Vec<f64>, u32) {
     let yf: Vec<f32> = y.iter().map(|&v| v as f32).collect();
     let uf: Vec<f32> = u.iter().map(|&v| v as f32).collect();
-    let cfg = RlsConfig {
-        forgetting: 1.0,
-        p0,
-        trace_max: 1e6,
-    };
+    let cfg = RlsConfig { forgetting: 1.0, p0, trace_max: 1e6 };
     let (r, skipped) = recursive::run::<N>(s, &cfg, SVector::zeros(), &yf, &uf, |_, _, _| {}).unwrap();
     (r.theta().iter().map(|&v| f64::from(v)).collect(), skipped)
 }
@@ -98,10 +85,7 @@ fn assert_spd(rls: &Rls<4>) {
     for i in 0..4 {
         for j in 0..4 {
             let (a, b) = (p64[(i, j)], p64[(j, i)]);
-            assert!(
-                (a - b).abs() <= 1e-6 * a.abs().max(b.abs()).max(1e-12),
-                "P not symmetric at {i},{j}"
-            );
+            assert!((a - b).abs() <= 1e-6 * a.abs().max(b.abs()).max(1e-12), "P not symmetric at {i},{j}");
         }
     }
     assert!(p64.cholesky().is_some(), "P not positive definite: {p64}");
@@ -137,13 +121,7 @@ proptest! {
 #[test]
 fn rels_recovers_c_where_least_squares_is_biased() {
     let n = 20_000;
-    let mut prbs = Prbs::new(PrbsConfig {
-        bits: 10,
-        hold: 1,
-        low: -1.0,
-        high: 1.0,
-    })
-    .unwrap();
+    let mut prbs = Prbs::new(PrbsConfig { bits: 10, hold: 1, low: -1.0, high: 1.0 }).unwrap();
     let mut rng = Lcg(3);
     let u: Vec<f64> = (0..n).map(|_| f64::from(prbs.next_duty())).collect();
     let e: Vec<f64> = (0..n).map(|_| 1.5 * rng.uniform()).collect();
@@ -157,16 +135,8 @@ fn rels_recovers_c_where_least_squares_is_biased() {
     let th_ls = batch_arx2(&y, &u);
     let armax = Structure::new(2, 2, 1, 1).unwrap();
     let (th_rels, _) = recursive_f32::<5>(&armax, 100.0, &y, &u);
-    println!(
-        "LS   {th_ls:?} error {:.4}\nRELS {th_rels:?} error {:.4}",
-        err(&th_ls),
-        err(&th_rels[..4])
-    );
+    println!("LS   {th_ls:?} error {:.4}\nRELS {th_rels:?} error {:.4}", err(&th_ls), err(&th_rels[..4]));
     assert!((th_rels[4] - 0.8).abs() < 0.05, "c1 = {}", th_rels[4]);
     assert!(err(&th_rels[..4]) < 0.03, "RELS error {}", err(&th_rels[..4]));
-    assert!(
-        err(&th_ls) > 3.0 * err(&th_rels[..4]),
-        "LS should be clearly biased: {}",
-        err(&th_ls)
-    );
+    assert!(err(&th_ls) > 3.0 * err(&th_rels[..4]), "LS should be clearly biased: {}", err(&th_ls));
 }

@@ -17,16 +17,7 @@ fn replay(rows: &[(f32, u32, f32)]) -> Vec<u32> {
     let cfg = CarrierConfig::DEFAULT;
     let mut c = Carrier::new(cfg, ControllerChoice::Pi.build(cfg.ts_s));
     rows.iter()
-        .map(|&(t_s, counts, setpoint_c)| {
-            c.step(&StepInput {
-                t_s,
-                counts,
-                setpoint_c,
-            })
-            .duty
-            .get()
-            .to_bits()
-        })
+        .map(|&(t_s, counts, setpoint_c)| c.step(&StepInput { t_s, counts, setpoint_c }).duty.get().to_bits())
         .collect()
 }
 
@@ -42,11 +33,7 @@ fn bless() {
         seed: 1,
     };
     let out = run(&opts).unwrap();
-    let rows: Vec<(f32, u32, f32)> = out
-        .rows
-        .iter()
-        .map(|r| (r.t_s as f32, r.counts, r.setpoint_c as f32))
-        .collect();
+    let rows: Vec<(f32, u32, f32)> = out.rows.iter().map(|r| (r.t_s as f32, r.counts, r.setpoint_c as f32)).collect();
     let duties = replay(&rows);
     let mut text = String::from("t_s,counts,setpoint_c,duty_bits\n");
     for ((t, c, w), d) in rows.iter().zip(&duties) {
@@ -71,11 +58,7 @@ fn recorded_counts_replay_to_the_recorded_duties() {
     assert!(rows.len() > 500, "golden trace too short");
     // The trace must exercise the controller, not sit at one duty.
     let distinct: std::collections::BTreeSet<_> = golden.iter().collect();
-    assert!(
-        distinct.len() > 20,
-        "golden trace has only {} distinct duties",
-        distinct.len()
-    );
+    assert!(distinct.len() > 20, "golden trace has only {} distinct duties", distinct.len());
     for run in 0..3 {
         let got = replay(&rows);
         for (k, (g, want)) in got.iter().zip(&golden).enumerate() {

@@ -28,16 +28,6 @@ fn default_pi_gains_are_detuned_ziegler_nichols_of_the_plant() {
     // Detuned by 2 on Kp and ×2 on Ti, within 25 % (the plant model is a documented table,
     // the defaults are rounded).
     let rel = |a: f32, b: f32| (a - b).abs() / b;
-    assert!(
-        rel(d.kp_per_c, kp / 2.0) < 0.25,
-        "default Kp {} vs ZN/2 {}",
-        d.kp_per_c,
-        kp / 2.0
-    );
-    assert!(
-        rel(d.ti_s, 2.0 * ti) < 0.25,
-        "default Ti {} vs 2·ZN {}",
-        d.ti_s,
-        2.0 * ti
-    );
+    assert!(rel(d.kp_per_c, kp / 2.0) < 0.25, "default Kp {} vs ZN/2 {}", d.kp_per_c, kp / 2.0);
+    assert!(rel(d.ti_s, 2.0 * ti) < 0.25, "default Ti {} vs 2·ZN {}", d.ti_s, 2.0 * ti);
 }

@@ -71,21 +71,11 @@ pub fn init() -> Board {
         ..Default::default()
     };
     let adc = Adc::new_with_config(p.ADC1, adc_config);
-    let rtd = RtdAdc {
-        adc,
-        channel: p.PA0.degrade_adc(),
-    };
+    let rtd = RtdAdc { adc, channel: p.PA0.degrade_adc() };
 
     let ssr_pin = PwmPin::new(p.PA6, OutputType::PushPull);
-    let ssr = SimplePwm::new(
-        p.TIM3,
-        Some(ssr_pin),
-        None,
-        None,
-        None,
-        Hertz(config::SSR_PWM_HZ),
-        CountingMode::EdgeAlignedUp,
-    );
+    let ssr =
+        SimplePwm::new(p.TIM3, Some(ssr_pin), None, None, None, Hertz(config::SSR_PWM_HZ), CountingMode::EdgeAlignedUp);
 
     Board {
         rtd,
@@ -109,8 +99,6 @@ impl hter::hal::RtdSampler for RtdAdc {
     fn sample(&mut self) -> Result<u32, Self::Error> {
         // 640.5 ADC cycles per conversion (the longest: the amplifier's output impedance and the
         // sampling capacitor settle fully); 256 conversions take ≈ 2.1 ms at 80 MHz.
-        Ok(u32::from(
-            self.adc.blocking_read(&mut self.channel, SampleTime::CYCLES640_5),
-        ))
+        Ok(u32::from(self.adc.blocking_read(&mut self.channel, SampleTime::CYCLES640_5)))
     }
 }

@@ -23,8 +23,5 @@ pub const WATCHDOG_TIMEOUT_US: u32 = 30_000_000;
 
 /// The controller: PI (Ziegler–Nichols, detuned; `PiConfig::HTER1_DEFAULT`).
 pub fn controller() -> AnyController {
-    AnyController::Pi(Pi::new(PiConfig {
-        ts_s: CARRIER.ts_s,
-        ..PiConfig::HTER1_DEFAULT
-    }))
+    AnyController::Pi(Pi::new(PiConfig { ts_s: CARRIER.ts_s, ..PiConfig::HTER1_DEFAULT }))
 }

@@ -96,15 +96,8 @@ async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripheral
     let mut carrier = Carrier::new(config::CARRIER, config::controller());
     loop {
         let s = SAMPLES.receive().await;
-        let out = carrier.step(&StepInput {
-            t_s: s.t_s,
-            counts: s.counts,
-            setpoint_c: config::SETPOINT_C,
-        });
-        ACTUATION.signal(Actuation {
-            duty: out.duty,
-            supply_enable: out.supply_enable,
-        });
+        let out = carrier.step(&StepInput { t_s: s.t_s, counts: s.counts, setpoint_c: config::SETPOINT_C });
+        ACTUATION.signal(Actuation { duty: out.duty, supply_enable: out.supply_enable });
         for e in out.events.iter() {
             // Never block the loop on logging: a full queue drops the event, and says so.
             if EVENTS.try_send(*e).is_err() {
@@ -157,10 +150,7 @@ async fn actuate(
 async fn telemetry() {
     loop {
         let r = TELEMETRY.receive().await;
-        info!(
-            "t={} temp={} sp={} duty={} mode={}",
-            r.t_s, r.temp_c, r.setpoint_c, r.duty, r.mode
-        );
+        info!("t={} temp={} sp={} duty={} mode={}", r.t_s, r.temp_c, r.setpoint_c, r.duty, r.mode);
         while let Ok(e) = EVENTS.try_receive() {
             warn!("event t={} {}", e.t_s, e.kind);
         }

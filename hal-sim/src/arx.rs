@@ -10,9 +10,7 @@ use hter::control::model::{Model, MAX_K, MAX_NA, MAX_NB, MAX_NC};
 
 /// Parses `arx:A;B;K[;C]`.
 pub fn parse(spec: &str) -> Result<Model> {
-    let body = spec
-        .strip_prefix("arx:")
-        .ok_or_else(|| anyhow!("model '{spec}' must start with 'arx:'"))?;
+    let body = spec.strip_prefix("arx:").ok_or_else(|| anyhow!("model '{spec}' must start with 'arx:'"))?;
     let parts: Vec<&str> = body.split(';').collect();
     if !(3..=4).contains(&parts.len()) {
         bail!("model '{spec}' must be arx:A;B;K (coefficients comma-separated, K the delay in samples)");
@@ -20,11 +18,7 @@ pub fn parse(spec: &str) -> Result<Model> {
     let coeffs = |name: &str, s: &str, max: usize, allow_empty: bool| -> Result<Vec<f32>> {
         let s = s.trim();
         if s.is_empty() {
-            return if allow_empty {
-                Ok(vec![])
-            } else {
-                bail!("model '{spec}': {name} is empty")
-            };
+            return if allow_empty { Ok(vec![]) } else { bail!("model '{spec}': {name} is empty") };
         }
         let v = s
             .split(',')
@@ -40,10 +34,7 @@ pub fn parse(spec: &str) -> Result<Model> {
             })
             .collect::<Result<Vec<f32>>>()?;
         if v.len() > max {
-            bail!(
-                "model '{spec}': {name} has {} coefficients, at most {max} are supported",
-                v.len()
-            );
+            bail!("model '{spec}': {name} has {} coefficients, at most {max} are supported", v.len());
         }
         Ok(v)
     };
@@ -89,12 +80,7 @@ impl ArxPlant {
         if !(0.0..=1.0).contains(&u_ss) {
             bail!("the ARX plant cannot hold {temp_c} °C at {ambient_c} °C ambient: steady duty would be {u_ss:.3}");
         }
-        Ok(ArxPlant {
-            model,
-            ambient_c,
-            y: vec![y_ss; model.na + 1],
-            u: vec![u_ss; model.nb + model.k],
-        })
+        Ok(ArxPlant { model, ambient_c, y: vec![y_ss; model.na + 1], u: vec![u_ss; model.nb + model.k] })
     }
 
     /// Temperature now, °C.
@@ -140,15 +126,9 @@ mod tests {
 
     #[test]
     fn rejects_malformed_models() {
-        for bad in [
-            "-1.8;1;1",
-            "arx:-1.8;1",
-            "arx:-1.8;x;1",
-            "arx:-1.8;1;0",
-            "arx:;1;1",
-            "arx:nan;1;1",
-            "arx:1,2,3,4,5;1;1",
-        ] {
+        for bad in
+            ["-1.8;1;1", "arx:-1.8;1", "arx:-1.8;x;1", "arx:-1.8;1;0", "arx:;1;1", "arx:nan;1;1", "arx:1,2,3,4,5;1;1"]
+        {
             let e = parse(bad).unwrap_err().to_string();
             assert!(!e.contains('\n'), "{e}");
         }

@@ -172,19 +172,12 @@ pub fn load(path: &Path, y_column: &str, filter: Option<f64>, decimate: usize) -
     if decimate == 0 {
         bail!("--decimate must be at least 1");
     }
-    let avg = |v: &[f64]| -> Vec<f64> {
-        v.chunks_exact(decimate)
-            .map(|c| c.iter().sum::<f64>() / decimate as f64)
-            .collect()
-    };
+    let avg =
+        |v: &[f64]| -> Vec<f64> { v.chunks_exact(decimate).map(|c| c.iter().sum::<f64>() / decimate as f64).collect() };
     let first = |v: &[f64]| -> Vec<f64> { v.chunks_exact(decimate).map(|c| c[0]).collect() };
     let (t, u, mut y) = (first(&cols[0]), avg(&cols[1]), avg(&cols[2]));
     if t.len() < 3 {
-        bail!(
-            "'{}' has {} rows; identification needs many more",
-            path.display(),
-            t.len()
-        );
+        bail!("'{}' has {} rows; identification needs many more", path.display(), t.len());
     }
     // The median interval is the sample period; the first interval off by > 5 % is named.
     let mut dts: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
@@ -252,11 +245,7 @@ pub fn fit(d: &Data, s: &Structure, method: Method, forgetting: f64) -> Result<F
             th
         }
         Method::Rls | Method::Rels => {
-            let cfg = RlsConfig {
-                forgetting: forgetting as f32,
-                p0: 1e4,
-                trace_max: 1e6,
-            };
+            let cfg = RlsConfig { forgetting: forgetting as f32, p0: 1e4, trace_max: 1e6 };
             let yf: Vec<f32> = d.y.iter().map(|&v| v as f32).collect();
             let uf: Vec<f32> = d.u.iter().map(|&v| v as f32).collect();
             let every = (d.y.len() / 400).max(1);
@@ -304,12 +293,8 @@ pub fn fit(d: &Data, s: &Structure, method: Method, forgetting: f64) -> Result<F
     let stable = poles.iter().all(|p| validate::abs(*p) < 1.0);
     let a1 = 1.0 + a.iter().sum::<f64>();
     let static_gain = b.iter().sum::<f64>() / a1;
-    let time_constants_s = poles
-        .iter()
-        .map(|p| validate::abs(*p))
-        .filter(|m| *m > 0.0 && *m < 1.0)
-        .map(|m| -d.ts_s / m.ln())
-        .collect();
+    let time_constants_s =
+        poles.iter().map(|p| validate::abs(*p)).filter(|m| *m > 0.0 && *m < 1.0).map(|m| -d.ts_s / m.ln()).collect();
     let resid = &eps[s.first_index()..];
     let mut ac = [0.0; 20];
     validate::autocorrelation(resid, &mut ac);
@@ -342,12 +327,7 @@ pub fn compare(d: &Data, nk: usize, nc: usize, method: Method, forgetting: f64) 
             continue;
         };
         if let Ok(f) = fit(d, &s, method, forgetting) {
-            rows.push(OrderRow {
-                order,
-                fit_percent: f.fit_percent,
-                mse: f.mse,
-                stable: f.stable,
-            });
+            rows.push(OrderRow { order, fit_percent: f.fit_percent, mse: f.mse, stable: f.stable });
         }
     }
     let best = rows
@@ -396,11 +376,7 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
     if !(args.forgetting.is_finite() && args.forgetting > 0.0 && args.forgetting <= 1.0) {
         bail!("--forgetting must be in (0, 1], got {}", args.forgetting);
     }
-    let nc = if args.method == Method::Rels && args.nc == 0 {
-        1
-    } else {
-        args.nc
-    };
+    let nc = if args.method == Method::Rels && args.nc == 0 { 1 } else { args.nc };
     let s = Structure::new(args.na, args.nb, nc, args.nk).map_err(|_| {
         anyhow!(
             "orders out of range: need na 1–4, nb 1–4, nc 0–2, nk 1–10 (got na={} nb={} nc={} nk={})",
@@ -455,16 +431,8 @@ fn poly(name: &str, lead: Option<f64>, c: &[f64]) -> String {
         } else {
             "+"
         };
-        let term = if k == 0 {
-            format!("{:.6}", v.abs())
-        } else {
-            format!("{:.6} q⁻{}", v.abs(), k)
-        };
-        s += &if first {
-            format!("{sign}{term}")
-        } else {
-            format!(" {sign} {term}")
-        };
+        let term = if k == 0 { format!("{:.6}", v.abs()) } else { format!("{:.6} q⁻{}", v.abs(), k) };
+        s += &if first { format!("{sign}{term}") } else { format!(" {sign} {term}") };
         first = false;
     }
     s
@@ -472,19 +440,12 @@ fn poly(name: &str, lead: Option<f64>, c: &[f64]) -> String {
 
 fn print_report(args: &IdentifyArgs, s: &Structure, r: &Report) {
     let f = &r.fit;
-    println!(
-        "identification of {} ({} samples, Ts = {:.3} s)",
-        args.input.display(),
-        r.rows,
-        r.ts_s
-    );
+    println!("identification of {} ({} samples, Ts = {:.3} s)", args.input.display(), r.rows, r.ts_s);
     println!(
         "  operating point removed: {:.3} °C, duty {:.3}{}",
         r.mean_temp_c,
         r.mean_duty,
-        r.filter
-            .map(|fa| format!("; filtered with F_a = {fa}"))
-            .unwrap_or_default()
+        r.filter.map(|fa| format!("; filtered with F_a = {fa}")).unwrap_or_default()
     );
     let kind = if s.nc > 0 { "ARMAX" } else { "ARX" };
     println!(
@@ -504,21 +465,14 @@ fn print_report(args: &IdentifyArgs, s: &Structure, r: &Report) {
         .iter()
         .map(|(re, im)| format!("{re:.5}{:+.5}i (|p| = {:.5})", im, (re * re + im * im).sqrt()))
         .collect();
-    println!(
-        "  poles               {}  → {}",
-        p.join(", "),
-        if f.stable { "stable" } else { "UNSTABLE" }
-    );
+    println!("  poles               {}  → {}", p.join(", "), if f.stable { "stable" } else { "UNSTABLE" });
     let z: Vec<String> = f.zeros.iter().map(|(re, im)| format!("{re:.4}{im:+.4}i")).collect();
     if !z.is_empty() {
         println!("  zeros               {}", z.join(", "));
     }
     let tc: Vec<String> = f.time_constants_s.iter().map(|t| format!("{t:.0} s")).collect();
     println!("  time constants      {}", tc.join(", "));
-    println!(
-        "  residual whiteness  {} of 20 autocorrelation lags outside the 95 % band",
-        f.residual_lags_outside_band
-    );
+    println!("  residual whiteness  {} of 20 autocorrelation lags outside the 95 % band", f.residual_lags_outside_band);
     println!("  order comparison (na = nb, same method and delay):");
     for o in &r.order_comparison {
         println!(
@@ -612,9 +566,8 @@ mod tests {
         let bad = write("bad", "t_s,duty,temp_c\n0,0.5,4\n1,0.5,x\n");
         let e = run(&args(bad)).unwrap_err().to_string();
         assert!(e.contains("line 3") && e.contains("temp_c"), "{e}");
-        let few: String = std::iter::once("t_s,duty,temp_c\n".to_string())
-            .chain((0..20).map(|i| format!("{i},0.5,4\n")))
-            .collect();
+        let few: String =
+            std::iter::once("t_s,duty,temp_c\n".to_string()).chain((0..20).map(|i| format!("{i},0.5,4\n"))).collect();
         let e = run(&args(write("few", &few))).unwrap_err().to_string();
         assert!(e.contains("too few rows"), "{e}");
         let mut a = args(write("ok", &few));

@@ -11,11 +11,7 @@ use anyhow::{anyhow, bail, Context, Result};
 pub fn read_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>> {
     let shown = path.display();
     let file = std::fs::File::open(path).with_context(|| format!("cannot read '{shown}'"))?;
-    let mut rdr = csv::ReaderBuilder::new()
-        .has_headers(true)
-        .flexible(false)
-        .trim(csv::Trim::All)
-        .from_reader(file);
+    let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(false).trim(csv::Trim::All).from_reader(file);
     let headers = rdr.headers().map_err(|e| anyhow!("'{shown}' line 1: {e}"))?.clone();
     let idx: Vec<usize> = names
         .iter()
@@ -49,13 +45,7 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>> {
 /// Checks that times strictly increase; names the first offending line.
 pub fn check_increasing(path: &Path, t: &[f64]) -> Result<()> {
     if let Some(i) = t.windows(2).position(|w| w[1] <= w[0]) {
-        bail!(
-            "'{}' line {}: t_s = {} does not increase (previous {})",
-            path.display(),
-            i + 3,
-            t[i + 1],
-            t[i]
-        );
+        bail!("'{}' line {}: t_s = {} does not increase (previous {})", path.display(), i + 3, t[i + 1], t[i]);
     }
     Ok(())
 }
@@ -85,10 +75,7 @@ mod tests {
     fn errors_name_the_line_and_column() {
         let p = write("bad", "t_s,temp_c\n0,4.0\n10,warm\n");
         let e = read_columns(&p, &["t_s", "temp_c"]).unwrap_err().to_string();
-        assert!(
-            e.contains("line 3") && e.contains("temp_c") && e.contains("warm"),
-            "{e}"
-        );
+        assert!(e.contains("line 3") && e.contains("temp_c") && e.contains("warm"), "{e}");
         let p = write("nan", "t_s,temp_c\n0,NaN\n");
         let e = read_columns(&p, &["t_s", "temp_c"]).unwrap_err().to_string();
         assert!(e.contains("line 2") && e.contains("finite"), "{e}");
@@ -98,9 +85,6 @@ mod tests {
         let p = write("short", "t_s,temp_c\n0,4.0\n10\n");
         let e = read_columns(&p, &["t_s", "temp_c"]).unwrap_err().to_string();
         assert!(e.contains("line 3"), "{e}");
-        assert!(check_increasing(&p, &[0.0, 10.0, 10.0])
-            .unwrap_err()
-            .to_string()
-            .contains("line 4"));
+        assert!(check_increasing(&p, &[0.0, 10.0, 10.0]).unwrap_err().to_string().contains("line 4"));
     }
 }

@@ -127,11 +127,7 @@ fn main() -> ExitCode {
             }
             // clap's own message can span lines; keep the first, which names the problem.
             let msg = e.to_string();
-            let first = msg
-                .lines()
-                .next()
-                .unwrap_or("invalid arguments")
-                .trim_start_matches("error: ");
+            let first = msg.lines().next().unwrap_or("invalid arguments").trim_start_matches("error: ");
             eprintln!("error: {first} (see 'hter --help')");
             return ExitCode::from(2);
         }
@@ -189,19 +185,10 @@ fn sim_options(a: &SimArgs) -> Result<SimOptions> {
     }
     let g = &controller.gpc;
     if g.n1 < 1 || g.n2 < g.n1 || g.n2 > hter::control::gpc::MAX_N2 {
-        bail!(
-            "GPC horizons need 1 ≤ N1 ≤ N2 ≤ {}, got N1 = {}, N2 = {}",
-            hter::control::gpc::MAX_N2,
-            g.n1,
-            g.n2
-        );
+        bail!("GPC horizons need 1 ≤ N1 ≤ N2 ≤ {}, got N1 = {}, N2 = {}", hter::control::gpc::MAX_N2, g.n1, g.n2);
     }
     if g.nu < 1 || g.nu > hter::control::gpc::MAX_NU || g.nu > g.n2 {
-        bail!(
-            "GPC control horizon needs 1 ≤ Nu ≤ min(N2, {}), got Nu = {}",
-            hter::control::gpc::MAX_NU,
-            g.nu
-        );
+        bail!("GPC control horizon needs 1 ≤ Nu ≤ min(N2, {}), got Nu = {}", hter::control::gpc::MAX_NU, g.nu);
     }
     if let Some(p) = a.p_weight {
         controller.gmvc.p = finite("p-weight", p)? as f32;
@@ -261,8 +248,7 @@ fn write_csv(path: &std::path::Path, out: &SimOutput) -> Result<()> {
     for r in &out.rows {
         w.serialize(r)?;
     }
-    w.flush()
-        .with_context(|| format!("cannot write '{}'", path.display()))?;
+    w.flush().with_context(|| format!("cannot write '{}'", path.display()))?;
     Ok(())
 }
 
@@ -273,32 +259,17 @@ fn plot_run(path: &std::path::Path, opts: &SimOptions, out: &SimOutput) -> Resul
         title: "Load temperature".into(),
         y_label: "°C".into(),
         series: vec![
-            plot::Series {
-                name: "setpoint".into(),
-                points: pts(&|r| r.setpoint_c),
-            },
-            plot::Series {
-                name: "true load".into(),
-                points: pts(&|r| r.true_temp_c),
-            },
-            plot::Series {
-                name: "measured (filtered)".into(),
-                points: pts(&|r| r.temp_c),
-            },
-            plot::Series {
-                name: "2 °C limit".into(),
-                points: pts(&|_| 2.0),
-            },
+            plot::Series { name: "setpoint".into(), points: pts(&|r| r.setpoint_c) },
+            plot::Series { name: "true load".into(), points: pts(&|r| r.true_temp_c) },
+            plot::Series { name: "measured (filtered)".into(), points: pts(&|r| r.temp_c) },
+            plot::Series { name: "2 °C limit".into(), points: pts(&|_| 2.0) },
         ],
         y_range: None,
     };
     let duty = plot::Panel {
         title: "SSR duty".into(),
         y_label: "duty".into(),
-        series: vec![plot::Series {
-            name: "duty".into(),
-            points: pts(&|r| r.duty),
-        }],
+        series: vec![plot::Series { name: "duty".into(), points: pts(&|r| r.duty) }],
         y_range: Some((-0.02, 1.02)),
     };
     let title = format!(
@@ -331,19 +302,12 @@ fn print_summary(opts: &SimOptions, out: &SimOutput) {
     println!("max |error| after settling  {:10.2} °C", m.max_abs_error_after_settle_c);
     println!("steady-state |error|        {:10.2} °C", m.steady_state_error_c);
     println!("overshoot                   {:10.2} °C", m.overshoot_c);
-    println!(
-        "min / max load temperature  {:6.2} / {:.2} °C",
-        m.min_temp_c, m.max_temp_c
-    );
+    println!("min / max load temperature  {:6.2} / {:.2} °C", m.min_temp_c, m.max_temp_c);
     println!("time outside 2–8 °C         {:10.0} s", m.time_outside_2_8_s);
     println!("energy                      {:10.2} Wh", m.energy_wh);
     println!("SSR switches                {:10}", m.ssr_switches);
     if !m.faults_detected.is_empty() {
-        let list: Vec<String> = m
-            .faults_detected
-            .iter()
-            .map(|f| format!("{}@{}s", f.kind, f.t_s))
-            .collect();
+        let list: Vec<String> = m.faults_detected.iter().map(|f| format!("{}@{}s", f.kind, f.t_s)).collect();
         println!("faults detected             {}", list.join(", "));
     }
 }
@@ -408,10 +372,7 @@ fn rtd_cmd(a: &RtdArgs) -> Result<()> {
                 bail!("--ohms must be positive, got {r}");
             }
             let t = rtd.temperature(Ohms(r as f32)).map_err(|e| {
-                anyhow::anyhow!(
-                    "{r} Ω is outside the Pt{} range of IEC 60751 (−200…850 °C): {e:?}",
-                    a.r0
-                )
+                anyhow::anyhow!("{r} Ω is outside the Pt{} range of IEC 60751 (−200…850 °C): {e:?}", a.r0)
             })?;
             (r, f64::from(t.0))
         }

@@ -121,22 +121,11 @@ pub fn tracking(samples: &[Sample], ts_s: f64) -> TrackingFigures {
     let mut start = 0;
     while start < samples.len() {
         let w = samples[start].setpoint_c;
-        let end = samples[start..]
-            .iter()
-            .position(|s| s.setpoint_c != w)
-            .map_or(samples.len(), |n| start + n);
+        let end = samples[start..].iter().position(|s| s.setpoint_c != w).map_or(samples.len(), |n| start + n);
         let seg = &samples[start..end];
         // Direction of travel: from the previous setpoint, or from the initial temperature.
-        let from = if start > 0 {
-            samples[start - 1].setpoint_c
-        } else {
-            seg[0].true_temp_c
-        };
-        let dir = if (w - from).abs() <= SETTLE_BAND_C {
-            0.0
-        } else {
-            (w - from).signum()
-        };
+        let from = if start > 0 { samples[start - 1].setpoint_c } else { seg[0].true_temp_c };
+        let dir = if (w - from).abs() <= SETTLE_BAND_C { 0.0 } else { (w - from).signum() };
         if dir != 0.0 {
             let past = seg.iter().map(|s| dir * (s.true_temp_c - w)).fold(0.0f64, f64::max);
             f.overshoot_c = f.overshoot_c.max(past);
@@ -170,11 +159,7 @@ mod tests {
         let s: Vec<Sample> = temps
             .iter()
             .enumerate()
-            .map(|(i, &(w, t))| Sample {
-                t_s: i as f64 * 10.0,
-                setpoint_c: w,
-                true_temp_c: t,
-            })
+            .map(|(i, &(w, t))| Sample { t_s: i as f64 * 10.0, setpoint_c: w, true_temp_c: t })
             .collect();
         tracking(&s, 10.0)
     }
@@ -182,16 +167,7 @@ mod tests {
     #[test]
     fn pull_down_with_undershoot() {
         // From 10 °C to a 4 °C setpoint, undershooting to 3.2 °C, then back to 4.1 °C.
-        let f = run(&[
-            (4.0, 10.0),
-            (4.0, 7.0),
-            (4.0, 4.4),
-            (4.0, 3.2),
-            (4.0, 3.9),
-            (4.0, 4.1),
-            (4.0, 4.0),
-            (4.0, 4.0),
-        ]);
+        let f = run(&[(4.0, 10.0), (4.0, 7.0), (4.0, 4.4), (4.0, 3.2), (4.0, 3.9), (4.0, 4.1), (4.0, 4.0), (4.0, 4.0)]);
         assert!((f.settle_time_s.unwrap() - 20.0).abs() < 1e-9);
         assert!((f.overshoot_c - 0.8).abs() < 1e-9);
         assert!((f.max_abs_error_after_settle_c - 0.8).abs() < 1e-9);

@@ -83,10 +83,7 @@ pub fn run(args: &MonitorArgs) -> Result<()> {
     let cols = log::read_columns(&args.input, &["t_s", "temp_c"])?;
     log::check_increasing(&args.input, &cols[0])?;
     if cols[0].last().is_some_and(|&t| t > 16_000_000.0) {
-        bail!(
-            "'{}': t_s beyond 16e6 s (185 days) is not supported",
-            args.input.display()
-        );
+        bail!("'{}': t_s beyond 16e6 s (185 days) is not supported", args.input.display());
     }
     let r = report(&cols[0], &cols[1])?;
     if args.json {
@@ -94,15 +91,8 @@ pub fn run(args: &MonitorArgs) -> Result<()> {
         return Ok(());
     }
     let hours = |s: f64| s / 3600.0;
-    println!(
-        "cold-chain record of {} ({} samples)",
-        args.input.display(),
-        cols[0].len()
-    );
-    println!(
-        "  mean kinetic temperature  {:7.2} °C  (WHO: must lie within 2–8 °C)",
-        r.mkt_c
-    );
+    println!("cold-chain record of {} ({} samples)", args.input.display(), cols[0].len());
+    println!("  mean kinetic temperature  {:7.2} °C  (WHO: must lie within 2–8 °C)", r.mkt_c);
     println!("  min / max                 {:7.2} / {:.2} °C", r.min_c, r.max_c);
     println!("  time below +2 °C          {:7.2} h", hours(r.time_below_2_s));
     println!("  time above +8 °C          {:7.2} h", hours(r.time_above_8_s));
@@ -111,10 +101,7 @@ pub fn run(args: &MonitorArgs) -> Result<()> {
         println!("  alarms                    none");
     }
     for a in &r.alarms {
-        println!(
-            "  ALARM {:<14} started at {:.0} s, triggered at {:.0} s",
-            a.kind, a.start_s, a.trigger_s
-        );
+        println!("  ALARM {:<14} started at {:.0} s, triggered at {:.0} s", a.kind, a.start_s, a.trigger_s);
     }
     Ok(())
 }

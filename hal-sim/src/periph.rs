@@ -151,11 +151,7 @@ impl SimSsr {
 
     /// Off, supply enabled, no fault.
     pub fn new() -> Self {
-        SimSsr {
-            ticks: 0,
-            fault: SsrFault::None,
-            supply_enabled: true,
-        }
+        SimSsr { ticks: 0, fault: SsrFault::None, supply_enabled: true }
     }
 
     /// Opens or closes the supply-enable switch in series with the modules.
@@ -232,9 +228,7 @@ mod tests {
         let off = adc.sample().unwrap();
         assert!((f64::from(off) - f64::from(normal) - 0.39 * 15.0 / 2000.0 * 65535.0).abs() < 10.0);
         adc.fault = SensorFault::Spikes;
-        let spikes = (0..1000)
-            .filter(|_| (f64::from(adc.sample().unwrap()) - f64::from(normal)).abs() > 500.0)
-            .count();
+        let spikes = (0..1000).filter(|_| (f64::from(adc.sample().unwrap()) - f64::from(normal)).abs() > 500.0).count();
         assert!((5..=50).contains(&spikes), "{spikes}");
     }
 

@@ -312,13 +312,7 @@ impl Plant {
 
     fn step_nodes(&mut self, h: f64, net: &[f64; 5]) {
         let p = &self.p;
-        let c = [
-            p.c_water_j_per_k,
-            p.c_wall_j_per_k,
-            p.c_air_j_per_k,
-            p.c_cold_j_per_k,
-            p.c_hot_j_per_k,
-        ];
+        let c = [p.c_water_j_per_k, p.c_wall_j_per_k, p.c_air_j_per_k, p.c_cold_j_per_k, p.c_hot_j_per_k];
         for i in 0..5 {
             self.t[i] += h * net[i] / c[i];
         }
@@ -432,10 +426,7 @@ mod tests {
         }
         // Everything that leaks in is pumped out, and the hot sink rejects pumped heat + power.
         assert!((f.leak_in_w - f.pumped_from_cold_w).abs() < 1e-3, "{f:?}");
-        assert!(
-            (f.hot_sink_to_ambient_w - (f.pumped_from_cold_w + f.electrical_w)).abs() < 1e-3,
-            "{f:?}"
-        );
+        assert!((f.hot_sink_to_ambient_w - (f.pumped_from_cold_w + f.electrical_w)).abs() < 1e-3, "{f:?}");
         assert!(f.electrical_w > 0.0 && f.pumped_from_cold_w > 0.0);
         // Integrated energy matches power × time at steady state.
         let e0 = p.energy_wh();
@@ -450,11 +441,7 @@ mod tests {
         let f = p.heat_flows(false);
         let t = p.node_temps_c();
         assert!(t[HOT] > t[COLD]);
-        assert!(
-            f.pumped_from_cold_w < -1.0,
-            "back-conduction {} W",
-            -f.pumped_from_cold_w
-        );
+        assert!(f.pumped_from_cold_w < -1.0, "back-conduction {} W", -f.pumped_from_cold_w);
         assert_eq!(f.electrical_w, 0.0);
     }
 
@@ -478,11 +465,7 @@ mod tests {
 
     #[test]
     fn holding_duty_leaves_authority_both_ways() {
-        let d = |amb| {
-            Plant::at_load_temperature(PlantParams::hter1(Load::Full), amb, 4.0)
-                .unwrap()
-                .1
-        };
+        let d = |amb| Plant::at_load_temperature(PlantParams::hter1(Load::Full), amb, 4.0).unwrap().1;
         let (d25, d28, d32) = (d(25.0), d(28.0), d(32.0));
         assert!(d25 > 0.2 && d32 < 0.8 && d25 < d28 && d28 < d32, "{d25} {d28} {d32}");
         assert!((0.3..=0.6).contains(&d28), "{d28}");
@@ -506,10 +489,7 @@ mod tests {
         // Switch off: the water warms at once, the RTD only after the dead time.
         run(&mut p, 15.0, 0.0);
         assert!(p.load_temp_c() > 4.01);
-        assert!(
-            (p.sensed_temp_c() - sensed0).abs() < 1e-9,
-            "RTD moved within the dead time"
-        );
+        assert!((p.sensed_temp_c() - sensed0).abs() < 1e-9, "RTD moved within the dead time");
         run(&mut p, 120.0, 0.0);
         assert!(p.sensed_temp_c() > sensed0 + 0.1);
         assert!(p.sensed_temp_c() < p.load_temp_c(), "the RTD lags a warming load");

@@ -42,11 +42,8 @@ fn register_font() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
         // The font is compiled in, so registration cannot fail on a user's machine.
-        let _ = plotters::style::register_font(
-            "sans-serif",
-            FontStyle::Normal,
-            include_bytes!("../assets/DejaVuSans.ttf"),
-        );
+        let _ =
+            plotters::style::register_font("sans-serif", FontStyle::Normal, include_bytes!("../assets/DejaVuSans.ttf"));
     });
 }
 
@@ -59,14 +56,12 @@ pub fn panels(path: &Path, title: &str, x_label: &str, panels: &[Panel]) -> Resu
         Some("png") => {
             let root = BitMapBackend::new(path, (1100, height)).into_drawing_area();
             draw(&root, title, x_label, panels)?;
-            root.present()
-                .map_err(|e| anyhow!("cannot write plot '{}': {e}", path.display()))
+            root.present().map_err(|e| anyhow!("cannot write plot '{}': {e}", path.display()))
         }
         Some("svg") => {
             let root = SVGBackend::new(path, (1100, height)).into_drawing_area();
             draw(&root, title, x_label, panels)?;
-            root.present()
-                .map_err(|e| anyhow!("cannot write plot '{}': {e}", path.display()))
+            root.present().map_err(|e| anyhow!("cannot write plot '{}': {e}", path.display()))
         }
         _ => bail!("plot file '{}' must end in .png or .svg", path.display()),
     }
@@ -99,12 +94,7 @@ where
             .y_label_area_size(56)
             .build_cartesian_2d(x0..x1, y0..y1)
             .map_err(err)?;
-        chart
-            .configure_mesh()
-            .x_desc(x_label)
-            .y_desc(&panel.y_label)
-            .draw()
-            .map_err(err)?;
+        chart.configure_mesh().x_desc(x_label).y_desc(&panel.y_label).draw().map_err(err)?;
         for (i, s) in panel.series.iter().enumerate() {
             let colour = COLOURS[i % COLOURS.len()];
             chart

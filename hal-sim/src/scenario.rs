@@ -74,10 +74,7 @@ impl Scenario {
                 serde_json::from_str(&text).map_err(|e| anyhow::anyhow!("scenario file '{name_or_file}': {e}"))?;
             return file.into_scenario(name_or_file);
         }
-        bail!(
-            "unknown scenario '{name_or_file}' (expected one of {} or a .json file)",
-            BUILT_IN.join(", ")
-        )
+        bail!("unknown scenario '{name_or_file}' (expected one of {} or a .json file)", BUILT_IN.join(", "))
     }
 
     /// A built-in scenario.
@@ -141,11 +138,7 @@ impl Scenario {
 
     /// Setpoint in force at time `t_s`.
     pub fn setpoint_at(&self, t_s: f64) -> f64 {
-        self.setpoints
-            .iter()
-            .take_while(|(t, _)| *t <= t_s)
-            .last()
-            .map_or(self.setpoints[0].1, |(_, w)| *w)
+        self.setpoints.iter().take_while(|(t, _)| *t <= t_s).last().map_or(self.setpoints[0].1, |(_, w)| *w)
     }
 }
 
@@ -181,11 +174,9 @@ impl ScenarioFile {
         if self.setpoints.is_empty() {
             bail!("scenario file '{name}': 'setpoints' is empty");
         }
-        for (field, v) in [
-            ("setpoints", &self.setpoints),
-            ("ambient", &self.ambient),
-            ("extra_heat_w", &self.extra_heat_w),
-        ] {
+        for (field, v) in
+            [("setpoints", &self.setpoints), ("ambient", &self.ambient), ("extra_heat_w", &self.extra_heat_w)]
+        {
             if !finite(v) {
                 bail!("scenario file '{name}': '{field}' has a negative time or a non-finite number");
             }
@@ -210,11 +201,7 @@ impl ScenarioFile {
         changes.sort_by(|a, b| a.0.total_cmp(&b.0));
         Ok(Scenario {
             name: name.into(),
-            description: if self.description.is_empty() {
-                "custom scenario".into()
-            } else {
-                self.description
-            },
+            description: if self.description.is_empty() { "custom scenario".into() } else { self.description },
             start: self.start_c.map_or(Start::Ambient, Start::Holding),
             setpoints,
             changes,

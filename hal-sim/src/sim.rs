@@ -68,13 +68,7 @@ pub struct ControllerSpec {
 impl ControllerSpec {
     /// The controller with its default tuning.
     pub fn new(choice: ControllerChoice) -> Self {
-        Self {
-            choice,
-            model: None,
-            gpc: GpcConfig::DEFAULT,
-            gmvc: GmvcConfig::DEFAULT,
-            igmvc: IgmvcConfig::DEFAULT,
-        }
+        Self { choice, model: None, gpc: GpcConfig::DEFAULT, gmvc: GmvcConfig::DEFAULT, igmvc: IgmvcConfig::DEFAULT }
     }
 
     /// The law of a model-based controller.
@@ -89,26 +83,18 @@ impl ControllerSpec {
 
     /// Builds the controller for a loop sampled every `ts_s`, starting from duty `u0`.
     pub fn build(&self, ts_s: f32, u0: f32) -> Result<AnyController> {
-        let pi = PiConfig {
-            ts_s,
-            ..PiConfig::HTER1_DEFAULT
-        };
+        let pi = PiConfig { ts_s, ..PiConfig::HTER1_DEFAULT };
         Ok(match (self.choice, self.law()) {
             (ControllerChoice::Onoff, _) => AnyController::OnOff(OnOff::new(OnOffConfig::DEFAULT)),
             // ZN P gain is Kp_PI / 0.9; the same 2× detuning as the PI.
-            (ControllerChoice::P, _) => AnyController::Pi(Pi::new(PiConfig {
-                kp_per_c: pi.kp_per_c / 0.9,
-                ti_s: f32::INFINITY,
-                ..pi
-            })),
+            (ControllerChoice::P, _) => {
+                AnyController::Pi(Pi::new(PiConfig { kp_per_c: pi.kp_per_c / 0.9, ti_s: f32::INFINITY, ..pi }))
+            }
             (ControllerChoice::Pi, _) => AnyController::Pi(Pi::new(pi)),
             (_, Some(law)) => match self.model {
                 Some(m) => AnyController::Fixed(FixedModel::new(law, m, u0)),
                 None => AnyController::SelfTuning(SelfTuning::new(
-                    AdaptiveConfig {
-                        fallback: pi,
-                        ..AdaptiveConfig::default_for(law)
-                    },
+                    AdaptiveConfig { fallback: pi, ..AdaptiveConfig::default_for(law) },
                     u0,
                 )),
             },
@@ -122,10 +108,7 @@ impl ControllerChoice {
     pub fn build(self, ts_s: f32) -> AnyController {
         match ControllerSpec::new(self).build(ts_s, 0.0) {
             Ok(c) => c,
-            Err(_) => AnyController::Pi(Pi::new(PiConfig {
-                ts_s,
-                ..PiConfig::HTER1_DEFAULT
-            })),
+            Err(_) => AnyController::Pi(Pi::new(PiConfig { ts_s, ..PiConfig::HTER1_DEFAULT })),
         }
     }
 }
@@ -252,10 +235,7 @@ pub fn event_name(k: EventKind) -> &'static str {
 }
 
 fn is_fault(k: EventKind) -> bool {
-    matches!(
-        k,
-        EventKind::SensorOpen | EventKind::SensorShort | EventKind::SensorOutOfRange
-    )
+    matches!(k, EventKind::SensorOpen | EventKind::SensorShort | EventKind::SensorOutOfRange)
 }
 
 /// The simulated hardware: the physical carrier behind a simulated ADC and SSR, or an ideal
@@ -263,11 +243,7 @@ fn is_fault(k: EventKind) -> bool {
 // One Rig per run: the size difference between variants costs nothing.
 #[allow(clippy::large_enum_variant)]
 enum Rig {
-    Physical {
-        plant: Box<Plant>,
-        adc: SimAdc,
-        ssr: SimSsr,
-    },
+    Physical { plant: Box<Plant>, adc: SimAdc, ssr: SimSsr },
     Arx(ArxPlant),
 }
 
@@ -294,14 +270,7 @@ impl Rig {
                 None => bail!("the plant cannot hold {t} °C at {} °C ambient", opts.ambient_c),
             },
         };
-        Ok((
-            Rig::Physical {
-                plant: Box::new(plant),
-                adc: SimAdc::new(opts.seed),
-                ssr: SimSsr::new(),
-            },
-            u0,
-        ))
+        Ok((Rig::Physical { plant: Box::new(plant), adc: SimAdc::new(opts.seed), ssr: SimSsr::new() }, u0))
     }
 
     /// Samples the sensor and runs the step; returns its output and the counts it got.
@@ -313,19 +282,9 @@ impl Rig {
                     Ok(c) => c,
                     Err(never) => match never {},
                 };
-                (
-                    carrier.step(&StepInput {
-                        t_s: t_s as f32,
-                        counts,
-                        setpoint_c: w as f32,
-                    }),
-                    counts,
-                )
+                (carrier.step(&StepInput { t_s: t_s as f32, counts, setpoint_c: w as f32 }), counts)
             }
-            Rig::Arx(p) => (
-                carrier.step_celsius(t_s as f32, Celsius(p.temp_c() as f32), w as f32),
-                0,
-            ),
+            Rig::Arx(p) => (carrier.step_celsius(t_s as f32, Celsius(p.temp_c() as f32), w as f32), 0),
         }
     }
 
@@ -419,12 +378,7 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
     let ts = f64::from(cfg.ts_s);
     let (mut rig, u0) = Rig::new(opts)?;
     let controller = if sc.excitation {
-        let prbs = PrbsConfig {
-            bits: 6,
-            hold: 30,
-            low: (u0 - 0.2).max(0.0) as f32,
-            high: (u0 + 0.2).min(1.0) as f32,
-        };
+        let prbs = PrbsConfig { bits: 6, hold: 30, low: (u0 - 0.2).max(0.0) as f32, high: (u0 + 0.2).min(1.0) as f32 };
         AnyController::Prbs(PrbsExcitation::new(prbs).map_err(|e| anyhow::anyhow!("PRBS: {e:?}"))?)
     } else {
         opts.controller.build(cfg.ts_s, u0 as f32)?
@@ -451,19 +405,12 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
             rig.change(sc.changes[next_change].1);
             next_change += 1;
         }
-        let w = if k >= 0 {
-            sc.setpoint_at(t_s)
-        } else {
-            sc.setpoint_at(0.0)
-        };
+        let w = if k >= 0 { sc.setpoint_at(t_s) } else { sc.setpoint_at(0.0) };
         let (out, counts) = rig.step(&mut carrier, t_s, w);
         let d = rig.actuate(&out);
         if k >= 0 {
             for e in out.events.iter().filter(|e| is_fault(e.kind)) {
-                faults.push(Stamped {
-                    kind: event_name(e.kind).into(),
-                    t_s: f64::from(e.t_s),
-                });
+                faults.push(Stamped { kind: event_name(e.kind).into(), t_s: f64::from(e.t_s) });
             }
             rows.push(Row {
                 t_s,
@@ -492,24 +439,15 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
         }
         switches += rig.advance(d, ts, &mut last_on, k >= 0);
     }
-    let samples: Vec<Sample> = rows
-        .iter()
-        .map(|r| Sample {
-            t_s: r.t_s,
-            setpoint_c: r.setpoint_c,
-            true_temp_c: r.true_temp_c,
-        })
-        .collect();
+    let samples: Vec<Sample> =
+        rows.iter().map(|r| Sample { t_s: r.t_s, setpoint_c: r.setpoint_c, true_temp_c: r.true_temp_c }).collect();
     let f = metrics::tracking(&samples, ts);
     // The alarms the carrier's own record would raise: the monitor sees what the sensor saw.
     let mut monitor = ColdChainMonitor::new();
     let mut alarms = Vec::new();
     for r in &rows {
         for a in monitor.push(r.t_s as f32, r.temp_c as f32).into_iter().flatten() {
-            alarms.push(Stamped {
-                kind: a.kind.name().into(),
-                t_s: f64::from(a.trigger_s),
-            });
+            alarms.push(Stamped { kind: a.kind.name().into(), t_s: f64::from(a.trigger_s) });
         }
     }
     let metrics = SimMetrics {
@@ -527,9 +465,5 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
         alarms,
         faults_detected: faults,
     };
-    Ok(SimOutput {
-        rows,
-        metrics,
-        ts_s: ts,
-    })
+    Ok(SimOutput { rows, metrics, ts_s: ts })
 }

@@ -3,10 +3,7 @@
 use std::process::{Command, Output};
 
 fn hter(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hter"))
-        .args(args)
-        .output()
-        .expect("run hter")
+    Command::new(env!("CARGO_BIN_EXE_hter")).args(args).output().expect("run hter")
 }
 
 fn assert_one_line_error(args: &[&str], needle: &str) {
@@ -25,10 +22,7 @@ fn bad_input_is_a_one_line_error() {
     assert_one_line_error(&["sim", "--controller", "magic"], "magic");
     assert_one_line_error(&["sim", "--ambient", "NaN"], "finite");
     assert_one_line_error(&["sim", "--duration", "-5"], "duration");
-    assert_one_line_error(
-        &["sim", "--scenario", "/no/such/file.json"],
-        "cannot read scenario file",
-    );
+    assert_one_line_error(&["sim", "--scenario", "/no/such/file.json"], "cannot read scenario file");
     assert_one_line_error(&["rtd", "--ohms", "-3"], "positive");
     assert_one_line_error(&["rtd", "--ohms", "nan"], "finite");
     assert_one_line_error(&["rtd", "--celsius", "inf"], "finite");
@@ -44,10 +38,7 @@ fn bad_input_is_a_one_line_error() {
     assert_one_line_error(&["sim", "--plant", "arx:1;x;1"], "not a number");
     assert_one_line_error(&["sim", "--model", "arx:-0.9;0.1;0"], "delay");
     assert_one_line_error(&["sim", "--plant", "hter3"], "unknown plant");
-    assert_one_line_error(
-        &["identify", "--input", "/dev/null", "--forgetting", "0"],
-        "--forgetting",
-    );
+    assert_one_line_error(&["identify", "--input", "/dev/null", "--forgetting", "0"], "--forgetting");
     assert_one_line_error(&["monitor", "--input", "/no/such/log.csv"], "/no/such/log.csv");
 }
 

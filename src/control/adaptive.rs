@@ -2,15 +2,18 @@
 //! ed., ch. 3–4; seed ch. 5–6): every sample the recursive least-squares estimate of a
 //! second-order model is updated and the law (GMVC, IGMVC or GPC) is redesigned from it.
 //!
-//! **What is estimated.** The incremental ARX model
+//! **What is estimated.** The ARX model with an offset term
 //!
 //! ```text
-//! Δy(t) = −a1 Δy(t−1) − a2 Δy(t−2) + b0 Δu(t−k) + b1 Δu(t−k−1) + ε(t),   θ = [a1 a2 b0 b1]
+//! y(t) = −a1 y(t−1) − a2 y(t−2) + b0 u(t−k) + b1 u(t−k−1) + d + ε(t),   θ = [a1 a2 b0 b1 d]
 //! ```
 //!
-//! Differencing removes the operating point (ambient, mean duty) without knowing it, and is the
-//! model GPC and IGMVC are designed on (CARIMA with C = 1). The RLS runs with forgetting λ_f and
-//! a bounded covariance ([`crate::ident`] documents the f32 safeguards).
+//! d absorbs the operating point (ambient, hot-side temperature) without knowing it. An
+//! incremental (Δy, Δu) estimate would remove it too, but in closed loop it throws away the
+//! low-frequency information: on the hal-sim plant it settled on a static gain of ≈ −2 °C per
+//! unit duty against the true ≈ −41. The laws use A and B only (GPC and IGMVC are designed on
+//! ΔA, so the offset never matters to them). The RLS runs with forgetting λ_f and a bounded
+//! covariance ([`crate::ident`] documents the f32 safeguards).
 //!
 //! **When the estimate is trusted** (all must hold, else the law runs on the last trusted
 //! model, and with no trusted model the bumpless fallback PI drives the SSR):
@@ -76,11 +79,7 @@ impl AdaptiveConfig {
         AdaptiveConfig {
             law,
             k: 5,
-            rls: RlsConfig {
-                forgetting: 0.995,
-                p0: 1.0,
-                trace_max: 10.0,
-            },
+            rls: RlsConfig { forgetting: 0.995, p0: 1.0, trace_max: 10.0 },
             initial: Some(Self::HTER1_MODEL),
             warmup_samples: 30,
             gain_min_c_per_duty: -1000.0,
@@ -94,7 +93,7 @@ impl AdaptiveConfig {
 #[derive(Clone, Debug)]
 pub struct SelfTuning {
     cfg: AdaptiveConfig,
-    rls: Rls<4>,
+    rls: Rls<5>,
     law_state: LawState,
     fallback: Pi,
     trusted: Option<Model>,
@@ -102,7 +101,7 @@ pub struct SelfTuning {
     updates: u32,
     y_hist: [f32; 4],
     filled: u8,
-    du_hist: [f32; MAX_K + 2],
+    u_hist: [f32; MAX_K + 2],
     u_prev: f32,
     last_error: f32,
 }
@@ -111,38 +110,24 @@ impl SelfTuning {
     /// A controller starting from duty `u0`.
     pub fn new(cfg: AdaptiveConfig, u0: f32) -> Self {
         let theta0 = match cfg.initial {
-            Some(m) => SVector::<f32, 4>::new(m.a[0], m.a[1], m.b[0], m.b[1]),
+            Some(m) => SVector::<f32, 5>::from([m.a[0], m.a[1], m.b[0], m.b[1], 0.0]),
             // A slow stable pole pair and a small cooling gain: a neutral start for RLS.
-            None => SVector::<f32, 4>::new(-1.5, 0.5, -0.01, 0.0),
+            None => SVector::<f32, 5>::from([-1.5, 0.5, -0.01, 0.0, 0.0]),
         };
         let trusted = cfg.initial.filter(|m| plausible(&cfg, m));
-        let mut fallback = Pi::new(PiConfig {
-            bias: u0,
-            ..cfg.fallback
-        });
-        fallback.track(
-            &ControlInput {
-                t_s: 0.0,
-                y_c: 0.0,
-                w_c: 0.0,
-            },
-            u0,
-        );
+        let mut fallback = Pi::new(PiConfig { bias: u0, ..cfg.fallback });
+        fallback.track(&ControlInput { t_s: 0.0, y_c: 0.0, w_c: 0.0 }, u0);
         Self {
             cfg,
             rls: Rls::new(&cfg.rls, theta0),
             law_state: LawState::new(u0),
             fallback,
             trusted,
-            mode: if trusted.is_some() {
-                AdaptiveMode::Frozen
-            } else {
-                AdaptiveMode::Fallback
-            },
+            mode: if trusted.is_some() { AdaptiveMode::Frozen } else { AdaptiveMode::Fallback },
             updates: 0,
             y_hist: [0.0; 4],
             filled: 0,
-            du_hist: [0.0; MAX_K + 2],
+            u_hist: [u0; MAX_K + 2],
             u_prev: u0,
             last_error: 0.0,
         }
@@ -192,14 +177,14 @@ impl SelfTuning {
             self.y_hist[0] = y;
         }
         self.filled = self.filled.saturating_add(1);
-        if self.filled < 4 {
+        if self.filled < 3 {
             return false;
         }
         let h = &self.y_hist;
         let k = self.cfg.k;
-        let du = |m: usize| self.du_hist.get(m - 1).copied().unwrap_or(0.0);
-        let phi = SVector::<f32, 4>::new(-(h[1] - h[2]), -(h[2] - h[3]), du(k), du(k + 1));
-        match self.rls.update(&self.cfg.rls, &phi, h[0] - h[1]) {
+        let u = |m: usize| self.u_hist.get(m - 1).copied().unwrap_or(self.u_prev);
+        let phi = SVector::<f32, 5>::from([-h[1], -h[2], u(k), u(k + 1), 1.0]);
+        match self.rls.update(&self.cfg.rls, &phi, h[0]) {
             Ok(e) => {
                 self.last_error = e;
                 self.updates = self.updates.saturating_add(1);
@@ -212,9 +197,7 @@ impl SelfTuning {
 
 /// Parameter projection: is `m` a model the laws may be designed from?
 fn plausible(cfg: &AdaptiveConfig, m: &Model) -> bool {
-    m.a_is_stable()
-        && m.static_gain()
-            .is_some_and(|g| (cfg.gain_min_c_per_duty..=cfg.gain_max_c_per_duty).contains(&g))
+    m.a_is_stable() && m.static_gain().is_some_and(|g| (cfg.gain_min_c_per_duty..=cfg.gain_max_c_per_duty).contains(&g))
 }
 
 impl Controller for SelfTuning {
@@ -228,9 +211,7 @@ impl Controller for SelfTuning {
                 self.mode = AdaptiveMode::Frozen;
             }
         }
-        let law_u = self
-            .law_state
-            .update(&self.cfg.law, self.trusted.as_ref(), input.y_c, input.w_c);
+        let law_u = self.law_state.update(&self.cfg.law, self.trusted.as_ref(), input.y_c, input.w_c);
         let pi_u = self.fallback.update(input);
         match law_u {
             Some(u) if self.mode != AdaptiveMode::Fallback => u,
@@ -247,9 +228,9 @@ impl Controller for SelfTuning {
         }
         self.law_state.track(applied);
         self.fallback.track(input, applied);
-        let n = self.du_hist.len();
-        self.du_hist.copy_within(0..n - 1, 1);
-        self.du_hist[0] = applied - self.u_prev;
+        let n = self.u_hist.len();
+        self.u_hist.copy_within(0..n - 1, 1);
+        self.u_hist[0] = applied;
         self.u_prev = applied;
     }
 

@@ -44,12 +44,7 @@ pub fn solve(a_prime: &[f32], pc: &[f32], k: usize) -> Option<Solution> {
     }
     let mut r = [0.0f32; R];
     r[..pc.len()].copy_from_slice(pc);
-    let mut s = Solution {
-        e: [0.0; MAX_K],
-        f: [0.0; MAX_F],
-        ne: k,
-        nf: 0,
-    };
+    let mut s = Solution { e: [0.0; MAX_K], f: [0.0; MAX_F], ne: k, nf: 0 };
     for i in 0..k {
         let ei = r[i];
         s.e[i] = ei;

@@ -41,10 +41,7 @@ pub struct LawState {
 impl LawState {
     /// Empty histories holding the duty `u0`.
     pub fn new(u0: f32) -> Self {
-        Self {
-            mv: MvState::new(u0),
-            gpc: GpcState::new(u0),
-        }
+        Self { mv: MvState::new(u0), gpc: GpcState::new(u0) }
     }
 
     /// Computes the unclipped u(t) for measurement `y`, setpoint `w`, model `m`; `None` on
@@ -85,11 +82,7 @@ pub struct FixedModel {
 impl FixedModel {
     /// A controller starting from duty `u0`.
     pub fn new(law: Law, model: Model, u0: f32) -> Self {
-        Self {
-            law,
-            model,
-            state: LawState::new(u0),
-        }
+        Self { law, model, state: LawState::new(u0) }
     }
 
     /// The model.
@@ -101,9 +94,7 @@ impl FixedModel {
 impl Controller for FixedModel {
     fn update(&mut self, input: &ControlInput) -> f32 {
         // NaN tells the step the law failed: it applies the safe state and raises an event.
-        self.state
-            .update(&self.law, Some(&self.model), input.y_c, input.w_c)
-            .unwrap_or(f32::NAN)
+        self.state.update(&self.law, Some(&self.model), input.y_c, input.w_c).unwrap_or(f32::NAN)
     }
 
     fn track(&mut self, _input: &ControlInput, applied: f32) {

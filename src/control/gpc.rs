@@ -68,18 +68,13 @@ pub struct GpcConfig {
 }
 
 impl GpcConfig {
-    /// N1 = 1, N2 = 30 (5 min at Ts = 10 s, the closed-loop settling scale), Nu = 3, λ = 30.
+    /// N1 = 1, N2 = 30 (5 min at Ts = 10 s, the closed-loop settling scale), Nu = 3, λ = 10.
     /// λ weighs Δu² (duty in [0, 1], so Δu ≤ 1) against squared errors in °C summed over 30
     /// predictions, with step-response coefficients of tens of °C per unit duty: the seed's
     /// 0.01–1 are negligible at this scale and let GPC bang the SSR between 0 and 1 on the
-    /// hal-sim plant (its unmodelled lag); λ = 30 gave the lowest IAE on `piecewise` in a
+    /// hal-sim plant (its unmodelled lag); λ = 10 gave the lowest IAE on `piecewise` in a
     /// sweep of 1, 3, 10, 30 (`hter sim --scenario piecewise --controller gpc --lambda L`).
-    pub const DEFAULT: GpcConfig = GpcConfig {
-        n1: 1,
-        n2: 30,
-        nu: 3,
-        lambda: 30.0,
-    };
+    pub const DEFAULT: GpcConfig = GpcConfig { n1: 1, n2: 30, nu: 3, lambda: 10.0 };
 
     /// Checks the ranges of [`GpcError::Config`].
     pub fn validate(&self) -> Result<(), GpcError> {
@@ -129,13 +124,7 @@ pub struct GpcDesign {
 impl GpcState {
     /// Empty history, holding `u0`.
     pub fn new(u0: f32) -> Self {
-        Self {
-            y: [0.0; HY],
-            du: [0.0; HU],
-            e: [0.0; HE],
-            u_prev: u0,
-            primed: false,
-        }
+        Self { y: [0.0; HY], du: [0.0; HU], e: [0.0; HE], u_prev: u0, primed: false }
     }
 
     /// The last applied u.
@@ -185,12 +174,7 @@ impl GpcState {
             return Err(GpcError::NonFinite);
         }
         let n2 = cfg.n2;
-        let mut d = GpcDesign {
-            g: [0.0; MAX_N2],
-            f: [0.0; MAX_N2],
-            k1: [0.0; MAX_N2],
-            du: 0.0,
-        };
+        let mut d = GpcDesign { g: [0.0; MAX_N2], f: [0.0; MAX_N2], k1: [0.0; MAX_N2], du: 0.0 };
 
         // Step response of q^−k B/A: y(j) = −Σ a_i y(j−i) + Σ b_i u(j−k−i), u = 1 from j = 0.
         let mut ys = [0.0f32; MAX_N2 + 1]; // ys[j] = y(j), j = 0..=n2; y(j<0) = 0
@@ -359,20 +343,13 @@ mod tests {
                 }
             }
         }
-        (0..rows)
-            .map(|jj| (0..nu).map(|c| inv[0][c] * gm(n1 + jj, c)).sum())
-            .collect()
+        (0..rows).map(|jj| (0..nu).map(|c| inv[0][c] * gm(n1 + jj, c)).sum()).collect()
     }
 
     #[test]
     fn step_response_and_gains_match_an_independent_f64_solution() {
         let m = Model::new(&[-1.8, 0.81], &[-0.02, -0.01], &[], 1).unwrap();
-        let cfg = GpcConfig {
-            n1: 1,
-            n2: 30,
-            nu: 3,
-            lambda: 0.1,
-        };
+        let cfg = GpcConfig { n1: 1, n2: 30, nu: 3, lambda: 0.1 };
         let mut s = GpcState::new(0.4);
         s.push_y(4.0, &m).unwrap();
         let d = s.design(&m, &cfg, 4.0).unwrap();
@@ -384,18 +361,11 @@ mod tests {
             y[j] = v;
         }
         for j in 1..=30 {
-            assert!(
-                (f64::from(d.g[j - 1]) - y[j]).abs() < 1e-4 * y[j].abs().max(1e-3),
-                "g{j}"
-            );
+            assert!((f64::from(d.g[j - 1]) - y[j]).abs() < 1e-4 * y[j].abs().max(1e-3), "g{j}");
         }
         let k1 = reference_k1(&y[1..], 1, 30, 3, 0.1);
         for (j, r) in k1.iter().enumerate() {
-            assert!(
-                (f64::from(d.k1[j]) - r).abs() < 2e-3 * r.abs().max(1e-2),
-                "k1[{j}] {} vs {r}",
-                d.k1[j]
-            );
+            assert!((f64::from(d.k1[j]) - r).abs() < 2e-3 * r.abs().max(1e-2), "k1[{j}] {} vs {r}", d.k1[j]);
         }
         // At rest at the setpoint the free response is flat and the increment is zero.
         assert!(d.f[..30].iter().all(|f| (f - 4.0).abs() < 1e-5));
@@ -411,18 +381,7 @@ mod tests {
         s.push_y(0.0, &m).unwrap();
         s.track(1.0); // u(t−1) = 1
         s.push_y(0.1, &m).unwrap(); // y(t) = 0.1
-        let d = s
-            .design(
-                &m,
-                &GpcConfig {
-                    n1: 1,
-                    n2: 10,
-                    nu: 1,
-                    lambda: 1.0,
-                },
-                0.0,
-            )
-            .unwrap();
+        let d = s.design(&m, &GpcConfig { n1: 1, n2: 10, nu: 1, lambda: 1.0 }, 0.0).unwrap();
         for j in 1..=10 {
             let want = 1.0 - 0.9f32.powi(j as i32 + 1);
             assert!((d.f[j - 1] - want).abs() < 1e-5, "f{j} = {} want {want}", d.f[j - 1]);
@@ -437,12 +396,7 @@ mod tests {
     #[test]
     fn camacho_bordons_worked_example() {
         let m = Model::new(&[-0.8], &[0.4, 0.6], &[], 1).unwrap();
-        let cfg = GpcConfig {
-            n1: 1,
-            n2: 3,
-            nu: 3,
-            lambda: 0.8,
-        };
+        let cfg = GpcConfig { n1: 1, n2: 3, nu: 3, lambda: 0.8 };
         // G and K from a state at rest.
         let mut s = GpcState::new(0.0);
         s.push_y(0.0, &m).unwrap();
@@ -456,10 +410,7 @@ mod tests {
         // The Diophantine F_j for Ã = 1 − 1.8 z⁻¹ + 0.8 z⁻².
         for (j, want) in [(1, [1.8, -0.8]), (2, [2.44, -1.44]), (3, [2.952, -1.952])] {
             let sol = crate::control::diophantine::solve(&[1.0, -1.8, 0.8], &[1.0], j).unwrap();
-            assert!(
-                (sol.f[0] - want[0]).abs() < 1e-5 && (sol.f[1] - want[1]).abs() < 1e-5,
-                "F{j}"
-            );
+            assert!((sol.f[0] - want[0]).abs() < 1e-5 && (sol.f[1] - want[1]).abs() < 1e-5, "F{j}");
         }
         // The control law's coefficients, probed one past value at a time (the law is linear):
         // history (oldest first) of y, with Δu(t−1) applied before the last sample.
@@ -484,31 +435,12 @@ mod tests {
     #[test]
     fn config_ranges_are_enforced() {
         let bad = [
-            GpcConfig {
-                n1: 0,
-                ..GpcConfig::DEFAULT
-            },
-            GpcConfig {
-                n1: 5,
-                n2: 4,
-                ..GpcConfig::DEFAULT
-            },
-            GpcConfig {
-                n2: 31,
-                ..GpcConfig::DEFAULT
-            },
-            GpcConfig {
-                nu: 6,
-                ..GpcConfig::DEFAULT
-            },
-            GpcConfig {
-                lambda: -1.0,
-                ..GpcConfig::DEFAULT
-            },
-            GpcConfig {
-                lambda: f32::NAN,
-                ..GpcConfig::DEFAULT
-            },
+            GpcConfig { n1: 0, ..GpcConfig::DEFAULT },
+            GpcConfig { n1: 5, n2: 4, ..GpcConfig::DEFAULT },
+            GpcConfig { n2: 31, ..GpcConfig::DEFAULT },
+            GpcConfig { nu: 6, ..GpcConfig::DEFAULT },
+            GpcConfig { lambda: -1.0, ..GpcConfig::DEFAULT },
+            GpcConfig { lambda: f32::NAN, ..GpcConfig::DEFAULT },
         ];
         for c in bad {
             assert_eq!(c.validate(), Err(GpcError::Config), "{c:?}");

@@ -49,15 +49,8 @@ pub struct Model {
 
 impl Model {
     /// y(t) = y(t−1) + u(t−1)·0: a placeholder that lets histories advance when no model is known.
-    pub const NEUTRAL: Model = Model {
-        a: [-1.0, 0.0, 0.0, 0.0],
-        b: [0.0; MAX_NB],
-        c: [0.0; MAX_NC],
-        na: 1,
-        nb: 1,
-        nc: 0,
-        k: 1,
-    };
+    pub const NEUTRAL: Model =
+        Model { a: [-1.0, 0.0, 0.0, 0.0], b: [0.0; MAX_NB], c: [0.0; MAX_NC], na: 1, nb: 1, nc: 0, k: 1 };
 
     /// Builds a model from coefficient slices (a without the leading 1, c likewise).
     pub fn new(a: &[f32], b: &[f32], c: &[f32], k: usize) -> Result<Model, ModelError> {
@@ -70,15 +63,8 @@ impl Model {
         if a.iter().chain(b).chain(c).any(|x| !x.is_finite()) {
             return Err(ModelError::NonFinite);
         }
-        let mut m = Model {
-            a: [0.0; MAX_NA],
-            b: [0.0; MAX_NB],
-            c: [0.0; MAX_NC],
-            na: a.len(),
-            nb: b.len(),
-            nc: c.len(),
-            k,
-        };
+        let mut m =
+            Model { a: [0.0; MAX_NA], b: [0.0; MAX_NB], c: [0.0; MAX_NC], na: a.len(), nb: b.len(), nc: c.len(), k };
         m.a[..a.len()].copy_from_slice(a);
         m.b[..b.len()].copy_from_slice(b);
         m.c[..c.len()].copy_from_slice(c);

@@ -56,11 +56,7 @@ pub struct GmvcConfig {
 impl GmvcConfig {
     /// P = R = 1, S = 0.05: a small control weight keeps the duty from banging between 0 and 1
     /// on this slow plant; the seed's Fig. 5.14 shows the offset growing with S.
-    pub const DEFAULT: GmvcConfig = GmvcConfig {
-        p: 1.0,
-        r: 1.0,
-        s: 0.05,
-    };
+    pub const DEFAULT: GmvcConfig = GmvcConfig { p: 1.0, r: 1.0, s: 0.05 };
 }
 
 /// IGMVC weight.
@@ -94,12 +90,7 @@ const D_POLE: f32 = 0.95;
 impl MvState {
     /// Empty history holding `u0`.
     pub fn new(u0: f32) -> Self {
-        Self {
-            y: [0.0; HY],
-            u: [u0; HU],
-            d_hat: None,
-            primed: false,
-        }
+        Self { y: [0.0; HY], u: [u0; HU], d_hat: None, primed: false }
     }
 
     /// The last applied u.
@@ -270,9 +261,6 @@ mod tests {
         let m = Model::new(&[-0.9], &[-0.5], &[], 1).unwrap();
         let s = MvState::new(0.0);
         assert_eq!(s.igmvc(&m, &IgmvcConfig { lambda: -1.0 }, 4.0), Err(MvError::Config));
-        assert_eq!(
-            s.gmvc(&m, &GmvcConfig { p: 0.0, r: 1.0, s: 0.0 }, 4.0),
-            Err(MvError::Config)
-        );
+        assert_eq!(s.gmvc(&m, &GmvcConfig { p: 0.0, r: 1.0, s: 0.0 }, 4.0), Err(MvError::Config));
     }
 }

@@ -42,12 +42,7 @@ impl PiConfig {
     /// detuned by 2 on Kp and ×2 on Ti, the usual correction for ZN's quarter-decay ratio:
     /// undetuned, the loop goes into a sustained ±1 °C oscillation on the half load and touches
     /// 2 °C.
-    pub const HTER1_DEFAULT: PiConfig = PiConfig {
-        kp_per_c: 0.3,
-        ti_s: 410.0,
-        ts_s: 10.0,
-        bias: 0.4,
-    };
+    pub const HTER1_DEFAULT: PiConfig = PiConfig { kp_per_c: 0.3, ti_s: 410.0, ts_s: 10.0, bias: 0.4 };
 
     /// Integral gain per sample, duty per °C per sample.
     fn ki(&self) -> f32 {
@@ -77,16 +72,8 @@ struct Pending {
 impl Pi {
     /// A controller whose integral starts at `cfg.bias`.
     pub fn new(cfg: PiConfig) -> Self {
-        let integral = if cfg.bias.is_finite() {
-            cfg.bias.clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        Self {
-            cfg,
-            integral,
-            pending: Pending::default(),
-        }
+        let integral = if cfg.bias.is_finite() { cfg.bias.clamp(0.0, 1.0) } else { 0.0 };
+        Self { cfg, integral, pending: Pending::default() }
     }
 
     /// The configuration.
@@ -140,11 +127,7 @@ mod tests {
     use super::*;
 
     fn input(y: f32) -> ControlInput {
-        ControlInput {
-            t_s: 0.0,
-            y_c: y,
-            w_c: 4.0,
-        }
+        ControlInput { t_s: 0.0, y_c: y, w_c: 4.0 }
     }
 
     fn run(c: &mut Pi, y: f32) -> f32 {
@@ -156,12 +139,7 @@ mod tests {
 
     #[test]
     fn integral_action_removes_offset_direction() {
-        let mut c = Pi::new(PiConfig {
-            kp_per_c: 0.5,
-            ti_s: 100.0,
-            ts_s: 10.0,
-            bias: 0.3,
-        });
+        let mut c = Pi::new(PiConfig { kp_per_c: 0.5, ti_s: 100.0, ts_s: 10.0, bias: 0.3 });
         let u1 = run(&mut c, 4.2);
         let u2 = run(&mut c, 4.2);
         assert!((u1 - (0.5 * 0.2 + 0.3 + 0.05 * 0.2)).abs() < 1e-6);
@@ -170,22 +148,13 @@ mod tests {
 
     #[test]
     fn anti_windup_freezes_integral_in_saturation() {
-        let cfg = PiConfig {
-            kp_per_c: 0.5,
-            ti_s: 100.0,
-            ts_s: 10.0,
-            bias: 0.4,
-        };
+        let cfg = PiConfig { kp_per_c: 0.5, ti_s: 100.0, ts_s: 10.0, bias: 0.4 };
         let mut c = Pi::new(cfg);
         // An hour at 24 °C above the setpoint: the request is saturated the whole time.
         for _ in 0..360 {
             assert_eq!(run(&mut c, 28.0), 1.0);
         }
-        assert!(
-            (c.integral() - 0.4).abs() < 1e-6,
-            "integral wound up to {}",
-            c.integral()
-        );
+        assert!((c.integral() - 0.4).abs() < 1e-6, "integral wound up to {}", c.integral());
         // Once the load is at the setpoint, the controller asks for its pre-saturation duty,
         // not for full cooling as a wound-up integral would.
         assert!((run(&mut c, 4.0) - 0.4).abs() < 1e-6);
@@ -194,12 +163,7 @@ mod tests {
 
     #[test]
     fn override_is_bumpless() {
-        let mut c = Pi::new(PiConfig {
-            kp_per_c: 0.5,
-            ti_s: 100.0,
-            ts_s: 10.0,
-            bias: 0.4,
-        });
+        let mut c = Pi::new(PiConfig { kp_per_c: 0.5, ti_s: 100.0, ts_s: 10.0, bias: 0.4 });
         let _ = c.update(&input(4.5));
         // The supervisor forced cooling off.
         c.track(&input(4.5), 0.0);
@@ -213,12 +177,7 @@ mod tests {
 
     #[test]
     fn p_only_holds_bias_at_zero_error() {
-        let mut c = Pi::new(PiConfig {
-            kp_per_c: 0.5,
-            ti_s: f32::INFINITY,
-            ts_s: 10.0,
-            bias: 0.35,
-        });
+        let mut c = Pi::new(PiConfig { kp_per_c: 0.5, ti_s: f32::INFINITY, ts_s: 10.0, bias: 0.35 });
         assert_eq!(c.name(), "p");
         for _ in 0..10 {
             assert!((run(&mut c, 4.0) - 0.35).abs() < 1e-6);

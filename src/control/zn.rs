@@ -68,11 +68,7 @@ impl ReactionCurve {
         if !(l > 0.0 && t > 0.0) {
             return Err(ZnError::NoUsableResponse);
         }
-        Ok(Self {
-            gain_c_per_duty: (yinf - y0) / du,
-            dead_time_s: l,
-            time_constant_s: t,
-        })
+        Ok(Self { gain_c_per_duty: (yinf - y0) / du, dead_time_s: l, time_constant_s: t })
     }
 
     /// Ziegler–Nichols P gain, duty per °C.
@@ -117,17 +113,8 @@ mod tests {
 
     #[test]
     fn refuses_flat_and_bad_records() {
-        assert_eq!(
-            ReactionCurve::from_step(&[1.0; 10], 10.0, 1.0),
-            Err(ZnError::NoUsableResponse)
-        );
-        assert_eq!(
-            ReactionCurve::from_step(&[1.0; 3], 10.0, 1.0),
-            Err(ZnError::TooLittleData)
-        );
-        assert_eq!(
-            ReactionCurve::from_step(&[1.0, f32::NAN, 0.0, 0.0, 0.0], 10.0, 1.0),
-            Err(ZnError::NonFinite)
-        );
+        assert_eq!(ReactionCurve::from_step(&[1.0; 10], 10.0, 1.0), Err(ZnError::NoUsableResponse));
+        assert_eq!(ReactionCurve::from_step(&[1.0; 3], 10.0, 1.0), Err(ZnError::TooLittleData));
+        assert_eq!(ReactionCurve::from_step(&[1.0, f32::NAN, 0.0, 0.0, 0.0], 10.0, 1.0), Err(ZnError::NonFinite));
     }
 }

@@ -29,12 +29,7 @@ impl BatchLs {
         if n == 0 || n > MAX_PARAMS {
             return Err(BatchError::Input);
         }
-        Ok(Self {
-            n,
-            ata: [[0.0; MAX_PARAMS]; MAX_PARAMS],
-            aty: [0.0; MAX_PARAMS],
-            rows: 0,
-        })
+        Ok(Self { n, ata: [[0.0; MAX_PARAMS]; MAX_PARAMS], aty: [0.0; MAX_PARAMS], rows: 0 })
     }
 
     /// Adds one row φ, y.

@@ -60,27 +60,12 @@ pub struct Prbs {
 impl Prbs {
     /// A generator seeded with all ones (any non-zero seed gives the same sequence, shifted).
     pub fn new(cfg: PrbsConfig) -> Result<Self, PrbsError> {
-        let taps = TAPS
-            .iter()
-            .find(|(b, _)| *b == cfg.bits)
-            .map(|(_, t)| *t)
-            .ok_or(PrbsError::Bits)?;
+        let taps = TAPS.iter().find(|(b, _)| *b == cfg.bits).map(|(_, t)| *t).ok_or(PrbsError::Bits)?;
         if cfg.hold == 0 || !cfg.low.is_finite() || !cfg.high.is_finite() || !(cfg.low < cfg.high) {
             return Err(PrbsError::Levels);
         }
-        let mask = if cfg.bits == 16 {
-            u16::MAX
-        } else {
-            (1u16 << cfg.bits) - 1
-        };
-        let mut p = Self {
-            cfg,
-            mask,
-            taps,
-            state: mask,
-            held: 0,
-            bit: false,
-        };
+        let mask = if cfg.bits == 16 { u16::MAX } else { (1u16 << cfg.bits) - 1 };
+        let mut p = Self { cfg, mask, taps, state: mask, held: 0, bit: false };
         p.bit = p.shift();
         Ok(p)
     }
@@ -119,13 +104,7 @@ mod tests {
     #[test]
     fn every_register_is_maximum_length_and_balanced() {
         for bits in 3..=16u8 {
-            let mut p = Prbs::new(PrbsConfig {
-                bits,
-                hold: 1,
-                low: 0.0,
-                high: 1.0,
-            })
-            .unwrap();
+            let mut p = Prbs::new(PrbsConfig { bits, hold: 1, low: 0.0, high: 1.0 }).unwrap();
             let n = p.period_bits() as usize;
             let seq: std::vec::Vec<bool> = (0..2 * n).map(|_| p.next_duty() > 0.5).collect();
             let ones = seq[..n].iter().filter(|b| **b).count();
@@ -142,13 +121,7 @@ mod tests {
 
     #[test]
     fn hold_repeats_each_bit() {
-        let mut p = Prbs::new(PrbsConfig {
-            bits: 7,
-            hold: 3,
-            low: 0.2,
-            high: 0.8,
-        })
-        .unwrap();
+        let mut p = Prbs::new(PrbsConfig { bits: 7, hold: 3, low: 0.2, high: 0.8 }).unwrap();
         let seq: std::vec::Vec<f32> = (0..300).map(|_| p.next_duty()).collect();
         for chunk in seq.chunks(3) {
             assert!(chunk.iter().all(|x| *x == chunk[0]));
@@ -161,11 +134,7 @@ mod tests {
             (7, 1, f32::NAN, 0.1, PrbsError::Levels),
         ];
         for (bits, hold, low, high, want) in bad {
-            assert_eq!(
-                Prbs::new(PrbsConfig { bits, hold, low, high }).err(),
-                Some(want),
-                "{bits} {hold} {low} {high}"
-            );
+            assert_eq!(Prbs::new(PrbsConfig { bits, hold, low, high }).err(), Some(want), "{bits} {hold} {low} {high}");
         }
     }
 }

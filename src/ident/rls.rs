@@ -55,11 +55,7 @@ pub struct RlsConfig {
 
 impl RlsConfig {
     /// λ_f = 1 (no forgetting), P(0) = 1000·I, trace bound 1e4.
-    pub const DEFAULT: RlsConfig = RlsConfig {
-        forgetting: 1.0,
-        p0: 1000.0,
-        trace_max: 1e4,
-    };
+    pub const DEFAULT: RlsConfig = RlsConfig { forgetting: 1.0, p0: 1000.0, trace_max: 1e4 };
 
     /// True if λ_f ∈ (0, 1], p0 > 0 and trace_max ≥ p0, all finite.
     pub fn is_valid(&self) -> bool {
@@ -85,17 +81,8 @@ pub struct Rls<const N: usize> {
 impl<const N: usize> Rls<N> {
     /// Starts at `theta0` with P = p0·I.
     pub fn new(cfg: &RlsConfig, theta0: SVector<f32, N>) -> Self {
-        let p0 = if cfg.p0 > 0.0 && cfg.p0.is_finite() {
-            cfg.p0
-        } else {
-            RlsConfig::DEFAULT.p0
-        };
-        Self {
-            theta: theta0,
-            u: SMatrix::identity(),
-            d: SVector::repeat(p0),
-            updates: 0,
-        }
+        let p0 = if cfg.p0 > 0.0 && cfg.p0.is_finite() { cfg.p0 } else { RlsConfig::DEFAULT.p0 };
+        Self { theta: theta0, u: SMatrix::identity(), d: SVector::repeat(p0), updates: 0 }
     }
 
     /// The estimate θ.
@@ -173,11 +160,7 @@ impl<const N: usize> Rls<N> {
         if !y.is_finite() || phi.iter().any(|x| !x.is_finite()) {
             return Err(EstError::NonFinite);
         }
-        let lambda = if cfg.forgetting > 0.0 && cfg.forgetting <= 1.0 {
-            cfg.forgetting
-        } else {
-            1.0
-        };
+        let lambda = if cfg.forgetting > 0.0 && cfg.forgetting <= 1.0 { cfg.forgetting } else { 1.0 };
         let eps = y - self.predict(phi);
 
         // Bierman's measurement update with noise variance λ_f (Bierman 1977, p. 100).
@@ -235,11 +218,7 @@ mod tests {
     #[test]
     fn matches_the_covariance_form_on_a_small_problem() {
         // Same data through the textbook update in f64 and through U-D in f32.
-        let cfg = RlsConfig {
-            forgetting: 0.99,
-            p0: 100.0,
-            trace_max: 1e9,
-        };
+        let cfg = RlsConfig { forgetting: 0.99, p0: 100.0, trace_max: 1e9 };
         let mut ud = Rls::<3>::new(&cfg, SVector::zeros());
         let mut p = nalgebra::Matrix3::<f64>::identity() * 100.0;
         let mut th = nalgebra::Vector3::<f64>::zeros();
@@ -260,20 +239,12 @@ mod tests {
             ud.update(&cfg, &phf, y as f32).unwrap();
         }
         for i in 0..3 {
-            assert!(
-                (f64::from(ud.theta()[i]) - th[i]).abs() < 1e-4,
-                "{i}: {} vs {}",
-                ud.theta()[i],
-                th[i]
-            );
+            assert!((f64::from(ud.theta()[i]) - th[i]).abs() < 1e-4, "{i}: {} vs {}", ud.theta()[i], th[i]);
         }
         let pu = ud.covariance();
         for i in 0..3 {
             for j in 0..3 {
-                assert!(
-                    (f64::from(pu[(i, j)]) - p[(i, j)]).abs() < 1e-3 * p[(i, j)].abs().max(1e-3),
-                    "P[{i}{j}]"
-                );
+                assert!((f64::from(pu[(i, j)]) - p[(i, j)]).abs() < 1e-3 * p[(i, j)].abs().max(1e-3), "P[{i}{j}]");
             }
         }
     }
@@ -283,24 +254,14 @@ mod tests {
         let cfg = RlsConfig::DEFAULT;
         let mut r = Rls::<2>::new(&cfg, nalgebra::Vector2::new(1.0, 2.0));
         let before = r.clone();
-        assert_eq!(
-            r.update(&cfg, &nalgebra::Vector2::new(f32::NAN, 1.0), 1.0),
-            Err(EstError::NonFinite)
-        );
-        assert_eq!(
-            r.update(&cfg, &nalgebra::Vector2::new(1.0, 1.0), f32::INFINITY),
-            Err(EstError::NonFinite)
-        );
+        assert_eq!(r.update(&cfg, &nalgebra::Vector2::new(f32::NAN, 1.0), 1.0), Err(EstError::NonFinite));
+        assert_eq!(r.update(&cfg, &nalgebra::Vector2::new(1.0, 1.0), f32::INFINITY), Err(EstError::NonFinite));
         assert_eq!(r, before);
     }
 
     #[test]
     fn trace_is_bounded_without_excitation() {
-        let cfg = RlsConfig {
-            forgetting: 0.9,
-            p0: 10.0,
-            trace_max: 50.0,
-        };
+        let cfg = RlsConfig { forgetting: 0.9, p0: 10.0, trace_max: 50.0 };
         let mut r = Rls::<2>::new(&cfg, SVector::zeros());
         for _ in 0..10_000 {
             r.update(&cfg, &nalgebra::Vector2::new(1.0, 0.0), 0.0).unwrap();

@@ -170,11 +170,7 @@ pub fn autocorrelation(x: &[f64], out: &mut [f64]) {
     let r0: f64 = x.iter().map(|v| (v - mean) * (v - mean)).sum();
     for (k, o) in out.iter_mut().enumerate() {
         let tau = k + 1;
-        let r: f64 = if tau < n {
-            (0..n - tau).map(|t| (x[t] - mean) * (x[t + tau] - mean)).sum()
-        } else {
-            0.0
-        };
+        let r: f64 = if tau < n { (0..n - tau).map(|t| (x[t] - mean) * (x[t + tau] - mean)).sum() } else { 0.0 };
         *o = if r0 > 0.0 { r / r0 } else { 0.0 };
     }
 }
