@@ -123,7 +123,7 @@ impl Scenario {
             },
             "prbs" => Scenario {
                 name: name.into(),
-                description: "open loop: PRBS (6-bit register, 300 s bits, period 5.25 h) on the SSR, holding duty ± 0.2, from 4 °C".into(),
+                description: "open loop: PRBS (7-bit register, 120 s bits, period 4.2 h) on the SSR, holding duty ± 0.1, from 4 °C".into(),
                 start: Start::Holding(4.0),
                 setpoints: vec![(0.0, 4.0)],
                 changes: vec![],
