@@ -61,6 +61,11 @@ pub struct IdentifyArgs {
     /// First-order filter parameter F_a in [0, 1) applied to the temperature first.
     #[arg(long, allow_negative_numbers = true)]
     pub filter: Option<f64>,
+    /// Prefilter both temperature and duty with the same first-order low-pass (pole in [0, 1))
+    /// before fitting (Ljung 1999, §14.4): weights the equation-error fit toward the slow
+    /// dynamics that matter for control, instead of the one-sample-ahead detail ARX favours.
+    #[arg(long, allow_negative_numbers = true)]
+    pub prefilter: Option<f64>,
     /// Output column to identify from (e.g. raw_temp_c for the unfiltered reading of a
     /// `hter sim` trace).
     #[arg(long, default_value = "temp_c")]
@@ -166,7 +171,7 @@ pub struct Data {
 }
 
 /// Reads and pre-processes a log.
-pub fn load(path: &Path, y_column: &str, filter: Option<f64>, decimate: usize) -> Result<Data> {
+pub fn load(path: &Path, y_column: &str, filter: Option<f64>, prefilter: Option<f64>, decimate: usize) -> Result<Data> {
     let cols = log::read_columns(path, &["t_s", "duty", y_column])?;
     log::check_increasing(path, &cols[0])?;
     if decimate == 0 {
@@ -192,12 +197,21 @@ pub fn load(path: &Path, y_column: &str, filter: Option<f64>, decimate: usize) -
             ts
         );
     }
-    if let Some(fa) = filter {
-        let cfg = FirstOrderConfig::new(fa as f32).ok_or_else(|| anyhow!("--filter must be in [0, 1), got {fa}"))?;
+    let first_order = |name: &str, fa: f64, x: &mut [f64]| -> Result<()> {
+        let cfg = FirstOrderConfig::new(fa as f32).ok_or_else(|| anyhow!("--{name} must be in [0, 1), got {fa}"))?;
         let mut f = FirstOrder::default();
-        for v in y.iter_mut() {
+        for v in x.iter_mut() {
             *v = f64::from(f.step(&cfg, *v as f32));
         }
+        Ok(())
+    };
+    if let Some(fa) = filter {
+        first_order("filter", fa, &mut y)?;
+    }
+    let mut u = u;
+    if let Some(fa) = prefilter {
+        first_order("prefilter", fa, &mut y)?;
+        first_order("prefilter", fa, &mut u)?;
     }
     let mean_y = y.iter().sum::<f64>() / y.len() as f64;
     let mean_u = u.iter().sum::<f64>() / u.len() as f64;
@@ -389,7 +403,7 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
     if args.method != Method::Rels && nc > 0 {
         bail!("nc > 0 (ARMAX) needs --method rels");
     }
-    let d = load(&args.input, &args.y_column, args.filter, args.decimate)?;
+    let d = load(&args.input, &args.y_column, args.filter, args.prefilter, args.decimate)?;
     let f = fit(&d, &s, args.method, args.forgetting)?;
     let (order_comparison, chosen_order, reason) = compare(&d, s.nk, nc, args.method, args.forgetting);
     if let Some(p) = &args.plot {
