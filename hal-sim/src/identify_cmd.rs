@@ -565,6 +565,7 @@ mod tests {
             method: Method::Ls,
             forgetting: 1.0,
             filter: None,
+            prefilter: None,
             y_column: "temp_c".into(),
             decimate: 1,
             json: true,
