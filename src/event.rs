@@ -12,6 +12,18 @@ pub enum EventKind {
     SensorShort,
     /// The RTD reads a temperature outside the plausible range of the carrier.
     SensorOutOfRange,
+    /// The RTD conversion has not changed for [`crate::step::CarrierConfig::stuck_samples`]
+    /// samples: a real reading always carries some noise (stuck converter, frozen front end).
+    SensorStuck,
+    /// Readings jumped by more than physics allows several times within an hour (EMI, a loose
+    /// contact); each spike is ignored and control continues on the filtered value.
+    SensorSpikes,
+    /// The load keeps cooling although the SSR has been commanded off for minutes: the SSR is
+    /// shorted. The supply-enable switch is opened (latched until reset).
+    SsrStuckOn,
+    /// The load warms although the SSR has been commanded fully on for minutes: the SSR or the
+    /// modules are open, or the cabinet is open.
+    SsrStuckOff,
     /// The sensor reads plausibly again after a fault.
     SensorRecovered,
     /// The freeze guard cut cooling: the measured load came too close to 0 °C.

@@ -66,6 +66,25 @@ pub struct CarrierConfig {
     /// guard on the present reading alone lets the load coast ≈ 1 °C past it (measured on the
     /// hal-sim plant with On-Off at a 3 °C setpoint).
     pub freeze_lookahead_s: f32,
+    /// Identical conversions in a row that mean a stuck converter. 18 samples = 3 min: with the
+    /// front end's ≈ 1.5 counts of noise, 18 equal 16-bit results in a row happen by chance
+    /// about once in 10¹² samples.
+    pub stuck_samples: u16,
+    /// A reading further than this from the filtered temperature is a spike, °C. The load
+    /// cannot move more than ≈ 0.2 °C in one 10 s sample; 2 °C leaves a wide margin.
+    pub spike_c: f32,
+    /// SSR stuck on: the duty was 0 for this many samples (3 min: the coast after full cooling
+    /// stops has slowed down by then)…
+    pub stuck_on_samples: u16,
+    /// …and the load still fell by more than this over the last minute, °C, at least 80 % as
+    /// fast as the minute before (the coast after full cooling stops slows down; a shorted SSR
+    /// keeps cooling at full rate).
+    pub stuck_on_drop_c: f32,
+    /// SSR stuck off: the duty was ≥ 0.9 for this many samples (5 min: longer than the
+    /// warming the sensor lag shows right after cooling starts)…
+    pub stuck_off_samples: u16,
+    /// …and the load rose by more than this over that time, °C.
+    pub stuck_off_rise_c: f32,
 }
 
 impl CarrierConfig {
@@ -84,6 +103,12 @@ impl CarrierConfig {
         freeze_cut_c: 1.5,
         freeze_release_c: 2.5,
         freeze_lookahead_s: 120.0,
+        stuck_samples: 18,
+        spike_c: 2.0,
+        stuck_on_samples: 18,
+        stuck_on_drop_c: 0.15,
+        stuck_off_samples: 30,
+        stuck_off_rise_c: 0.5,
     };
 }
 
@@ -146,7 +171,21 @@ pub struct Carrier<C: Controller> {
     adaptive_mode: Option<AdaptiveMode>,
     last_temp_c: Option<f32>,
     slope_c_per_s: f32,
+    last_counts: Option<u32>,
+    same_counts: u16,
+    spike_run: u8,
+    spike_times: [f32; 3],
+    spikes_reported_s: Option<f32>,
+    history: [f32; HISTORY],
+    history_len: usize,
+    off_run: u16,
+    on_run: u16,
+    supply_cut: bool,
+    ssr_off_reported: bool,
 }
+
+/// Samples of filtered temperature kept for the SSR checks.
+const HISTORY: usize = 32;
 
 impl<C: Controller> Carrier<C> {
     /// A carrier that has not seen a sample yet.
@@ -161,6 +200,17 @@ impl<C: Controller> Carrier<C> {
             adaptive_mode: None,
             last_temp_c: None,
             slope_c_per_s: 0.0,
+            last_counts: None,
+            same_counts: 0,
+            spike_run: 0,
+            spike_times: [f32::NEG_INFINITY; 3],
+            spikes_reported_s: None,
+            history: [0.0; HISTORY],
+            history_len: 0,
+            off_run: 0,
+            on_run: 0,
+            supply_cut: false,
+            ssr_off_reported: false,
         }
     }
 
@@ -176,7 +226,13 @@ impl<C: Controller> Carrier<C> {
 
     /// Runs one sample from raw ADC counts (the firmware's and the simulator's entry).
     pub fn step(&mut self, input: &StepInput) -> StepOutput {
-        let measured = self.measure(input.counts);
+        self.same_counts = if self.last_counts == Some(input.counts) { self.same_counts.saturating_add(1) } else { 0 };
+        self.last_counts = Some(input.counts);
+        // Only a plausible reading can be "stuck": open and short keep their own diagnosis.
+        let measured = match self.measure(input.counts) {
+            Ok(_) if self.same_counts + 1 >= self.cfg.stuck_samples => Err(EventKind::SensorStuck),
+            m => m,
+        };
         self.run(input.t_s, measured, input.setpoint_c)
     }
 
@@ -213,9 +269,31 @@ impl<C: Controller> Carrier<C> {
             _ => {}
         }
         let raw_c = raw.ok();
+        // Spikes: a reading far from the filtered value is ignored; three in a row are a real
+        // jump (a re-seated probe) and restart the filter.
+        let spike = match (raw_c, self.filter.output()) {
+            (Some(t), Some(prev)) => (t.0 - prev).abs() > self.cfg.spike_c,
+            _ => false,
+        };
+        if spike {
+            self.spike_run = self.spike_run.saturating_add(1);
+            self.spike_times.copy_within(0..2, 1);
+            self.spike_times[0] = t_s;
+            let burst = t_s - self.spike_times[2] <= 3600.0;
+            let quiet = self.spikes_reported_s.is_none_or(|r| t_s - r > 3600.0);
+            if burst && quiet {
+                emit(EventKind::SensorSpikes);
+                self.spikes_reported_s = Some(t_s);
+            }
+            if self.spike_run >= 3 {
+                self.filter.reset();
+            }
+        } else {
+            self.spike_run = 0;
+        }
         let temp_c = match raw_c {
-            Some(t) => self.filter.step(&self.cfg.filter, t.0),
-            None => self.filter.output().unwrap_or(f32::NAN),
+            Some(t) if !spike || self.spike_run >= 3 => self.filter.step(&self.cfg.filter, t.0),
+            _ => self.filter.output().unwrap_or(f32::NAN),
         };
 
         // 4: setpoint.
@@ -271,6 +349,41 @@ impl<C: Controller> Carrier<C> {
                 emit(EventKind::FreezeGuardReleased);
             }
         }
+        // SSR checks on the duty applied over the last samples (`off_run`/`on_run` count up to
+        // the previous sample) and the filtered temperature history.
+        if self.sensor_fault.is_none() {
+            if self.history_len == HISTORY {
+                self.history.copy_within(1.., 0);
+                self.history[HISTORY - 1] = temp_c;
+            } else {
+                self.history[self.history_len] = temp_c;
+                self.history_len += 1;
+            }
+            let ago = |n: usize| self.history_len.checked_sub(n + 1).map(|i| self.history[i]);
+            // Stuck on: still falling after the SSR has been off for a while, and not slowing
+            // down — the coast after full cooling stops decelerates, a shorted SSR does not.
+            if !self.supply_cut && self.off_run >= self.cfg.stuck_on_samples {
+                if let (Some(t6), Some(t12)) = (ago(6), ago(12)) {
+                    let (last, before) = (t6 - temp_c, t12 - t6);
+                    if last > self.cfg.stuck_on_drop_c && last >= 0.8 * before {
+                        self.supply_cut = true;
+                        emit(EventKind::SsrStuckOn);
+                    }
+                }
+            }
+            if !self.ssr_off_reported && self.on_run >= self.cfg.stuck_off_samples {
+                if let Some(past) = ago(self.cfg.stuck_off_samples as usize) {
+                    if temp_c - past > self.cfg.stuck_off_rise_c {
+                        self.ssr_off_reported = true;
+                        emit(EventKind::SsrStuckOff);
+                    }
+                }
+            }
+            if self.on_run == 0 {
+                self.ssr_off_reported = false;
+            }
+        }
+
         let mode = if self.sensor_fault.is_some() {
             Mode::SensorFault
         } else if self.freeze_guard {
@@ -281,6 +394,12 @@ impl<C: Controller> Carrier<C> {
         if mode != Mode::Normal {
             duty = Duty::OFF;
         }
+
+        if self.supply_cut {
+            duty = Duty::OFF;
+        }
+        self.off_run = if duty.get() == 0.0 { self.off_run.saturating_add(1) } else { 0 };
+        self.on_run = if duty.get() >= 0.9 { self.on_run.saturating_add(1) } else { 0 };
 
         // 7: tell the controller what was really applied.
         if self.sensor_fault.is_none() {
@@ -293,7 +412,7 @@ impl<C: Controller> Carrier<C> {
             setpoint_c: Celsius(w),
             requested,
             duty,
-            supply_enable: true,
+            supply_enable: !self.supply_cut,
             mode,
             events,
             status,

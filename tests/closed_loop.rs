@@ -72,6 +72,7 @@ fn gpc_on_its_own_arx_model_tracks_piecewise_without_offset() {
         load: Load::Full,
         ambient_c: 14.0,
         seed: 1,
+        faults: vec![],
     })
     .unwrap();
     assert!(out.metrics.steady_state_error_c < 0.01, "{:?}", out.metrics);
@@ -98,6 +99,7 @@ fn self_tuning_gpc_stays_in_range_and_reports_its_modes() {
         load: Load::Full,
         ambient_c: 28.0,
         seed: 3,
+        faults: vec![],
     })
     .unwrap();
     assert!(out.metrics.min_temp_c >= 2.0 && out.metrics.max_temp_c <= 8.0, "{:?}", out.metrics);
@@ -108,5 +110,6 @@ fn self_tuning_gpc_stays_in_range_and_reports_its_modes() {
 fn sim_spec(scenario: &str, controller: ControllerSpec, plant: PlantChoice, load: Load) -> SimOutput {
     let scenario = Scenario::resolve(scenario).unwrap();
     let duration_s = scenario.duration_s;
-    run(&SimOptions { scenario, controller, plant, load, ambient_c: 28.0, duration_s, seed: 7 }).unwrap()
+    run(&SimOptions { scenario, controller, plant, load, ambient_c: 28.0, duration_s, seed: 7, faults: vec![] })
+        .unwrap()
 }

@@ -31,6 +31,7 @@ fn bless() {
         load: Load::Full,
         ambient_c: 28.0,
         seed: 1,
+        faults: vec![],
     };
     let out = run(&opts).unwrap();
     let rows: Vec<(f32, u32, f32)> = out.rows.iter().map(|r| (r.t_s as f32, r.counts, r.setpoint_c as f32)).collect();

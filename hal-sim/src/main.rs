@@ -82,6 +82,11 @@ struct SimArgs {
     /// Seed of the measurement noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Inject a hardware fault at a time, KIND@T_S (repeatable): sensor-open, sensor-short,
+    /// sensor-stuck, sensor-spikes, sensor-offset, ssr-stuck-on, ssr-stuck-off, supply-sag,
+    /// lid-open, brownout.
+    #[arg(long = "fault")]
+    faults: Vec<String>,
     /// Write the trace as CSV (one row per control sample).
     #[arg(long)]
     csv: Option<PathBuf>,
@@ -217,6 +222,7 @@ fn sim_options(a: &SimArgs) -> Result<SimOptions> {
         ambient_c: finite("ambient", a.ambient)?,
         duration_s,
         seed: a.seed,
+        faults: a.faults.iter().map(|f| sim::Fault::parse(f)).collect::<Result<_>>()?,
     })
 }
 
@@ -333,6 +339,7 @@ fn demo() -> Result<()> {
         ambient: 28.0,
         duration: None,
         seed: 1,
+        faults: Vec::new(),
         csv: None,
         plot: None,
         json: false,

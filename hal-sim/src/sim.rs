@@ -25,7 +25,7 @@ use hter::units::Celsius;
 
 use crate::arx::{self, ArxPlant};
 use crate::metrics::{self, Sample, SimMetrics, Stamped};
-use crate::periph::{SimAdc, SimSsr};
+use crate::periph::{SensorFault, SimAdc, SimSsr, SsrFault};
 use crate::plant::{Load, Plant, PlantParams};
 use crate::scenario::{Change, Scenario, Start, PREROLL_S};
 
@@ -162,6 +162,8 @@ pub struct SimOptions {
     pub duration_s: f64,
     /// Seed of the ADC noise.
     pub seed: u64,
+    /// Injected hardware faults (time s, kind), any order.
+    pub faults: Vec<(f64, Fault)>,
 }
 
 /// One control sample of a run (one CSV row).
@@ -224,6 +226,10 @@ pub fn event_name(k: EventKind) -> &'static str {
         EventKind::SensorShort => "sensor_short",
         EventKind::SensorOutOfRange => "sensor_out_of_range",
         EventKind::SensorRecovered => "sensor_recovered",
+        EventKind::SensorStuck => "sensor_stuck",
+        EventKind::SensorSpikes => "sensor_spikes",
+        EventKind::SsrStuckOn => "ssr_stuck_on",
+        EventKind::SsrStuckOff => "ssr_stuck_off",
         EventKind::FreezeGuardTripped => "freeze_guard_tripped",
         EventKind::FreezeGuardReleased => "freeze_guard_released",
         EventKind::SetpointClamped => "setpoint_clamped",
@@ -235,7 +241,72 @@ pub fn event_name(k: EventKind) -> &'static str {
 }
 
 fn is_fault(k: EventKind) -> bool {
-    matches!(k, EventKind::SensorOpen | EventKind::SensorShort | EventKind::SensorOutOfRange)
+    matches!(
+        k,
+        EventKind::SensorOpen
+            | EventKind::SensorShort
+            | EventKind::SensorOutOfRange
+            | EventKind::SensorStuck
+            | EventKind::SensorSpikes
+            | EventKind::SsrStuckOn
+            | EventKind::SsrStuckOff
+    )
+}
+
+/// Hardware faults `--fault KIND@T_S` injects (SPEC §3).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Fault {
+    /// RTD lead broken.
+    SensorOpen,
+    /// RTD leads shorted.
+    SensorShort,
+    /// Converter repeats its last value.
+    SensorStuck,
+    /// Occasional large spikes.
+    SensorSpikes,
+    /// +1.5 °C calibration drift.
+    SensorOffset,
+    /// SSR output shorted.
+    SsrStuckOn,
+    /// SSR output open.
+    SsrStuckOff,
+    /// Supply drops from 12 to 9 V.
+    SupplySag,
+    /// Lid left open: 15 W extra heat.
+    LidOpen,
+    /// The MCU resets: all controller state is lost and the step restarts.
+    Brownout,
+}
+
+impl Fault {
+    /// Every kind, with its CLI name.
+    pub const ALL: [(&'static str, Fault); 10] = [
+        ("sensor-open", Fault::SensorOpen),
+        ("sensor-short", Fault::SensorShort),
+        ("sensor-stuck", Fault::SensorStuck),
+        ("sensor-spikes", Fault::SensorSpikes),
+        ("sensor-offset", Fault::SensorOffset),
+        ("ssr-stuck-on", Fault::SsrStuckOn),
+        ("ssr-stuck-off", Fault::SsrStuckOff),
+        ("supply-sag", Fault::SupplySag),
+        ("lid-open", Fault::LidOpen),
+        ("brownout", Fault::Brownout),
+    ];
+
+    /// Parses `KIND@T_S`.
+    pub fn parse(s: &str) -> Result<(f64, Fault)> {
+        let (kind, t) =
+            s.split_once('@').ok_or_else(|| anyhow::anyhow!("fault '{s}' must be KIND@T_S, e.g. sensor-open@1800"))?;
+        let fault = Self::ALL.iter().find(|(n, _)| *n == kind).map(|(_, f)| *f).ok_or_else(|| {
+            let names: Vec<&str> = Self::ALL.iter().map(|(n, _)| *n).collect();
+            anyhow::anyhow!("unknown fault '{kind}' (expected one of {})", names.join(", "))
+        })?;
+        let t: f64 = t.parse().map_err(|_| anyhow::anyhow!("fault '{s}': time '{t}' is not a number"))?;
+        if !(t.is_finite() && t >= 0.0) {
+            bail!("fault '{s}': time must be a finite number of seconds ≥ 0");
+        }
+        Ok((t, fault))
+    }
 }
 
 /// The simulated hardware: the physical carrier behind a simulated ADC and SSR, or an ideal
@@ -350,6 +421,23 @@ impl Rig {
         }
     }
 
+    fn inject(&mut self, f: Fault) {
+        if let Rig::Physical { plant, adc, ssr } = self {
+            match f {
+                Fault::SensorOpen => adc.fault = SensorFault::Open,
+                Fault::SensorShort => adc.fault = SensorFault::Short,
+                Fault::SensorStuck => adc.fault = SensorFault::Stuck,
+                Fault::SensorSpikes => adc.fault = SensorFault::Spikes,
+                Fault::SensorOffset => adc.fault = SensorFault::Offset(1.5),
+                Fault::SsrStuckOn => ssr.fault = SsrFault::StuckOn,
+                Fault::SsrStuckOff => ssr.fault = SsrFault::StuckOff,
+                Fault::SupplySag => plant.set_supply_v(9.0),
+                Fault::LidOpen => plant.set_extra_heat_w(15.0),
+                Fault::Brownout => {}
+            }
+        }
+    }
+
     fn change(&mut self, c: Change) {
         if let Rig::Physical { plant, .. } = self {
             match c {
@@ -386,13 +474,17 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
             rig.advance(u0, ts, &mut last_on, false);
         }
     }
-    let controller = if sc.excitation {
-        let prbs = PrbsConfig { bits: 7, hold: 12, low: (u0 - 0.1).max(0.0) as f32, high: (u0 + 0.1).min(1.0) as f32 };
-        AnyController::Prbs(PrbsExcitation::new(prbs).map_err(|e| anyhow::anyhow!("PRBS: {e:?}"))?)
-    } else {
-        opts.controller.build(cfg.ts_s, u0 as f32)?
+    let make_controller = || -> Result<AnyController> {
+        Ok(if sc.excitation {
+            let prbs =
+                PrbsConfig { bits: 7, hold: 12, low: (u0 - 0.1).max(0.0) as f32, high: (u0 + 0.1).min(1.0) as f32 };
+            AnyController::Prbs(PrbsExcitation::new(prbs).map_err(|e| anyhow::anyhow!("PRBS: {e:?}"))?)
+        } else {
+            opts.controller.build(cfg.ts_s, u0 as f32)?
+        })
     };
-    let mut carrier = Carrier::new(cfg, controller);
+    let mut carrier = Carrier::new(cfg, make_controller()?);
+    let faults_pending = &opts.faults;
     let name = carrier.controller().name().to_string();
 
     // Pre-roll: the loop has been holding the initial temperature for an hour.
@@ -413,6 +505,16 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
         while k >= 0 && next_change < sc.changes.len() && sc.changes[next_change].0 <= t_s {
             rig.change(sc.changes[next_change].1);
             next_change += 1;
+        }
+        if k >= 0 {
+            for &(_, f) in faults_pending.iter().filter(|(ft, _)| *ft <= t_s && *ft > t_s - ts) {
+                if f == Fault::Brownout {
+                    // State lost: a fresh step, as after a reset (no persistence yet).
+                    carrier = Carrier::new(cfg, make_controller()?);
+                } else {
+                    rig.inject(f);
+                }
+            }
         }
         let w = if k >= 0 { sc.setpoint_at(t_s) } else { sc.setpoint_at(0.0) };
         let (out, counts) = rig.step(&mut carrier, t_s, w);

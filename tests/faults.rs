@@ -1,0 +1,116 @@
+//! Injected hardware faults (`hter sim --fault KIND@T_S`): each is detected, nothing is detected
+//! before it, and the load never reaches 0 °C.
+
+use hal_sim::plant::Load;
+use hal_sim::scenario::Scenario;
+use hal_sim::sim::{run, ControllerChoice, ControllerSpec, Fault, PlantChoice, SimOptions, SimOutput};
+
+const AT_S: f64 = 3600.0;
+
+fn with_fault(kind: &str, controller: ControllerChoice) -> SimOutput {
+    let scenario = Scenario::resolve("disturbance").unwrap();
+    run(&SimOptions {
+        duration_s: scenario.duration_s,
+        scenario,
+        controller: ControllerSpec::new(controller),
+        plant: PlantChoice::Hter1,
+        load: Load::Full,
+        ambient_c: 28.0,
+        seed: 11,
+        faults: vec![Fault::parse(&format!("{kind}@{AT_S}")).unwrap()],
+    })
+    .unwrap()
+}
+
+/// Asserts the fault `detected` is reported within `within_s` of the injection, nothing before.
+fn check(kind: &str, detected: &str, within_s: f64) {
+    for c in [ControllerChoice::Pi, ControllerChoice::Gpc, ControllerChoice::Onoff] {
+        let out = with_fault(kind, c);
+        let m = &out.metrics;
+        assert!(m.faults_detected.iter().all(|f| f.t_s >= AT_S), "{kind}/{c:?}: detection before the fault: {m:?}");
+        let first = m.faults_detected.iter().find(|f| f.kind == detected);
+        let first = first.unwrap_or_else(|| panic!("{kind}/{c:?}: {detected} never reported: {:?}", m.faults_detected));
+        assert!(first.t_s - AT_S <= within_s, "{kind}/{c:?}: detected after {} s", first.t_s - AT_S);
+        assert!(m.min_temp_c > 0.0, "{kind}/{c:?}: load reached {} °C", m.min_temp_c);
+    }
+}
+
+#[test]
+fn open_and_short_sensors_are_detected_within_two_samples() {
+    check("sensor-open", "sensor_open", 20.0);
+    check("sensor-short", "sensor_short", 20.0);
+}
+
+#[test]
+fn a_stuck_converter_is_detected() {
+    check("sensor-stuck", "sensor_stuck", 1800.0);
+}
+
+#[test]
+fn spikes_are_detected_and_filtered_out() {
+    check("sensor-spikes", "sensor_spikes", 1800.0);
+    // Filtered: control goes on, the load stays on target.
+    let m = with_fault("sensor-spikes", ControllerChoice::Pi).metrics;
+    assert!(m.min_temp_c > 3.5 && m.max_temp_c < 6.0, "{m:?}");
+}
+
+#[test]
+fn a_shorted_ssr_is_detected_and_the_supply_switch_opened() {
+    check("ssr-stuck-on", "ssr_stuck_on", 1800.0);
+    let out = with_fault("ssr-stuck-on", ControllerChoice::Pi);
+    let cut = out.rows.iter().position(|r| r.t_s > AT_S && r.duty == 0.0 && r.true_temp_c > 1.0);
+    assert!(cut.is_some());
+    // After the cut the modules get nothing: the carrier can only warm (it must alarm, not freeze).
+    let last = out.rows.last().unwrap();
+    assert!(last.true_temp_c > 8.0 && last.duty == 0.0);
+}
+
+#[test]
+fn an_open_ssr_is_detected() {
+    check("ssr-stuck-off", "ssr_stuck_off", 1800.0);
+}
+
+/// No detector fires on healthy hardware across the baseline scenarios, controllers and plants.
+#[test]
+fn no_false_detections_without_faults() {
+    let plants = [
+        (PlantChoice::Hter1, Load::Full),
+        (PlantChoice::Hter1, Load::Half),
+        (PlantChoice::Hter2, Load::Full),
+        (PlantChoice::Hter2, Load::Half),
+    ];
+    for c in [ControllerChoice::Onoff, ControllerChoice::Pi, ControllerChoice::Gpc, ControllerChoice::Igmvc] {
+        for scenario in ["step", "piecewise", "disturbance"] {
+            for (plant, load) in plants {
+                for ambient_c in [20.0, 28.0, 35.0] {
+                    let sc = Scenario::resolve(scenario).unwrap();
+                    let out = run(&SimOptions {
+                        duration_s: sc.duration_s,
+                        scenario: sc,
+                        controller: ControllerSpec::new(c),
+                        plant,
+                        load,
+                        ambient_c,
+                        seed: 5,
+                        faults: vec![],
+                    });
+                    let Ok(out) = out else { continue }; // e.g. cannot hold 4 °C at this ambient
+                    assert!(
+                        out.metrics.faults_detected.is_empty(),
+                        "{c:?} {scenario} {plant:?} {load:?} {ambient_c}: {:?}",
+                        out.metrics.faults_detected
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn fault_strings_are_checked() {
+    assert!(Fault::parse("sensor-open@10").is_ok());
+    assert!(Fault::parse("sensor-opn@10").unwrap_err().to_string().contains("unknown fault"));
+    assert!(Fault::parse("sensor-open").is_err());
+    assert!(Fault::parse("sensor-open@-1").is_err());
+    assert!(Fault::parse("sensor-open@nan").is_err());
+}
