@@ -12,8 +12,10 @@
 //! 4. setpoint clamped to the vaccine band 2…8 °C (a controller may never aim below +2 °C);
 //! 5. controller ([`crate::control`]);
 //! 6. safety: on a sensor fault cooling stops (the safe state for vaccines that freeze); the
-//!    freeze guard cuts cooling when the measured load falls to `freeze_cut_c` and holds it off
-//!    until it is back above `freeze_release_c`;
+//!    freeze guard cuts cooling — duty and the supply-enable switch — when the measured load,
+//!    extrapolated along its slope, falls to `freeze_cut_c`, and holds it off until it is back
+//!    above `freeze_release_c`; stuck and spiking sensors and a shorted or open SSR are
+//!    detected (a shorted SSR opens the supply switch for good);
 //! 7. the applied duty is fed back to the controller (anti-windup, bumpless transfer).
 //!
 //! ## Sampling period
@@ -412,7 +414,10 @@ impl<C: Controller> Carrier<C> {
             setpoint_c: Celsius(w),
             requested,
             duty,
-            supply_enable: !self.supply_cut,
+            // The supply switch also opens whenever the freeze guard holds cooling off: it costs
+            // nothing then, and it is the only thing that stops a shorted SSR before the SSR
+            // check has seen enough to be sure.
+            supply_enable: !(self.supply_cut || self.freeze_guard),
             mode,
             events,
             status,

@@ -1,26 +1,72 @@
 //! `hter identify`: fit an ARX/ARMAX model to a logged run (SPEC §3; seed chapter 4).
 //!
-//! Pipeline: read `t_s, duty, temp_c` → check a uniform sample period → optional first-order
-//! filter F_a on the temperature (the seed filtered its PRBS records) → deviation variables
-//! (the means of temperature and duty are removed, so an ambient offset or a mean duty never
-//! biases the model: with `A y = B u + d`, the means satisfy `A(1) ȳ = B(1) ū + d` and
-//! subtracting leaves `A (y − ȳ) = B (u − ū) + e`) → estimate (batch LS in f64, or the
-//! firmware's f32 RLS/RELS) → validate (one-step MSE, simulated fit, poles/zeros, residual
-//! whiteness) → compare 1st/2nd/4th order and explain the choice.
+//! Pipeline:
+//!
+//! 1. Read `t_s`, `duty` (input u) and `temp_c` (output y; `--y-column` picks another) from the
+//!    CSV ([`crate::log::read_columns`]: columns by name, one-line errors with line numbers).
+//! 2. Check the time axis: strictly increasing, and uniform — every interval within 5 % of the
+//!    median interval, which is the sample period Ts. The first offending line is named.
+//! 3. Optionally average every `--decimate` samples into one (logs sampled much faster than
+//!    the plant moves, where quantisation noise dominates every single step).
+//! 4. Optionally filter the output with the firmware's first-order filter
+//!    `y_f(t) = F_a y_f(t−1) + (1 − F_a) y(t)` (`--filter F_a`, [`hter::filter::FirstOrder`]).
+//!    Only y is filtered, as in the measurement chain: the model then describes duty → filtered
+//!    temperature, which is what the controller sees.
+//!    `--prefilter L` is different: the same low-pass L(q) = (1 − L)/(1 − L q⁻¹) on both u and
+//!    y, for the estimation only (Ljung 1999, §14.4 "prefiltering"). Since L commutes with A and
+//!    B, the model is unchanged, but the equation-error fit is weighted toward the slow dynamics
+//!    that matter for control instead of the sample-to-sample detail (quantisation noise) ARX
+//!    otherwise favours. MSE, fit and residuals are computed on the unprefiltered data.
+//! 5. Deviation variables around an operating point (y0, u0) ([`OperatingPointChoice`]). The
+//!    default is the **initial rest**: u0 = u(0) and y0 = the mean of y while the duty keeps its
+//!    initial value (at most the first 10 % of the record). An identification experiment
+//!    starts at steady state, so that point is an equilibrium of the plant and the offset-free
+//!    model `A ỹ = q^−nk B ũ` holds exactly. The record means are *not* an equilibrium when the
+//!    record is a transient (a step response never averages to a steady state): the leftover
+//!    constant in `A ỹ = B ũ + d`, divided by A(1) ≈ 1e-3 of a slow plant, wrecks the static
+//!    gain and the simulated fit (on `tclab-heater-step.csv`: fit ≈ 96 % from the initial
+//!    rest, ≈ 0 % around the means). `--operating-point mean` remains for logs that do not start
+//!    at rest (e.g. a long closed-loop record around a setpoint).
+//! 6. Estimate: batch LS in f64 ([`hter::ident::batch`]), or the firmware's f32 estimators
+//!    (RLS for ARX, RELS for ARMAX, with forgetting λ_f; [`hter::ident::recursive::run`]) on
+//!    signals scaled to order one (ỹ / max|ỹ|, ũ / max|ũ|; b is scaled back afterwards). For
+//!    the recursive methods the reported parameters are the final estimates θ(N).
+//! 7. Validate ([`hter::ident::validate`]): one-step-ahead MSE (°C², on the data the model was
+//!    estimated from), simulated-output fit % (the model run from the input alone, starting
+//!    from the measured initial condition, as MATLAB `compare`), poles and zeros with
+//!    stability, static gain B(1)/A(1) in °C per unit duty, time constants −Ts/ln p of the real
+//!    positive poles, and the residual autocorrelation at lags 1–20 against ±1.96/√N.
+//! 8. Compare orders 1, 2 and 4 (na = nb, same method, nc and nk) and pick the lowest stable
+//!    order within [`validate::ORDER_TOLERANCE_POINTS`] fit points of the best
+//!    ([`validate::choose_order`]); the report says why. `--auto-order` makes that the reported
+//!    model instead of the requested one.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Result};
 use hter::filter::{FirstOrder, FirstOrderConfig};
 use hter::ident::batch::BatchLs;
-use hter::ident::model::Structure;
+use hter::ident::model::{Structure, MAX_PARAMS};
 use hter::ident::recursive;
 use hter::ident::rls::RlsConfig;
-use hter::ident::validate::{self, Complex};
+use hter::ident::validate::{self, Complex, OrderCandidate};
 use nalgebra::SVector;
 use serde::Serialize;
 
 use crate::{log, plot};
+
+/// Residual autocorrelation lags reported.
+const LAGS: usize = 20;
+
+/// A pole counts as real positive when its angle is below this, rad: its oscillation period
+/// would exceed 2π/1e-3 ≈ 6000 samples. Repeated real poles come out of the quadratic formula
+/// with a tiny imaginary part (√ of a rounding error), which must not hide their time constant.
+const REAL_ANGLE_RAD: f64 = 1e-3;
+
+/// True for a pole that behaves as a real one in (0, 1): a first-order lag.
+fn is_real_lag(p: &Complex) -> bool {
+    p.0 > 0.0 && is_real(p) && validate::abs(*p) < 1.0
+}
 
 /// Estimation method.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
@@ -34,10 +80,22 @@ pub enum Method {
     Rels,
 }
 
+/// Where the deviation variables are taken from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum OperatingPointChoice {
+    /// `initial` if the log starts at rest, else `mean`.
+    Auto,
+    /// u(0) and the mean of y while the duty keeps its initial value (the log starts at rest).
+    Initial,
+    /// The means of y and u over the record.
+    Mean,
+}
+
 /// Arguments of `hter identify`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct IdentifyArgs {
-    /// CSV log with columns t_s, duty (input) and temp_c (output).
+    /// CSV log with a header row and columns t_s, duty (input) and temp_c (output), any order.
     #[arg(long)]
     pub input: PathBuf,
     /// Order of A (1–4).
@@ -58,12 +116,13 @@ pub struct IdentifyArgs {
     /// Forgetting factor λ_f of rls/rels, in (0, 1].
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     pub forgetting: f64,
-    /// First-order filter parameter F_a in [0, 1) applied to the temperature first.
+    /// First-order filter parameter F_a in [0, 1) applied to the output first.
     #[arg(long, allow_negative_numbers = true)]
     pub filter: Option<f64>,
-    /// Prefilter both temperature and duty with the same first-order low-pass (pole in [0, 1))
-    /// before fitting (Ljung 1999, §14.4): weights the equation-error fit toward the slow
+    /// Prefilter both duty and temperature with the same first-order low-pass (pole in [0, 1))
+    /// before estimating (Ljung 1999, §14.4): weights the equation-error fit toward the slow
     /// dynamics that matter for control, instead of the one-sample-ahead detail ARX favours.
+    /// Validation uses the unprefiltered data.
     #[arg(long, allow_negative_numbers = true)]
     pub prefilter: Option<f64>,
     /// Output column to identify from (e.g. raw_temp_c for the unfiltered reading of a
@@ -74,6 +133,13 @@ pub struct IdentifyArgs {
     /// the plant moves, where quantisation noise would dominate each step).
     #[arg(long, default_value_t = 1)]
     pub decimate: usize,
+    /// Operating point removed: initial (the log starts at rest), mean, or auto (initial when
+    /// the log starts at rest, else mean).
+    #[arg(long, value_enum, default_value = "auto")]
+    pub operating_point: OperatingPointChoice,
+    /// Report the order the 1/2/4 comparison chooses (na = nb) instead of --na/--nb.
+    #[arg(long)]
+    pub auto_order: bool,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -82,33 +148,43 @@ pub struct IdentifyArgs {
     pub plot: Option<PathBuf>,
 }
 
-/// A model fitted and validated.
+/// A model fitted and validated (physical units: °C, duty, s).
 #[derive(Clone, Debug, Serialize)]
 pub struct Fit {
-    /// a1 … a_na.
+    /// a1 … a_na (A without its leading 1).
     pub a: Vec<f64>,
-    /// b0 … b_{nb−1}.
+    /// b0 … b_{nb−1}, °C per unit duty.
     pub b: Vec<f64>,
-    /// c1 … c_nc.
+    /// c1 … c_nc (C without its leading 1).
     pub c: Vec<f64>,
     /// Delay, samples.
     pub nk: usize,
-    /// One-step-ahead mean squared prediction error, °C².
+    /// One-step-ahead mean squared prediction error, °C² (on the output the model was estimated
+    /// from: filtered if `--filter` was given).
     pub mse: f64,
     /// Simulated-output fit, %.
     pub fit_percent: f64,
-    /// Poles (re, im).
+    /// Poles (re, im): roots of z^na A(z⁻¹).
     pub poles: Vec<Complex>,
-    /// Zeros (re, im).
+    /// Zeros (re, im): roots of z^(nb−1) B(z⁻¹).
     pub zeros: Vec<Complex>,
     /// All poles strictly inside the unit circle.
     pub stable: bool,
     /// B(1)/A(1), °C per unit duty.
     pub static_gain_c_per_duty: f64,
-    /// −Ts/ln|p| for each pole with 0 < |p| < 1, s.
+    /// −Ts/ln |p| for each real pole 0 < p < 1, s (slowest first).
     pub time_constants_s: Vec<f64>,
-    /// Residual autocorrelation lags 1–20 outside ±1.96/√N.
+    /// −Ts/ln|p| of the pole of largest modulus < 1, s: the dominant time constant (the
+    /// envelope's for a complex pair).
+    pub dominant_time_constant_s: Option<f64>,
+    /// Normalised residual autocorrelation at lags 1–20.
+    pub residual_autocorrelation: Vec<f64>,
+    /// The ±1.96/√N band the autocorrelation is compared with.
+    pub whiteness_band: f64,
+    /// Lags outside the band.
     pub residual_lags_outside_band: usize,
+    /// Samples whose recursive update was refused.
+    pub skipped_updates: u32,
     #[serde(skip)]
     theta_history: Vec<(f64, Vec<f64>)>,
     #[serde(skip)]
@@ -126,35 +202,65 @@ pub struct OrderRow {
     pub mse: f64,
     /// Stable poles.
     pub stable: bool,
+    /// Dominant time constant −Ts/ln|p| of the slowest pole, s (envelope for a complex pair).
+    pub dominant_time_constant_s: Option<f64>,
+    /// Static gain, °C per unit duty.
+    pub static_gain_c_per_duty: f64,
+}
+
+/// The operating point removed.
+#[derive(Clone, Debug, Serialize)]
+pub struct OperatingPoint {
+    /// How it was taken (`initial` or `mean`; `auto` resolves to one of them).
+    pub kind: OperatingPointChoice,
+    /// Why, in words.
+    pub why: String,
+    /// Output there, °C.
+    pub temp_c: f64,
+    /// Input there, duty.
+    pub duty: f64,
+    /// Samples averaged for the output.
+    pub samples: usize,
 }
 
 /// The `--json` report.
 #[derive(Debug, Serialize)]
 pub struct Report {
-    /// The model asked for.
+    /// The reported model (contract fields `a, b, c, nk, mse, fit_percent` and extras).
     #[serde(flatten)]
     pub fit: Fit,
+    /// na of the reported model.
+    pub na: usize,
+    /// nb of the reported model.
+    pub nb: usize,
     /// Estimator.
     pub method: Method,
-    /// Sample period, s.
+    /// Forgetting factor used by rls/rels.
+    pub forgetting: f64,
+    /// Sample period after decimation, s.
     pub ts_s: f64,
+    /// Dead time nk·Ts, s.
+    pub dead_time_s: f64,
     /// Samples used.
     pub rows: usize,
-    /// Operating point removed: mean temperature, °C.
-    pub mean_temp_c: f64,
-    /// Operating point removed: mean duty.
-    pub mean_duty: f64,
-    /// Filter parameter applied, if any.
+    /// Decimation factor applied.
+    pub decimate: usize,
+    /// Filter parameter applied to the output, if any.
     pub filter: Option<f64>,
-    /// 1st/2nd/4th order fits with the same method and delay.
+    /// Prefilter pole applied to both signals for the estimation, if any.
+    pub prefilter: Option<f64>,
+    /// Deviation variables are taken from here.
+    pub operating_point: OperatingPoint,
+    /// 1st/2nd/4th order fits with the same method, nc and delay.
     pub order_comparison: Vec<OrderRow>,
-    /// Order the comparison recommends.
+    /// Order the comparison recommends (0 if none is stable).
     pub chosen_order: usize,
     /// Why.
     pub reason: String,
 }
 
 /// The data after pre-processing.
+#[derive(Clone, Debug)]
 pub struct Data {
     /// Sample period, s.
     pub ts_s: f64,
@@ -164,65 +270,207 @@ pub struct Data {
     pub y: Vec<f64>,
     /// Input deviation, duty.
     pub u: Vec<f64>,
-    /// Means removed.
-    pub mean_y: f64,
-    /// Means removed.
-    pub mean_u: f64,
+    /// Output deviation prefiltered for the estimation (= `y` without `--prefilter`).
+    pub y_est: Vec<f64>,
+    /// Input deviation prefiltered for the estimation (= `u` without `--prefilter`).
+    pub u_est: Vec<f64>,
+    /// Operating point removed.
+    pub op: OperatingPoint,
 }
 
-/// Reads and pre-processes a log.
-pub fn load(path: &Path, y_column: &str, filter: Option<f64>, prefilter: Option<f64>, decimate: usize) -> Result<Data> {
-    let cols = log::read_columns(path, &["t_s", "duty", y_column])?;
-    log::check_increasing(path, &cols[0])?;
-    if decimate == 0 {
-        bail!("--decimate must be at least 1");
+/// Checks that the times increase with a uniform period; returns the period (median interval).
+fn check_time_axis(path: &Path, t: &[f64]) -> Result<f64> {
+    log::check_increasing(path, t)?;
+    if t.len() < 2 {
+        bail!("'{}' has {} data rows; identification needs many more", path.display(), t.len());
     }
-    let avg =
-        |v: &[f64]| -> Vec<f64> { v.chunks_exact(decimate).map(|c| c.iter().sum::<f64>() / decimate as f64).collect() };
-    let first = |v: &[f64]| -> Vec<f64> { v.chunks_exact(decimate).map(|c| c[0]).collect() };
-    let (t, u, mut y) = (first(&cols[0]), avg(&cols[1]), avg(&cols[2]));
-    if t.len() < 3 {
-        bail!("'{}' has {} rows; identification needs many more", path.display(), t.len());
-    }
-    // The median interval is the sample period; the first interval off by > 5 % is named.
     let mut dts: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
     dts.sort_by(f64::total_cmp);
     let ts = dts[dts.len() / 2];
     if let Some(i) = t.windows(2).position(|w| ((w[1] - w[0]) - ts).abs() > 0.05 * ts) {
+        // Interval from data row i to row i + 1; data row k is on line k + 2.
         bail!(
-            "'{}' line {}: sample interval {} s differs from the period {} s by more than 5 % (resample the log first)",
+            "'{}' line {}: t_s steps by {} s but the sample period is {} s; identification needs a uniform period (resample the log first)",
             path.display(),
-            (i + 1) * decimate + 2,
+            i + 3,
             t[i + 1] - t[i],
             ts
         );
     }
-    let first_order = |name: &str, fa: f64, x: &mut [f64]| -> Result<()> {
-        let cfg = FirstOrderConfig::new(fa as f32).ok_or_else(|| anyhow!("--{name} must be in [0, 1), got {fa}"))?;
-        let mut f = FirstOrder::default();
-        for v in x.iter_mut() {
-            *v = f64::from(f.step(&cfg, *v as f32));
-        }
-        Ok(())
+    Ok(ts)
+}
+
+/// Largest output drift during the initial constant-duty segment for the log to count as
+/// starting at rest, as a fraction of the record's output range. The real heater logs drift
+/// 0 % and 0.7 % (quantisation), a log that starts with the excitation already on ≈ 35 %.
+const REST_DRIFT_FRACTION: f64 = 0.05;
+
+/// The operating point of `y`, `u` (before removal).
+fn operating_point(kind: OperatingPointChoice, y: &[f64], u: &[f64]) -> OperatingPoint {
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    // The initial segment: the duty keeps its first value (at most 10 % of the record).
+    let u0 = u.first().copied().unwrap_or(0.0);
+    let rest = u.iter().take_while(|v| **v == u0).count();
+    let samples = rest.min(y.len() / 10).max(1).min(y.len());
+    let seg = &y[..samples];
+    let third = (samples / 3).max(1);
+    let drift = (mean(&seg[samples - third..]) - mean(&seg[..third])).abs();
+    let range = y.iter().copied().fold(f64::NEG_INFINITY, f64::max) - y.iter().copied().fold(f64::INFINITY, f64::min);
+    let at_rest = samples >= 5 && drift <= REST_DRIFT_FRACTION * range;
+    let initial =
+        |why: String| OperatingPoint { kind: OperatingPointChoice::Initial, why, temp_c: mean(seg), duty: u0, samples };
+    let means = |why: String| OperatingPoint {
+        kind: OperatingPointChoice::Mean,
+        why,
+        temp_c: mean(y),
+        duty: mean(u),
+        samples: y.len(),
     };
-    if let Some(fa) = filter {
-        first_order("filter", fa, &mut y)?;
+    let rest_note = format!(
+        "the output drifts {drift:.3} °C over the first {samples} samples at constant duty, {:.1} % of its range",
+        100.0 * drift / range.max(f64::MIN_POSITIVE)
+    );
+    match kind {
+        OperatingPointChoice::Initial => initial(format!("asked for; {rest_note}")),
+        OperatingPointChoice::Mean => means("asked for".into()),
+        OperatingPointChoice::Auto if at_rest => initial(format!("the log starts at rest: {rest_note}")),
+        OperatingPointChoice::Auto => means(format!("the log does not start at rest: {rest_note}")),
     }
-    let mut u = u;
-    if let Some(fa) = prefilter {
-        first_order("prefilter", fa, &mut y)?;
-        first_order("prefilter", fa, &mut u)?;
-    }
-    let mean_y = y.iter().sum::<f64>() / y.len() as f64;
-    let mean_u = u.iter().sum::<f64>() / u.len() as f64;
-    Ok(Data {
-        ts_s: ts,
-        t,
-        y: y.iter().map(|v| v - mean_y).collect(),
-        u: u.iter().map(|v| v - mean_u).collect(),
-        mean_y,
-        mean_u,
+}
+
+/// A first-order filter configuration from a command-line value, or a one-line error naming
+/// the flag.
+fn first_order_cfg(flag: &str, fa: Option<f64>) -> Result<Option<FirstOrderConfig>> {
+    fa.map(|fa| {
+        FirstOrderConfig::new(fa as f32)
+            .filter(|_| fa.is_finite())
+            .ok_or_else(|| anyhow!("--{flag} must be in [0, 1), got {fa}"))
     })
+    .transpose()
+}
+
+/// `x` through the first-order filter (initialised at the first sample).
+fn first_order(cfg: &FirstOrderConfig, x: &[f64]) -> Vec<f64> {
+    let mut f = FirstOrder::default();
+    x.iter().map(|v| f64::from(f.step(cfg, *v as f32))).collect()
+}
+
+/// Reads and pre-processes a log (steps 1–5 of the module docs).
+pub fn load(
+    path: &Path,
+    y_column: &str,
+    filter: Option<f64>,
+    prefilter: Option<f64>,
+    decimate: usize,
+    op: OperatingPointChoice,
+) -> Result<Data> {
+    if decimate == 0 {
+        bail!("--decimate must be at least 1");
+    }
+    let filter_cfg = first_order_cfg("filter", filter)?;
+    let prefilter_cfg = first_order_cfg("prefilter", prefilter)?;
+    let cols = log::read_columns(path, &["t_s", "duty", y_column])?;
+    let ts_raw = check_time_axis(path, &cols[0])?;
+    let avg =
+        |v: &[f64]| -> Vec<f64> { v.chunks_exact(decimate).map(|c| c.iter().sum::<f64>() / decimate as f64).collect() };
+    // The operating point is a level: found on the raw samples (where the initial rest is
+    // longest), then removed from the decimated and filtered ones.
+    let op = operating_point(op, &cols[2], &cols[1]);
+    let t: Vec<f64> = cols[0].chunks_exact(decimate).map(|c| c[0]).collect();
+    let (u, y) = (avg(&cols[1]), avg(&cols[2]));
+    if y.is_empty() {
+        bail!("'{}' has {} data rows, fewer than --decimate {decimate}", path.display(), cols[0].len());
+    }
+    let y = match &filter_cfg {
+        Some(cfg) => first_order(cfg, &y),
+        None => y,
+    };
+    let y: Vec<f64> = y.iter().map(|v| v - op.temp_c).collect();
+    let u: Vec<f64> = u.iter().map(|v| v - op.duty).collect();
+    let (y_est, u_est) = match &prefilter_cfg {
+        Some(cfg) => (first_order(cfg, &y), first_order(cfg, &u)),
+        None => (y.clone(), u.clone()),
+    };
+    Ok(Data { ts_s: ts_raw * decimate as f64, t, y, u, y_est, u_est, op })
+}
+
+/// Largest magnitude of `v`, or 1 if it is zero (a scale factor for the f32 estimator).
+fn scale_of(v: &[f64]) -> f64 {
+    let m = v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    if m > 0.0 && m.is_finite() {
+        m
+    } else {
+        1.0
+    }
+}
+
+/// θ in physical units from θ estimated on ỹ/ys, ũ/us: b · ys/us, a and c unchanged.
+fn unscale(s: &Structure, th: &[f64], ys: f64, us: f64) -> Vec<f64> {
+    th.iter().enumerate().map(|(i, v)| if i >= s.na && i < s.na + s.nb { v * ys / us } else { *v }).collect()
+}
+
+/// An estimate in physical units.
+struct Estimate {
+    /// θ = [a, b, c].
+    theta: Vec<f64>,
+    /// (time in s, θ) every few samples, for the recursive methods.
+    history: Vec<(f64, Vec<f64>)>,
+    /// Recursive updates refused.
+    skipped: u32,
+}
+
+/// Estimates θ = [a, b, c] and, for the recursive methods, its history and the refused count.
+fn estimate(d: &Data, s: &Structure, method: Method, forgetting: f64) -> Result<Estimate> {
+    let n = s.n_params();
+    if method == Method::Ls {
+        if s.nc > 0 {
+            bail!("method ls fits ARX only: use --method rels for nc > 0");
+        }
+        let mut ls = BatchLs::new(n).map_err(|e| anyhow!("batch least squares: {e:?}"))?;
+        let mut phi = [0.0f64; MAX_PARAMS];
+        for t in s.first_index()..d.y_est.len() {
+            if s.regressor(&d.y_est, &d.u_est, &[], t, &mut phi) {
+                ls.add(&phi[..n], d.y_est[t]).map_err(|e| anyhow!("batch least squares: {e:?}"))?;
+            }
+        }
+        let mut th = vec![0.0; n];
+        ls.solve(&mut th).map_err(|_| {
+            anyhow!("the data do not excite the model enough to identify it (singular normal equations): the duty must change during the record")
+        })?;
+        return Ok(Estimate { theta: th, history: Vec::new(), skipped: 0 });
+    }
+    // Signals are scaled to |x| ≤ 1, so P(0) = 1e6·I is a prior worth 1e-6 of one sample: RLS
+    // with λ_f = 1 then ends within rounding of batch LS. The trace bound only acts with λ_f < 1.
+    let cfg = RlsConfig { forgetting: forgetting as f32, p0: 1e6, trace_max: 1e8 };
+    let (ys, us) = (scale_of(&d.y_est), scale_of(&d.u_est));
+    let yf: Vec<f32> = d.y_est.iter().map(|&v| (v / ys) as f32).collect();
+    let uf: Vec<f32> = d.u_est.iter().map(|&v| (v / us) as f32).collect();
+    let every = (d.y.len() / 400).max(1);
+    let (ts, t0) = (d.ts_s, d.t[0]);
+    let mut history = Vec::new();
+    let mut record = |t: usize, th: &[f32]| {
+        if t.is_multiple_of(every) {
+            let th: Vec<f64> = th.iter().map(|&v| f64::from(v)).collect();
+            history.push((t0 + t as f64 * ts, unscale(s, &th, ys, us)));
+        }
+    };
+    macro_rules! run_n {
+        ($($k:literal),*) => {
+            match n {
+                $($k => {
+                    let (r, skipped) = recursive::run::<$k>(s, &cfg, SVector::zeros(), &yf, &uf, |t, th, _| {
+                        record(t, th.as_slice())
+                    })
+                    .map_err(|e| anyhow!("estimator failed: {e:?}"))?;
+                    let th: Vec<f64> = r.theta().iter().map(|&v| f64::from(v)).collect();
+                    (th, skipped)
+                })*
+                _ => bail!("unsupported number of parameters {n}"),
+            }
+        };
+    }
+    let (th, skipped) = run_n!(2, 3, 4, 5, 6, 7, 8, 9, 10);
+    Ok(Estimate { theta: unscale(s, &th, ys, us), history, skipped })
 }
 
 /// Fits and validates one structure.
@@ -239,51 +487,7 @@ pub fn fit(d: &Data, s: &Structure, method: Method, forgetting: f64) -> Result<F
             s.nk
         );
     }
-    let mut history = Vec::new();
-    let theta: Vec<f64> = match method {
-        Method::Ls => {
-            if s.nc > 0 {
-                bail!("method ls fits ARX only: use --method rels for nc > 0");
-            }
-            let mut ls = BatchLs::new(n).map_err(|e| anyhow!("{e:?}"))?;
-            let mut phi = [0.0f64; 12];
-            for t in s.first_index()..d.y.len() {
-                if s.regressor(&d.y, &d.u, &[], t, &mut phi) {
-                    ls.add(&phi[..n], d.y[t]).map_err(|e| anyhow!("{e:?}"))?;
-                }
-            }
-            let mut th = vec![0.0; n];
-            ls.solve(&mut th).map_err(|_| {
-                anyhow!("the data do not excite the model enough to identify it (singular normal equations)")
-            })?;
-            th
-        }
-        Method::Rls | Method::Rels => {
-            let cfg = RlsConfig { forgetting: forgetting as f32, p0: 1e4, trace_max: 1e6 };
-            let yf: Vec<f32> = d.y.iter().map(|&v| v as f32).collect();
-            let uf: Vec<f32> = d.u.iter().map(|&v| v as f32).collect();
-            let every = (d.y.len() / 400).max(1);
-            let ts = d.ts_s;
-            let t0 = d.t[0];
-            macro_rules! run_n {
-                ($($k:literal),*) => {
-                    match n {
-                        $($k => {
-                            let (r, _) = recursive::run::<$k>(s, &cfg, SVector::zeros(), &yf, &uf, |t, th, _| {
-                                if t % every == 0 {
-                                    history.push((t0 + t as f64 * ts, th.iter().map(|&v| f64::from(v)).collect()));
-                                }
-                            })
-                            .map_err(|e| anyhow!("estimator failed: {e:?}"))?;
-                            r.theta().iter().map(|&v| f64::from(v)).collect()
-                        })*
-                        _ => bail!("unsupported number of parameters {n}"),
-                    }
-                };
-            }
-            run_n!(2, 3, 4, 5, 6, 7, 8, 9, 10)
-        }
-    };
+    let Estimate { theta, history: theta_history, skipped: skipped_updates } = estimate(d, s, method, forgetting)?;
     if theta.iter().any(|v| !v.is_finite()) {
         bail!("the estimate is not finite: the data may be constant or corrupt");
     }
@@ -305,14 +509,16 @@ pub fn fit(d: &Data, s: &Structure, method: Method, forgetting: f64) -> Result<F
         vec![]
     };
     let stable = poles.iter().all(|p| validate::abs(*p) < 1.0);
-    let a1 = 1.0 + a.iter().sum::<f64>();
-    let static_gain = b.iter().sum::<f64>() / a1;
-    let time_constants_s =
-        poles.iter().map(|p| validate::abs(*p)).filter(|m| *m > 0.0 && *m < 1.0).map(|m| -d.ts_s / m.ln()).collect();
+    let static_gain = b.iter().sum::<f64>() / (1.0 + a.iter().sum::<f64>());
+    let mut time_constants_s: Vec<f64> =
+        poles.iter().filter(|p| is_real_lag(p)).map(|p| -d.ts_s / validate::abs(*p).ln()).collect();
+    time_constants_s.sort_by(|x, y| y.total_cmp(x));
+    let slowest = poles.iter().map(|p| validate::abs(*p)).fold(0.0f64, f64::max);
+    let dominant_time_constant_s = (slowest > 0.0 && slowest < 1.0).then(|| -d.ts_s / slowest.ln());
     let resid = &eps[s.first_index()..];
-    let mut ac = [0.0; 20];
+    let mut ac = [0.0; LAGS];
     validate::autocorrelation(resid, &mut ac);
-    let band = 1.96 / (resid.len() as f64).sqrt();
+    let band = validate::whiteness_band(resid.len());
     Ok(Fit {
         a,
         b,
@@ -325,64 +531,72 @@ pub fn fit(d: &Data, s: &Structure, method: Method, forgetting: f64) -> Result<F
         stable,
         static_gain_c_per_duty: static_gain,
         time_constants_s,
+        dominant_time_constant_s,
         residual_lags_outside_band: ac.iter().filter(|v| v.abs() > band).count(),
-        theta_history: history,
+        residual_autocorrelation: ac.to_vec(),
+        whiteness_band: band,
+        skipped_updates,
+        theta_history,
         ysim,
     })
 }
 
-/// Compares orders 1, 2, 4 (na = nb) and picks the lowest stable one within 3 fit points of
-/// the best: extra parameters that do not buy simulation accuracy only add variance (and
-/// controller cost on the MCU).
+/// Compares orders 1, 2, 4 (na = nb, same nc and nk) and picks one with
+/// [`validate::choose_order`]. Returns the rows, the chosen order (0 if none) and the reason.
 pub fn compare(d: &Data, nk: usize, nc: usize, method: Method, forgetting: f64) -> (Vec<OrderRow>, usize, String) {
     let mut rows = Vec::new();
+    let mut failed = Vec::new();
     for order in [1usize, 2, 4] {
-        let Ok(s) = Structure::new(order, order, nc, nk) else {
-            continue;
-        };
-        if let Ok(f) = fit(d, &s, method, forgetting) {
-            rows.push(OrderRow { order, fit_percent: f.fit_percent, mse: f.mse, stable: f.stable });
+        let fitted = Structure::new(order, order, nc, nk)
+            .map_err(|_| anyhow!("unsupported"))
+            .and_then(|s| fit(d, &s, method, forgetting));
+        match fitted {
+            Ok(f) => rows.push(OrderRow {
+                order,
+                fit_percent: f.fit_percent,
+                mse: f.mse,
+                stable: f.stable,
+                dominant_time_constant_s: f.dominant_time_constant_s,
+                static_gain_c_per_duty: f.static_gain_c_per_duty,
+            }),
+            Err(e) => failed.push(format!("order {order} could not be fitted ({e})")),
         }
     }
-    let best = rows
+    let candidates: Vec<OrderCandidate> =
+        rows.iter().map(|r| OrderCandidate { order: r.order, fit_percent: r.fit_percent, stable: r.stable }).collect();
+    let tol = validate::ORDER_TOLERANCE_POINTS;
+    let Some(i) = validate::choose_order(&candidates, tol) else {
+        failed.insert(0, "no order gave a stable model with a finite fit".into());
+        return (rows, 0, failed.join("; "));
+    };
+    let chosen = &rows[i];
+    let best = candidates
         .iter()
-        .filter(|r| r.stable && r.fit_percent.is_finite())
-        .map(|r| r.fit_percent)
+        .filter(|c| c.stable && c.fit_percent.is_finite())
+        .map(|c| c.fit_percent)
         .fold(f64::NEG_INFINITY, f64::max);
-    let chosen = rows.iter().find(|r| r.stable && r.fit_percent >= best - 3.0);
-    match chosen {
-        Some(c) => {
-            let higher: Vec<String> = rows
-                .iter()
-                .filter(|r| r.order > c.order)
-                .map(|r| {
-                    format!(
-                        "order {} fits {:.1} %{}",
-                        r.order,
-                        r.fit_percent,
-                        if r.stable { "" } else { " (unstable)" }
-                    )
-                })
-                .collect();
-            let lower: Vec<String> = rows
-                .iter()
-                .filter(|r| r.order < c.order)
-                .map(|r| format!("order {} only {:.1} %", r.order, r.fit_percent))
-                .collect();
-            let mut reason = format!("order {} fits {:.1} % (best {:.1} %)", c.order, c.fit_percent, best);
-            if !higher.is_empty() {
-                reason += &format!(
-                    "; {} — no more than 3 points better, so the extra parameters are not worth it",
-                    higher.join(", ")
-                );
-            }
-            if !lower.is_empty() {
-                reason += &format!("; {} — too simple", lower.join(", "));
-            }
-            (rows.clone(), c.order, reason)
-        }
-        None => (rows, 0, "no order gave a stable model".into()),
+    let mut why = vec![format!(
+        "order {} is the lowest stable order whose simulated fit ({:.1} %) is within {tol} points of the best stable fit ({best:.1} %)",
+        chosen.order, chosen.fit_percent
+    )];
+    for r in rows.iter().filter(|r| r.order != chosen.order) {
+        let note = if !r.stable {
+            "unstable".to_string()
+        } else if r.order < chosen.order {
+            format!("more than {tol} points below the best")
+        } else if r.fit_percent > chosen.fit_percent {
+            format!(
+                "only {:.1} points better: the extra parameters are not worth it",
+                r.fit_percent - chosen.fit_percent
+            )
+        } else {
+            "no better".to_string()
+        };
+        why.push(format!("order {}: {:.1} % ({note})", r.order, r.fit_percent));
     }
+    why.extend(failed);
+    let order = chosen.order;
+    (rows, order, why.join("; "))
 }
 
 /// `hter identify`.
@@ -403,26 +617,37 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
     if args.method != Method::Rels && nc > 0 {
         bail!("nc > 0 (ARMAX) needs --method rels");
     }
-    let d = load(&args.input, &args.y_column, args.filter, args.prefilter, args.decimate)?;
-    let f = fit(&d, &s, args.method, args.forgetting)?;
+    let d = load(&args.input, &args.y_column, args.filter, args.prefilter, args.decimate, args.operating_point)?;
     let (order_comparison, chosen_order, reason) = compare(&d, s.nk, nc, args.method, args.forgetting);
+    let s = if args.auto_order && chosen_order > 0 {
+        Structure::new(chosen_order, chosen_order, nc, s.nk).unwrap_or(s)
+    } else {
+        s
+    };
+    let f = fit(&d, &s, args.method, args.forgetting)?;
     if let Some(p) = &args.plot {
-        plot_fit(p, &d, &f)?;
+        plot_fit(p, &d, &s, &f)?;
     }
     let report = Report {
         fit: f,
+        na: s.na,
+        nb: s.nb,
         method: args.method,
+        forgetting: args.forgetting,
         ts_s: d.ts_s,
+        dead_time_s: s.nk as f64 * d.ts_s,
         rows: d.y.len(),
-        mean_temp_c: d.mean_y,
-        mean_duty: d.mean_u,
+        decimate: args.decimate,
         filter: args.filter,
+        prefilter: args.prefilter,
+        operating_point: d.op,
         order_comparison,
         chosen_order,
         reason,
     };
     if args.json {
-        println!("{}", serde_json::to_string(&report)?);
+        use std::io::Write;
+        let _ = writeln!(std::io::stdout(), "{}", serde_json::to_string(&report)?);
     } else {
         print_report(args, &s, &report);
     }
@@ -438,106 +663,205 @@ fn poly(name: &str, lead: Option<f64>, c: &[f64]) -> String {
     }
     for (i, v) in c.iter().enumerate() {
         let k = if lead.is_some() { i + 1 } else { i };
-        let sign = if *v < 0.0 {
-            "−"
-        } else if first {
-            ""
-        } else {
-            "+"
+        let sign = match (*v < 0.0, first) {
+            (true, _) => "−",
+            (false, true) => "",
+            (false, false) => "+",
         };
-        let term = if k == 0 { format!("{:.6}", v.abs()) } else { format!("{:.6} q⁻{}", v.abs(), k) };
+        let term = if k == 0 { format!("{:.6}", v.abs()) } else { format!("{:.6} q^-{k}", v.abs()) };
         s += &if first { format!("{sign}{term}") } else { format!(" {sign} {term}") };
         first = false;
     }
     s
 }
 
+/// 4 significant digits, in scientific notation only for small values.
+fn fmt_small(v: f64) -> String {
+    if v.abs() >= 0.01 || v == 0.0 {
+        format!("{v:.4}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+/// True if `p` is real up to rounding (see [`REAL_ANGLE_RAD`]).
+fn is_real(p: &Complex) -> bool {
+    p.1.abs() <= REAL_ANGLE_RAD * validate::abs(*p)
+}
+
+/// `re` for a real number, `re±im i` otherwise.
+fn fmt_complex(p: &Complex) -> String {
+    if is_real(p) {
+        format!("{:.5}", p.0)
+    } else {
+        format!("{:.5}{:+.5}i", p.0, p.1)
+    }
+}
+
+fn describe_pole(p: &Complex, ts: f64) -> String {
+    let m = validate::abs(*p);
+    let kind = if m >= 1.0 {
+        "on or outside the unit circle".to_string()
+    } else if is_real_lag(p) {
+        format!("τ = {:.1} s", -ts / m.ln())
+    } else if is_real(p) {
+        "real ≤ 0: alternating, no physical time constant".to_string()
+    } else {
+        format!("complex, envelope τ = {:.1} s", -ts / m.ln())
+    };
+    format!("{} (|p| = {m:.5}, {kind})", fmt_complex(p))
+}
+
 fn print_report(args: &IdentifyArgs, s: &Structure, r: &Report) {
+    let mut out = String::new();
+    // One write at the end: a closed pipe (`| head`) is not worth a panic.
+    macro_rules! line {
+        ($($arg:tt)*) => {{
+            out.push_str(&format!($($arg)*));
+            out.push('\n');
+        }};
+    }
     let f = &r.fit;
-    println!("identification of {} ({} samples, Ts = {:.3} s)", args.input.display(), r.rows, r.ts_s);
-    println!(
-        "  operating point removed: {:.3} °C, duty {:.3}{}",
-        r.mean_temp_c,
-        r.mean_duty,
-        r.filter.map(|fa| format!("; filtered with F_a = {fa}")).unwrap_or_default()
+    line!(
+        "identification of {} ({} samples, Ts = {} s{})",
+        args.input.display(),
+        r.rows,
+        r.ts_s,
+        if r.decimate > 1 { format!(", {} raw samples averaged per sample", r.decimate) } else { String::new() }
+    );
+    let op = &r.operating_point;
+    let how = match op.kind {
+        OperatingPointChoice::Initial => format!("initial rest, mean of {} samples", op.samples),
+        _ => "record means".to_string(),
+    };
+    line!(
+        "  operating point removed: {:.3} °C at duty {:.3} ({how}){}\n    because {}",
+        op.temp_c,
+        op.duty,
+        r.filter.map(|fa| format!("; output filtered with F_a = {fa}")).unwrap_or_default()
+            + &r.prefilter
+                .map(|l| format!("; u and y prefiltered with pole {l} for the estimation"))
+                .unwrap_or_default(),
+        op.why
     );
     let kind = if s.nc > 0 { "ARMAX" } else { "ARX" };
-    println!(
-        "  {kind}(na={}, nb={}, nc={}, nk={}) by {:?}, λ_f = {}",
-        s.na, s.nb, s.nc, s.nk, r.method, args.forgetting
+    let method = match r.method {
+        Method::Ls => "batch least squares (f64)".to_string(),
+        Method::Rls => format!("f32 RLS, λ_f = {}", r.forgetting),
+        Method::Rels => format!("f32 RELS, λ_f = {}", r.forgetting),
+    };
+    line!(
+        "  model {kind}(na={}, nb={}, nc={}, nk={}) by {method}{}",
+        s.na,
+        s.nb,
+        s.nc,
+        s.nk,
+        if args.auto_order { " (order chosen by the comparison)" } else { "" }
     );
-    println!("  {}", poly("A", Some(1.0), &f.a));
-    println!("  {}   (delay q⁻{})", poly("B", None, &f.b), f.nk);
+    line!("    {}", poly("A", Some(1.0), &f.a));
+    line!("    {}   (delay nk = {} × Ts = {} s)", poly("B", None, &f.b), f.nk, r.dead_time_s);
     if !f.c.is_empty() {
-        println!("  {}", poly("C", Some(1.0), &f.c));
+        line!("    {}", poly("C", Some(1.0), &f.c));
     }
-    println!("  one-step MSE        {:.3e} °C²", f.mse);
-    println!("  simulated fit       {:.1} %", f.fit_percent);
-    println!("  static gain         {:.3} °C per unit duty", f.static_gain_c_per_duty);
-    let p: Vec<String> = f
-        .poles
-        .iter()
-        .map(|(re, im)| format!("{re:.5}{:+.5}i (|p| = {:.5})", im, (re * re + im * im).sqrt()))
-        .collect();
-    println!("  poles               {}  → {}", p.join(", "), if f.stable { "stable" } else { "UNSTABLE" });
-    let z: Vec<String> = f.zeros.iter().map(|(re, im)| format!("{re:.4}{im:+.4}i")).collect();
-    if !z.is_empty() {
-        println!("  zeros               {}", z.join(", "));
+    if f.skipped_updates > 0 {
+        line!("    ({} recursive updates refused on non-finite data)", f.skipped_updates);
     }
-    let tc: Vec<String> = f.time_constants_s.iter().map(|t| format!("{t:.0} s")).collect();
-    println!("  time constants      {}", tc.join(", "));
-    println!("  residual whiteness  {} of 20 autocorrelation lags outside the 95 % band", f.residual_lags_outside_band);
-    println!("  order comparison (na = nb, same method and delay):");
+    line!("  one-step MSE        {} °C²", fmt_small(f.mse));
+    line!("  simulated fit       {:.1} %", f.fit_percent);
+    line!("  static gain         {:.3} °C per unit duty", f.static_gain_c_per_duty);
+    line!(
+        "  stability           {}",
+        if f.stable {
+            "stable (all poles inside the unit circle)"
+        } else {
+            "UNSTABLE (a pole on or outside the unit circle)"
+        }
+    );
+    for p in &f.poles {
+        line!("  pole                {}", describe_pole(p, r.ts_s));
+    }
+    for z in &f.zeros {
+        line!(
+            "  zero                {}{}",
+            fmt_complex(z),
+            if validate::abs(*z) > 1.0 { " (outside the unit circle)" } else { "" }
+        );
+    }
+    let tc: Vec<String> = f.time_constants_s.iter().map(|t| format!("{t:.1} s")).collect();
+    line!(
+        "  time constants      {}",
+        if tc.is_empty() { "none (no real pole in (0, 1))".to_string() } else { tc.join(", ") }
+    );
+    line!(
+        "  residual whiteness  {} of {LAGS} autocorrelation lags outside ±{:.3} (95 % band){}",
+        f.residual_lags_outside_band,
+        f.whiteness_band,
+        // Of 20 lags of white noise, 1 is expected outside the 95 % band and 3 or more happen
+        // with probability 7.5 %.
+        if f.residual_lags_outside_band <= 2 {
+            ": consistent with white noise"
+        } else {
+            ": not white, the noise is coloured or the model misses dynamics"
+        }
+    );
+    line!("  order comparison (na = nb, same method, nc and delay):");
     for o in &r.order_comparison {
-        println!(
-            "    order {}: fit {:6.1} %, MSE {:.3e} °C², {}",
+        line!(
+            "    order {}: fit {:6.1} %, MSE {} °C², gain {:8.3} °C/duty, dominant τ {}, {}",
             o.order,
             o.fit_percent,
-            o.mse,
+            fmt_small(o.mse),
+            o.static_gain_c_per_duty,
+            o.dominant_time_constant_s.map(|t| format!("{t:.1} s")).unwrap_or_else(|| "–".into()),
             if o.stable { "stable" } else { "unstable" }
         );
     }
-    println!("  chosen order: {} — {}", r.chosen_order, r.reason);
+    line!("  chosen order: {} — {}", r.chosen_order, r.reason);
+    use std::io::Write;
+    let _ = std::io::stdout().write_all(out.as_bytes());
 }
 
-fn plot_fit(path: &Path, d: &Data, f: &Fit) -> Result<()> {
+fn plot_fit(path: &Path, d: &Data, s: &Structure, f: &Fit) -> Result<()> {
+    let minutes = |t: f64| t / 60.0;
     let mut panels = Vec::new();
     if !f.theta_history.is_empty() {
-        let n = f.theta_history[0].1.len();
-        let names: Vec<String> = (0..n)
-            .map(|i| {
-                if i < f.a.len() {
-                    format!("a{}", i + 1)
-                } else if i < f.a.len() + f.b.len() {
-                    format!("b{}", i - f.a.len())
-                } else {
-                    format!("c{}", i - f.a.len() - f.b.len() + 1)
-                }
-            })
-            .collect();
-        panels.push(plot::Panel {
-            title: "Parameter convergence (recursive estimate)".into(),
-            y_label: "θ".into(),
-            series: (0..n)
+        let series = |range: std::ops::Range<usize>, name: &dyn Fn(usize) -> String| -> Vec<plot::Series> {
+            range
                 .map(|i| plot::Series {
-                    name: names[i].clone(),
-                    points: f.theta_history.iter().map(|(t, th)| (*t / 60.0, th[i])).collect(),
+                    name: name(i),
+                    points: f.theta_history.iter().filter_map(|(t, th)| th.get(i).map(|v| (minutes(*t), *v))).collect(),
                 })
+                .collect()
+        };
+        let (na, nb) = (s.na, s.nb);
+        panels.push(plot::Panel {
+            title: "Parameter convergence: A and C (recursive estimate)".into(),
+            y_label: "a, c".into(),
+            series: series(0..na, &|i| format!("a{}", i + 1))
+                .into_iter()
+                .chain(series(na + nb..s.n_params(), &|i| format!("c{}", i - na - nb + 1)))
                 .collect(),
             y_range: None,
         });
+        panels.push(plot::Panel {
+            title: "Parameter convergence: B".into(),
+            y_label: "b (°C/duty)".into(),
+            series: series(na..na + nb, &|i| format!("b{}", i - na)),
+            y_range: None,
+        });
     }
+    let y0 = d.op.temp_c;
     panels.push(plot::Panel {
         title: format!("Measured vs simulated output (fit {:.1} %)", f.fit_percent),
         y_label: "°C".into(),
         series: vec![
             plot::Series {
                 name: "measured".into(),
-                points: d.t.iter().zip(&d.y).map(|(t, y)| (t / 60.0, y + d.mean_y)).collect(),
+                points: d.t.iter().zip(&d.y).map(|(t, y)| (minutes(*t), y + y0)).collect(),
             },
             plot::Series {
-                name: "simulated".into(),
-                points: d.t.iter().zip(&f.ysim).map(|(t, y)| (t / 60.0, y + d.mean_y)).collect(),
+                name: "simulated from the input".into(),
+                points: d.t.iter().zip(&f.ysim).map(|(t, y)| (minutes(*t), y + y0)).collect(),
             },
         ],
         y_range: None,
@@ -568,42 +892,206 @@ mod tests {
             prefilter: None,
             y_column: "temp_c".into(),
             decimate: 1,
+            operating_point: OperatingPointChoice::Initial,
+            auto_order: false,
             json: true,
             plot: None,
         }
     }
 
+    fn err(a: &IdentifyArgs) -> String {
+        let e = run(a).unwrap_err().to_string();
+        assert!(!e.contains('\n'), "not one line: {e}");
+        e
+    }
+
+    /// A log of y(t) = 1.8 y(t−1) − 0.81 y(t−2) + 2 u(t−1) + u(t−2) around 25 °C and duty 0.3,
+    /// starting at rest, with a PRBS-like duty.
+    fn synthetic_log(n: usize) -> String {
+        let mut text = String::from("duty,extra,t_s,temp_c\n");
+        let (mut y1, mut y2, mut u1, mut u2) = (0.0f64, 0.0, 0.0, 0.0);
+        let mut state = 0b1010_1100u8;
+        for t in 0..n {
+            let y = 1.8 * y1 - 0.81 * y2 + 2.0 * u1 + u2;
+            let u = if t < 20 {
+                0.0
+            } else {
+                // 8-bit LFSR bit, held 4 samples.
+                if t % 4 == 0 {
+                    let fb = (state >> 7) ^ (state >> 5) ^ (state >> 4) ^ (state >> 3);
+                    state = (state << 1) | (fb & 1);
+                }
+                if state & 1 == 1 {
+                    0.1
+                } else {
+                    -0.1
+                }
+            };
+            text += &format!("{},x,{},{}\n", 0.3 + u, 10.0 * t as f64, 25.0 + y);
+            (y2, y1, u2, u1) = (y1, y, u1, u);
+        }
+        text
+    }
+
     #[test]
-    fn malformed_logs_are_one_line_errors() {
-        let missing = write("missing", "t_s,temp_c\n0,1\n");
-        let e = run(&args(missing)).unwrap_err().to_string();
+    fn missing_column_is_named() {
+        let e = err(&args(write("missing", "t_s,temp_c\n0,1\n")));
         assert!(e.contains("missing column 'duty'"), "{e}");
-        let bad = write("bad", "t_s,duty,temp_c\n0,0.5,4\n1,0.5,x\n");
-        let e = run(&args(bad)).unwrap_err().to_string();
+    }
+
+    #[test]
+    fn bad_cells_name_line_and_column() {
+        let e = err(&args(write("bad", "t_s,duty,temp_c\n0,0.5,4\n1,0.5,x\n")));
         assert!(e.contains("line 3") && e.contains("temp_c"), "{e}");
+        let e = err(&args(write("inf", "t_s,duty,temp_c\n0,0.5,4\n1,inf,4\n")));
+        assert!(e.contains("line 3") && e.contains("duty") && e.contains("finite"), "{e}");
+    }
+
+    #[test]
+    fn too_few_rows_and_bad_time_axis() {
         let few: String =
             std::iter::once("t_s,duty,temp_c\n".to_string()).chain((0..20).map(|i| format!("{i},0.5,4\n"))).collect();
-        let e = run(&args(write("few", &few))).unwrap_err().to_string();
-        assert!(e.contains("too few rows"), "{e}");
-        let mut a = args(write("ok", &few));
-        a.forgetting = 1.5;
-        assert!(run(&a).unwrap_err().to_string().contains("--forgetting"));
-        let jump = write("jump", "t_s,duty,temp_c\n0,0,1\n1,0,1\n2,0,1\n10,0,1\n");
-        assert!(run(&args(jump)).unwrap_err().to_string().contains("line 5"));
-        for e in [missing_e(), bad_orders()] {
-            assert!(!e.contains('\n'));
+        let e = err(&args(write("few", &few)));
+        assert!(e.contains("too few rows (20)"), "{e}");
+        let jump = write("jump", "t_s,duty,temp_c\n0,0,1\n1,0,1\n2,0,1\n10,0,1\n11,0,1\n");
+        let e = err(&args(jump));
+        assert!(e.contains("line 5") && e.contains("uniform"), "{e}");
+        let back = write("back", "t_s,duty,temp_c\n0,0,1\n1,0,1\n1,0,1\n");
+        let e = err(&args(back));
+        assert!(e.contains("line 4") && e.contains("increase"), "{e}");
+    }
+
+    #[test]
+    fn impossible_parameters_are_refused() {
+        let ok = write("params", &synthetic_log(200));
+        for bad in [0.0, 1.5, -0.5, f64::NAN] {
+            let mut a = args(ok.clone());
+            a.forgetting = bad;
+            assert!(err(&a).contains("--forgetting must be in (0, 1]"), "{bad}");
         }
-    }
-
-    fn missing_e() -> String {
-        run(&args(PathBuf::from("/no/such.csv"))).unwrap_err().to_string()
-    }
-
-    fn bad_orders() -> String {
-        let mut a = args(PathBuf::from("/no/such.csv"));
+        for bad in [1.0, -0.1, 2.0] {
+            let mut a = args(ok.clone());
+            a.filter = Some(bad);
+            assert!(err(&a).contains("--filter must be in [0, 1)"), "{bad}");
+            let mut a = args(ok.clone());
+            a.prefilter = Some(bad);
+            assert!(err(&a).contains("--prefilter must be in [0, 1)"), "{bad}");
+        }
+        let mut a = args(ok.clone());
         a.na = 7;
-        let e = run(&a).unwrap_err().to_string();
-        assert!(e.contains("orders out of range"));
-        e
+        assert!(err(&a).contains("orders out of range"));
+        let mut a = args(ok.clone());
+        a.nk = 0;
+        assert!(err(&a).contains("orders out of range"));
+        let mut a = args(ok.clone());
+        a.nc = 1;
+        assert!(err(&a).contains("--method rels"));
+        let mut a = args(ok);
+        a.decimate = 0;
+        assert!(err(&a).contains("--decimate"));
+        assert!(err(&args(PathBuf::from("/no/such.csv"))).contains("cannot read"));
+    }
+
+    #[test]
+    fn recovers_an_exact_model_from_a_raw_log() {
+        let log = write("exact", &synthetic_log(600));
+        let d = load(&log, "temp_c", None, None, 1, OperatingPointChoice::Initial).unwrap();
+        assert_eq!(d.ts_s, 10.0);
+        assert!((d.op.temp_c - 25.0).abs() < 1e-12 && (d.op.duty - 0.3).abs() < 1e-12);
+        let s = Structure::new(2, 2, 0, 1).unwrap();
+        for method in [Method::Ls, Method::Rls] {
+            let f = fit(&d, &s, method, 1.0).unwrap();
+            let th: Vec<f64> = f.a.iter().chain(&f.b).copied().collect();
+            let want = [-1.8, 0.81, 2.0, 1.0];
+            for (got, want) in th.iter().zip(want) {
+                assert!((got - want).abs() < 1e-3 * want.abs().max(1.0), "{method:?}: {th:?}");
+            }
+            assert!(f.fit_percent > 99.9, "{method:?}: fit {}", f.fit_percent);
+            assert!(f.mse < 1e-6, "{method:?}: mse {}", f.mse);
+            assert!(f.stable);
+            // Poles 0.9, 0.9: τ = −10/ln 0.9 = 94.9 s; gain 3/0.01 = 300.
+            assert!((f.time_constants_s[0] - 94.9).abs() < 0.5, "{:?}", f.time_constants_s);
+            assert!((f.static_gain_c_per_duty - 300.0).abs() < 3.0);
+        }
+        // The same low-pass on u and y commutes with A and B: the prefiltered fit finds the
+        // same model, validated on the unprefiltered data.
+        let p = load(&log, "temp_c", None, Some(0.7), 1, OperatingPointChoice::Initial).unwrap();
+        assert!(p.y_est != p.y && p.y == d.y);
+        let f = fit(&p, &s, Method::Ls, 1.0).unwrap();
+        let th: Vec<f64> = f.a.iter().chain(&f.b).copied().collect();
+        for (got, want) in th.iter().zip([-1.8, 0.81, 2.0, 1.0]) {
+            assert!((got - want).abs() < 1e-6 * want.abs().max(1.0), "prefiltered: {th:?}");
+        }
+        assert!(f.fit_percent > 99.99);
+        // Noiseless 2nd-order data leave the 4th-order normal equations singular: the
+        // comparison says so and still chooses 2 over the poorer 1st order.
+        let (rows, chosen, reason) = compare(&d, 1, 0, Method::Ls, 1.0);
+        assert_eq!(rows.iter().map(|r| r.order).collect::<Vec<_>>(), [1, 2], "{reason}");
+        assert_eq!(chosen, 2, "{reason}");
+        assert!(reason.contains("order 1: ") && reason.contains("order 4 could not be fitted"), "{reason}");
+    }
+
+    #[test]
+    fn operating_point_is_the_initial_rest_only_when_the_log_starts_at_rest() {
+        let log = write("rest", &synthetic_log(600));
+        let d = load(&log, "temp_c", None, None, 1, OperatingPointChoice::Auto).unwrap();
+        assert_eq!(d.op.kind, OperatingPointChoice::Initial, "{}", d.op.why);
+        assert_eq!(d.op.samples, 20);
+        // A ramp while the duty holds still is not rest.
+        let ramp_y: Vec<f64> = (0..100).map(|t| if t < 30 { t as f64 } else { 30.0 }).collect();
+        let ramp_u: Vec<f64> = (0..100).map(|t| if t < 30 { 0.2 } else { 0.5 }).collect();
+        let op = operating_point(OperatingPointChoice::Auto, &ramp_y, &ramp_u);
+        assert_eq!(op.kind, OperatingPointChoice::Mean, "{}", op.why);
+        assert!(op.why.contains("does not start at rest"));
+        let flat_y: Vec<f64> = (0..100).map(|t| if t < 30 { 1.0 } else { 30.0 }).collect();
+        let op = operating_point(OperatingPointChoice::Auto, &flat_y, &ramp_u);
+        assert_eq!((op.kind, op.temp_c, op.duty, op.samples), (OperatingPointChoice::Initial, 1.0, 0.2, 10));
+    }
+
+    #[test]
+    fn json_report_has_the_contract_fields() {
+        let log = write("json", &synthetic_log(400));
+        let d = load(&log, "temp_c", None, None, 1, OperatingPointChoice::Initial).unwrap();
+        let s = Structure::new(2, 2, 0, 1).unwrap();
+        let f = fit(&d, &s, Method::Rls, 1.0).unwrap();
+        let (order_comparison, chosen_order, reason) = compare(&d, 1, 0, Method::Rls, 1.0);
+        let r = Report {
+            fit: f,
+            na: 2,
+            nb: 2,
+            method: Method::Rls,
+            forgetting: 1.0,
+            ts_s: d.ts_s,
+            dead_time_s: 10.0,
+            rows: d.y.len(),
+            decimate: 1,
+            filter: None,
+            prefilter: None,
+            operating_point: d.op,
+            order_comparison,
+            chosen_order,
+            reason,
+        };
+        let v: serde_json::Value = serde_json::from_str(&serde_json::to_string(&r).unwrap()).unwrap();
+        for key in [
+            "a",
+            "b",
+            "c",
+            "nk",
+            "mse",
+            "fit_percent",
+            "poles",
+            "zeros",
+            "stable",
+            "order_comparison",
+            "chosen_order",
+            "reason",
+            "ts_s",
+        ] {
+            assert!(v.get(key).is_some(), "missing {key}");
+        }
+        assert_eq!(v["a"].as_array().unwrap().len(), 2, "a without the leading 1");
+        assert_eq!(v["c"].as_array().unwrap().len(), 0);
+        assert_eq!(v["nk"], 1);
     }
 }

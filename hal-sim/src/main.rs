@@ -32,6 +32,8 @@ enum Command {
     Rtd(RtdArgs),
     /// Cold-chain record of a CSV log: WHO-style alarms, mean kinetic temperature, excursions.
     Monitor(monitor_cmd::MonitorArgs),
+    /// Run one scenario with several controllers and print a markdown comparison table.
+    Compare(CompareArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -98,6 +100,16 @@ struct SimArgs {
     json: bool,
 }
 
+#[derive(clap::Args, Debug)]
+struct CompareArgs {
+    /// The scenario and plant, exactly as for `hter sim` (its --controller is ignored).
+    #[command(flatten)]
+    sim: SimArgs,
+    /// Controllers to compare, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "onoff,pi,gmvc,igmvc,gpc")]
+    controllers: Vec<ControllerChoice>,
+}
+
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
 enum LoadArg {
     Full,
@@ -143,6 +155,7 @@ fn main() -> ExitCode {
         Some(Command::Identify(a)) => identify_cmd::run(&a),
         Some(Command::Rtd(a)) => rtd_cmd(&a),
         Some(Command::Monitor(a)) => monitor_cmd::run(&a),
+        Some(Command::Compare(a)) => compare_cmd(&a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -245,6 +258,79 @@ fn sim_cmd(a: &SimArgs) -> Result<()> {
         if let Some(p) = &a.plot {
             println!("plot written to {}", p.display());
         }
+    }
+    Ok(())
+}
+
+fn compare_cmd(a: &CompareArgs) -> Result<()> {
+    if a.controllers.is_empty() {
+        bail!("--controllers is empty");
+    }
+    let base = sim_options(&a.sim)?;
+    let mut runs = Vec::new();
+    for &c in &a.controllers {
+        let mut opts = base.clone();
+        opts.controller.choice = c;
+        let out = sim::run(&opts)?;
+        runs.push((c, out));
+    }
+    println!(
+        "{} on {}, {:?} load, {} °C ambient, seed {}",
+        base.scenario.name,
+        base.plant.name(),
+        base.scenario.load.unwrap_or(base.load),
+        base.ambient_c,
+        base.seed
+    );
+    println!();
+    println!("| controller | IAE (°C·s) | steady-state error (°C) | overshoot (°C) | settle (s) | min / max (°C) | time outside 2–8 °C (s) | energy (Wh) | SSR switches |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    for (_, out) in &runs {
+        let m = &out.metrics;
+        let settle = m.settle_time_s.map_or("never".to_string(), |s| format!("{s:.0}"));
+        println!(
+            "| {} | {:.0} | {:.3} | {:.2} | {} | {:.2} / {:.2} | {:.0} | {:.1} | {} |",
+            m.controller,
+            m.iae,
+            m.steady_state_error_c,
+            m.overshoot_c,
+            settle,
+            m.min_temp_c,
+            m.max_temp_c,
+            m.time_outside_2_8_s,
+            m.energy_wh,
+            m.ssr_switches
+        );
+    }
+    if let Some(path) = &a.sim.plot {
+        let minutes = |t: f64| t / 60.0;
+        let first = &runs[0].1;
+        let mut temp = vec![plot::Series {
+            name: "setpoint".into(),
+            points: first.rows.iter().map(|r| (minutes(r.t_s), r.setpoint_c)).collect(),
+        }];
+        let mut duty = Vec::new();
+        for (_, out) in &runs {
+            temp.push(plot::Series {
+                name: out.metrics.controller.clone(),
+                points: out.rows.iter().map(|r| (minutes(r.t_s), r.true_temp_c)).collect(),
+            });
+            duty.push(plot::Series {
+                name: out.metrics.controller.clone(),
+                points: out.rows.iter().map(|r| (minutes(r.t_s), r.duty)).collect(),
+            });
+        }
+        let panels = [
+            plot::Panel { title: "True load temperature".into(), y_label: "°C".into(), series: temp, y_range: None },
+            plot::Panel {
+                title: "SSR duty".into(),
+                y_label: "duty".into(),
+                series: duty,
+                y_range: Some((-0.02, 1.02)),
+            },
+        ];
+        plot::panels(path, &format!("{} — {}", base.scenario.name, base.plant.name()), "time (min)", &panels)?;
+        println!("\nplot written to {}", path.display());
     }
     Ok(())
 }

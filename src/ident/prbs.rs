@@ -1,8 +1,24 @@
 //! Pseudo-random binary sequence from a maximum-length linear feedback shift register
-//! (Ljung 1999, §13.3; taps from Xilinx XAPP052, "Efficient shift registers, LFSR counters and
-//! long pseudo-random sequence generators", 1996). Runs on the MCU: an n-bit register gives a
-//! period of 2ⁿ − 1 bits with 2ⁿ⁻¹ ones and 2ⁿ⁻¹ − 1 zeros; each bit is held for `hold`
-//! samples, and mapped to the duty levels `low`/`high`.
+//! (Ljung, *System Identification*, 2nd ed., 1999, §13.3 "Input signals", PRBS; taps from
+//! Xilinx XAPP052, "Efficient shift registers, LFSR counters and long pseudo-random sequence
+//! generators", 1996). Runs on the MCU: no allocation, one shift and a popcount per bit.
+//!
+//! ```text
+//! s(k+1) = (s(k) << 1 | parity(s(k) & taps)) mod 2ⁿ        Fibonacci LFSR, n = `bits`
+//! x(k)   = newest bit of s(k)
+//! u(t)   = high if x(⌊t / hold⌋) = 1, else low
+//! ```
+//!
+//! An n-bit register with maximum-length taps visits all 2ⁿ − 1 non-zero states, so the bit
+//! sequence has period 2ⁿ − 1 with 2ⁿ⁻¹ ones and 2ⁿ⁻¹ − 1 zeros (ones − zeros = 1 per period)
+//! and an almost white spectrum up to 1/(2·hold·Ts). Each bit is held for `hold` samples: a
+//! slow plant needs `hold · Ts` of the order of its dominant time constant / 3 or longer, else
+//! the excitation is all above its bandwidth. The levels `low`/`high` are duties in [0, 1]
+//! when the sequence drives the SSR. [`Prbs::with_length`] stops the sequence after a given
+//! number of samples (an identification experiment of fixed length).
+//!
+//! Glossary: LFSR — linear feedback shift register; taps — the register bits XORed into the
+//! feedback; hold — samples per bit; period — 2ⁿ − 1 bits = (2ⁿ − 1)·hold samples.
 
 /// Why a PRBS configuration was refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -55,6 +71,8 @@ pub struct Prbs {
     state: u16,
     held: u16,
     bit: bool,
+    /// Samples left when the length is limited.
+    remaining: Option<u32>,
 }
 
 impl Prbs {
@@ -65,9 +83,44 @@ impl Prbs {
             return Err(PrbsError::Levels);
         }
         let mask = if cfg.bits == 16 { u16::MAX } else { (1u16 << cfg.bits) - 1 };
-        let mut p = Self { cfg, mask, taps, state: mask, held: 0, bit: false };
+        let mut p = Self { cfg, mask, taps, state: mask, held: 0, bit: false, remaining: None };
         p.bit = p.shift();
         Ok(p)
+    }
+
+    /// A generator that yields `length_samples` samples through [`Prbs::next_sample`] and the
+    /// [`Iterator`] impl, then ends. ([`Prbs::next_duty`] ignores the length.)
+    pub fn with_length(cfg: PrbsConfig, length_samples: u32) -> Result<Self, PrbsError> {
+        let mut p = Self::new(cfg)?;
+        p.remaining = Some(length_samples);
+        Ok(p)
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &PrbsConfig {
+        &self.cfg
+    }
+
+    /// Period in samples, (2ⁿ − 1)·hold.
+    pub fn period_samples(&self) -> u32 {
+        self.period_bits() * u32::from(self.cfg.hold)
+    }
+
+    /// Samples left before a length-limited sequence ends (`None`: endless).
+    pub fn remaining(&self) -> Option<u32> {
+        self.remaining
+    }
+
+    /// The next sample, or `None` once a length-limited sequence is over.
+    pub fn next_sample(&mut self) -> Option<f32> {
+        match self.remaining {
+            Some(0) => None,
+            Some(n) => {
+                self.remaining = Some(n - 1);
+                Some(self.next_duty())
+            }
+            None => Some(self.next_duty()),
+        }
     }
 
     /// Period of the bit sequence, 2ⁿ − 1.
@@ -82,7 +135,7 @@ impl Prbs {
         fb
     }
 
-    /// The next sample's duty.
+    /// The next sample's level (endless: a length set by [`Prbs::with_length`] is not consumed).
     pub fn next_duty(&mut self) -> f32 {
         if self.held >= self.cfg.hold {
             self.bit = self.shift();
@@ -94,6 +147,14 @@ impl Prbs {
         } else {
             self.cfg.low
         }
+    }
+}
+
+impl Iterator for Prbs {
+    type Item = f32;
+
+    fn next(&mut self) -> Option<f32> {
+        self.next_sample()
     }
 }
 

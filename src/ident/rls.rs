@@ -1,32 +1,48 @@
 //! Recursive least squares with forgetting, in Bierman's U-D factorised form.
 //!
 //! Model `y(t) = φ(t)ᵀ θ + e(t)`. The textbook covariance update (Ljung, *System
-//! Identification*, 2nd ed., eq. 11.45; Åström & Wittenmark, *Adaptive Control*, eq. 2.21)
+//! Identification*, 2nd ed., 1999, §11.2 "The recursive least-squares algorithm", with
+//! forgetting factor; Åström & Wittenmark, *Adaptive Control*, 2nd ed., 1995, §2.2)
 //!
 //! ```text
 //! ε(t) = y(t) − φᵀ θ(t−1)                 a-priori prediction error
 //! K    = P φ / (λ_f + φᵀ P φ)
 //! θ(t) = θ(t−1) + K ε(t)
 //! P(t) = (P − K φᵀ P) / λ_f
+//! ε̄(t) = y(t) − φᵀ θ(t) = ε(t) λ_f / (λ_f + φᵀ P φ)     a-posteriori error
 //! ```
 //!
-//! breaks in f32 on this plant: at Ts = 10 s the poles sit near 1 (1 + a1 + a2 ≈ 1e-3), so
-//! consecutive outputs in φ are almost collinear, P spans many decades, and the subtraction
-//! `P − KφᵀP` loses symmetry and positive definiteness after a few thousand samples. What this
-//! module does about it:
+//! is fragile in f32 on this plant: at the sampling period the poles sit near 1
+//! (1 + a1 + a2 ≈ 1e-3), so consecutive outputs in φ are almost collinear, P spans many decades,
+//! and the subtraction `P − KφᵀP` cancels almost all digits in the well-excited directions. On
+//! a plant with 1 + a1 + a2 = 5e-5 it loses positive definiteness within 10⁴ samples
+//! (`tests/ident_rls.rs`); an indefinite P can then drive λ_f + φᵀPφ to zero or below, and the
+//! update diverges. What this module does about it:
 //!
 //! 1. **U-D factorisation** (Bierman, *Factorization Methods for Discrete Sequential
-//!    Estimation*, 1977, §V.3; Thornton & Bierman 1980): P = U D Uᵀ with U unit upper
-//!    triangular and D diagonal. The update works on U and D directly, so P is symmetric by
-//!    construction and positive definite as long as every d_i > 0 — which the update preserves
-//!    and [`Rls::update`] checks. It carries roughly twice the precision of the covariance form.
-//! 2. **Bounded trace**: with λ_f < 1 and no excitation, P grows as λ_f^−t (estimator windup).
-//!    After each update, if trace(P) exceeds `trace_max`, D is scaled down to that trace
-//!    (constant-trace regularisation, Åström & Wittenmark §11.2).
+//!    Estimation*, 1977, ch. V; Thornton & Bierman 1980; Ljung 1999 §11.7 "Implementation"):
+//!    P = U D Uᵀ with U unit upper triangular and D diagonal. The update works on U and D
+//!    directly, so P is symmetric by construction and positive definite as long as every
+//!    d_i > 0 — which the update preserves in exact arithmetic and [`Rls::update`] checks. Like
+//!    every square-root method it works with the condition number of √P, not of P.
+//! 2. **Bounded trace** against estimator windup: with λ_f < 1 and no excitation, P grows as
+//!    λ_f^−t in the unexcited directions until a single new excitation throws θ off (a
+//!    "burst"). After each update, if trace(P) exceeds `trace_max`, D is scaled down to that
+//!    trace (the constant-trace idea; Åström & Wittenmark, *Adaptive Control*, ch. 11 on
+//!    estimator windup). Scaling D by a positive number keeps P symmetric positive definite.
+//!    [`Rls::reset_covariance`] restores P = p0·I after a detected plant change.
 //! 3. **Nothing non-finite gets in**: φ, y and the updated state are checked; on failure the
 //!    previous state is kept and [`EstError`] returned.
-//! 4. **Scaling is the caller's job**: φ should hold deviations from an operating point (or
-//!    increments), of order one. [`crate::ident::model::Structure`] builds such regressors.
+//! 4. **Scaled deviation variables**: φ should hold deviations from an operating point (or
+//!    increments), of order one. [`crate::ident::model::Regressor`] builds such regressors from
+//!    raw samples with an [`crate::ident::model::OperatingPoint`] (y0, u0 and scale factors).
+//!
+//! The a-posteriori error ε̄ falls out of the update for free (α = λ_f + φᵀPφ is computed
+//! anyway); RELS feeds it back as the residual ê(t).
+//!
+//! Cost for N parameters: about 2N² + 5N multiplications and 2N divisions for the U-D update,
+//! plus O(N²) for the finiteness checks and the trace — of the order of 150 flops for the
+//! 4-parameter model the adaptive controllers run every sample. No allocation, no square root.
 #![allow(non_snake_case)]
 
 use nalgebra::{SMatrix, SVector};
@@ -76,13 +92,15 @@ pub struct Rls<const N: usize> {
     u: SMatrix<f32, N, N>,
     d: SVector<f32, N>,
     updates: u32,
+    eps: f32,
+    eps_post: f32,
 }
 
 impl<const N: usize> Rls<N> {
     /// Starts at `theta0` with P = p0·I.
     pub fn new(cfg: &RlsConfig, theta0: SVector<f32, N>) -> Self {
         let p0 = if cfg.p0 > 0.0 && cfg.p0.is_finite() { cfg.p0 } else { RlsConfig::DEFAULT.p0 };
-        Self { theta: theta0, u: SMatrix::identity(), d: SVector::repeat(p0), updates: 0 }
+        Self { theta: theta0, u: SMatrix::identity(), d: SVector::repeat(p0), updates: 0, eps: 0.0, eps_post: 0.0 }
     }
 
     /// The estimate θ.
@@ -93,6 +111,16 @@ impl<const N: usize> Rls<N> {
     /// Updates made so far.
     pub fn updates(&self) -> u32 {
         self.updates
+    }
+
+    /// A-priori prediction error ε(t) = y(t) − φ(t)ᵀθ(t−1) of the last accepted update.
+    pub fn prediction_error(&self) -> f32 {
+        self.eps
+    }
+
+    /// A-posteriori error ε̄(t) = y(t) − φ(t)ᵀθ(t) of the last accepted update.
+    pub fn posterior_error(&self) -> f32 {
+        self.eps_post
     }
 
     /// The covariance P = U D Uᵀ (for logging and tests; the update never forms it).
@@ -147,7 +175,9 @@ impl<const N: usize> Rls<N> {
 
     /// Resets P to p0·I, keeping θ (after a detected plant change, or a breakdown).
     pub fn reset_covariance(&mut self, cfg: &RlsConfig) {
+        let updates = self.updates;
         *self = Self::new(cfg, self.theta);
+        self.updates = updates;
     }
 
     /// Prediction φᵀθ.
@@ -207,6 +237,9 @@ impl<const N: usize> Rls<N> {
             self.d *= cfg.trace_max / tr;
         }
         self.updates = self.updates.saturating_add(1);
+        self.eps = eps;
+        // ε̄ = ε (1 − φᵀK) = ε λ_f / α, α = λ_f + φᵀPφ ≥ λ_f > 0.
+        self.eps_post = eps * (lambda / alpha);
         Ok(eps)
     }
 }

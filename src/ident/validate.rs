@@ -7,7 +7,17 @@
 //! - **poles and zeros**: roots of `z^na A(z⁻¹)` and `z^(nb−1) B(z⁻¹)` (closed form up to
 //!   order 2, Durand–Kerner iteration above), with |p| < 1 for stability;
 //! - **residual autocorrelation** r(τ)/r(0) for τ = 1…, against the ±1.96/√N whiteness band
-//!   (Ljung 1999, §16.6).
+//!   (Ljung 1999, §16.6 "Residual analysis");
+//! - **order selection** ([`choose_order`]): the lowest order whose model is stable and whose
+//!   simulated fit is within a few points of the best stable fit — parsimony (Ljung 1999, §16.4
+//!   "Comparing model structures"): parameters that buy no simulation accuracy only add
+//!   variance, and on the MCU every extra parameter costs the adaptive controller.
+//!
+//! ```text
+//! MSE  = 1/M Σ_t (y(t) − φ(t)ᵀθ)²                 one-step-ahead, t = first index … N−1
+//! fit  = 100 · (1 − ‖y − ŷ_sim‖₂ / ‖y − ȳ‖₂)  %    ŷ_sim from A ŷ_sim = q^−nk B u only
+//! r(τ) = Σ_t (ε(t) − ε̄)(ε(t+τ) − ε̄) / Σ_t (ε(t) − ε̄)²,   white if |r(τ)| < 1.96/√N
+//! ```
 
 use super::model::Structure;
 
@@ -77,7 +87,7 @@ pub fn fit_percent(y: &[f64], yhat: &[f64]) -> f64 {
     100.0 * (1.0 - libm::sqrt(num / den))
 }
 
-/// Roots of the monic polynomial z^n + c[0] z^(n−1) + … + c[n−1] (n ≤ 4) into `out[..n]`.
+/// Roots of the monic polynomial `z^n + c[0] z^(n−1) + … + c[n−1]` (n ≤ 4) into `out[..n]`.
 pub fn roots_monic(c: &[f64], out: &mut [Complex; 4]) -> usize {
     let n = c.len().min(4);
     match n {
@@ -175,6 +185,44 @@ pub fn autocorrelation(x: &[f64], out: &mut [f64]) {
     }
 }
 
+/// The 95 % confidence band ±1.96/√N of a normalised autocorrelation estimated from N samples
+/// of white noise.
+pub fn whiteness_band(n: usize) -> f64 {
+    if n == 0 {
+        f64::INFINITY
+    } else {
+        1.96 / libm::sqrt(n as f64)
+    }
+}
+
+/// One model in an order comparison.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OrderCandidate {
+    /// Model order (na = nb).
+    pub order: usize,
+    /// Simulated-output fit, %.
+    pub fit_percent: f64,
+    /// All poles strictly inside the unit circle.
+    pub stable: bool,
+}
+
+/// Default tolerance of [`choose_order`], fit points: differences of a few points are within
+/// what a different record of the same plant changes.
+pub const ORDER_TOLERANCE_POINTS: f64 = 3.0;
+
+/// Index of the lowest-order candidate that is stable and fits within `tolerance_points` of the
+/// best stable fit; `None` if no candidate is stable with a finite fit.
+pub fn choose_order(candidates: &[OrderCandidate], tolerance_points: f64) -> Option<usize> {
+    let usable = |c: &OrderCandidate| c.stable && c.fit_percent.is_finite();
+    let best = candidates.iter().filter(|c| usable(c)).map(|c| c.fit_percent).fold(f64::NEG_INFINITY, f64::max);
+    candidates
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| usable(c) && c.fit_percent >= best - tolerance_points)
+        .min_by_key(|(_, c)| c.order)
+        .map(|(i, _)| i)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -222,6 +270,20 @@ mod tests {
         let mut m: std::vec::Vec<f64> = r.iter().map(|z| abs(*z)).collect();
         m.sort_by(f64::total_cmp);
         assert!((m[0] - 0.5).abs() < 1e-5 && (m[3] - 0.9).abs() < 1e-5, "{m:?}");
+    }
+
+    #[test]
+    fn order_choice_prefers_the_simplest_adequate_stable_model() {
+        let c = |order, fit_percent, stable| OrderCandidate { order, fit_percent, stable };
+        // 2nd order within 3 points of the best: chosen over 4th; 1st is too poor.
+        let rows = [c(1, 80.0, true), c(2, 94.0, true), c(4, 96.5, true)];
+        assert_eq!(choose_order(&rows, 3.0), Some(1));
+        // The best is unstable: it does not count.
+        let rows = [c(1, 80.0, true), c(2, 81.0, true), c(4, 99.0, false)];
+        assert_eq!(choose_order(&rows, 3.0), Some(0));
+        let rows = [c(1, 80.0, false), c(2, f64::NAN, true)];
+        assert_eq!(choose_order(&rows, 3.0), None);
+        assert!((whiteness_band(400) - 0.098).abs() < 1e-12);
     }
 
     #[test]
