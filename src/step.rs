@@ -182,6 +182,7 @@ pub struct Carrier<C: Controller> {
     history_len: usize,
     off_run: u16,
     on_run: u16,
+    req_off_run: u16,
     supply_cut: bool,
     ssr_off_reported: bool,
 }
@@ -211,6 +212,7 @@ impl<C: Controller> Carrier<C> {
             history_len: 0,
             off_run: 0,
             on_run: 0,
+            req_off_run: 0,
             supply_cut: false,
             ssr_off_reported: false,
         }
@@ -346,6 +348,12 @@ impl<C: Controller> Carrier<C> {
             if !self.freeze_guard && predicted <= self.cfg.freeze_cut_c {
                 self.freeze_guard = true;
                 emit(EventKind::FreezeGuardTripped);
+                // Falling fast although no cooling has been asked for a minute: only a shorted
+                // SSR does that (a coast after cooling stops is slowing down by then).
+                if !self.supply_cut && self.req_off_run >= 6 && self.slope_c_per_s < -0.003 {
+                    self.supply_cut = true;
+                    emit(EventKind::SsrStuckOn);
+                }
             } else if self.freeze_guard && temp_c >= self.cfg.freeze_release_c && predicted > self.cfg.freeze_cut_c {
                 self.freeze_guard = false;
                 emit(EventKind::FreezeGuardReleased);
@@ -402,6 +410,7 @@ impl<C: Controller> Carrier<C> {
         }
         self.off_run = if duty.get() == 0.0 { self.off_run.saturating_add(1) } else { 0 };
         self.on_run = if duty.get() >= 0.9 { self.on_run.saturating_add(1) } else { 0 };
+        self.req_off_run = if requested <= 0.0 { self.req_off_run.saturating_add(1) } else { 0 };
 
         // 7: tell the controller what was really applied.
         if self.sensor_fault.is_none() {
