@@ -305,10 +305,7 @@ fn compare_cmd(a: &CompareArgs) -> Result<()> {
     if let Some(path) = &a.sim.plot {
         let minutes = |t: f64| t / 60.0;
         let first = &runs[0].1;
-        let mut temp = vec![plot::Series {
-            name: "setpoint".into(),
-            points: first.rows.iter().map(|r| (minutes(r.t_s), r.setpoint_c)).collect(),
-        }];
+        let mut temp = Vec::new();
         let mut duty = Vec::new();
         for (_, out) in &runs {
             temp.push(plot::Series {
@@ -320,6 +317,11 @@ fn compare_cmd(a: &CompareArgs) -> Result<()> {
                 points: out.rows.iter().map(|r| (minutes(r.t_s), r.duty)).collect(),
             });
         }
+        // Setpoint last, so each controller has the same colour in both panels.
+        temp.push(plot::Series {
+            name: "setpoint".into(),
+            points: first.rows.iter().map(|r| (minutes(r.t_s), r.setpoint_c)).collect(),
+        });
         let panels = [
             plot::Panel { title: "True load temperature".into(), y_label: "°C".into(), series: temp, y_range: None },
             plot::Panel {
