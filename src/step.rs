@@ -234,7 +234,7 @@ impl<C: Controller> Carrier<C> {
         self.last_counts = Some(input.counts);
         // Only a plausible reading can be "stuck": open and short keep their own diagnosis.
         let measured = match self.measure(input.counts) {
-            Ok(_) if self.same_counts + 1 >= self.cfg.stuck_samples => Err(EventKind::SensorStuck),
+            Ok(_) if self.same_counts.saturating_add(1) >= self.cfg.stuck_samples => Err(EventKind::SensorStuck),
             m => m,
         };
         self.run(input.t_s, measured, input.setpoint_c)
@@ -558,5 +558,38 @@ mod tests {
         // Fast fall (0.6 °C/min, full cooling): it acts ≈ 120 s ahead, above 2 °C.
         let fast = guard_trip(0.01);
         assert!(fast > 2.0 && fast <= 2.8, "fast fall tripped at {fast}");
+    }
+}
+
+#[cfg(test)]
+mod robustness {
+    use super::*;
+    use crate::control::{AnyController, Pi, PiConfig};
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 64, .. ProptestConfig::default() })]
+
+        /// Arbitrary conversions (including stuck runs, rails and noise) never panic, never give
+        /// a non-finite or out-of-range duty.
+        #[test]
+        fn arbitrary_counts_give_a_valid_duty(counts in proptest::collection::vec(prop_oneof![any::<u32>(), 0u32..70_000, Just(49_900u32)], 1..400)) {
+            let mut c = Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)));
+            for (k, n) in counts.iter().enumerate() {
+                let out = c.step(&StepInput { t_s: k as f32 * 10.0, counts: *n, setpoint_c: 4.0 });
+                prop_assert!(out.duty.get().is_finite() && (0.0..=1.0).contains(&out.duty.get()));
+            }
+        }
+    }
+
+    #[test]
+    fn a_week_of_identical_counts_does_not_overflow() {
+        let mut c = Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)));
+        for k in 0..70_000u32 {
+            let out = c.step(&StepInput { t_s: k as f32 * 10.0, counts: 49_900, setpoint_c: 4.0 });
+            if k > 20 {
+                assert_eq!(out.mode, Mode::SensorFault);
+            }
+        }
     }
 }
