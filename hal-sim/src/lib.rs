@@ -5,6 +5,7 @@
 pub mod arx;
 pub mod identify_cmd;
 pub mod log;
+pub mod log2csv_cmd;
 pub mod metrics;
 pub mod monitor_cmd;
 pub mod periph;

@@ -8,7 +8,7 @@ use clap::{Parser, Subcommand};
 use hal_sim::plant::Load;
 use hal_sim::scenario::Scenario;
 use hal_sim::sim::{self, ControllerChoice, ControllerSpec, PlantChoice, SimOptions, SimOutput};
-use hal_sim::{identify_cmd, monitor_cmd, plot};
+use hal_sim::{identify_cmd, log2csv_cmd, monitor_cmd, plot};
 use hter::rtd::Rtd;
 use hter::units::{Celsius, Ohms};
 
@@ -34,6 +34,8 @@ enum Command {
     Monitor(monitor_cmd::MonitorArgs),
     /// Run one scenario with several controllers and print a markdown comparison table.
     Compare(CompareArgs),
+    /// Turn the firmware's defmt telemetry log into the CSV `identify` and `monitor` read.
+    Log2csv(log2csv_cmd::Log2CsvArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -156,6 +158,7 @@ fn main() -> ExitCode {
         Some(Command::Rtd(a)) => rtd_cmd(&a),
         Some(Command::Monitor(a)) => monitor_cmd::run(&a),
         Some(Command::Compare(a)) => compare_cmd(&a),
+        Some(Command::Log2csv(a)) => log2csv_cmd::run(&a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
