@@ -302,7 +302,9 @@ impl<C: Controller> Carrier<C> {
 
         // 4: setpoint.
         let w = if setpoint_c.is_finite() {
-            setpoint_c.clamp(self.cfg.setpoint_min_c, self.cfg.setpoint_max_c)
+            // Not `f32::clamp`: it panics when min > max, and a panic path costs the firmware
+            // ~15 KiB of formatting code. The config is checked at construction anyway.
+            setpoint_c.max(self.cfg.setpoint_min_c).min(self.cfg.setpoint_max_c)
         } else {
             self.cfg.setpoint_min_c.max(4.0).min(self.cfg.setpoint_max_c)
         };

@@ -74,8 +74,14 @@ pub fn init() -> Board {
     let rtd = RtdAdc { adc, channel: p.PA0.degrade_adc() };
 
     let ssr_pin = PwmPin::new(p.PA6, OutputType::PushPull);
+    // TIM3 is 16-bit and clocked at 80 MHz (APB1 ÷ 1): embassy picks the smallest prescaler that
+    // fits, PSC + 1 = 1221, ARR = 65520, a period of 1.000014 s and 65521 duty ticks.
     let ssr =
         SimplePwm::new(p.TIM3, Some(ssr_pin), None, None, None, Hertz(config::SSR_PWM_HZ), CountingMode::EdgeAlignedUp);
+    // embedded-hal's `SetDutyCycle` (behind `hter::hal::apply_duty`) counts duty in u16 and
+    // embassy unwraps ARR + 1 into it on every write: a clock change that gave ARR = 65535 would
+    // panic in the control path, so refuse it here, at boot.
+    defmt::assert!(ssr.max_duty_cycle() <= u32::from(u16::MAX), "SSR PWM: ARR + 1 must fit in u16");
 
     Board {
         rtd,
@@ -97,8 +103,11 @@ impl hter::hal::RtdSampler for RtdAdc {
     type Error = core::convert::Infallible;
 
     fn sample(&mut self) -> Result<u32, Self::Error> {
-        // 640.5 ADC cycles per conversion (the longest: the amplifier's output impedance and the
-        // sampling capacitor settle fully); 256 conversions take ≈ 2.1 ms at 80 MHz.
+        // 640.5 ADC cycles of sampling per conversion (the longest: the amplifier's output
+        // impedance and the sampling capacitor settle fully) + 12.5 of conversion; 256 of them
+        // take 2.1 ms at 80 MHz. embassy converts twice on the L4 and keeps the second (an L4 ADC
+        // erratum: the first conversion after a pause longer than 1 ms may be corrupted), so this
+        // blocks the executor ≈ 4.2 ms every Ts — nothing else in it is that time-critical.
         Ok(u32::from(self.adc.blocking_read(&mut self.channel, SampleTime::CYCLES640_5)))
     }
 }

@@ -24,6 +24,7 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant, Ticker};
+use hter::control::{Controller, ControllerStatus};
 use hter::event::Event;
 use hter::hal::{apply_duty, RtdSampler};
 use hter::step::{Carrier, Mode, StepInput};
@@ -52,6 +53,8 @@ struct Telemetry {
     setpoint_c: f32,
     duty: f32,
     mode: Mode,
+    /// Estimator state of a self-tuning controller (θ, trace P, prediction error, mode).
+    status: Option<ControllerStatus>,
 }
 
 static SAMPLES: Channel<CriticalSectionRawMutex, Sample, 2> = Channel::new();
@@ -63,10 +66,12 @@ static EVENTS: Channel<CriticalSectionRawMutex, Event, 16> = Channel::new();
 async fn main(spawner: Spawner) {
     let b = board::init();
     info!(
-        "hter firmware {}: Ts = {} s, setpoint {} °C",
+        "hter firmware {}: Ts = {} s, setpoint {} °C, SSR PWM {} Hz ({} ticks)",
         env!("CARGO_PKG_VERSION"),
         config::CARRIER.ts_s,
-        config::SETPOINT_C
+        config::SETPOINT_C,
+        b.ssr.get_frequency().0,
+        b.ssr.max_duty_cycle()
     );
     let mut wdg = IndependentWatchdog::new(b.iwdg, config::WATCHDOG_TIMEOUT_US);
     wdg.unleash();
@@ -79,8 +84,7 @@ async fn main(spawner: Spawner) {
 /// Takes one oversampled RTD conversion every Ts.
 #[embassy_executor::task]
 async fn sample(mut rtd: board::RtdAdc) {
-    let period = Duration::from_millis((config::CARRIER.ts_s * 1000.0) as u64);
-    let mut ticker = Ticker::every(period);
+    let mut ticker = Ticker::every(Duration::from_millis(config::SAMPLE_PERIOD_MS));
     let start = Instant::now();
     loop {
         let Ok(counts) = rtd.sample();
@@ -94,6 +98,7 @@ async fn sample(mut rtd: board::RtdAdc) {
 #[embassy_executor::task]
 async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>) {
     let mut carrier = Carrier::new(config::CARRIER, config::controller());
+    info!("controller: {}", carrier.controller().name());
     loop {
         let s = SAMPLES.receive().await;
         let out = carrier.step(&StepInput { t_s: s.t_s, counts: s.counts, setpoint_c: config::SETPOINT_C });
@@ -104,13 +109,20 @@ async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripheral
                 warn!("event queue full, dropped {}", e);
             }
         }
-        let _ = TELEMETRY.try_send(Telemetry {
+        if out.events.dropped() > 0 {
+            warn!("{} events of this step did not fit the step's list", out.events.dropped());
+        }
+        let record = Telemetry {
             t_s: s.t_s,
             temp_c: out.temp_c.0,
             setpoint_c: out.setpoint_c.0,
             duty: out.duty.get(),
             mode: out.mode,
-        });
+            status: out.status,
+        };
+        if TELEMETRY.try_send(record).is_err() {
+            warn!("telemetry queue full, dropped t={}", s.t_s);
+        }
         wdg.pet();
     }
 }
@@ -150,7 +162,14 @@ async fn actuate(
 async fn telemetry() {
     loop {
         let r = TELEMETRY.receive().await;
+        // `hter log2csv` parses this line: keep its `key=value` fields.
         info!("t={} temp={} sp={} duty={} mode={}", r.t_s, r.temp_c, r.setpoint_c, r.duty, r.mode);
+        if let Some(st) = r.status {
+            info!(
+                "est t={} ctl={} theta={} trace_p={} pe={}",
+                r.t_s, st.mode, st.theta, st.trace_p, st.prediction_error
+            );
+        }
         while let Ok(e) = EVENTS.try_receive() {
             warn!("event t={} {}", e.t_s, e.kind);
         }
