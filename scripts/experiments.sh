@@ -4,7 +4,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release --bin hter -q
-H=target/release/hter
+H="${CARGO_TARGET_DIR:-target}/release/hter"
+
 D=docs/experiments
 mkdir -p "$D"
 echo "## step to 4 °C";            $H compare --scenario step --plot "$D/step.png"
@@ -13,7 +14,7 @@ echo "## half load";                $H compare --scenario half-load --plot "$D/h
 echo "## H-TER II";                 $H compare --scenario piecewise --plant hter2 --plot "$D/hter2.png"
 echo "## step load disturbance";    $H compare --scenario disturbance --plot "$D/disturbance.png"
 echo "## GPC, λ";
-for l in 0.01 0.1 1 10 30; do
+for l in 0.01 0.1 1 3 10 30; do
   printf 'λ = %s: ' "$l"; $H sim --scenario piecewise --controller gpc --lambda "$l" --json
 done
 M2="arx:-1.74927,0.751376;-0.0270791,-0.029865"

@@ -113,3 +113,70 @@ fn sim_spec(scenario: &str, controller: ControllerSpec, plant: PlantChoice, load
     run(&SimOptions { scenario, controller, plant, load, ambient_c: 28.0, duration_s, seed: 7, faults: vec![] })
         .unwrap()
 }
+
+/// The seed's conclusions on `piecewise` (§5.4, §6.4), with the self-tuning laws at their
+/// defaults and seed 7: IGMVC holds the steady-state error within ±0.15 °C on the full load, the
+/// half load and H-TER II; GPC has a lower IAE than IGMVC and PI on the H-TER I loads; no
+/// controller takes the load below 2 °C. (On H-TER II GPC beats PI but not IGMVC: its estimate
+/// is refused there and it runs on the H-TER I start model — EXPERIMENTS.md.)
+#[test]
+fn seed_conclusions_hold_on_piecewise() {
+    for (plant, load) in
+        [(PlantChoice::Hter1, Load::Full), (PlantChoice::Hter1, Load::Half), (PlantChoice::Hter2, Load::Full)]
+    {
+        let run = |c| sim("piecewise", c, plant, load).metrics;
+        let (pi, gmvc, igmvc, gpc) = (
+            run(ControllerChoice::Pi),
+            run(ControllerChoice::Gmvc),
+            run(ControllerChoice::Igmvc),
+            run(ControllerChoice::Gpc),
+        );
+        for m in [&pi, &gmvc, &igmvc, &gpc] {
+            assert!(m.min_temp_c >= 2.0 && m.max_temp_c <= 8.0, "{plant:?} {load:?}: {m:?}");
+        }
+        assert!(igmvc.steady_state_error_c <= 0.15, "{plant:?} {load:?} IGMVC: {igmvc:?}");
+        assert!(gpc.iae < pi.iae, "{plant:?} {load:?}: GPC {} vs PI {}", gpc.iae, pi.iae);
+        if plant == PlantChoice::Hter1 {
+            assert!(gpc.iae < igmvc.iae, "{load:?}: GPC {} vs IGMVC {}", gpc.iae, igmvc.iae);
+        }
+    }
+}
+
+/// Self-tuning copes with the plant changing under it: at 4 °C the supply sags from 12 to 9 V
+/// after an hour (a quarter less cooling power) and the ambient jumps from 28 to 36 °C after two.
+/// Every law keeps the load within 2–8 °C, is back within ±0.3 °C of the setpoint in the last
+/// half hour, and its estimate has moved.
+#[test]
+fn self_tuning_laws_survive_a_plant_change_mid_run() {
+    use hal_sim::scenario::{Change, Start};
+    for c in [ControllerChoice::Gmvc, ControllerChoice::Igmvc, ControllerChoice::Gpc] {
+        let scenario = Scenario {
+            name: "plant-change".into(),
+            description: "supply sag then hotter ambient at 4 °C".into(),
+            start: Start::Holding(4.0),
+            setpoints: vec![(0.0, 4.0)],
+            changes: vec![(3600.0, Change::Supply(9.0)), (7200.0, Change::Ambient(36.0))],
+            duration_s: 4.0 * 3600.0,
+            load: None,
+            excitation: false,
+        };
+        let out = run(&SimOptions {
+            duration_s: scenario.duration_s,
+            scenario,
+            controller: spec(c),
+            plant: PlantChoice::Hter1,
+            load: Load::Full,
+            ambient_c: 28.0,
+            seed: 5,
+            faults: vec![],
+        })
+        .unwrap();
+        let m = &out.metrics;
+        assert!(m.min_temp_c >= 2.0 && m.max_temp_c <= 8.0, "{c:?}: {m:?}");
+        let tail = out.rows.iter().filter(|r| r.t_s >= 3.5 * 3600.0);
+        let worst = tail.map(|r| (r.true_temp_c - 4.0).abs()).fold(0.0, f64::max);
+        assert!(worst <= 0.3, "{c:?}: |T − 4| up to {worst} °C in the last half hour");
+        let b0 = |t: f64| out.rows.iter().find(|r| r.t_s >= t).and_then(|r| r.b0).unwrap();
+        assert!((b0(3500.0) - b0(14000.0)).abs() > 1e-4, "{c:?}: the estimate did not move");
+    }
+}

@@ -49,7 +49,7 @@ pub fn controller() -> AnyController {
     AnyController::Pi(Pi::new(PI))
 }
 
-/// The controller: self-tuning GPC (N2 = 30, Nu = 3, λ = 10; RLS λ_f = 0.995) starting from the
+/// The controller: self-tuning GPC (N2 = 30, Nu = 3, λ = 3, T-filter τ = 0.8; RLS λ_f = 0.995) starting from the
 /// H-TER I model, with the PI as its bumpless fallback — the host's `--controller gpc`.
 #[cfg(feature = "adaptive")]
 pub fn controller() -> AnyController {

@@ -74,6 +74,13 @@ struct SimArgs {
     /// GMVC: control weight S (≥ 0).
     #[arg(long, allow_negative_numbers = true)]
     s_weight: Option<f64>,
+    /// GMVC and IGMVC: pole α of the output weight P = (1 − α q⁻¹)/(1 − α), 0 ≤ α < 1
+    /// (default 0.95; 0 gives the classical P = 1).
+    #[arg(long, allow_negative_numbers = true)]
+    p_pole: Option<f64>,
+    /// IGMVC and self-tuning GPC: pole τ of the T-filter T = 1 − τ q⁻¹, 0 ≤ τ < 1 (0: none).
+    #[arg(long, allow_negative_numbers = true)]
+    t_pole: Option<f64>,
     /// Water load: full (100 ml) or half (50 ml).
     #[arg(long, value_enum, default_value = "full")]
     load: LoadArg,
@@ -226,6 +233,22 @@ fn sim_options(a: &SimArgs) -> Result<SimOptions> {
             bail!("--s-weight must be ≥ 0, got {sw}");
         }
         controller.gmvc.s = sw as f32;
+    }
+    if let Some(al) = a.p_pole {
+        let al = finite("p-pole", al)?;
+        if !(0.0..1.0).contains(&al) {
+            bail!("--p-pole must be in [0, 1), got {al}");
+        }
+        controller.gmvc.p_pole = al as f32;
+        controller.igmvc.p_pole = al as f32;
+    }
+    if let Some(tp) = a.t_pole {
+        let tp = finite("t-pole", tp)?;
+        if !(0.0..1.0).contains(&tp) {
+            bail!("--t-pole must be in [0, 1), got {tp}");
+        }
+        controller.igmvc.t_pole = tp as f32;
+        controller.gpc_t_filter = tp as f32;
     }
     Ok(SimOptions {
         scenario,
@@ -426,6 +449,8 @@ fn demo() -> Result<()> {
         p_weight: None,
         r_weight: None,
         s_weight: None,
+        p_pole: None,
+        t_pole: None,
         load: LoadArg::Full,
         ambient: 28.0,
         duration: None,

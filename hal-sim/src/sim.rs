@@ -63,12 +63,21 @@ pub struct ControllerSpec {
     pub gmvc: GmvcConfig,
     /// IGMVC weight.
     pub igmvc: IgmvcConfig,
+    /// Self-tuning GPC: T-filter pole (`AdaptiveConfig::t_filter`).
+    pub gpc_t_filter: f32,
 }
 
 impl ControllerSpec {
     /// The controller with its default tuning.
     pub fn new(choice: ControllerChoice) -> Self {
-        Self { choice, model: None, gpc: GpcConfig::DEFAULT, gmvc: GmvcConfig::DEFAULT, igmvc: IgmvcConfig::DEFAULT }
+        Self {
+            choice,
+            model: None,
+            gpc: GpcConfig::DEFAULT,
+            gmvc: GmvcConfig::DEFAULT,
+            igmvc: IgmvcConfig::DEFAULT,
+            gpc_t_filter: AdaptiveConfig::default_for(Law::Gpc(GpcConfig::DEFAULT)).t_filter,
+        }
     }
 
     /// The law of a model-based controller.
@@ -94,7 +103,7 @@ impl ControllerSpec {
             (_, Some(law)) => match self.model {
                 Some(m) => AnyController::Fixed(FixedModel::new(law, m, u0)),
                 None => AnyController::SelfTuning(SelfTuning::new(
-                    AdaptiveConfig { fallback: pi, ..AdaptiveConfig::default_for(law) },
+                    AdaptiveConfig { fallback: pi, t_filter: self.gpc_t_filter, ..AdaptiveConfig::default_for(law) },
                     u0,
                 )),
             },

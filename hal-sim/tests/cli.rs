@@ -35,6 +35,9 @@ fn bad_input_is_a_one_line_error() {
     assert_one_line_error(&["sim", "--controller", "gpc", "--n1", "5", "--n2", "4"], "N1");
     assert_one_line_error(&["sim", "--controller", "gpc", "--nu", "9"], "Nu");
     assert_one_line_error(&["sim", "--controller", "gpc", "--lambda", "inf"], "finite");
+    assert_one_line_error(&["sim", "--controller", "igmvc", "--p-pole", "1"], "--p-pole");
+    assert_one_line_error(&["sim", "--controller", "igmvc", "--t-pole", "-0.1"], "--t-pole");
+    assert_one_line_error(&["sim", "--controller", "gmvc", "--p-pole", "nan"], "finite");
     assert_one_line_error(&["sim", "--plant", "arx:1;x;1"], "not a number");
     assert_one_line_error(&["sim", "--model", "arx:-0.9;0.1;0"], "delay");
     assert_one_line_error(&["sim", "--plant", "hter3"], "unknown plant");

@@ -68,13 +68,15 @@ pub struct GpcConfig {
 }
 
 impl GpcConfig {
-    /// N1 = 1, N2 = 30 (5 min at Ts = 10 s, the closed-loop settling scale), Nu = 3, λ = 10.
+    /// N1 = 1, N2 = 30 (5 min at Ts = 10 s, the closed-loop settling scale), Nu = 3, λ = 3.
     /// λ weighs Δu² (duty in [0, 1], so Δu ≤ 1) against squared errors in °C summed over 30
     /// predictions, with step-response coefficients of tens of °C per unit duty: the seed's
     /// 0.01–1 are negligible at this scale and let GPC bang the SSR between 0 and 1 on the
-    /// hal-sim plant (its unmodelled lag); λ = 10 gave the lowest IAE on `piecewise` in a
-    /// sweep of 1, 3, 10, 30 (`hter sim --scenario piecewise --controller gpc --lambda L`).
-    pub const DEFAULT: GpcConfig = GpcConfig { n1: 1, n2: 30, nu: 3, lambda: 10.0 };
+    /// hal-sim plant (its unmodelled lag). Without a T-filter λ = 10 was best in a sweep of 1, 3,
+    /// 10, 30; with the self-tuner's T-filter (τ = 0.8, `AdaptiveConfig::t_filter`) λ = 3 gave
+    /// the lowest IAE on the full and the half load (seeds 1–3; `hter sim --scenario piecewise
+    /// --controller gpc --lambda L --t-pole T`).
+    pub const DEFAULT: GpcConfig = GpcConfig { n1: 1, n2: 30, nu: 3, lambda: 3.0 };
 
     /// Checks the ranges of [`GpcError::Config`].
     pub fn validate(&self) -> Result<(), GpcError> {
