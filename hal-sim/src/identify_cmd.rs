@@ -45,7 +45,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Result};
 use hter::filter::{FirstOrder, FirstOrderConfig};
-use hter::ident::batch::BatchLs;
+use hter::ident::batch::{BatchIv, BatchLs};
 use hter::ident::model::{Structure, MAX_PARAMS};
 use hter::ident::recursive;
 use hter::ident::rls::RlsConfig;
@@ -78,6 +78,10 @@ pub enum Method {
     Rls,
     /// Recursive extended least squares, ARMAX (nc ≥ 1).
     Rels,
+    /// Instrumental variables (f64), ARX: least squares, then three rounds with instruments
+    /// simulated from the previous model. Unbiased under coloured noise; fits the simulated
+    /// output rather than the one-step-ahead prediction.
+    Iv,
 }
 
 /// Where the deviation variables are taken from.
@@ -422,6 +426,40 @@ struct Estimate {
 /// Estimates θ = [a, b, c] and, for the recursive methods, its history and the refused count.
 fn estimate(d: &Data, s: &Structure, method: Method, forgetting: f64) -> Result<Estimate> {
     let n = s.n_params();
+    if method == Method::Iv {
+        if s.nc > 0 {
+            bail!("method iv fits ARX only: use --method rels for nc > 0");
+        }
+        let mut th = estimate(d, s, Method::Ls, forgetting)?.theta;
+        let (mut x, mut zeta, mut phi) = (vec![0.0; d.y_est.len()], [0.0f64; MAX_PARAMS], [0.0f64; MAX_PARAMS]);
+        // Each round's instruments come from the previous model; the iterate whose simulation
+        // fits the estimation data best is kept (an IV round can overshoot into an unstable
+        // model, whose simulation is no instrument and no model).
+        let mut best = (validate::simulate_fit(s, &th, &d.y_est, &d.u_est, &mut x), th.clone());
+        for _ in 0..3 {
+            validate::simulate_fit(s, &th, &d.y_est, &d.u_est, &mut x);
+            if x.iter().any(|v| !v.is_finite() || v.abs() >= 1e6) {
+                break;
+            }
+            let mut iv = BatchIv::new(n).map_err(|e| anyhow!("instrumental variables: {e:?}"))?;
+            for t in s.first_index()..d.y_est.len() {
+                if s.regressor(&x, &d.u_est, &[], t, &mut zeta) && s.regressor(&d.y_est, &d.u_est, &[], t, &mut phi) {
+                    iv.add(&zeta[..n], &phi[..n], d.y_est[t]).map_err(|e| anyhow!("instrumental variables: {e:?}"))?;
+                }
+            }
+            let mut next = vec![0.0; n];
+            if iv.solve(&mut next).is_err() {
+                break;
+            }
+            th = next;
+            let f = validate::simulate_fit(s, &th, &d.y_est, &d.u_est, &mut x);
+            if f.is_finite() && (best.0.is_nan() || f > best.0) {
+                best = (f, th.clone());
+            }
+        }
+        let th = best.1;
+        return Ok(Estimate { theta: th, history: Vec::new(), skipped: 0 });
+    }
     if method == Method::Ls {
         if s.nc > 0 {
             bail!("method ls fits ARX only: use --method rels for nc > 0");
@@ -592,7 +630,7 @@ pub fn compare(d: &Data, nk: usize, nc: usize, method: Method, forgetting: f64) 
         } else {
             "no better".to_string()
         };
-        why.push(format!("order {}: {:.1} % ({note})", r.order, r.fit_percent));
+        why.push(format!("order {}: {} ({note})", r.order, fmt_fit(r.fit_percent, r.stable)));
     }
     why.extend(failed);
     let order = chosen.order;
@@ -747,6 +785,7 @@ fn print_report(args: &IdentifyArgs, s: &Structure, r: &Report) {
     let kind = if s.nc > 0 { "ARMAX" } else { "ARX" };
     let method = match r.method {
         Method::Ls => "batch least squares (f64)".to_string(),
+        Method::Iv => "instrumental variables (f64, instruments simulated from the LS model)".to_string(),
         Method::Rls => format!("f32 RLS, λ_f = {}", r.forgetting),
         Method::Rels => format!("f32 RELS, λ_f = {}", r.forgetting),
     };
@@ -767,7 +806,11 @@ fn print_report(args: &IdentifyArgs, s: &Structure, r: &Report) {
         line!("    ({} recursive updates refused on non-finite data)", f.skipped_updates);
     }
     line!("  one-step MSE        {} °C²", fmt_small(f.mse));
-    line!("  simulated fit       {:.1} %", f.fit_percent);
+    if f.stable {
+        line!("  simulated fit       {}", fmt_fit(f.fit_percent, f.stable));
+    } else {
+        line!("  simulated fit       – (the model is unstable: its simulation diverges)");
+    }
     line!("  static gain         {:.3} °C per unit duty", f.static_gain_c_per_duty);
     line!(
         "  stability           {}",
@@ -807,9 +850,9 @@ fn print_report(args: &IdentifyArgs, s: &Structure, r: &Report) {
     line!("  order comparison (na = nb, same method, nc and delay):");
     for o in &r.order_comparison {
         line!(
-            "    order {}: fit {:6.1} %, MSE {} °C², gain {:8.3} °C/duty, dominant τ {}, {}",
+            "    order {}: fit {:>8}, MSE {} °C², gain {:8.3} °C/duty, dominant τ {}, {}",
             o.order,
-            o.fit_percent,
+            fmt_fit(o.fit_percent, o.stable),
             fmt_small(o.mse),
             o.static_gain_c_per_duty,
             o.dominant_time_constant_s.map(|t| format!("{t:.1} s")).unwrap_or_else(|| "–".into()),
@@ -867,6 +910,16 @@ fn plot_fit(path: &Path, d: &Data, s: &Structure, f: &Fit) -> Result<()> {
         y_range: None,
     });
     plot::panels(path, "hter identify", "time (min)", &panels)
+}
+
+/// A simulated fit for people: an unstable model's simulation diverges, and its "fit" of
+/// −10⁸⁰ % says nothing the word "unstable" does not (the JSON keeps the number).
+fn fmt_fit(fit_percent: f64, stable: bool) -> String {
+    if stable && fit_percent.is_finite() {
+        format!("{fit_percent:.1} %")
+    } else {
+        "–".to_string()
+    }
 }
 
 #[cfg(test)]
@@ -931,6 +984,53 @@ mod tests {
             (y2, y1, u2, u1) = (y1, y, u1, u);
         }
         text
+    }
+
+    /// Output-error plant y = B/A u + v with white v: the equation error A v is coloured, so
+    /// least squares is biased (it pulls the pole toward zero); IV is not.
+    #[test]
+    fn iv_removes_the_bias_least_squares_has_under_coloured_noise() {
+        let n = 4000;
+        let (mut x1, mut u1) = (0.0f64, 0.0f64);
+        let mut state = 0xACE1u16;
+        let mut seed = 99u32;
+        let (mut y, mut u) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        for t in 0..n {
+            // Noise-free x(t) = 0.95 x(t−1) + 0.5 u(t−1).
+            let x = 0.95 * x1 + 0.5 * u1;
+            if t % 3 == 0 {
+                let bit = (state ^ (state >> 2) ^ (state >> 3) ^ (state >> 5)) & 1;
+                state = (state >> 1) | (bit << 15);
+            }
+            let ut = if state & 1 == 1 { 1.0 } else { -1.0 };
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let v = (f64::from(seed >> 8) / f64::from(1u32 << 24) - 0.5) * 2.0;
+            y.push(x + v);
+            u.push(ut);
+            (x1, u1) = (x, ut);
+        }
+        let d = Data {
+            ts_s: 10.0,
+            t: (0..n).map(|i| 10.0 * i as f64).collect(),
+            y_est: y.clone(),
+            u_est: u.clone(),
+            y,
+            u,
+            op: OperatingPoint {
+                kind: OperatingPointChoice::Initial,
+                why: String::new(),
+                temp_c: 0.0,
+                duty: 0.0,
+                samples: 0,
+            },
+        };
+        let s = Structure::new(1, 1, 0, 1).unwrap();
+        let ls = fit(&d, &s, Method::Ls, 1.0).unwrap();
+        let iv = fit(&d, &s, Method::Iv, 1.0).unwrap();
+        assert!((ls.a[0] + 0.95).abs() > 0.03, "LS should be biased here: a1 = {}", ls.a[0]);
+        assert!((iv.a[0] + 0.95).abs() < 0.01, "IV a1 = {} (want −0.95)", iv.a[0]);
+        assert!((iv.b[0] - 0.5).abs() < 0.05, "IV b0 = {} (want 0.5)", iv.b[0]);
+        assert!(iv.fit_percent > ls.fit_percent, "IV fit {} vs LS {}", iv.fit_percent, ls.fit_percent);
     }
 
     #[test]

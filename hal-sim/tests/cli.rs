@@ -103,3 +103,31 @@ fn sim_json_has_every_contract_field_and_writes_csv_and_plot() {
     assert!(png_bytes.len() > 10_000);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The seed's order conclusion (ch. 4) on the simulator's PRBS runs: with instrumental
+/// variables and the dead time as delay (`--method iv --nk 5`), a 2nd-order model simulates the
+/// carrier within a few points of the 4th-order one on both carriers, and the tool's order
+/// choice is at most 2, with its reason.
+#[test]
+fn second_order_model_is_enough_on_both_carriers() {
+    for plant in ["hter1", "hter2"] {
+        let csv = std::env::temp_dir().join(format!("hter-cli-prbs-{plant}-{}.csv", std::process::id()));
+        let csv_s = csv.to_str().unwrap();
+        let out = hter(&["sim", "--scenario", "prbs", "--plant", plant, "--csv", csv_s, "--json"]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let out = hter(&["identify", "--input", csv_s, "--method", "iv", "--nk", "5", "--json"]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let _ = std::fs::remove_file(&csv);
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let row = |order: u64| {
+            v["order_comparison"].as_array().unwrap().iter().find(|r| r["order"] == order).unwrap().clone()
+        };
+        let (second, fourth) = (row(2), row(4));
+        let (f2, f4) = (second["fit_percent"].as_f64().unwrap(), fourth["fit_percent"].as_f64().unwrap());
+        assert!(second["stable"] == true && fourth["stable"] == true, "{plant}: {second} {fourth}");
+        assert!(f2 > 60.0, "{plant}: 2nd-order fit {f2} %");
+        assert!(f2 >= f4 - 3.0, "{plant}: 2nd order {f2} % vs 4th {f4} %");
+        assert!(v["chosen_order"].as_u64().unwrap() <= 2, "{plant}: {}", v["reason"]);
+        assert!(v["reason"].as_str().unwrap().contains("order 4"), "{plant}: the reason compares with order 4");
+    }
+}

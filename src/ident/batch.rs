@@ -1,6 +1,13 @@
 //! Batch least squares in f64 (Ljung 1999, eq. 7.34): θ = (ΦᵀΦ)⁻¹ Φᵀ Y, accumulated row by
 //! row into the normal equations (no storage of Φ) and solved by Cholesky. The reference the
 //! f32 recursive estimator is checked against, and the `ls` method of `hter identify`.
+//!
+//! [`BatchIv`] is the instrumental-variable estimate (Ljung 1999, §7.6, eq. 7.118; Söderström &
+//! Stoica, *System Identification*, ch. 8): θ = (Σ ζ φᵀ)⁻¹ Σ ζ y, with instruments ζ(t) built
+//! like φ(t) but from the noise-free simulated output x(t) of a first model instead of the
+//! measured y. ζ correlates with φ but not with the equation error, so coloured noise — which
+//! biases ARX least squares toward a fast, one-step-ahead fit — does not bias it; the estimate
+//! aims at the simulated output, which is what a controller's predictions need.
 
 use super::model::MAX_PARAMS;
 
@@ -96,6 +103,80 @@ impl BatchLs {
     }
 }
 
+/// Instrumental-variable accumulator: Σ ζ φᵀ and Σ ζ y for up to [`MAX_PARAMS`] parameters.
+#[derive(Clone, Debug)]
+pub struct BatchIv {
+    n: usize,
+    zp: [[f64; MAX_PARAMS]; MAX_PARAMS],
+    zy: [f64; MAX_PARAMS],
+    rows: usize,
+}
+
+impl BatchIv {
+    /// An accumulator for `n` parameters.
+    pub fn new(n: usize) -> Result<Self, BatchError> {
+        if n == 0 || n > MAX_PARAMS {
+            return Err(BatchError::Input);
+        }
+        Ok(Self { n, zp: [[0.0; MAX_PARAMS]; MAX_PARAMS], zy: [0.0; MAX_PARAMS], rows: 0 })
+    }
+
+    /// Adds one row: instruments ζ, regressor φ, output y.
+    pub fn add(&mut self, zeta: &[f64], phi: &[f64], y: f64) -> Result<(), BatchError> {
+        let n = self.n;
+        if zeta.len() < n
+            || phi.len() < n
+            || !y.is_finite()
+            || zeta[..n].iter().chain(&phi[..n]).any(|x| !x.is_finite())
+        {
+            return Err(BatchError::Input);
+        }
+        for i in 0..n {
+            for j in 0..n {
+                self.zp[i][j] += zeta[i] * phi[j];
+            }
+            self.zy[i] += zeta[i] * y;
+        }
+        self.rows += 1;
+        Ok(())
+    }
+
+    /// Solves Σ ζ φᵀ θ = Σ ζ y into `theta[..n]` by Gaussian elimination with partial pivoting
+    /// (the matrix is not symmetric).
+    pub fn solve(&self, theta: &mut [f64]) -> Result<(), BatchError> {
+        let n = self.n;
+        if theta.len() < n {
+            return Err(BatchError::Input);
+        }
+        let mut m = self.zp;
+        let mut r = self.zy;
+        let scale = m.iter().take(n).flat_map(|row| row[..n].iter()).fold(0.0f64, |a, v| a.max(v.abs()));
+        for c in 0..n {
+            let p = (c..n).max_by(|&i, &j| m[i][c].abs().total_cmp(&m[j][c].abs())).unwrap_or(c);
+            if !(m[p][c].abs() > 1e-13 * scale) {
+                return Err(BatchError::Singular);
+            }
+            m.swap(c, p);
+            r.swap(c, p);
+            for i in c + 1..n {
+                let f = m[i][c] / m[c][c];
+                for j in c..n {
+                    m[i][j] -= f * m[c][j];
+                }
+                r[i] -= f * r[c];
+            }
+        }
+        for i in (0..n).rev() {
+            let mut s = r[i];
+            for j in i + 1..n {
+                s -= m[i][j] * theta[j];
+            }
+            theta[i] = s / m[i][i];
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -114,5 +195,25 @@ mod tests {
         s.add(&[1.0, 1.0], 1.0).unwrap();
         s.add(&[2.0, 2.0], 2.0).unwrap();
         assert_eq!(s.solve(&mut th), Err(BatchError::Singular));
+    }
+
+    /// With the instruments equal to the regressors IV is least squares.
+    #[test]
+    fn iv_with_phi_as_instruments_is_least_squares() {
+        let (mut ls, mut iv) = (BatchLs::new(3).unwrap(), BatchIv::new(3).unwrap());
+        let mut seed = 7u32;
+        for i in 0..50 {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let x = [f64::from(i % 7), f64::from(seed >> 20) / 4096.0, 1.0];
+            let y = 0.5 * x[0] - 2.0 * x[1] + 0.25 + f64::from(seed >> 28) * 0.01;
+            ls.add(&x, y).unwrap();
+            iv.add(&x, &x, y).unwrap();
+        }
+        let (mut a, mut b) = ([0.0; 3], [0.0; 3]);
+        ls.solve(&mut a).unwrap();
+        iv.solve(&mut b).unwrap();
+        for i in 0..3 {
+            assert!((a[i] - b[i]).abs() < 1e-9, "{a:?} vs {b:?}");
+        }
     }
 }
