@@ -65,6 +65,10 @@ pub struct ControllerSpec {
     pub igmvc: IgmvcConfig,
     /// Self-tuning GPC: T-filter pole (`AdaptiveConfig::t_filter`).
     pub gpc_t_filter: f32,
+    /// Model the self-tuning laws start from; `None`: the one identified on the simulated
+    /// carrier (`AdaptiveConfig::HTER1_MODEL`, `HTER2_MODEL`), as a board starts from the model
+    /// persisted from its own identification run.
+    pub initial: Option<Model>,
 }
 
 impl ControllerSpec {
@@ -77,6 +81,7 @@ impl ControllerSpec {
             gmvc: GmvcConfig::DEFAULT,
             igmvc: IgmvcConfig::DEFAULT,
             gpc_t_filter: AdaptiveConfig::default_for(Law::Gpc(GpcConfig::DEFAULT)).t_filter,
+            initial: None,
         }
     }
 
@@ -102,10 +107,21 @@ impl ControllerSpec {
             (ControllerChoice::Pi, _) => AnyController::Pi(Pi::new(pi)),
             (_, Some(law)) => match self.model {
                 Some(m) => AnyController::Fixed(FixedModel::new(law, m, u0)),
-                None => AnyController::SelfTuning(SelfTuning::new(
-                    AdaptiveConfig { fallback: pi, t_filter: self.gpc_t_filter, ..AdaptiveConfig::default_for(law) },
-                    u0,
-                )),
+                None => {
+                    let d = AdaptiveConfig::default_for(law);
+                    let initial = self.initial.or(d.initial);
+                    AnyController::SelfTuning(SelfTuning::new(
+                        AdaptiveConfig {
+                            fallback: pi,
+                            t_filter: self.gpc_t_filter,
+                            initial,
+                            // The estimator uses the start model's delay.
+                            k: initial.map_or(d.k, |m| m.k),
+                            ..d
+                        },
+                        u0,
+                    ))
+                }
             },
             (_, None) => bail!("no law for {:?}", self.choice),
         })
@@ -489,7 +505,11 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
                 PrbsConfig { bits: 7, hold: 12, low: (u0 - 0.1).max(0.0) as f32, high: (u0 + 0.1).min(1.0) as f32 };
             AnyController::Prbs(PrbsExcitation::new(prbs).map_err(|e| anyhow::anyhow!("PRBS: {e:?}"))?)
         } else {
-            opts.controller.build(cfg.ts_s, u0 as f32)?
+            let mut spec = opts.controller;
+            if spec.initial.is_none() && opts.plant == PlantChoice::Hter2 {
+                spec.initial = Some(AdaptiveConfig::HTER2_MODEL);
+            }
+            spec.build(cfg.ts_s, u0 as f32)?
         })
     };
     let mut carrier = Carrier::new(cfg, make_controller()?);
