@@ -22,3 +22,5 @@ echo "## unmodelled dynamics: fixed 2nd-order model, delay 1 vs 5 samples, on th
 for k in 1 5; do printf 'k = %s: ' "$k"; $H sim --scenario piecewise --controller gpc --model "$M2;$k" --json; done
 echo "## GPC T-filter: C = 1 vs C = 1 - 0.8 q^-1 (fixed model, k = 1)"
 for c in "" ";-0.8"; do printf 'C%s: ' "$c"; $H sim --scenario piecewise --controller gpc --model "$M2;1$c" --json; done
+echo "## self-tuning GPC with its estimate (the seed's Figs 5.21, 6.9)"
+$H sim --scenario piecewise --controller gpc --plot "$D/gpc-estimate.png" > /dev/null

@@ -400,7 +400,32 @@ fn plot_run(path: &std::path::Path, opts: &SimOptions, out: &SimOutput) -> Resul
         opts.scenario.load.unwrap_or(opts.load),
         opts.ambient_c
     );
-    plot::panels(path, &title, "time (min)", &[temp, duty])
+    let mut panels = vec![temp, duty];
+    // Self-tuning runs: the estimate over time, as the seed's Figs 5.21 and 6.9.
+    let est = |f: &dyn Fn(&sim::Row) -> Option<f32>| -> Vec<(f64, f64)> {
+        out.rows.iter().filter_map(|r| f(r).map(|v| (minutes(r.t_s), f64::from(v)))).collect()
+    };
+    if out.rows.iter().any(|r| r.a1.is_some()) {
+        panels.push(plot::Panel {
+            title: "Estimated A(q⁻¹) = 1 + a1 q⁻¹ + a2 q⁻²".into(),
+            y_label: "coefficient".into(),
+            series: vec![
+                plot::Series { name: "a1".into(), points: est(&|r| r.a1) },
+                plot::Series { name: "a2".into(), points: est(&|r| r.a2) },
+            ],
+            y_range: None,
+        });
+        panels.push(plot::Panel {
+            title: "Estimated B(q⁻¹) = b0 + b1 q⁻¹ (°C per unit duty)".into(),
+            y_label: "coefficient".into(),
+            series: vec![
+                plot::Series { name: "b0".into(), points: est(&|r| r.b0) },
+                plot::Series { name: "b1".into(), points: est(&|r| r.b1) },
+            ],
+            y_range: None,
+        });
+    }
+    plot::panels(path, &title, "time (min)", &panels)
 }
 
 fn print_summary(opts: &SimOptions, out: &SimOutput) {
