@@ -168,33 +168,52 @@ impl GpcState {
     }
 
     /// The GPC increment Δu(t) for setpoint `w`, after [`push_y`](Self::push_y).
+    ///
+    /// Runs every sample of the self-tuning controller (the model changes every sample), so it
+    /// is written for the Cortex-M4F: slices instead of indexed loops with run-time checks,
+    /// products that are zero by the structure of G skipped, the symmetric normal matrix built
+    /// band by band from shared partial sums. Every floating-point operation that is kept is
+    /// the one of the plain formulas, in the same order, so the result is bit-for-bit that of
+    /// the textbook loops (skipped terms are exact zeros and adding ±0 changes nothing).
     pub fn design(&self, m: &Model, cfg: &GpcConfig, w: f32) -> Result<GpcDesign, GpcError> {
         cfg.validate()?;
         if !w.is_finite() {
             return Err(GpcError::NonFinite);
         }
         let n2 = cfg.n2;
+        let na = m.na.min(MAX_NA);
+        let nb = m.nb.min(MAX_NB);
+        let nc = m.nc.min(MAX_NC);
         let mut d = GpcDesign { g: [0.0; MAX_N2], f: [0.0; MAX_N2], k1: [0.0; MAX_N2], du: 0.0 };
 
+        // A and B zero-padded to the largest orders, so the inner loops have fixed lengths and
+        // unroll. A padded term adds 0·y = ±0 to a sum that starts at +0.0 and so is never −0:
+        // the sum is unchanged, bit for bit.
+        let mut a = [0.0f32; MAX_NA];
+        a[..na].copy_from_slice(&m.a[..na]);
+        let mut b = [0.0f32; MAX_NB];
+        b[..nb].copy_from_slice(&m.b[..nb]);
+
         // Step response of q^−k B/A: y(j) = −Σ a_i y(j−i) + Σ b_i u(j−k−i), u = 1 from j = 0.
-        let mut ys = [0.0f32; MAX_N2 + 1]; // ys[j] = y(j), j = 0..=n2; y(j<0) = 0
+        // (Histories are windows into one array: shifting an array calls memmove on the M4.)
+        let mut ys = [0.0f32; MAX_NA + MAX_N2]; // ys[MAX_NA − 1 + j] = y(j); y(j ≤ 0) = 0
         for j in 1..=n2 {
             let mut v = 0.0;
-            for i in 1..=m.na {
-                if let Some(yp) = j.checked_sub(i).and_then(|x| ys.get(x)) {
-                    v -= m.a[i - 1] * yp;
-                }
+            // a_1 y(j−1), a_2 y(j−2), …: the window holds y(j−MAX_NA) … y(j−1).
+            for (ai, yp) in a.iter().zip(ys[j - 1..j - 1 + MAX_NA].iter().rev()) {
+                v -= ai * yp;
             }
-            for i in 0..m.nb {
+            for (i, bi) in b.iter().enumerate() {
                 if j >= m.k + i {
-                    v += m.b[i];
+                    v += bi;
                 }
             }
-            ys[j] = v;
-            d.g[j - 1] = v;
+            ys[MAX_NA - 1 + j] = v;
         }
+        d.g[..n2].copy_from_slice(&ys[MAX_NA..MAX_NA + n2]);
 
         // Free response: run Ã ŷ(t+j) = B Δu(t+j−k) + C ê(t+j) with future Δu, ê = 0.
+        // Ã is zero beyond ã_{na+1} (padding as above).
         let at = m.atilde();
         let mut yy = [0.0f32; HY + MAX_N2]; // yy[HY-1-i] = y(t−i); yy[HY-1+j] = ŷ(t+j)
         for i in 0..HY {
@@ -202,51 +221,50 @@ impl GpcState {
         }
         for j in 1..=n2 {
             let mut v = 0.0;
-            for i in 1..=m.na + 1 {
-                v -= at[i] * yy[HY - 1 + j - i];
+            // ã_1 ŷ(t+j−1), ã_2 ŷ(t+j−2), …: the window holds ŷ(t+j−HY+1) … ŷ(t+j−1).
+            for (ai, yp) in at[1..].iter().zip(yy[j..j + HY - 1].iter().rev()) {
+                v -= ai * yp;
             }
-            for i in 0..m.nb {
-                // Δu(t + j − k − i) is known only when j − k − i ≤ −1.
-                if m.k + i > j {
-                    v += m.b[i] * self.du_past(m.k + i - j);
+            // Δu(t + j − k − i) is known only when j − k − i ≤ −1.
+            if j < m.k + nb {
+                for (i, bi) in b[..nb].iter().enumerate() {
+                    if m.k + i > j {
+                        v += bi * self.du_past(m.k + i - j);
+                    }
                 }
             }
-            for i in j..=m.nc {
+            for i in j..=nc {
                 v += m.c[i - 1] * self.e[i - j];
             }
             yy[HY - 1 + j] = v;
-            d.f[j - 1] = v;
         }
-        if d.f.iter().chain(d.g.iter()).any(|x| !x.is_finite()) {
+        d.f[..n2].copy_from_slice(&yy[HY..HY + n2]);
+        if d.f[..n2].iter().chain(d.g[..n2].iter()).any(|x| !x.is_finite()) {
             return Err(GpcError::NonFinite);
         }
 
         // Normal equations H x = Gᵀ(w − f), H = GᵀG + λI, rows j = N1..N2, G[j][c] = g_{j−c}.
-        let nu = cfg.nu;
-        let gjc = |j: usize, c: usize| if j > c { d.g[j - c - 1] } else { 0.0 };
-        let mut h = [[0.0f32; MAX_NU]; MAX_NU];
-        for (r, row) in h.iter_mut().enumerate().take(nu) {
-            for (c, hrc) in row.iter_mut().enumerate().take(nu) {
-                let mut s = if r == c { cfg.lambda } else { 0.0 };
-                for j in cfg.n1..=n2 {
-                    s += gjc(j, r) * gjc(j, c);
-                }
-                *hrc = s;
-            }
-        }
+        let (n1, nu) = (cfg.n1, cfg.nu);
+        let h = normal_matrix(&d.g, cfg);
         let l = cholesky(&h, nu).ok_or(GpcError::Singular)?;
-        // First row of H⁻¹Gᵀ: solve H z = e₁ once, then k1_j = Σ_c z_c G[j][c].
+        // First row of H⁻¹Gᵀ: solve H z = e₁ once, then k1_j = Σ_c z_c G[j][c], accumulated
+        // column by column (for each j the same additions in the same order, c = 0, 1, …;
+        // G[j][c] = 0 for c ≥ j is skipped).
         let mut z = [0.0f32; MAX_NU];
         z[0] = 1.0;
         chol_solve(&l, nu, &mut z);
-        let mut du = 0.0;
-        for j in cfg.n1..=n2 {
-            let mut kj = 0.0;
-            for (c, zc) in z.iter().enumerate().take(nu) {
-                kj += zc * gjc(j, c);
+        let rows = n2 + 1 - n1; // k1[r] belongs to j = N1 + r
+        for (c, zc) in z[..nu].iter().enumerate() {
+            let lo = n1.max(c + 1);
+            if lo <= n2 {
+                for (kj, gv) in d.k1[lo - n1..rows].iter_mut().zip(&d.g[lo - c - 1..n2 - c]) {
+                    *kj += zc * gv;
+                }
             }
-            d.k1[j - cfg.n1] = kj;
-            du += kj * (w - d.f[j - 1]);
+        }
+        let mut du = 0.0;
+        for (kj, fj) in d.k1[..rows].iter().zip(&d.f[n1 - 1..n2]) {
+            du += kj * (w - fj);
         }
         if !du.is_finite() {
             return Err(GpcError::NonFinite);
@@ -266,6 +284,84 @@ impl GpcState {
     }
 }
 
+/// The lower triangle (and its mirror) of H = GᵀG + λI for rows j = N1..N2 of
+/// G[j][c] = g_{j−c} (g_0 = 0): H[r][c] = λδ_rc + Σ_{j = max(N1, r+1)..N2} g_{j−r} g_{j−c},
+/// summed in increasing j, for r ≥ c.
+///
+/// With N1 = 1 the sums of one band r − c = δ are prefixes of each other (row r + 1 has the
+/// terms of row r but the last), so each band is summed once, from the shortest row up: N2·Nu
+/// products instead of N2·Nu², with the same additions in the same order.
+fn normal_matrix(g: &[f32; MAX_N2], cfg: &GpcConfig) -> [[f32; MAX_NU]; MAX_NU] {
+    let (n1, n2, nu) = (cfg.n1, cfg.n2, cfg.nu);
+    let mut h = [[0.0f32; MAX_NU]; MAX_NU];
+    if n1 == 1 {
+        for band in 0..nu {
+            let mut s = if band == 0 { cfg.lambda } else { 0.0 };
+            // Row r sums g[p]·g[p + band] (0-based g, g[p] = g_{p+1}) for p = 0..n2 − r.
+            let last = nu - 1;
+            for (x, y) in g[..n2 - last].iter().zip(&g[band..n2 - last + band]) {
+                s += x * y;
+            }
+            h[last][last - band] = s;
+            for r in (band..last).rev() {
+                let p = n2 - r - 1;
+                s += g[p] * g[p + band];
+                h[r][r - band] = s;
+            }
+        }
+    } else {
+        for r in 0..nu {
+            for c in 0..=r {
+                let mut s = if r == c { cfg.lambda } else { 0.0 };
+                let lo = n1.max(r + 1);
+                if lo <= n2 {
+                    for (x, y) in g[lo - r - 1..n2 - r].iter().zip(&g[lo - c - 1..n2 - c]) {
+                        s += x * y;
+                    }
+                }
+                h[r][c] = s;
+            }
+        }
+    }
+    for r in 0..nu {
+        for c in 0..r {
+            h[c][r] = h[r][c];
+        }
+    }
+    h
+}
+
+/// √x, correctly rounded: the FPU's `vsqrt.f32` on a hard-float Arm target (the same IEEE
+/// result as `libm::sqrtf`, without its ≈ 90-instruction software loop), `libm` elsewhere.
+#[inline(always)]
+fn sqrtf(x: f32) -> f32 {
+    #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+    {
+        let r: u32;
+        // SAFETY: FPU register moves and one arithmetic instruction; s15 is saved in a core
+        // register and restored, so no register but the declared outputs changes. (Rust's `sreg`
+        // operands need the double-precision `vfp2` feature, which the M4F does not have.)
+        unsafe {
+            core::arch::asm!(
+                "vmov {save}, s15",
+                "vmov s15, {x}",
+                "vsqrt.f32 s15, s15",
+                "vmov {r}, s15",
+                "vmov s15, {save}",
+                x = in(reg) x.to_bits(),
+                r = lateout(reg) r,
+                save = out(reg) _,
+                options(pure, nomem, nostack),
+            )
+        };
+        f32::from_bits(r)
+    }
+    #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
+    {
+        libm::sqrtf(x)
+    }
+}
+
 /// Lower Cholesky factor of the leading n×n block, or `None` if not positive definite.
 fn cholesky(h: &[[f32; MAX_NU]; MAX_NU], n: usize) -> Option<[[f32; MAX_NU]; MAX_NU]> {
     let mut l = [[0.0f32; MAX_NU]; MAX_NU];
@@ -279,7 +375,7 @@ fn cholesky(h: &[[f32; MAX_NU]; MAX_NU], n: usize) -> Option<[[f32; MAX_NU]; MAX
                 if !(s > 1e-12) {
                     return None;
                 }
-                l[i][i] = libm::sqrtf(s);
+                l[i][i] = sqrtf(s);
             } else {
                 l[i][j] = s / l[j][j];
             }
