@@ -3,7 +3,7 @@
 //! [`Controller`] trait. The self-tuning versions redesign the same laws from the RLS estimate
 //! every sample.
 
-use super::gpc::{GpcConfig, GpcState};
+use super::gpc::{GpcConfig, GpcDesign, GpcState};
 use super::model::Model;
 use super::mv::{GmvcConfig, IgmvcConfig, MvState};
 use super::{ControlInput, Controller};
@@ -36,12 +36,14 @@ impl Law {
 pub struct LawState {
     mv: MvState,
     gpc: GpcState,
+    /// GPC's working arrays, kept between samples so a design costs no zeroing and copying.
+    gpc_design: GpcDesign,
 }
 
 impl LawState {
     /// Empty histories holding the duty `u0`.
     pub fn new(u0: f32) -> Self {
-        Self { mv: MvState::new(u0), gpc: GpcState::new(u0) }
+        Self { mv: MvState::new(u0), gpc: GpcState::new(u0), gpc_design: GpcDesign::ZERO }
     }
 
     /// Computes the unclipped u(t) for measurement `y`, setpoint `w`, model `m`; `None` on
@@ -58,7 +60,11 @@ impl LawState {
         let u = match law {
             Law::Gmvc(c) if ok_mv => self.mv.gmvc(m, c, w).ok(),
             Law::Igmvc(c) if ok_mv => self.mv.igmvc(m, c, w).ok(),
-            Law::Gpc(c) if ok_gpc => self.gpc.design(m, c, w).ok().map(|d| self.gpc.u_prev() + d.du),
+            Law::Gpc(c) if ok_gpc => self
+                .gpc
+                .design_into(m, c, w, &mut self.gpc_design)
+                .ok()
+                .map(|()| self.gpc.u_prev() + self.gpc_design.du),
             _ => None,
         };
         u.filter(|u| u.is_finite())

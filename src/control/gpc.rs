@@ -95,6 +95,8 @@ impl GpcConfig {
 }
 
 const HY: usize = MAX_NA + 2; // y(t) … y(t − na − 1)
+                              // `design_into` holds the recursions' past values in MAX_NA and HY − 1 scalars.
+const _: () = assert!(MAX_NA == 4 && HY == 6);
 const HU: usize = MAX_NB + MAX_K; // Δu(t−1) … Δu(t − k − nb)
 const HE: usize = MAX_NC + 1; // ê(t) … ê(t − nc)
 
@@ -119,6 +121,11 @@ pub struct GpcDesign {
     pub k1: [f32; MAX_N2],
     /// The increment Δu(t) before clipping.
     pub du: f32,
+}
+
+impl GpcDesign {
+    /// All zeros.
+    pub const ZERO: GpcDesign = GpcDesign { g: [0.0; MAX_N2], f: [0.0; MAX_N2], k1: [0.0; MAX_N2], du: 0.0 };
 }
 
 impl GpcState {
@@ -164,7 +171,8 @@ impl GpcState {
 
     /// Δu(t − m), m ≥ 1 (zero beyond the stored history).
     fn du_past(&self, m: usize) -> f32 {
-        m.checked_sub(1).and_then(|i| self.du.get(i)).copied().unwrap_or(0.0)
+        // m = 0 wraps to an index past the end, which `get` refuses.
+        self.du.get(m.wrapping_sub(1)).copied().unwrap_or(0.0)
     }
 
     /// The GPC increment Δu(t) for setpoint `w`, after [`push_y`](Self::push_y).
@@ -176,6 +184,15 @@ impl GpcState {
     /// the one of the plain formulas, in the same order, so the result is bit-for-bit that of
     /// the textbook loops (skipped terms are exact zeros and adding ±0 changes nothing).
     pub fn design(&self, m: &Model, cfg: &GpcConfig, w: f32) -> Result<GpcDesign, GpcError> {
+        let mut d = GpcDesign::ZERO;
+        self.design_into(m, cfg, w, &mut d)?;
+        Ok(d)
+    }
+
+    /// [`design`](Self::design) into the caller's `d`, which the self-tuning loop keeps from
+    /// sample to sample (no 364-byte zeroing and copy per sample on the M4). Only g_1…g_N2,
+    /// f_1…f_N2, k1 over N1…N2 and du are written; entries beyond are left as they were.
+    pub fn design_into(&self, m: &Model, cfg: &GpcConfig, w: f32, d: &mut GpcDesign) -> Result<(), GpcError> {
         cfg.validate()?;
         if !w.is_finite() {
             return Err(GpcError::NonFinite);
@@ -184,77 +201,97 @@ impl GpcState {
         let na = m.na.min(MAX_NA);
         let nb = m.nb.min(MAX_NB);
         let nc = m.nc.min(MAX_NC);
-        let mut d = GpcDesign { g: [0.0; MAX_N2], f: [0.0; MAX_N2], k1: [0.0; MAX_N2], du: 0.0 };
 
-        // A and B zero-padded to the largest orders, so the inner loops have fixed lengths and
+        // A and B zero-padded to the largest orders, so the inner sums have fixed lengths and
         // unroll. A padded term adds 0·y = ±0 to a sum that starts at +0.0 and so is never −0:
-        // the sum is unchanged, bit for bit.
-        let mut a = [0.0f32; MAX_NA];
-        a[..na].copy_from_slice(&m.a[..na]);
-        let mut b = [0.0f32; MAX_NB];
-        b[..nb].copy_from_slice(&m.b[..nb]);
+        // the sum is unchanged, bit for bit. The past values the recursions need are held in
+        // scalars, shifted by register moves (shifting an array calls memmove on the M4).
+        // (Element by element: a run-time-length copy is a memcpy call on the M4.)
+        let a: [f32; MAX_NA] = core::array::from_fn(|i| if i < na { m.a[i] } else { 0.0 });
+        let b: [f32; MAX_NB] = core::array::from_fn(|i| if i < nb { m.b[i] } else { 0.0 });
 
-        // Step response of q^−k B/A: y(j) = −Σ a_i y(j−i) + Σ b_i u(j−k−i), u = 1 from j = 0.
-        // (Histories are windows into one array: shifting an array calls memmove on the M4.)
-        let mut ys = [0.0f32; MAX_NA + MAX_N2]; // ys[MAX_NA − 1 + j] = y(j); y(j ≤ 0) = 0
-        for j in 1..=n2 {
+        // Step response of q^−k B/A: y(j) = −Σ a_i y(j−i) + Σ b_i u(j−k−i), u = 1 from j = 0;
+        // y(j ≤ 0) = 0. From j = k + nb − 1 on every b_i is in (the padded zeros add +0), so
+        // that part of the loop needs no comparisons.
+        let (mut y1, mut y2, mut y3, mut y4) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+        let steady = (m.k + nb).saturating_sub(1).clamp(1, n2 + 1);
+        for (idx, gj) in d.g[..n2].iter_mut().enumerate() {
+            let j = idx + 1;
             let mut v = 0.0;
-            // a_1 y(j−1), a_2 y(j−2), …: the window holds y(j−MAX_NA) … y(j−1).
-            for (ai, yp) in a.iter().zip(ys[j - 1..j - 1 + MAX_NA].iter().rev()) {
-                v -= ai * yp;
-            }
-            for (i, bi) in b.iter().enumerate() {
-                if j >= m.k + i {
-                    v += bi;
+            v -= a[0] * y1;
+            v -= a[1] * y2;
+            v -= a[2] * y3;
+            v -= a[3] * y4;
+            if j < steady {
+                for (i, bi) in b.iter().enumerate() {
+                    if j >= m.k + i {
+                        v += bi;
+                    }
                 }
+            } else {
+                v += b[0];
+                v += b[1];
+                v += b[2];
+                v += b[3];
             }
-            ys[MAX_NA - 1 + j] = v;
+            (y4, y3, y2, y1) = (y3, y2, y1, v);
+            *gj = v;
         }
-        d.g[..n2].copy_from_slice(&ys[MAX_NA..MAX_NA + n2]);
 
         // Free response: run Ã ŷ(t+j) = B Δu(t+j−k) + C ê(t+j) with future Δu, ê = 0.
-        // Ã is zero beyond ã_{na+1} (padding as above).
+        // Ã is zero beyond ã_{na+1} (padding as above); ŷ(t + j − i) = y(t + j − i) for j ≤ i.
+        // Past increments enter while j < k + nb, past residuals while j ≤ nc.
         let at = m.atilde();
-        let mut yy = [0.0f32; HY + MAX_N2]; // yy[HY-1-i] = y(t−i); yy[HY-1+j] = ŷ(t+j)
-        for i in 0..HY {
-            yy[HY - 1 - i] = self.y[i];
-        }
-        for j in 1..=n2 {
+        let [mut p1, mut p2, mut p3, mut p4, mut p5, _] = self.y;
+        let known = (m.k + nb).max(nc + 1);
+        for (idx, fj) in d.f[..n2].iter_mut().enumerate() {
+            let j = idx + 1;
             let mut v = 0.0;
-            // ã_1 ŷ(t+j−1), ã_2 ŷ(t+j−2), …: the window holds ŷ(t+j−HY+1) … ŷ(t+j−1).
-            for (ai, yp) in at[1..].iter().zip(yy[j..j + HY - 1].iter().rev()) {
-                v -= ai * yp;
-            }
-            // Δu(t + j − k − i) is known only when j − k − i ≤ −1.
-            if j < m.k + nb {
+            v -= at[1] * p1;
+            v -= at[2] * p2;
+            v -= at[3] * p3;
+            v -= at[4] * p4;
+            v -= at[5] * p5;
+            if j < known {
+                // Δu(t + j − k − i) is known only when j − k − i ≤ −1.
                 for (i, bi) in b[..nb].iter().enumerate() {
                     if m.k + i > j {
                         v += bi * self.du_past(m.k + i - j);
                     }
                 }
+                for i in j..=nc {
+                    v += m.c[i - 1] * self.e[i - j];
+                }
             }
-            for i in j..=nc {
-                v += m.c[i - 1] * self.e[i - j];
-            }
-            yy[HY - 1 + j] = v;
+            (p5, p4, p3, p2, p1) = (p4, p3, p2, p1, v);
+            *fj = v;
         }
-        d.f[..n2].copy_from_slice(&yy[HY..HY + n2]);
-        if d.f[..n2].iter().chain(d.g[..n2].iter()).any(|x| !x.is_finite()) {
+        // x − x is +0 for a finite x and NaN otherwise: one branch instead of 2·N2.
+        let mut probe = 0.0f32;
+        for x in d.f[..n2].iter().chain(d.g[..n2].iter()) {
+            probe += x - x;
+        }
+        if probe != 0.0 {
             return Err(GpcError::NonFinite);
         }
 
         // Normal equations H x = Gᵀ(w − f), H = GᵀG + λI, rows j = N1..N2, G[j][c] = g_{j−c}.
         let (n1, nu) = (cfg.n1, cfg.nu);
-        let h = normal_matrix(&d.g, cfg);
-        let l = cholesky(&h, nu).ok_or(GpcError::Singular)?;
+        let mut h = normal_matrix(&d.g, cfg);
+        if !cholesky_in_place(&mut h, nu) {
+            return Err(GpcError::Singular);
+        }
         // First row of H⁻¹Gᵀ: solve H z = e₁ once, then k1_j = Σ_c z_c G[j][c], accumulated
-        // column by column (for each j the same additions in the same order, c = 0, 1, …;
-        // G[j][c] = 0 for c ≥ j is skipped).
+        // column by column (for each j the same additions in the same order, starting from 0.0,
+        // c = 0, 1, …; G[j][c] = 0 for c ≥ j is skipped).
         let mut z = [0.0f32; MAX_NU];
         z[0] = 1.0;
-        chol_solve(&l, nu, &mut z);
+        chol_solve(&h, nu, &mut z);
         let rows = n2 + 1 - n1; // k1[r] belongs to j = N1 + r
-        for (c, zc) in z[..nu].iter().enumerate() {
+        for (kj, gv) in d.k1[..rows].iter_mut().zip(&d.g[n1 - 1..n2]) {
+            *kj = 0.0 + z[0] * gv;
+        }
+        for (c, zc) in z[..nu].iter().enumerate().skip(1) {
             let lo = n1.max(c + 1);
             if lo <= n2 {
                 for (kj, gv) in d.k1[lo - n1..rows].iter_mut().zip(&d.g[lo - c - 1..n2 - c]) {
@@ -270,7 +307,7 @@ impl GpcState {
             return Err(GpcError::NonFinite);
         }
         d.du = du;
-        Ok(d)
+        Ok(())
     }
 
     /// Records the u actually applied this sample (after clipping or an override).
@@ -284,13 +321,14 @@ impl GpcState {
     }
 }
 
-/// The lower triangle (and its mirror) of H = GᵀG + λI for rows j = N1..N2 of
+/// The lower triangle of H = GᵀG + λI (all the Cholesky factorisation reads) for rows j = N1..N2 of
 /// G[j][c] = g_{j−c} (g_0 = 0): H[r][c] = λδ_rc + Σ_{j = max(N1, r+1)..N2} g_{j−r} g_{j−c},
 /// summed in increasing j, for r ≥ c.
 ///
 /// With N1 = 1 the sums of one band r − c = δ are prefixes of each other (row r + 1 has the
 /// terms of row r but the last), so each band is summed once, from the shortest row up: N2·Nu
 /// products instead of N2·Nu², with the same additions in the same order.
+#[inline(always)]
 fn normal_matrix(g: &[f32; MAX_N2], cfg: &GpcConfig) -> [[f32; MAX_NU]; MAX_NU] {
     let (n1, n2, nu) = (cfg.n1, cfg.n2, cfg.nu);
     let mut h = [[0.0f32; MAX_NU]; MAX_NU];
@@ -321,11 +359,6 @@ fn normal_matrix(g: &[f32; MAX_N2], cfg: &GpcConfig) -> [[f32; MAX_NU]; MAX_NU] 
                 }
                 h[r][c] = s;
             }
-        }
-    }
-    for r in 0..nu {
-        for c in 0..r {
-            h[c][r] = h[r][c];
         }
     }
     h
@@ -362,29 +395,30 @@ fn sqrtf(x: f32) -> f32 {
     }
 }
 
-/// Lower Cholesky factor of the leading n×n block, or `None` if not positive definite.
-fn cholesky(h: &[[f32; MAX_NU]; MAX_NU], n: usize) -> Option<[[f32; MAX_NU]; MAX_NU]> {
-    let mut l = [[0.0f32; MAX_NU]; MAX_NU];
+/// Lower Cholesky factor of the leading n×n block, computed in place over the lower triangle
+/// of `h` (each entry is read before it is overwritten); false if not positive definite.
+fn cholesky_in_place(h: &mut [[f32; MAX_NU]; MAX_NU], n: usize) -> bool {
     for i in 0..n {
         for j in 0..=i {
             let mut s = h[i][j];
             for p in 0..j {
-                s -= l[i][p] * l[j][p];
+                s -= h[i][p] * h[j][p];
             }
             if i == j {
                 if !(s > 1e-12) {
-                    return None;
+                    return false;
                 }
-                l[i][i] = sqrtf(s);
+                h[i][i] = sqrtf(s);
             } else {
-                l[i][j] = s / l[j][j];
+                h[i][j] = s / h[j][j];
             }
         }
     }
-    Some(l)
+    true
 }
 
-/// Solves L Lᵀ x = b in place.
+/// Solves L Lᵀ x = b in place (L in the lower triangle).
+#[inline(always)]
 fn chol_solve(l: &[[f32; MAX_NU]; MAX_NU], n: usize, b: &mut [f32; MAX_NU]) {
     for i in 0..n {
         let mut s = b[i];
