@@ -476,6 +476,116 @@ mod tests {
         (0..rows).map(|jj| (0..nu).map(|c| inv[0][c] * gm(n1 + jj, c)).sum()).collect()
     }
 
+    /// The textbook loops of the design (every term of every sum, G built by index), as the
+    /// design was first written: the optimised `design` must give the same bits.
+    fn textbook_design(
+        s: &GpcState,
+        m: &Model,
+        cfg: &GpcConfig,
+        w: f32,
+    ) -> ([f32; MAX_N2], [f32; MAX_N2], [f32; MAX_N2], f32) {
+        let n2 = cfg.n2;
+        let (mut g, mut f, mut k1) = ([0.0f32; MAX_N2], [0.0f32; MAX_N2], [0.0f32; MAX_N2]);
+        let mut ys = [0.0f32; MAX_N2 + 1];
+        for j in 1..=n2 {
+            let mut v = 0.0;
+            for i in 1..=m.na {
+                if let Some(yp) = j.checked_sub(i).and_then(|x| ys.get(x)) {
+                    v -= m.a[i - 1] * yp;
+                }
+            }
+            for i in 0..m.nb {
+                if j >= m.k + i {
+                    v += m.b[i];
+                }
+            }
+            ys[j] = v;
+            g[j - 1] = v;
+        }
+        let at = m.atilde();
+        let mut yy = [0.0f32; HY + MAX_N2];
+        for i in 0..HY {
+            yy[HY - 1 - i] = s.y[i];
+        }
+        for j in 1..=n2 {
+            let mut v = 0.0;
+            for i in 1..=m.na + 1 {
+                v -= at[i] * yy[HY - 1 + j - i];
+            }
+            for i in 0..m.nb {
+                if m.k + i > j {
+                    v += m.b[i] * s.du_past(m.k + i - j);
+                }
+            }
+            for i in j..=m.nc {
+                v += m.c[i - 1] * s.e[i - j];
+            }
+            yy[HY - 1 + j] = v;
+            f[j - 1] = v;
+        }
+        let nu = cfg.nu;
+        let gjc = |j: usize, c: usize| if j > c { g[j - c - 1] } else { 0.0 };
+        let mut h = [[0.0f32; MAX_NU]; MAX_NU];
+        for (r, row) in h.iter_mut().enumerate().take(nu) {
+            for (c, hrc) in row.iter_mut().enumerate().take(nu) {
+                let mut acc = if r == c { cfg.lambda } else { 0.0 };
+                for j in cfg.n1..=n2 {
+                    acc += gjc(j, r) * gjc(j, c);
+                }
+                *hrc = acc;
+            }
+        }
+        assert!(cholesky_in_place(&mut h, nu));
+        let mut z = [0.0f32; MAX_NU];
+        z[0] = 1.0;
+        chol_solve(&h, nu, &mut z);
+        let mut du = 0.0;
+        for j in cfg.n1..=n2 {
+            let mut kj = 0.0;
+            for (c, zc) in z.iter().enumerate().take(nu) {
+                kj += zc * gjc(j, c);
+            }
+            k1[j - cfg.n1] = kj;
+            du += kj * (w - f[j - 1]);
+        }
+        (g, f, k1, du)
+    }
+
+    #[test]
+    fn design_is_bit_for_bit_the_textbook_loops() {
+        let models = [
+            Model::new(&[-1.749_27, 0.751_376], &[-0.027_079_1, -0.029_865], &[], 5).unwrap(),
+            Model::new(&[-1.8, 0.81], &[-0.02, -0.01], &[], 1).unwrap(),
+            Model::new(&[-0.8], &[0.4, 0.6], &[0.5], 1).unwrap(),
+            Model::new(&[-2.8, 2.86, -1.26, 0.2025], &[0.1, -0.05, 0.02, 0.01], &[-0.3, 0.1], 3).unwrap(),
+            Model::new(&[-1.5, 0.56], &[-0.03], &[0.2], 10).unwrap(),
+        ];
+        let cfgs = [
+            GpcConfig::DEFAULT,
+            GpcConfig { n1: 1, n2: 3, nu: 3, lambda: 0.8 },
+            GpcConfig { n1: 3, n2: 20, nu: 2, lambda: 1.0 },
+            GpcConfig { n1: 1, n2: 30, nu: 5, lambda: 0.1 },
+            GpcConfig { n1: 2, n2: 12, nu: 1, lambda: 3.0 },
+        ];
+        for m in &models {
+            let mut s = GpcState::new(0.4);
+            for (t, y) in [4.3f32, 4.25, 4.31, 4.1, 3.95, 4.02, 4.0, 3.97].iter().enumerate() {
+                s.push_y(*y, m).unwrap();
+                s.track(0.4 + 0.05 * (t % 3) as f32);
+            }
+            s.push_y(3.99, m).unwrap();
+            for cfg in &cfgs {
+                let (g, f, k1, du) = textbook_design(&s, m, cfg, 4.0);
+                let d = s.design(m, cfg, 4.0).unwrap();
+                let bits = |x: &[f32]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&d.g), bits(&g), "g, {m:?} {cfg:?}");
+                assert_eq!(bits(&d.f), bits(&f), "f, {m:?} {cfg:?}");
+                assert_eq!(bits(&d.k1), bits(&k1), "k1, {m:?} {cfg:?}");
+                assert_eq!(d.du.to_bits(), du.to_bits(), "du, {m:?} {cfg:?}");
+            }
+        }
+    }
+
     #[test]
     fn step_response_and_gains_match_an_independent_f64_solution() {
         let m = Model::new(&[-1.8, 0.81], &[-0.02, -0.01], &[], 1).unwrap();
