@@ -149,8 +149,7 @@ impl GpcState {
             self.y = [y; HY];
             self.primed = true;
         } else {
-            self.y.copy_within(0..HY - 1, 1);
-            self.y[0] = y;
+            shift_in(&mut self.y, y);
         }
         // ê(t) = Ã y(t) − B Δu(t−k) − Σ c_i ê(t−i)
         let at = m.atilde();
@@ -161,7 +160,7 @@ impl GpcState {
         for i in 0..m.nb {
             e -= m.b[i] * self.du_past(m.k + i);
         }
-        self.e.copy_within(0..HE - 1, 1);
+        shift_in(&mut self.e, 0.0);
         for i in 0..m.nc {
             e -= m.c[i] * self.e[i + 1];
         }
@@ -213,27 +212,39 @@ impl GpcState {
         // Step response of q^−k B/A: y(j) = −Σ a_i y(j−i) + Σ b_i u(j−k−i), u = 1 from j = 0;
         // y(j ≤ 0) = 0. From j = k + nb − 1 on every b_i is in (the padded zeros add +0), so
         // that part of the loop needs no comparisons.
+        // x − x is +0 for a finite x and NaN otherwise: summed over g and f, one branch tells
+        // whether every value is finite.
+        let mut probe = 0.0f32;
         let (mut y1, mut y2, mut y3, mut y4) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
         let steady = (m.k + nb).saturating_sub(1).clamp(1, n2 + 1);
-        for (idx, gj) in d.g[..n2].iter_mut().enumerate() {
+        let (head, tail) = d.g[..n2].split_at_mut(steady - 1);
+        for (idx, gj) in head.iter_mut().enumerate() {
             let j = idx + 1;
             let mut v = 0.0;
             v -= a[0] * y1;
             v -= a[1] * y2;
             v -= a[2] * y3;
             v -= a[3] * y4;
-            if j < steady {
-                for (i, bi) in b.iter().enumerate() {
-                    if j >= m.k + i {
-                        v += bi;
-                    }
+            for (i, bi) in b.iter().enumerate() {
+                if j >= m.k + i {
+                    v += bi;
                 }
-            } else {
-                v += b[0];
-                v += b[1];
-                v += b[2];
-                v += b[3];
             }
+            probe += v - v;
+            (y4, y3, y2, y1) = (y3, y2, y1, v);
+            *gj = v;
+        }
+        for gj in tail.iter_mut() {
+            let mut v = 0.0;
+            v -= a[0] * y1;
+            v -= a[1] * y2;
+            v -= a[2] * y3;
+            v -= a[3] * y4;
+            v += b[0];
+            v += b[1];
+            v += b[2];
+            v += b[3];
+            probe += v - v;
             (y4, y3, y2, y1) = (y3, y2, y1, v);
             *gj = v;
         }
@@ -243,8 +254,9 @@ impl GpcState {
         // Past increments enter while j < k + nb, past residuals while j ≤ nc.
         let at = m.atilde();
         let [mut p1, mut p2, mut p3, mut p4, mut p5, _] = self.y;
-        let known = (m.k + nb).max(nc + 1);
-        for (idx, fj) in d.f[..n2].iter_mut().enumerate() {
+        let known = (m.k + nb).max(nc + 1).min(n2 + 1);
+        let (head, tail) = d.f[..n2].split_at_mut(known - 1);
+        for (idx, fj) in head.iter_mut().enumerate() {
             let j = idx + 1;
             let mut v = 0.0;
             v -= at[1] * p1;
@@ -252,24 +264,29 @@ impl GpcState {
             v -= at[3] * p3;
             v -= at[4] * p4;
             v -= at[5] * p5;
-            if j < known {
-                // Δu(t + j − k − i) is known only when j − k − i ≤ −1.
-                for (i, bi) in b[..nb].iter().enumerate() {
-                    if m.k + i > j {
-                        v += bi * self.du_past(m.k + i - j);
-                    }
-                }
-                for i in j..=nc {
-                    v += m.c[i - 1] * self.e[i - j];
+            // Δu(t + j − k − i) is known only when j − k − i ≤ −1.
+            for (i, bi) in b[..nb].iter().enumerate() {
+                if m.k + i > j {
+                    v += bi * self.du_past(m.k + i - j);
                 }
             }
+            for i in j..=nc {
+                v += m.c[i - 1] * self.e[i - j];
+            }
+            probe += v - v;
             (p5, p4, p3, p2, p1) = (p4, p3, p2, p1, v);
             *fj = v;
         }
-        // x − x is +0 for a finite x and NaN otherwise: one branch instead of 2·N2.
-        let mut probe = 0.0f32;
-        for x in d.f[..n2].iter().chain(d.g[..n2].iter()) {
-            probe += x - x;
+        for fj in tail.iter_mut() {
+            let mut v = 0.0;
+            v -= at[1] * p1;
+            v -= at[2] * p2;
+            v -= at[3] * p3;
+            v -= at[4] * p4;
+            v -= at[5] * p5;
+            probe += v - v;
+            (p5, p4, p3, p2, p1) = (p4, p3, p2, p1, v);
+            *fj = v;
         }
         if probe != 0.0 {
             return Err(GpcError::NonFinite);
@@ -281,28 +298,18 @@ impl GpcState {
         if !cholesky_in_place(&mut h, nu) {
             return Err(GpcError::Singular);
         }
-        // First row of H⁻¹Gᵀ: solve H z = e₁ once, then k1_j = Σ_c z_c G[j][c], accumulated
-        // column by column (for each j the same additions in the same order, starting from 0.0,
-        // c = 0, 1, …; G[j][c] = 0 for c ≥ j is skipped).
+        // First row of H⁻¹Gᵀ: solve H z = e₁ once, then k1_j = Σ_c z_c G[j][c] and
+        // Δu = Σ_j k1_j (w − f_j) (see `gains`).
         let mut z = [0.0f32; MAX_NU];
         z[0] = 1.0;
         chol_solve(&h, nu, &mut z);
-        let rows = n2 + 1 - n1; // k1[r] belongs to j = N1 + r
-        for (kj, gv) in d.k1[..rows].iter_mut().zip(&d.g[n1 - 1..n2]) {
-            *kj = 0.0 + z[0] * gv;
-        }
-        for (c, zc) in z[..nu].iter().enumerate().skip(1) {
-            let lo = n1.max(c + 1);
-            if lo <= n2 {
-                for (kj, gv) in d.k1[lo - n1..rows].iter_mut().zip(&d.g[lo - c - 1..n2 - c]) {
-                    *kj += zc * gv;
-                }
-            }
-        }
-        let mut du = 0.0;
-        for (kj, fj) in d.k1[..rows].iter().zip(&d.f[n1 - 1..n2]) {
-            du += kj * (w - fj);
-        }
+        let du = match nu {
+            1 => gains::<1>(&z, d, n1, n2, w),
+            2 => gains::<2>(&z, d, n1, n2, w),
+            3 => gains::<3>(&z, d, n1, n2, w),
+            4 => gains::<4>(&z, d, n1, n2, w),
+            _ => gains::<MAX_NU>(&z, d, n1, n2, w),
+        };
         if !du.is_finite() {
             return Err(GpcError::NonFinite);
         }
@@ -315,8 +322,7 @@ impl GpcState {
         if !applied.is_finite() {
             return;
         }
-        self.du.copy_within(0..HU - 1, 1);
-        self.du[0] = applied - self.u_prev;
+        shift_in(&mut self.du, applied - self.u_prev);
         self.u_prev = applied;
     }
 }
@@ -392,6 +398,46 @@ fn sqrtf(x: f32) -> f32 {
     #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
     {
         libm::sqrtf(x)
+    }
+}
+
+/// k1_j = Σ_{c<Nu} z_c G[j][c] for j = N1…N2 (into `d.k1`) and Δu = Σ_j k1_j (w − f_j), both
+/// summed in the textbook order (k1_j from 0.0 over c = 0, 1, …, Δu over increasing j). Nu is
+/// a constant so the sum over c unrolls; G[j][c] = g_{j−c} is zero for c ≥ j, and those terms
+/// are skipped (rows j < Nu only).
+#[inline(always)]
+fn gains<const NU: usize>(z: &[f32; MAX_NU], d: &mut GpcDesign, n1: usize, n2: usize, w: f32) -> f32 {
+    let mut du = 0.0;
+    let first_full = NU.max(n1); // from this j on every c < Nu has g_{j−c} with j − c ≥ 1
+    for j in n1..first_full.min(n2 + 1) {
+        let mut kj = 0.0;
+        for (c, zc) in z[..NU].iter().enumerate() {
+            if j > c {
+                kj += zc * d.g[j - c - 1];
+            }
+        }
+        d.k1[j - n1] = kj;
+        du += kj * (w - d.f[j - 1]);
+    }
+    for j in first_full..n2 + 1 {
+        let mut kj = 0.0;
+        // z_0 g_j, z_1 g_{j−1}, …: the window holds g_{j−NU+1} … g_j.
+        for (zc, gv) in z[..NU].iter().zip(d.g[j - NU..j].iter().rev()) {
+            kj += zc * gv;
+        }
+        d.k1[j - n1] = kj;
+        du += kj * (w - d.f[j - 1]);
+    }
+    du
+}
+
+/// Pushes `x` in at index 0 and drops the last entry: a history shift by register moves
+/// (`copy_within` is a memmove call on the M4).
+#[inline(always)]
+pub(crate) fn shift_in<const N: usize>(a: &mut [f32; N], x: f32) {
+    let mut carry = x;
+    for v in a.iter_mut() {
+        carry = core::mem::replace(v, carry);
     }
 }
 
