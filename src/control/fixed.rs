@@ -50,10 +50,10 @@ impl LawState {
     /// any numerical failure or without a model (the caller falls back to its safe
     /// behaviour). The histories advance either way.
     pub fn update(&mut self, law: &Law, m: Option<&Model>, y: f32, w: f32) -> Option<f32> {
-        let neutral = Model::NEUTRAL;
+        // A reference to the constant (promoted to a static): no 60-byte copy per sample.
         let (m, have_model) = match m {
             Some(m) => (m, true),
-            None => (&neutral, false),
+            None => (&Model::NEUTRAL, false),
         };
         let ok_mv = self.mv.push_y(y, m).is_ok() && have_model;
         let ok_gpc = self.gpc.push_y(y, m).is_ok() && have_model;

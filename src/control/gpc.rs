@@ -95,8 +95,8 @@ impl GpcConfig {
 }
 
 const HY: usize = MAX_NA + 2; // y(t) … y(t − na − 1)
-                              // `design_into` holds the recursions' past values in MAX_NA and HY − 1 scalars.
-const _: () = assert!(MAX_NA == 4 && HY == 6);
+                              // `responses` reads ã_1…ã_{MAX_NA+1} and y(t)…y(t − MAX_NA).
+const _: () = assert!(HY > MAX_NA);
 const HU: usize = MAX_NB + MAX_K; // Δu(t−1) … Δu(t − k − nb)
 const HE: usize = MAX_NC + 1; // ê(t) … ê(t − nc)
 
@@ -174,6 +174,100 @@ impl GpcState {
         self.du.get(m.wrapping_sub(1)).copied().unwrap_or(0.0)
     }
 
+    /// Step response g_1…g_N2 and free response f_1…f_N2 into `d`, with A and B zero-padded to
+    /// `NA` ≥ na and `NB` ≥ nb coefficients and Ã to `NH` = NA + 1 (ã_1…ã_NH). Returns the
+    /// finiteness probe Σ (x − x) over both (+0 exactly when every value is finite).
+    ///
+    /// A padded term adds 0·y = ±0 to a sum that starts at +0.0 and so is never −0: the sum is
+    /// unchanged, bit for bit, and the inner sums have fixed lengths and unroll. The past values
+    /// the recursions need stay in registers ([`shift_in`]).
+    #[inline(always)]
+    fn responses<const NA: usize, const NB: usize, const NH: usize>(
+        &self,
+        m: &Model,
+        n2: usize,
+        d: &mut GpcDesign,
+    ) -> f32 {
+        let na = m.na.min(NA);
+        let nb = m.nb.min(NB);
+        let nc = m.nc.min(MAX_NC);
+        // (Element by element: a run-time-length copy is a memcpy call on the M4.)
+        let a: [f32; NA] = core::array::from_fn(|i| if i < na { m.a[i] } else { 0.0 });
+        let b: [f32; NB] = core::array::from_fn(|i| if i < nb { m.b[i] } else { 0.0 });
+        let mut probe = 0.0f32;
+
+        // Step response of q^−k B/A: y(j) = −Σ a_i y(j−i) + Σ b_i u(j−k−i), u = 1 from j = 0;
+        // y(j ≤ 0) = 0. From j = k + nb − 1 on every b_i is in (the padded zeros add +0), so
+        // that part needs no comparisons.
+        let mut past = [0.0f32; NA]; // y(j−1), y(j−2), …
+        let steady = (m.k + nb).saturating_sub(1).clamp(1, n2 + 1);
+        let (head, tail) = d.g[..n2].split_at_mut(steady - 1);
+        for (idx, gj) in head.iter_mut().enumerate() {
+            let j = idx + 1;
+            let mut v = 0.0;
+            for (ai, yp) in a.iter().zip(&past) {
+                v -= ai * yp;
+            }
+            for (i, bi) in b.iter().enumerate() {
+                if j >= m.k + i {
+                    v += bi;
+                }
+            }
+            probe += finite_probe(v);
+            shift_in(&mut past, v);
+            *gj = v;
+        }
+        for gj in tail.iter_mut() {
+            let mut v = 0.0;
+            for (ai, yp) in a.iter().zip(&past) {
+                v -= ai * yp;
+            }
+            for bi in &b {
+                v += bi;
+            }
+            probe += finite_probe(v);
+            shift_in(&mut past, v);
+            *gj = v;
+        }
+
+        // Free response: run Ã ŷ(t+j) = B Δu(t+j−k) + C ê(t+j) with future Δu, ê = 0;
+        // ŷ(t + j − i) = y(t + j − i) for j ≤ i. Past increments enter while j < k + nb, past
+        // residuals while j ≤ nc.
+        let at = m.atilde();
+        let mut past: [f32; NH] = core::array::from_fn(|i| self.y[i]); // ŷ(t+j−1), ŷ(t+j−2), …
+        let known = (m.k + nb).max(nc + 1).min(n2 + 1);
+        let (head, tail) = d.f[..n2].split_at_mut(known - 1);
+        for (idx, fj) in head.iter_mut().enumerate() {
+            let j = idx + 1;
+            let mut v = 0.0;
+            for (ai, yp) in at[1..].iter().zip(&past) {
+                v -= ai * yp;
+            }
+            // Δu(t + j − k − i) is known only when j − k − i ≤ −1.
+            for (i, bi) in b[..nb].iter().enumerate() {
+                if m.k + i > j {
+                    v += bi * self.du_past(m.k + i - j);
+                }
+            }
+            for i in j..=nc {
+                v += m.c[i - 1] * self.e[i - j];
+            }
+            probe += finite_probe(v);
+            shift_in(&mut past, v);
+            *fj = v;
+        }
+        for fj in tail.iter_mut() {
+            let mut v = 0.0;
+            for (ai, yp) in at[1..].iter().zip(&past) {
+                v -= ai * yp;
+            }
+            probe += finite_probe(v);
+            shift_in(&mut past, v);
+            *fj = v;
+        }
+        probe
+    }
+
     /// The GPC increment Δu(t) for setpoint `w`, after [`push_y`](Self::push_y).
     ///
     /// Runs every sample of the self-tuning controller (the model changes every sample), so it
@@ -197,104 +291,23 @@ impl GpcState {
             return Err(GpcError::NonFinite);
         }
         let n2 = cfg.n2;
-        let na = m.na.min(MAX_NA);
-        let nb = m.nb.min(MAX_NB);
-        let nc = m.nc.min(MAX_NC);
-
-        // A and B zero-padded to the largest orders, so the inner sums have fixed lengths and
-        // unroll. A padded term adds 0·y = ±0 to a sum that starts at +0.0 and so is never −0:
-        // the sum is unchanged, bit for bit. The past values the recursions need are held in
-        // scalars, shifted by register moves (shifting an array calls memmove on the M4).
-        // (Element by element: a run-time-length copy is a memcpy call on the M4.)
-        let a: [f32; MAX_NA] = core::array::from_fn(|i| if i < na { m.a[i] } else { 0.0 });
-        let b: [f32; MAX_NB] = core::array::from_fn(|i| if i < nb { m.b[i] } else { 0.0 });
-
-        // Step response of q^−k B/A: y(j) = −Σ a_i y(j−i) + Σ b_i u(j−k−i), u = 1 from j = 0;
-        // y(j ≤ 0) = 0. From j = k + nb − 1 on every b_i is in (the padded zeros add +0), so
-        // that part of the loop needs no comparisons.
-        // x − x is +0 for a finite x and NaN otherwise: summed over g and f, one branch tells
-        // whether every value is finite.
-        let mut probe = 0.0f32;
-        let (mut y1, mut y2, mut y3, mut y4) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
-        let steady = (m.k + nb).saturating_sub(1).clamp(1, n2 + 1);
-        let (head, tail) = d.g[..n2].split_at_mut(steady - 1);
-        for (idx, gj) in head.iter_mut().enumerate() {
-            let j = idx + 1;
-            let mut v = 0.0;
-            v -= a[0] * y1;
-            v -= a[1] * y2;
-            v -= a[2] * y3;
-            v -= a[3] * y4;
-            for (i, bi) in b.iter().enumerate() {
-                if j >= m.k + i {
-                    v += bi;
-                }
-            }
-            probe += v - v;
-            (y4, y3, y2, y1) = (y3, y2, y1, v);
-            *gj = v;
-        }
-        for gj in tail.iter_mut() {
-            let mut v = 0.0;
-            v -= a[0] * y1;
-            v -= a[1] * y2;
-            v -= a[2] * y3;
-            v -= a[3] * y4;
-            v += b[0];
-            v += b[1];
-            v += b[2];
-            v += b[3];
-            probe += v - v;
-            (y4, y3, y2, y1) = (y3, y2, y1, v);
-            *gj = v;
-        }
-
-        // Free response: run Ã ŷ(t+j) = B Δu(t+j−k) + C ê(t+j) with future Δu, ê = 0.
-        // Ã is zero beyond ã_{na+1} (padding as above); ŷ(t + j − i) = y(t + j − i) for j ≤ i.
-        // Past increments enter while j < k + nb, past residuals while j ≤ nc.
-        let at = m.atilde();
-        let [mut p1, mut p2, mut p3, mut p4, mut p5, _] = self.y;
-        let known = (m.k + nb).max(nc + 1).min(n2 + 1);
-        let (head, tail) = d.f[..n2].split_at_mut(known - 1);
-        for (idx, fj) in head.iter_mut().enumerate() {
-            let j = idx + 1;
-            let mut v = 0.0;
-            v -= at[1] * p1;
-            v -= at[2] * p2;
-            v -= at[3] * p3;
-            v -= at[4] * p4;
-            v -= at[5] * p5;
-            // Δu(t + j − k − i) is known only when j − k − i ≤ −1.
-            for (i, bi) in b[..nb].iter().enumerate() {
-                if m.k + i > j {
-                    v += bi * self.du_past(m.k + i - j);
-                }
-            }
-            for i in j..=nc {
-                v += m.c[i - 1] * self.e[i - j];
-            }
-            probe += v - v;
-            (p5, p4, p3, p2, p1) = (p4, p3, p2, p1, v);
-            *fj = v;
-        }
-        for fj in tail.iter_mut() {
-            let mut v = 0.0;
-            v -= at[1] * p1;
-            v -= at[2] * p2;
-            v -= at[3] * p3;
-            v -= at[4] * p4;
-            v -= at[5] * p5;
-            probe += v - v;
-            (p5, p4, p3, p2, p1) = (p4, p3, p2, p1, v);
-            *fj = v;
-        }
+        // Second-order models (the self-tuning controller's) get the recursions unrolled for
+        // two coefficients; anything larger for the most the model holds.
+        let probe = if m.na <= 2 && m.nb <= 2 {
+            self.responses::<2, 2, 3>(m, n2, d)
+        } else {
+            self.responses::<MAX_NA, MAX_NB, { MAX_NA + 1 }>(m, n2, d)
+        };
         if probe != 0.0 {
             return Err(GpcError::NonFinite);
         }
 
         // Normal equations H x = Gᵀ(w − f), H = GᵀG + λI, rows j = N1..N2, G[j][c] = g_{j−c}.
         let (n1, nu) = (cfg.n1, cfg.nu);
-        let mut h = normal_matrix(&d.g, cfg);
+        // g_1 … g_lead are exact zeros (the dead time): their products are ±0 and are skipped
+        // below (adding ±0 to a sum that is not −0 changes nothing).
+        let lead = d.g[..n2].iter().take_while(|x| **x == 0.0).count();
+        let mut h = normal_matrix(&d.g, cfg, lead);
         if !cholesky_in_place(&mut h, nu) {
             return Err(GpcError::Singular);
         }
@@ -304,11 +317,11 @@ impl GpcState {
         z[0] = 1.0;
         chol_solve(&h, nu, &mut z);
         let du = match nu {
-            1 => gains::<1>(&z, d, n1, n2, w),
-            2 => gains::<2>(&z, d, n1, n2, w),
-            3 => gains::<3>(&z, d, n1, n2, w),
-            4 => gains::<4>(&z, d, n1, n2, w),
-            _ => gains::<MAX_NU>(&z, d, n1, n2, w),
+            1 => gains::<1>(&z, d, n1, n2, lead, w),
+            2 => gains::<2>(&z, d, n1, n2, lead, w),
+            3 => gains::<3>(&z, d, n1, n2, lead, w),
+            4 => gains::<4>(&z, d, n1, n2, lead, w),
+            _ => gains::<MAX_NU>(&z, d, n1, n2, lead, w),
         };
         if !du.is_finite() {
             return Err(GpcError::NonFinite);
@@ -335,7 +348,7 @@ impl GpcState {
 /// terms of row r but the last), so each band is summed once, from the shortest row up: N2·Nu
 /// products instead of N2·Nu², with the same additions in the same order.
 #[inline(always)]
-fn normal_matrix(g: &[f32; MAX_N2], cfg: &GpcConfig) -> [[f32; MAX_NU]; MAX_NU] {
+fn normal_matrix(g: &[f32; MAX_N2], cfg: &GpcConfig, lead: usize) -> [[f32; MAX_NU]; MAX_NU] {
     let (n1, n2, nu) = (cfg.n1, cfg.n2, cfg.nu);
     let mut h = [[0.0f32; MAX_NU]; MAX_NU];
     if n1 == 1 {
@@ -343,7 +356,9 @@ fn normal_matrix(g: &[f32; MAX_N2], cfg: &GpcConfig) -> [[f32; MAX_NU]; MAX_NU] 
             let mut s = if band == 0 { cfg.lambda } else { 0.0 };
             // Row r sums g[p]·g[p + band] (0-based g, g[p] = g_{p+1}) for p = 0..n2 − r.
             let last = nu - 1;
-            for (x, y) in g[..n2 - last].iter().zip(&g[band..n2 - last + band]) {
+            // Terms with p < lead are products with an exact zero g[p]: skipped.
+            let p0 = lead.min(n2 - last);
+            for (x, y) in g[p0..n2 - last].iter().zip(&g[p0 + band..n2 - last + band]) {
                 s += x * y;
             }
             h[last][last - band] = s;
@@ -406,10 +421,16 @@ fn sqrtf(x: f32) -> f32 {
 /// a constant so the sum over c unrolls; G[j][c] = g_{j−c} is zero for c ≥ j, and those terms
 /// are skipped (rows j < Nu only).
 #[inline(always)]
-fn gains<const NU: usize>(z: &[f32; MAX_NU], d: &mut GpcDesign, n1: usize, n2: usize, w: f32) -> f32 {
+fn gains<const NU: usize>(z: &[f32; MAX_NU], d: &mut GpcDesign, n1: usize, n2: usize, lead: usize, w: f32) -> f32 {
     let mut du = 0.0;
-    let first_full = NU.max(n1); // from this j on every c < Nu has g_{j−c} with j − c ≥ 1
-    for j in n1..first_full.min(n2 + 1) {
+    // Rows j ≤ lead see only g's that are exact zeros: k1_j = 0.0 + (±0) = +0, and their
+    // Δu terms (+0)·(w − f_j) are ±0 (f and w are finite here).
+    let start = n1.max(lead + 1).min(n2 + 1);
+    for kj in &mut d.k1[..start - n1] {
+        *kj = 0.0;
+    }
+    let first_full = NU.max(start); // from this j on every c < Nu has g_{j−c} with j − c ≥ 1
+    for j in start..first_full.min(n2 + 1) {
         let mut kj = 0.0;
         for (c, zc) in z[..NU].iter().enumerate() {
             if j > c {
@@ -429,6 +450,14 @@ fn gains<const NU: usize>(z: &[f32; MAX_NU], d: &mut GpcDesign, n1: usize, n2: u
         du += kj * (w - d.f[j - 1]);
     }
     du
+}
+
+/// x − x: +0 for a finite x, NaN for ±∞ or NaN. Summed over many values it tells in one
+/// comparison whether all of them are finite.
+#[inline(always)]
+#[allow(clippy::eq_op)]
+pub(crate) fn finite_probe(x: f32) -> f32 {
+    x - x
 }
 
 /// Pushes `x` in at index 0 and drops the last entry: a history shift by register moves

@@ -63,12 +63,18 @@ impl Model {
         if a.iter().chain(b).chain(c).any(|x| !x.is_finite()) {
             return Err(ModelError::NonFinite);
         }
-        let mut m =
-            Model { a: [0.0; MAX_NA], b: [0.0; MAX_NB], c: [0.0; MAX_NC], na: a.len(), nb: b.len(), nc: c.len(), k };
-        m.a[..a.len()].copy_from_slice(a);
-        m.b[..b.len()].copy_from_slice(b);
-        m.c[..c.len()].copy_from_slice(c);
-        Ok(m)
+        // Element by element: a run-time-length copy is a memcpy call on the M4, and the
+        // self-tuning controller builds a model every sample.
+        let pad = |v: &[f32], i: usize| v.get(i).copied().unwrap_or(0.0);
+        Ok(Model {
+            a: core::array::from_fn(|i| pad(a, i)),
+            b: core::array::from_fn(|i| pad(b, i)),
+            c: core::array::from_fn(|i| pad(c, i)),
+            na: a.len(),
+            nb: b.len(),
+            nc: c.len(),
+            k,
+        })
     }
 
     /// Steady-state gain B(1)/A(1), output units per input unit (`None` if A(1) ≈ 0).

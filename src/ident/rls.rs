@@ -193,9 +193,9 @@ impl<const N: usize> Rls<N> {
     /// controller runs this on the M4F. The floating-point operations and their order are
     /// those of Bierman's algorithm as written in the comments.
     pub fn update(&mut self, cfg: &RlsConfig, phi: &SVector<f32, N>, y: f32) -> Result<f32, EstError> {
-        let mut probe = y - y;
+        let mut probe = finite_probe(y);
         for x in phi.iter() {
-            probe += x - x;
+            probe += finite_probe(*x);
         }
         if probe != 0.0 {
             return Err(EstError::NonFinite);
@@ -237,10 +237,10 @@ impl<const N: usize> Rls<N> {
         for j in 0..N {
             theta[j] += (b[j] / alpha) * eps;
             d[j] /= lambda;
-            probe += theta[j] - theta[j];
-            probe += d[j] - d[j];
+            probe += finite_probe(theta[j]);
+            probe += finite_probe(d[j]);
             for i in 0..j {
-                probe += u[(i, j)] - u[(i, j)];
+                probe += finite_probe(u[(i, j)]);
             }
         }
         if !(alpha > 0.0) || probe != 0.0 || d.iter().any(|x| !(*x > 0.0)) {
@@ -259,6 +259,13 @@ impl<const N: usize> Rls<N> {
         self.eps_post = eps * (lambda / alpha);
         Ok(eps)
     }
+}
+
+/// x − x: +0 for a finite x, NaN for ±∞ or NaN (summed, one comparison checks many values).
+#[inline(always)]
+#[allow(clippy::eq_op)]
+fn finite_probe(x: f32) -> f32 {
+    x - x
 }
 
 #[cfg(test)]

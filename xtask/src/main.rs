@@ -267,8 +267,11 @@ fn record(case: &Case) -> Result<Vec<StepInput>> {
         .collect())
 }
 
-/// The same samples through the same library code on the host: (duty bits, event words).
-fn run_host(kind: u32, inputs: &[StepInput]) -> Result<Vec<(u32, Vec<(u32, u32)>)>> {
+/// One host sample: the duty's bits and the event words.
+type HostSample = (u32, Vec<(u32, u32)>);
+
+/// The same samples through the same library code on the host.
+fn run_host(kind: u32, inputs: &[StepInput]) -> Result<Vec<HostSample>> {
     let (mut carrier, mut monitor) = proto::carrier(kind).context("unknown controller kind")?;
     Ok(inputs
         .iter()
@@ -282,7 +285,7 @@ fn run_host(kind: u32, inputs: &[StepInput]) -> Result<Vec<(u32, Vec<(u32, u32)>
         .collect())
 }
 
-fn compare(host: &[(u32, Vec<(u32, u32)>)], target: &[TargetSample]) -> Vec<String> {
+fn compare(host: &[HostSample], target: &[TargetSample]) -> Vec<String> {
     let mut out = Vec::new();
     if host.len() != target.len() {
         out.push(format!("{} host samples, {} target samples", host.len(), target.len()));
