@@ -26,7 +26,7 @@ use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln, nr, syscall};
-use hter::control::gpc::{GpcConfig, GpcState};
+use hter::control::gpc::{GpcConfig, GpcDesign, GpcState};
 use hter::control::{AnyController, ControlInput, Controller};
 use hter::ident::rls::Rls;
 use hter::step::StepInput;
@@ -260,6 +260,7 @@ fn run() -> Result<(), &'static str> {
     let mut rls4 = Rls::new(&acfg.rls, theta4);
     let mut regs = Regressors { y: [0.0; 3], filled: 0, u: [PI_BIAS; 8] };
     let mut gpc = GpcState::new(PI_BIAS);
+    let mut gpc_design = GpcDesign::ZERO; // kept between samples, as `LawState` does
     let k = acfg.k;
 
     let mut chunk = [0u8; 12 * CHUNK];
@@ -302,8 +303,11 @@ fn run() -> Result<(), &'static str> {
             }
             let model = st.and_then(|s| s.trusted_model()).unwrap_or(m0);
             let gcfg = GpcConfig::DEFAULT;
-            ticks[6] =
-                timed(|| gpc.push_y(o.temp_c.0, &model).is_ok() && gpc.design(&model, &gcfg, o.setpoint_c.0).is_ok()).1;
+            ticks[6] = timed(|| {
+                gpc.push_y(o.temp_c.0, &model).is_ok()
+                    && gpc.design_into(&model, &gcfg, o.setpoint_c.0, &mut gpc_design).is_ok()
+            })
+            .1;
             gpc.track(o.duty.get());
             if let Some(st) = st {
                 ticks[7] = timed(|| {
@@ -341,6 +345,10 @@ fn run() -> Result<(), &'static str> {
         done += take;
     }
     out.word(stack_peak())?;
+    // RAM of the control state itself (the runner keeps it on the stack).
+    let state = core::mem::size_of::<hter::step::Carrier<AnyController>>()
+        + core::mem::size_of::<hter::coldchain::ColdChainMonitor>();
+    out.word(state as u32)?;
     out.flush()
 }
 

@@ -8,7 +8,7 @@
 //!
 //! Output file ([`OUTPUT_FILE`]): `MAGIC_OUT`, the calibration (3 words, [`CAL_LOOP`]), n, then
 //! per sample: `duty (f32 bits)`, one SysTick count per entry of [`PARTS`], the number of event
-//! word pairs m, and m × `(code, value)` from [`event_words`]; last the runner's peak stack, bytes.
+//! word pairs m, and m × `(code, value)` from [`event_words`]; then the runner's peak stack and the size of the carrier + monitor state, bytes.
 
 use hter::coldchain::{ColdChainMonitor, Raised};
 use hter::control::adaptive::{AdaptiveConfig, SelfTuning};
@@ -70,7 +70,7 @@ pub const PARTS: [&str; 9] = [
     "counts → °C (ratio + CVD)",
     "RLS update, 5 parameters",
     "RLS update, 4 parameters",
-    "GPC push_y + design",
+    "GPC push_y + design_into",
     "estimate + projection",
     "Diophantine (Ã, k = 5)",
 ];

@@ -105,6 +105,7 @@ struct TargetRun {
     cal: [u32; 3],
     samples: Vec<TargetSample>,
     stack_bytes: u32,
+    state_bytes: u32,
 }
 
 fn pil() -> Result<()> {
@@ -120,6 +121,7 @@ fn pil() -> Result<()> {
     let mut parts: Vec<Vec<f64>> = vec![Vec::new(); proto::PARTS.len()];
     let mut cal_seen = None;
     let mut stack = 0;
+    let mut state = 0;
     println!("processor-in-the-loop: {} on qemu-system-arm -M mps2-an386 (Cortex-M4F), -icount shift=6", elf.display());
     for case in &CASES {
         let inputs = record(case)?;
@@ -131,6 +133,7 @@ fn pil() -> Result<()> {
         let (empty, tpi) = calibration(&tr.cal)?;
         cal_seen = Some((tr.cal, tpi));
         stack = stack.max(tr.stack_bytes);
+        state = state.max(tr.state_bytes);
         let host = run_host(case.kind, &inputs)?;
         let mismatches = compare(&host, &tr.samples);
         steps += inputs.len();
@@ -185,9 +188,10 @@ fn pil() -> Result<()> {
         }
     }
     println!(
-        "PI: insn/sample median {:.0}, max {:.0}; peak stack of the runner {} B; runner image: flash {} B, static RAM {} B",
+        "PI: insn/sample median {:.0}, max {:.0}; carrier + monitor state {} B (on the runner's stack); peak stack of the runner {} B; runner image: flash {} B, static RAM {} B",
         median(&pi_insn),
         max(&pi_insn),
+        state,
         stack,
         flash,
         ram
@@ -202,13 +206,14 @@ fn pil() -> Result<()> {
         if all_equal { "bit-equal on every sample" } else { "DIFFER" }
     );
     println!(
-        "{{\"steps\": {}, \"bit_equal\": {}, \"insn_per_step_median\": {:.0}, \"insn_per_step_max\": {:.0}, \"flash_bytes\": {}, \"ram_bytes\": {}, \"stack_bytes\": {}, \"ticks_per_insn\": {:.4}}}",
+        "{{\"steps\": {}, \"bit_equal\": {}, \"insn_per_step_median\": {:.0}, \"insn_per_step_max\": {:.0}, \"flash_bytes\": {}, \"ram_bytes\": {}, \"state_bytes\": {}, \"stack_bytes\": {}, \"ticks_per_insn\": {:.4}}}",
         steps,
         all_equal,
         median(&gpc_insn),
         worst,
         flash,
         ram,
+        state,
         stack,
         tpi
     );
@@ -382,7 +387,8 @@ fn parse_output(bytes: &[u8], n: usize) -> Result<TargetRun> {
         samples.push(TargetSample { duty, ticks, events });
     }
     let stack_bytes = next()?;
-    Ok(TargetRun { cal, samples, stack_bytes })
+    let state_bytes = next()?;
+    Ok(TargetRun { cal, samples, stack_bytes, state_bytes })
 }
 
 /// Empty-window overhead in ticks and the measured ticks per instruction; fails if the
