@@ -346,7 +346,8 @@ impl GpcState {
 ///
 /// With N1 = 1 the sums of one band r − c = δ are prefixes of each other (row r + 1 has the
 /// terms of row r but the last), so each band is summed once, from the shortest row up: N2·Nu
-/// products instead of N2·Nu², with the same additions in the same order.
+/// products instead of N2·Nu², with the same additions in the same order. The first `lead`
+/// g's are exact zeros (dead time); their products are skipped there.
 #[inline(always)]
 fn normal_matrix(g: &[f32; MAX_N2], cfg: &GpcConfig, lead: usize) -> [[f32; MAX_NU]; MAX_NU] {
     let (n1, n2, nu) = (cfg.n1, cfg.n2, cfg.nu);
