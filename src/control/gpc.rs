@@ -749,6 +749,15 @@ mod tests {
     }
 
     #[test]
+    fn history_shift_and_finiteness_probe() {
+        let mut h = [1.0f32, 2.0, 3.0];
+        shift_in(&mut h, 0.5);
+        assert_eq!(h, [0.5, 1.0, 2.0]);
+        assert_eq!(finite_probe(-3.5).to_bits(), 0.0f32.to_bits());
+        assert!(finite_probe(f32::INFINITY).is_nan() && finite_probe(f32::NAN).is_nan());
+    }
+
+    #[test]
     fn config_ranges_are_enforced() {
         let bad = [
             GpcConfig { n1: 0, ..GpcConfig::DEFAULT },
