@@ -447,3 +447,69 @@ fn median(v: &[f64]) -> f64 {
 fn max(v: &[f64]) -> f64 {
     v.iter().copied().fold(0.0, f64::max)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn words(ws: &[u32]) -> Vec<u8> {
+        ws.iter().flat_map(|w| w.to_le_bytes()).collect()
+    }
+
+    /// A target output with two samples: the second has one event.
+    fn output() -> Vec<u32> {
+        let mut w = vec![proto::MAGIC_OUT, 2, 3216, 6416, 2];
+        w.push(0.5f32.to_bits());
+        w.extend([100u32; proto::PARTS.len()]);
+        w.push(0);
+        w.push(0.25f32.to_bits());
+        w.extend([200u32; proto::PARTS.len()]);
+        w.extend([1, 7, 10.0f32.to_bits()]);
+        w.extend([4096, 1600]);
+        w
+    }
+
+    #[test]
+    fn parses_the_runner_output_and_refuses_a_truncated_one() {
+        let run = parse_output(&words(&output()), 2).unwrap();
+        assert_eq!(run.cal, [2, 3216, 6416]);
+        assert_eq!(run.samples[1].duty, 0.25f32.to_bits());
+        assert_eq!(run.samples[1].events, vec![(7, 10.0f32.to_bits())]);
+        assert_eq!((run.stack_bytes, run.state_bytes), (4096, 1600));
+        let w = output();
+        assert!(parse_output(&words(&w[..w.len() - 3]), 2).is_err());
+        assert!(parse_output(&words(&w), 3).is_err(), "sample count must match");
+    }
+
+    #[test]
+    fn one_flipped_bit_or_event_is_a_mismatch() {
+        let run = parse_output(&words(&output()), 2).unwrap();
+        let host: Vec<HostSample> = vec![(0.5f32.to_bits(), vec![]), (0.25f32.to_bits(), vec![(7, 10.0f32.to_bits())])];
+        assert!(compare(&host, &run.samples).is_empty());
+        let mut flipped = host.clone();
+        flipped[0].0 ^= 1;
+        assert_eq!(compare(&flipped, &run.samples).len(), 1);
+        let mut other_event = host.clone();
+        other_event[1].1[0].0 = 8;
+        assert_eq!(compare(&other_event, &run.samples).len(), 1);
+        assert_eq!(compare(&host[..1], &run.samples).len(), 1, "length mismatch reported");
+    }
+
+    #[test]
+    fn calibration_demands_1_6_ticks_per_instruction() {
+        assert!((calibration(&[2, 3216, 6416]).unwrap().1 - 1.6).abs() < 1e-9);
+        // Without -icount, or with another shift, the ratio is off: refuse.
+        assert!(calibration(&[2, 2000, 4000]).is_err());
+    }
+
+    #[test]
+    fn host_replay_of_the_library_is_deterministic() {
+        let inputs: Vec<StepInput> = (0..50)
+            .map(|k| StepInput { t_s: 10.0 * k as f32, counts: 49_000 + (k * 7919 % 13), setpoint_c: 4.0 })
+            .collect();
+        let a = run_host(proto::KIND_GPC, &inputs).unwrap();
+        let b = run_host(proto::KIND_GPC, &inputs).unwrap();
+        assert_eq!(a, b);
+        assert!(run_host(7, &inputs).is_err());
+    }
+}
