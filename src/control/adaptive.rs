@@ -27,6 +27,7 @@
 //! in either direction is bumpless; the law's histories also track the applied duty.
 
 use super::fixed::{Law, LawState};
+use super::gpc::shift_in;
 use super::model::{Model, MAX_K};
 use super::pi::{Pi, PiConfig};
 use super::{AdaptiveMode, ControlInput, Controller, ControllerStatus};
@@ -199,8 +200,7 @@ impl SelfTuning {
         if self.filled == 0 {
             self.y_hist = [y; 4];
         } else {
-            self.y_hist.copy_within(0..3, 1);
-            self.y_hist[0] = y;
+            shift_in(&mut self.y_hist, y);
         }
         self.filled = self.filled.saturating_add(1);
         if self.filled < 3 {
@@ -262,9 +262,7 @@ impl Controller for SelfTuning {
         }
         self.law_state.track(applied);
         self.fallback.track(input, applied);
-        let n = self.u_hist.len();
-        self.u_hist.copy_within(0..n - 1, 1);
-        self.u_hist[0] = applied;
+        shift_in(&mut self.u_hist, applied);
         self.u_prev = applied;
     }
 

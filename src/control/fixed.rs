@@ -3,7 +3,7 @@
 //! [`Controller`] trait. The self-tuning versions redesign the same laws from the RLS estimate
 //! every sample.
 
-use super::gpc::{GpcConfig, GpcState};
+use super::gpc::{GpcConfig, GpcDesign, GpcState};
 use super::model::Model;
 use super::mv::{GmvcConfig, IgmvcConfig, MvState};
 use super::{ControlInput, Controller};
@@ -36,29 +36,35 @@ impl Law {
 pub struct LawState {
     mv: MvState,
     gpc: GpcState,
+    /// GPC's working arrays, kept between samples so a design costs no zeroing and copying.
+    gpc_design: GpcDesign,
 }
 
 impl LawState {
     /// Empty histories holding the duty `u0`.
     pub fn new(u0: f32) -> Self {
-        Self { mv: MvState::new(u0), gpc: GpcState::new(u0) }
+        Self { mv: MvState::new(u0), gpc: GpcState::new(u0), gpc_design: GpcDesign::ZERO }
     }
 
     /// Computes the unclipped u(t) for measurement `y`, setpoint `w`, model `m`; `None` on
     /// any numerical failure or without a model (the caller falls back to its safe
     /// behaviour). The histories advance either way.
     pub fn update(&mut self, law: &Law, m: Option<&Model>, y: f32, w: f32) -> Option<f32> {
-        let neutral = Model::NEUTRAL;
+        // A reference to the constant (promoted to a static): no 60-byte copy per sample.
         let (m, have_model) = match m {
             Some(m) => (m, true),
-            None => (&neutral, false),
+            None => (&Model::NEUTRAL, false),
         };
         let ok_mv = self.mv.push_y(y, m).is_ok() && have_model;
         let ok_gpc = self.gpc.push_y(y, m).is_ok() && have_model;
         let u = match law {
             Law::Gmvc(c) if ok_mv => self.mv.gmvc(m, c, w).ok(),
             Law::Igmvc(c) if ok_mv => self.mv.igmvc(m, c, w).ok(),
-            Law::Gpc(c) if ok_gpc => self.gpc.design(m, c, w).ok().map(|d| self.gpc.u_prev() + d.du),
+            Law::Gpc(c) if ok_gpc => self
+                .gpc
+                .design_into(m, c, w, &mut self.gpc_design)
+                .ok()
+                .map(|()| self.gpc.u_prev() + self.gpc_design.du),
             _ => None,
         };
         u.filter(|u| u.is_finite())

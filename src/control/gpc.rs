@@ -97,6 +97,8 @@ impl GpcConfig {
 }
 
 const HY: usize = MAX_NA + 2; // y(t) … y(t − na − 1)
+                              // `responses` reads ã_1…ã_{MAX_NA+1} and y(t)…y(t − MAX_NA).
+const _: () = assert!(HY > MAX_NA);
 const HU: usize = MAX_NB + MAX_K; // Δu(t−1) … Δu(t − k − nb)
 const HE: usize = MAX_NC + 1; // ê(t) … ê(t − nc)
 
@@ -123,6 +125,11 @@ pub struct GpcDesign {
     pub du: f32,
 }
 
+impl GpcDesign {
+    /// All zeros.
+    pub const ZERO: GpcDesign = GpcDesign { g: [0.0; MAX_N2], f: [0.0; MAX_N2], k1: [0.0; MAX_N2], du: 0.0 };
+}
+
 impl GpcState {
     /// Empty history, holding `u0`.
     pub fn new(u0: f32) -> Self {
@@ -144,8 +151,7 @@ impl GpcState {
             self.y = [y; HY];
             self.primed = true;
         } else {
-            self.y.copy_within(0..HY - 1, 1);
-            self.y[0] = y;
+            shift_in(&mut self.y, y);
         }
         // ê(t) = Ã y(t) − B Δu(t−k) − Σ c_i ê(t−i)
         let at = m.atilde();
@@ -156,7 +162,7 @@ impl GpcState {
         for i in 0..m.nb {
             e -= m.b[i] * self.du_past(m.k + i);
         }
-        self.e.copy_within(0..HE - 1, 1);
+        shift_in(&mut self.e, 0.0);
         for i in 0..m.nc {
             e -= m.c[i] * self.e[i + 1];
         }
@@ -166,95 +172,164 @@ impl GpcState {
 
     /// Δu(t − m), m ≥ 1 (zero beyond the stored history).
     fn du_past(&self, m: usize) -> f32 {
-        m.checked_sub(1).and_then(|i| self.du.get(i)).copied().unwrap_or(0.0)
+        // m = 0 wraps to an index past the end, which `get` refuses.
+        self.du.get(m.wrapping_sub(1)).copied().unwrap_or(0.0)
+    }
+
+    /// Step response g_1…g_N2 and free response f_1…f_N2 into `d`, with A and B zero-padded to
+    /// `NA` ≥ na and `NB` ≥ nb coefficients and Ã to `NH` = NA + 1 (ã_1…ã_NH). Returns the
+    /// finiteness probe Σ (x − x) over both (+0 exactly when every value is finite).
+    ///
+    /// A padded term adds 0·y = ±0 to a sum that starts at +0.0 and so is never −0: the sum is
+    /// unchanged, bit for bit, and the inner sums have fixed lengths and unroll. The past values
+    /// the recursions need stay in registers ([`shift_in`]).
+    #[inline(always)]
+    fn responses<const NA: usize, const NB: usize, const NH: usize>(
+        &self,
+        m: &Model,
+        n2: usize,
+        d: &mut GpcDesign,
+    ) -> f32 {
+        let na = m.na.min(NA);
+        let nb = m.nb.min(NB);
+        let nc = m.nc.min(MAX_NC);
+        // (Element by element: a run-time-length copy is a memcpy call on the M4.)
+        let a: [f32; NA] = core::array::from_fn(|i| if i < na { m.a[i] } else { 0.0 });
+        let b: [f32; NB] = core::array::from_fn(|i| if i < nb { m.b[i] } else { 0.0 });
+        let mut probe = 0.0f32;
+
+        // Step response of q^−k B/A: y(j) = −Σ a_i y(j−i) + Σ b_i u(j−k−i), u = 1 from j = 0;
+        // y(j ≤ 0) = 0. From j = k + nb − 1 on every b_i is in (the padded zeros add +0), so
+        // that part needs no comparisons.
+        let mut past = [0.0f32; NA]; // y(j−1), y(j−2), …
+        let steady = (m.k + nb).saturating_sub(1).clamp(1, n2 + 1);
+        let (head, tail) = d.g[..n2].split_at_mut(steady - 1);
+        for (idx, gj) in head.iter_mut().enumerate() {
+            let j = idx + 1;
+            let mut v = 0.0;
+            for (ai, yp) in a.iter().zip(&past) {
+                v -= ai * yp;
+            }
+            for (i, bi) in b.iter().enumerate() {
+                if j >= m.k + i {
+                    v += bi;
+                }
+            }
+            probe += finite_probe(v);
+            shift_in(&mut past, v);
+            *gj = v;
+        }
+        for gj in tail.iter_mut() {
+            let mut v = 0.0;
+            for (ai, yp) in a.iter().zip(&past) {
+                v -= ai * yp;
+            }
+            for bi in &b {
+                v += bi;
+            }
+            probe += finite_probe(v);
+            shift_in(&mut past, v);
+            *gj = v;
+        }
+
+        // Free response: run Ã ŷ(t+j) = B Δu(t+j−k) + C ê(t+j) with future Δu, ê = 0;
+        // ŷ(t + j − i) = y(t + j − i) for j ≤ i. Past increments enter while j < k + nb, past
+        // residuals while j ≤ nc.
+        let at = m.atilde();
+        let mut past: [f32; NH] = core::array::from_fn(|i| self.y[i]); // ŷ(t+j−1), ŷ(t+j−2), …
+        let known = (m.k + nb).max(nc + 1).min(n2 + 1);
+        let (head, tail) = d.f[..n2].split_at_mut(known - 1);
+        for (idx, fj) in head.iter_mut().enumerate() {
+            let j = idx + 1;
+            let mut v = 0.0;
+            for (ai, yp) in at[1..].iter().zip(&past) {
+                v -= ai * yp;
+            }
+            // Δu(t + j − k − i) is known only when j − k − i ≤ −1.
+            for (i, bi) in b[..nb].iter().enumerate() {
+                if m.k + i > j {
+                    v += bi * self.du_past(m.k + i - j);
+                }
+            }
+            for i in j..=nc {
+                v += m.c[i - 1] * self.e[i - j];
+            }
+            probe += finite_probe(v);
+            shift_in(&mut past, v);
+            *fj = v;
+        }
+        for fj in tail.iter_mut() {
+            let mut v = 0.0;
+            for (ai, yp) in at[1..].iter().zip(&past) {
+                v -= ai * yp;
+            }
+            probe += finite_probe(v);
+            shift_in(&mut past, v);
+            *fj = v;
+        }
+        probe
     }
 
     /// The GPC increment Δu(t) for setpoint `w`, after [`push_y`](Self::push_y).
+    ///
+    /// Runs every sample of the self-tuning controller (the model changes every sample), so it
+    /// is written for the Cortex-M4F: slices instead of indexed loops with run-time checks,
+    /// products that are zero by the structure of G skipped, the symmetric normal matrix built
+    /// band by band from shared partial sums. Every floating-point operation that is kept is
+    /// the one of the plain formulas, in the same order, so the result is bit-for-bit that of
+    /// the textbook loops (skipped terms are exact zeros and adding ±0 changes nothing).
     pub fn design(&self, m: &Model, cfg: &GpcConfig, w: f32) -> Result<GpcDesign, GpcError> {
+        let mut d = GpcDesign::ZERO;
+        self.design_into(m, cfg, w, &mut d)?;
+        Ok(d)
+    }
+
+    /// [`design`](Self::design) into the caller's `d`, which the self-tuning loop keeps from
+    /// sample to sample (no 364-byte zeroing and copy per sample on the M4). Only g_1…g_N2,
+    /// f_1…f_N2, k1 over N1…N2 and du are written; entries beyond are left as they were.
+    pub fn design_into(&self, m: &Model, cfg: &GpcConfig, w: f32, d: &mut GpcDesign) -> Result<(), GpcError> {
         cfg.validate()?;
         if !w.is_finite() {
             return Err(GpcError::NonFinite);
         }
         let n2 = cfg.n2;
-        let mut d = GpcDesign { g: [0.0; MAX_N2], f: [0.0; MAX_N2], k1: [0.0; MAX_N2], du: 0.0 };
-
-        // Step response of q^−k B/A: y(j) = −Σ a_i y(j−i) + Σ b_i u(j−k−i), u = 1 from j = 0.
-        let mut ys = [0.0f32; MAX_N2 + 1]; // ys[j] = y(j), j = 0..=n2; y(j<0) = 0
-        for j in 1..=n2 {
-            let mut v = 0.0;
-            for i in 1..=m.na {
-                if let Some(yp) = j.checked_sub(i).and_then(|x| ys.get(x)) {
-                    v -= m.a[i - 1] * yp;
-                }
-            }
-            for i in 0..m.nb {
-                if j >= m.k + i {
-                    v += m.b[i];
-                }
-            }
-            ys[j] = v;
-            d.g[j - 1] = v;
-        }
-
-        // Free response: run Ã ŷ(t+j) = B Δu(t+j−k) + C ê(t+j) with future Δu, ê = 0.
-        let at = m.atilde();
-        let mut yy = [0.0f32; HY + MAX_N2]; // yy[HY-1-i] = y(t−i); yy[HY-1+j] = ŷ(t+j)
-        for i in 0..HY {
-            yy[HY - 1 - i] = self.y[i];
-        }
-        for j in 1..=n2 {
-            let mut v = 0.0;
-            for i in 1..=m.na + 1 {
-                v -= at[i] * yy[HY - 1 + j - i];
-            }
-            for i in 0..m.nb {
-                // Δu(t + j − k − i) is known only when j − k − i ≤ −1.
-                if m.k + i > j {
-                    v += m.b[i] * self.du_past(m.k + i - j);
-                }
-            }
-            for i in j..=m.nc {
-                v += m.c[i - 1] * self.e[i - j];
-            }
-            yy[HY - 1 + j] = v;
-            d.f[j - 1] = v;
-        }
-        if d.f.iter().chain(d.g.iter()).any(|x| !x.is_finite()) {
+        // Second-order models (the self-tuning controller's) get the recursions unrolled for
+        // two coefficients; anything larger for the most the model holds.
+        let probe = if m.na <= 2 && m.nb <= 2 {
+            self.responses::<2, 2, 3>(m, n2, d)
+        } else {
+            self.responses::<MAX_NA, MAX_NB, { MAX_NA + 1 }>(m, n2, d)
+        };
+        if probe != 0.0 {
             return Err(GpcError::NonFinite);
         }
 
         // Normal equations H x = Gᵀ(w − f), H = GᵀG + λI, rows j = N1..N2, G[j][c] = g_{j−c}.
-        let nu = cfg.nu;
-        let gjc = |j: usize, c: usize| if j > c { d.g[j - c - 1] } else { 0.0 };
-        let mut h = [[0.0f32; MAX_NU]; MAX_NU];
-        for (r, row) in h.iter_mut().enumerate().take(nu) {
-            for (c, hrc) in row.iter_mut().enumerate().take(nu) {
-                let mut s = if r == c { cfg.lambda } else { 0.0 };
-                for j in cfg.n1..=n2 {
-                    s += gjc(j, r) * gjc(j, c);
-                }
-                *hrc = s;
-            }
+        let (n1, nu) = (cfg.n1, cfg.nu);
+        // g_1 … g_lead are exact zeros (the dead time): their products are ±0 and are skipped
+        // below (adding ±0 to a sum that is not −0 changes nothing).
+        let lead = d.g[..n2].iter().take_while(|x| **x == 0.0).count();
+        let mut h = normal_matrix(&d.g, cfg, lead);
+        if !cholesky_in_place(&mut h, nu) {
+            return Err(GpcError::Singular);
         }
-        let l = cholesky(&h, nu).ok_or(GpcError::Singular)?;
-        // First row of H⁻¹Gᵀ: solve H z = e₁ once, then k1_j = Σ_c z_c G[j][c].
+        // First row of H⁻¹Gᵀ: solve H z = e₁ once, then k1_j = Σ_c z_c G[j][c] and
+        // Δu = Σ_j k1_j (w − f_j) (see `gains`).
         let mut z = [0.0f32; MAX_NU];
         z[0] = 1.0;
-        chol_solve(&l, nu, &mut z);
-        let mut du = 0.0;
-        for j in cfg.n1..=n2 {
-            let mut kj = 0.0;
-            for (c, zc) in z.iter().enumerate().take(nu) {
-                kj += zc * gjc(j, c);
-            }
-            d.k1[j - cfg.n1] = kj;
-            du += kj * (w - d.f[j - 1]);
-        }
+        chol_solve(&h, nu, &mut z);
+        let du = match nu {
+            1 => gains::<1>(&z, d, n1, n2, lead, w),
+            2 => gains::<2>(&z, d, n1, n2, lead, w),
+            3 => gains::<3>(&z, d, n1, n2, lead, w),
+            4 => gains::<4>(&z, d, n1, n2, lead, w),
+            _ => gains::<MAX_NU>(&z, d, n1, n2, lead, w),
+        };
         if !du.is_finite() {
             return Err(GpcError::NonFinite);
         }
         d.du = du;
-        Ok(d)
+        Ok(())
     }
 
     /// Records the u actually applied this sample (after clipping or an override).
@@ -262,35 +337,166 @@ impl GpcState {
         if !applied.is_finite() {
             return;
         }
-        self.du.copy_within(0..HU - 1, 1);
-        self.du[0] = applied - self.u_prev;
+        shift_in(&mut self.du, applied - self.u_prev);
         self.u_prev = applied;
     }
 }
 
-/// Lower Cholesky factor of the leading n×n block, or `None` if not positive definite.
-fn cholesky(h: &[[f32; MAX_NU]; MAX_NU], n: usize) -> Option<[[f32; MAX_NU]; MAX_NU]> {
-    let mut l = [[0.0f32; MAX_NU]; MAX_NU];
+/// The lower triangle of H = GᵀG + λI (all the Cholesky factorisation reads) for rows j = N1..N2 of
+/// G[j][c] = g_{j−c} (g_0 = 0): H[r][c] = λδ_rc + Σ_{j = max(N1, r+1)..N2} g_{j−r} g_{j−c},
+/// summed in increasing j, for r ≥ c.
+///
+/// With N1 = 1 the sums of one band r − c = δ are prefixes of each other (row r + 1 has the
+/// terms of row r but the last), so each band is summed once, from the shortest row up: N2·Nu
+/// products instead of N2·Nu², with the same additions in the same order. The first `lead`
+/// g's are exact zeros (dead time); their products are skipped there.
+#[inline(always)]
+fn normal_matrix(g: &[f32; MAX_N2], cfg: &GpcConfig, lead: usize) -> [[f32; MAX_NU]; MAX_NU] {
+    let (n1, n2, nu) = (cfg.n1, cfg.n2, cfg.nu);
+    let mut h = [[0.0f32; MAX_NU]; MAX_NU];
+    if n1 == 1 {
+        for band in 0..nu {
+            let mut s = if band == 0 { cfg.lambda } else { 0.0 };
+            // Row r sums g[p]·g[p + band] (0-based g, g[p] = g_{p+1}) for p = 0..n2 − r.
+            let last = nu - 1;
+            // Terms with p < lead are products with an exact zero g[p]: skipped.
+            let p0 = lead.min(n2 - last);
+            for (x, y) in g[p0..n2 - last].iter().zip(&g[p0 + band..n2 - last + band]) {
+                s += x * y;
+            }
+            h[last][last - band] = s;
+            for r in (band..last).rev() {
+                let p = n2 - r - 1;
+                s += g[p] * g[p + band];
+                h[r][r - band] = s;
+            }
+        }
+    } else {
+        for r in 0..nu {
+            for c in 0..=r {
+                let mut s = if r == c { cfg.lambda } else { 0.0 };
+                let lo = n1.max(r + 1);
+                if lo <= n2 {
+                    for (x, y) in g[lo - r - 1..n2 - r].iter().zip(&g[lo - c - 1..n2 - c]) {
+                        s += x * y;
+                    }
+                }
+                h[r][c] = s;
+            }
+        }
+    }
+    h
+}
+
+/// √x, correctly rounded: the FPU's `vsqrt.f32` on a hard-float Arm target (the same IEEE
+/// result as `libm::sqrtf`, without its ≈ 90-instruction software loop), `libm` elsewhere.
+#[inline(always)]
+fn sqrtf(x: f32) -> f32 {
+    #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+    {
+        let r: u32;
+        // SAFETY: FPU register moves and one arithmetic instruction; s15 is saved in a core
+        // register and restored, so no register but the declared outputs changes. (Rust's `sreg`
+        // operands need the double-precision `vfp2` feature, which the M4F does not have.)
+        unsafe {
+            core::arch::asm!(
+                "vmov {save}, s15",
+                "vmov s15, {x}",
+                "vsqrt.f32 s15, s15",
+                "vmov {r}, s15",
+                "vmov s15, {save}",
+                x = in(reg) x.to_bits(),
+                r = lateout(reg) r,
+                save = out(reg) _,
+                options(pure, nomem, nostack),
+            )
+        };
+        f32::from_bits(r)
+    }
+    #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
+    {
+        libm::sqrtf(x)
+    }
+}
+
+/// k1_j = Σ_{c<Nu} z_c G[j][c] for j = N1…N2 (into `d.k1`) and Δu = Σ_j k1_j (w − f_j), both
+/// summed in the textbook order (k1_j from 0.0 over c = 0, 1, …, Δu over increasing j). Nu is
+/// a constant so the sum over c unrolls; G[j][c] = g_{j−c} is zero for c ≥ j, and those terms
+/// are skipped (rows j < Nu only).
+#[inline(always)]
+fn gains<const NU: usize>(z: &[f32; MAX_NU], d: &mut GpcDesign, n1: usize, n2: usize, lead: usize, w: f32) -> f32 {
+    let mut du = 0.0;
+    // Rows j ≤ lead see only g's that are exact zeros: k1_j = 0.0 + (±0) = +0, and their
+    // Δu terms (+0)·(w − f_j) are ±0 (f and w are finite here).
+    let start = n1.max(lead + 1).min(n2 + 1);
+    for kj in &mut d.k1[..start - n1] {
+        *kj = 0.0;
+    }
+    let first_full = NU.max(start); // from this j on every c < Nu has g_{j−c} with j − c ≥ 1
+    for j in start..first_full.min(n2 + 1) {
+        let mut kj = 0.0;
+        for (c, zc) in z[..NU].iter().enumerate() {
+            if j > c {
+                kj += zc * d.g[j - c - 1];
+            }
+        }
+        d.k1[j - n1] = kj;
+        du += kj * (w - d.f[j - 1]);
+    }
+    for j in first_full..n2 + 1 {
+        let mut kj = 0.0;
+        // z_0 g_j, z_1 g_{j−1}, …: the window holds g_{j−NU+1} … g_j.
+        for (zc, gv) in z[..NU].iter().zip(d.g[j - NU..j].iter().rev()) {
+            kj += zc * gv;
+        }
+        d.k1[j - n1] = kj;
+        du += kj * (w - d.f[j - 1]);
+    }
+    du
+}
+
+/// x − x: +0 for a finite x, NaN for ±∞ or NaN. Summed over many values it tells in one
+/// comparison whether all of them are finite.
+#[inline(always)]
+#[allow(clippy::eq_op)]
+pub(crate) fn finite_probe(x: f32) -> f32 {
+    x - x
+}
+
+/// Pushes `x` in at index 0 and drops the last entry: a history shift by register moves
+/// (`copy_within` is a memmove call on the M4).
+#[inline(always)]
+pub(crate) fn shift_in<const N: usize>(a: &mut [f32; N], x: f32) {
+    let mut carry = x;
+    for v in a.iter_mut() {
+        carry = core::mem::replace(v, carry);
+    }
+}
+
+/// Lower Cholesky factor of the leading n×n block, computed in place over the lower triangle
+/// of `h` (each entry is read before it is overwritten); false if not positive definite.
+fn cholesky_in_place(h: &mut [[f32; MAX_NU]; MAX_NU], n: usize) -> bool {
     for i in 0..n {
         for j in 0..=i {
             let mut s = h[i][j];
             for p in 0..j {
-                s -= l[i][p] * l[j][p];
+                s -= h[i][p] * h[j][p];
             }
             if i == j {
                 if !(s > 1e-12) {
-                    return None;
+                    return false;
                 }
-                l[i][i] = libm::sqrtf(s);
+                h[i][i] = sqrtf(s);
             } else {
-                l[i][j] = s / l[j][j];
+                h[i][j] = s / h[j][j];
             }
         }
     }
-    Some(l)
+    true
 }
 
-/// Solves L Lᵀ x = b in place.
+/// Solves L Lᵀ x = b in place (L in the lower triangle).
+#[inline(always)]
 fn chol_solve(l: &[[f32; MAX_NU]; MAX_NU], n: usize, b: &mut [f32; MAX_NU]) {
     for i in 0..n {
         let mut s = b[i];
@@ -346,6 +552,116 @@ mod tests {
             }
         }
         (0..rows).map(|jj| (0..nu).map(|c| inv[0][c] * gm(n1 + jj, c)).sum()).collect()
+    }
+
+    /// The textbook loops of the design (every term of every sum, G built by index), as the
+    /// design was first written: the optimised `design` must give the same bits.
+    fn textbook_design(
+        s: &GpcState,
+        m: &Model,
+        cfg: &GpcConfig,
+        w: f32,
+    ) -> ([f32; MAX_N2], [f32; MAX_N2], [f32; MAX_N2], f32) {
+        let n2 = cfg.n2;
+        let (mut g, mut f, mut k1) = ([0.0f32; MAX_N2], [0.0f32; MAX_N2], [0.0f32; MAX_N2]);
+        let mut ys = [0.0f32; MAX_N2 + 1];
+        for j in 1..=n2 {
+            let mut v = 0.0;
+            for i in 1..=m.na {
+                if let Some(yp) = j.checked_sub(i).and_then(|x| ys.get(x)) {
+                    v -= m.a[i - 1] * yp;
+                }
+            }
+            for i in 0..m.nb {
+                if j >= m.k + i {
+                    v += m.b[i];
+                }
+            }
+            ys[j] = v;
+            g[j - 1] = v;
+        }
+        let at = m.atilde();
+        let mut yy = [0.0f32; HY + MAX_N2];
+        for i in 0..HY {
+            yy[HY - 1 - i] = s.y[i];
+        }
+        for j in 1..=n2 {
+            let mut v = 0.0;
+            for i in 1..=m.na + 1 {
+                v -= at[i] * yy[HY - 1 + j - i];
+            }
+            for i in 0..m.nb {
+                if m.k + i > j {
+                    v += m.b[i] * s.du_past(m.k + i - j);
+                }
+            }
+            for i in j..=m.nc {
+                v += m.c[i - 1] * s.e[i - j];
+            }
+            yy[HY - 1 + j] = v;
+            f[j - 1] = v;
+        }
+        let nu = cfg.nu;
+        let gjc = |j: usize, c: usize| if j > c { g[j - c - 1] } else { 0.0 };
+        let mut h = [[0.0f32; MAX_NU]; MAX_NU];
+        for (r, row) in h.iter_mut().enumerate().take(nu) {
+            for (c, hrc) in row.iter_mut().enumerate().take(nu) {
+                let mut acc = if r == c { cfg.lambda } else { 0.0 };
+                for j in cfg.n1..=n2 {
+                    acc += gjc(j, r) * gjc(j, c);
+                }
+                *hrc = acc;
+            }
+        }
+        assert!(cholesky_in_place(&mut h, nu));
+        let mut z = [0.0f32; MAX_NU];
+        z[0] = 1.0;
+        chol_solve(&h, nu, &mut z);
+        let mut du = 0.0;
+        for j in cfg.n1..=n2 {
+            let mut kj = 0.0;
+            for (c, zc) in z.iter().enumerate().take(nu) {
+                kj += zc * gjc(j, c);
+            }
+            k1[j - cfg.n1] = kj;
+            du += kj * (w - f[j - 1]);
+        }
+        (g, f, k1, du)
+    }
+
+    #[test]
+    fn design_is_bit_for_bit_the_textbook_loops() {
+        let models = [
+            Model::new(&[-1.749_27, 0.751_376], &[-0.027_079_1, -0.029_865], &[], 5).unwrap(),
+            Model::new(&[-1.8, 0.81], &[-0.02, -0.01], &[], 1).unwrap(),
+            Model::new(&[-0.8], &[0.4, 0.6], &[0.5], 1).unwrap(),
+            Model::new(&[-2.8, 2.86, -1.26, 0.2025], &[0.1, -0.05, 0.02, 0.01], &[-0.3, 0.1], 3).unwrap(),
+            Model::new(&[-1.5, 0.56], &[-0.03], &[0.2], 10).unwrap(),
+        ];
+        let cfgs = [
+            GpcConfig::DEFAULT,
+            GpcConfig { n1: 1, n2: 3, nu: 3, lambda: 0.8 },
+            GpcConfig { n1: 3, n2: 20, nu: 2, lambda: 1.0 },
+            GpcConfig { n1: 1, n2: 30, nu: 5, lambda: 0.1 },
+            GpcConfig { n1: 2, n2: 12, nu: 1, lambda: 3.0 },
+        ];
+        for m in &models {
+            let mut s = GpcState::new(0.4);
+            for (t, y) in [4.3f32, 4.25, 4.31, 4.1, 3.95, 4.02, 4.0, 3.97].iter().enumerate() {
+                s.push_y(*y, m).unwrap();
+                s.track(0.4 + 0.05 * (t % 3) as f32);
+            }
+            s.push_y(3.99, m).unwrap();
+            for cfg in &cfgs {
+                let (g, f, k1, du) = textbook_design(&s, m, cfg, 4.0);
+                let d = s.design(m, cfg, 4.0).unwrap();
+                let bits = |x: &[f32]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&d.g), bits(&g), "g, {m:?} {cfg:?}");
+                assert_eq!(bits(&d.f), bits(&f), "f, {m:?} {cfg:?}");
+                assert_eq!(bits(&d.k1), bits(&k1), "k1, {m:?} {cfg:?}");
+                assert_eq!(d.du.to_bits(), du.to_bits(), "du, {m:?} {cfg:?}");
+            }
+        }
     }
 
     #[test]
@@ -432,6 +748,15 @@ mod tests {
         assert!((c_y + 1.371).abs() < 2e-3, "y(t) coefficient {c_y}");
         assert!((c_y1 - 0.805).abs() < 2e-3, "y(t−1) coefficient {c_y1}");
         assert!((c_du + 0.6042).abs() < 2e-3, "Δu(t−1) coefficient {c_du}");
+    }
+
+    #[test]
+    fn history_shift_and_finiteness_probe() {
+        let mut h = [1.0f32, 2.0, 3.0];
+        shift_in(&mut h, 0.5);
+        assert_eq!(h, [0.5, 1.0, 2.0]);
+        assert_eq!(finite_probe(-3.5).to_bits(), 0.0f32.to_bits());
+        assert!(finite_probe(f32::INFINITY).is_nan() && finite_probe(f32::NAN).is_nan());
     }
 
     #[test]

@@ -34,6 +34,7 @@
 //! fixed-model and the self-tuning controllers.
 
 use super::diophantine::{self, MAX_A, MAX_F};
+use super::gpc::shift_in;
 use super::model::{Model, MAX_K, MAX_NA, MAX_NB};
 
 /// Why no control could be computed.
@@ -154,8 +155,8 @@ impl MvState {
             return Err(MvError::NonFinite);
         }
         if self.primed {
-            self.y.copy_within(0..HY - 1, 1);
-            self.y[0] = y;
+            // Not `copy_within`: a memmove call on the M4 (this runs every sample).
+            shift_in(&mut self.y, y);
         } else {
             self.y = [y; HY];
             self.primed = true;
@@ -188,8 +189,7 @@ impl MvState {
             _ => None,
         };
         if applied.is_finite() {
-            self.u.copy_within(0..HU - 1, 1);
-            self.u[0] = applied;
+            shift_in(&mut self.u, applied);
         }
     }
 

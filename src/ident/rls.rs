@@ -150,14 +150,15 @@ impl<const N: usize> Rls<N> {
         (u, self.d)
     }
 
-    /// trace(P) = Σ_k d_k Σ_{i≤k} U_ik².
+    /// trace(P) = Σ_k d_k Σ_{i≤k} U_ik² (U_kk = 1).
     pub fn trace_p(&self) -> f32 {
         let mut t = 0.0;
         for k in 0..N {
             let mut col = 0.0;
-            for i in 0..=k {
-                col += self.uu(i, k) * self.uu(i, k);
+            for i in 0..k {
+                col += self.u[(i, k)] * self.u[(i, k)];
             }
+            col += 1.0f32 * 1.0f32;
             t += self.d[k] * col;
         }
         t
@@ -186,8 +187,17 @@ impl<const N: usize> Rls<N> {
     }
 
     /// One update with regressor `phi` and output `y`; returns the a-priori error ε(t).
+    ///
+    /// Plain loops over the factors (no temporaries), and the finiteness checks folded into
+    /// one sum of x − x (+0 for a finite x, NaN otherwise): every sample of the self-tuning
+    /// controller runs this on the M4F. The floating-point operations and their order are
+    /// those of Bierman's algorithm as written in the comments.
     pub fn update(&mut self, cfg: &RlsConfig, phi: &SVector<f32, N>, y: f32) -> Result<f32, EstError> {
-        if !y.is_finite() || phi.iter().any(|x| !x.is_finite()) {
+        let mut probe = finite_probe(y);
+        for x in phi.iter() {
+            probe += finite_probe(*x);
+        }
+        if probe != 0.0 {
             return Err(EstError::NonFinite);
         }
         let lambda = if cfg.forgetting > 0.0 && cfg.forgetting <= 1.0 { cfg.forgetting } else { 1.0 };
@@ -195,17 +205,19 @@ impl<const N: usize> Rls<N> {
 
         // Bierman's measurement update with noise variance λ_f (Bierman 1977, p. 100).
         let mut u = self.u;
-        let mut d = self.d;
-        let mut f = SVector::<f32, N>::zeros(); // f = Uᵀ φ
+        let mut d = [0.0f32; N];
+        let mut f = [0.0f32; N]; // f = Uᵀ φ
+        let mut g = [0.0f32; N]; // g = D f
         for j in 0..N {
             let mut s = phi[j];
             for i in 0..j {
                 s += u[(i, j)] * phi[i];
             }
             f[j] = s;
+            d[j] = self.d[j];
+            g[j] = s * d[j];
         }
-        let g = f.component_mul(&d); // g = D f
-        let mut b = SVector::<f32, N>::zeros();
+        let mut b = [0.0f32; N];
         let mut alpha = lambda;
         for j in 0..N {
             let beta = alpha;
@@ -219,19 +231,24 @@ impl<const N: usize> Rls<N> {
             }
             b[j] = g[j];
         }
-        let k = b / alpha;
-        let theta = self.theta + k * eps;
-        // Forgetting: P ← P / λ_f.
-        d /= lambda;
-        if !(alpha > 0.0)
-            || !theta.iter().chain(d.iter()).chain(u.iter()).all(|x| x.is_finite())
-            || d.iter().any(|x| !(*x > 0.0))
-        {
+        // K = b / α, θ ← θ + K ε; forgetting: P ← P / λ_f.
+        let mut theta = self.theta;
+        let mut probe = 0.0f32;
+        for j in 0..N {
+            theta[j] += (b[j] / alpha) * eps;
+            d[j] /= lambda;
+            probe += finite_probe(theta[j]);
+            probe += finite_probe(d[j]);
+            for i in 0..j {
+                probe += finite_probe(u[(i, j)]);
+            }
+        }
+        if !(alpha > 0.0) || probe != 0.0 || d.iter().any(|x| !(*x > 0.0)) {
             return Err(EstError::Diverged);
         }
         self.theta = theta;
         self.u = u;
-        self.d = d;
+        self.d = SVector::from(d);
         let tr = self.trace_p();
         if tr > cfg.trace_max {
             self.d *= cfg.trace_max / tr;
@@ -242,6 +259,13 @@ impl<const N: usize> Rls<N> {
         self.eps_post = eps * (lambda / alpha);
         Ok(eps)
     }
+}
+
+/// x − x: +0 for a finite x, NaN for ±∞ or NaN (summed, one comparison checks many values).
+#[inline(always)]
+#[allow(clippy::eq_op)]
+fn finite_probe(x: f32) -> f32 {
+    x - x
 }
 
 #[cfg(test)]

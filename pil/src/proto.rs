@@ -1,0 +1,107 @@
+//! What the host (`cargo xtask pil`) and the target runner agree on: the controllers both build,
+//! the per-sample work both run, the file formats, and the encoding of events. The runner
+//! compiles this file as its module and xtask includes it with `#[path]`, so the two sides
+//! cannot drift apart.
+//!
+//! Input file ([`INPUT_FILE`], little-endian u32 words):
+//! `MAGIC_IN, controller kind, n`, then n × `t_s (f32 bits), counts, setpoint_c (f32 bits)`.
+//!
+//! Output file ([`OUTPUT_FILE`]): `MAGIC_OUT`, the calibration (3 words, [`CAL_LOOP`]), n, then
+//! per sample: `duty (f32 bits)`, one SysTick count per entry of [`PARTS`], the number of event
+//! word pairs m, and m × `(code, value)` from [`event_words`]; then the runner's peak stack and the size of the carrier + monitor state, bytes.
+
+use hter::coldchain::{ColdChainMonitor, Raised};
+use hter::control::adaptive::{AdaptiveConfig, SelfTuning};
+use hter::control::gpc::GpcConfig;
+use hter::control::{AnyController, Law, Pi, PiConfig};
+use hter::step::{Carrier, CarrierConfig, StepInput, StepOutput};
+
+/// Input file name in QEMU's working directory (NUL-terminated for semihosting `SYS_OPEN`).
+pub const INPUT_FILE: &str = "pil-in.bin\0";
+/// Output file name in QEMU's working directory (NUL-terminated).
+pub const OUTPUT_FILE: &str = "pil-out.bin\0";
+/// First word of the input file.
+pub const MAGIC_IN: u32 = 0x4e49_4c50; // "PLIN"
+/// First word of the output file.
+pub const MAGIC_OUT: u32 = 0x544f_4c50; // "PLOT"
+
+/// The step's configuration on both sides: the firmware's (`firmware/src/config.rs`).
+pub const CARRIER: CarrierConfig = CarrierConfig::DEFAULT;
+
+/// The fallback and baseline PI at Ts = 10 s, as the firmware builds it.
+pub const PI: PiConfig = PiConfig { ts_s: CARRIER.ts_s, ..PiConfig::HTER1_DEFAULT };
+
+/// Controller kind 0: the firmware's default PI.
+pub const KIND_PI: u32 = 0;
+/// Controller kind 1: the firmware's `adaptive` feature, self-tuning GPC (N2 = 30, Nu = 3).
+pub const KIND_GPC: u32 = 1;
+
+/// The self-tuning GPC configuration the firmware's `adaptive` feature runs.
+pub fn adaptive_config() -> AdaptiveConfig {
+    AdaptiveConfig { fallback: PI, ..AdaptiveConfig::default_for(Law::Gpc(GpcConfig::DEFAULT)) }
+}
+
+/// The controller of `kind`, exactly as `firmware/src/config.rs` builds it.
+pub fn controller(kind: u32) -> Option<AnyController> {
+    match kind {
+        KIND_PI => Some(AnyController::Pi(Pi::new(PI))),
+        KIND_GPC => Some(AnyController::SelfTuning(SelfTuning::new(adaptive_config(), PI.bias))),
+        _ => None,
+    }
+}
+
+/// A fresh carrier and cold-chain record for `kind`.
+pub fn carrier(kind: u32) -> Option<(Carrier<AnyController>, ColdChainMonitor)> {
+    Some((Carrier::new(CARRIER, controller(kind)?), ColdChainMonitor::new()))
+}
+
+/// The cold-chain record's share of a sample: it is fed what the controller saw.
+pub fn monitor_push(monitor: &mut ColdChainMonitor, input: &StepInput, out: &StepOutput) -> Raised {
+    monitor.push(input.t_s, out.temp_c.0)
+}
+
+/// Timed parts of a sample, one SysTick count each (0 where a part did not run).
+/// `step` and `monitor` are the per-sample work; the others are the same computations run
+/// again on shadow copies, to split the figure.
+pub const PARTS: [&str; 9] = [
+    "step (Carrier::step)",
+    "cold-chain monitor push",
+    "controller update alone",
+    "counts → °C (ratio + CVD)",
+    "RLS update, 5 parameters",
+    "RLS update, 4 parameters",
+    "GPC push_y + design_into",
+    "estimate + projection",
+    "Diophantine (Ã, k = 5)",
+];
+/// Index of the step in [`PARTS`].
+pub const PART_STEP: usize = 0;
+/// Index of the monitor in [`PARTS`].
+pub const PART_MONITOR: usize = 1;
+
+/// Iterations of the short calibration loop (the long one runs twice as many). The output's
+/// calibration words are the SysTick counts of an empty window and of the two loops of two
+/// instructions per iteration (`subs`, `bne`): the last two differ by exactly 2 · CAL_LOOP
+/// instructions.
+pub const CAL_LOOP: u32 = 1000;
+
+/// Event code of an alarm of the cold-chain monitor (`+ AlarmKind as u32`).
+pub const CODE_ALARM: u32 = 0x100;
+/// Event code of the step's dropped-event counter (value = the count, not a time).
+pub const CODE_DROPPED: u32 = 0x200;
+
+/// The events and alarms of one sample as `(code, value)` pairs: step events as
+/// `(EventKind as u32, t_s bits)`, alarms as `(CODE_ALARM + kind, trigger_s bits)` then
+/// `(start_s bits)` folded in as a second pair with the same code.
+pub fn event_words(out: &StepOutput, raised: &Raised, mut push: impl FnMut(u32, u32)) {
+    for e in out.events.iter() {
+        push(e.kind as u32, e.t_s.to_bits());
+    }
+    if out.events.dropped() > 0 {
+        push(CODE_DROPPED, u32::from(out.events.dropped()));
+    }
+    for a in raised.iter().flatten() {
+        push(CODE_ALARM + a.kind as u32, a.trigger_s.to_bits());
+        push(CODE_ALARM + a.kind as u32, a.start_s.to_bits());
+    }
+}

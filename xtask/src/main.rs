@@ -1,0 +1,515 @@
+//! Host automation for hter (`cargo xtask <command>`).
+//!
+//! `cargo xtask pil` — processor-in-the-loop: records ADC counts from closed-loop `hal-sim`
+//! runs, builds the bare-metal runner `pil/` for the Cortex-M4F (thumbv7em-none-eabihf), runs
+//! it under QEMU (`-M mps2-an386`, `-icount shift=6,sleep=off`: deterministic virtual time, one
+//! instruction = 64 ns), and checks that every duty (bit for bit) and every event and alarm the
+//! target computes equals what the same library code computes here on the host from the same
+//! counts. It reports the instructions per sample (the step plus the cold-chain monitor), a
+//! profile by part, the runner's flash and RAM, and ends with one JSON line. It exits non-zero
+//! when a bit differs or when a self-tuning GPC sample takes more than [`BUDGET_INSN`]
+//! instructions (issue 7).
+
+#[path = "../../pil/src/proto.rs"]
+#[allow(dead_code)]
+mod proto;
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use hal_sim::plant::Load;
+use hal_sim::scenario::Scenario;
+use hal_sim::sim::{run, ControllerChoice, ControllerSpec, Fault, PlantChoice, SimOptions};
+use hter::step::StepInput;
+
+/// Worst-case instructions allowed for one sample (step + monitor) with self-tuning GPC.
+const BUDGET_INSN: f64 = 5000.0;
+/// SysTick counts per instruction expected under `-icount shift=6` at 25 MHz (64 ns / 40 ns).
+const TICKS_PER_INSN: f64 = 1.6;
+/// Longest a QEMU run may take before it is killed.
+const QEMU_TIMEOUT: Duration = Duration::from_secs(300);
+const TARGET: &str = "thumbv7em-none-eabihf";
+
+/// One recorded sequence.
+struct Case {
+    name: &'static str,
+    scenario: &'static str,
+    duration_s: Option<f64>,
+    kind: u32,
+    faults: &'static [&'static str],
+}
+
+const CASES: [Case; 5] = [
+    Case {
+        name: "piecewise, self-tuning GPC",
+        scenario: "piecewise",
+        duration_s: None,
+        kind: proto::KIND_GPC,
+        faults: &[],
+    },
+    Case {
+        name: "piecewise, self-tuning GPC, sensor open at 1500 s",
+        scenario: "piecewise",
+        duration_s: None,
+        kind: proto::KIND_GPC,
+        faults: &["sensor-open@1500"],
+    },
+    Case {
+        name: "step, self-tuning GPC, SSR stuck on at 5400 s",
+        scenario: "step",
+        duration_s: None,
+        kind: proto::KIND_GPC,
+        faults: &["ssr-stuck-on@5400"],
+    },
+    Case {
+        name: "step 24 h, self-tuning GPC",
+        scenario: "step",
+        duration_s: Some(86_400.0),
+        kind: proto::KIND_GPC,
+        faults: &[],
+    },
+    Case { name: "step, PI", scenario: "step", duration_s: None, kind: proto::KIND_PI, faults: &[] },
+];
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match args.first().map(String::as_str) {
+        Some("pil") => pil(),
+        _ => {
+            eprintln!("usage: cargo xtask pil");
+            std::process::exit(2)
+        }
+    }
+}
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("xtask lives in the workspace").to_path_buf()
+}
+
+fn target_dir() -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR").map(PathBuf::from).unwrap_or_else(|| root().join("target"))
+}
+
+/// What the target reported for one sample.
+struct TargetSample {
+    duty: u32,
+    ticks: [u32; proto::PARTS.len()],
+    events: Vec<(u32, u32)>,
+}
+
+/// What the target reported for one run.
+struct TargetRun {
+    cal: [u32; 3],
+    samples: Vec<TargetSample>,
+    stack_bytes: u32,
+    state_bytes: u32,
+}
+
+fn pil() -> Result<()> {
+    which("qemu-system-arm").context("qemu-system-arm not found (Debian: apt-get install qemu-system-arm)")?;
+    let elf = build_runner()?;
+    let (flash, ram) = elf_sizes(&std::fs::read(&elf)?)?;
+    let work = target_dir().join("pil-runs");
+
+    let mut all_equal = true;
+    let mut steps = 0usize;
+    let mut gpc_insn: Vec<f64> = Vec::new();
+    let mut pi_insn: Vec<f64> = Vec::new();
+    let mut parts: Vec<Vec<f64>> = vec![Vec::new(); proto::PARTS.len()];
+    let mut cal_seen = None;
+    let mut stack = 0;
+    let mut state = 0;
+    println!("processor-in-the-loop: {} on qemu-system-arm -M mps2-an386 (Cortex-M4F), -icount shift=6", elf.display());
+    for case in &CASES {
+        let inputs = record(case)?;
+        let dir = work.join(case.name.replace([',', ' '], "_"));
+        std::fs::create_dir_all(&dir)?;
+        let t0 = Instant::now();
+        let tr = run_target(&elf, &dir, case.kind, &inputs)?;
+        let qemu_s = t0.elapsed().as_secs_f64();
+        let (empty, tpi) = calibration(&tr.cal)?;
+        cal_seen = Some((tr.cal, tpi));
+        stack = stack.max(tr.stack_bytes);
+        state = state.max(tr.state_bytes);
+        let host = run_host(case.kind, &inputs)?;
+        let mismatches = compare(&host, &tr.samples);
+        steps += inputs.len();
+        let insn = |t: u32| (f64::from(t) - f64::from(empty)).max(0.0) / TICKS_PER_INSN;
+        let per_step: Vec<f64> =
+            tr.samples.iter().map(|s| insn(s.ticks[proto::PART_STEP]) + insn(s.ticks[proto::PART_MONITOR])).collect();
+        if case.kind == proto::KIND_GPC {
+            gpc_insn.extend(&per_step);
+            for s in &tr.samples {
+                for (p, t) in s.ticks.iter().enumerate() {
+                    if *t > 0 {
+                        parts[p].push(insn(*t));
+                    }
+                }
+            }
+        } else {
+            pi_insn.extend(&per_step);
+        }
+        let events: usize = host.iter().map(|h| h.1.len()).sum();
+        println!(
+            "  {:<52} {:>5} samples, {:>3} event words, bit-equal: {:<3}  insn/sample median {:>5.0} max {:>5.0}  ({:.1} s)",
+            case.name,
+            inputs.len(),
+            events,
+            if mismatches.is_empty() { "yes" } else { "NO" },
+            median(&per_step),
+            max(&per_step),
+            qemu_s
+        );
+        for m in mismatches.iter().take(5) {
+            println!("    mismatch: {m}");
+        }
+        all_equal &= mismatches.is_empty();
+    }
+
+    let (cal, tpi) = cal_seen.context("no case ran")?;
+    println!(
+        "calibration: empty window {} ticks; {} and {} loop instructions: {} and {} ticks → {:.4} ticks per instruction (expected {})",
+        cal[0],
+        2 * proto::CAL_LOOP,
+        4 * proto::CAL_LOOP,
+        cal[1],
+        cal[2],
+        tpi,
+        TICKS_PER_INSN
+    );
+    println!("profile, self-tuning GPC samples (instructions; shadow copies re-run each part):");
+    println!("  {:<32} {:>8} {:>8} {:>8}", "part", "median", "max", "n");
+    for (name, v) in proto::PARTS.iter().zip(&parts) {
+        if !v.is_empty() {
+            println!("  {:<32} {:>8.0} {:>8.0} {:>8}", name, median(v), max(v), v.len());
+        }
+    }
+    println!(
+        "PI: insn/sample median {:.0}, max {:.0}; carrier + monitor state {} B (on the runner's stack); peak stack of the runner {} B; runner image: flash {} B, static RAM {} B",
+        median(&pi_insn),
+        max(&pi_insn),
+        state,
+        stack,
+        flash,
+        ram
+    );
+    let worst = max(&gpc_insn);
+    let within = worst <= BUDGET_INSN;
+    println!(
+        "budget: self-tuning GPC worst case {:.0} instructions per sample ({} the {} budget); host and target {}",
+        worst,
+        if within { "within" } else { "OVER" },
+        BUDGET_INSN,
+        if all_equal { "bit-equal on every sample" } else { "DIFFER" }
+    );
+    println!(
+        "{{\"steps\": {}, \"bit_equal\": {}, \"insn_per_step_median\": {:.0}, \"insn_per_step_max\": {:.0}, \"flash_bytes\": {}, \"ram_bytes\": {}, \"state_bytes\": {}, \"stack_bytes\": {}, \"ticks_per_insn\": {:.4}}}",
+        steps,
+        all_equal,
+        median(&gpc_insn),
+        worst,
+        flash,
+        ram,
+        state,
+        stack,
+        tpi
+    );
+    if !all_equal {
+        bail!("host and target results differ");
+    }
+    if !within {
+        bail!("instruction budget exceeded: {worst:.0} > {BUDGET_INSN}");
+    }
+    Ok(())
+}
+
+fn which(cmd: &str) -> Result<()> {
+    let ok = Command::new(cmd).arg("--version").stdout(Stdio::null()).stderr(Stdio::null()).status()?.success();
+    if !ok {
+        bail!("{cmd} --version failed");
+    }
+    Ok(())
+}
+
+/// Builds `pil/` (its own workspace) for the target; returns the ELF path.
+fn build_runner() -> Result<PathBuf> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let pil = root().join("pil");
+    let status = Command::new(cargo)
+        .current_dir(&pil)
+        .args(["build", "--release", "--locked", "--target", TARGET, "--target-dir"])
+        .arg(target_dir())
+        .status()
+        .context("running cargo")?;
+    if !status.success() {
+        bail!("building the PIL runner failed");
+    }
+    Ok(target_dir().join(TARGET).join("release").join("pil"))
+}
+
+/// Runs the case's closed loop on the simulated plant; returns the step inputs it recorded.
+fn record(case: &Case) -> Result<Vec<StepInput>> {
+    let scenario = Scenario::resolve(case.scenario)?;
+    let choice = if case.kind == proto::KIND_PI { ControllerChoice::Pi } else { ControllerChoice::Gpc };
+    let opts = SimOptions {
+        duration_s: case.duration_s.unwrap_or(scenario.duration_s),
+        scenario,
+        controller: ControllerSpec::new(choice),
+        plant: PlantChoice::Hter1,
+        load: Load::Full,
+        ambient_c: 28.0,
+        seed: 1,
+        faults: case.faults.iter().map(|f| Fault::parse(f)).collect::<Result<_>>()?,
+    };
+    let out = run(&opts)?;
+    Ok(out
+        .rows
+        .iter()
+        .map(|r| StepInput { t_s: r.t_s as f32, counts: r.counts, setpoint_c: r.setpoint_c as f32 })
+        .collect())
+}
+
+/// One host sample: the duty's bits and the event words.
+type HostSample = (u32, Vec<(u32, u32)>);
+
+/// The same samples through the same library code on the host.
+fn run_host(kind: u32, inputs: &[StepInput]) -> Result<Vec<HostSample>> {
+    let (mut carrier, mut monitor) = proto::carrier(kind).context("unknown controller kind")?;
+    Ok(inputs
+        .iter()
+        .map(|inp| {
+            let o = carrier.step(inp);
+            let raised = proto::monitor_push(&mut monitor, inp, &o);
+            let mut ev = Vec::new();
+            proto::event_words(&o, &raised, |c, v| ev.push((c, v)));
+            (o.duty.get().to_bits(), ev)
+        })
+        .collect())
+}
+
+fn compare(host: &[HostSample], target: &[TargetSample]) -> Vec<String> {
+    let mut out = Vec::new();
+    if host.len() != target.len() {
+        out.push(format!("{} host samples, {} target samples", host.len(), target.len()));
+    }
+    for (k, ((hd, hev), t)) in host.iter().zip(target).enumerate() {
+        if *hd != t.duty {
+            out.push(format!(
+                "sample {k}: duty host {:?} ({hd:#010x}) target {:?} ({:#010x})",
+                f32::from_bits(*hd),
+                f32::from_bits(t.duty),
+                t.duty
+            ));
+        }
+        if *hev != t.events {
+            out.push(format!("sample {k}: events host {hev:?} target {:?}", t.events));
+        }
+    }
+    out
+}
+
+fn run_target(elf: &Path, dir: &Path, kind: u32, inputs: &[StepInput]) -> Result<TargetRun> {
+    let mut bytes = Vec::with_capacity(12 + 12 * inputs.len());
+    for w in [proto::MAGIC_IN, kind, inputs.len() as u32] {
+        bytes.extend_from_slice(&w.to_le_bytes());
+    }
+    for i in inputs {
+        for w in [i.t_s.to_bits(), i.counts, i.setpoint_c.to_bits()] {
+            bytes.extend_from_slice(&w.to_le_bytes());
+        }
+    }
+    let input = dir.join(proto::INPUT_FILE.trim_end_matches('\0'));
+    let output = dir.join(proto::OUTPUT_FILE.trim_end_matches('\0'));
+    std::fs::write(&input, bytes)?;
+    let _ = std::fs::remove_file(&output);
+    let mut child = Command::new("qemu-system-arm")
+        .current_dir(dir)
+        .args(["-M", "mps2-an386", "-display", "none", "-monitor", "none", "-serial", "none"])
+        .args(["-semihosting-config", "enable=on,target=native", "-icount", "shift=6,sleep=off", "-kernel"])
+        .arg(elf)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .context("starting qemu-system-arm")?;
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait()? {
+            break s;
+        }
+        if start.elapsed() > QEMU_TIMEOUT {
+            child.kill()?;
+            child.wait()?;
+            bail!("QEMU did not finish within {} s", QEMU_TIMEOUT.as_secs());
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut msg = String::new();
+    if let Some(mut s) = child.stdout.take() {
+        s.read_to_string(&mut msg)?;
+    }
+    if let Some(mut s) = child.stderr.take() {
+        s.read_to_string(&mut msg)?;
+    }
+    if !status.success() {
+        bail!("the PIL runner failed ({status}): {}", msg.trim());
+    }
+    parse_output(&std::fs::read(&output).with_context(|| format!("reading {}", output.display()))?, inputs.len())
+}
+
+fn parse_output(bytes: &[u8], n: usize) -> Result<TargetRun> {
+    let words: Vec<u32> =
+        bytes.chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().expect("chunks of 4"))).collect();
+    let mut it = words.into_iter();
+    let mut next = || it.next().context("PIL output truncated");
+    if next()? != proto::MAGIC_OUT {
+        bail!("PIL output has no header");
+    }
+    let cal = [next()?, next()?, next()?];
+    let count = next()? as usize;
+    if count != n {
+        bail!("target ran {count} samples of {n}");
+    }
+    let mut samples = Vec::with_capacity(n);
+    for _ in 0..n {
+        let duty = next()?;
+        let mut ticks = [0u32; proto::PARTS.len()];
+        for t in ticks.iter_mut() {
+            *t = next()?;
+        }
+        let m = next()? as usize;
+        let mut events = Vec::with_capacity(m);
+        for _ in 0..m {
+            events.push((next()?, next()?));
+        }
+        samples.push(TargetSample { duty, ticks, events });
+    }
+    let stack_bytes = next()?;
+    let state_bytes = next()?;
+    Ok(TargetRun { cal, samples, stack_bytes, state_bytes })
+}
+
+/// Empty-window overhead in ticks and the measured ticks per instruction; fails if the
+/// emulator does not count 1.6 ticks per instruction.
+fn calibration(cal: &[u32; 3]) -> Result<(u32, f64)> {
+    let tpi = f64::from(cal[2].saturating_sub(cal[1])) / f64::from(2 * proto::CAL_LOOP);
+    if (tpi - TICKS_PER_INSN).abs() > 0.01 * TICKS_PER_INSN {
+        bail!("SysTick counts {tpi:.4} ticks per instruction, not {TICKS_PER_INSN}: is -icount shift=6 in effect?");
+    }
+    Ok((cal[0], tpi))
+}
+
+/// Flash (allocated sections with contents) and static RAM (allocated sections at or above
+/// 0x2000_0000) of a little-endian ELF32 image, as `size` counts text + data and data + bss.
+fn elf_sizes(elf: &[u8]) -> Result<(u64, u64)> {
+    let u16_at = |o: usize| -> Result<u64> {
+        Ok(u64::from(u16::from_le_bytes(elf.get(o..o + 2).context("ELF truncated")?.try_into()?)))
+    };
+    let u32_at = |o: usize| -> Result<u64> {
+        Ok(u64::from(u32::from_le_bytes(elf.get(o..o + 4).context("ELF truncated")?.try_into()?)))
+    };
+    if elf.get(..5) != Some(&[0x7f, b'E', b'L', b'F', 1][..]) {
+        bail!("not an ELF32 file");
+    }
+    let shoff = u32_at(0x20)? as usize;
+    let shentsize = u16_at(0x2e)? as usize;
+    let shnum = u16_at(0x30)? as usize;
+    let (mut flash, mut ram) = (0, 0);
+    for i in 0..shnum {
+        let sh = shoff + i * shentsize;
+        let (ty, flags, addr, size) = (u32_at(sh + 4)?, u32_at(sh + 8)?, u32_at(sh + 12)?, u32_at(sh + 20)?);
+        const SHF_ALLOC: u64 = 2;
+        const SHT_NOBITS: u64 = 8;
+        if flags & SHF_ALLOC == 0 {
+            continue;
+        }
+        if ty != SHT_NOBITS {
+            flash += size;
+        }
+        if addr >= 0x2000_0000 {
+            ram += size;
+        }
+    }
+    Ok((flash, ram))
+}
+
+fn median(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    s[s.len() / 2]
+}
+
+fn max(v: &[f64]) -> f64 {
+    v.iter().copied().fold(0.0, f64::max)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn words(ws: &[u32]) -> Vec<u8> {
+        ws.iter().flat_map(|w| w.to_le_bytes()).collect()
+    }
+
+    /// A target output with two samples: the second has one event.
+    fn output() -> Vec<u32> {
+        let mut w = vec![proto::MAGIC_OUT, 2, 3216, 6416, 2];
+        w.push(0.5f32.to_bits());
+        w.extend([100u32; proto::PARTS.len()]);
+        w.push(0);
+        w.push(0.25f32.to_bits());
+        w.extend([200u32; proto::PARTS.len()]);
+        w.extend([1, 7, 10.0f32.to_bits()]);
+        w.extend([4096, 1600]);
+        w
+    }
+
+    #[test]
+    fn parses_the_runner_output_and_refuses_a_truncated_one() {
+        let run = parse_output(&words(&output()), 2).unwrap();
+        assert_eq!(run.cal, [2, 3216, 6416]);
+        assert_eq!(run.samples[1].duty, 0.25f32.to_bits());
+        assert_eq!(run.samples[1].events, vec![(7, 10.0f32.to_bits())]);
+        assert_eq!((run.stack_bytes, run.state_bytes), (4096, 1600));
+        let w = output();
+        assert!(parse_output(&words(&w[..w.len() - 3]), 2).is_err());
+        assert!(parse_output(&words(&w), 3).is_err(), "sample count must match");
+    }
+
+    #[test]
+    fn one_flipped_bit_or_event_is_a_mismatch() {
+        let run = parse_output(&words(&output()), 2).unwrap();
+        let host: Vec<HostSample> = vec![(0.5f32.to_bits(), vec![]), (0.25f32.to_bits(), vec![(7, 10.0f32.to_bits())])];
+        assert!(compare(&host, &run.samples).is_empty());
+        let mut flipped = host.clone();
+        flipped[0].0 ^= 1;
+        assert_eq!(compare(&flipped, &run.samples).len(), 1);
+        let mut other_event = host.clone();
+        other_event[1].1[0].0 = 8;
+        assert_eq!(compare(&other_event, &run.samples).len(), 1);
+        assert_eq!(compare(&host[..1], &run.samples).len(), 1, "length mismatch reported");
+    }
+
+    #[test]
+    fn calibration_demands_1_6_ticks_per_instruction() {
+        assert!((calibration(&[2, 3216, 6416]).unwrap().1 - 1.6).abs() < 1e-9);
+        // Without -icount, or with another shift, the ratio is off: refuse.
+        assert!(calibration(&[2, 2000, 4000]).is_err());
+    }
+
+    #[test]
+    fn host_replay_of_the_library_is_deterministic() {
+        let inputs: Vec<StepInput> = (0..50)
+            .map(|k| StepInput { t_s: 10.0 * k as f32, counts: 49_000 + (k * 7919 % 13), setpoint_c: 4.0 })
+            .collect();
+        let a = run_host(proto::KIND_GPC, &inputs).unwrap();
+        let b = run_host(proto::KIND_GPC, &inputs).unwrap();
+        assert_eq!(a, b);
+        assert!(run_host(7, &inputs).is_err());
+    }
+}
