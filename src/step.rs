@@ -373,9 +373,8 @@ impl<C: Controller> Carrier<C> {
             self.history_head = if self.history_head + 1 == HISTORY { 0 } else { self.history_head + 1 };
             self.history_len = (self.history_len + 1).min(HISTORY);
             let (head, len) = (self.history_head, self.history_len);
-            let ago = |n: usize| {
-                (n < len).then(|| self.history.get((head + HISTORY - 1 - n) % HISTORY).copied()).flatten()
-            };
+            let ago =
+                |n: usize| (n < len).then(|| self.history.get((head + HISTORY - 1 - n) % HISTORY).copied()).flatten();
             // Stuck on: still falling after the SSR has been off for a while, and not slowing
             // down — the coast after full cooling stops decelerates, a shorted SSR does not.
             if !self.supply_cut && self.off_run >= self.cfg.stuck_on_samples {
