@@ -11,9 +11,8 @@ mod proto;
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use hal_sim::plant::Load;
 use hal_sim::scenario::Scenario;
-use hal_sim::sim::{run, ControllerChoice, ControllerSpec, PlantChoice, SimOptions};
+use hal_sim::sim::{run, ControllerChoice, ControllerSpec, SimOptions};
 use hter::control::adaptive::AdaptiveConfig;
 use hter::control::diophantine;
 use hter::control::gpc::{GpcConfig, GpcState};
@@ -24,16 +23,11 @@ use nalgebra::SVector;
 
 fn sim_options(scenario: &str, duration_s: Option<f64>, choice: ControllerChoice) -> SimOptions {
     let scenario = Scenario::resolve(scenario).expect("built-in scenario");
-    SimOptions {
-        duration_s: duration_s.unwrap_or(scenario.duration_s),
-        scenario,
-        controller: ControllerSpec::new(choice),
-        plant: PlantChoice::Hter1,
-        load: Load::Full,
-        ambient_c: 28.0,
-        seed: 1,
-        faults: vec![],
+    let mut opts = SimOptions::new(scenario, ControllerSpec::new(choice));
+    if let Some(d) = duration_s {
+        opts.duration_s = d;
     }
+    opts
 }
 
 /// The counts the step saw in a closed-loop `piecewise` run (360 samples).

@@ -191,6 +191,23 @@ pub struct SimOptions {
     pub faults: Vec<(f64, Fault)>,
 }
 
+impl SimOptions {
+    /// `scenario` with `controller` as `hter sim` runs it without other flags: H-TER I, full
+    /// load, 28 °C ambient, the scenario's own duration, noise seed 1, no faults.
+    pub fn new(scenario: Scenario, controller: ControllerSpec) -> Self {
+        Self {
+            duration_s: scenario.duration_s,
+            scenario,
+            controller,
+            plant: PlantChoice::Hter1,
+            load: Load::Full,
+            ambient_c: 28.0,
+            seed: 1,
+            faults: Vec::new(),
+        }
+    }
+}
+
 /// One control sample of a run (one CSV row).
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct Row {

@@ -20,9 +20,8 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
-use hal_sim::plant::Load;
 use hal_sim::scenario::Scenario;
-use hal_sim::sim::{run, ControllerChoice, ControllerSpec, Fault, PlantChoice, SimOptions};
+use hal_sim::sim::{run, ControllerChoice, ControllerSpec, Fault, SimOptions};
 use hter::step::StepInput;
 
 /// Worst-case instructions allowed for one sample (step + monitor) with self-tuning GPC.
@@ -254,16 +253,9 @@ fn build_runner() -> Result<PathBuf> {
 fn record(case: &Case) -> Result<Vec<StepInput>> {
     let scenario = Scenario::resolve(case.scenario)?;
     let choice = if case.kind == proto::KIND_PI { ControllerChoice::Pi } else { ControllerChoice::Gpc };
-    let opts = SimOptions {
-        duration_s: case.duration_s.unwrap_or(scenario.duration_s),
-        scenario,
-        controller: ControllerSpec::new(choice),
-        plant: PlantChoice::Hter1,
-        load: Load::Full,
-        ambient_c: 28.0,
-        seed: 1,
-        faults: case.faults.iter().map(|f| Fault::parse(f)).collect::<Result<_>>()?,
-    };
+    let mut opts = SimOptions::new(scenario, ControllerSpec::new(choice));
+    opts.duration_s = case.duration_s.unwrap_or(opts.duration_s);
+    opts.faults = case.faults.iter().map(|f| Fault::parse(f)).collect::<Result<_>>()?;
     let out = run(&opts)?;
     Ok(out
         .rows
