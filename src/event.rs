@@ -24,6 +24,16 @@ pub enum EventKind {
     /// The load warms although the SSR has been commanded fully on for minutes: the SSR or the
     /// modules are open, or the cabinet is open.
     SsrStuckOff,
+    /// The reading stepped by more than physics allows in one sample and stayed at the new level
+    /// (a drifting reference, a damaged lead, a probe pulled out of the load). The step is
+    /// measured and subtracted from then on, and this alarm asks for a service check.
+    SensorOffset,
+    /// The measured supply of the Peltier modules is below its minimum (a failing battery, a
+    /// weak car socket or solar panel): cooling power falls with the square of the voltage.
+    SupplySag,
+    /// The duty needed to hold the setpoint rose sharply within half an hour: a sudden extra
+    /// heat load (the lid left open, a warm load put in).
+    LidOpen,
     /// The sensor reads plausibly again after a fault.
     SensorRecovered,
     /// The freeze guard cut cooling: the measured load came too close to 0 °C.

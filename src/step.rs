@@ -87,6 +87,25 @@ pub struct CarrierConfig {
     pub stuck_off_samples: u16,
     /// …and the load rose by more than this over that time, °C.
     pub stuck_off_rise_c: f32,
+    /// Sensor offset: a step of the calibrated reading larger than this between two samples,
+    /// °C… The sensed load moves at most ≈ 0.46 °C per 10 s sample (pull-down from 43 °C, half
+    /// load, measured on the hal-sim plant), so 0.7 °C is more than physics allows.
+    pub offset_step_c: f32,
+    /// …that stays at its new level (within a quarter of the step) for this many samples.
+    pub offset_confirm_samples: u8,
+    /// Supply sag: the measured module supply below this, V (12 V nominal − 10 %)…
+    pub supply_min_v: f32,
+    /// …for this many samples in a row.
+    pub supply_sag_samples: u8,
+    /// Lid open: time constants of the fast and slow averages of the applied duty, s…
+    pub lid_fast_s: f32,
+    /// (slow average)
+    pub lid_slow_s: f32,
+    /// …whose difference above this, duty, while holding within 1 °C of the setpoint, means a
+    /// sudden heat load. A 15 W lid opening raises the holding duty by ≈ 0.35 and the difference
+    /// peaks at ≈ 0.13 after 50 min; a 3 W warm item (≈ +0.09) and a 12 → 9 V supply sag
+    /// (≈ +0.07) stay below 0.04; On-Off's own duty cycle ripples the difference by < 0.08.
+    pub lid_duty_rise: f32,
 }
 
 impl CarrierConfig {
@@ -111,6 +130,13 @@ impl CarrierConfig {
         stuck_on_drop_c: 0.15,
         stuck_off_samples: 30,
         stuck_off_rise_c: 0.5,
+        offset_step_c: 0.7,
+        offset_confirm_samples: 3,
+        supply_min_v: 10.8,
+        supply_sag_samples: 3,
+        lid_fast_s: 1800.0,
+        lid_slow_s: 5400.0,
+        lid_duty_rise: 0.1,
     };
 }
 
@@ -186,6 +212,23 @@ pub struct Carrier<C: Controller> {
     req_off_run: u16,
     supply_cut: bool,
     ssr_off_reported: bool,
+    /// Sensor offset measured and subtracted, °C.
+    offset_c: f32,
+    /// The previous offset-corrected reading.
+    last_raw_c: Option<f32>,
+    /// A step under watch: (level before, step, samples it has held).
+    pending_step: Option<(f32, f32, u8)>,
+    /// Last measured module supply, V, and samples in a row below the minimum.
+    supply_v: Option<f32>,
+    supply_low_run: u8,
+    supply_sag_reported: bool,
+    /// Fast and slow averages of the applied duty (lid-open check).
+    duty_fast: Option<f32>,
+    duty_slow: f32,
+    lid_reported: bool,
+    /// The setpoint of the last sample and when the load first came within 0.3 °C of it.
+    last_w: f32,
+    reached_s: Option<f32>,
 }
 
 /// Samples of filtered temperature kept for the SSR checks.
@@ -217,7 +260,25 @@ impl<C: Controller> Carrier<C> {
             req_off_run: 0,
             supply_cut: false,
             ssr_off_reported: false,
+            offset_c: 0.0,
+            last_raw_c: None,
+            pending_step: None,
+            supply_v: None,
+            supply_low_run: 0,
+            supply_sag_reported: false,
+            duty_fast: None,
+            duty_slow: 0.0,
+            lid_reported: false,
+            last_w: f32::NAN,
+            reached_s: None,
         }
+    }
+
+    /// Gives the step the measured supply voltage of the Peltier modules, V, for the next
+    /// sample (boards with a divider on the supply rail call it every sample; without it the
+    /// supply-sag check is off).
+    pub fn observe_supply_v(&mut self, v: f32) {
+        self.supply_v = Some(v);
     }
 
     /// The configuration.
@@ -239,7 +300,7 @@ impl<C: Controller> Carrier<C> {
             Ok(_) if self.same_counts.saturating_add(1) >= self.cfg.stuck_samples => Err(EventKind::SensorStuck),
             m => m,
         };
-        self.run(input.t_s, measured, input.setpoint_c)
+        self.run(input.t_s, measured, input.setpoint_c, true)
     }
 
     /// Runs one sample from an already converted temperature, skipping the ADC and RTD
@@ -247,10 +308,46 @@ impl<C: Controller> Carrier<C> {
     /// check, filter, controller and safety still apply.
     pub fn step_celsius(&mut self, t_s: f32, temp: Celsius, setpoint_c: f32) -> StepOutput {
         let measured = self.plausible(temp);
-        self.run(t_s, measured, setpoint_c)
+        self.run(t_s, measured, setpoint_c, false)
     }
 
-    fn run(&mut self, t_s: f32, raw: Result<Celsius, EventKind>, setpoint_c: f32) -> StepOutput {
+    /// Sensor offset: a reading that steps by more than physics allows and stays there is a
+    /// sensor fault, not the load. While a step is under watch the filter is held; once it has
+    /// held its level for `offset_confirm_samples` it is measured, subtracted from every later
+    /// reading and reported. `raw` is the offset-corrected reading; returns whether the filter
+    /// must hold this sample.
+    fn watch_offset(&mut self, raw: f32, emit: &mut impl FnMut(EventKind)) -> bool {
+        let prev = self.last_raw_c.replace(raw);
+        match (self.pending_step, prev) {
+            (Some((before, step, n)), _) => {
+                if (raw - (before + step)).abs() <= 0.25 * step.abs() {
+                    let n = n.saturating_add(1);
+                    if n >= self.cfg.offset_confirm_samples {
+                        // Measured on this sample: the load itself has not moved measurably.
+                        let measured = raw - before;
+                        self.offset_c += measured;
+                        self.last_raw_c = Some(raw - measured);
+                        self.pending_step = None;
+                        emit(EventKind::SensorOffset);
+                    } else {
+                        self.pending_step = Some((before, step, n));
+                    }
+                    true
+                } else {
+                    // Back (a transient, which the spike filter handles) or somewhere else.
+                    self.pending_step = None;
+                    false
+                }
+            }
+            (None, Some(p)) if (raw - p).abs() > self.cfg.offset_step_c => {
+                self.pending_step = Some((p, raw - p, 1));
+                true
+            }
+            _ => false,
+        }
+    }
+
+    fn run(&mut self, t_s: f32, raw: Result<Celsius, EventKind>, setpoint_c: f32, sensor: bool) -> StepOutput {
         let mut events = Events::default();
         let mut emit = |kind| events.push(Event { t_s, kind });
 
@@ -274,7 +371,20 @@ impl<C: Controller> Carrier<C> {
             }
             _ => {}
         }
-        let raw_c = raw.ok();
+        // Offset check on the raw sensor path only (an ideal-measurement plant has no sensor).
+        let mut hold = false;
+        let raw_c = match raw.ok() {
+            Some(t) if sensor => {
+                let corrected = t.0 - self.offset_c;
+                hold = self.watch_offset(corrected, &mut emit);
+                Some(Celsius(corrected))
+            }
+            other => other,
+        };
+        if raw_c.is_none() {
+            self.last_raw_c = None;
+            self.pending_step = None;
+        }
         // Spikes: a reading far from the filtered value is ignored; three in a row are a real
         // jump (a re-seated probe) and restart the filter.
         let spike = match (raw_c, self.filter.output()) {
@@ -298,9 +408,25 @@ impl<C: Controller> Carrier<C> {
             self.spike_run = 0;
         }
         let temp_c = match raw_c {
-            Some(t) if !spike || self.spike_run >= 3 => self.filter.step(&self.cfg.filter, t.0),
+            Some(t) if !hold && (!spike || self.spike_run >= 3) => self.filter.step(&self.cfg.filter, t.0),
             _ => self.filter.output().unwrap_or(f32::NAN),
         };
+
+        // Supply sag, on the measured module supply.
+        if let Some(v) = self.supply_v {
+            if v < self.cfg.supply_min_v {
+                self.supply_low_run = self.supply_low_run.saturating_add(1);
+                if self.supply_low_run >= self.cfg.supply_sag_samples && !self.supply_sag_reported {
+                    self.supply_sag_reported = true;
+                    emit(EventKind::SupplySag);
+                }
+            } else {
+                self.supply_low_run = 0;
+                if v >= self.cfg.supply_min_v + 0.5 {
+                    self.supply_sag_reported = false;
+                }
+            }
+        }
 
         // 4: setpoint.
         let w = if setpoint_c.is_finite() {
@@ -412,6 +538,38 @@ impl<C: Controller> Carrier<C> {
 
         if self.supply_cut {
             duty = Duty::OFF;
+        }
+        // Lid open: the duty it takes to hold the setpoint jumps. Two averages of the applied
+        // duty; the fast one running well above the slow one while the load is held near its
+        // setpoint means a sudden heat load (a slow ambient swing moves both together, a
+        // setpoint change or pull-down is not "holding").
+        let (d, ts) = (duty.get(), self.cfg.ts_s);
+        let fast = self.duty_fast.map_or(d, |f| f + (d - f) * (ts / self.cfg.lid_fast_s).min(1.0));
+        self.duty_slow = if self.duty_fast.is_some() {
+            self.duty_slow + (d - self.duty_slow) * (ts / self.cfg.lid_slow_s).min(1.0)
+        } else {
+            d
+        };
+        self.duty_fast = Some(fast);
+        // "Holding": the load reached this setpoint (no pull-down, no setpoint transient) at
+        // least one fast time constant ago, so the averages no longer carry the transient.
+        if (w - self.last_w).abs() > 0.01 || !self.last_w.is_finite() {
+            self.reached_s = None;
+        }
+        self.last_w = w;
+        if self.reached_s.is_none() && (temp_c - w).abs() < 0.3 {
+            self.reached_s = Some(t_s);
+        }
+        let settled = mode == Mode::Normal && self.reached_s.is_some_and(|r| t_s - r >= self.cfg.lid_fast_s);
+        // Either the holding duty jumped (a controller that keeps the load on target), or full
+        // cooling for 10 min no longer holds the load within 1 °C (one that cannot, On-Off).
+        let duty_jump = (temp_c - w).abs() < 1.0 && fast - self.duty_slow > self.cfg.lid_duty_rise;
+        let overwhelmed = self.on_run >= 60 && temp_c > w + 1.0;
+        if settled && !self.lid_reported && (duty_jump || overwhelmed) {
+            self.lid_reported = true;
+            emit(EventKind::LidOpen);
+        } else if self.lid_reported && fast - self.duty_slow < 0.25 * self.cfg.lid_duty_rise {
+            self.lid_reported = false;
         }
         self.off_run = if duty.get() == 0.0 { self.off_run.saturating_add(1) } else { 0 };
         self.on_run = if duty.get() >= 0.9 { self.on_run.saturating_add(1) } else { 0 };

@@ -24,7 +24,11 @@ fn with_fault(kind: &str, controller: ControllerChoice) -> SimOutput {
 
 /// Asserts the fault `detected` is reported within `within_s` of the injection, nothing before.
 fn check(kind: &str, detected: &str, within_s: f64) {
-    for c in [ControllerChoice::Pi, ControllerChoice::Gpc, ControllerChoice::Onoff] {
+    check_with(kind, detected, within_s, &[ControllerChoice::Pi, ControllerChoice::Gpc, ControllerChoice::Onoff]);
+}
+
+fn check_with(kind: &str, detected: &str, within_s: f64, controllers: &[ControllerChoice]) {
+    for &c in controllers {
         let out = with_fault(kind, c);
         let m = &out.metrics;
         assert!(m.faults_detected.iter().all(|f| f.t_s >= AT_S), "{kind}/{c:?}: detection before the fault: {m:?}");
@@ -63,6 +67,37 @@ fn a_shorted_ssr_is_detected_and_the_supply_switch_opened() {
     // After the cut the modules get nothing: the carrier can only warm (it must alarm, not freeze).
     let last = out.rows.last().unwrap();
     assert!(last.true_temp_c > 8.0 && last.duty == 0.0);
+}
+
+/// A +1.5 °C step of the reading is caught in three samples, measured and subtracted: the load
+/// stays on target instead of being cooled 1.5 °C too far (it reached 2.4 °C with PI and 1.6 °C
+/// with On-Off before this check).
+#[test]
+fn a_sensor_offset_is_detected_and_compensated() {
+    check("sensor-offset", "sensor_offset", 40.0);
+    for c in [ControllerChoice::Pi, ControllerChoice::Onoff] {
+        let m = with_fault("sensor-offset", c).metrics;
+        assert!(m.min_temp_c > 2.5, "{c:?}: {m:?}");
+    }
+}
+
+/// The measured module supply falling from 12 to 9 V is reported within three samples.
+#[test]
+fn a_supply_sag_is_detected() {
+    check("supply-sag", "supply_sag", 40.0);
+}
+
+/// A 15 W heat load (the lid left open) is reported within half an hour by the controllers that
+/// hold the load on target. On-Off is not in the list: its own ±0.3 °C limit cycle hides the
+/// change of duty this check looks for (a known gap).
+#[test]
+fn an_open_lid_is_detected() {
+    check_with(
+        "lid-open",
+        "lid_open",
+        1800.0,
+        &[ControllerChoice::Pi, ControllerChoice::Gpc, ControllerChoice::Igmvc, ControllerChoice::Gmvc],
+    );
 }
 
 #[test]

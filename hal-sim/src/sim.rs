@@ -268,6 +268,9 @@ pub fn event_name(k: EventKind) -> &'static str {
         EventKind::SensorShort => "sensor_short",
         EventKind::SensorOutOfRange => "sensor_out_of_range",
         EventKind::SensorRecovered => "sensor_recovered",
+        EventKind::SensorOffset => "sensor_offset",
+        EventKind::SupplySag => "supply_sag",
+        EventKind::LidOpen => "lid_open",
         EventKind::SensorStuck => "sensor_stuck",
         EventKind::SensorSpikes => "sensor_spikes",
         EventKind::SsrStuckOn => "ssr_stuck_on",
@@ -292,6 +295,9 @@ fn is_fault(k: EventKind) -> bool {
             | EventKind::SensorSpikes
             | EventKind::SsrStuckOn
             | EventKind::SsrStuckOff
+            | EventKind::SensorOffset
+            | EventKind::SupplySag
+            | EventKind::LidOpen
     )
 }
 
@@ -391,6 +397,8 @@ impl Rig {
         match self {
             Rig::Physical { plant, adc, .. } => {
                 adc.set_temperature_c(plant.sensed_temp_c());
+                // The board's divider on the module supply rail.
+                carrier.observe_supply_v(plant.supply_v() as f32);
                 let counts = match adc.sample() {
                     Ok(c) => c,
                     Err(never) => match never {},
