@@ -25,6 +25,8 @@
 //! evaluated as an offset from a 5 °C reference so the exponentials stay near 1 in f32, with a
 //! running mean (no growing sum to lose precision over a 30-day record).
 
+use crate::units::{max_f32, min_f32};
+
 /// ΔH/R of the mean kinetic temperature, K (83 144 / 8.314).
 pub const MKT_DH_OVER_R_K: f32 = 83_144.0 / 8.314;
 const T_REF_K: f32 = 278.15;
@@ -200,8 +202,8 @@ impl ColdChainMonitor {
             }
         }
         self.last = Some((t_s, temp_c));
-        self.min_c = self.min_c.min(temp_c);
-        self.max_c = self.max_c.max(temp_c);
+        self.min_c = min_f32(self.min_c, temp_c);
+        self.max_c = max_f32(self.max_c, temp_c);
 
         for (i, (tr, kind)) in self.trackers.iter_mut().zip(AlarmKind::ALL).enumerate() {
             let meets = kind.meets(temp_c);
@@ -239,7 +241,8 @@ impl ColdChainMonitor {
             (Some(s), Some(i)) if self.log[i].is_some_and(|e| e.side == s) => {
                 if let Some(e) = self.log[i].as_mut() {
                     e.end_s = t_s;
-                    e.extreme_c = if s == Side::Cold { e.extreme_c.min(temp_c) } else { e.extreme_c.max(temp_c) };
+                    e.extreme_c =
+                        if s == Side::Cold { min_f32(e.extreme_c, temp_c) } else { max_f32(e.extreme_c, temp_c) };
                 }
             }
             (Some(s), _) => {

@@ -33,7 +33,7 @@ use crate::control::{AdaptiveMode, ControlInput, Controller, ControllerStatus};
 use crate::event::{Event, EventKind, Events};
 use crate::filter::{FirstOrder, FirstOrderConfig};
 use crate::rtd::Rtd;
-use crate::units::{Celsius, Duty};
+use crate::units::{max_f32, min_f32, Celsius, Duty};
 
 /// Everything the step needs to know that does not change while it runs.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -431,10 +431,10 @@ impl<C: Controller> Carrier<C> {
         // 4: setpoint.
         let w = if setpoint_c.is_finite() {
             // Not `f32::clamp`: it panics when min > max, and a panic path costs the firmware
-            // ~15 KiB of formatting code. The config is checked at construction anyway.
-            setpoint_c.max(self.cfg.setpoint_min_c).min(self.cfg.setpoint_max_c)
+            // ~15 KiB of formatting code. Not `f32::max`/`min` either: calls on the M4F.
+            min_f32(max_f32(setpoint_c, self.cfg.setpoint_min_c), self.cfg.setpoint_max_c)
         } else {
-            self.cfg.setpoint_min_c.max(4.0).min(self.cfg.setpoint_max_c)
+            min_f32(max_f32(self.cfg.setpoint_min_c, 4.0), self.cfg.setpoint_max_c)
         };
         let clamped = w != setpoint_c;
         if clamped && !self.setpoint_clamped {
@@ -474,7 +474,7 @@ impl<C: Controller> Carrier<C> {
                 }
             }
             self.last_temp_c = Some(temp_c);
-            let predicted = temp_c + self.slope_c_per_s.min(0.0) * self.cfg.freeze_lookahead_s;
+            let predicted = temp_c + min_f32(self.slope_c_per_s, 0.0) * self.cfg.freeze_lookahead_s;
             if !self.freeze_guard && predicted <= self.cfg.freeze_cut_c {
                 self.freeze_guard = true;
                 emit(EventKind::FreezeGuardTripped);
@@ -544,9 +544,9 @@ impl<C: Controller> Carrier<C> {
         // setpoint means a sudden heat load (a slow ambient swing moves both together, a
         // setpoint change or pull-down is not "holding").
         let (d, ts) = (duty.get(), self.cfg.ts_s);
-        let fast = self.duty_fast.map_or(d, |f| f + (d - f) * (ts / self.cfg.lid_fast_s).min(1.0));
+        let fast = self.duty_fast.map_or(d, |f| f + (d - f) * min_f32(ts / self.cfg.lid_fast_s, 1.0));
         self.duty_slow = if self.duty_fast.is_some() {
-            self.duty_slow + (d - self.duty_slow) * (ts / self.cfg.lid_slow_s).min(1.0)
+            self.duty_slow + (d - self.duty_slow) * min_f32(ts / self.cfg.lid_slow_s, 1.0)
         } else {
             d
         };

@@ -66,3 +66,24 @@ mod tests {
         assert_eq!(Duty::saturating(-3.0), Duty::OFF);
     }
 }
+
+/// min of two finite numbers as a compare-and-select. `f32::min` is a call to `fminf` on the
+/// Cortex-M4F (its NaN handling is software, ≈ 15 instructions a call: `cargo xtask pil`).
+#[inline(always)]
+pub(crate) fn min_f32(a: f32, b: f32) -> f32 {
+    if b < a {
+        b
+    } else {
+        a
+    }
+}
+
+/// max of two finite numbers as a compare-and-select (see [`min_f32`]).
+#[inline(always)]
+pub(crate) fn max_f32(a: f32, b: f32) -> f32 {
+    if b > a {
+        b
+    } else {
+        a
+    }
+}
