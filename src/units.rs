@@ -50,23 +50,6 @@ impl Duty {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn duty_rejects_out_of_range_and_nan() {
-        assert!(Duty::new(-0.01).is_none());
-        assert!(Duty::new(1.01).is_none());
-        assert!(Duty::new(f32::NAN).is_none());
-        assert_eq!(Duty::new(0.25).map(Duty::get), Some(0.25));
-        assert_eq!(Duty::saturating(f32::NAN), Duty::OFF);
-        assert_eq!(Duty::saturating(f32::INFINITY), Duty::OFF);
-        assert_eq!(Duty::saturating(3.0), Duty::FULL);
-        assert_eq!(Duty::saturating(-3.0), Duty::OFF);
-    }
-}
-
 /// min of two finite numbers as a compare-and-select. `f32::min` is a call to `fminf` on the
 /// Cortex-M4F (its NaN handling is software, ≈ 15 instructions a call: `cargo xtask pil`).
 #[inline(always)]
@@ -85,5 +68,22 @@ pub(crate) fn max_f32(a: f32, b: f32) -> f32 {
         b
     } else {
         a
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn duty_rejects_out_of_range_and_nan() {
+        assert!(Duty::new(-0.01).is_none());
+        assert!(Duty::new(1.01).is_none());
+        assert!(Duty::new(f32::NAN).is_none());
+        assert_eq!(Duty::new(0.25).map(Duty::get), Some(0.25));
+        assert_eq!(Duty::saturating(f32::NAN), Duty::OFF);
+        assert_eq!(Duty::saturating(f32::INFINITY), Duty::OFF);
+        assert_eq!(Duty::saturating(3.0), Duty::FULL);
+        assert_eq!(Duty::saturating(-3.0), Duty::OFF);
     }
 }
