@@ -93,6 +93,9 @@ pub struct CarrierConfig {
     pub offset_step_c: f32,
     /// …that stays at its new level (within a quarter of the step) for this many samples.
     pub offset_confirm_samples: u8,
+    /// Largest upward offset that is measured and subtracted, °C (larger ones, and any step
+    /// down, are reported only).
+    pub offset_max_comp_c: f32,
     /// Supply sag: the measured module supply below this, V (12 V nominal − 10 %)…
     pub supply_min_v: f32,
     /// …for this many samples in a row.
@@ -132,6 +135,7 @@ impl CarrierConfig {
         stuck_off_rise_c: 0.5,
         offset_step_c: 0.7,
         offset_confirm_samples: 3,
+        offset_max_comp_c: 3.0,
         supply_min_v: 10.8,
         supply_sag_samples: 3,
         lid_fast_s: 1800.0,
@@ -324,9 +328,15 @@ impl<C: Controller> Carrier<C> {
                     let n = n.saturating_add(1);
                     if n >= self.cfg.offset_confirm_samples {
                         // Measured on this sample: the load itself has not moved measurably.
+                        // Only a step *up* of at most `offset_max_comp_c` is subtracted: a
+                        // reading too warm makes the controller overcool — the freezing side —
+                        // while one too cold only under-cools, which the warm alarms catch, and
+                        // which is also what a probe re-seated in a colder load looks like.
                         let measured = raw - before;
-                        self.offset_c += measured;
-                        self.last_raw_c = Some(raw - measured);
+                        if measured > 0.0 && measured <= self.cfg.offset_max_comp_c {
+                            self.offset_c += measured;
+                            self.last_raw_c = Some(raw - measured);
+                        }
                         self.pending_step = None;
                         emit(EventKind::SensorOffset);
                     } else {
@@ -409,6 +419,8 @@ impl<C: Controller> Carrier<C> {
         }
         let temp_c = match raw_c {
             Some(t) if !hold && (!spike || self.spike_run >= 3) => self.filter.step(&self.cfg.filter, t.0),
+            // An empty filter (just reset) starts from the reading rather than report nothing.
+            Some(t) if self.filter.output().is_none() => self.filter.step(&self.cfg.filter, t.0),
             _ => self.filter.output().unwrap_or(f32::NAN),
         };
 
