@@ -6,7 +6,7 @@
 //! | feature | controller | host equivalent |
 //! | --- | --- | --- |
 //! | (none) | PI, `PiConfig::HTER1_DEFAULT` | `hter sim --controller pi` |
-//! | `adaptive` | self-tuning GPC, `AdaptiveConfig::default_for(Law::Gpc(GpcConfig::DEFAULT))` | `hter sim --controller gpc` |
+//! | `adaptive` | self-tuning GPC, `AdaptiveConfig::default_for(Law::Gpc(GpcConfig::DEFAULT))`, restarted from the model stored in flash | `hter sim --controller gpc` |
 //! | `identify` | open-loop PRBS on the SSR (sensor checks and freeze guard stay on) | `hter sim --scenario prbs` |
 
 #[cfg(all(feature = "adaptive", feature = "identify"))]
@@ -49,17 +49,38 @@ pub fn controller() -> AnyController {
     AnyController::Pi(Pi::new(PI))
 }
 
-/// The controller: self-tuning GPC (N2 = 30, Nu = 3, λ = 3, T-filter τ = 0.8; RLS λ_f = 0.995) starting from the
-/// H-TER I model, with the PI as its bumpless fallback — the host's `--controller gpc`.
+/// Self-tuning GPC (N2 = 30, Nu = 3, λ = 3, T-filter τ = 0.8; RLS λ_f = 0.995) starting from the
+/// H-TER I model, with the PI as its bumpless fallback — the host's `--controller gpc`. A model
+/// restored from flash replaces the starting model (`hter::persist`).
 #[cfg(feature = "adaptive")]
-pub fn controller() -> AnyController {
-    use hter::control::adaptive::{AdaptiveConfig, SelfTuning};
-    use hter::control::gpc::GpcConfig;
-    use hter::control::Law;
-    let cfg = AdaptiveConfig { fallback: PI, ..AdaptiveConfig::default_for(Law::Gpc(GpcConfig::DEFAULT)) };
+pub const ADAPTIVE: hter::control::adaptive::AdaptiveConfig = hter::control::adaptive::AdaptiveConfig {
+    fallback: PI,
+    ..hter::control::adaptive::AdaptiveConfig::default_for(hter::control::Law::Gpc(
+        hter::control::gpc::GpcConfig::DEFAULT,
+    ))
+};
+
+/// The controller: the self-tuner configured by `cfg` ([`ADAPTIVE`], or it restarted from the
+/// stored model).
+#[cfg(feature = "adaptive")]
+pub fn controller(cfg: hter::control::adaptive::AdaptiveConfig) -> AnyController {
     // Start from the PI's bias: the duty that holds the load near 4 °C (PiConfig::HTER1_DEFAULT).
-    AnyController::SelfTuning(SelfTuning::new(cfg, PI.bias))
+    AnyController::SelfTuning(hter::control::adaptive::SelfTuning::new(cfg, PI.bias))
 }
+
+/// Flash region of the persisted records, as offsets from the flash base 0x0800_0000 (what
+/// embassy's `Flash` takes): the last 4 pages of 2 KiB, `PERSIST` in `memory.x`.
+#[cfg(feature = "adaptive")]
+pub const PERSIST_RANGE: core::ops::Range<u32> = 0x000F_E000..0x0010_0000;
+
+/// Samples with a trusted, freshly updated estimate (mode `Adaptive`) between model saves:
+/// 4 h at Ts = 10 s. Wear: one model item takes 40 bytes of flash (24 of key and record, 16 of
+/// sequential-storage's header, padded to 8-byte words), so the 4 pages see one erase per ≈ 150
+/// saves (`tests/persist.rs`, `wear_per_save`); at 6 saves a day that is one erase per page in
+/// 25 days, and the L4's 10 000 cycles last ≈ 680 years. Power lost within 4 h of learning
+/// loses at most those 4 h.
+#[cfg(feature = "adaptive")]
+pub const MODEL_SAVE_SAMPLES: u32 = 4 * 3600 / (CARRIER.ts_s as u32);
 
 /// Identification excitation, as `hter sim --scenario prbs` plays it: a 7-bit PRBS (period 127
 /// bits), each bit held 12 samples = 120 s, so one period is 4.2 h; levels 0.45 ± 0.1 duty (the

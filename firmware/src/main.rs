@@ -6,8 +6,13 @@
 //! ```text
 //! sample ──(t, counts)──► control ──(duty, supply)──► actuate ──► SSR PWM, supply enable, LED
 //!   every Ts               Carrier::step                    │
-//!                           └──(telemetry record)──► telemetry ──► defmt over RTT
+//!                           ├──(telemetry record)──► telemetry ──► defmt over RTT
+//!                           └──(trusted model, every 4 h of trust)──► persist ──► flash
 //! ```
+//!
+//! With `adaptive`, `main` restores the self-tuner's model from flash before the loop starts
+//! (`hter::persist`; a missing, torn or implausible record means the built-in starting model,
+//! and the boot log says which) and the `persist` task saves it.
 //!
 //! The control math is the library's [`hter::step::Carrier`], the very object the host
 //! simulator and the tests drive: this crate only moves data between peripherals and it.
@@ -16,6 +21,8 @@
 
 mod board;
 mod config;
+#[cfg(feature = "adaptive")]
+mod persist;
 
 use defmt::{info, warn};
 use embassy_executor::Spawner;
@@ -24,7 +31,7 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant, Ticker};
-use hter::control::{Controller, ControllerStatus};
+use hter::control::{AnyController, Controller, ControllerStatus};
 use hter::event::Event;
 use hter::hal::{apply_duty, RtdSampler};
 use hter::step::{Carrier, Mode, StepInput};
@@ -73,10 +80,24 @@ async fn main(spawner: Spawner) {
         b.ssr.get_frequency().0,
         b.ssr.max_duty_cycle()
     );
+    #[cfg(feature = "adaptive")]
+    let controller = {
+        let mut store = persist::open(b.flash);
+        let cfg = match store.as_mut() {
+            Some(store) => persist::restore(store).await,
+            None => config::ADAPTIVE,
+        };
+        if let Some(store) = store {
+            spawner.spawn(persist::persist(store).unwrap());
+        }
+        config::controller(cfg)
+    };
+    #[cfg(not(feature = "adaptive"))]
+    let controller = config::controller();
     let mut wdg = IndependentWatchdog::new(b.iwdg, config::WATCHDOG_TIMEOUT_US);
     wdg.unleash();
     spawner.spawn(sample(b.rtd).unwrap());
-    spawner.spawn(control(wdg).unwrap());
+    spawner.spawn(control(wdg, controller).unwrap());
     spawner.spawn(actuate(b.ssr, b.supply_enable, b.led).unwrap());
     spawner.spawn(telemetry().unwrap());
 }
@@ -96,9 +117,11 @@ async fn sample(mut rtd: board::RtdAdc) {
 
 /// Runs the library's per-sample step on each conversion; feeds the watchdog after each one.
 #[embassy_executor::task]
-async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>) {
-    let mut carrier = Carrier::new(config::CARRIER, config::controller());
+async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>, controller: AnyController) {
+    let mut carrier = Carrier::new(config::CARRIER, controller);
     info!("controller: {}", carrier.controller().name());
+    #[cfg(feature = "adaptive")]
+    let mut trusted_samples = 0u32;
     loop {
         let s = SAMPLES.receive().await;
         let out = carrier.step(&StepInput { t_s: s.t_s, counts: s.counts, setpoint_c: config::SETPOINT_C });
@@ -122,6 +145,14 @@ async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripheral
         };
         if TELEMETRY.try_send(record).is_err() {
             warn!("telemetry queue full, dropped t={}", s.t_s);
+        }
+        #[cfg(feature = "adaptive")]
+        if out.status.is_some_and(|st| st.mode == hter::control::AdaptiveMode::Adaptive) {
+            trusted_samples += 1;
+            if trusted_samples >= config::MODEL_SAVE_SAMPLES {
+                trusted_samples = 0;
+                persist::request_save(carrier.controller());
+            }
         }
         wdg.pet();
     }
