@@ -74,11 +74,12 @@ pub fn controller(cfg: hter::control::adaptive::AdaptiveConfig) -> AnyController
 pub const PERSIST_RANGE: core::ops::Range<u32> = 0x000F_E000..0x0010_0000;
 
 /// Samples with a trusted, freshly updated estimate (mode `Adaptive`) between model saves:
-/// 4 h at Ts = 10 s. Wear: one model item takes 40 bytes of flash (24 of key and record, 16 of
-/// sequential-storage's header, padded to 8-byte words), so the 4 pages see one erase per ≈ 150
-/// saves (`tests/persist.rs`, `wear_per_save`); at 6 saves a day that is one erase per page in
-/// 25 days, and the L4's 10 000 cycles last ≈ 680 years. Power lost within 4 h of learning
-/// loses at most those 4 h.
+/// 4 h at Ts = 10 s. Wear: a model item takes ≈ 32 bytes of flash (1 key + 23 record bytes
+/// and sequential-storage's item header, in 8-byte words), so a 2 KiB page holds ≈ 62 and the
+/// 4 pages are erased in turn: each page once per ≈ 250 saves (`wear_per_save` in
+/// `tests/persist.rs` measures ≥ 60 saves per erase). At 6 saves a day a page is erased every
+/// ≈ 41 days, and the L4's 10 000 cycles (datasheet DS10198, "NEND") last ≈ 1 100 years.
+/// Power lost within 4 h of learning loses at most those 4 h.
 #[cfg(feature = "adaptive")]
 pub const MODEL_SAVE_SAMPLES: u32 = 4 * 3600 / (CARRIER.ts_s as u32);
 
