@@ -43,9 +43,20 @@ pub const WATCHDOG_TIMEOUT_US: u32 = 30_000_000;
 /// `PiConfig::HTER1_DEFAULT`), also the fallback of the self-tuning controller.
 const PI: PiConfig = PiConfig { ts_s: CARRIER.ts_s, ..PiConfig::HTER1_DEFAULT };
 
+/// What `main` hands the control task to build its controller from (inside the task, so the
+/// controller lives once in the task's state): the self-tuner's configuration, possibly
+/// restored from flash, with `adaptive`; nothing otherwise.
+#[cfg(feature = "adaptive")]
+pub type ControllerSeed = hter::control::adaptive::AdaptiveConfig;
+
+/// What `main` hands the control task to build its controller from: nothing without `adaptive`.
+#[cfg(not(feature = "adaptive"))]
+#[derive(Clone, Copy)]
+pub struct ControllerSeed;
+
 /// The controller: PI (Ziegler–Nichols, detuned; `PiConfig::HTER1_DEFAULT`).
 #[cfg(not(any(feature = "adaptive", feature = "identify")))]
-pub fn controller() -> AnyController {
+pub fn controller(_: ControllerSeed) -> AnyController {
     AnyController::Pi(Pi::new(PI))
 }
 
@@ -63,7 +74,7 @@ pub const ADAPTIVE: hter::control::adaptive::AdaptiveConfig = hter::control::ada
 /// The controller: the self-tuner configured by `cfg` ([`ADAPTIVE`], or it restarted from the
 /// stored model).
 #[cfg(feature = "adaptive")]
-pub fn controller(cfg: hter::control::adaptive::AdaptiveConfig) -> AnyController {
+pub fn controller(cfg: ControllerSeed) -> AnyController {
     // Start from the PI's bias: the duty that holds the load near 4 °C (PiConfig::HTER1_DEFAULT).
     AnyController::SelfTuning(hter::control::adaptive::SelfTuning::new(cfg, PI.bias))
 }
@@ -95,7 +106,7 @@ pub const PRBS: hter::ident::prbs::PrbsConfig =
 /// The controller: the identification PRBS. Should the configuration ever be refused, the PI
 /// runs instead and the boot log says so (the controller name is logged at start).
 #[cfg(feature = "identify")]
-pub fn controller() -> AnyController {
+pub fn controller(_: ControllerSeed) -> AnyController {
     match hter::control::excite::PrbsExcitation::new(PRBS) {
         Ok(p) => AnyController::Prbs(p),
         Err(e) => {

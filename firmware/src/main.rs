@@ -31,7 +31,7 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant, Ticker};
-use hter::control::{AnyController, Controller, ControllerStatus};
+use hter::control::{Controller, ControllerStatus};
 use hter::event::Event;
 use hter::hal::{apply_duty, RtdSampler};
 use hter::step::{Carrier, Mode, StepInput};
@@ -81,7 +81,7 @@ async fn main(spawner: Spawner) {
         b.ssr.max_duty_cycle()
     );
     #[cfg(feature = "adaptive")]
-    let controller = {
+    let seed = {
         let mut store = persist::open(b.flash);
         let cfg = match store.as_mut() {
             Some(store) => persist::restore(store).await,
@@ -90,14 +90,14 @@ async fn main(spawner: Spawner) {
         if let Some(store) = store {
             spawner.spawn(persist::persist(store).unwrap());
         }
-        config::controller(cfg)
+        cfg
     };
     #[cfg(not(feature = "adaptive"))]
-    let controller = config::controller();
+    let seed = config::ControllerSeed;
     let mut wdg = IndependentWatchdog::new(b.iwdg, config::WATCHDOG_TIMEOUT_US);
     wdg.unleash();
     spawner.spawn(sample(b.rtd).unwrap());
-    spawner.spawn(control(wdg, controller).unwrap());
+    spawner.spawn(control(wdg, seed).unwrap());
     spawner.spawn(actuate(b.ssr, b.supply_enable, b.led).unwrap());
     spawner.spawn(telemetry().unwrap());
 }
@@ -117,8 +117,11 @@ async fn sample(mut rtd: board::RtdAdc) {
 
 /// Runs the library's per-sample step on each conversion; feeds the watchdog after each one.
 #[embassy_executor::task]
-async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>, controller: AnyController) {
-    let mut carrier = Carrier::new(config::CARRIER, controller);
+async fn control(
+    mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
+    seed: config::ControllerSeed,
+) {
+    let mut carrier = Carrier::new(config::CARRIER, config::controller(seed));
     info!("controller: {}", carrier.controller().name());
     #[cfg(feature = "adaptive")]
     let mut trusted_samples = 0u32;
