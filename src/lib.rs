@@ -15,6 +15,8 @@
 //! - [`event`]: timestamped events the step reports (sensor faults, guard actions, mode changes).
 //! - [`hal`]: the small hardware seams the firmware and `hal-sim` implement.
 //! - [`step`]: the per-sample application step.
+//! - [`persist`]: versioned, CRC-checked records of what survives a power cycle (model, calibration,
+//!   history); with feature `persist-flash`, their storage in flash.
 #![cfg_attr(not(test), no_std)]
 #![warn(missing_docs)]
 // `!(x > 0.0)` is deliberate throughout: unlike `x <= 0.0` it is also true for NaN, which is
@@ -31,6 +33,7 @@ pub mod event;
 pub mod filter;
 pub mod hal;
 pub mod ident;
+pub mod persist;
 pub mod rtd;
 pub mod step;
 pub mod units;

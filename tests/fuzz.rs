@@ -46,7 +46,7 @@ fn counts(rng: &mut Rng, n: usize, out: &mut Vec<u32>) {
                     walk as u32
                 }
                 _ => {
-                    if r % 7 == 0 {
+                    if r.is_multiple_of(7) {
                         (r >> 16) as u32 % 70_000
                     } else {
                         plausible as u32 + (r % 30) as u32

@@ -36,6 +36,9 @@ pub struct Board {
     pub led: Output<'static>,
     /// Independent watchdog.
     pub iwdg: Peri<'static, IWDG>,
+    /// Flash controller (persisted records, `config::PERSIST_RANGE`).
+    #[cfg(feature = "adaptive")]
+    pub flash: Peri<'static, embassy_stm32::peripherals::FLASH>,
 }
 
 /// Clocks: HSI16 → PLL → 80 MHz system clock; the ADC runs from SYSCLK.
@@ -90,6 +93,8 @@ pub fn init() -> Board {
         supply_enable: Output::new(p.PB0, Level::Low, Speed::Low),
         led: Output::new(p.PA5, Level::Low, Speed::Low),
         iwdg: p.IWDG,
+        #[cfg(feature = "adaptive")]
+        flash: p.FLASH,
     }
 }
 

@@ -6,8 +6,13 @@
 //! ```text
 //! sample ──(t, counts)──► control ──(duty, supply)──► actuate ──► SSR PWM, supply enable, LED
 //!   every Ts               Carrier::step                    │
-//!                           └──(telemetry record)──► telemetry ──► defmt over RTT
+//!                           ├──(telemetry record)──► telemetry ──► defmt over RTT
+//!                           └──(trusted model, every 4 h of trust)──► persist ──► flash
 //! ```
+//!
+//! With `adaptive`, `main` restores the self-tuner's model from flash before the loop starts
+//! (`hter::persist`; a missing, torn or implausible record means the built-in starting model,
+//! and the boot log says which) and the `persist` task saves it.
 //!
 //! The control math is the library's [`hter::step::Carrier`], the very object the host
 //! simulator and the tests drive: this crate only moves data between peripherals and it.
@@ -16,6 +21,8 @@
 
 mod board;
 mod config;
+#[cfg(feature = "adaptive")]
+mod persist;
 
 use defmt::{info, warn};
 use embassy_executor::Spawner;
@@ -73,10 +80,24 @@ async fn main(spawner: Spawner) {
         b.ssr.get_frequency().0,
         b.ssr.max_duty_cycle()
     );
+    #[cfg(feature = "adaptive")]
+    let seed = {
+        let mut store = persist::open(b.flash);
+        let cfg = match store.as_mut() {
+            Some(store) => persist::restore(store).await,
+            None => config::ADAPTIVE,
+        };
+        if let Some(store) = store {
+            spawner.spawn(persist::persist(store).unwrap());
+        }
+        cfg
+    };
+    #[cfg(not(feature = "adaptive"))]
+    let seed = config::ControllerSeed;
     let mut wdg = IndependentWatchdog::new(b.iwdg, config::WATCHDOG_TIMEOUT_US);
     wdg.unleash();
     spawner.spawn(sample(b.rtd).unwrap());
-    spawner.spawn(control(wdg).unwrap());
+    spawner.spawn(control(wdg, seed).unwrap());
     spawner.spawn(actuate(b.ssr, b.supply_enable, b.led).unwrap());
     spawner.spawn(telemetry().unwrap());
 }
@@ -96,9 +117,14 @@ async fn sample(mut rtd: board::RtdAdc) {
 
 /// Runs the library's per-sample step on each conversion; feeds the watchdog after each one.
 #[embassy_executor::task]
-async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>) {
-    let mut carrier = Carrier::new(config::CARRIER, config::controller());
+async fn control(
+    mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
+    seed: config::ControllerSeed,
+) {
+    let mut carrier = Carrier::new(config::CARRIER, config::controller(seed));
     info!("controller: {}", carrier.controller().name());
+    #[cfg(feature = "adaptive")]
+    let mut trusted_samples = 0u32;
     loop {
         let s = SAMPLES.receive().await;
         let out = carrier.step(&StepInput { t_s: s.t_s, counts: s.counts, setpoint_c: config::SETPOINT_C });
@@ -122,6 +148,14 @@ async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripheral
         };
         if TELEMETRY.try_send(record).is_err() {
             warn!("telemetry queue full, dropped t={}", s.t_s);
+        }
+        #[cfg(feature = "adaptive")]
+        if out.status.is_some_and(|st| st.mode == hter::control::AdaptiveMode::Adaptive) {
+            trusted_samples += 1;
+            if trusted_samples >= config::MODEL_SAVE_SAMPLES {
+                trusted_samples = 0;
+                persist::request_save(carrier.controller());
+            }
         }
         wdg.pet();
     }

@@ -95,6 +95,13 @@ impl AdaptiveConfig {
         k: 6,
     };
 
+    /// This configuration restarted from a stored model (e.g. [`crate::persist::ModelRecord`]):
+    /// the model becomes the starting θ and, if [`plausible_model`], the first trusted model, and
+    /// the estimator takes its delay.
+    pub const fn restored_from(self, model: Model) -> Self {
+        AdaptiveConfig { initial: Some(model), k: model.k, ..self }
+    }
+
     /// Self-tuning `law` with the defaults: λ_f = 0.995 (memory ≈ 200 samples, half an hour),
     /// P(0) = I (a weak prior around the starting model), trace(P) ≤ 10, 30 samples (5 min) of
     /// warm-up, plausible static gains −300…−3 °C per unit duty (the model's −25 and the
@@ -139,7 +146,7 @@ impl SelfTuning {
             // A slow stable pole pair and a small cooling gain: a neutral start for RLS.
             None => SVector::<f32, 5>::from([-1.5, 0.5, -0.01, 0.0, 0.0]),
         };
-        let trusted = cfg.initial.filter(|m| plausible(&cfg, m));
+        let trusted = cfg.initial.filter(|m| plausible_model(&cfg, m));
         let mut fallback = Pi::new(PiConfig { bias: u0, ..cfg.fallback });
         fallback.track(&ControlInput { t_s: 0.0, y_c: 0.0, w_c: 0.0 }, u0);
         Self {
@@ -161,9 +168,7 @@ impl SelfTuning {
     /// The current estimate as a model.
     pub fn estimate(&self) -> Option<Model> {
         let th = *self.rls.theta();
-        let tau = self.cfg.t_filter;
-        let c: &[f32] = if matches!(self.cfg.law, Law::Gpc(_)) && tau > 0.0 && tau < 1.0 { &[-tau] } else { &[] };
-        Model::new(&[th[0], th[1]], &[th[2], th[3]], c, self.cfg.k).ok()
+        model_from_theta(&self.cfg, [th[0], th[1], th[2], th[3]])
     }
 
     /// θ = [a1 a2 b0 b1].
@@ -221,6 +226,15 @@ impl SelfTuning {
     }
 }
 
+/// The model the laws are designed on for θ = [a1 a2 b0 b1] under `cfg`: delay `cfg.k`, and
+/// GPC's T-filter C = 1 − τ q⁻¹ when the law is GPC (see [`AdaptiveConfig::t_filter`]). `None`
+/// when a coefficient is not finite or `cfg.k` is out of range.
+pub fn model_from_theta(cfg: &AdaptiveConfig, theta: [f32; 4]) -> Option<Model> {
+    let tau = cfg.t_filter;
+    let c: &[f32] = if matches!(cfg.law, Law::Gpc(_)) && tau > 0.0 && tau < 1.0 { &[-tau] } else { &[] };
+    Model::new(&theta[..2], &theta[2..], c, cfg.k).ok()
+}
+
 /// Parameter projection: is `m` a model the laws may be designed from?
 ///
 /// Besides a stable A and a cooling static gain, every B coefficient must cool (b_i ≤ 0): the
@@ -228,7 +242,7 @@ impl SelfTuning {
 /// artefact of poor excitation — and a positive b0 reverses the sign of the first-step gain g0
 /// that (I)GMVC divides by, so the law would heat when it should cool (seen on H-TER II, seed 2,
 /// before this check: the load drifted to 12 °C at a 4 °C setpoint).
-fn plausible(cfg: &AdaptiveConfig, m: &Model) -> bool {
+pub fn plausible_model(cfg: &AdaptiveConfig, m: &Model) -> bool {
     m.a_is_stable()
         && m.b[..m.nb].iter().all(|&b| b <= 0.0)
         && m.static_gain().is_some_and(|g| (cfg.gain_min_c_per_duty..=cfg.gain_max_c_per_duty).contains(&g))
@@ -238,7 +252,7 @@ impl Controller for SelfTuning {
     fn update(&mut self, input: &ControlInput) -> f32 {
         let healthy = self.estimate_step(input.y_c);
         if healthy && self.updates >= self.cfg.warmup_samples {
-            if let Some(m) = self.estimate().filter(|m| plausible(&self.cfg, m)) {
+            if let Some(m) = self.estimate().filter(|m| plausible_model(&self.cfg, m)) {
                 self.trusted = Some(m);
                 self.mode = AdaptiveMode::Adaptive;
             } else if self.trusted.is_some() {

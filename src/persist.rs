@@ -1,0 +1,674 @@
+//! What the carrier keeps across power cycles: the learned plant model, the two-point
+//! calibration and a cold-chain history summary, each as a small versioned record with a fixed
+//! little-endian byte layout and a CRC.
+//!
+//! Every record is framed the same way:
+//!
+//! ```text
+//! offset 0        1          2 … n−5    n−4 … n−1
+//!        kind tag version    payload    CRC-32 (IEEE 802.3, reflected, LE) of bytes 0 … n−5
+//! ```
+//!
+//! The flash layer below ([`flash`], feature `persist-flash`, over `sequential-storage`) has its
+//! own CRCs against torn writes; this CRC and the range checks on decode guard what that layer
+//! cannot know: a record written by another firmware version, a bit flip inside a stored value,
+//! or a model that was plausible under different limits. A record that fails any check is
+//! rejected with a [`DecodeError`] and the caller starts from defaults.
+//!
+//! Glossary: θ = [a1 a2 b0 b1] the self-tuner's ARX estimate (see [`crate::control::adaptive`];
+//! its offset d is not kept: it tracks the operating point, which has changed by the next boot,
+//! and the estimator starts it at 0 anyway); k the model delay in samples.
+
+use crate::calib::TwoPoint;
+use crate::coldchain::{AlarmKind, ColdChainMonitor, Excursion, Side};
+use crate::control::adaptive::{model_from_theta, plausible_model, AdaptiveConfig};
+use crate::control::model::{Model, MAX_K};
+
+#[cfg(feature = "persist-flash")]
+pub mod flash;
+
+/// Why stored bytes were not accepted as a record.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DecodeError {
+    /// The byte count is not the record's length.
+    Length,
+    /// The CRC does not match the bytes.
+    Crc,
+    /// The kind tag belongs to another record.
+    Kind,
+    /// A layout version this firmware does not read.
+    Version,
+    /// A value is NaN or infinite where a finite one is required.
+    NonFinite,
+    /// A value is outside the range the record allows.
+    OutOfRange,
+    /// The model decodes but the self-tuner would not trust it (unstable A, a heating b_i, or a
+    /// static gain outside the configured range).
+    Implausible,
+}
+
+/// CRC-32 (IEEE 802.3: polynomial 0x04C11DB7 reflected, init and final XOR 0xFFFF_FFFF), bit
+/// by bit: no 1 KiB table in flash for a few hundred bytes every few hours.
+pub fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = 0xFFFF_FFFFu32;
+    for &byte in bytes {
+        crc ^= u32::from(byte);
+        for _ in 0..8 {
+            let mask = (crc & 1).wrapping_neg();
+            crc = (crc >> 1) ^ (0xEDB8_8320 & mask);
+        }
+    }
+    !crc
+}
+
+/// Sequential little-endian writer into a record buffer sized by its `LEN`.
+struct Writer<'a> {
+    buf: &'a mut [u8],
+    at: usize,
+}
+
+impl<'a> Writer<'a> {
+    fn new(buf: &'a mut [u8], tag: u8, version: u8) -> Self {
+        let mut w = Writer { buf, at: 0 };
+        w.put(&[tag, version]);
+        w
+    }
+
+    fn put(&mut self, bytes: &[u8]) {
+        if let Some(dst) = self.buf.get_mut(self.at..self.at + bytes.len()) {
+            dst.copy_from_slice(bytes);
+        }
+        self.at += bytes.len();
+    }
+
+    fn f32(&mut self, x: f32) {
+        self.put(&x.to_le_bytes());
+    }
+
+    fn u16(&mut self, x: u16) {
+        self.put(&x.to_le_bytes());
+    }
+
+    fn u32(&mut self, x: u32) {
+        self.put(&x.to_le_bytes());
+    }
+
+    /// Appends the CRC of everything written so far.
+    fn finish(mut self) {
+        let crc = crc32(self.buf.get(..self.at).unwrap_or(&[]));
+        self.u32(crc);
+    }
+}
+
+/// Sequential little-endian reader over a frame already checked by [`open_frame`].
+struct Reader<'a> {
+    rest: &'a [u8],
+}
+
+impl Reader<'_> {
+    fn bytes<const N: usize>(&mut self) -> [u8; N] {
+        let mut out = [0u8; N];
+        if let Some((head, tail)) = self.rest.split_at_checked(N) {
+            out.copy_from_slice(head);
+            self.rest = tail;
+        }
+        out
+    }
+
+    fn u8(&mut self) -> u8 {
+        self.bytes::<1>()[0]
+    }
+
+    fn u16(&mut self) -> u16 {
+        u16::from_le_bytes(self.bytes())
+    }
+
+    fn u32(&mut self) -> u32 {
+        u32::from_le_bytes(self.bytes())
+    }
+
+    fn f32(&mut self) -> f32 {
+        f32::from_le_bytes(self.bytes())
+    }
+
+    /// A finite f32 within `range`.
+    fn f32_in(&mut self, range: core::ops::RangeInclusive<f32>) -> Result<f32, DecodeError> {
+        let x = self.f32();
+        if !x.is_finite() {
+            Err(DecodeError::NonFinite)
+        } else if !range.contains(&x) {
+            Err(DecodeError::OutOfRange)
+        } else {
+            Ok(x)
+        }
+    }
+}
+
+/// Checks length, CRC, tag and version; returns a reader over the payload.
+fn open_frame(bytes: &[u8], len: usize, tag: u8, version: u8) -> Result<Reader<'_>, DecodeError> {
+    if bytes.len() != len {
+        return Err(DecodeError::Length);
+    }
+    let (body, crc) = bytes.split_at_checked(len - 4).ok_or(DecodeError::Length)?;
+    let mut crc_reader = Reader { rest: crc };
+    if crc32(body) != crc_reader.u32() {
+        return Err(DecodeError::Crc);
+    }
+    let mut r = Reader { rest: body };
+    if r.u8() != tag {
+        return Err(DecodeError::Kind);
+    }
+    if r.u8() != version {
+        return Err(DecodeError::Version);
+    }
+    Ok(r)
+}
+
+/// The self-tuner's learned model: θ = [a1 a2 b0 b1] and the delay k.
+///
+/// Layout v1, 23 bytes: `'M'`, 1, a1 a2 b0 b1 (f32 LE), k (u8), CRC-32.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ModelRecord {
+    /// θ = [a1 a2 b0 b1].
+    pub theta: [f32; 4],
+    /// Delay, samples (1 … [`MAX_K`]).
+    pub k: u8,
+}
+
+impl ModelRecord {
+    /// Kind tag.
+    pub const TAG: u8 = b'M';
+    /// Layout version written by this firmware.
+    pub const VERSION: u8 = 1;
+    /// Encoded length, bytes.
+    pub const LEN: usize = 2 + 4 * 4 + 1 + 4;
+
+    /// The record of a second-order model (what [`crate::control::adaptive::SelfTuning`]
+    /// estimates); `None` for other orders or a delay that does not fit.
+    pub fn from_model(m: &Model) -> Option<Self> {
+        if m.na != 2 || m.nb != 2 || m.k == 0 || m.k > MAX_K {
+            return None;
+        }
+        Some(ModelRecord { theta: [m.a[0], m.a[1], m.b[0], m.b[1]], k: m.k as u8 })
+    }
+
+    /// The bytes to store.
+    pub fn encode(&self) -> [u8; Self::LEN] {
+        let mut buf = [0u8; Self::LEN];
+        let mut w = Writer::new(&mut buf, Self::TAG, Self::VERSION);
+        for x in self.theta {
+            w.f32(x);
+        }
+        w.put(&[self.k]);
+        w.finish();
+        buf
+    }
+
+    /// Parses stored bytes: frame, finite θ, 1 ≤ k ≤ [`MAX_K`]. Plausibility needs the
+    /// controller's limits: see [`ModelRecord::to_model`].
+    pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
+        let mut r = open_frame(bytes, Self::LEN, Self::TAG, Self::VERSION)?;
+        let mut theta = [0.0f32; 4];
+        for x in theta.iter_mut() {
+            *x = r.f32();
+            if !x.is_finite() {
+                return Err(DecodeError::NonFinite);
+            }
+        }
+        let k = r.u8();
+        if k == 0 || usize::from(k) > MAX_K {
+            return Err(DecodeError::OutOfRange);
+        }
+        Ok(ModelRecord { theta, k })
+    }
+
+    /// The model the self-tuner configured by `cfg` would design on, if it passes the same
+    /// plausibility test the self-tuner applies to its own estimates ([`plausible_model`]).
+    pub fn to_model(&self, cfg: &AdaptiveConfig) -> Result<Model, DecodeError> {
+        let cfg = AdaptiveConfig { k: usize::from(self.k), ..*cfg };
+        let m = model_from_theta(&cfg, self.theta).ok_or(DecodeError::OutOfRange)?;
+        if plausible_model(&cfg, &m) {
+            Ok(m)
+        } else {
+            Err(DecodeError::Implausible)
+        }
+    }
+
+    /// `cfg` restarted from this record ([`AdaptiveConfig::restored_from`]), or why not.
+    pub fn restore(&self, cfg: &AdaptiveConfig) -> Result<AdaptiveConfig, DecodeError> {
+        self.to_model(cfg).map(|m| cfg.restored_from(m))
+    }
+}
+
+/// Largest |offset| a stored calibration may have, °C: a Pt100 channel 10 °C off needs ≈ 3.9 Ω
+/// of error (0.385 Ω/°C), more than leads and reference tolerance give; it is broken.
+pub const CAL_OFFSET_MAX_C: f32 = 10.0;
+
+/// The two-point calibration ([`TwoPoint`]).
+///
+/// Layout v1, 14 bytes: `'C'`, 1, gain (f32 LE), offset_c (f32 LE), CRC-32. On decode the gain
+/// must be within 0.9 … 1.1 (as [`TwoPoint::from_points`] requires) and |offset| ≤
+/// [`CAL_OFFSET_MAX_C`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct CalibrationRecord {
+    /// The calibration.
+    pub cal: TwoPoint,
+}
+
+impl CalibrationRecord {
+    /// Kind tag.
+    pub const TAG: u8 = b'C';
+    /// Layout version written by this firmware.
+    pub const VERSION: u8 = 1;
+    /// Encoded length, bytes.
+    pub const LEN: usize = 2 + 4 + 4 + 4;
+
+    /// The bytes to store.
+    pub fn encode(&self) -> [u8; Self::LEN] {
+        let mut buf = [0u8; Self::LEN];
+        let mut w = Writer::new(&mut buf, Self::TAG, Self::VERSION);
+        w.f32(self.cal.gain);
+        w.f32(self.cal.offset_c);
+        w.finish();
+        buf
+    }
+
+    /// Parses and range-checks stored bytes.
+    pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
+        let mut r = open_frame(bytes, Self::LEN, Self::TAG, Self::VERSION)?;
+        let gain = r.f32_in(0.9..=1.1)?;
+        let offset_c = r.f32_in(-CAL_OFFSET_MAX_C..=CAL_OFFSET_MAX_C)?;
+        Ok(CalibrationRecord { cal: TwoPoint { gain, offset_c } })
+    }
+}
+
+/// Why the MCU last reset (from the RCC reset flags on the STM32L4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ResetCause {
+    /// Independent or window watchdog.
+    Watchdog,
+    /// Brown-out (supply dipped below the BOR threshold).
+    BrownOut,
+    /// Power-on, pin, software or anything else.
+    Other,
+}
+
+/// Excursions kept in a [`HistoryRecord`] (the newest).
+pub const HISTORY_EXCURSIONS: usize = 4;
+
+/// Temperatures a stored extreme may have, °C: the RTD chain's measurable span with margin.
+const TEMP_RANGE_C: core::ops::RangeInclusive<f32> = -60.0..=100.0;
+
+/// Cold-chain history summary and reset counts, accumulated over power cycles.
+///
+/// Layout v1, 92 bytes: `'H'`, 1; alarm counts (4 × u16, in [`AlarmKind`] order heat_10h,
+/// freeze_60min, ship_45c_1h, ship_30c_10h); reset counts (3 × u16: watchdog, brown-out, other);
+/// min_c, max_c (f32, NaN = no sample yet); time below 2 °C, time above 8 °C, excursion count
+/// (3 × u32, seconds and count); [`HISTORY_EXCURSIONS`] × (side u8: 0 none, 1 cold, 2 warm;
+/// start_s, end_s, extreme_c f32); CRC-32. Excursion times are seconds since the boot that saw
+/// them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct HistoryRecord {
+    /// Alarms raised, per kind, in [`AlarmKind`] declaration order.
+    pub alarms: [u16; 4],
+    /// Resets seen: watchdog, brown-out, other.
+    pub resets: [u16; 3],
+    /// Coldest sample, °C.
+    pub min_c: Option<f32>,
+    /// Warmest sample, °C.
+    pub max_c: Option<f32>,
+    /// Time below +2 °C, s.
+    pub below_2_s: u32,
+    /// Time above +8 °C, s.
+    pub above_8_s: u32,
+    /// Excursions outside 2 … 8 °C.
+    pub excursions: u32,
+    /// The newest excursions, oldest first (`None` entries first while fewer were seen).
+    pub last: [Option<Excursion>; HISTORY_EXCURSIONS],
+}
+
+impl Default for HistoryRecord {
+    fn default() -> Self {
+        Self::EMPTY
+    }
+}
+
+fn alarm_index(kind: AlarmKind) -> usize {
+    match kind {
+        AlarmKind::Heat10h => 0,
+        AlarmKind::Freeze60min => 1,
+        AlarmKind::Ship45c1h => 2,
+        AlarmKind::Ship30c10h => 3,
+    }
+}
+
+fn reset_index(cause: ResetCause) -> usize {
+    match cause {
+        ResetCause::Watchdog => 0,
+        ResetCause::BrownOut => 1,
+        ResetCause::Other => 2,
+    }
+}
+
+/// Seconds as a saturating u32 (NaN and negatives give 0).
+fn secs(x_s: f32) -> u32 {
+    x_s as u32
+}
+
+impl HistoryRecord {
+    /// Kind tag.
+    pub const TAG: u8 = b'H';
+    /// Layout version written by this firmware.
+    pub const VERSION: u8 = 1;
+    /// Encoded length, bytes.
+    pub const LEN: usize = 2 + 4 * 2 + 3 * 2 + 2 * 4 + 3 * 4 + HISTORY_EXCURSIONS * 13 + 4;
+    /// Nothing seen yet.
+    pub const EMPTY: HistoryRecord = HistoryRecord {
+        alarms: [0; 4],
+        resets: [0; 3],
+        min_c: None,
+        max_c: None,
+        below_2_s: 0,
+        above_8_s: 0,
+        excursions: 0,
+        last: [None; HISTORY_EXCURSIONS],
+    };
+
+    /// Counts an alarm.
+    pub fn note_alarm(&mut self, kind: AlarmKind) {
+        if let Some(n) = self.alarms.get_mut(alarm_index(kind)) {
+            *n = n.saturating_add(1);
+        }
+    }
+
+    /// Counts a reset.
+    pub fn note_reset(&mut self, cause: ResetCause) {
+        if let Some(n) = self.resets.get_mut(reset_index(cause)) {
+            *n = n.saturating_add(1);
+        }
+    }
+
+    /// Resets seen with `cause`.
+    pub fn resets_by(&self, cause: ResetCause) -> u16 {
+        self.resets.get(reset_index(cause)).copied().unwrap_or(0)
+    }
+
+    /// Alarms of `kind` raised.
+    pub fn alarms_of(&self, kind: AlarmKind) -> u16 {
+        self.alarms.get(alarm_index(kind)).copied().unwrap_or(0)
+    }
+
+    /// This record (what was carried in at boot) plus what `monitor` saw since boot. Always
+    /// merge into the boot-time record, not into a previous merge, or this session counts twice.
+    pub fn merged(&self, monitor: &ColdChainMonitor) -> HistoryRecord {
+        let pick = |a: Option<f32>, b: Option<f32>, f: fn(f32, f32) -> f32| match (a, b) {
+            (Some(a), Some(b)) => Some(f(a, b)),
+            (a, b) => a.or(b),
+        };
+        let mut last = self.last;
+        for e in monitor.excursions() {
+            last.rotate_left(1);
+            if let Some(slot) = last.last_mut() {
+                *slot = Some(*e);
+            }
+        }
+        HistoryRecord {
+            min_c: pick(self.min_c, monitor.min_c(), f32::min),
+            max_c: pick(self.max_c, monitor.max_c(), f32::max),
+            below_2_s: self.below_2_s.saturating_add(secs(monitor.time_below_2_s())),
+            above_8_s: self.above_8_s.saturating_add(secs(monitor.time_above_8_s())),
+            excursions: self.excursions.saturating_add(monitor.excursion_count()),
+            last,
+            ..*self
+        }
+    }
+
+    /// The bytes to store.
+    pub fn encode(&self) -> [u8; Self::LEN] {
+        let mut buf = [0u8; Self::LEN];
+        let mut w = Writer::new(&mut buf, Self::TAG, Self::VERSION);
+        for n in self.alarms.iter().chain(self.resets.iter()) {
+            w.u16(*n);
+        }
+        w.f32(self.min_c.unwrap_or(f32::NAN));
+        w.f32(self.max_c.unwrap_or(f32::NAN));
+        w.u32(self.below_2_s);
+        w.u32(self.above_8_s);
+        w.u32(self.excursions);
+        for e in &self.last {
+            match e {
+                Some(e) => {
+                    w.put(&[match e.side {
+                        Side::Cold => 1,
+                        Side::Warm => 2,
+                    }]);
+                    w.f32(e.start_s);
+                    w.f32(e.end_s);
+                    w.f32(e.extreme_c);
+                }
+                None => w.put(&[0; 13]),
+            }
+        }
+        w.finish();
+        buf
+    }
+
+    /// Parses and range-checks stored bytes: extremes within −60 … 100 °C (or absent) and
+    /// min ≤ max; excursions with a known side, 0 ≤ start ≤ end and a finite extreme in range.
+    pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
+        let mut r = open_frame(bytes, Self::LEN, Self::TAG, Self::VERSION)?;
+        let mut rec = HistoryRecord::EMPTY;
+        for n in rec.alarms.iter_mut().chain(rec.resets.iter_mut()) {
+            *n = r.u16();
+        }
+        let mut extreme = || {
+            let x = r.f32();
+            if x.is_nan() {
+                Ok(None)
+            } else if !x.is_finite() {
+                Err(DecodeError::NonFinite)
+            } else if TEMP_RANGE_C.contains(&x) {
+                Ok(Some(x))
+            } else {
+                Err(DecodeError::OutOfRange)
+            }
+        };
+        rec.min_c = extreme()?;
+        rec.max_c = extreme()?;
+        if let (Some(lo), Some(hi)) = (rec.min_c, rec.max_c) {
+            if lo > hi {
+                return Err(DecodeError::OutOfRange);
+            }
+        }
+        rec.below_2_s = r.u32();
+        rec.above_8_s = r.u32();
+        rec.excursions = r.u32();
+        for slot in rec.last.iter_mut() {
+            let side = match r.u8() {
+                0 => {
+                    let _ = r.bytes::<12>();
+                    continue;
+                }
+                1 => Side::Cold,
+                2 => Side::Warm,
+                _ => return Err(DecodeError::OutOfRange),
+            };
+            let start_s = r.f32_in(0.0..=f32::MAX)?;
+            let end_s = r.f32_in(start_s..=f32::MAX)?;
+            let extreme_c = r.f32_in(TEMP_RANGE_C)?;
+            *slot = Some(Excursion { side, start_s, end_s, extreme_c });
+        }
+        Ok(rec)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::fixed::Law;
+    use crate::control::gpc::GpcConfig;
+
+    fn cfg() -> AdaptiveConfig {
+        AdaptiveConfig::default_for(Law::Gpc(GpcConfig::DEFAULT))
+    }
+
+    #[test]
+    fn crc32_check_value() {
+        // The catalogue check value of CRC-32/ISO-HDLC.
+        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+        assert_eq!(crc32(b""), 0);
+    }
+
+    #[test]
+    fn model_round_trip_and_restore() {
+        let rec = ModelRecord::from_model(&AdaptiveConfig::HTER2_MODEL).unwrap();
+        assert_eq!(rec.k, 6);
+        let bytes = rec.encode();
+        assert_eq!(bytes.len(), ModelRecord::LEN);
+        assert_eq!(&bytes[..2], &[b'M', 1]);
+        assert_eq!(ModelRecord::decode(&bytes), Ok(rec));
+        let restored = rec.restore(&cfg()).unwrap();
+        assert_eq!(restored.k, 6);
+        let m = restored.initial.unwrap();
+        assert_eq!(m.a[..2], AdaptiveConfig::HTER2_MODEL.a[..2]);
+        assert_eq!(m.b[..2], AdaptiveConfig::HTER2_MODEL.b[..2]);
+        // GPC's T-filter is rebuilt from the configuration, as for a live estimate.
+        assert_eq!(m.nc, 1);
+    }
+
+    #[test]
+    fn every_single_bit_flip_is_caught() {
+        let bytes = ModelRecord::from_model(&AdaptiveConfig::HTER1_MODEL).unwrap().encode();
+        for i in 0..bytes.len() * 8 {
+            let mut b = bytes;
+            b[i / 8] ^= 1 << (i % 8);
+            assert!(ModelRecord::decode(&b).is_err(), "flip of bit {i} accepted");
+        }
+    }
+
+    #[test]
+    fn frame_errors() {
+        let bytes = ModelRecord { theta: [-1.7, 0.75, -0.03, -0.03], k: 5 }.encode();
+        assert_eq!(ModelRecord::decode(&bytes[..22]), Err(DecodeError::Length));
+        assert_eq!(ModelRecord::decode(&[0xFF; ModelRecord::LEN]), Err(DecodeError::Crc));
+        assert_eq!(CalibrationRecord::decode(&bytes[..14]), Err(DecodeError::Crc));
+        // Re-frame with a good CRC: wrong version, then wrong kind.
+        let reframe = |tag: u8, ver: u8| {
+            let mut b = bytes;
+            b[0] = tag;
+            b[1] = ver;
+            let crc = crc32(&b[..19]);
+            b[19..].copy_from_slice(&crc.to_le_bytes());
+            b
+        };
+        assert_eq!(ModelRecord::decode(&reframe(b'M', 2)), Err(DecodeError::Version));
+        assert_eq!(ModelRecord::decode(&reframe(b'C', 1)), Err(DecodeError::Kind));
+    }
+
+    #[test]
+    fn model_checks() {
+        let bad_k = ModelRecord { theta: [-1.7, 0.75, -0.03, -0.03], k: 0 }.encode();
+        assert_eq!(ModelRecord::decode(&bad_k), Err(DecodeError::OutOfRange));
+        let nan = ModelRecord { theta: [f32::NAN, 0.75, -0.03, -0.03], k: 5 }.encode();
+        assert_eq!(ModelRecord::decode(&nan), Err(DecodeError::NonFinite));
+        // Decodes, but: unstable A (pole at 1.2), a heating b0, a gain of −1 °C per duty.
+        for theta in [[-2.2, 1.2, -0.03, -0.03], [-1.7, 0.75, 0.03, -0.03], [-1.7, 0.75, -0.0005, -0.0005]] {
+            let rec = ModelRecord::decode(&ModelRecord { theta, k: 5 }.encode()).unwrap();
+            assert_eq!(rec.to_model(&cfg()), Err(DecodeError::Implausible), "{theta:?}");
+        }
+    }
+
+    #[test]
+    fn calibration_round_trip_and_ranges() {
+        let rec = CalibrationRecord { cal: TwoPoint { gain: 1.02, offset_c: -0.35 } };
+        assert_eq!(CalibrationRecord::decode(&rec.encode()), Ok(rec));
+        let gain = CalibrationRecord { cal: TwoPoint { gain: 1.2, offset_c: 0.0 } };
+        assert_eq!(CalibrationRecord::decode(&gain.encode()), Err(DecodeError::OutOfRange));
+        let offset = CalibrationRecord { cal: TwoPoint { gain: 1.0, offset_c: 12.0 } };
+        assert_eq!(CalibrationRecord::decode(&offset.encode()), Err(DecodeError::OutOfRange));
+        let inf = CalibrationRecord { cal: TwoPoint { gain: 1.0, offset_c: f32::INFINITY } };
+        assert_eq!(CalibrationRecord::decode(&inf.encode()), Err(DecodeError::NonFinite));
+    }
+
+    fn monitor(samples: &[(f32, f32)]) -> ColdChainMonitor {
+        let mut m = ColdChainMonitor::new();
+        for &(t, c) in samples {
+            m.push(t, c);
+        }
+        m
+    }
+
+    #[test]
+    fn history_merge_and_round_trip() {
+        let mut base = HistoryRecord::EMPTY;
+        base.note_reset(ResetCause::BrownOut);
+        base.note_reset(ResetCause::BrownOut);
+        base.note_reset(ResetCause::Watchdog);
+        base.note_alarm(AlarmKind::Freeze60min);
+        assert_eq!(HistoryRecord::decode(&base.encode()), Ok(base));
+
+        // Warm excursion 600 … 1200 s, cold one 1800 … 2400 s.
+        let samples: std::vec::Vec<(f32, f32)> = (0..40)
+            .map(|i| {
+                let t = 60.0 * i as f32;
+                (
+                    t,
+                    if (10..=20).contains(&i) {
+                        9.5
+                    } else if (30..=35).contains(&i) {
+                        1.0
+                    } else {
+                        5.0
+                    },
+                )
+            })
+            .collect();
+        let mon = monitor(&samples);
+        let first = base.merged(&mon);
+        assert_eq!(first.resets_by(ResetCause::BrownOut), 2);
+        assert_eq!(first.alarms_of(AlarmKind::Freeze60min), 1);
+        assert_eq!(first.min_c, Some(1.0));
+        assert_eq!(first.max_c, Some(9.5));
+        assert_eq!(first.excursions, 2);
+        assert_eq!(first.above_8_s, mon.time_above_8_s() as u32);
+        assert!(first.above_8_s >= 600);
+        assert_eq!(first.last[..2], [None, None]);
+        assert_eq!(first.last[2].unwrap().side, Side::Warm);
+        assert_eq!(first.last[3].unwrap().side, Side::Cold);
+        assert_eq!(HistoryRecord::decode(&first.encode()), Ok(first));
+
+        // Next boot: carried totals plus a session with a colder minimum; the ring keeps the newest.
+        let second = first.merged(&monitor(&[(0.0, 0.5), (60.0, 5.0), (120.0, 9.0), (180.0, 5.0)]));
+        assert_eq!(second.min_c, Some(0.5));
+        assert_eq!(second.max_c, Some(9.5));
+        assert_eq!(second.excursions, 4);
+        let sides: std::vec::Vec<Side> = second.last.iter().flatten().map(|e| e.side).collect();
+        assert_eq!(sides, [Side::Warm, Side::Cold, Side::Cold, Side::Warm]);
+        assert_eq!(HistoryRecord::decode(&second.encode()), Ok(second));
+    }
+
+    #[test]
+    fn history_checks() {
+        let mut rec = HistoryRecord { min_c: Some(9.0), max_c: Some(3.0), ..HistoryRecord::EMPTY };
+        assert_eq!(HistoryRecord::decode(&rec.encode()), Err(DecodeError::OutOfRange));
+        rec = HistoryRecord { min_c: Some(-80.0), ..HistoryRecord::EMPTY };
+        assert_eq!(HistoryRecord::decode(&rec.encode()), Err(DecodeError::OutOfRange));
+        rec = HistoryRecord::EMPTY;
+        rec.last[0] = Some(Excursion { side: Side::Warm, start_s: 10.0, end_s: 5.0, extreme_c: 9.0 });
+        assert_eq!(HistoryRecord::decode(&rec.encode()), Err(DecodeError::OutOfRange));
+        rec.last[0] = Some(Excursion { side: Side::Warm, start_s: 10.0, end_s: 50.0, extreme_c: f32::NAN });
+        assert_eq!(HistoryRecord::decode(&rec.encode()), Err(DecodeError::NonFinite));
+        // An unknown side byte, re-framed with a valid CRC.
+        let mut b = HistoryRecord::EMPTY.encode();
+        b[2 + 14 + 8 + 12] = 3;
+        let n = HistoryRecord::LEN - 4;
+        let crc = crc32(&b[..n]);
+        b[n..].copy_from_slice(&crc.to_le_bytes());
+        assert_eq!(HistoryRecord::decode(&b), Err(DecodeError::OutOfRange));
+    }
+}
