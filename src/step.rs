@@ -229,6 +229,10 @@ pub struct Carrier<C: Controller> {
     /// Fast and slow averages of the applied duty (lid-open check).
     duty_fast: Option<f32>,
     duty_slow: f32,
+    /// Samples the duty averages have run (they mean nothing before one slow time constant).
+    duty_n: u32,
+    /// Samples since the applied duty was last strictly between 0 and 1.
+    since_modulated: u32,
     lid_reported: bool,
     /// The setpoint of the last sample and when the load first came within 0.3 °C of it.
     last_w: f32,
@@ -272,6 +276,8 @@ impl<C: Controller> Carrier<C> {
             supply_sag_reported: false,
             duty_fast: None,
             duty_slow: 0.0,
+            duty_n: 0,
+            since_modulated: u32::MAX,
             lid_reported: false,
             last_w: f32::NAN,
             reached_s: None,
@@ -572,7 +578,16 @@ impl<C: Controller> Carrier<C> {
         if self.reached_s.is_none() && (temp_c - w).abs() < 0.3 {
             self.reached_s = Some(t_s);
         }
-        let settled = mode == Mode::Normal && self.reached_s.is_some_and(|r| t_s - r >= self.cfg.lid_fast_s);
+        self.duty_n = self.duty_n.saturating_add(1);
+        self.since_modulated = if d > 0.0 && d < 1.0 { 0 } else { self.since_modulated.saturating_add(1) };
+        let averaged = self.duty_n as f32 * ts >= self.cfg.lid_slow_s;
+        // A relay controller (On-Off: only 0 and 1 for the last hour) has a limit cycle whose
+        // averages swing as much as a lid opening moves them: no lid check for it (a known gap).
+        let modulated = (self.since_modulated as f32) * ts < 3600.0;
+        let settled = averaged
+            && modulated
+            && mode == Mode::Normal
+            && self.reached_s.is_some_and(|r| t_s - r >= self.cfg.lid_fast_s);
         // Either the holding duty jumped (a controller that keeps the load on target), or full
         // cooling for 10 min no longer holds the load within 1 °C (one that cannot, On-Off).
         let duty_jump = (temp_c - w).abs() < 1.0 && fast - self.duty_slow > self.cfg.lid_duty_rise;

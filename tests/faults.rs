@@ -149,3 +149,42 @@ fn fault_strings_are_checked() {
     assert!(Fault::parse("sensor-open@-1").is_err());
     assert!(Fault::parse("sensor-open@nan").is_err());
 }
+
+/// A brownout restarts the step from scratch: nothing freezes, nothing is falsely reported, and
+/// control resumes on the setpoint (with nothing persisted yet: the restart is 1 h in).
+#[test]
+fn a_brownout_restart_is_safe_and_control_resumes() {
+    for c in [ControllerChoice::Pi, ControllerChoice::Gpc, ControllerChoice::Onoff] {
+        let out = with_fault("brownout", c);
+        let m = &out.metrics;
+        assert!(m.faults_detected.is_empty(), "{c:?}: {:?}", m.faults_detected);
+        assert!(m.min_temp_c > 2.0 && m.max_temp_c < 8.0, "{c:?}: {m:?}");
+        let after: Vec<_> = out.rows.iter().filter(|r| r.t_s > AT_S + 1800.0).collect();
+        assert!(after.iter().any(|r| r.duty > 0.0), "{c:?}: no cooling after the restart");
+        assert!(after.iter().all(|r| (r.true_temp_c - 4.0).abs() < 1.5), "{c:?}: not back on the setpoint");
+    }
+}
+
+/// After a brownout the self-tuner restarts from the model it had persisted (every 4 h of
+/// trusted learning, as the firmware saves it), not from its built-in start model. Started here
+/// from the H-TER II model on an H-TER I carrier, it has learnt a different B by the time the
+/// power dips at 5 h; the restart picks that up.
+#[test]
+fn a_brownout_restarts_from_the_persisted_model() {
+    use hter::control::adaptive::AdaptiveConfig;
+    let scenario = Scenario::resolve("step").unwrap();
+    let mut spec = ControllerSpec::new(ControllerChoice::Gpc);
+    spec.initial = Some(AdaptiveConfig::HTER2_MODEL);
+    let mut opts = SimOptions::new(scenario, spec);
+    opts.duration_s = 6.0 * 3600.0;
+    opts.faults = vec![Fault::parse("brownout@18000").unwrap()];
+    let out = run(&opts).unwrap();
+    let b0 = |t: f64| out.rows.iter().find(|r| r.t_s >= t).and_then(|r| r.b0).unwrap();
+    let (before, after, start) = (b0(17990.0), b0(18000.0), AdaptiveConfig::HTER2_MODEL.b[0]);
+    assert!((before - start).abs() > 0.002, "the estimate should have moved: {start} → {before}");
+    assert!(
+        (after - before).abs() < 0.25 * (before - start).abs(),
+        "restart b0 {after}, persisted ≈ {before}, start {start}"
+    );
+    assert!(out.metrics.min_temp_c > 2.0, "{:?}", out.metrics);
+}

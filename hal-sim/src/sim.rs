@@ -20,6 +20,7 @@ use hter::control::{AnyController, FixedModel, Law, OnOff, OnOffConfig, Pi, PiCo
 use hter::event::EventKind;
 use hter::hal::{apply_duty, RtdSampler};
 use hter::ident::prbs::PrbsConfig;
+use hter::persist::ModelRecord;
 use hter::step::{Carrier, CarrierConfig, Mode, StepInput, StepOutput};
 use hter::units::Celsius;
 
@@ -524,7 +525,12 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
             rig.advance(u0, ts, &mut last_on, false);
         }
     }
-    let make_controller = || -> Result<AnyController> {
+    // What the board keeps in flash: the trusted model, saved every 4 h of learning as the
+    // firmware does (`firmware/src/persist.rs`), as the same record bytes.
+    const SAVE_EVERY: u32 = 1440;
+    let mut persisted: Option<[u8; ModelRecord::LEN]> = None;
+    let mut since_save = 0u32;
+    let make_controller = |persisted: Option<&[u8; ModelRecord::LEN]>| -> Result<AnyController> {
         Ok(if sc.excitation {
             let prbs =
                 PrbsConfig { bits: 7, hold: 12, low: (u0 - 0.1).max(0.0) as f32, high: (u0 + 0.1).min(1.0) as f32 };
@@ -534,10 +540,18 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
             if spec.initial.is_none() && opts.plant == PlantChoice::Hter2 {
                 spec.initial = Some(AdaptiveConfig::HTER2_MODEL);
             }
+            // After a reset: the stored model, if it decodes and is still plausible for this law
+            // (else the built-in start model, as on the board).
+            if let (Some(bytes), Some(law)) = (persisted, spec.law()) {
+                let check = AdaptiveConfig::default_for(law);
+                if let Ok(m) = ModelRecord::decode(bytes).and_then(|r| r.to_model(&check)) {
+                    spec.initial = Some(m);
+                }
+            }
             spec.build(cfg.ts_s, u0 as f32)?
         })
     };
-    let mut carrier = Carrier::new(cfg, make_controller()?);
+    let mut carrier = Carrier::new(cfg, make_controller(None)?);
     let faults_pending = &opts.faults;
     let name = carrier.controller().name().to_string();
 
@@ -563,8 +577,9 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
         if k >= 0 {
             for &(_, f) in faults_pending.iter().filter(|(ft, _)| *ft <= t_s && *ft > t_s - ts) {
                 if f == Fault::Brownout {
-                    // State lost: a fresh step, as after a reset (no persistence yet).
-                    carrier = Carrier::new(cfg, make_controller()?);
+                    // RAM lost: a fresh step, restarted from what flash holds.
+                    carrier = Carrier::new(cfg, make_controller(persisted.as_ref())?);
+                    since_save = 0;
                 } else {
                     rig.inject(f);
                 }
@@ -572,6 +587,17 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
         }
         let w = if k >= 0 { sc.setpoint_at(t_s) } else { sc.setpoint_at(0.0) };
         let (out, counts) = rig.step(&mut carrier, t_s, w);
+        if let AnyController::SelfTuning(st) = carrier.controller() {
+            if st.mode() == AdaptiveMode::Adaptive {
+                since_save += 1;
+                if since_save >= SAVE_EVERY {
+                    since_save = 0;
+                    if let Some(rec) = st.trusted_model().as_ref().and_then(ModelRecord::from_model) {
+                        persisted = Some(rec.encode());
+                    }
+                }
+            }
+        }
         let d = rig.actuate(&out);
         if k >= 0 {
             for e in out.events.iter().filter(|e| is_fault(e.kind)) {
