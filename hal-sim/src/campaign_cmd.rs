@@ -91,6 +91,10 @@ pub struct CampaignSummary {
     pub faults_missed_with_detector: u64,
     /// Per kind.
     pub faults_by_kind: BTreeMap<String, KindFigures>,
+    /// Missions in which the step reported a hardware fault that was not injected.
+    pub spurious_missions: u64,
+    /// Spurious reports per kind (missions).
+    pub spurious_by_kind: BTreeMap<String, u64>,
     /// Missions with sensor spikes (not a hardware fault).
     pub spikes_injected: u64,
     /// Of which the step reported spikes.
@@ -175,6 +179,11 @@ pub fn summarize(reports: &[MissionReport], controller: ControllerChoice, seed: 
         faults_detected,
         faults_missed_with_detector,
         faults_by_kind: by_kind,
+        spurious_missions: reports.iter().filter(|r| !r.spurious.is_empty()).count() as u64,
+        spurious_by_kind: reports.iter().flat_map(|r| r.spurious.iter()).fold(BTreeMap::new(), |mut m, (k, _)| {
+            *m.entry(k.clone()).or_insert(0) += 1;
+            m
+        }),
         spikes_injected: reports.iter().filter(|r| r.spikes.is_some()).count() as u64,
         spikes_reported: reports.iter().filter(|r| matches!(r.spikes, Some((_, Some(_))))).count() as u64,
         worst_min_c: reports.iter().map(|r| r.min_c).fold(f64::INFINITY, f64::min),
@@ -258,6 +267,7 @@ fn print_table(s: &CampaignSummary) {
         s.cold_ambient_outside_minutes
     );
     println!("| hardware faults detected | {} of {} |", s.faults_detected, s.faults_injected);
+    println!("| hardware faults reported without a fault | {} missions {:?} |", s.spurious_missions, s.spurious_by_kind);
     println!("| sensor spikes reported | {} of {} missions |", s.spikes_reported, s.spikes_injected);
     println!("| failing missions | {} |", s.failures.len());
     println!();

@@ -235,6 +235,10 @@ pub fn detection(f: Fault) -> (fn(&str) -> bool, bool) {
 ///   cold-ambient samples (ambient below [`COLD_AMBIENT_C`] now or within [`COLD_LAG_S`]).
 /// - **Fails** when the load is ever below 0 °C (anywhere, faults and cold ambient included),
 ///   or an injected fault whose kind has a detector is not detected by the end of the run,
+///   or the step reports a hardware fault that was not injected, other than `ssr_stuck_off`
+///   (a false `ssr_stuck_on` latches the modules' supply off for the rest of the mission;
+///   `ssr_stuck_off` without a fault is the step warning that the load warms at full duty,
+///   e.g. during a lid opening, and changes nothing in the control: reported, not a failure),
 ///   or the judged window has more than [`OUTSIDE_TOLERANCE_S`] outside 2–8 °C, or the
 ///   pull-down never reaches 2–8 °C (outside cold ambient).
 #[derive(Clone, Debug, Serialize)]
@@ -263,6 +267,9 @@ pub struct MissionReport {
     pub fault_detectable: bool,
     /// Sensor spikes: (injected at s, first report at s).
     pub spikes: Option<(f64, Option<f64>)>,
+    /// Hardware-fault reports without a fault behind them (before the injected fault, or in a
+    /// mission without one): (kind, first report at s), one per kind.
+    pub spurious: Vec<(String, f64)>,
     /// Why the mission failed (empty: passed).
     pub reasons: Vec<String>,
 }
@@ -319,7 +326,20 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
     let spikes =
         m.spikes_s.map(|ts0| (ts0, detected.iter().find(|d| d.t_s >= ts0 && d.kind == "sensor_spikes").map(|d| d.t_s)));
 
+    let mut spurious: Vec<(String, f64)> = Vec::new();
+    for d in detected.iter().filter(|d| d.kind != "sensor_spikes" && d.t_s < t_fault) {
+        if !spurious.iter().any(|(k, _)| *k == d.kind) {
+            spurious.push((d.kind.clone(), d.t_s));
+        }
+    }
+
     let mut reasons = Vec::new();
+    // `ssr_stuck_off` without a fault is the step's own warning that the load warms at full
+    // duty (a lid opening or a sag in the heat): it changes nothing in the control, so it is
+    // reported, not a failure. Any other spurious report puts the step in a safe state.
+    for (k, t) in spurious.iter().filter(|(k, _)| k != "ssr_stuck_off") {
+        reasons.push(format!("{k} reported at {t:.0} s without a fault"));
+    }
     if freeze_s > 0.0 || min_c < 0.0 {
         reasons.push(format!("load below 0 °C for {:.0} min (min {min_c:.2} °C)", freeze_s / 60.0));
     }
@@ -348,6 +368,7 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
         fault,
         fault_detectable,
         spikes,
+        spurious,
         reasons,
     }
 }
