@@ -267,7 +267,10 @@ fn print_table(s: &CampaignSummary) {
         s.cold_ambient_outside_minutes
     );
     println!("| hardware faults detected | {} of {} |", s.faults_detected, s.faults_injected);
-    println!("| hardware faults reported without a fault | {} missions {:?} |", s.spurious_missions, s.spurious_by_kind);
+    println!(
+        "| hardware faults reported without a fault | {} missions {:?} |",
+        s.spurious_missions, s.spurious_by_kind
+    );
     println!("| sensor spikes reported | {} of {} missions |", s.spikes_reported, s.spikes_injected);
     println!("| failing missions | {} |", s.failures.len());
     println!();
