@@ -30,6 +30,9 @@ pub struct CampaignArgs {
     /// Print one JSON object instead of the summary table.
     #[arg(long)]
     pub json: bool,
+    /// Exit non-zero (after the report) when any mission fails (for CI).
+    #[arg(long)]
+    pub strict: bool,
 }
 
 /// Detection figures of one injected fault kind.
@@ -234,6 +237,9 @@ pub fn run(a: &CampaignArgs) -> Result<()> {
         }
     } else {
         print_table(&s);
+    }
+    if a.strict && !s.failures.is_empty() {
+        bail!("{} of {} missions failed (seeds {:?})", s.failures.len(), s.missions, s.failures);
     }
     Ok(())
 }

@@ -144,10 +144,10 @@ impl Mission {
                 Fault::LidOpen => changes.retain(|(t, c)| !(matches!(c, Change::ExtraHeat(_)) && *t >= tf)),
                 Fault::SupplySag => changes.retain(|(t, c)| !(matches!(c, Change::Supply(_)) && *t >= tf)),
                 // A later spike fault would replace the sensor fault in the simulated front end.
-                Fault::SensorOpen | Fault::SensorShort | Fault::SensorStuck | Fault::SensorOffset => {
-                    if spikes_s.is_some_and(|ts| ts >= tf) {
-                        spikes_s = None;
-                    }
+                Fault::SensorOpen | Fault::SensorShort | Fault::SensorStuck | Fault::SensorOffset
+                    if spikes_s.is_some_and(|ts| ts >= tf) =>
+                {
+                    spikes_s = None;
                 }
                 _ => {}
             }
