@@ -218,8 +218,10 @@ pub struct Carrier<C: Controller> {
     ssr_off_reported: bool,
     /// Sensor offset measured and subtracted, °C.
     offset_c: f32,
-    /// The previous offset-corrected reading.
+    /// The last offset-corrected reading that was not a spike.
     last_raw_c: Option<f32>,
+    /// The last spike's reading.
+    spike_last_c: f32,
     /// A step under watch: (level before, step, samples it has held).
     pending_step: Option<(f32, f32, u8)>,
     /// Last measured module supply, V, and samples in a row below the minimum.
@@ -270,6 +272,7 @@ impl<C: Controller> Carrier<C> {
             ssr_off_reported: false,
             offset_c: 0.0,
             last_raw_c: None,
+            spike_last_c: f32::NAN,
             pending_step: None,
             supply_v: None,
             supply_low_run: 0,
@@ -327,7 +330,11 @@ impl<C: Controller> Carrier<C> {
     /// reading and reported. `raw` is the offset-corrected reading; returns whether the filter
     /// must hold this sample.
     fn watch_offset(&mut self, raw: f32, emit: &mut impl FnMut(EventKind)) -> bool {
-        let prev = self.last_raw_c.replace(raw);
+        // The reference is the last reading that was not a spike (`run` keeps it): after a
+        // spike the good reading that follows must not look like a step from the spike, and
+        // the filtered value lags a fast pull-down too much to serve (both seen in
+        // `hter campaign` before this).
+        let prev = self.last_raw_c;
         match (self.pending_step, prev) {
             (Some((before, step, n)), _) => {
                 if (raw - (before + step)).abs() <= 0.25 * step.abs() {
@@ -341,7 +348,6 @@ impl<C: Controller> Carrier<C> {
                         let measured = raw - before;
                         if measured > 0.0 && measured <= self.cfg.offset_max_comp_c {
                             self.offset_c += measured;
-                            self.last_raw_c = Some(raw - measured);
                         }
                         self.pending_step = None;
                         emit(EventKind::SensorOffset);
@@ -389,6 +395,7 @@ impl<C: Controller> Carrier<C> {
         }
         // Offset check on the raw sensor path only (an ideal-measurement plant has no sensor).
         let mut hold = false;
+        let offset_before = self.offset_c;
         let raw_c = match raw.ok() {
             Some(t) if sensor => {
                 let corrected = t.0 - self.offset_c;
@@ -407,6 +414,21 @@ impl<C: Controller> Carrier<C> {
             (Some(t), Some(prev)) => (t.0 - prev).abs() > self.cfg.spike_c,
             _ => false,
         };
+        if let (Some(t), false) = (raw_c, spike) {
+            // In the frame of the offset now in force (it may have changed this sample).
+            self.last_raw_c = Some(t.0 - (self.offset_c - offset_before));
+        }
+        // Three spikes in a row that agree with each other are a real jump (a re-seated probe);
+        // three that do not are noise, and the filter keeps its value.
+        let consistent = raw_c.is_some_and(|t| (t.0 - self.spike_last_c).abs() < 0.5 * self.cfg.spike_c);
+        if let Some(t) = raw_c {
+            if spike {
+                self.spike_last_c = t.0;
+            }
+        }
+        if spike && self.spike_run > 0 && !consistent {
+            self.spike_run = 0;
+        }
         if spike {
             self.spike_run = self.spike_run.saturating_add(1);
             self.spike_times.copy_within(0..2, 1);

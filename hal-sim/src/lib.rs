@@ -3,10 +3,12 @@
 #![warn(missing_docs)]
 
 pub mod arx;
+pub mod campaign_cmd;
 pub mod identify_cmd;
 pub mod log;
 pub mod log2csv_cmd;
 pub mod metrics;
+pub mod mission;
 pub mod monitor_cmd;
 pub mod periph;
 pub mod plant;

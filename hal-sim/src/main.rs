@@ -8,7 +8,7 @@ use clap::{Parser, Subcommand};
 use hal_sim::plant::Load;
 use hal_sim::scenario::Scenario;
 use hal_sim::sim::{self, ControllerChoice, ControllerSpec, PlantChoice, SimOptions, SimOutput};
-use hal_sim::{identify_cmd, log2csv_cmd, monitor_cmd, plot};
+use hal_sim::{campaign_cmd, identify_cmd, log2csv_cmd, monitor_cmd, plot};
 use hter::rtd::Rtd;
 use hter::units::{Celsius, Ohms};
 
@@ -36,11 +36,15 @@ enum Command {
     Compare(CompareArgs),
     /// Turn the firmware's defmt telemetry log into the CSV `identify` and `monitor` read.
     Log2csv(log2csv_cmd::Log2CsvArgs),
+    /// Run many randomized 24 h missions (plant ±50 %, ambient 0–43 °C, lid openings, supply
+    /// sags, sensor spikes, random hardware faults) in parallel and judge them.
+    Campaign(campaign_cmd::CampaignArgs),
 }
 
 #[derive(clap::Args, Debug)]
 struct SimArgs {
-    /// Scenario name (step, piecewise, half-load, disturbance) or a JSON scenario file.
+    /// Scenario name (step, piecewise, half-load, disturbance, prbs, hot-zone, mission) or a
+    /// JSON scenario file.
     #[arg(long, default_value = "step")]
     scenario: String,
     /// Controller.
@@ -107,6 +111,10 @@ struct SimArgs {
     /// Print the metrics as one JSON object instead of the summary.
     #[arg(long)]
     json: bool,
+    /// Replay the randomized mission of this seed from `hter campaign` (its carrier, ambient,
+    /// lid openings, supply sag, faults and noise seed); the controller flags still apply.
+    #[arg(long, conflicts_with_all = ["scenario", "plant", "load", "ambient", "duration", "seed", "faults"])]
+    mission_seed: Option<u64>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -166,6 +174,7 @@ fn main() -> ExitCode {
         Some(Command::Monitor(a)) => monitor_cmd::run(&a),
         Some(Command::Compare(a)) => compare_cmd(&a),
         Some(Command::Log2csv(a)) => log2csv_cmd::run(&a),
+        Some(Command::Campaign(a)) => campaign_cmd::run(&a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -249,6 +258,9 @@ fn sim_options(a: &SimArgs) -> Result<SimOptions> {
         }
         controller.igmvc.t_pole = tp as f32;
         controller.gpc_t_filter = tp as f32;
+    }
+    if let Some(seed) = a.mission_seed {
+        return Ok(hal_sim::mission::Mission::generate(seed).options(controller));
     }
     Ok(SimOptions {
         scenario,
@@ -484,6 +496,7 @@ fn demo() -> Result<()> {
         csv: None,
         plot: None,
         json: false,
+        mission_seed: None,
     };
     let opts = sim_options(&args)?;
     let out = sim::run(&opts)?;

@@ -58,7 +58,32 @@ pub struct Scenario {
 }
 
 /// Names of the built-in scenarios.
-pub const BUILT_IN: &[&str] = &["step", "piecewise", "half-load", "disturbance", "prbs"];
+pub const BUILT_IN: &[&str] = &["step", "piecewise", "half-load", "disturbance", "prbs", "hot-zone", "mission"];
+
+/// One day, s.
+pub const DAY_S: f64 = 86400.0;
+
+/// A day/night ambient cycle as a staircase: from `t0_s` to `t1_s`, every `step_s`, the ambient
+/// `mean_c + amplitude_c · cos(2π (t − t_peak_s) / 24 h)` at the middle of the step (so the
+/// staircase follows the sine without lagging it). Peak at `t_peak_s` (and every 24 h from it).
+pub fn day_night(
+    t0_s: f64,
+    t1_s: f64,
+    step_s: f64,
+    mean_c: f64,
+    amplitude_c: f64,
+    t_peak_s: f64,
+) -> Vec<(f64, Change)> {
+    let mut out = Vec::new();
+    let mut t = t0_s;
+    while t < t1_s {
+        let mid = t + 0.5 * step_s.min(t1_s - t);
+        let phase = 2.0 * std::f64::consts::PI * (mid - t_peak_s) / DAY_S;
+        out.push((t, Change::Ambient(mean_c + amplitude_c * phase.cos())));
+        t += step_s;
+    }
+    out
+}
 
 impl Scenario {
     /// A built-in scenario by name, or a JSON scenario file.
@@ -131,6 +156,45 @@ impl Scenario {
                 load: None,
                 excitation: true,
             },
+            "hot-zone" => {
+                // 24 h at 43 °C, then two days of 43/25 °C day/night (peak at 14:00, the
+                // hot zone is entered at 14:00 of day 1), in 30-min steps.
+                let mut changes = vec![(0.0, Change::Ambient(43.0))];
+                changes.extend(day_night(DAY_S, 3.0 * DAY_S, 1800.0, 34.0, 9.0, DAY_S));
+                Scenario {
+                    name: name.into(),
+                    description: "holding 4 °C, carried into 43 °C ambient for 24 h, then a 43/25 °C day/night cycle (30-min steps) for 48 h".into(),
+                    start: Start::Holding(4.0),
+                    setpoints: vec![(0.0, 4.0)],
+                    changes,
+                    duration_s: 3.0 * DAY_S,
+                    load: None,
+                    excitation: false,
+                }
+            }
+            "mission" => {
+                // A day in the field, starting 08:00: ambient 20…34 °C (peak 14:00) in 30-min
+                // steps, the lid opened for 2 min four times (15 W each), and the supply
+                // sagging to 10 V for an hour in the hot afternoon.
+                let mut changes = day_night(0.0, DAY_S, 1800.0, 27.0, 7.0, 6.0 * 3600.0);
+                for h in [2.0, 5.5, 9.0, 20.0] {
+                    changes.push((h * 3600.0, Change::ExtraHeat(15.0)));
+                    changes.push((h * 3600.0 + 120.0, Change::ExtraHeat(0.0)));
+                }
+                changes.push((6.0 * 3600.0, Change::Supply(10.0)));
+                changes.push((7.0 * 3600.0, Change::Supply(12.0)));
+                changes.sort_by(|a, b| a.0.total_cmp(&b.0));
+                Scenario {
+                    name: name.into(),
+                    description: "24 h in the field: pull-down from ambient, day/night 20…34 °C, lid opened 2 min (15 W) four times, supply 12 → 10 V for an hour".into(),
+                    start: Start::Ambient,
+                    setpoints: vec![(0.0, 4.0)],
+                    changes,
+                    duration_s: DAY_S,
+                    load: None,
+                    excitation: false,
+                }
+            }
             _ => return None,
         };
         Some(s)

@@ -140,6 +140,8 @@ impl ControllerChoice {
 }
 
 /// Which plant the controller drives.
+// Chosen once per run: the size difference between variants costs nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum PlantChoice {
     /// H-TER I: aluminium container.
@@ -148,6 +150,9 @@ pub enum PlantChoice {
     Hter2,
     /// An ideal ARX plant at the controller's sampling period (`--plant arx:A;B;K`).
     Arx(Model),
+    /// The physical carrier with these parameters (a randomized `campaign` mission); the
+    /// scenario's load override does not apply, the parameters carry their own water load.
+    Custom(PlantParams),
 }
 
 impl PlantChoice {
@@ -167,6 +172,7 @@ impl PlantChoice {
             PlantChoice::Hter1 => "H-TER I",
             PlantChoice::Hter2 => "H-TER II",
             PlantChoice::Arx(_) => "ARX model",
+            PlantChoice::Custom(_) => "randomized carrier",
         }
     }
 }
@@ -374,6 +380,7 @@ impl Rig {
         let params = match opts.plant {
             PlantChoice::Hter1 => PlantParams::hter1(load),
             PlantChoice::Hter2 => PlantParams::hter2(load),
+            PlantChoice::Custom(p) => p,
             PlantChoice::Arx(m) => {
                 let t0 = match sc.start {
                     Start::Ambient => opts.ambient_c,
@@ -537,7 +544,12 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
             AnyController::Prbs(PrbsExcitation::new(prbs).map_err(|e| anyhow::anyhow!("PRBS: {e:?}"))?)
         } else {
             let mut spec = opts.controller;
-            if spec.initial.is_none() && opts.plant == PlantChoice::Hter2 {
+            let stainless = match opts.plant {
+                PlantChoice::Hter2 => true,
+                PlantChoice::Custom(p) => p.container == crate::plant::Container::StainlessSteel,
+                _ => false,
+            };
+            if spec.initial.is_none() && stainless {
                 spec.initial = Some(AdaptiveConfig::HTER2_MODEL);
             }
             // After a reset: the stored model, if it decodes and is still plausible for this law
@@ -558,7 +570,9 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
     // Pre-roll: the loop has been holding the initial temperature for an hour.
     let preroll = match (sc.start, opts.plant) {
         _ if sc.excitation => 0,
-        (Start::Holding(_), PlantChoice::Hter1 | PlantChoice::Hter2) => (PREROLL_S / ts).round() as i64,
+        (Start::Holding(_), PlantChoice::Hter1 | PlantChoice::Hter2 | PlantChoice::Custom(_)) => {
+            (PREROLL_S / ts).round() as i64
+        }
         _ => 0,
     };
     let n = (opts.duration_s / ts).round() as i64;

@@ -131,3 +131,71 @@ fn second_order_model_is_enough_on_both_carriers() {
         assert!(v["reason"].as_str().unwrap().contains("order 4"), "{plant}: the reason compares with order 4");
     }
 }
+
+#[test]
+fn campaign_bad_input_is_a_one_line_error() {
+    assert_one_line_error(&["campaign", "--missions", "0"], "--missions");
+    assert_one_line_error(&["campaign", "--missions", "abc"], "abc");
+    assert_one_line_error(&["campaign", "--missions", "-3"], "-3");
+    assert_one_line_error(&["campaign"], "required");
+    assert_one_line_error(&["campaign", "--missions", "2", "--controller", "magic"], "magic");
+    assert_one_line_error(&["campaign", "--missions", "2", "--seed", "18446744073709551615"], "overflows");
+    assert_one_line_error(&["sim", "--mission-seed", "3", "--scenario", "step"], "--scenario");
+    assert_one_line_error(&["sim", "--mission-seed", "x"], "x");
+}
+
+fn json(args: &[&str]) -> serde_json::Value {
+    let out = hter(args);
+    assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{args:?}: {e}"))
+}
+
+#[test]
+fn small_campaign_reports_the_spec_fields() {
+    let v = json(&["campaign", "--missions", "8", "--seed", "100", "--json"]);
+    assert_eq!(v["missions"], 8);
+    for f in ["freeze_minutes", "fraction_outside_2_8", "worst_min_c", "worst_max_c", "cold_ambient_minutes"] {
+        assert!(v[f].as_f64().is_some_and(f64::is_finite), "{f}: {v}");
+    }
+    let frac = v["fraction_outside_2_8"].as_f64().unwrap();
+    assert!((0.0..=1.0).contains(&frac), "{v}");
+    assert!(v["faults_detected"].as_u64().unwrap() <= v["faults_injected"].as_u64().unwrap(), "{v}");
+    let kinds = v["faults_by_kind"].as_object().unwrap();
+    assert_eq!(kinds.len(), 9, "{v}");
+    let injected: u64 = kinds.values().map(|k| k["injected"].as_u64().unwrap()).sum();
+    assert_eq!(injected, v["faults_injected"].as_u64().unwrap());
+    // Every failure is one of the campaign's seeds and comes with its replay command.
+    let failures = v["failures"].as_array().unwrap();
+    assert!(failures.iter().all(|s| (100..108).contains(&s.as_u64().unwrap())), "{v}");
+    assert_eq!(v["failure_details"].as_array().unwrap().len(), failures.len());
+    assert!(v["worst_min_c"].as_f64().unwrap() > -20.0 && v["worst_max_c"].as_f64().unwrap() < 50.0, "{v}");
+}
+
+#[test]
+fn a_campaign_mission_replays_with_hter_sim() {
+    // Mission 230 (gpc) has a spurious ssr_stuck_on; use it: a replay must show the same event.
+    for (seed, controller) in [("230", "gpc"), ("7", "pi")] {
+        let c = json(&["campaign", "--missions", "1", "--seed", seed, "--controller", controller, "--json"]);
+        let s = json(&["sim", "--mission-seed", seed, "--controller", controller, "--json"]);
+        assert_eq!(c["worst_min_c"].as_f64(), s["min_temp_c"].as_f64(), "{c}\n{s}");
+        let again = json(&["sim", "--mission-seed", seed, "--controller", controller, "--json"]);
+        assert_eq!(s, again);
+        if seed == "230" {
+            assert_eq!(c["failures"], serde_json::json!([230]), "{c}");
+            let replay = c["failure_details"][0]["replay"].as_str().unwrap();
+            assert_eq!(replay, "hter sim --mission-seed 230 --controller gpc --json");
+            assert_eq!(s["faults_detected"][0]["kind"], "ssr_stuck_on", "{s}");
+        }
+    }
+}
+
+#[test]
+fn mission_and_hot_zone_scenarios_hold_2_to_8_after_pull_down() {
+    let v = json(&["sim", "--scenario", "mission", "--controller", "gpc", "--json"]);
+    assert!(v["min_temp_c"].as_f64().unwrap() >= 2.0, "{v}");
+    // Outside 2–8 °C only during the pull-down from 28 °C (≈ 24 min).
+    assert!(v["time_outside_2_8_s"].as_f64().unwrap() < 1800.0, "{v}");
+    let v = json(&["sim", "--scenario", "hot-zone", "--controller", "pi", "--json"]);
+    assert!(v["min_temp_c"].as_f64().unwrap() >= 2.0 && v["max_temp_c"].as_f64().unwrap() <= 8.0, "{v}");
+    assert_eq!(v["time_outside_2_8_s"].as_f64(), Some(0.0), "{v}");
+}

@@ -1,0 +1,307 @@
+//! `hter campaign`: many randomized 24 h missions in parallel, judged against the cold-chain
+//! rules (the rules are on [`crate::mission::MissionReport`]).
+
+use std::collections::BTreeMap;
+use std::io::IsTerminal;
+
+use anyhow::{bail, Result};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::mission::{self, Mission, MissionReport, HARDWARE_FAULTS};
+use crate::sim::{self, ControllerChoice, ControllerSpec};
+
+/// Most missions one campaign may run.
+pub const MAX_MISSIONS: u64 = 1_000_000;
+
+/// `hter campaign` arguments.
+#[derive(clap::Args, Debug)]
+pub struct CampaignArgs {
+    /// Number of randomized 24 h missions.
+    #[arg(long)]
+    pub missions: u64,
+    /// Seed of the first mission; mission i has seed S + i.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Controller (default: the self-tuning GPC the adaptive firmware runs).
+    #[arg(long, value_enum, default_value = "gpc")]
+    pub controller: ControllerChoice,
+    /// Print one JSON object instead of the summary table.
+    #[arg(long)]
+    pub json: bool,
+    /// Exit non-zero (after the report) when any mission fails (for CI).
+    #[arg(long)]
+    pub strict: bool,
+}
+
+/// Detection figures of one injected fault kind.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct KindFigures {
+    /// Missions that carried it.
+    pub injected: u64,
+    /// Of which the step reported it.
+    pub detected: u64,
+    /// Whether the library has a detector for it (missed detections of kinds without one are
+    /// not mission failures; see `mission::detection`).
+    pub detector: bool,
+    /// Longest time from injection to detection, s.
+    pub max_latency_s: Option<f64>,
+}
+
+/// A failing mission.
+#[derive(Clone, Debug, Serialize)]
+pub struct FailureDetail {
+    /// The mission's seed.
+    pub seed: u64,
+    /// Why it failed.
+    pub reasons: Vec<String>,
+    /// The command that replays it.
+    pub replay: String,
+}
+
+/// The `hter campaign --json` object.
+#[derive(Clone, Debug, Serialize)]
+pub struct CampaignSummary {
+    /// Missions run.
+    pub missions: u64,
+    /// Controller.
+    pub controller: String,
+    /// Seed of the first mission.
+    pub seed: u64,
+    /// Total time with the load below 0 °C over all missions, min.
+    pub freeze_minutes: f64,
+    /// Missions with any time below 0 °C.
+    pub freeze_missions: u64,
+    /// Fraction of the judged time (after pull-down, before any hardware fault, outside cold
+    /// ambient) with the load outside 2–8 °C.
+    pub fraction_outside_2_8: f64,
+    /// Judged time, h.
+    pub judged_hours: f64,
+    /// Judged time outside 2–8 °C, min.
+    pub outside_minutes: f64,
+    /// Cold-ambient time after pull-down and before any fault (not judged), min.
+    pub cold_ambient_minutes: f64,
+    /// Of which outside 2–8 °C (below 2 °C: the carrier cannot heat), min.
+    pub cold_ambient_outside_minutes: f64,
+    /// Missions that had any cold-ambient time.
+    pub cold_ambient_missions: u64,
+    /// Hardware faults injected.
+    pub faults_injected: u64,
+    /// Of which the step reported.
+    pub faults_detected: u64,
+    /// Of the injected faults whose kind has a detector, the ones missed.
+    pub faults_missed_with_detector: u64,
+    /// Per kind.
+    pub faults_by_kind: BTreeMap<String, KindFigures>,
+    /// Missions in which the step reported a hardware fault that was not injected.
+    pub spurious_missions: u64,
+    /// Spurious reports per kind (missions).
+    pub spurious_by_kind: BTreeMap<String, u64>,
+    /// Missions with sensor spikes (not a hardware fault).
+    pub spikes_injected: u64,
+    /// Of which the step reported spikes.
+    pub spikes_reported: u64,
+    /// Lowest true load temperature of any mission, anywhere, °C.
+    pub worst_min_c: f64,
+    /// Highest true load temperature in any judged window, °C.
+    pub worst_max_c: f64,
+    /// Missions whose pull-down took longest, s (None if none ended).
+    pub longest_pulldown_s: Option<f64>,
+    /// Seeds of the failing missions.
+    pub failures: Vec<u64>,
+    /// Why each failed and how to replay it.
+    pub failure_details: Vec<FailureDetail>,
+    /// Wall time of the campaign, s.
+    pub wall_s: f64,
+}
+
+/// The replay command of one mission.
+pub fn replay_command(seed: u64, controller: ControllerChoice) -> String {
+    let c = clap::ValueEnum::to_possible_value(&controller).map_or("gpc".to_string(), |v| v.get_name().to_string());
+    format!("hter sim --mission-seed {seed} --controller {c} --json")
+}
+
+/// Runs one mission and judges it.
+pub fn run_mission(seed: u64, controller: ControllerChoice) -> Result<MissionReport> {
+    let m = Mission::generate(seed);
+    let out = sim::run(&m.options(ControllerSpec::new(controller)))?;
+    Ok(mission::evaluate(&m, &out))
+}
+
+/// Summarizes judged missions.
+pub fn summarize(reports: &[MissionReport], controller: ControllerChoice, seed: u64, wall_s: f64) -> CampaignSummary {
+    let mut by_kind: BTreeMap<String, KindFigures> = HARDWARE_FAULTS
+        .iter()
+        .map(|&f| {
+            (
+                mission::fault_name(f).to_string(),
+                KindFigures { detector: mission::detection(f).1, ..Default::default() },
+            )
+        })
+        .collect();
+    let sum = |f: &dyn Fn(&MissionReport) -> f64| reports.iter().map(f).sum::<f64>();
+    let judged_s = sum(&|r| r.judged_s);
+    let outside_s = sum(&|r| r.outside_s);
+    let mut failures = Vec::new();
+    let mut details = Vec::new();
+    for r in reports {
+        if let Some((name, t, at)) = r.fault {
+            let k = by_kind.entry(name.to_string()).or_default();
+            k.injected += 1;
+            if let Some(at) = at {
+                k.detected += 1;
+                k.max_latency_s = Some(k.max_latency_s.map_or(at - t, |x: f64| x.max(at - t)));
+            }
+        }
+        if !r.reasons.is_empty() {
+            failures.push(r.seed);
+            details.push(FailureDetail {
+                seed: r.seed,
+                reasons: r.reasons.clone(),
+                replay: replay_command(r.seed, controller),
+            });
+        }
+    }
+    let faults_injected = by_kind.values().map(|k| k.injected).sum();
+    let faults_detected = by_kind.values().map(|k| k.detected).sum();
+    let faults_missed_with_detector = by_kind.values().filter(|k| k.detector).map(|k| k.injected - k.detected).sum();
+    CampaignSummary {
+        missions: reports.len() as u64,
+        controller: format!("{controller:?}").to_lowercase(),
+        seed,
+        freeze_minutes: sum(&|r| r.freeze_s) / 60.0,
+        freeze_missions: reports.iter().filter(|r| r.freeze_s > 0.0).count() as u64,
+        fraction_outside_2_8: if judged_s > 0.0 { outside_s / judged_s } else { 0.0 },
+        judged_hours: judged_s / 3600.0,
+        outside_minutes: outside_s / 60.0,
+        cold_ambient_minutes: sum(&|r| r.cold_ambient_s) / 60.0,
+        cold_ambient_outside_minutes: sum(&|r| r.cold_outside_s) / 60.0,
+        cold_ambient_missions: reports.iter().filter(|r| r.cold_ambient_s > 0.0).count() as u64,
+        faults_injected,
+        faults_detected,
+        faults_missed_with_detector,
+        faults_by_kind: by_kind,
+        spurious_missions: reports.iter().filter(|r| !r.spurious.is_empty()).count() as u64,
+        spurious_by_kind: reports.iter().flat_map(|r| r.spurious.iter()).fold(BTreeMap::new(), |mut m, (k, _)| {
+            *m.entry(k.clone()).or_insert(0) += 1;
+            m
+        }),
+        spikes_injected: reports.iter().filter(|r| r.spikes.is_some()).count() as u64,
+        spikes_reported: reports.iter().filter(|r| matches!(r.spikes, Some((_, Some(_))))).count() as u64,
+        worst_min_c: reports.iter().map(|r| r.min_c).fold(f64::INFINITY, f64::min),
+        worst_max_c: reports.iter().filter_map(|r| r.max_judged_c).fold(f64::NEG_INFINITY, f64::max),
+        longest_pulldown_s: reports.iter().filter_map(|r| r.pulldown_s).reduce(f64::max),
+        failures,
+        failure_details: details,
+        wall_s,
+    }
+}
+
+/// `hter campaign`.
+pub fn run(a: &CampaignArgs) -> Result<()> {
+    if a.missions == 0 {
+        bail!("--missions must be at least 1");
+    }
+    if a.missions > MAX_MISSIONS {
+        bail!("--missions must be at most {MAX_MISSIONS}, got {}", a.missions);
+    }
+    if a.seed.checked_add(a.missions).is_none() {
+        bail!("--seed {} + --missions {} overflows a 64-bit seed", a.seed, a.missions);
+    }
+    let start = std::time::Instant::now();
+    let pb = if a.json || !std::io::stderr().is_terminal() {
+        ProgressBar::hidden()
+    } else {
+        let pb = ProgressBar::with_draw_target(Some(a.missions), ProgressDrawTarget::stderr());
+        if let Ok(style) = ProgressStyle::with_template("{bar:40} {pos}/{len} missions  {elapsed} (eta {eta})") {
+            pb.set_style(style);
+        }
+        pb
+    };
+    let controller = a.controller;
+    let reports: Vec<MissionReport> = (0..a.missions)
+        .into_par_iter()
+        .map(|i| {
+            let r = run_mission(a.seed + i, controller);
+            pb.inc(1);
+            r
+        })
+        .collect::<Result<_>>()?;
+    pb.finish_and_clear();
+    let s = summarize(&reports, controller, a.seed, start.elapsed().as_secs_f64());
+    if a.json {
+        println!("{}", serde_json::to_string(&s)?);
+        for f in &s.failure_details {
+            eprintln!("mission {} failed ({}); replay: {}", f.seed, f.reasons.join("; "), f.replay);
+        }
+    } else {
+        print_table(&s);
+    }
+    if a.strict && !s.failures.is_empty() {
+        bail!("{} of {} missions failed (seeds {:?})", s.failures.len(), s.missions, s.failures);
+    }
+    Ok(())
+}
+
+fn print_table(s: &CampaignSummary) {
+    println!(
+        "campaign: {} randomized 24 h missions (seeds {}…{}), controller {}, {:.1} s wall",
+        s.missions,
+        s.seed,
+        s.seed + s.missions - 1,
+        s.controller,
+        s.wall_s
+    );
+    println!();
+    println!("| figure | value |");
+    println!("| --- | --- |");
+    println!("| minutes below 0 °C (all missions) | {:.1} ({} missions) |", s.freeze_minutes, s.freeze_missions);
+    println!("| lowest load temperature | {:.2} °C |", s.worst_min_c);
+    println!("| highest load temperature after pull-down, before faults | {:.2} °C |", s.worst_max_c);
+    println!(
+        "| outside 2–8 °C after pull-down, before faults | {:.4} % ({:.1} min of {:.0} h) |",
+        100.0 * s.fraction_outside_2_8,
+        s.outside_minutes,
+        s.judged_hours
+    );
+    println!(
+        "| cold ambient (< {} °C, not judged) | {:.0} min in {} missions, {:.0} min of it outside 2–8 °C |",
+        mission::COLD_AMBIENT_C,
+        s.cold_ambient_minutes,
+        s.cold_ambient_missions,
+        s.cold_ambient_outside_minutes
+    );
+    println!("| hardware faults detected | {} of {} |", s.faults_detected, s.faults_injected);
+    println!(
+        "| hardware faults reported without a fault | {} missions {:?} |",
+        s.spurious_missions, s.spurious_by_kind
+    );
+    println!("| sensor spikes reported | {} of {} missions |", s.spikes_reported, s.spikes_injected);
+    println!("| failing missions | {} |", s.failures.len());
+    println!();
+    println!("| fault kind | injected | detected | detector in the library | worst latency (s) |");
+    println!("| --- | --- | --- | --- | --- |");
+    for (name, k) in &s.faults_by_kind {
+        println!(
+            "| {name} | {} | {} | {} | {} |",
+            k.injected,
+            k.detected,
+            if k.detector { "yes" } else { "no" },
+            k.max_latency_s.map_or("–".to_string(), |l| format!("{l:.0}"))
+        );
+    }
+    if s.cold_ambient_minutes > 0.0 {
+        println!();
+        println!(
+            "note: the carrier only cools; below {} °C ambient it cannot keep the load above 2 °C. That",
+            mission::COLD_AMBIENT_C
+        );
+        println!("time is reported above and not judged; on a real carrier the recorder's alarms still apply.");
+    }
+    for f in &s.failure_details {
+        println!();
+        println!("FAILED mission {}: {}", f.seed, f.reasons.join("; "));
+        println!("  replay: {}", f.replay);
+    }
+}

@@ -1,0 +1,418 @@
+//! Randomized 24 h missions for `hter campaign` (issue 6): each mission is fully determined by
+//! its seed, so any mission of a campaign replays alone with `hter sim --mission-seed N`.
+//!
+//! A mission draws, from a ChaCha8 stream seeded with its seed:
+//! - the carrier: H-TER I or II, full load, with every heat capacity and thermal conductance of
+//!   [`PlantParams`] scaled by its own factor in [0.5, 1.5] (the Peltier module, the RTD and
+//!   the dead time stay nominal: they come from datasheets, not from the build);
+//! - the ambient: a day/night cycle, amplitude 2…10 °C around a mean chosen so that the whole
+//!   cycle stays within 0…43 °C, in steps of 30…60 min, with a random phase;
+//! - 0…6 lid openings (10…20 W for 1…5 min);
+//! - with probability ½ a supply sag (12 V → 9.5…11 V for 30…120 min);
+//! - with probability 0.3 sensor spikes from a random time on (not a hardware fault: the step
+//!   ignores each spike and reports them);
+//! - with probability 0.2 one hardware fault, uniform over [`HARDWARE_FAULTS`], at a random
+//!   time between 2 h and 22 h.
+//!
+//! The setpoint is 4 °C; the run starts at ambient with cooling off (pull-down).
+//!
+//! The evaluation ([`evaluate`]) and its rules are documented on [`MissionReport`].
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+use crate::plant::{Load, PlantParams};
+use crate::scenario::{day_night, Change, Scenario, Start, DAY_S};
+use crate::sim::{ControllerSpec, Fault, PlantChoice, SimOptions, SimOutput};
+
+/// Hardware faults a mission may carry (every `--fault` kind except `sensor-spikes`, which is
+/// a nuisance the step must ride through, not a hardware fault).
+pub const HARDWARE_FAULTS: [Fault; 9] = [
+    Fault::SensorOpen,
+    Fault::SensorShort,
+    Fault::SensorStuck,
+    Fault::SensorOffset,
+    Fault::SsrStuckOn,
+    Fault::SsrStuckOff,
+    Fault::SupplySag,
+    Fault::LidOpen,
+    Fault::Brownout,
+];
+
+/// Setpoint of every mission, °C.
+pub const MISSION_SETPOINT_C: f64 = 4.0;
+
+/// A sample counts as "cold ambient" when the ambient is below this, °C, now or within
+/// [`COLD_LAG_S`] before: the carrier only cools, so it cannot keep the load above 2 °C there.
+pub const COLD_AMBIENT_C: f64 = 4.0;
+
+/// How long a cold spell keeps affecting the load after the ambient is back above
+/// [`COLD_AMBIENT_C`], s (the carrier's slowest time constants are ≈ 1 h).
+pub const COLD_LAG_S: f64 = 7200.0;
+
+/// Largest time outside 2–8 °C after pull-down, before any hardware fault and outside cold
+/// ambient, that a mission may have and still pass, s (one minute: six samples).
+pub const OUTSIDE_TOLERANCE_S: f64 = 60.0;
+
+/// One randomized mission.
+#[derive(Clone, Debug)]
+pub struct Mission {
+    /// Its seed (also the ADC noise seed).
+    pub seed: u64,
+    /// The carrier's parameters.
+    pub params: PlantParams,
+    /// Scale factors applied to the capacities and conductances, by parameter name.
+    pub factors: Vec<(&'static str, f64)>,
+    /// Ambient at t = 0, °C.
+    pub ambient0_c: f64,
+    /// Setpoint, ambient, lid openings and supply sag.
+    pub scenario: Scenario,
+    /// Every fault injected, spikes included.
+    pub faults: Vec<(f64, Fault)>,
+    /// The hardware fault, if any.
+    pub hardware_fault: Option<(f64, Fault)>,
+    /// When sensor spikes start, if they do.
+    pub spikes_s: Option<f64>,
+}
+
+impl Mission {
+    /// The mission of a seed.
+    pub fn generate(seed: u64) -> Mission {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let stainless = rng.gen_bool(0.5);
+        let mut params = if stainless { PlantParams::hter2(Load::Full) } else { PlantParams::hter1(Load::Full) };
+        let mut factors = Vec::new();
+        {
+            let p = &mut params;
+            let fields: [(&'static str, &mut f64); 11] = [
+                ("c_hot", &mut p.c_hot_j_per_k),
+                ("g_hot", &mut p.g_hot_w_per_k),
+                ("c_cold", &mut p.c_cold_j_per_k),
+                ("g_cold_wall", &mut p.g_cold_wall_w_per_k),
+                ("g_cold_air", &mut p.g_cold_air_w_per_k),
+                ("c_wall", &mut p.c_wall_j_per_k),
+                ("g_wall_water", &mut p.g_wall_water_w_per_k),
+                ("g_air_wall", &mut p.g_air_wall_w_per_k),
+                ("c_air", &mut p.c_air_j_per_k),
+                ("g_leak", &mut p.g_leak_w_per_k),
+                ("c_water", &mut p.c_water_j_per_k),
+            ];
+            for (name, v) in fields {
+                let f = rng.gen_range(0.5..=1.5);
+                *v *= f;
+                factors.push((name, f));
+            }
+        }
+
+        // Ambient: day/night staircase within 0…43 °C.
+        let amplitude = rng.gen_range(2.0..=10.0);
+        let mean = rng.gen_range(amplitude..=43.0 - amplitude);
+        let step_s = f64::from(rng.gen_range(30u32..=60)) * 60.0;
+        let t_peak = rng.gen_range(0.0..DAY_S);
+        let mut changes = day_night(0.0, DAY_S, step_s, mean, amplitude, t_peak);
+        let ambient0_c = match changes.first() {
+            Some((_, Change::Ambient(a))) => *a,
+            _ => mean,
+        };
+
+        // Lid openings.
+        for _ in 0..rng.gen_range(0..=6) {
+            let t = rng.gen_range(3600.0..DAY_S - 600.0).round();
+            let w = rng.gen_range(10.0..=20.0);
+            let d = f64::from(rng.gen_range(1u32..=5)) * 60.0;
+            changes.push((t, Change::ExtraHeat(w)));
+            changes.push((t + d, Change::ExtraHeat(0.0)));
+        }
+        // Supply sag.
+        if rng.gen_bool(0.5) {
+            let t = rng.gen_range(3600.0..DAY_S - 7200.0).round();
+            let v = rng.gen_range(9.5..=11.0);
+            let d = f64::from(rng.gen_range(30u32..=120)) * 60.0;
+            changes.push((t, Change::Supply(v)));
+            changes.push((t + d, Change::Supply(params.supply_v)));
+        }
+        let mut spikes_s = rng.gen_bool(0.3).then(|| rng.gen_range(3600.0..23.0 * 3600.0_f64).round());
+        let hardware_fault = rng.gen_bool(0.2).then(|| {
+            let kind = HARDWARE_FAULTS[rng.gen_range(0..HARDWARE_FAULTS.len())];
+            (rng.gen_range(2.0 * 3600.0..22.0 * 3600.0_f64).round(), kind)
+        });
+
+        // A fault is a lasting state: keep the scheduled changes from undoing it.
+        if let Some((tf, kind)) = hardware_fault {
+            match kind {
+                Fault::LidOpen => changes.retain(|(t, c)| !(matches!(c, Change::ExtraHeat(_)) && *t >= tf)),
+                Fault::SupplySag => changes.retain(|(t, c)| !(matches!(c, Change::Supply(_)) && *t >= tf)),
+                // A later spike fault would replace the sensor fault in the simulated front end.
+                Fault::SensorOpen | Fault::SensorShort | Fault::SensorStuck | Fault::SensorOffset
+                    if spikes_s.is_some_and(|ts| ts >= tf) =>
+                {
+                    spikes_s = None;
+                }
+                _ => {}
+            }
+        }
+        changes.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut faults = Vec::new();
+        if let Some(t) = spikes_s {
+            faults.push((t, Fault::SensorSpikes));
+        }
+        if let Some(f) = hardware_fault {
+            faults.push(f);
+        }
+        let fault_text =
+            hardware_fault.map_or("no hardware fault".to_string(), |(t, k)| format!("{} at {:.0} s", fault_name(k), t));
+        let scenario = Scenario {
+            name: format!("mission-{seed}"),
+            description: format!(
+                "randomized mission {seed}: {}, ambient {:.1} ± {:.1} °C, {}",
+                if stainless { "H-TER II" } else { "H-TER I" },
+                mean,
+                amplitude,
+                fault_text
+            ),
+            start: Start::Ambient,
+            setpoints: vec![(0.0, MISSION_SETPOINT_C)],
+            changes,
+            duration_s: DAY_S,
+            load: None,
+            excitation: false,
+        };
+        Mission { seed, params, factors, ambient0_c, scenario, faults, hardware_fault, spikes_s }
+    }
+
+    /// The run of this mission with `controller`.
+    pub fn options(&self, controller: ControllerSpec) -> SimOptions {
+        SimOptions {
+            plant: PlantChoice::Custom(self.params),
+            ambient_c: self.ambient0_c,
+            seed: self.seed,
+            faults: self.faults.clone(),
+            ..SimOptions::new(self.scenario.clone(), controller)
+        }
+    }
+}
+
+/// The CLI name of a fault kind.
+pub fn fault_name(f: Fault) -> &'static str {
+    Fault::ALL.iter().find(|(_, k)| *k == f).map_or("?", |(n, _)| n)
+}
+
+/// How the library can report a fault kind: the `faults_detected` kinds that count as its
+/// detection, and whether the library has a detector for it at all.
+///
+/// Every kind but `brownout` has a detector in the step's supervisor (`src/step.rs`):
+/// `sensor_offset` (a step of the reading that holds), `supply_sag` (the measured module
+/// supply), `lid_open` (the holding duty jumps; no check for the relay On-Off controller, whose
+/// limit cycle hides it — `ssr_stuck_off` also counts, "the load warms at full duty"). A
+/// brownout restarts the MCU; the simulated step has no reset-cause input, so it is reported per
+/// kind but is not a failure when missed.
+pub fn detection(f: Fault) -> (fn(&str) -> bool, bool) {
+    match f {
+        Fault::SensorOpen => (|k| k == "sensor_open" || k == "sensor_out_of_range", true),
+        Fault::SensorShort => (|k| k == "sensor_short" || k == "sensor_out_of_range", true),
+        Fault::SensorStuck => (|k| k == "sensor_stuck", true),
+        Fault::SsrStuckOn => (|k| k == "ssr_stuck_on", true),
+        Fault::SsrStuckOff => (|k| k == "ssr_stuck_off", true),
+        Fault::SensorOffset => (|k| k == "sensor_offset", true),
+        Fault::SupplySag => (|k| k == "supply_sag", true),
+        Fault::LidOpen => (|k| k == "lid_open" || k == "ssr_stuck_off", true),
+        Fault::Brownout => (|k| k.contains("brownout") || k.contains("reset"), false),
+        Fault::SensorSpikes => (|k| k == "sensor_spikes", false),
+    }
+}
+
+/// Reports that are warnings about the mission's own disturbances, not faults: `ssr_stuck_off`
+/// (the load warms at full duty, e.g. a lid opening), `supply_sag` (the mission's scheduled
+/// sag is real) and `lid_open` (its lid openings are real). None changes the control.
+fn is_warning(kind: &str) -> bool {
+    matches!(kind, "ssr_stuck_off" | "supply_sag" | "lid_open")
+}
+
+/// The verdict on one mission.
+///
+/// - **Pull-down** ends at the first sample with the true load temperature within 2–8 °C.
+/// - **Judged window**: from the end of pull-down to the hardware fault (or the end), minus
+///   cold-ambient samples (ambient below [`COLD_AMBIENT_C`] now or within [`COLD_LAG_S`]).
+/// - **Fails** when the load is ever below 0 °C (anywhere, faults and cold ambient included),
+///   or an injected fault whose kind has a detector is not detected by the end of the run,
+///   or the step reports a hardware fault that was not injected, other than `ssr_stuck_off`
+///   (a false `ssr_stuck_on` latches the modules' supply off for the rest of the mission;
+///   `ssr_stuck_off` without a fault is the step warning that the load warms at full duty,
+///   e.g. during a lid opening, and changes nothing in the control: reported, not a failure),
+///   or the judged window has more than [`OUTSIDE_TOLERANCE_S`] outside 2–8 °C, or the
+///   pull-down never reaches 2–8 °C (outside cold ambient).
+#[derive(Clone, Debug, Serialize)]
+pub struct MissionReport {
+    /// The mission's seed.
+    pub seed: u64,
+    /// Time below 0 °C, s.
+    pub freeze_s: f64,
+    /// Length of the judged window, s.
+    pub judged_s: f64,
+    /// Time outside 2–8 °C in the judged window, s.
+    pub outside_s: f64,
+    /// Cold-ambient time after pull-down and before any hardware fault, s.
+    pub cold_ambient_s: f64,
+    /// Of which outside 2–8 °C, s.
+    pub cold_outside_s: f64,
+    /// End of pull-down, s (None: never).
+    pub pulldown_s: Option<f64>,
+    /// Lowest true load temperature of the whole run, °C.
+    pub min_c: f64,
+    /// Highest true load temperature in the judged window, °C (None: empty window).
+    pub max_judged_c: Option<f64>,
+    /// The hardware fault: (kind, injected at s, detected at s).
+    pub fault: Option<(&'static str, f64, Option<f64>)>,
+    /// Whether the library has a detector for that kind.
+    pub fault_detectable: bool,
+    /// Sensor spikes: (injected at s, first report at s).
+    pub spikes: Option<(f64, Option<f64>)>,
+    /// Hardware-fault reports without a fault behind them (before the injected fault, or in a
+    /// mission without one): (kind, first report at s), one per kind.
+    pub spurious: Vec<(String, f64)>,
+    /// Why the mission failed (empty: passed).
+    pub reasons: Vec<String>,
+}
+
+/// Judges a finished mission run (rules on [`MissionReport`]).
+pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
+    let ts = out.ts_s;
+    let t_fault = m.hardware_fault.map_or(f64::INFINITY, |(t, _)| t);
+    let mut freeze_s = 0.0;
+    let mut judged_s = 0.0;
+    let mut outside_s = 0.0;
+    let mut cold_s = 0.0;
+    let mut cold_outside_s = 0.0;
+    let mut pulldown_s = None;
+    let mut min_c = f64::INFINITY;
+    let mut max_judged_c: Option<f64> = None;
+    let mut last_cold = f64::NEG_INFINITY;
+    for r in &out.rows {
+        let t = r.true_temp_c;
+        min_c = min_c.min(t);
+        if t < 0.0 {
+            freeze_s += ts;
+        }
+        if r.ambient_c < COLD_AMBIENT_C {
+            last_cold = r.t_s;
+        }
+        let inside = (2.0..=8.0).contains(&t);
+        if pulldown_s.is_none() && inside {
+            pulldown_s = Some(r.t_s);
+        }
+        if pulldown_s.is_none() || r.t_s >= t_fault {
+            continue;
+        }
+        if r.t_s - last_cold <= COLD_LAG_S {
+            cold_s += ts;
+            if !inside {
+                cold_outside_s += ts;
+            }
+            continue;
+        }
+        judged_s += ts;
+        if !inside {
+            outside_s += ts;
+        }
+        max_judged_c = Some(max_judged_c.map_or(t, |x| x.max(t)));
+    }
+    let detected = &out.metrics.faults_detected;
+    let fault = m.hardware_fault.map(|(tf, kind)| {
+        let (accept, _) = detection(kind);
+        let at = detected.iter().find(|d| d.t_s >= tf && accept(&d.kind)).map(|d| d.t_s);
+        (fault_name(kind), tf, at)
+    });
+    let fault_detectable = m.hardware_fault.is_some_and(|(_, k)| detection(k).1);
+    let spikes =
+        m.spikes_s.map(|ts0| (ts0, detected.iter().find(|d| d.t_s >= ts0 && d.kind == "sensor_spikes").map(|d| d.t_s)));
+
+    let mut spurious: Vec<(String, f64)> = Vec::new();
+    for d in detected.iter().filter(|d| d.kind != "sensor_spikes" && d.t_s < t_fault) {
+        if !spurious.iter().any(|(k, _)| *k == d.kind) {
+            spurious.push((d.kind.clone(), d.t_s));
+        }
+    }
+
+    let mut reasons = Vec::new();
+    // `ssr_stuck_off` without a fault is the step's own warning that the load warms at full
+    // duty (a lid opening or a sag in the heat): it changes nothing in the control, so it is
+    // reported, not a failure. Any other spurious report puts the step in a safe state.
+    for (k, t) in spurious.iter().filter(|(k, _)| !is_warning(k)) {
+        reasons.push(format!("{k} reported at {t:.0} s without a fault"));
+    }
+    if freeze_s > 0.0 || min_c < 0.0 {
+        reasons.push(format!("load below 0 °C for {:.0} min (min {min_c:.2} °C)", freeze_s / 60.0));
+    }
+    if let Some((name, tf, None)) = fault {
+        if fault_detectable {
+            reasons.push(format!("{name} at {tf:.0} s not detected"));
+        }
+    }
+    if outside_s > OUTSIDE_TOLERANCE_S {
+        reasons
+            .push(format!("{:.0} s outside 2–8 °C after pull-down (tolerance {OUTSIDE_TOLERANCE_S:.0} s)", outside_s));
+    }
+    if pulldown_s.is_none() && m.ambient0_c >= COLD_AMBIENT_C && t_fault > 4.0 * 3600.0 {
+        reasons.push("pull-down never reached 2–8 °C".into());
+    }
+    MissionReport {
+        seed: m.seed,
+        freeze_s,
+        judged_s,
+        outside_s,
+        cold_ambient_s: cold_s,
+        cold_outside_s,
+        pulldown_s,
+        min_c,
+        max_judged_c,
+        fault,
+        fault_detectable,
+        spikes,
+        spurious,
+        reasons,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::{run, ControllerChoice};
+
+    #[test]
+    fn a_mission_is_determined_by_its_seed() {
+        let a = Mission::generate(42);
+        let b = Mission::generate(42);
+        assert_eq!(a.params, b.params);
+        assert_eq!(a.scenario, b.scenario);
+        assert_eq!(a.faults, b.faults);
+        assert_ne!(Mission::generate(43).params, a.params);
+        let spec = ControllerSpec::new(ControllerChoice::Pi);
+        let ra = run(&a.options(spec)).unwrap();
+        let rb = run(&b.options(spec)).unwrap();
+        assert_eq!(ra.rows.len(), rb.rows.len());
+        assert!(ra.rows.iter().zip(&rb.rows).all(|(x, y)| x.true_temp_c == y.true_temp_c && x.duty == y.duty));
+        assert_eq!(ra.metrics.faults_detected, rb.metrics.faults_detected);
+    }
+
+    #[test]
+    fn missions_stay_within_their_ranges() {
+        for seed in 0..200 {
+            let m = Mission::generate(seed);
+            for (name, f) in &m.factors {
+                assert!((0.5..=1.5).contains(f), "{seed} {name} {f}");
+            }
+            for (t, c) in &m.scenario.changes {
+                assert!((0.0..DAY_S).contains(t), "{seed}: change at {t}");
+                if let Change::Ambient(a) = c {
+                    assert!((0.0..=43.0).contains(a), "{seed}: ambient {a}");
+                }
+            }
+            if let Some((t, f)) = m.hardware_fault {
+                assert!((7200.0..=22.0 * 3600.0).contains(&t) && f != Fault::SensorSpikes);
+            }
+        }
+        let with_fault = (0..1000).filter(|&s| Mission::generate(s).hardware_fault.is_some()).count();
+        assert!((150..=250).contains(&with_fault), "{with_fault}");
+    }
+}
