@@ -87,6 +87,13 @@ pub struct CarrierConfig {
     pub stuck_off_samples: u16,
     /// …and the load rose by more than this over that time, °C.
     pub stuck_off_rise_c: f32,
+    /// SSR stuck off, slow warming (a cool day, when a dead SSR lets the load rise only
+    /// ≈ 0.3 °C in 5 min): full duty for this many samples (15 min, three times the longest
+    /// lag between cooling starting and the load turning down)…
+    pub stuck_off_slow_samples: u16,
+    /// …the load higher than when full duty began by more than this, °C, and still rising
+    /// over the last 5 min. A working SSR has turned the load around long before.
+    pub stuck_off_slow_rise_c: f32,
     /// Sensor offset: a step of the calibrated reading larger than this between two samples,
     /// °C… The sensed load moves at most ≈ 0.46 °C per 10 s sample (pull-down from 43 °C, half
     /// load, measured on the hal-sim plant), so 0.7 °C is more than physics allows.
@@ -133,6 +140,8 @@ impl CarrierConfig {
         stuck_on_drop_c: 0.15,
         stuck_off_samples: 30,
         stuck_off_rise_c: 0.5,
+        stuck_off_slow_samples: 90,
+        stuck_off_slow_rise_c: 0.3,
         offset_step_c: 0.7,
         offset_confirm_samples: 3,
         offset_max_comp_c: 3.0,
@@ -213,6 +222,10 @@ pub struct Carrier<C: Controller> {
     history_head: usize,
     off_run: u16,
     on_run: u16,
+    /// When the freeze guard last tripped with cooling not requested.
+    unrequested_trip_s: Option<f32>,
+    /// Filtered temperature when the current run of full duty began.
+    on_start_c: f32,
     req_off_run: u16,
     supply_cut: bool,
     ssr_off_reported: bool,
@@ -231,7 +244,8 @@ pub struct Carrier<C: Controller> {
     /// Fast and slow averages of the applied duty (lid-open check).
     duty_fast: Option<f32>,
     duty_slow: f32,
-    /// Samples the duty averages have run (they mean nothing before one slow time constant).
+    /// Samples the duty averages have run since the load reached its setpoint (they mean
+    /// nothing before one slow time constant).
     duty_n: u32,
     /// Samples since the applied duty was last strictly between 0 and 1.
     since_modulated: u32,
@@ -267,6 +281,8 @@ impl<C: Controller> Carrier<C> {
             history_head: 0,
             off_run: 0,
             on_run: 0,
+            on_start_c: 0.0,
+            unrequested_trip_s: None,
             req_off_run: 0,
             supply_cut: false,
             ssr_off_reported: false,
@@ -337,7 +353,9 @@ impl<C: Controller> Carrier<C> {
         let prev = self.last_raw_c;
         match (self.pending_step, prev) {
             (Some((before, step, n)), _) => {
-                if (raw - (before + step)).abs() <= 0.25 * step.abs() {
+                // Within a quarter of the step, and never looser than 0.5 °C: a burst of
+                // spikes tens of degrees off must not pass for a level that holds.
+                if (raw - (before + step)).abs() <= min_f32(0.25 * step.abs(), 0.5) {
                     let n = n.saturating_add(1);
                     if n >= self.cfg.offset_confirm_samples {
                         // Measured on this sample: the load itself has not moved measurably.
@@ -518,11 +536,18 @@ impl<C: Controller> Carrier<C> {
             if !self.freeze_guard && predicted <= self.cfg.freeze_cut_c {
                 self.freeze_guard = true;
                 emit(EventKind::FreezeGuardTripped);
-                // Falling fast although no cooling has been asked for a minute: only a shorted
-                // SSR does that (a coast after cooling stops is slowing down by then).
+                // Falling fast although no cooling has been asked for a minute, twice within
+                // half an hour: only a shorted SSR does that. Once is not enough: a light
+                // carrier pulled down from a cool ambient coasts that fast after cooling stops
+                // (the sensor lags the load by ≈ 50 s); the guard has opened the supply switch
+                // meanwhile, so a shorted SSR cannot cool until the second trip either.
                 if !self.supply_cut && self.req_off_run >= 6 && self.slope_c_per_s < -0.003 {
-                    self.supply_cut = true;
-                    emit(EventKind::SsrStuckOn);
+                    if self.unrequested_trip_s.is_some_and(|t0| t_s - t0 <= 1800.0) {
+                        self.supply_cut = true;
+                        emit(EventKind::SsrStuckOn);
+                    } else {
+                        self.unrequested_trip_s = Some(t_s);
+                    }
                 }
             } else if self.freeze_guard && temp_c >= self.cfg.freeze_release_c && predicted > self.cfg.freeze_cut_c {
                 self.freeze_guard = false;
@@ -546,7 +571,7 @@ impl<C: Controller> Carrier<C> {
             if !self.supply_cut && self.off_run >= self.cfg.stuck_on_samples {
                 if let (Some(t6), Some(t12)) = (ago(6), ago(12)) {
                     let (last, before) = (t6 - temp_c, t12 - t6);
-                    if last > self.cfg.stuck_on_drop_c && last >= 0.8 * before {
+                    if last > self.cfg.stuck_on_drop_c && last >= 0.95 * before {
                         self.supply_cut = true;
                         emit(EventKind::SsrStuckOn);
                     }
@@ -554,7 +579,11 @@ impl<C: Controller> Carrier<C> {
             }
             if !self.ssr_off_reported && self.on_run >= self.cfg.stuck_off_samples {
                 if let Some(past) = ago(self.cfg.stuck_off_samples as usize) {
-                    if temp_c - past > self.cfg.stuck_off_rise_c {
+                    let fast = temp_c - past > self.cfg.stuck_off_rise_c;
+                    let slow = self.on_run >= self.cfg.stuck_off_slow_samples
+                        && temp_c - self.on_start_c > self.cfg.stuck_off_slow_rise_c
+                        && temp_c > past;
+                    if fast || slow {
                         self.ssr_off_reported = true;
                         emit(EventKind::SsrStuckOff);
                     }
@@ -584,23 +613,33 @@ impl<C: Controller> Carrier<C> {
         // setpoint means a sudden heat load (a slow ambient swing moves both together, a
         // setpoint change or pull-down is not "holding").
         let (d, ts) = (duty.get(), self.cfg.ts_s);
-        let fast = self.duty_fast.map_or(d, |f| f + (d - f) * min_f32(ts / self.cfg.lid_fast_s, 1.0));
-        self.duty_slow = if self.duty_fast.is_some() {
-            self.duty_slow + (d - self.duty_slow) * min_f32(ts / self.cfg.lid_slow_s, 1.0)
-        } else {
-            d
-        };
-        self.duty_fast = Some(fast);
         // "Holding": the load reached this setpoint (no pull-down, no setpoint transient) at
-        // least one fast time constant ago, so the averages no longer carry the transient.
+        // least one fast time constant ago. The averages start afresh when a pull-down reaches
+        // the setpoint, so they never carry its full duty (which a 90 min average would still
+        // show at 23 % two hours later and hide a lid opening behind). A load that warms up to
+        // the setpoint (a cold ambient) keeps them: its zero duty is the holding duty until then.
         if (w - self.last_w).abs() > 0.01 || !self.last_w.is_finite() {
             self.reached_s = None;
         }
         self.last_w = w;
         if self.reached_s.is_none() && (temp_c - w).abs() < 0.3 {
             self.reached_s = Some(t_s);
+            if self.slope_c_per_s < 0.0 {
+                self.duty_n = 0;
+                self.duty_fast = None;
+            }
         }
+        // Exponential averages that begin as the running mean of the samples so far (a weight
+        // of at least 1/n), so a fresh start is not biased toward its first sample.
         self.duty_n = self.duty_n.saturating_add(1);
+        let first = 1.0 / self.duty_n as f32;
+        let fast = self.duty_fast.map_or(d, |f| f + (d - f) * max_f32(ts / self.cfg.lid_fast_s, first));
+        self.duty_slow = if self.duty_fast.is_some() {
+            self.duty_slow + (d - self.duty_slow) * max_f32(ts / self.cfg.lid_slow_s, first)
+        } else {
+            d
+        };
+        self.duty_fast = Some(fast);
         self.since_modulated = if d > 0.0 && d < 1.0 { 0 } else { self.since_modulated.saturating_add(1) };
         let averaged = self.duty_n as f32 * ts >= self.cfg.lid_slow_s;
         // A relay controller (On-Off: only 0 and 1 for the last hour) has a limit cycle whose
@@ -621,6 +660,9 @@ impl<C: Controller> Carrier<C> {
             self.lid_reported = false;
         }
         self.off_run = if duty.get() == 0.0 { self.off_run.saturating_add(1) } else { 0 };
+        if self.on_run == 0 && duty.get() >= 0.9 {
+            self.on_start_c = temp_c;
+        }
         self.on_run = if duty.get() >= 0.9 { self.on_run.saturating_add(1) } else { 0 };
         self.req_off_run = if requested <= 0.0 { self.req_off_run.saturating_add(1) } else { 0 };
 

@@ -45,6 +45,9 @@ pub struct KindFigures {
     /// Whether the library has a detector for it (missed detections of kinds without one are
     /// not mission failures; see `mission::detection`).
     pub detector: bool,
+    /// Of the missed ones, those the fault never showed in (a dead SSR during a cold spell
+    /// that never asked for cooling; see `mission::evaluate`): not failures.
+    pub not_observable: u64,
     /// Longest time from injection to detection, s.
     pub max_latency_s: Option<f64>,
 }
@@ -152,6 +155,8 @@ pub fn summarize(reports: &[MissionReport], controller: ControllerChoice, seed: 
             if let Some(at) = at {
                 k.detected += 1;
                 k.max_latency_s = Some(k.max_latency_s.map_or(at - t, |x: f64| x.max(at - t)));
+            } else if k.detector && !r.fault_detectable {
+                k.not_observable += 1;
             }
         }
         if !r.reasons.is_empty() {
@@ -165,7 +170,8 @@ pub fn summarize(reports: &[MissionReport], controller: ControllerChoice, seed: 
     }
     let faults_injected = by_kind.values().map(|k| k.injected).sum();
     let faults_detected = by_kind.values().map(|k| k.detected).sum();
-    let faults_missed_with_detector = by_kind.values().filter(|k| k.detector).map(|k| k.injected - k.detected).sum();
+    let faults_missed_with_detector =
+        by_kind.values().filter(|k| k.detector).map(|k| k.injected - k.detected - k.not_observable).sum();
     CampaignSummary {
         missions: reports.len() as u64,
         controller: format!("{controller:?}").to_lowercase(),
@@ -280,13 +286,14 @@ fn print_table(s: &CampaignSummary) {
     println!("| sensor spikes reported | {} of {} missions |", s.spikes_reported, s.spikes_injected);
     println!("| failing missions | {} |", s.failures.len());
     println!();
-    println!("| fault kind | injected | detected | detector in the library | worst latency (s) |");
-    println!("| --- | --- | --- | --- | --- |");
+    println!("| fault kind | injected | detected | never showed | detector in the library | worst latency (s) |");
+    println!("| --- | --- | --- | --- | --- | --- |");
     for (name, k) in &s.faults_by_kind {
         println!(
-            "| {name} | {} | {} | {} | {} |",
+            "| {name} | {} | {} | {} | {} | {} |",
             k.injected,
             k.detected,
+            k.not_observable,
             if k.detector { "yes" } else { "no" },
             k.max_latency_s.map_or("–".to_string(), |l| format!("{l:.0}"))
         );

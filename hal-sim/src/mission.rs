@@ -142,7 +142,9 @@ impl Mission {
         if let Some((tf, kind)) = hardware_fault {
             match kind {
                 Fault::LidOpen => changes.retain(|(t, c)| !(matches!(c, Change::ExtraHeat(_)) && *t >= tf)),
-                Fault::SupplySag => changes.retain(|(t, c)| !(matches!(c, Change::Supply(_)) && *t >= tf)),
+                // The hardware sag replaces the mission's own: one still under way at `tf`
+                // would already have been reported, leaving nothing new to detect.
+                Fault::SupplySag => changes.retain(|(_, c)| !matches!(c, Change::Supply(_))),
                 // A later spike fault would replace the sensor fault in the simulated front end.
                 Fault::SensorOpen | Fault::SensorShort | Fault::SensorStuck | Fault::SensorOffset
                     if spikes_s.is_some_and(|ts| ts >= tf) =>
@@ -323,7 +325,13 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
         let at = detected.iter().find(|d| d.t_s >= tf && accept(&d.kind)).map(|d| d.t_s);
         (fault_name(kind), tf, at)
     });
-    let fault_detectable = m.hardware_fault.is_some_and(|(_, k)| detection(k).1);
+    // A dead SSR shows only once cooling is needed: after a fault in a cold spell that never
+    // warms the load 1 °C past its setpoint there was nothing to see.
+    let fault_detectable = m.hardware_fault.is_some_and(|(tf, k)| {
+        detection(k).1
+            && (k != Fault::SsrStuckOff
+                || out.rows.iter().any(|r| r.t_s >= tf && r.true_temp_c > MISSION_SETPOINT_C + 1.0))
+    });
     let spikes =
         m.spikes_s.map(|ts0| (ts0, detected.iter().find(|d| d.t_s >= ts0 && d.kind == "sensor_spikes").map(|d| d.t_s)));
 

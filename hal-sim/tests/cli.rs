@@ -173,18 +173,28 @@ fn small_campaign_reports_the_spec_fields() {
 
 #[test]
 fn a_campaign_mission_replays_with_hter_sim() {
-    // Mission 230 (gpc) has a spurious ssr_stuck_on; use it: a replay must show the same event.
-    for (seed, controller) in [("230", "gpc"), ("7", "pi")] {
+    // Mission 116 with PI fails (it leaves 2–8 °C for ≈ 17 min); mission 115 carries a dead SSR
+    // at 61 071 s that the step reports. A replay must show what the campaign judged.
+    for (seed, controller) in [("116", "pi"), ("115", "gpc")] {
         let c = json(&["campaign", "--missions", "1", "--seed", seed, "--controller", controller, "--json"]);
         let s = json(&["sim", "--mission-seed", seed, "--controller", controller, "--json"]);
         assert_eq!(c["worst_min_c"].as_f64(), s["min_temp_c"].as_f64(), "{c}\n{s}");
         let again = json(&["sim", "--mission-seed", seed, "--controller", controller, "--json"]);
         assert_eq!(s, again);
-        if seed == "230" {
-            assert_eq!(c["failures"], serde_json::json!([230]), "{c}");
+        if seed == "116" {
+            assert_eq!(c["failures"], serde_json::json!([116]), "{c}");
             let replay = c["failure_details"][0]["replay"].as_str().unwrap();
-            assert_eq!(replay, "hter sim --mission-seed 230 --controller gpc --json");
-            assert_eq!(s["faults_detected"][0]["kind"], "ssr_stuck_on", "{s}");
+            assert_eq!(replay, "hter sim --mission-seed 116 --controller pi --json");
+            assert!(s["time_outside_2_8_s"].as_f64().unwrap() > 600.0, "{s}");
+        } else {
+            assert_eq!(c["failures"], serde_json::json!([]), "{c}");
+            assert_eq!(c["faults_by_kind"]["ssr-stuck-off"]["detected"], 1, "{c}");
+            let found = s["faults_detected"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|f| f["kind"] == "ssr_stuck_off" && f["t_s"].as_f64().unwrap() >= 61071.0);
+            assert!(found, "{s}");
         }
     }
 }
