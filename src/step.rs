@@ -222,6 +222,14 @@ pub struct Carrier<C: Controller> {
     history_head: usize,
     off_run: u16,
     on_run: u16,
+    /// The fall of the filtered temperature over the last sample, °C (positive falling).
+    last_drop_c: f32,
+    /// When the supply probe under way began.
+    probe: Option<f32>,
+    /// When the last supply probe began.
+    probe_s: Option<f32>,
+    /// When the freeze guard last tripped.
+    trip_s: Option<f32>,
     /// When the freeze guard last tripped with cooling not requested.
     unrequested_trip_s: Option<f32>,
     /// Filtered temperature when the current run of full duty began.
@@ -283,6 +291,10 @@ impl<C: Controller> Carrier<C> {
             on_run: 0,
             on_start_c: 0.0,
             unrequested_trip_s: None,
+            trip_s: None,
+            probe: None,
+            probe_s: None,
+            last_drop_c: 0.0,
             req_off_run: 0,
             supply_cut: false,
             ssr_off_reported: false,
@@ -524,7 +536,9 @@ impl<C: Controller> Carrier<C> {
 
         // 6: safety, independent of what the controller wanted.
         if self.sensor_fault.is_none() {
+            let mut drop_c = 0.0;
             if let Some(prev) = self.last_temp_c.filter(|p| p.is_finite()) {
+                drop_c = prev - temp_c;
                 let raw_slope = (temp_c - prev) / self.cfg.ts_s;
                 if raw_slope.is_finite() {
                     // Smoothed over ≈ 3 samples so one noisy reading cannot trip the guard.
@@ -535,21 +549,46 @@ impl<C: Controller> Carrier<C> {
             let predicted = temp_c + min_f32(self.slope_c_per_s, 0.0) * self.cfg.freeze_lookahead_s;
             if !self.freeze_guard && predicted <= self.cfg.freeze_cut_c {
                 self.freeze_guard = true;
+                self.trip_s = Some(t_s);
                 emit(EventKind::FreezeGuardTripped);
-                // Falling fast although no cooling has been asked for a minute, twice within
-                // half an hour: only a shorted SSR does that. Once is not enough: a light
-                // carrier pulled down from a cool ambient coasts that fast after cooling stops
-                // (the sensor lags the load by ≈ 50 s); the guard has opened the supply switch
-                // meanwhile, so a shorted SSR cannot cool until the second trip either.
-                if !self.supply_cut && self.req_off_run >= 6 && self.slope_c_per_s < -0.003 {
-                    if self.unrequested_trip_s.is_some_and(|t0| t_s - t0 <= 1800.0) {
+                // No cooling asked for a minute, and either falling fast without slowing down
+                // or tripping for the second time in half an hour: only a shorted SSR does
+                // that. A light carrier pulled down from a cool ambient coasts fast after
+                // cooling stops, seen through the ≈ 50 s sensor lag, but its fall slows down; a
+                // very light one fed by a shorted SSR falls faster every sample (`hter
+                // campaign` missions 11338 and 28631). In a hot ambient a shorted SSR only
+                // holds the load near its full-cooling floor (≈ 1.5 °C), and the guard trips,
+                // opens the supply, releases and trips again every ≈ 15 min (mission 27640); a
+                // cold ambient pulls the load down once, and needs hours to warm it past the
+                // release and back.
+                if !self.supply_cut && self.req_off_run >= 6 {
+                    let again = self.unrequested_trip_s.is_some_and(|t0| t_s - t0 <= 1800.0);
+                    if again || (self.slope_c_per_s < -0.003 && drop_c >= self.last_drop_c) {
                         self.supply_cut = true;
                         emit(EventKind::SsrStuckOn);
                     } else {
                         self.unrequested_trip_s = Some(t_s);
                     }
                 }
-            } else if self.freeze_guard && temp_c >= self.cfg.freeze_release_c && predicted > self.cfg.freeze_cut_c {
+            }
+            // The same fall between trips: within half an hour of a trip, nothing asked for a
+            // minute, yet falling more than 0.6 °C a minute and faster every sample. Catches a
+            // very light carrier on a shorted SSR after the guard has released, before the next
+            // trip comes too late (mission 28631). Not outside that window: the coast after a
+            // pull-down does the same for a minute or two on light carriers.
+            if !self.supply_cut
+                && self.trip_s.is_some_and(|t0| t_s - t0 <= 1800.0)
+                && self.req_off_run >= 6
+                && drop_c > 0.1
+                && drop_c >= self.last_drop_c
+                && self.slope_c_per_s < -0.003
+            {
+                self.supply_cut = true;
+                emit(EventKind::SsrStuckOn);
+            }
+            self.last_drop_c = drop_c;
+            // (Exclusive with a trip this sample: that needs `predicted` at or below the cut.)
+            if self.freeze_guard && temp_c >= self.cfg.freeze_release_c && predicted > self.cfg.freeze_cut_c {
                 self.freeze_guard = false;
                 emit(EventKind::FreezeGuardReleased);
             }
@@ -591,6 +630,41 @@ impl<C: Controller> Carrier<C> {
             }
             if self.on_run == 0 {
                 self.ssr_off_reported = false;
+            }
+            // Supply probe: a shorted SSR that holds the load below its setpoint at a cooling
+            // floor above the freeze guard (a hot day: full cooling barely wins) never trips
+            // the guard. Nothing asked for 10 min, 1 °C below the setpoint and still falling:
+            // open the supply switch for 5 min (harmless, no cooling is wanted). A shorted SSR
+            // stops cooling and the load turns up; a load falling toward a cold ambient does
+            // not notice. One probe an hour at most.
+            match self.probe {
+                Some(t0) => {
+                    // Turned up fast with the supply open: it was the supply cooling. A shorted
+                    // SSR's cold side warms the load by 0.2–0.4 °C in 30 s once it stops (the
+                    // hot side's heat flows back); a lid opening or a warmer ambient that
+                    // happens to coincide warms it by ≤ 0.1 °C in 30 s (`hter campaign`
+                    // missions 20217, 22550, 25800, 26642).
+                    if ago(3).is_some_and(|p| temp_c - p > 0.15) {
+                        self.probe = None;
+                        if !self.supply_cut {
+                            self.supply_cut = true;
+                            emit(EventKind::SsrStuckOn);
+                        }
+                    } else if self.req_off_run == 0 || t_s - t0 >= 300.0 {
+                        self.probe = None; // no verdict: cooling wanted again, or time is up
+                    }
+                }
+                None => {
+                    let idle = self.probe_s.is_none_or(|p| t_s - p >= 3600.0);
+                    if idle && !self.supply_cut && self.req_off_run >= 60 && temp_c < w - 1.0 {
+                        if let Some(past) = ago(30) {
+                            if past - temp_c > 0.05 {
+                                self.probe = Some(t_s);
+                                self.probe_s = Some(t_s);
+                            }
+                        }
+                    }
+                }
             }
         }
 
@@ -680,7 +754,7 @@ impl<C: Controller> Carrier<C> {
             // The supply switch also opens whenever the freeze guard holds cooling off: it costs
             // nothing then, and it is the only thing that stops a shorted SSR before the SSR
             // check has seen enough to be sure.
-            supply_enable: !(self.supply_cut || self.freeze_guard),
+            supply_enable: !(self.supply_cut || self.freeze_guard || self.probe.is_some()),
             mode,
             events,
             status,

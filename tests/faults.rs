@@ -110,11 +110,14 @@ fn an_open_ssr_is_detected() {
 /// light carrier's coast, seen through the sensor lag, tripping the freeze guard's shorted-SSR
 /// check), 11047 and 11205 (three spikes in a row taken for a sensor offset), 10805 (a lid
 /// opening hidden by the pull-down still in the duty averages), 257 and 925 (a dead SSR on a
-/// cool day). All must now pass.
+/// cool day), 28631 (a very light carrier on a shorted SSR cooled to −0.03 °C between two
+/// freeze-guard trips), 27640 (a shorted SSR holding the load at its 1.5 °C floor on a hot day,
+/// found by the supply probe), 22550 and 26642 (a lid opening during a probe taken for a
+/// shorted SSR). All must now pass.
 #[test]
 fn campaign_missions_that_once_failed_pass() {
     use hal_sim::mission::{evaluate, Mission};
-    for seed in [230, 588, 11338, 11047, 11205, 10805, 257, 925] {
+    for seed in [230, 588, 11338, 11047, 11205, 10805, 257, 925, 28631, 27640, 22550, 26642] {
         let m = Mission::generate(seed);
         let out = run(&m.options(ControllerSpec::new(ControllerChoice::Gpc))).unwrap();
         let r = evaluate(&m, &out);

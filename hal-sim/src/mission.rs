@@ -329,8 +329,13 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
     // warms the load 1 °C past its setpoint there was nothing to see.
     let fault_detectable = m.hardware_fault.is_some_and(|(tf, k)| {
         detection(k).1
-            && (k != Fault::SsrStuckOff
-                || out.rows.iter().any(|r| r.t_s >= tf && r.true_temp_c > MISSION_SETPOINT_C + 1.0))
+            && match k {
+                Fault::SsrStuckOff => out.rows.iter().any(|r| r.t_s >= tf && r.true_temp_c > MISSION_SETPOINT_C + 1.0),
+                // A shorted SSR shows only once less than full cooling is wanted: in a heat that
+                // needs full cooling and still leaves the load above its setpoint it never does.
+                Fault::SsrStuckOn => out.rows.iter().any(|r| r.t_s >= tf && r.true_temp_c < MISSION_SETPOINT_C - 1.0),
+                _ => true,
+            }
     });
     let spikes =
         m.spikes_s.map(|ts0| (ts0, detected.iter().find(|d| d.t_s >= ts0 && d.kind == "sensor_spikes").map(|d| d.t_s)));
