@@ -50,6 +50,41 @@ pub enum EventKind {
     AdaptiveFrozen,
     /// Self-tuning: no trusted model or the law failed; the fallback PI drives.
     FallbackEngaged,
+    /// The first sample after the MCU restarted, and why it restarted (the glue reads the
+    /// reset flags at boot and hands them to [`crate::step::Carrier::note_reset`]). A
+    /// brown-out or a watchdog bite means minutes of control and record were lost.
+    Restarted(crate::persist::ResetCause),
+}
+
+impl EventKind {
+    /// A stable number for the kind, for compact logs and checksums (the processor-in-the-loop
+    /// runner compares events by it).
+    pub fn code(self) -> u32 {
+        use crate::persist::ResetCause;
+        match self {
+            EventKind::SensorOpen => 0,
+            EventKind::SensorShort => 1,
+            EventKind::SensorOutOfRange => 2,
+            EventKind::SensorStuck => 3,
+            EventKind::SensorSpikes => 4,
+            EventKind::SsrStuckOn => 5,
+            EventKind::SsrStuckOff => 6,
+            EventKind::SensorOffset => 7,
+            EventKind::SupplySag => 8,
+            EventKind::LidOpen => 9,
+            EventKind::SensorRecovered => 10,
+            EventKind::FreezeGuardTripped => 11,
+            EventKind::FreezeGuardReleased => 12,
+            EventKind::SetpointClamped => 13,
+            EventKind::ControllerNonFinite => 14,
+            EventKind::AdaptiveEngaged => 15,
+            EventKind::AdaptiveFrozen => 16,
+            EventKind::FallbackEngaged => 17,
+            EventKind::Restarted(ResetCause::Watchdog) => 18,
+            EventKind::Restarted(ResetCause::BrownOut) => 19,
+            EventKind::Restarted(ResetCause::Other) => 20,
+        }
+    }
 }
 
 /// One timestamped event.
@@ -109,6 +144,39 @@ impl Events {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn event_codes_are_unique() {
+        use crate::persist::ResetCause;
+        let all = [
+            EventKind::SensorOpen,
+            EventKind::SensorShort,
+            EventKind::SensorOutOfRange,
+            EventKind::SensorStuck,
+            EventKind::SensorSpikes,
+            EventKind::SsrStuckOn,
+            EventKind::SsrStuckOff,
+            EventKind::SensorOffset,
+            EventKind::SupplySag,
+            EventKind::LidOpen,
+            EventKind::SensorRecovered,
+            EventKind::FreezeGuardTripped,
+            EventKind::FreezeGuardReleased,
+            EventKind::SetpointClamped,
+            EventKind::ControllerNonFinite,
+            EventKind::AdaptiveEngaged,
+            EventKind::AdaptiveFrozen,
+            EventKind::FallbackEngaged,
+            EventKind::Restarted(ResetCause::Watchdog),
+            EventKind::Restarted(ResetCause::BrownOut),
+            EventKind::Restarted(ResetCause::Other),
+        ];
+        for (i, a) in all.iter().enumerate() {
+            for b in &all[i + 1..] {
+                assert_ne!(a.code(), b.code(), "{a:?} {b:?}");
+            }
+        }
+    }
 
     #[test]
     fn overflow_is_counted_not_lost_silently() {

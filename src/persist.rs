@@ -291,10 +291,30 @@ impl CalibrationRecord {
 pub enum ResetCause {
     /// Independent or window watchdog.
     Watchdog,
-    /// Brown-out (supply dipped below the BOR threshold).
+    /// The supply fell below the brown-out threshold: a brown-out or a power cycle. The
+    /// STM32L4 sets the same flag for both (its BOR is the power-on reset), and for the
+    /// vaccines they are the same event: RAM, and the record of those minutes, are lost.
     BrownOut,
-    /// Power-on, pin, software or anything else.
+    /// Pin (NRST, the debugger), software or anything else.
     Other,
+}
+
+impl ResetCause {
+    /// The cause from the STM32L4's `RCC_CSR` (RM0351 §6.4.29), read at boot before the
+    /// firmware clears the flags. Several flags can be set at once (a power-on sets BORRSTF and
+    /// PINRSTF); the watchdog wins over the supply, the supply over the pin.
+    pub fn from_stm32l4_csr(csr: u32) -> ResetCause {
+        const IWDGRSTF: u32 = 1 << 29;
+        const WWDGRSTF: u32 = 1 << 30;
+        const BORRSTF: u32 = 1 << 27;
+        if csr & (IWDGRSTF | WWDGRSTF) != 0 {
+            ResetCause::Watchdog
+        } else if csr & BORRSTF != 0 {
+            ResetCause::BrownOut
+        } else {
+            ResetCause::Other
+        }
+    }
 }
 
 /// Excursions kept in a [`HistoryRecord`] (the newest).
@@ -515,6 +535,19 @@ mod tests {
 
     fn cfg() -> AdaptiveConfig {
         AdaptiveConfig::default_for(Law::Gpc(GpcConfig::DEFAULT))
+    }
+
+    /// RCC_CSR values as RM0351 documents them: the reset value after a power-on (BORRSTF and
+    /// PINRSTF set, MSI range bits 0x600), a watchdog bite (IWDGRSTF and PINRSTF: the
+    /// watchdog drives NRST low), NRST alone, a software reset (SFTRSTF and PINRSTF).
+    #[test]
+    fn reset_cause_from_the_rcc_flags() {
+        assert_eq!(ResetCause::from_stm32l4_csr(0x0C00_0600), ResetCause::BrownOut);
+        assert_eq!(ResetCause::from_stm32l4_csr(0x2400_0600), ResetCause::Watchdog);
+        assert_eq!(ResetCause::from_stm32l4_csr(0x4400_0600), ResetCause::Watchdog);
+        assert_eq!(ResetCause::from_stm32l4_csr(0x0400_0600), ResetCause::Other);
+        assert_eq!(ResetCause::from_stm32l4_csr(0x1400_0600), ResetCause::Other);
+        assert_eq!(ResetCause::from_stm32l4_csr(0), ResetCause::Other);
     }
 
     #[test]

@@ -224,6 +224,8 @@ pub struct Carrier<C: Controller> {
     on_run: u16,
     /// The fall of the filtered temperature over the last sample, °C (positive falling).
     last_drop_c: f32,
+    /// A restart to report with the next sample.
+    pending_reset: Option<crate::persist::ResetCause>,
     /// When the supply probe under way began.
     probe: Option<f32>,
     /// When the last supply probe began.
@@ -294,6 +296,7 @@ impl<C: Controller> Carrier<C> {
             trip_s: None,
             probe: None,
             probe_s: None,
+            pending_reset: None,
             last_drop_c: 0.0,
             req_off_run: 0,
             supply_cut: false,
@@ -313,6 +316,12 @@ impl<C: Controller> Carrier<C> {
             last_w: f32::NAN,
             reached_s: None,
         }
+    }
+
+    /// Tells the step why the MCU (re)started; the next sample reports it as
+    /// [`EventKind::Restarted`], so the log and the cold-chain record show the gap.
+    pub fn note_reset(&mut self, cause: crate::persist::ResetCause) {
+        self.pending_reset = Some(cause);
     }
 
     /// Gives the step the measured supply voltage of the Peltier modules, V, for the next
@@ -402,6 +411,9 @@ impl<C: Controller> Carrier<C> {
     fn run(&mut self, t_s: f32, raw: Result<Celsius, EventKind>, setpoint_c: f32, sensor: bool) -> StepOutput {
         let mut events = Events::default();
         let mut emit = |kind| events.push(Event { t_s, kind });
+        if let Some(cause) = self.pending_reset.take() {
+            emit(EventKind::Restarted(cause));
+        }
 
         // 1–3: measurement chain.
         match (raw, self.sensor_fault) {

@@ -34,6 +34,7 @@ use embassy_time::{Duration, Instant, Ticker};
 use hter::control::{Controller, ControllerStatus};
 use hter::event::Event;
 use hter::hal::{apply_duty, RtdSampler};
+use hter::persist::ResetCause;
 use hter::step::{Carrier, Mode, StepInput};
 use hter::units::Duty;
 use {defmt_rtt as _, panic_probe as _};
@@ -71,7 +72,17 @@ static EVENTS: Channel<CriticalSectionRawMutex, Event, 16> = Channel::new();
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
+    // Why we (re)started, before anything else; the flags are cleared so the next boot
+    // reads its own. The step reports it with the first sample (a brown-out or watchdog bite
+    // shows in the log and the cold-chain record as a gap, not as silence).
+    let reset = {
+        let rcc = embassy_stm32::pac::RCC;
+        let csr = rcc.csr().read().0;
+        rcc.csr().modify(|w| w.set_rmvf(true));
+        ResetCause::from_stm32l4_csr(csr)
+    };
     let b = board::init();
+    info!("reset cause: {}", reset);
     info!(
         "hter firmware {}: Ts = {} s, setpoint {} °C, SSR PWM {} Hz ({} ticks)",
         env!("CARGO_PKG_VERSION"),
@@ -97,7 +108,7 @@ async fn main(spawner: Spawner) {
     let mut wdg = IndependentWatchdog::new(b.iwdg, config::WATCHDOG_TIMEOUT_US);
     wdg.unleash();
     spawner.spawn(sample(b.rtd).unwrap());
-    spawner.spawn(control(wdg, seed).unwrap());
+    spawner.spawn(control(wdg, seed, reset).unwrap());
     spawner.spawn(actuate(b.ssr, b.supply_enable, b.led).unwrap());
     spawner.spawn(telemetry().unwrap());
 }
@@ -120,8 +131,10 @@ async fn sample(mut rtd: board::RtdAdc) {
 async fn control(
     mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
     seed: config::ControllerSeed,
+    reset: ResetCause,
 ) {
     let mut carrier = Carrier::new(config::CARRIER, config::controller(seed));
+    carrier.note_reset(reset);
     info!("controller: {}", carrier.controller().name());
     #[cfg(feature = "adaptive")]
     let mut trusted_samples = 0u32;

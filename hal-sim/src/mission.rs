@@ -206,9 +206,9 @@ pub fn fault_name(f: Fault) -> &'static str {
 /// Every kind but `brownout` has a detector in the step's supervisor (`src/step.rs`):
 /// `sensor_offset` (a step of the reading that holds), `supply_sag` (the measured module
 /// supply), `lid_open` (the holding duty jumps; no check for the relay On-Off controller, whose
-/// limit cycle hides it — `ssr_stuck_off` also counts, "the load warms at full duty"). A
-/// brownout restarts the MCU; the simulated step has no reset-cause input, so it is reported per
-/// kind but is not a failure when missed.
+/// limit cycle hides it — `ssr_stuck_off` also counts, "the load warms at full duty"),
+/// `restarted_brownout` (the reset flags the firmware reads at boot, handed to the step by
+/// `Carrier::note_reset`, as the simulator does when it restarts the step).
 pub fn detection(f: Fault) -> (fn(&str) -> bool, bool) {
     match f {
         Fault::SensorOpen => (|k| k == "sensor_open" || k == "sensor_out_of_range", true),
@@ -219,7 +219,7 @@ pub fn detection(f: Fault) -> (fn(&str) -> bool, bool) {
         Fault::SensorOffset => (|k| k == "sensor_offset", true),
         Fault::SupplySag => (|k| k == "supply_sag", true),
         Fault::LidOpen => (|k| k == "lid_open" || k == "ssr_stuck_off", true),
-        Fault::Brownout => (|k| k.contains("brownout") || k.contains("reset"), false),
+        Fault::Brownout => (|k| k == "restarted_brownout", true),
         Fault::SensorSpikes => (|k| k == "sensor_spikes", false),
     }
 }

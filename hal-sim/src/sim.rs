@@ -21,6 +21,7 @@ use hter::event::EventKind;
 use hter::hal::{apply_duty, RtdSampler};
 use hter::ident::prbs::PrbsConfig;
 use hter::persist::ModelRecord;
+use hter::persist::ResetCause;
 use hter::step::{Carrier, CarrierConfig, Mode, StepInput, StepOutput};
 use hter::units::Celsius;
 
@@ -289,6 +290,9 @@ pub fn event_name(k: EventKind) -> &'static str {
         EventKind::AdaptiveEngaged => "adaptive_engaged",
         EventKind::AdaptiveFrozen => "adaptive_frozen",
         EventKind::FallbackEngaged => "fallback_engaged",
+        EventKind::Restarted(ResetCause::BrownOut) => "restarted_brownout",
+        EventKind::Restarted(ResetCause::Watchdog) => "restarted_watchdog",
+        EventKind::Restarted(ResetCause::Other) => "restarted",
     }
 }
 
@@ -305,6 +309,7 @@ fn is_fault(k: EventKind) -> bool {
             | EventKind::SensorOffset
             | EventKind::SupplySag
             | EventKind::LidOpen
+            | EventKind::Restarted(ResetCause::BrownOut | ResetCause::Watchdog)
     )
 }
 
@@ -593,6 +598,8 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
                 if f == Fault::Brownout {
                     // RAM lost: a fresh step, restarted from what flash holds.
                     carrier = Carrier::new(cfg, make_controller(persisted.as_ref())?);
+                    // What the firmware reads from RCC_CSR at boot after a brown-out.
+                    carrier.note_reset(ResetCause::BrownOut);
                     since_save = 0;
                 } else {
                     rig.inject(f);

@@ -95,7 +95,7 @@ pub const CODE_DROPPED: u32 = 0x200;
 /// `(start_s bits)` folded in as a second pair with the same code.
 pub fn event_words(out: &StepOutput, raised: &Raised, mut push: impl FnMut(u32, u32)) {
     for e in out.events.iter() {
-        push(e.kind as u32, e.t_s.to_bits());
+        push(e.kind.code(), e.t_s.to_bits());
     }
     if out.events.dropped() > 0 {
         push(CODE_DROPPED, u32::from(out.events.dropped()));
