@@ -83,6 +83,8 @@ pub struct CampaignSummary {
     pub judged_hours: f64,
     /// Judged time outside 2–8 °C, min.
     pub outside_minutes: f64,
+    /// Of which above 8 °C after 30 min of full cooling (the carrier's capacity), min.
+    pub capacity_minutes: f64,
     /// Cold-ambient time after pull-down and before any fault (not judged), min.
     pub cold_ambient_minutes: f64,
     /// Of which outside 2–8 °C (below 2 °C: the carrier cannot heat), min.
@@ -181,6 +183,7 @@ pub fn summarize(reports: &[MissionReport], controller: ControllerChoice, seed: 
         fraction_outside_2_8: if judged_s > 0.0 { outside_s / judged_s } else { 0.0 },
         judged_hours: judged_s / 3600.0,
         outside_minutes: outside_s / 60.0,
+        capacity_minutes: sum(&|r| r.capacity_s) / 60.0,
         cold_ambient_minutes: sum(&|r| r.cold_ambient_s) / 60.0,
         cold_ambient_outside_minutes: sum(&|r| r.cold_outside_s) / 60.0,
         cold_ambient_missions: reports.iter().filter(|r| r.cold_ambient_s > 0.0).count() as u64,
@@ -266,10 +269,11 @@ fn print_table(s: &CampaignSummary) {
     println!("| lowest load temperature | {:.2} °C |", s.worst_min_c);
     println!("| highest load temperature after pull-down, before faults | {:.2} °C |", s.worst_max_c);
     println!(
-        "| outside 2–8 °C after pull-down, before faults | {:.4} % ({:.1} min of {:.0} h) |",
+        "| outside 2–8 °C after pull-down, before faults | {:.4} % ({:.1} min of {:.0} h; {:.1} min above 8 °C at full cooling for 30 min: capacity) |",
         100.0 * s.fraction_outside_2_8,
         s.outside_minutes,
-        s.judged_hours
+        s.judged_hours,
+        s.capacity_minutes
     );
     println!(
         "| cold ambient (< {} °C, not judged) | {:.0} min in {} missions, {:.0} min of it outside 2–8 °C |",

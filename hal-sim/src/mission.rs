@@ -242,7 +242,10 @@ fn is_warning(kind: &str) -> bool {
 ///   (a false `ssr_stuck_on` latches the modules' supply off for the rest of the mission;
 ///   `ssr_stuck_off` without a fault is the step warning that the load warms at full duty,
 ///   e.g. during a lid opening, and changes nothing in the control: reported, not a failure),
-///   or the judged window has more than [`OUTSIDE_TOLERANCE_S`] outside 2–8 °C, or the
+///   or the judged window has more than [`OUTSIDE_TOLERANCE_S`] outside 2–8 °C not counting
+///   time above 8 °C after 30 min of full cooling (the carrier's capacity: a randomized
+///   carrier at 40 °C may not hold 8 °C with any controller; that time still counts in the
+///   campaign's fraction outside 2–8 °C and is reported as `capacity_minutes`), or the
 ///   pull-down never reaches 2–8 °C (outside cold ambient).
 #[derive(Clone, Debug, Serialize)]
 pub struct MissionReport {
@@ -254,6 +257,9 @@ pub struct MissionReport {
     pub judged_s: f64,
     /// Time outside 2–8 °C in the judged window, s.
     pub outside_s: f64,
+    /// Of `outside_s`, the time above 8 °C after at least 30 min of full cooling: the
+    /// carrier's capacity, not its control (no controller can do better there).
+    pub capacity_s: f64,
     /// Cold-ambient time after pull-down and before any hardware fault, s.
     pub cold_ambient_s: f64,
     /// Of which outside 2–8 °C, s.
@@ -284,6 +290,8 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
     let mut freeze_s = 0.0;
     let mut judged_s = 0.0;
     let mut outside_s = 0.0;
+    let mut capacity_s = 0.0;
+    let mut full_run = 0u32;
     let mut cold_s = 0.0;
     let mut cold_outside_s = 0.0;
     let mut pulldown_s = None;
@@ -292,6 +300,7 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
     let mut last_cold = f64::NEG_INFINITY;
     for r in &out.rows {
         let t = r.true_temp_c;
+        full_run = if r.duty >= 0.99 { full_run + 1 } else { 0 };
         min_c = min_c.min(t);
         if t < 0.0 {
             freeze_s += ts;
@@ -316,6 +325,9 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
         judged_s += ts;
         if !inside {
             outside_s += ts;
+            if t > 8.0 && f64::from(full_run) * ts >= 1800.0 {
+                capacity_s += ts;
+            }
         }
         max_judged_c = Some(max_judged_c.map_or(t, |x| x.max(t)));
     }
@@ -362,9 +374,11 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
             reasons.push(format!("{name} at {tf:.0} s not detected"));
         }
     }
-    if outside_s > OUTSIDE_TOLERANCE_S {
-        reasons
-            .push(format!("{:.0} s outside 2–8 °C after pull-down (tolerance {OUTSIDE_TOLERANCE_S:.0} s)", outside_s));
+    if outside_s - capacity_s > OUTSIDE_TOLERANCE_S {
+        reasons.push(format!(
+            "{:.0} s outside 2–8 °C after pull-down, {:.0} s of it at the carrier's capacity (tolerance {OUTSIDE_TOLERANCE_S:.0} s)",
+            outside_s, capacity_s
+        ));
     }
     if pulldown_s.is_none() && m.ambient0_c >= COLD_AMBIENT_C && t_fault > 4.0 * 3600.0 {
         reasons.push("pull-down never reached 2–8 °C".into());
@@ -374,6 +388,7 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
         freeze_s,
         judged_s,
         outside_s,
+        capacity_s,
         cold_ambient_s: cold_s,
         cold_outside_s,
         pulldown_s,
