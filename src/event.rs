@@ -19,7 +19,8 @@ pub enum EventKind {
     /// contact); each spike is ignored and control continues on the filtered value.
     SensorSpikes,
     /// The load keeps cooling although the SSR has been commanded off for minutes: the SSR is
-    /// shorted. The supply-enable switch is opened (latched until reset).
+    /// shorted. Until reset the step limps home: the supply-enable switch does the On-Off
+    /// control the SSR no longer can ([`crate::step::Mode::LimpHome`]).
     SsrStuckOn,
     /// The load warms although the SSR has been commanded fully on for minutes: the SSR or the
     /// modules are open, or the cabinet is open.

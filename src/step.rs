@@ -175,6 +175,9 @@ pub enum Mode {
     SensorFault,
     /// The freeze guard holds cooling off.
     FreezeGuard,
+    /// The SSR was found shorted: cooling is switched On-Off through the supply-enable switch
+    /// (full cooling above setpoint + 1 °C until 0.5 °C below it), the controller is idle.
+    LimpHome,
 }
 
 /// One sample's output.
@@ -224,6 +227,8 @@ pub struct Carrier<C: Controller> {
     on_run: u16,
     /// The fall of the filtered temperature over the last sample, °C (positive falling).
     last_drop_c: f32,
+    /// Limp home: whether the supply is switched on now.
+    limp_on: bool,
     /// A restart to report with the next sample.
     pending_reset: Option<crate::persist::ResetCause>,
     /// When the supply probe under way began.
@@ -297,6 +302,7 @@ impl<C: Controller> Carrier<C> {
             probe: None,
             probe_s: None,
             pending_reset: None,
+            limp_on: false,
             last_drop_c: 0.0,
             req_off_run: 0,
             supply_cut: false,
@@ -684,16 +690,31 @@ impl<C: Controller> Carrier<C> {
             Mode::SensorFault
         } else if self.freeze_guard {
             Mode::FreezeGuard
+        } else if self.supply_cut {
+            Mode::LimpHome
         } else {
             Mode::Normal
         };
         if mode != Mode::Normal {
             duty = Duty::OFF;
         }
-
-        if self.supply_cut {
-            duty = Duty::OFF;
+        if mode == Mode::LimpHome {
+            // Limp home after a shorted SSR: On-Off through the supply switch (with the SSR
+            // commanded alike, in case the short was a false alarm), on 1 °C above the setpoint
+            // and off 0.5 °C below it (the coast after full cooling stops carries the load
+            // ≈ 1 °C further; the freeze guard still cuts). Cooling that cannot be modulated
+            // still keeps vaccines in 2–8 °C, where a latched-off supply would let them warm
+            // to the ambient.
+            if temp_c >= w + 1.0 {
+                self.limp_on = true;
+            } else if temp_c <= w - 0.5 {
+                self.limp_on = false;
+            }
+            if self.limp_on {
+                duty = Duty::FULL;
+            }
         }
+
         // Lid open: the duty it takes to hold the setpoint jumps. Two averages of the applied
         // duty; the fast one running well above the slow one while the load is held near its
         // setpoint means a sudden heat load (a slow ambient swing moves both together, a
@@ -766,7 +787,13 @@ impl<C: Controller> Carrier<C> {
             // The supply switch also opens whenever the freeze guard holds cooling off: it costs
             // nothing then, and it is the only thing that stops a shorted SSR before the SSR
             // check has seen enough to be sure.
-            supply_enable: !(self.supply_cut || self.freeze_guard || self.probe.is_some()),
+            supply_enable: if self.supply_cut {
+                mode == Mode::LimpHome && self.limp_on
+            } else {
+                // No cooling at all without a trustworthy reading either: a shorted SSR must
+                // not cool blind.
+                !(self.freeze_guard || self.probe.is_some() || mode == Mode::SensorFault)
+            },
             mode,
             events,
             status,

@@ -91,10 +91,22 @@ fn ten_million_arbitrary_samples_through_every_controller() {
             let d = out.duty.get();
             assert!(d.is_finite() && (0.0..=1.0).contains(&d), "{choice:?} sample {i}: duty {d}");
             assert!((2.0..=8.0).contains(&out.setpoint_c.0), "{choice:?} sample {i}: setpoint {:?}", out.setpoint_c);
-            if out.mode == Mode::Normal {
-                assert!(out.temp_c.0.is_finite(), "{choice:?} sample {i}: temperature {:?}", out.temp_c);
-            } else {
-                assert_eq!(d, 0.0, "{choice:?} sample {i}: cooling in {:?}", out.mode);
+            match out.mode {
+                Mode::Normal => {
+                    assert!(out.temp_c.0.is_finite(), "{choice:?} sample {i}: temperature {:?}", out.temp_c);
+                }
+                // After a (fuzzed) shorted-SSR verdict: On-Off through the supply switch, the
+                // SSR commanded alike, on a finite temperature.
+                Mode::LimpHome => {
+                    assert!(out.temp_c.0.is_finite(), "{choice:?} sample {i}: temperature {:?}", out.temp_c);
+                    assert!(d == 0.0 || d == 1.0, "{choice:?} sample {i}: duty {d} in limp-home");
+                    assert_eq!(out.supply_enable, d == 1.0, "{choice:?} sample {i}");
+                }
+                // Sensor fault, freeze guard: no cooling at all, the supply switch open too.
+                _ => {
+                    assert_eq!(d, 0.0, "{choice:?} sample {i}: cooling in {:?}", out.mode);
+                    assert!(!out.supply_enable, "{choice:?} sample {i}: supply on in {:?}", out.mode);
+                }
             }
             total += 1;
         }

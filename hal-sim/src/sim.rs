@@ -266,6 +266,7 @@ fn mode_name(m: Mode) -> &'static str {
         Mode::Normal => "normal",
         Mode::SensorFault => "sensor_fault",
         Mode::FreezeGuard => "freeze_guard",
+        Mode::LimpHome => "limp_home",
     }
 }
 
