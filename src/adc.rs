@@ -14,6 +14,23 @@
 //!
 //! An open RTD drives the amplifier to its rail (counts at full scale); a shorted one reads the
 //! lead resistance only, far below any plausible temperature.
+//!
+//! ## Forming the ratio on the STM32L476RG
+//! In the LQFP64 package of the reference board the ADC's VREF+ is bonded to VDDA, so the
+//! reference-resistor voltage cannot be the converter's reference. The board converts both
+//! voltages against VDDA instead — the amplified RTD voltage `s = gain · I · R_rtd / VDDA` and
+//! the reference-resistor voltage `r = I · R_ref / VDDA`, each in 16-bit counts — and
+//! [`ratiometric_counts`] forms `full_scale · s / r`, the counts of the equation above: VDDA
+//! and the excitation current I cancel as they would with a true ratiometric converter. With
+//! 1 mA through 2 kΩ (r ≈ 2.0 V ≈ 39 700 counts of 3.3 V) one count of the RTD conversion is
+//! 1.65 counts of the ratio, 3.4 mΩ ≈ 0.009 °C: the resolution on the board (see
+//! `firmware/src/board.rs`), within the 0.02 °C target. The simulator generates the ratio
+//! directly.
+//!
+//! ## Supply voltage
+//! [`SupplySense`] turns a divided conversion of the modules' supply into volts, with VDDA
+//! measured against the MCU's factory-calibrated internal reference (VREFINT), so the reading
+//! does not depend on the 3.3 V regulator's tolerance.
 
 use crate::units::Ohms;
 
@@ -77,9 +94,95 @@ impl AdcFrontEnd {
     }
 }
 
+/// The 16-bit ratio `full_scale · signal / reference` of two conversions of the same excitation
+/// (see the module docs), saturated at `full_scale`. A missing reference (an open reference
+/// resistor or no excitation: `reference` = 0) gives `full_scale`, which [`AdcFrontEnd::ohms`]
+/// reports as an open sensor.
+pub fn ratiometric_counts(signal: u32, reference: u32, full_scale: u32) -> u32 {
+    if reference == 0 {
+        return full_scale;
+    }
+    let ratio = u64::from(full_scale) * u64::from(signal) / u64::from(reference);
+    u32::try_from(ratio).map_or(full_scale, |r| r.min(full_scale))
+}
+
+/// Measurement of the Peltier modules' supply through a resistive divider, with VDDA taken from
+/// the internal reference (RM0351 §16.4.34: VDDA = 3.0 V · VREFINT_CAL / VREFINT_DATA, with
+/// VREFINT_CAL the 12-bit conversion of VREFINT at VDDA = 3.0 V stored in system memory).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SupplySense {
+    /// Divider ratio (R_top + R_bottom) / R_bottom.
+    pub divider: f32,
+    /// Full scale of the conversions handed in, counts (65 520 for 12-bit × 256 >> 4).
+    pub full_scale_counts: u32,
+    /// VDDA at which VREFINT_CAL was measured, V (3.0 on the STM32L4).
+    pub vrefint_cal_vdda_v: f32,
+    /// Full scale of VREFINT_CAL, counts (12-bit: 4095).
+    pub vrefint_cal_full_scale: u32,
+}
+
+impl SupplySense {
+    /// The reference board: 47 kΩ over 10 kΩ (12 V → 2.1 V; up to 18.8 V before the ADC
+    /// saturates), conversions oversampled to 16 bits as the RTD's.
+    pub const DEFAULT: SupplySense =
+        SupplySense { divider: 5.7, full_scale_counts: 65_520, vrefint_cal_vdda_v: 3.0, vrefint_cal_full_scale: 4095 };
+
+    /// The supply, V, from the divided conversion `supply` and the conversion `vrefint` of the
+    /// internal reference (same oversampling), given the factory `vrefint_cal`. `None` when a
+    /// conversion or the calibration word is 0 (no reference, a blank calibration): the
+    /// supply check then stays off rather than report a made-up voltage.
+    pub fn volts(&self, supply: u32, vrefint: u32, vrefint_cal: u16) -> Option<f32> {
+        if vrefint == 0 || vrefint_cal == 0 || self.full_scale_counts == 0 || self.vrefint_cal_full_scale == 0 {
+            return None;
+        }
+        // VDDA from VREFINT, in the units of `vrefint` (the calibration word is 12-bit).
+        let scale = self.full_scale_counts as f32 / self.vrefint_cal_full_scale as f32;
+        let vdda = self.vrefint_cal_vdda_v * f32::from(vrefint_cal) * scale / vrefint as f32;
+        let v = self.divider * vdda * supply as f32 / self.full_scale_counts as f32;
+        v.is_finite().then_some(v)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ratio_of_two_conversions_is_the_front_end_counts() {
+        let fe = AdcFrontEnd::DEFAULT;
+        // 1 mA through a Pt100 at 4 °C (101.56 Ω) and 2 kΩ, gain 15, VDDA 3.3 V, 16-bit.
+        let to_counts = |v: f64| (v / 3.3 * 65_535.0).round() as u32;
+        let (s, r) = (to_counts(15.0 * 1e-3 * 101.56), to_counts(1e-3 * 2000.0));
+        let c = ratiometric_counts(s, r, fe.full_scale_counts);
+        let ohms = fe.ohms(c).unwrap().0;
+        // Quantisation of the two conversions: within 2 counts of the RTD conversion.
+        assert!((ohms - 101.56).abs() < 2.0 * 3.3 / 65_535.0 / 15.0 / 1e-3, "{ohms}");
+        // The same at another VDDA and excitation: both cancel.
+        let to_counts_28 = |v: f64| (v / 2.8 * 65_535.0).round() as u32;
+        let c2 = ratiometric_counts(to_counts_28(15.0 * 0.9e-3 * 101.56), to_counts_28(0.9e-3 * 2000.0), 65_535);
+        assert!((fe.ohms(c2).unwrap().0 - 101.56).abs() < 0.01);
+        // No reference, or a signal beyond it: full scale, an open sensor.
+        assert_eq!(ratiometric_counts(30_000, 0, 65_535), 65_535);
+        assert_eq!(ratiometric_counts(0, 0, 65_535), 65_535);
+        assert_eq!(fe.ohms(ratiometric_counts(65_535, 20_000, 65_535)), Err(AdcError::Open));
+        assert_eq!(ratiometric_counts(u32::MAX, 1, 65_535), 65_535);
+    }
+
+    #[test]
+    fn supply_volts_from_the_divider_and_vrefint() {
+        let s = SupplySense::DEFAULT;
+        // A typical VREFINT_CAL (1.212 V at 3.0 V: 1655 of 4095); VDDA really 3.28 V.
+        let (cal, vdda) = (1655u16, 3.28f64);
+        let vref_v = 3.0 * f64::from(cal) / 4095.0;
+        let conv = |v: f64| (v / vdda * 65_520.0).round() as u32;
+        for supply in [9.0f64, 10.8, 12.0, 13.8] {
+            let v = s.volts(conv(supply / 5.7), conv(vref_v), cal).unwrap();
+            assert!((f64::from(v) - supply).abs() < 0.01, "{supply} V read as {v}");
+        }
+        assert_eq!(s.volts(30_000, 0, cal), None);
+        assert_eq!(s.volts(30_000, 20_000, 0), None);
+    }
 
     #[test]
     fn counts_to_ohms_round_trip_and_resolution() {
