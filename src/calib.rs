@@ -47,21 +47,23 @@ impl TwoPoint {
     pub const IDENTITY: TwoPoint = TwoPoint { gain: 1.0, offset_c: 0.0 };
 
     /// Fits the line through (measured, reference) at the ice bath and at a second point.
-    pub fn from_points(
+    /// A `const fn`, so a board's configuration can hold its calibration as a constant that is
+    /// checked when the firmware compiles (`firmware/src/config.rs`).
+    pub const fn from_points(
         measured_ice: Celsius,
         reference_ice: Celsius,
         measured_hot: Celsius,
         reference_hot: Celsius,
     ) -> Result<TwoPoint, CalError> {
         let (m0, r0, m1, r1) = (measured_ice.0, reference_ice.0, measured_hot.0, reference_hot.0);
-        if ![m0, r0, m1, r1].iter().all(|x| x.is_finite()) {
+        if !(m0.is_finite() && r0.is_finite() && m1.is_finite() && r1.is_finite()) {
             return Err(CalError::NonFinite);
         }
         if (m1 - m0).abs() < 1.0 {
             return Err(CalError::PointsTooClose);
         }
         let gain = (r1 - r0) / (m1 - m0);
-        if !(0.9..=1.1).contains(&gain) {
+        if !(gain >= 0.9 && gain <= 1.1) {
             return Err(CalError::ImplausibleGain);
         }
         Ok(TwoPoint { gain, offset_c: r0 - gain * m0 })

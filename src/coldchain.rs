@@ -280,6 +280,11 @@ impl ColdChainMonitor {
         self.last.map(|_| self.max_c)
     }
 
+    /// Time covered by the record (first to last sample), s: the excursions' clock.
+    pub fn recorded_s(&self) -> f32 {
+        self.elapsed_s
+    }
+
     /// Time below +2 °C, s.
     pub fn time_below_2_s(&self) -> f32 {
         self.below_2_s

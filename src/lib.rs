@@ -15,6 +15,8 @@
 //! - [`event`]: timestamped events the step reports (sensor faults, guard actions, mode changes).
 //! - [`hal`]: the small hardware seams the firmware and `hal-sim` implement.
 //! - [`step`]: the per-sample application step.
+//! - [`coldchain`]: WHO-style alarms, mean kinetic temperature, excursions; [`alarm`]: the
+//!   board's alarm indicator.
 //! - [`persist`]: versioned, CRC-checked records of what survives a power cycle (model, calibration,
 //!   history); with feature `persist-flash`, their storage in flash.
 #![cfg_attr(not(test), no_std)]
@@ -26,6 +28,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod adc;
+pub mod alarm;
 pub mod calib;
 pub mod coldchain;
 pub mod control;

@@ -20,7 +20,7 @@
 //! and the estimator starts it at 0 anyway); k the model delay in samples.
 
 use crate::calib::TwoPoint;
-use crate::coldchain::{AlarmKind, ColdChainMonitor, Excursion, Side};
+use crate::coldchain::{AlarmKind, ColdChainMonitor, Excursion, Raised, Side};
 use crate::control::adaptive::{model_from_theta, plausible_model, AdaptiveConfig};
 use crate::control::model::{Model, MAX_K};
 
@@ -325,12 +325,14 @@ const TEMP_RANGE_C: core::ops::RangeInclusive<f32> = -60.0..=100.0;
 
 /// Cold-chain history summary and reset counts, accumulated over power cycles.
 ///
-/// Layout v1, 92 bytes: `'H'`, 1; alarm counts (4 × u16, in [`AlarmKind`] order heat_10h,
+/// Layout v2, 96 bytes: `'H'`, 2; alarm counts (4 × u16, in [`AlarmKind`] order heat_10h,
 /// freeze_60min, ship_45c_1h, ship_30c_10h); reset counts (3 × u16: watchdog, brown-out, other);
-/// min_c, max_c (f32, NaN = no sample yet); time below 2 °C, time above 8 °C, excursion count
-/// (3 × u32, seconds and count); [`HISTORY_EXCURSIONS`] × (side u8: 0 none, 1 cold, 2 warm;
-/// start_s, end_s, extreme_c f32); CRC-32. Excursion times are seconds since the boot that saw
-/// them.
+/// min_c, max_c (f32, NaN = no sample yet); time below 2 °C, time above 8 °C, excursion count,
+/// recorded time (4 × u32, seconds and count); [`HISTORY_EXCURSIONS`] × (side u8: 0 none,
+/// 1 cold, 2 warm; start_s, end_s, extreme_c f32); CRC-32. Excursion times are on the record's
+/// own clock: seconds of recorded time since the first boot (each boot's samples start where
+/// the previous boot's record ended), so they stay in order across power cycles. (v1 had no
+/// recorded time and stamped excursions with seconds since their own boot; it is not read.)
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct HistoryRecord {
@@ -348,6 +350,8 @@ pub struct HistoryRecord {
     pub above_8_s: u32,
     /// Excursions outside 2 … 8 °C.
     pub excursions: u32,
+    /// Time covered by the record over every boot, s (the excursions' clock).
+    pub recorded_s: u32,
     /// The newest excursions, oldest first (`None` entries first while fewer were seen).
     pub last: [Option<Excursion>; HISTORY_EXCURSIONS],
 }
@@ -384,9 +388,9 @@ impl HistoryRecord {
     /// Kind tag.
     pub const TAG: u8 = b'H';
     /// Layout version written by this firmware.
-    pub const VERSION: u8 = 1;
+    pub const VERSION: u8 = 2;
     /// Encoded length, bytes.
-    pub const LEN: usize = 2 + 4 * 2 + 3 * 2 + 2 * 4 + 3 * 4 + HISTORY_EXCURSIONS * 13 + 4;
+    pub const LEN: usize = 2 + 4 * 2 + 3 * 2 + 2 * 4 + 4 * 4 + HISTORY_EXCURSIONS * 13 + 4;
     /// Nothing seen yet.
     pub const EMPTY: HistoryRecord = HistoryRecord {
         alarms: [0; 4],
@@ -396,6 +400,7 @@ impl HistoryRecord {
         below_2_s: 0,
         above_8_s: 0,
         excursions: 0,
+        recorded_s: 0,
         last: [None; HISTORY_EXCURSIONS],
     };
 
@@ -430,11 +435,13 @@ impl HistoryRecord {
             (Some(a), Some(b)) => Some(f(a, b)),
             (a, b) => a.or(b),
         };
+        // This boot's excursions on the record's clock.
+        let base = self.recorded_s as f32;
         let mut last = self.last;
         for e in monitor.excursions() {
             last.rotate_left(1);
             if let Some(slot) = last.last_mut() {
-                *slot = Some(*e);
+                *slot = Some(Excursion { start_s: base + e.start_s, end_s: base + e.end_s, ..*e });
             }
         }
         HistoryRecord {
@@ -443,6 +450,7 @@ impl HistoryRecord {
             below_2_s: self.below_2_s.saturating_add(secs(monitor.time_below_2_s())),
             above_8_s: self.above_8_s.saturating_add(secs(monitor.time_above_8_s())),
             excursions: self.excursions.saturating_add(monitor.excursion_count()),
+            recorded_s: self.recorded_s.saturating_add(secs(monitor.recorded_s())),
             last,
             ..*self
         }
@@ -460,6 +468,7 @@ impl HistoryRecord {
         w.u32(self.below_2_s);
         w.u32(self.above_8_s);
         w.u32(self.excursions);
+        w.u32(self.recorded_s);
         for e in &self.last {
             match e {
                 Some(e) => {
@@ -508,6 +517,7 @@ impl HistoryRecord {
         rec.below_2_s = r.u32();
         rec.above_8_s = r.u32();
         rec.excursions = r.u32();
+        rec.recorded_s = r.u32();
         for slot in rec.last.iter_mut() {
             let side = match r.u8() {
                 0 => {
@@ -524,6 +534,78 @@ impl HistoryRecord {
             *slot = Some(Excursion { side, start_s, end_s, extreme_c });
         }
         Ok(rec)
+    }
+}
+
+/// What one sample did to the cold-chain record: the alarms it raised and, when the record is
+/// due to be kept, the history to store.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Recorded {
+    /// Alarms this sample raised (at most one per kind).
+    pub raised: Raised,
+    /// The history to store now: after an alarm, and every `save_every_samples` samples.
+    pub save: Option<HistoryRecord>,
+}
+
+/// The carrier's cold-chain record across power cycles: the history carried in at boot, this
+/// boot's [`ColdChainMonitor`], and when to store their merge. The firmware feeds it every
+/// step's output and stores what it hands back; a power cut loses at most the samples since
+/// the last store (an hour by default), never an alarm.
+#[derive(Clone, Debug)]
+pub struct Recorder {
+    boot: HistoryRecord,
+    monitor: ColdChainMonitor,
+    save_every_samples: u32,
+    since_save: u32,
+}
+
+impl Recorder {
+    /// A record that continues `boot` (the stored history, or [`HistoryRecord::EMPTY`]) and
+    /// asks for a store every `save_every_samples` samples (at least 1).
+    pub fn new(boot: HistoryRecord, save_every_samples: u32) -> Self {
+        Recorder {
+            boot,
+            monitor: ColdChainMonitor::new(),
+            save_every_samples: save_every_samples.max(1),
+            since_save: 0,
+        }
+    }
+
+    /// Counts the reset that started this boot; returns the history to store at once (a
+    /// brown-out must be on record even if the next one follows within the hour).
+    pub fn note_reset(&mut self, cause: ResetCause) -> HistoryRecord {
+        self.boot.note_reset(cause);
+        self.since_save = 0;
+        self.history()
+    }
+
+    /// Records one sample: the temperature the controller saw (`temp_c` of the step's output,
+    /// as `hter sim` and the processor-in-the-loop runner record it).
+    pub fn push(&mut self, t_s: f32, temp_c: f32) -> Recorded {
+        let raised = self.monitor.push(t_s, temp_c);
+        let mut alarm = false;
+        for a in raised.iter().flatten() {
+            self.boot.note_alarm(a.kind);
+            alarm = true;
+        }
+        self.since_save = self.since_save.saturating_add(1);
+        let save = if alarm || self.since_save >= self.save_every_samples {
+            self.since_save = 0;
+            Some(self.history())
+        } else {
+            None
+        };
+        Recorded { raised, save }
+    }
+
+    /// This boot's monitor (MKT, extremes, excursions since boot).
+    pub fn monitor(&self) -> &ColdChainMonitor {
+        &self.monitor
+    }
+
+    /// The whole history: what was carried in at boot plus this boot's record.
+    pub fn history(&self) -> HistoryRecord {
+        self.boot.merged(&self.monitor)
     }
 }
 
@@ -682,7 +764,47 @@ mod tests {
         assert_eq!(second.excursions, 4);
         let sides: std::vec::Vec<Side> = second.last.iter().flatten().map(|e| e.side).collect();
         assert_eq!(sides, [Side::Warm, Side::Cold, Side::Cold, Side::Warm]);
+        // The second boot's excursions continue the first one's clock (2 340 s recorded).
+        assert_eq!(first.recorded_s, 2340);
+        assert_eq!(second.recorded_s, 2340 + 180);
+        assert_eq!(second.last[2].map(|e| e.start_s), Some(2340.0));
+        assert_eq!(second.last[3].map(|e| (e.start_s, e.end_s)), Some((2340.0 + 120.0, 2340.0 + 120.0)));
+        assert!(second.last[1].unwrap().end_s < second.last[2].unwrap().start_s);
         assert_eq!(HistoryRecord::decode(&second.encode()), Ok(second));
+    }
+
+    #[test]
+    fn recorder_stores_hourly_at_resets_and_at_every_alarm() {
+        let mut carried = HistoryRecord::EMPTY;
+        carried.note_alarm(AlarmKind::Heat10h);
+        carried.recorded_s = 86_400;
+        let mut rec = Recorder::new(carried, 360);
+        let boot = rec.note_reset(ResetCause::BrownOut);
+        assert_eq!(boot.resets_by(ResetCause::BrownOut), 1);
+        assert_eq!(boot.alarms_of(AlarmKind::Heat10h), 1);
+        // 359 samples at 5 °C: nothing to store; the 360th stores.
+        for i in 0..359 {
+            assert_eq!(rec.push(i as f32 * 10.0, 5.0).save, None, "sample {i}");
+        }
+        let hourly = rec.push(3590.0, 5.0).save.expect("hourly store");
+        assert_eq!(hourly.recorded_s, 86_400 + 3590);
+        // Freezing: the freeze_60min alarm stores at once, counted once; the excursion is on
+        // the record's clock.
+        let mut stored_alarm = None;
+        for i in 0..=360 {
+            let out = rec.push(3600.0 + i as f32 * 10.0, -1.0);
+            if out.raised.iter().flatten().any(|a| a.kind == AlarmKind::Freeze60min) {
+                stored_alarm = out.save;
+                assert_eq!(i, 360, "triggers exactly 60 min after the run began");
+            }
+        }
+        let h = stored_alarm.expect("an alarm is stored at once");
+        assert_eq!(h.alarms_of(AlarmKind::Freeze60min), 1);
+        assert_eq!(h.alarms_of(AlarmKind::Heat10h), 1);
+        assert_eq!(h.resets_by(ResetCause::BrownOut), 1);
+        assert_eq!(h.last[3].map(|e| (e.side, e.start_s)), Some((Side::Cold, 86_400.0 + 3600.0)));
+        assert_eq!(HistoryRecord::decode(&h.encode()), Ok(h));
+        assert_eq!(rec.history().alarms_of(AlarmKind::Freeze60min), 1);
     }
 
     #[test]
@@ -698,7 +820,7 @@ mod tests {
         assert_eq!(HistoryRecord::decode(&rec.encode()), Err(DecodeError::NonFinite));
         // An unknown side byte, re-framed with a valid CRC.
         let mut b = HistoryRecord::EMPTY.encode();
-        b[2 + 14 + 8 + 12] = 3;
+        b[2 + 14 + 8 + 16] = 3;
         let n = HistoryRecord::LEN - 4;
         let crc = crc32(&b[..n]);
         b[n..].copy_from_slice(&crc.to_le_bytes());

@@ -456,3 +456,29 @@ fn wear_per_save() {
     assert!(erases > 0);
     assert!(saves / erases >= 60, "{erases} erases for {saves} saves");
 }
+
+/// The firmware's cadence (`firmware/src/config.rs`): the history every hour, the model every
+/// 4 h of trusted learning. Prints and checks how long the four pages last at the L4's 10 000
+/// erase cycles.
+#[test]
+fn wear_at_the_firmware_cadence() {
+    let mut store = open(MockFlash::<2048>::blank(4), 4);
+    let days = 60;
+    block_on(async {
+        for hour in 0..24 * days {
+            let h =
+                HistoryRecord { recorded_s: 3600 * hour as u32, excursions: hour as u32 / 7, ..HistoryRecord::EMPTY };
+            store.save_history(&h).await.unwrap();
+            if hour % 4 == 3 {
+                let rec = ModelRecord { theta: [-1.75 + 1e-5 * hour as f32, 0.75, -0.027, -0.03], k: 5 };
+                store.save_model(&rec).await.unwrap();
+            }
+        }
+    });
+    let erases = store.release().erases;
+    let days_per_page_erase = (days * 4) as f64 / erases as f64;
+    let years = 10_000.0 * days_per_page_erase / 365.25;
+    println!("{days} days: {erases} page erases, each page erased every {days_per_page_erase:.1} days: {years:.0} years to 10 000 cycles");
+    assert!(erases > 0);
+    assert!(years >= 50.0, "{years:.0} years");
+}

@@ -1,49 +1,56 @@
 //! hter firmware: the vaccine carrier controller on a NUCLEO-L476RG.
 //!
 //! One task per concern, talking through static channels (STYLE.md, layer 3); `main` only
-//! initialises and spawns:
+//! initialises, restores what flash holds and spawns:
 //!
 //! ```text
-//! sample ──(t, counts)──► control ──(duty, supply)──► actuate ──► SSR PWM, supply enable, LED
-//!   every Ts               Carrier::step                    │
-//!                           ├──(telemetry record)──► telemetry ──► defmt over RTT
-//!                           └──(trusted model, every 4 h of trust)──► persist ──► flash
+//! sample ──(t, counts, supply V)──► control ──(duty, supply, alarm)──► actuate ──► SSR PWM, supply enable, LEDs
+//!   every Ts                         Carrier::step, cold-chain Recorder, Annunciator
+//!                                     ├──(telemetry record)──► telemetry ──► defmt over RTT
+//!                                     └──(model every 4 h of trust, history hourly and at alarms)──► persist ──► flash
 //! ```
 //!
-//! With `adaptive`, `main` restores the self-tuner's model from flash before the loop starts
-//! (`hter::persist`; a missing, torn or implausible record means the built-in starting model,
-//! and the boot log says which) and the `persist` task saves it.
+//! At boot `main` restores the calibration, the cold-chain history and (self-tuning builds) the
+//! learned model from flash (`hter::persist`; a missing, torn or implausible record means its
+//! default, and the boot log says which), counts the reset in the history, and starts the loop.
 //!
 //! The control math is the library's [`hter::step::Carrier`], the very object the host
-//! simulator and the tests drive: this crate only moves data between peripherals and it.
+//! simulator and the tests drive, and the record and alarm rules are the library's
+//! [`hter::persist::Recorder`] and [`hter::alarm::Annunciator`]: this crate only moves data
+//! between peripherals and them.
 #![no_std]
 #![no_main]
 
 mod board;
 mod config;
-#[cfg(feature = "adaptive")]
 mod persist;
 
-use defmt::{info, warn};
+use defmt::{error, info, warn};
 use embassy_executor::Spawner;
+use embassy_stm32::gpio::{Input, Output};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant, Ticker};
-use hter::control::{Controller, ControllerStatus};
+use hter::alarm::{Annunciator, Indication};
+use hter::control::adaptive::AdaptiveConfig;
+use hter::control::{AdaptiveMode, Controller, ControllerStatus};
 use hter::event::Event;
 use hter::hal::{apply_duty, RtdSampler};
-use hter::persist::ResetCause;
-use hter::step::{Carrier, Mode, StepInput};
+use hter::persist::{HistoryRecord, Recorder, ResetCause};
+use hter::step::{Carrier, CarrierConfig, Mode, StepInput};
 use hter::units::Duty;
 use {defmt_rtt as _, panic_probe as _};
 
-/// One RTD conversion and when it was taken.
+/// One sample of the analog inputs and when it was taken.
 #[derive(Clone, Copy)]
 struct Sample {
     t_s: f32,
+    /// RTD conversion (ratio to the reference resistor), counts.
     counts: u32,
+    /// The modules' supply, V (`None` if it could not be measured).
+    supply_v: Option<f32>,
 }
 
 /// What the actuator must do.
@@ -51,6 +58,7 @@ struct Sample {
 struct Actuation {
     duty: Duty,
     supply_enable: bool,
+    alarm: bool,
 }
 
 /// One telemetry record per sample.
@@ -61,20 +69,34 @@ struct Telemetry {
     setpoint_c: f32,
     duty: f32,
     mode: Mode,
+    counts: u32,
+    supply_v: Option<f32>,
+    alarm: Indication,
     /// Estimator state of a self-tuning controller (θ, trace P, prediction error, mode).
     status: Option<ControllerStatus>,
+}
+
+/// Everything the boot hands the control task.
+struct Boot {
+    cfg: CarrierConfig,
+    adaptive: Option<AdaptiveConfig>,
+    history: HistoryRecord,
+    reset: ResetCause,
 }
 
 static SAMPLES: Channel<CriticalSectionRawMutex, Sample, 2> = Channel::new();
 static ACTUATION: Signal<CriticalSectionRawMutex, Actuation> = Signal::new();
 static TELEMETRY: Channel<CriticalSectionRawMutex, Telemetry, 4> = Channel::new();
 static EVENTS: Channel<CriticalSectionRawMutex, Event, 16> = Channel::new();
+/// The user button was pressed: the alarm has been seen.
+static ACKNOWLEDGE: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
     // Why we (re)started, before anything else; the flags are cleared so the next boot
-    // reads its own. The step reports it with the first sample (a brown-out or watchdog bite
-    // shows in the log and the cold-chain record as a gap, not as silence).
+    // reads its own. The step reports it with the first sample and the history counts it (a
+    // brown-out or watchdog bite shows in the log and the cold-chain record as a gap, not as
+    // silence).
     let reset = {
         let rcc = embassy_stm32::pac::RCC;
         let csr = rcc.csr().read().0;
@@ -91,57 +113,65 @@ async fn main(spawner: Spawner) {
         b.ssr.get_frequency().0,
         b.ssr.max_duty_cycle()
     );
-    #[cfg(feature = "adaptive")]
-    let seed = {
-        let mut store = persist::open(b.flash);
-        let cfg = match store.as_mut() {
-            Some(store) => persist::restore(store).await,
-            None => config::ADAPTIVE,
-        };
-        if let Some(store) = store {
-            spawner.spawn(persist::persist(store).unwrap());
-        }
-        cfg
+    let mut store = persist::open(b.flash);
+    let restored = persist::restore(store.as_mut()).await;
+    if let Some(store) = store {
+        spawner.spawn(persist::persist(store).unwrap());
+    }
+    let boot = Boot {
+        cfg: CarrierConfig { cal: restored.cal, ..config::CARRIER },
+        adaptive: restored.adaptive,
+        history: restored.history,
+        reset,
     };
-    #[cfg(not(feature = "adaptive"))]
-    let seed = config::ControllerSeed;
     let mut wdg = IndependentWatchdog::new(b.iwdg, config::WATCHDOG_TIMEOUT_US);
     wdg.unleash();
-    spawner.spawn(sample(b.rtd).unwrap());
-    spawner.spawn(control(wdg, seed, reset).unwrap());
-    spawner.spawn(actuate(b.ssr, b.supply_enable, b.led).unwrap());
+    spawner.spawn(sample(b.analog).unwrap());
+    spawner.spawn(control(wdg, boot).unwrap());
+    spawner.spawn(actuate(b.ssr, b.supply_enable, b.led, b.alarm).unwrap());
+    spawner.spawn(acknowledge(b.button).unwrap());
     spawner.spawn(telemetry().unwrap());
 }
 
-/// Takes one oversampled RTD conversion every Ts.
+/// Takes one oversampled conversion of each analog input every Ts.
 #[embassy_executor::task]
-async fn sample(mut rtd: board::RtdAdc) {
+async fn sample(mut analog: board::Analog) {
     let mut ticker = Ticker::every(Duration::from_millis(config::SAMPLE_PERIOD_MS));
     let start = Instant::now();
     loop {
-        let Ok(counts) = rtd.sample();
+        let Ok(counts) = analog.sample();
+        let supply_v = analog.supply_v();
         let t_s = (Instant::now() - start).as_millis() as f32 / 1000.0;
-        SAMPLES.send(Sample { t_s, counts }).await;
+        SAMPLES.send(Sample { t_s, counts, supply_v }).await;
         ticker.next().await;
     }
 }
 
-/// Runs the library's per-sample step on each conversion; feeds the watchdog after each one.
+/// Runs the library's per-sample step on each sample, records it, decides the alarm
+/// indicator; feeds the watchdog after each one.
 #[embassy_executor::task]
-async fn control(
-    mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
-    seed: config::ControllerSeed,
-    reset: ResetCause,
-) {
-    let mut carrier = Carrier::new(config::CARRIER, config::controller(seed));
-    carrier.note_reset(reset);
+async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>, boot: Boot) {
+    let mut carrier = Carrier::new(boot.cfg, config::controller(boot.adaptive));
+    carrier.note_reset(boot.reset);
+    let mut recorder = Recorder::new(boot.history, config::HISTORY_SAVE_SAMPLES);
+    persist::request(persist::Save::History(recorder.note_reset(boot.reset)));
+    let mut annunciator = Annunciator::new();
     info!("controller: {}", carrier.controller().name());
-    #[cfg(feature = "adaptive")]
     let mut trusted_samples = 0u32;
+    let mut samples = 0u32;
     loop {
         let s = SAMPLES.receive().await;
+        if let Some(v) = s.supply_v {
+            carrier.observe_supply_v(v);
+        }
         let out = carrier.step(&StepInput { t_s: s.t_s, counts: s.counts, setpoint_c: config::SETPOINT_C });
-        ACTUATION.signal(Actuation { duty: out.duty, supply_enable: out.supply_enable });
+        let rec = recorder.push(s.t_s, out.temp_c.0);
+        if ACKNOWLEDGE.try_take().is_some() {
+            info!("alarm acknowledged t={}", s.t_s);
+            annunciator.acknowledge();
+        }
+        let alarm = annunciator.update(&out, &rec.raised);
+        ACTUATION.signal(Actuation { duty: out.duty, supply_enable: out.supply_enable, alarm: alarm.is_on() });
         for e in out.events.iter() {
             // Never block the loop on logging: a full queue drops the event, and says so.
             if EVENTS.try_send(*e).is_err() {
@@ -151,35 +181,58 @@ async fn control(
         if out.events.dropped() > 0 {
             warn!("{} events of this step did not fit the step's list", out.events.dropped());
         }
+        for a in rec.raised.iter().flatten() {
+            error!("ALARM {} t={} (condition since t={})", a.kind.name(), a.trigger_s, a.start_s);
+        }
+        if let Some(h) = rec.save {
+            persist::request(persist::Save::History(h));
+        }
         let record = Telemetry {
             t_s: s.t_s,
             temp_c: out.temp_c.0,
             setpoint_c: out.setpoint_c.0,
             duty: out.duty.get(),
             mode: out.mode,
+            counts: s.counts,
+            supply_v: s.supply_v,
+            alarm,
             status: out.status,
         };
         if TELEMETRY.try_send(record).is_err() {
             warn!("telemetry queue full, dropped t={}", s.t_s);
         }
-        #[cfg(feature = "adaptive")]
-        if out.status.is_some_and(|st| st.mode == hter::control::AdaptiveMode::Adaptive) {
+        samples = samples.wrapping_add(1);
+        if samples.is_multiple_of(config::SUMMARY_SAMPLES) {
+            let m = recorder.monitor();
+            info!(
+                "coldchain t={} mkt={} min={} max={} below2_s={} above8_s={} excursions={}",
+                s.t_s,
+                m.mkt_c().unwrap_or(f32::NAN),
+                m.min_c().unwrap_or(f32::NAN),
+                m.max_c().unwrap_or(f32::NAN),
+                m.time_below_2_s(),
+                m.time_above_8_s(),
+                m.excursion_count()
+            );
+        }
+        if out.status.is_some_and(|st| st.mode == AdaptiveMode::Adaptive) {
             trusted_samples += 1;
             if trusted_samples >= config::MODEL_SAVE_SAMPLES {
                 trusted_samples = 0;
-                persist::request_save(carrier.controller());
+                persist::request_model(carrier.controller());
             }
         }
         wdg.pet();
     }
 }
 
-/// Applies each actuation to the SSR timer and the supply-enable switch.
+/// Applies each actuation to the SSR timer, the supply-enable switch and the indicators.
 #[embassy_executor::task]
 async fn actuate(
     mut ssr: embassy_stm32::timer::simple_pwm::SimplePwm<'static, embassy_stm32::peripherals::TIM3>,
-    mut supply_enable: embassy_stm32::gpio::Output<'static>,
-    mut led: embassy_stm32::gpio::Output<'static>,
+    mut supply_enable: Output<'static>,
+    mut led: Output<'static>,
+    mut alarm: Output<'static>,
 ) {
     ssr.ch1().enable();
     loop {
@@ -201,6 +254,29 @@ async fn actuate(
         } else {
             led.set_low();
         }
+        if a.alarm {
+            alarm.set_high();
+        } else {
+            alarm.set_low();
+        }
+    }
+}
+
+/// The user button acknowledges the alarm indicator (debounced by a 50 ms re-check).
+#[embassy_executor::task]
+async fn acknowledge(button: Input<'static>) {
+    loop {
+        // Pressed pulls the line low (the Nucleo's B1).
+        while button.is_high() {
+            embassy_time::Timer::after_millis(20).await;
+        }
+        embassy_time::Timer::after_millis(50).await;
+        if button.is_low() {
+            ACKNOWLEDGE.signal(());
+            while button.is_low() {
+                embassy_time::Timer::after_millis(20).await;
+            }
+        }
     }
 }
 
@@ -210,7 +286,17 @@ async fn telemetry() {
     loop {
         let r = TELEMETRY.receive().await;
         // `hter log2csv` parses this line: keep its `key=value` fields.
-        info!("t={} temp={} sp={} duty={} mode={}", r.t_s, r.temp_c, r.setpoint_c, r.duty, r.mode);
+        info!(
+            "t={} temp={} sp={} duty={} mode={} counts={} supply={} alarm={}",
+            r.t_s,
+            r.temp_c,
+            r.setpoint_c,
+            r.duty,
+            r.mode,
+            r.counts,
+            r.supply_v.unwrap_or(f32::NAN),
+            r.alarm
+        );
         if let Some(st) = r.status {
             info!(
                 "est t={} ctl={} theta={} trace_p={} pe={}",

@@ -28,7 +28,7 @@
 
 use super::fixed::{Law, LawState};
 use super::gpc::shift_in;
-use super::model::{Model, MAX_K};
+use super::model::{second_order_stable, Model, MAX_K};
 use super::pi::{Pi, PiConfig};
 use super::{AdaptiveMode, ControlInput, Controller, ControllerStatus};
 use crate::ident::rls::{Rls, RlsConfig};
@@ -237,13 +237,17 @@ pub fn model_from_theta(cfg: &AdaptiveConfig, theta: [f32; 4]) -> Option<Model> 
 
 /// Parameter projection: is `m` a model the laws may be designed from?
 ///
-/// Besides a stable A and a cooling static gain, every B coefficient must cool (b_i ≤ 0): the
-/// step response of a Peltier cooler seen through the RTD is monotone, so a positive b_i is an
-/// artefact of poor excitation — and a positive b0 reverses the sign of the first-step gain g0
+/// A second-order structure (the self-tuner's), a stable A, a cooling static gain, and every B
+/// coefficient cooling (b_i ≤ 0): the step response of a Peltier cooler seen through the RTD
+/// is monotone, so a positive b_i is an artefact of poor excitation — and a positive b0 reverses the sign of the first-step gain g0
 /// that (I)GMVC divides by, so the law would heat when it should cool (seen on H-TER II, seed 2,
 /// before this check: the load drifted to 12 °C at a 4 °C setpoint).
 pub fn plausible_model(cfg: &AdaptiveConfig, m: &Model) -> bool {
-    m.a_is_stable()
+    // The self-tuner's structure is second order: anything else cannot be its model.
+    let a2 = if m.na == 2 { m.a[1] } else { 0.0 };
+    m.na <= 2
+        && m.nb <= 2
+        && second_order_stable(m.a[0], a2)
         && m.b[..m.nb].iter().all(|&b| b <= 0.0)
         && m.static_gain().is_some_and(|g| (cfg.gain_min_c_per_duty..=cfg.gain_max_c_per_duty).contains(&g))
 }

@@ -103,16 +103,23 @@ impl Model {
     }
 }
 
+/// Are both roots of 1 + a1 z⁻¹ + a2 z⁻² inside the unit circle? Jury's conditions |a2| < 1 and
+/// |a1| < 1 + a2 (a first-order A is a2 = 0). The self-tuner's every-sample check: a caller that
+/// only has second-order models uses this and leaves the general recursion (and the software
+/// f64 it needs on the M4F, ≈ 2 KB of flash) out of its binary.
+pub fn second_order_stable(a1: f32, a2: f32) -> bool {
+    // 1 + a2 is exact in f64 for any f32 |a2| ≥ 2⁻³⁰, so only a pole pair within ~1e-9 of the
+    // unit circle could be judged differently from the recursion's f64 roundings.
+    a2.abs() < 1.0 && f64::from(a1.abs()) < 1.0 + f64::from(a2)
+}
+
 /// Schur–Cohn test: are all roots of 1 + a1 z⁻¹ + … + an z⁻ⁿ inside the unit circle?
 pub fn schur_stable(a: &[f32]) -> bool {
-    // Orders 1 and 2 (the adaptive controllers' every-sample check): the conditions the
-    // recursion below reduces to, |a1| < 1, and |a2| < 1 with |a1| < 1 + a2 (Jury). The same
-    // answer without the recursion's f64 divisions (software on the M4F, ≈ 1 000 instructions);
-    // 1 + a2 is exact in f64 for any f32 |a2| ≥ 2⁻³⁰, so only a pole pair within ~1e-9 of the
-    // unit circle could be judged differently by the two roundings.
+    // Orders 1 and 2: the conditions the recursion below reduces to, without its f64
+    // divisions (software on the M4F, ≈ 1 000 instructions).
     match *a {
         [a1] => return a1.abs() < 1.0,
-        [a1, a2] => return a2.abs() < 1.0 && f64::from(a1.abs()) < 1.0 + f64::from(a2),
+        [a1, a2] => return second_order_stable(a1, a2),
         _ => {}
     }
     // Step-down (Levinson) recursion on the coefficients, in f64 for margin near |z| = 1.

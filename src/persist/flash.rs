@@ -108,8 +108,20 @@ impl<S: NorFlash> Store<S> {
         Ok(self.map.erase_all().await?)
     }
 
-    async fn store(&mut self, key: u8, bytes: &[u8]) -> Result<(), StoreError> {
+    /// Stores already encoded record bytes under `key` (one call site for every record kind
+    /// keeps one copy of the storage layer's write path in the firmware's flash).
+    pub async fn store(&mut self, key: u8, bytes: &[u8]) -> Result<(), StoreError> {
         Ok(self.map.store_item(&mut self.buf.0, &key, &bytes).await?)
+    }
+
+    /// The bytes of the newest item under `key` (not generic: one copy of the storage layer's
+    /// read path for every record kind).
+    async fn fetch(&mut self, key: u8) -> Result<&[u8], LoadStatus> {
+        match self.map.fetch_item::<&[u8]>(&mut self.buf.0, &key).await {
+            Ok(Some(bytes)) => Ok(bytes),
+            Ok(None) => Err(LoadStatus::Missing),
+            Err(e) => Err(LoadStatus::Flash(e.into())),
+        }
     }
 
     /// Fetches the newest item under `key` and decodes it.
@@ -118,11 +130,8 @@ impl<S: NorFlash> Store<S> {
         key: u8,
         decode: impl FnOnce(&[u8]) -> Result<T, DecodeError>,
     ) -> Result<T, LoadStatus> {
-        match self.map.fetch_item::<&[u8]>(&mut self.buf.0, &key).await {
-            Ok(Some(bytes)) => decode(bytes).map_err(LoadStatus::Invalid),
-            Ok(None) => Err(LoadStatus::Missing),
-            Err(e) => Err(LoadStatus::Flash(e.into())),
-        }
+        let bytes = self.fetch(key).await?;
+        decode(bytes).map_err(LoadStatus::Invalid)
     }
 
     /// Stores the model record.

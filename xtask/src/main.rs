@@ -9,6 +9,12 @@
 //! profile by part, the runner's flash and RAM, and ends with one JSON line. It exits non-zero
 //! when a bit differs or when a self-tuning GPC sample takes more than [`BUDGET_INSN`]
 //! instructions (issue 7).
+//!
+//! `cargo xtask size` — the firmware's footprint: builds the release firmware once per
+//! controller (the default self-tuning GPC, then each controller feature), prints flash
+//! (allocated sections with contents: what is programmed) and static RAM (allocated sections
+//! in SRAM: .data, .bss, .uninit) for each, and ends with one JSON line. It exits non-zero when
+//! a build exceeds [`FLASH_BUDGET`] or [`RAM_BUDGET`] (issue 5).
 
 #[path = "../../pil/src/proto.rs"]
 #[allow(dead_code)]
@@ -26,6 +32,18 @@ use hter::step::StepInput;
 
 /// Worst-case instructions allowed for one sample (step + monitor) with self-tuning GPC.
 const BUDGET_INSN: f64 = 5000.0;
+/// Release firmware flash budget, bytes (issue 5: 64 KiB with adaptive GPC and RLS).
+const FLASH_BUDGET: u64 = 64 * 1024;
+/// Release firmware static RAM budget, bytes (issue 5: 16 KiB).
+const RAM_BUDGET: u64 = 16 * 1024;
+/// The firmware builds `size` reports: (cargo features, what they run).
+const FIRMWARE_BUILDS: [(&str, &str); 5] = [
+    ("", "self-tuning GPC (default)"),
+    ("igmvc", "self-tuning IGMVC"),
+    ("pi", "PI"),
+    ("onoff", "On-Off"),
+    ("identify", "identification PRBS"),
+];
 /// SysTick counts per instruction expected under `-icount shift=6` at 25 MHz (64 ns / 40 ns).
 const TICKS_PER_INSN: f64 = 1.6;
 /// Longest a QEMU run may take before it is killed.
@@ -77,8 +95,9 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     match args.first().map(String::as_str) {
         Some("pil") => pil(),
+        Some("size") => size(),
         _ => {
-            eprintln!("usage: cargo xtask pil");
+            eprintln!("usage: cargo xtask pil | cargo xtask size");
             std::process::exit(2)
         }
     }
@@ -97,6 +116,47 @@ struct TargetSample {
     duty: u32,
     ticks: [u32; proto::PARTS.len()],
     events: Vec<(u32, u32)>,
+}
+
+/// Builds the release firmware for every entry of [`FIRMWARE_BUILDS`] and checks the budgets.
+fn size() -> Result<()> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let elf = target_dir().join(TARGET).join("release").join("firmware");
+    let mut rows = Vec::new();
+    println!("firmware release builds for {TARGET} (budget: flash {FLASH_BUDGET} B, static RAM {RAM_BUDGET} B)");
+    for (features, what) in FIRMWARE_BUILDS {
+        let mut cmd = Command::new(&cargo);
+        cmd.current_dir(root()).args(["build", "--release", "-p", "firmware", "--target", TARGET]);
+        if !features.is_empty() {
+            cmd.args(["--features", features]);
+        }
+        if !cmd.status().context("running cargo")?.success() {
+            bail!("building the firmware ({what}) failed");
+        }
+        let (flash, ram) = elf_sizes(&std::fs::read(&elf).with_context(|| format!("reading {}", elf.display()))?)?;
+        let ok = flash <= FLASH_BUDGET && ram <= RAM_BUDGET;
+        println!(
+            "  {what:<28} features {:<10} flash {flash:>6} B ({:>5.1} %)  static RAM {ram:>6} B ({:>5.1} %){}",
+            if features.is_empty() { "(none)" } else { features },
+            100.0 * flash as f64 / FLASH_BUDGET as f64,
+            100.0 * ram as f64 / RAM_BUDGET as f64,
+            if ok { "" } else { "  OVER BUDGET" }
+        );
+        rows.push((features, flash, ram, ok));
+    }
+    let within = rows.iter().all(|r| r.3);
+    let builds: Vec<String> = rows
+        .iter()
+        .map(|(f, flash, ram, _)| format!("{{\"features\": \"{f}\", \"flash_bytes\": {flash}, \"ram_bytes\": {ram}}}"))
+        .collect();
+    println!(
+        "{{\"builds\": [{}], \"flash_budget\": {FLASH_BUDGET}, \"ram_budget\": {RAM_BUDGET}, \"within_budget\": {within}}}",
+        builds.join(", ")
+    );
+    if !within {
+        bail!("a firmware build exceeds the budget");
+    }
+    Ok(())
 }
 
 /// What the target reported for one run.

@@ -1,0 +1,179 @@
+//! The alarm indicator: what the health worker sees and hears (a buzzer or red lamp on the
+//! board's alarm output), decided here so the host tests the same rule the board runs.
+//!
+//! The indicator is on while
+//! - the load is outside +2…+8 °C now (the vaccines are at risk this minute), or
+//! - the step is not in control: a sensor fault (cooling is off) or limping home on a shorted
+//!   SSR ([`Mode::SensorFault`], [`Mode::LimpHome`]), or
+//! - something was detected since the last acknowledgement: a cold-chain alarm of SPEC §6
+//!   (`heat_10h`, `freeze_60min`, …) or a hardware fault event (sensor, SSR, supply, lid,
+//!   offset). These latch: a fault that cleared by itself still needs a look, and the one who
+//!   carries the box may not have been there when it happened.
+//!
+//! Acknowledging (the board's user button) clears the latch; what is still true now keeps the
+//! indicator on. Restarts, freeze-guard actions, mode changes of the self-tuner and setpoint
+//! clamps are not alarms: they are the supervisor doing its job, and they are in the log.
+
+use crate::coldchain::Raised;
+use crate::event::EventKind;
+use crate::step::{Mode, StepOutput};
+
+/// Whether an event asks for a person.
+pub fn needs_attention(kind: EventKind) -> bool {
+    matches!(
+        kind,
+        EventKind::SensorOpen
+            | EventKind::SensorShort
+            | EventKind::SensorOutOfRange
+            | EventKind::SensorStuck
+            | EventKind::SensorSpikes
+            | EventKind::SensorOffset
+            | EventKind::SsrStuckOn
+            | EventKind::SsrStuckOff
+            | EventKind::SupplySag
+            | EventKind::LidOpen
+            | EventKind::ControllerNonFinite
+    )
+}
+
+/// Why the indicator is on (the first reason that holds, in this order).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Indication {
+    /// Nothing to report.
+    Off,
+    /// The step is not in control (sensor fault or limp home).
+    NotInControl,
+    /// The load is outside 2…8 °C now.
+    OutOfRange,
+    /// A cold-chain alarm or fault was detected and not yet acknowledged.
+    Unacknowledged,
+}
+
+impl Indication {
+    /// True if the indicator is on.
+    pub fn is_on(self) -> bool {
+        self != Indication::Off
+    }
+}
+
+/// The indicator's state.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Annunciator {
+    latched: bool,
+}
+
+impl Annunciator {
+    /// Nothing latched.
+    pub const fn new() -> Self {
+        Annunciator { latched: false }
+    }
+
+    /// Takes one sample's step output and the cold-chain alarms it raised.
+    pub fn update(&mut self, out: &StepOutput, raised: &Raised) -> Indication {
+        if out.events.iter().any(|e| needs_attention(e.kind)) || raised.iter().any(Option::is_some) {
+            self.latched = true;
+        }
+        let t = out.temp_c.0;
+        if matches!(out.mode, Mode::SensorFault | Mode::LimpHome) {
+            Indication::NotInControl
+        } else if !(2.0..=8.0).contains(&t) {
+            Indication::OutOfRange
+        } else if self.latched {
+            Indication::Unacknowledged
+        } else {
+            Indication::Off
+        }
+    }
+
+    /// A person has seen it: clears what latched.
+    pub fn acknowledge(&mut self) {
+        self.latched = false;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::coldchain::{Alarm, AlarmKind};
+    use crate::event::{Event, Events};
+    use crate::units::{Celsius, Duty};
+
+    fn out(temp_c: f32, mode: Mode, events: &[EventKind]) -> StepOutput {
+        let mut ev = Events::default();
+        for k in events {
+            ev.push(Event { t_s: 0.0, kind: *k });
+        }
+        StepOutput {
+            raw_c: Some(Celsius(temp_c)),
+            temp_c: Celsius(temp_c),
+            setpoint_c: Celsius(4.0),
+            requested: 0.5,
+            duty: Duty::saturating(0.5),
+            supply_enable: true,
+            mode,
+            events: ev,
+            status: None,
+        }
+    }
+
+    #[test]
+    fn faults_latch_until_acknowledged_and_present_danger_stays() {
+        let mut a = Annunciator::new();
+        let none: Raised = [None; 4];
+        assert_eq!(a.update(&out(4.0, Mode::Normal, &[]), &none), Indication::Off);
+        // Supervisor actions alone are not alarms.
+        let quiet = [EventKind::FreezeGuardTripped, EventKind::AdaptiveEngaged, EventKind::SetpointClamped];
+        assert_eq!(a.update(&out(4.0, Mode::FreezeGuard, &quiet), &none), Indication::Off);
+        // A sensor fault: on while it lasts, latched after it cleared.
+        assert_eq!(a.update(&out(4.0, Mode::SensorFault, &[EventKind::SensorOpen]), &none), Indication::NotInControl);
+        assert_eq!(a.update(&out(4.0, Mode::Normal, &[EventKind::SensorRecovered]), &none), Indication::Unacknowledged);
+        a.acknowledge();
+        assert_eq!(a.update(&out(4.0, Mode::Normal, &[]), &none), Indication::Off);
+        // Out of range shows while it lasts, acknowledged or not.
+        assert_eq!(a.update(&out(8.3, Mode::Normal, &[]), &none), Indication::OutOfRange);
+        a.acknowledge();
+        assert_eq!(a.update(&out(8.3, Mode::Normal, &[]), &none), Indication::OutOfRange);
+        assert_eq!(a.update(&out(7.9, Mode::Normal, &[]), &none), Indication::Off);
+        // A cold-chain alarm latches.
+        let raised: Raised =
+            [Some(Alarm { kind: AlarmKind::Heat10h, start_s: 0.0, trigger_s: 36_000.0 }), None, None, None];
+        assert_eq!(a.update(&out(7.9, Mode::Normal, &[]), &raised), Indication::Unacknowledged);
+        assert!(a.update(&out(5.0, Mode::Normal, &[]), &none).is_on());
+        // A shorted SSR: limp home is not in control, even acknowledged.
+        a.acknowledge();
+        assert_eq!(a.update(&out(5.0, Mode::LimpHome, &[EventKind::SsrStuckOn]), &none), Indication::NotInControl);
+        a.acknowledge();
+        assert_eq!(a.update(&out(5.0, Mode::LimpHome, &[]), &none), Indication::NotInControl);
+    }
+
+    #[test]
+    fn every_fault_kind_asks_for_attention() {
+        use EventKind::*;
+        for k in [
+            SensorOpen,
+            SensorShort,
+            SensorOutOfRange,
+            SensorStuck,
+            SensorSpikes,
+            SensorOffset,
+            SsrStuckOn,
+            SsrStuckOff,
+            SupplySag,
+            LidOpen,
+        ] {
+            assert!(needs_attention(k), "{k:?}");
+        }
+        for k in [
+            SensorRecovered,
+            FreezeGuardTripped,
+            FreezeGuardReleased,
+            SetpointClamped,
+            AdaptiveEngaged,
+            AdaptiveFrozen,
+            FallbackEngaged,
+        ] {
+            assert!(!needs_attention(k), "{k:?}");
+        }
+    }
+}
