@@ -134,7 +134,7 @@ enum LoadArg {
 }
 
 #[derive(clap::Args, Debug)]
-#[command(group(clap::ArgGroup::new("input").required(true).args(["ohms", "celsius"])))]
+#[command(group(clap::ArgGroup::new("input").required(true).args(["ohms", "celsius", "counts"])))]
 struct RtdArgs {
     /// Resistance to convert, Ω.
     #[arg(long, allow_negative_numbers = true)]
@@ -142,6 +142,10 @@ struct RtdArgs {
     /// Temperature to convert, °C.
     #[arg(long, allow_negative_numbers = true)]
     celsius: Option<f64>,
+    /// A conversion of the board's RTD channel (the `counts=` of its telemetry) to convert
+    /// through the default front end, uncalibrated: the "measured" reading of a calibration.
+    #[arg(long)]
+    counts: Option<u32>,
     /// Nominal resistance at 0 °C: 100 (Pt100) or 1000 (Pt1000).
     #[arg(long, default_value_t = 100)]
     r0: u32,
@@ -526,7 +530,21 @@ fn rtd_cmd(a: &RtdArgs) -> Result<()> {
         1000 => Rtd::PT1000,
         other => bail!("--r0 must be 100 or 1000, got {other}"),
     };
-    let (ohms, celsius) = match (a.ohms, a.celsius) {
+    let from_counts = match a.counts {
+        Some(c) => {
+            let fe = hter::adc::AdcFrontEnd::DEFAULT;
+            let r = fe.ohms(c).map_err(|e| {
+                anyhow::anyhow!(
+                    "{c} counts is not a working RTD on the default front end ({e:?}: open at ≥ {}, short below {} Ω)",
+                    fe.full_scale_counts - fe.open_margin_counts,
+                    fe.short_below_ohm
+                )
+            })?;
+            Some(f64::from(r.0))
+        }
+        None => None,
+    };
+    let (ohms, celsius) = match (from_counts.or(a.ohms), a.celsius) {
         (Some(r), _) => {
             let r = finite("ohms", r)?;
             if r <= 0.0 {
@@ -544,10 +562,16 @@ fn rtd_cmd(a: &RtdArgs) -> Result<()> {
                 .map_err(|e| anyhow::anyhow!("{t} °C is outside the IEC 60751 range −200…850 °C: {e:?}"))?;
             (f64::from(r.0), t)
         }
-        (None, None) => bail!("give --ohms or --celsius"),
+        (None, None) => bail!("give --ohms, --celsius or --counts"),
     };
     if a.json {
-        println!("{}", serde_json::json!({ "ohms": ohms, "celsius": celsius }));
+        let mut v = serde_json::json!({ "ohms": ohms, "celsius": celsius });
+        if let Some(c) = a.counts {
+            v["counts"] = c.into();
+        }
+        println!("{v}");
+    } else if let Some(c) = a.counts {
+        println!("{c} counts: Pt{}: {:.4} Ω  ⇔  {:.3} °C (uncalibrated, default front end)", a.r0, ohms, celsius);
     } else {
         println!("Pt{}: {:.3} Ω  ⇔  {:.3} °C", a.r0, ohms, celsius);
     }

@@ -55,6 +55,18 @@ fn rtd_json_matches_iec_60751() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     // 1385.1 Ω is the table value rounded to 0.1 Ω, i.e. ±0.013 °C.
     assert!((v["celsius"].as_f64().unwrap() - 100.0).abs() < 0.02, "{v}");
+    // A board conversion through the default front end: 49 918 counts · 2 kΩ / (15 · 65 535)
+    // = 101.5600 Ω; Callendar–Van Dusen above 0 °C inverted in f64 gives the reference.
+    let out = hter(&["rtd", "--counts", "49918", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let r = 49_918.0 * 2000.0 / (15.0 * 65_535.0);
+    let (a, b) = (3.9083e-3f64, -5.775e-7f64);
+    let t = (-a + (a * a - 4.0 * b * (1.0 - r / 100.0)).sqrt()) / (2.0 * b);
+    assert!((v["ohms"].as_f64().unwrap() - r).abs() < 1e-4, "{v} vs {r} Ω");
+    assert!((v["celsius"].as_f64().unwrap() - t).abs() < 1e-3, "{v} vs {t} °C");
+    assert_one_line_error(&["rtd", "--counts", "65535"], "not a working RTD");
+    assert_one_line_error(&["rtd", "--counts", "20", "--ohms", "100"], "--counts");
 }
 
 #[test]

@@ -31,12 +31,13 @@ pub const CARRIER: CarrierConfig = CarrierConfig::DEFAULT;
 /// The fallback and baseline PI at Ts = 10 s, as the firmware builds it.
 pub const PI: PiConfig = PiConfig { ts_s: CARRIER.ts_s, ..PiConfig::HTER1_DEFAULT };
 
-/// Controller kind 0: the firmware's default PI.
+/// Controller kind 0: the PI baseline (the firmware's `pi` feature, and the self-tuners'
+/// fallback).
 pub const KIND_PI: u32 = 0;
-/// Controller kind 1: the firmware's `adaptive` feature, self-tuning GPC (N2 = 30, Nu = 3).
+/// Controller kind 1: the firmware's default, self-tuning GPC (N2 = 30, Nu = 3).
 pub const KIND_GPC: u32 = 1;
 
-/// The self-tuning GPC configuration the firmware's `adaptive` feature runs.
+/// The self-tuning GPC configuration the firmware runs by default (`config::ADAPTIVE_GPC`).
 pub fn adaptive_config() -> AdaptiveConfig {
     AdaptiveConfig { fallback: PI, ..AdaptiveConfig::default_for(Law::Gpc(GpcConfig::DEFAULT)) }
 }
