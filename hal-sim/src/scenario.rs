@@ -52,8 +52,9 @@ pub struct Scenario {
     pub duration_s: f64,
     /// Load forced by the scenario (`half-load`), overriding `--load`.
     pub load: Option<Load>,
-    /// Open-loop identification run: a PRBS on the SSR around the holding duty instead of the
-    /// controller (`prbs`).
+    /// Open-loop identification run: the plant settles 2 h at the holding duty, the log starts
+    /// with [`crate::sim::PRBS_REST_S`] more of that rest, then a PRBS on the SSR around the
+    /// holding duty instead of the controller (`prbs`).
     pub excitation: bool,
 }
 
@@ -148,11 +149,11 @@ impl Scenario {
             },
             "prbs" => Scenario {
                 name: name.into(),
-                description: "open loop: PRBS (7-bit register, 120 s bits, period 4.2 h) on the SSR, holding duty ± 0.1, from 4 °C".into(),
+                description: "open loop: 30 min at rest at the holding duty, then a PRBS (7-bit register, 120 s bits, period 4.2 h) on the SSR, holding duty ± 0.1, for 6 h, from 4 °C".into(),
                 start: Start::Holding(4.0),
                 setpoints: vec![(0.0, 4.0)],
                 changes: vec![],
-                duration_s: 6.0 * 3600.0,
+                duration_s: 6.5 * 3600.0,
                 load: None,
                 excitation: true,
             },

@@ -35,6 +35,12 @@ use crate::scenario::{Change, Scenario, Start, PREROLL_S};
 /// duty resolution against Ts = 10 s and is far faster than the modules' thermal response.
 pub const PWM_PERIOD_S: f64 = 1.0;
 
+/// Rest at the holding duty at the start of an excitation scenario's log (`prbs`), s, before
+/// the PRBS begins: after the 2 h settling, so the record starts at steady state and `hter
+/// identify --operating-point auto` finds the initial rest (180 samples at Ts = 10 s, far more
+/// than the 5 it needs, and under the 10 % of the record it averages at most).
+pub const PRBS_REST_S: f64 = 1800.0;
+
 /// Which controller runs in the step.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum ControllerChoice {
@@ -547,7 +553,12 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
         Ok(if sc.excitation {
             let prbs =
                 PrbsConfig { bits: 7, hold: 12, low: (u0 - 0.1).max(0.0) as f32, high: (u0 + 0.1).min(1.0) as f32 };
-            AnyController::Prbs(PrbsExcitation::new(prbs).map_err(|e| anyhow::anyhow!("PRBS: {e:?}"))?)
+            // The log begins with the last of the settling at the holding duty, as an engineer
+            // logs the rest before starting the PRBS: the identification's operating point.
+            let rest = (PRBS_REST_S / ts).round() as u32;
+            AnyController::Prbs(
+                PrbsExcitation::after_rest(prbs, u0 as f32, rest).map_err(|e| anyhow::anyhow!("PRBS: {e:?}"))?,
+            )
         } else {
             let mut spec = opts.controller;
             let stainless = match opts.plant {

@@ -61,46 +61,58 @@ impl BatchLs {
 
     /// Solves the normal equations into `theta[..n]`.
     pub fn solve(&self, theta: &mut [f64]) -> Result<(), BatchError> {
-        let n = self.n;
-        if theta.len() < n {
-            return Err(BatchError::Input);
-        }
-        // Cholesky with a relative pivot threshold.
-        let scale = (0..n).map(|i| self.ata[i][i]).fold(0.0f64, f64::max);
-        let mut l = [[0.0f64; MAX_PARAMS]; MAX_PARAMS];
-        for i in 0..n {
-            for j in 0..=i {
-                let mut s = self.ata[i][j];
-                for k in 0..j {
-                    s -= l[i][k] * l[j][k];
-                }
-                if i == j {
-                    if !(s > 1e-14 * scale) {
-                        return Err(BatchError::Singular);
-                    }
-                    l[i][i] = libm::sqrt(s);
-                } else {
-                    l[i][j] = s / l[j][j];
-                }
-            }
-        }
-        let mut z = [0.0f64; MAX_PARAMS];
-        for i in 0..n {
-            let mut s = self.aty[i];
-            for k in 0..i {
-                s -= l[i][k] * z[k];
-            }
-            z[i] = s / l[i][i];
-        }
-        for i in (0..n).rev() {
-            let mut s = z[i];
-            for k in i + 1..n {
-                s -= l[k][i] * theta[k];
-            }
-            theta[i] = s / l[i][i];
-        }
-        Ok(())
+        solve_symmetric(&self.ata, &self.aty, self.n, theta)
     }
+}
+
+/// Solves `M θ = r` for a symmetric positive definite `M` (its leading `n × n` block) into
+/// `theta[..n]` by Cholesky, `M = L Lᵀ`. A pivot below 1e-14 of the largest diagonal entry
+/// counts as singular. Shared by [`BatchLs`] and the damped Gauss–Newton steps of
+/// [`super::oe`].
+pub fn solve_symmetric(
+    m: &[[f64; MAX_PARAMS]; MAX_PARAMS],
+    r: &[f64; MAX_PARAMS],
+    n: usize,
+    theta: &mut [f64],
+) -> Result<(), BatchError> {
+    if n == 0 || n > MAX_PARAMS || theta.len() < n {
+        return Err(BatchError::Input);
+    }
+    // Cholesky with a relative pivot threshold.
+    let scale = (0..n).map(|i| m[i][i]).fold(0.0f64, f64::max);
+    let mut l = [[0.0f64; MAX_PARAMS]; MAX_PARAMS];
+    for i in 0..n {
+        for j in 0..=i {
+            let mut s = m[i][j];
+            for k in 0..j {
+                s -= l[i][k] * l[j][k];
+            }
+            if i == j {
+                if !(s > 1e-14 * scale) {
+                    return Err(BatchError::Singular);
+                }
+                l[i][i] = libm::sqrt(s);
+            } else {
+                l[i][j] = s / l[j][j];
+            }
+        }
+    }
+    let mut z = [0.0f64; MAX_PARAMS];
+    for i in 0..n {
+        let mut s = r[i];
+        for k in 0..i {
+            s -= l[i][k] * z[k];
+        }
+        z[i] = s / l[i][i];
+    }
+    for i in (0..n).rev() {
+        let mut s = z[i];
+        for k in i + 1..n {
+            s -= l[k][i] * theta[k];
+        }
+        theta[i] = s / l[i][i];
+    }
+    Ok(())
 }
 
 /// Instrumental-variable accumulator: Σ ζ φᵀ and Σ ζ y for up to [`MAX_PARAMS`] parameters.

@@ -1,6 +1,7 @@
 //! Black-box identification of the carrier (seed chapter 4): ARX/ARMAX structures, recursive
 //! least squares with forgetting (f32, U-D factorised, for the MCU), recursive extended least
-//! squares, batch least squares (f64 reference and offline tool), PRBS excitation, and
+//! squares, batch least squares and output-error refinement (f64 reference and offline tool),
+//! PRBS excitation, and
 //! validation (one-step MSE, simulated fit, poles/zeros, residual whiteness, order choice).
 //!
 //! # Equations
@@ -27,6 +28,9 @@
 //! Recursive extended least squares (Ljung §11.5, pseudolinear regression; Åström &
 //! Wittenmark, *Adaptive Control*, §2.3): the same update with φ extended by the a-posteriori
 //! residuals ê(t) = y(t) − φ(t)ᵀθ(t), which estimates C ([`recursive`]).
+//!
+//! Output error ([`oe`], Ljung §4.2 and §10.2–10.3): minimise V(θ) = Σ (y − q^−nk B/A u)², the
+//! simulated-output error, by Levenberg–Marquardt with ψ = φ_x / A as gradient.
 //!
 //! Validation ([`validate`]): MSE = mean (y − φᵀθ)², fit = 100 (1 − ‖y − ŷ_sim‖/‖y − ȳ‖) %,
 //! poles = roots of z^na A(z⁻¹), residual autocorrelation against ±1.96/√N (Ljung §16.6).
@@ -75,13 +79,16 @@
 //!   (prediction, simulation), [`model::OperatingPoint`].
 //! - [`rls`]: f32 U-D RLS ([`rls::Rls`], [`rls::RlsConfig`], [`rls::EstError`]).
 //! - [`recursive`]: RELS ([`recursive::Rels`]) and a record runner for RLS/RELS.
-//! - [`batch`]: f64 batch least squares through the normal equations.
+//! - [`batch`]: f64 batch least squares and instrumental variables through the normal
+//!   equations.
+//! - [`oe`]: f64 output-error refinement (Levenberg–Marquardt on the simulated-output error).
 //! - [`prbs`]: PRBS generator for the SSR.
 //! - [`validate`]: MSE, fit, roots, autocorrelation, order choice (f64, host side).
 #![allow(non_snake_case)]
 
 pub mod batch;
 pub mod model;
+pub mod oe;
 pub mod prbs;
 pub mod recursive;
 pub mod rls;
