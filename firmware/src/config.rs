@@ -120,16 +120,22 @@ pub const ADAPTIVE: Option<AdaptiveConfig> = if cfg!(any(feature = "pi", feature
 /// Identification excitation, as `hter sim --scenario prbs` plays it: a 7-bit PRBS (period 127
 /// bits), each bit held 12 samples = 120 s, so one period is 4.2 h; levels 0.45 ± 0.1 duty (the
 /// README's holding duty; ±0.1 kept the simulated H-TER I load within 2.6–5.6 °C where ±0.2 took
-/// it below 2 °C, commit d1a13d1). The board does not settle at the holding duty first as the
-/// simulator does: precool to ≈ 4 °C, or let `hter identify` discard the initial drift.
+/// it below 2 °C, commit d1a13d1).
 pub const PRBS: hter::ident::prbs::PrbsConfig =
     hter::ident::prbs::PrbsConfig { bits: 7, hold: 12, low: 0.35, high: 0.55 };
+
+/// The identification run first holds the PRBS's middle duty for this many samples (2 h, about
+/// two of the carrier's slow time constants): the rest `hter identify` takes as the operating
+/// point. Precool the load to ≈ 4 °C with a normal build before flashing the identification
+/// build, so the rest starts near its equilibrium.
+pub const IDENTIFY_REST_SAMPLES: u32 = 2 * 3600 / (CARRIER.ts_s as u32);
 
 /// The controller of this build. `adaptive` is the self-tuner's configuration as restored from
 /// flash (the built-in one when nothing good is stored); the others ignore it.
 pub fn controller(adaptive: Option<AdaptiveConfig>) -> AnyController {
     if cfg!(feature = "identify") {
-        return match hter::control::excite::PrbsExcitation::new(PRBS) {
+        let rest_duty = 0.5 * (PRBS.low + PRBS.high);
+        return match hter::control::excite::PrbsExcitation::after_rest(PRBS, rest_duty, IDENTIFY_REST_SAMPLES) {
             Ok(p) => AnyController::Prbs(p),
             Err(e) => {
                 // The controller's name is logged at start, so the log shows the PI.

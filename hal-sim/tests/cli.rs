@@ -241,3 +241,51 @@ fn mission_and_hot_zone_scenarios_hold_2_to_8_after_pull_down() {
     assert!(v["min_temp_c"].as_f64().unwrap() >= 2.0 && v["max_temp_c"].as_f64().unwrap() <= 8.0, "{v}");
     assert_eq!(v["time_outside_2_8_s"].as_f64(), Some(0.0), "{v}");
 }
+
+/// The engineer's identification workflow on a board (README, "Identifying a new cabinet"):
+/// the identification build's defmt log, as probe-rs prints it, through `hter log2csv` and
+/// `hter identify`. The log is made from a simulated `prbs` run in the firmware's line format,
+/// with the boot, estimate, event and location lines a real log interleaves.
+#[test]
+fn a_board_identification_log_goes_through_log2csv_and_identify() {
+    let dir = std::env::temp_dir().join(format!("hter-cli-board-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (sim_csv, log, csv) = (dir.join("sim.csv"), dir.join("cabinet.log"), dir.join("cabinet.csv"));
+    let out = hter(&["sim", "--scenario", "prbs", "--csv", sim_csv.to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = std::fs::read_to_string(&sim_csv).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (t, sp, temp, duty, counts) = (col("t_s"), col("setpoint_c"), col("temp_c"), col("duty"), col("counts"));
+    let mut board = String::from(
+        "0.000000 INFO  reset cause: BrownOut\n└─ firmware::__main_task @ src/main.rs:97\n0.001 INFO  controller: prbs\n",
+    );
+    for (i, row) in lines.enumerate() {
+        let f: Vec<&str> = row.split(',').collect();
+        board.push_str(&format!(
+            "{}.000000 INFO  t={} temp={} sp={} duty={} mode=Normal counts={} supply=12.02 alarm=Off\n└─ firmware::__telemetry_task @ src/main.rs:290\n",
+            i * 10,
+            f[t],
+            f[temp],
+            f[sp],
+            f[duty],
+            f[counts]
+        ));
+        if i == 100 {
+            board.push_str("1000.000000 WARN  event t=1000 SensorSpikes\n");
+        }
+    }
+    std::fs::write(&log, board).unwrap();
+    let out = hter(&["log2csv", "--input", log.to_str().unwrap(), "--output", csv.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let converted = std::fs::read_to_string(&csv).unwrap();
+    assert!(converted.starts_with("t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm\n"));
+    assert_eq!(converted.lines().count(), text.lines().count(), "one row per sample line");
+    let v = json(&["identify", "--input", csv.to_str().unwrap(), "--json"]);
+    let _ = std::fs::remove_dir_all(&dir);
+    assert_eq!(v["chosen_order"], 2, "{}", v["reason"]);
+    assert!(v["fit_percent"].as_f64().unwrap() > 90.0, "{v}");
+    let gain = v["static_gain_c_per_duty"].as_f64().unwrap();
+    assert!((-50.0..=-40.0).contains(&gain), "{gain}");
+}
