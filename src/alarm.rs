@@ -11,8 +11,10 @@
 //!   carries the box may not have been there when it happened.
 //!
 //! Acknowledging (the board's user button) clears the latch; what is still true now keeps the
-//! indicator on. Restarts, freeze-guard actions, mode changes of the self-tuner and setpoint
-//! clamps are not alarms: they are the supervisor doing its job, and they are in the log.
+//! indicator on. A watchdog restart latches too (the loop hung). Power-on and brown-out
+//! restarts (the STM32L4 flags both alike), freeze-guard actions, mode changes of the
+//! self-tuner and setpoint clamps are not alarms: they are the supervisor doing its job, and
+//! they are in the log.
 
 use crate::coldchain::Raised;
 use crate::event::EventKind;
@@ -33,6 +35,9 @@ pub fn needs_attention(kind: EventKind) -> bool {
             | EventKind::SupplySag
             | EventKind::LidOpen
             | EventKind::ControllerNonFinite
+            // A watchdog bite is a hung loop: minutes without control. A brown-out is not
+            // here: the L4 flags every power-on as one, and switching the box on is no alarm.
+            | EventKind::Restarted(crate::persist::ResetCause::Watchdog)
     )
 }
 
@@ -164,7 +169,10 @@ mod tests {
         ] {
             assert!(needs_attention(k), "{k:?}");
         }
+        assert!(needs_attention(Restarted(crate::persist::ResetCause::Watchdog)));
         for k in [
+            Restarted(crate::persist::ResetCause::BrownOut),
+            Restarted(crate::persist::ResetCause::Other),
             SensorRecovered,
             FreezeGuardTripped,
             FreezeGuardReleased,

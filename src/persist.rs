@@ -537,14 +537,15 @@ impl HistoryRecord {
     }
 }
 
-/// What one sample did to the cold-chain record: the alarms it raised and, when the record is
-/// due to be kept, the history to store.
+/// What one sample did to the cold-chain record: the alarms it raised and whether the history
+/// is due to be stored ([`Recorder::history`] gives it; not carried here, so the samples that
+/// store nothing do not move a hundred bytes).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Recorded {
     /// Alarms this sample raised (at most one per kind).
     pub raised: Raised,
-    /// The history to store now: after an alarm, and every `save_every_samples` samples.
-    pub save: Option<HistoryRecord>,
+    /// Store the history now: after an alarm, and every `save_every_samples` samples.
+    pub save_due: bool,
 }
 
 /// The carrier's cold-chain record across power cycles: the history carried in at boot, this
@@ -589,13 +590,11 @@ impl Recorder {
             alarm = true;
         }
         self.since_save = self.since_save.saturating_add(1);
-        let save = if alarm || self.since_save >= self.save_every_samples {
+        let save_due = alarm || self.since_save >= self.save_every_samples;
+        if save_due {
             self.since_save = 0;
-            Some(self.history())
-        } else {
-            None
-        };
-        Recorded { raised, save }
+        }
+        Recorded { raised, save_due }
     }
 
     /// This boot's monitor (MKT, extremes, excursions since boot).
@@ -784,9 +783,10 @@ mod tests {
         assert_eq!(boot.alarms_of(AlarmKind::Heat10h), 1);
         // 359 samples at 5 °C: nothing to store; the 360th stores.
         for i in 0..359 {
-            assert_eq!(rec.push(i as f32 * 10.0, 5.0).save, None, "sample {i}");
+            assert!(!rec.push(i as f32 * 10.0, 5.0).save_due, "sample {i}");
         }
-        let hourly = rec.push(3590.0, 5.0).save.expect("hourly store");
+        assert!(rec.push(3590.0, 5.0).save_due, "hourly store");
+        let hourly = rec.history();
         assert_eq!(hourly.recorded_s, 86_400 + 3590);
         // Freezing: the freeze_60min alarm stores at once, counted once; the excursion is on
         // the record's clock.
@@ -794,11 +794,12 @@ mod tests {
         for i in 0..=360 {
             let out = rec.push(3600.0 + i as f32 * 10.0, -1.0);
             if out.raised.iter().flatten().any(|a| a.kind == AlarmKind::Freeze60min) {
-                stored_alarm = out.save;
+                assert!(out.save_due, "an alarm is stored at once");
+                stored_alarm = Some(rec.history());
                 assert_eq!(i, 360, "triggers exactly 60 min after the run began");
             }
         }
-        let h = stored_alarm.expect("an alarm is stored at once");
+        let h = stored_alarm.expect("the alarm triggered");
         assert_eq!(h.alarms_of(AlarmKind::Freeze60min), 1);
         assert_eq!(h.alarms_of(AlarmKind::Heat10h), 1);
         assert_eq!(h.resets_by(ResetCause::BrownOut), 1);

@@ -20,6 +20,13 @@ fn pi_pulls_down_from_28_to_4_without_freezing_and_holds() {
     assert!(m.max_abs_error_after_settle_c <= 0.5, "{m:?}");
     // It really started warm.
     assert!(out.rows[0].true_temp_c > 27.0);
+    // The alarm indicator shows the warm box (out of range) from the first sample and goes
+    // off once the measured load is within 2–8 °C: a pull-down is no fault, nothing latches.
+    assert_eq!(out.rows[0].alarm, "out_of_range");
+    let inside = out.rows.iter().position(|r| (2.0..=8.0).contains(&r.temp_c)).expect("reaches 2–8 °C");
+    assert!(out.rows[..inside].iter().all(|r| r.alarm == "out_of_range"));
+    assert!(out.rows[inside..].iter().all(|r| r.alarm == "off"), "indicator on after the pull-down");
+    assert!((m.alarm_indicator_s - inside as f64 * 10.0).abs() < 1e-9, "{} s", m.alarm_indicator_s);
 }
 
 #[test]
@@ -31,6 +38,8 @@ fn baselines_never_take_the_load_below_2_on_piecewise() {
             let m = sim("piecewise", c, plant, load).metrics;
             assert!(m.min_temp_c >= 2.0, "{c:?} {plant:?} {load:?}: min {}", m.min_temp_c);
             assert!(m.max_temp_c <= 8.0, "{c:?} {plant:?} {load:?}: max {}", m.max_temp_c);
+            // Nothing wrong, nothing to see: the board's alarm indicator stays off.
+            assert_eq!(m.alarm_indicator_first_s, None, "{c:?} {plant:?} {load:?}: indicator on");
         }
     }
 }
@@ -133,6 +142,7 @@ fn seed_conclusions_hold_on_piecewise() {
         );
         for m in [&pi, &gmvc, &igmvc, &gpc] {
             assert!(m.min_temp_c >= 2.0 && m.max_temp_c <= 8.0, "{plant:?} {load:?}: {m:?}");
+            assert_eq!(m.alarm_indicator_first_s, None, "{plant:?} {load:?}: indicator on: {m:?}");
         }
         assert!(igmvc.steady_state_error_c <= 0.15, "{plant:?} {load:?} IGMVC: {igmvc:?}");
         assert!(gpc.iae < pi.iae, "{plant:?} {load:?}: GPC {} vs PI {}", gpc.iae, pi.iae);

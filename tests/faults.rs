@@ -36,6 +36,16 @@ fn check_with(kind: &str, detected: &str, within_s: f64, controllers: &[Controll
         let first = first.unwrap_or_else(|| panic!("{kind}/{c:?}: {detected} never reported: {:?}", m.faults_detected));
         assert!(first.t_s - AT_S <= within_s, "{kind}/{c:?}: detected after {} s", first.t_s - AT_S);
         assert!(m.min_temp_c > 0.0, "{kind}/{c:?}: load reached {} °C", m.min_temp_c);
+        // The board's alarm indicator (`hter::alarm`): off until the fault, on by its detection
+        // at the latest, and, nobody pressing the button, on from then to the end.
+        let on = m.alarm_indicator_first_s.unwrap_or_else(|| panic!("{kind}/{c:?}: the indicator never came on"));
+        assert!(on >= AT_S && on <= first.t_s, "{kind}/{c:?}: indicator on at {on} s, detection at {} s", first.t_s);
+        let last = out.rows.last().map_or(0.0, |r| r.t_s);
+        assert!(
+            out.rows.iter().filter(|r| r.t_s >= first.t_s).all(|r| r.alarm != "off"),
+            "{kind}/{c:?}: indicator went off"
+        );
+        assert!(m.alarm_indicator_s >= last - first.t_s, "{kind}/{c:?}: {} s on", m.alarm_indicator_s);
     }
 }
 

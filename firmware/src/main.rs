@@ -184,8 +184,8 @@ async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripheral
         for a in rec.raised.iter().flatten() {
             error!("ALARM {} t={} (condition since t={})", a.kind.name(), a.trigger_s, a.start_s);
         }
-        if let Some(h) = rec.save {
-            persist::request(persist::Save::History(h));
+        if rec.save_due {
+            persist::request(persist::Save::History(recorder.history()));
         }
         let record = Telemetry {
             t_s: s.t_s,

@@ -74,6 +74,11 @@ pub struct SimMetrics {
     pub alarms: Vec<Stamped>,
     /// Faults the step detected.
     pub faults_detected: Vec<Stamped>,
+    /// Time the board's alarm indicator was on (`hter::alarm`: out of range, not in control,
+    /// or a fault or alarm nobody acknowledged — the simulation never presses the button), s.
+    pub alarm_indicator_s: f64,
+    /// When the alarm indicator first came on, s (null if never).
+    pub alarm_indicator_first_s: Option<f64>,
 }
 
 /// Figures computed from the samples alone.

@@ -8,6 +8,7 @@
 //! 4. the plant integrates Ts / PWM-period SSR periods, each switched on then off for real.
 
 use anyhow::{bail, Result};
+use hter::alarm::{Annunciator, Indication};
 use hter::coldchain::ColdChainMonitor;
 use hter::control::adaptive::{AdaptiveConfig, SelfTuning};
 use hter::control::excite::PrbsExcitation;
@@ -255,6 +256,9 @@ pub struct Row {
     pub trace_p: Option<f32>,
     /// Self-tuning mode (adaptive, frozen, fallback).
     pub adaptive_mode: Option<&'static str>,
+    /// The board's alarm indicator (`hter::alarm::Indication`): off, not_in_control,
+    /// out_of_range, unacknowledged.
+    pub alarm: &'static str,
 }
 
 /// A finished run.
@@ -265,6 +269,15 @@ pub struct SimOutput {
     pub metrics: SimMetrics,
     /// Sample period, s.
     pub ts_s: f64,
+}
+
+fn indication_name(i: Indication) -> &'static str {
+    match i {
+        Indication::Off => "off",
+        Indication::NotInControl => "not_in_control",
+        Indication::OutOfRange => "out_of_range",
+        Indication::Unacknowledged => "unacknowledged",
+    }
 }
 
 fn mode_name(m: Mode) -> &'static str {
@@ -599,6 +612,12 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
     let mut last_on = false;
     let mut next_change = 0;
     let mut energy0_wh = 0.0;
+    // The carrier's own record and alarm indicator, fed as the firmware feeds them: the
+    // monitor sees what the sensor saw.
+    let mut monitor = ColdChainMonitor::new();
+    let mut alarms = Vec::new();
+    let mut annunciator = Annunciator::new();
+    let (mut alarm_on_s, mut alarm_first_s) = (0.0, None);
     for k in -preroll..n {
         let t_s = k as f64 * ts;
         while k >= 0 && next_change < sc.changes.len() && sc.changes[next_change].0 <= t_s {
@@ -613,6 +632,8 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
                     // What the firmware reads from RCC_CSR at boot after a brown-out.
                     carrier.note_reset(ResetCause::BrownOut);
                     since_save = 0;
+                    // The indicator's latch is RAM too.
+                    annunciator = Annunciator::new();
                 } else {
                     rig.inject(f);
                 }
@@ -636,6 +657,15 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
             for e in out.events.iter().filter(|e| is_fault(e.kind)) {
                 faults.push(Stamped { kind: event_name(e.kind).into(), t_s: f64::from(e.t_s) });
             }
+            let raised = monitor.push(t_s as f32, out.temp_c.0);
+            for a in raised.iter().flatten() {
+                alarms.push(Stamped { kind: a.kind.name().into(), t_s: f64::from(a.trigger_s) });
+            }
+            let indication = annunciator.update(&out, &raised);
+            if indication.is_on() {
+                alarm_on_s += ts;
+                alarm_first_s.get_or_insert(t_s);
+            }
             rows.push(Row {
                 t_s,
                 setpoint_c: w,
@@ -656,6 +686,7 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
                     AdaptiveMode::Frozen => "frozen",
                     AdaptiveMode::Fallback => "fallback",
                 }),
+                alarm: indication_name(indication),
             });
         }
         if k == 0 {
@@ -666,14 +697,6 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
     let samples: Vec<Sample> =
         rows.iter().map(|r| Sample { t_s: r.t_s, setpoint_c: r.setpoint_c, true_temp_c: r.true_temp_c }).collect();
     let f = metrics::tracking(&samples, ts);
-    // The alarms the carrier's own record would raise: the monitor sees what the sensor saw.
-    let mut monitor = ColdChainMonitor::new();
-    let mut alarms = Vec::new();
-    for r in &rows {
-        for a in monitor.push(r.t_s as f32, r.temp_c as f32).into_iter().flatten() {
-            alarms.push(Stamped { kind: a.kind.name().into(), t_s: f64::from(a.trigger_s) });
-        }
-    }
     let metrics = SimMetrics {
         controller: name,
         iae: f.iae,
@@ -688,6 +711,8 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
         ssr_switches: switches,
         alarms,
         faults_detected: faults,
+        alarm_indicator_s: alarm_on_s,
+        alarm_indicator_first_s: alarm_first_s,
     };
     Ok(SimOutput { rows, metrics, ts_s: ts })
 }

@@ -26,9 +26,11 @@ use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln, nr, syscall};
+use hter::alarm::Annunciator;
 use hter::control::gpc::{GpcConfig, GpcDesign, GpcState};
 use hter::control::{AnyController, ControlInput, Controller};
 use hter::ident::rls::Rls;
+use hter::persist::{HistoryRecord, Recorder};
 use hter::step::StepInput;
 use nalgebra::SVector;
 
@@ -262,6 +264,9 @@ fn run() -> Result<(), &'static str> {
     let mut gpc = GpcState::new(PI_BIAS);
     let mut gpc_design = GpcDesign::ZERO; // kept between samples, as `LawState` does
     let k = acfg.k;
+    // The firmware's record and indicator, timed beside the step as the control task runs them.
+    let mut recorder = Recorder::new(HistoryRecord::EMPTY, proto::HISTORY_SAVE_SAMPLES);
+    let mut annunciator = Annunciator::new();
 
     let mut chunk = [0u8; 12 * CHUNK];
     let mut done = 0;
@@ -283,6 +288,15 @@ fn run() -> Result<(), &'static str> {
             ticks[proto::PART_STEP] = t;
             let (raised, t) = timed(|| proto::monitor_push(&mut monitor, &inp_b, &o));
             ticks[proto::PART_MONITOR] = t;
+            ticks[proto::PART_BOARD] = timed(|| {
+                let rec = recorder.push(inp_b.t_s, o.temp_c.0);
+                if rec.save_due {
+                    // What the control task hands the persist task (its queue copies it once).
+                    black_box(recorder.history());
+                }
+                annunciator.update(&o, &rec.raised)
+            })
+            .1;
 
             // Profile on shadows.
             let ci = ControlInput { t_s: inp.t_s, y_c: o.temp_c.0, w_c: o.setpoint_c.0 };
