@@ -20,25 +20,17 @@ use crate::coldchain::Raised;
 use crate::event::EventKind;
 use crate::step::{Mode, StepOutput};
 
-/// Whether an event asks for a person.
+/// Whether an event asks for a person: a hardware fault ([`EventKind::is_hardware_fault`]), a
+/// controller that produced no number, or a watchdog restart.
 pub fn needs_attention(kind: EventKind) -> bool {
-    matches!(
-        kind,
-        EventKind::SensorOpen
-            | EventKind::SensorShort
-            | EventKind::SensorOutOfRange
-            | EventKind::SensorStuck
-            | EventKind::SensorSpikes
-            | EventKind::SensorOffset
-            | EventKind::SsrStuckOn
-            | EventKind::SsrStuckOff
-            | EventKind::SupplySag
-            | EventKind::LidOpen
-            | EventKind::ControllerNonFinite
-            // A watchdog bite is a hung loop: minutes without control. A brown-out is not
-            // here: the L4 flags every power-on as one, and switching the box on is no alarm.
-            | EventKind::Restarted(crate::persist::ResetCause::Watchdog)
-    )
+    kind.is_hardware_fault()
+        || matches!(
+            kind,
+            EventKind::ControllerNonFinite
+                // A watchdog bite is a hung loop: minutes without control. A brown-out is not
+                // here: the L4 flags every power-on as one, and switching the box on is no alarm.
+                | EventKind::Restarted(crate::persist::ResetCause::Watchdog)
+        )
 }
 
 /// Why the indicator is on (the first reason that holds, in this order).

@@ -58,6 +58,25 @@ pub enum EventKind {
 }
 
 impl EventKind {
+    /// A detected hardware fault of the carrier (sensor, SSR, supply, lid): what
+    /// `hter sim --fault` can inject and the supervisor reports. Restarts, guard actions and
+    /// the self-tuner's mode changes are not.
+    pub fn is_hardware_fault(self) -> bool {
+        matches!(
+            self,
+            EventKind::SensorOpen
+                | EventKind::SensorShort
+                | EventKind::SensorOutOfRange
+                | EventKind::SensorStuck
+                | EventKind::SensorSpikes
+                | EventKind::SensorOffset
+                | EventKind::SsrStuckOn
+                | EventKind::SsrStuckOff
+                | EventKind::SupplySag
+                | EventKind::LidOpen
+        )
+    }
+
     /// A stable number for the kind, for compact logs and checksums (the processor-in-the-loop
     /// runner compares events by it).
     pub fn code(self) -> u32 {

@@ -317,20 +317,7 @@ pub fn event_name(k: EventKind) -> &'static str {
 }
 
 fn is_fault(k: EventKind) -> bool {
-    matches!(
-        k,
-        EventKind::SensorOpen
-            | EventKind::SensorShort
-            | EventKind::SensorOutOfRange
-            | EventKind::SensorStuck
-            | EventKind::SensorSpikes
-            | EventKind::SsrStuckOn
-            | EventKind::SsrStuckOff
-            | EventKind::SensorOffset
-            | EventKind::SupplySag
-            | EventKind::LidOpen
-            | EventKind::Restarted(ResetCause::BrownOut | ResetCause::Watchdog)
-    )
+    k.is_hardware_fault() || matches!(k, EventKind::Restarted(ResetCause::BrownOut | ResetCause::Watchdog))
 }
 
 /// Hardware faults `--fault KIND@T_S` injects (SPEC §3).
