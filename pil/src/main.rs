@@ -27,6 +27,7 @@ use cortex_m::peripheral::SYST;
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln, nr, syscall};
 use hter::alarm::Annunciator;
+use hter::control::adaptive::plausible_model;
 use hter::control::gpc::{GpcConfig, GpcDesign, GpcState};
 use hter::control::{AnyController, ControlInput, Controller};
 use hter::ident::rls::Rls;
@@ -324,14 +325,7 @@ fn run() -> Result<(), &'static str> {
             .1;
             gpc.track(o.duty.get());
             if let Some(st) = st {
-                ticks[7] = timed(|| {
-                    st.estimate().is_some_and(|m| {
-                        m.a_is_stable()
-                            && m.static_gain()
-                                .is_some_and(|g| (acfg.gain_min_c_per_duty..=acfg.gain_max_c_per_duty).contains(&g))
-                    })
-                })
-                .1;
+                ticks[7] = timed(|| st.estimate().is_some_and(|m| plausible_model(&acfg, &m))).1;
             }
             let at = model.atilde();
             ticks[8] =
