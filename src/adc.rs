@@ -114,8 +114,6 @@ pub fn ratiometric_counts(signal: u32, reference: u32, full_scale: u32) -> u32 {
 pub struct SupplySense {
     /// Divider ratio (R_top + R_bottom) / R_bottom.
     pub divider: f32,
-    /// Full scale of the conversions handed in, counts (65 520 for 12-bit × 256 >> 4).
-    pub full_scale_counts: u32,
     /// VDDA at which VREFINT_CAL was measured, V (3.0 on the STM32L4).
     pub vrefint_cal_vdda_v: f32,
     /// Full scale of VREFINT_CAL, counts (12-bit: 4095).
@@ -124,22 +122,25 @@ pub struct SupplySense {
 
 impl SupplySense {
     /// The reference board: 47 kΩ over 10 kΩ (12 V → 2.1 V; up to 18.8 V before the ADC
-    /// saturates), conversions oversampled to 16 bits as the RTD's.
+    /// saturates).
     pub const DEFAULT: SupplySense =
-        SupplySense { divider: 5.7, full_scale_counts: 65_520, vrefint_cal_vdda_v: 3.0, vrefint_cal_full_scale: 4095 };
+        SupplySense { divider: 5.7, vrefint_cal_vdda_v: 3.0, vrefint_cal_full_scale: 4095 };
 
     /// The supply, V, from the divided conversion `supply` and the conversion `vrefint` of the
-    /// internal reference (same oversampling), given the factory `vrefint_cal`. `None` when a
-    /// conversion or the calibration word is 0 (no reference, a blank calibration): the
-    /// supply check then stays off rather than report a made-up voltage.
+    /// internal reference, both with the same oversampling (any: its scale cancels), given the
+    /// factory `vrefint_cal`. `None` when a conversion or the calibration word is 0 (no
+    /// reference, a blank calibration): the supply check then stays off rather than report a
+    /// made-up voltage.
+    ///
+    /// With F the oversampled full scale, VDDA = V_cal · cal · (F / cal_full_scale) / vrefint and
+    /// V_in = VDDA · supply / F, so F drops out: V = divider · V_cal · cal · supply /
+    /// (cal_full_scale · vrefint).
     pub fn volts(&self, supply: u32, vrefint: u32, vrefint_cal: u16) -> Option<f32> {
-        if vrefint == 0 || vrefint_cal == 0 || self.full_scale_counts == 0 || self.vrefint_cal_full_scale == 0 {
+        if vrefint == 0 || vrefint_cal == 0 || self.vrefint_cal_full_scale == 0 {
             return None;
         }
-        // VDDA from VREFINT, in the units of `vrefint` (the calibration word is 12-bit).
-        let scale = self.full_scale_counts as f32 / self.vrefint_cal_full_scale as f32;
-        let vdda = self.vrefint_cal_vdda_v * f32::from(vrefint_cal) * scale / vrefint as f32;
-        let v = self.divider * vdda * supply as f32 / self.full_scale_counts as f32;
+        let v = self.divider * self.vrefint_cal_vdda_v * f32::from(vrefint_cal) * supply as f32
+            / (self.vrefint_cal_full_scale as f32 * vrefint as f32);
         v.is_finite().then_some(v)
     }
 }

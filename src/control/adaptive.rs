@@ -243,9 +243,10 @@ pub fn model_from_theta(cfg: &AdaptiveConfig, theta: [f32; 4]) -> Option<Model> 
 ///
 /// A second-order structure (the self-tuner's), a stable A, a cooling static gain, and every B
 /// coefficient cooling (b_i ≤ 0): the step response of a Peltier cooler seen through the RTD
-/// is monotone, so a positive b_i is an artefact of poor excitation — and a positive b0 reverses the sign of the first-step gain g0
-/// that (I)GMVC divides by, so the law would heat when it should cool (seen on H-TER II, seed 2,
-/// before this check: the load drifted to 12 °C at a 4 °C setpoint).
+/// is monotone, so a positive b_i is an artefact of poor excitation — and a positive b0
+/// reverses the sign of the first-step gain g0 that (I)GMVC divides by, so the law would heat
+/// when it should cool (seen on H-TER II, seed 2, before this check: the load drifted to 12 °C
+/// at a 4 °C setpoint).
 pub fn plausible_model(cfg: &AdaptiveConfig, m: &Model) -> bool {
     // The self-tuner's structure is second order: anything else cannot be its model.
     let a2 = if m.na == 2 { m.a[1] } else { 0.0 };
