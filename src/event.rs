@@ -55,6 +55,22 @@ pub enum EventKind {
     /// reset flags at boot and hands them to [`crate::step::Carrier::note_reset`]). A
     /// brown-out or a watchdog bite means minutes of control and record were lost.
     Restarted(crate::persist::ResetCause),
+    /// The previous boot stopped through a fail-safe path (panic, HardFault, NMI, an unexpected
+    /// interrupt, a control stall): its outputs went safe, its reason survived the reset in
+    /// RAM ([`crate::failsafe::ReasonRecord`]), and this boot reports it with its first sample.
+    BoardFault(crate::failsafe::StopKind),
+    /// A flash page of the persistence region could not be read (an ECC error: a double-word
+    /// whose programming a power cut interrupted). The page was treated as lost and erased; the
+    /// records in the other pages were kept.
+    FlashPageLost,
+    /// The switched supply rail (after the supply-enable switch) reads powered although the
+    /// switch is commanded open: the switch is shorted and the second cut-off is gone. The SSR
+    /// still controls; the alarm asks for service.
+    SupplySwitchShorted,
+    /// The reference-resistor conversions on either side of the RTD conversion are outside
+    /// their window (excitation current or front end broken, VDDA out of range): the RTD
+    /// reading is not trusted, a sensor fault.
+    ReferenceOutOfRange,
 }
 
 impl EventKind {
@@ -74,7 +90,44 @@ impl EventKind {
                 | EventKind::SsrStuckOff
                 | EventKind::SupplySag
                 | EventKind::LidOpen
+                | EventKind::SupplySwitchShorted
+                | EventKind::ReferenceOutOfRange
         )
+    }
+
+    /// Stable snake_case name, as `hter sim --json`, the CSV traces and the board's log spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            EventKind::SensorOpen => "sensor_open",
+            EventKind::SensorShort => "sensor_short",
+            EventKind::SensorOutOfRange => "sensor_out_of_range",
+            EventKind::SensorRecovered => "sensor_recovered",
+            EventKind::SensorOffset => "sensor_offset",
+            EventKind::SupplySag => "supply_sag",
+            EventKind::LidOpen => "lid_open",
+            EventKind::SensorStuck => "sensor_stuck",
+            EventKind::SensorSpikes => "sensor_spikes",
+            EventKind::SsrStuckOn => "ssr_stuck_on",
+            EventKind::SsrStuckOff => "ssr_stuck_off",
+            EventKind::FreezeGuardTripped => "freeze_guard_tripped",
+            EventKind::FreezeGuardReleased => "freeze_guard_released",
+            EventKind::SetpointClamped => "setpoint_clamped",
+            EventKind::ControllerNonFinite => "controller_non_finite",
+            EventKind::AdaptiveEngaged => "adaptive_engaged",
+            EventKind::AdaptiveFrozen => "adaptive_frozen",
+            EventKind::FallbackEngaged => "fallback_engaged",
+            EventKind::Restarted(crate::persist::ResetCause::BrownOut) => "restarted_brownout",
+            EventKind::Restarted(crate::persist::ResetCause::Watchdog) => "restarted_watchdog",
+            EventKind::Restarted(crate::persist::ResetCause::Other) => "restarted",
+            EventKind::BoardFault(crate::failsafe::StopKind::Panic) => "board_fault_panic",
+            EventKind::BoardFault(crate::failsafe::StopKind::HardFault) => "board_fault_hard_fault",
+            EventKind::BoardFault(crate::failsafe::StopKind::Nmi) => "board_fault_nmi",
+            EventKind::BoardFault(crate::failsafe::StopKind::UnexpectedInterrupt) => "board_fault_unexpected_interrupt",
+            EventKind::BoardFault(crate::failsafe::StopKind::ControlStall) => "board_fault_control_stall",
+            EventKind::FlashPageLost => "flash_page_lost",
+            EventKind::SupplySwitchShorted => "supply_switch_shorted",
+            EventKind::ReferenceOutOfRange => "reference_out_of_range",
+        }
     }
 
     /// A stable number for the kind, for compact logs and checksums (the processor-in-the-loop
@@ -103,6 +156,10 @@ impl EventKind {
             EventKind::Restarted(ResetCause::Watchdog) => 18,
             EventKind::Restarted(ResetCause::BrownOut) => 19,
             EventKind::Restarted(ResetCause::Other) => 20,
+            EventKind::BoardFault(k) => 0x40 + u32::from(k as u8),
+            EventKind::FlashPageLost => 21,
+            EventKind::SupplySwitchShorted => 22,
+            EventKind::ReferenceOutOfRange => 23,
         }
     }
 }
@@ -190,7 +247,12 @@ mod tests {
             EventKind::Restarted(ResetCause::Watchdog),
             EventKind::Restarted(ResetCause::BrownOut),
             EventKind::Restarted(ResetCause::Other),
+            EventKind::FlashPageLost,
+            EventKind::SupplySwitchShorted,
+            EventKind::ReferenceOutOfRange,
         ];
+        let faults = crate::failsafe::StopKind::ALL.map(EventKind::BoardFault);
+        let all: Vec<EventKind> = all.into_iter().chain(faults).collect();
         for (i, a) in all.iter().enumerate() {
             for b in &all[i + 1..] {
                 assert_ne!(a.code(), b.code(), "{a:?} {b:?}");

@@ -13,6 +13,8 @@
 //! - [`control`]: the [`control::Controller`] trait and the baseline controllers.
 //! - [`ident`]: ARX/ARMAX models, LS/RLS/RELS estimators, PRBS, validation.
 //! - [`event`]: timestamped events the step reports (sensor faults, guard actions, mode changes).
+//! - [`failsafe`]: the safe-outputs seam, the reset-surviving reason record and the heartbeat
+//!   of the fail-loud alarm.
 //! - [`hal`]: the small hardware seams the firmware and `hal-sim` implement.
 //! - [`step`]: the per-sample application step.
 //! - [`coldchain`]: WHO-style alarms, mean kinetic temperature, excursions; [`alarm`]: the
@@ -33,6 +35,7 @@ pub mod calib;
 pub mod coldchain;
 pub mod control;
 pub mod event;
+pub mod failsafe;
 pub mod filter;
 pub mod hal;
 pub mod ident;

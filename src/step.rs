@@ -231,6 +231,8 @@ pub struct Carrier<C: Controller> {
     limp_on: bool,
     /// A restart to report with the next sample.
     pending_reset: Option<crate::persist::ResetCause>,
+    /// A fail-safe stop of the previous boot to report with the next sample.
+    pending_stop: Option<crate::failsafe::StopKind>,
     /// When the supply probe under way began.
     probe: Option<f32>,
     /// When the last supply probe began.
@@ -302,6 +304,7 @@ impl<C: Controller> Carrier<C> {
             probe: None,
             probe_s: None,
             pending_reset: None,
+            pending_stop: None,
             limp_on: false,
             last_drop_c: 0.0,
             req_off_run: 0,
@@ -328,6 +331,13 @@ impl<C: Controller> Carrier<C> {
     /// [`EventKind::Restarted`], so the log and the cold-chain record show the gap.
     pub fn note_reset(&mut self, cause: crate::persist::ResetCause) {
         self.pending_reset = Some(cause);
+    }
+
+    /// Tells the step that the previous boot ended in a fail-safe stop (the reason record the
+    /// glue found at boot, [`crate::failsafe::ReasonRecord::take`]); the next sample reports it
+    /// as [`EventKind::BoardFault`].
+    pub fn note_board_fault(&mut self, kind: crate::failsafe::StopKind) {
+        self.pending_stop = Some(kind);
     }
 
     /// Gives the step the measured supply voltage of the Peltier modules, V, for the next
@@ -419,6 +429,9 @@ impl<C: Controller> Carrier<C> {
         let mut emit = |kind| events.push(Event { t_s, kind });
         if let Some(cause) = self.pending_reset.take() {
             emit(EventKind::Restarted(cause));
+        }
+        if let Some(kind) = self.pending_stop.take() {
+            emit(EventKind::BoardFault(kind));
         }
 
         // 1–3: measurement chain.

@@ -289,31 +289,9 @@ fn mode_name(m: Mode) -> &'static str {
     }
 }
 
-/// snake_case name of an event kind, as it appears in JSON.
+/// snake_case name of an event kind, as it appears in JSON and CSV ([`EventKind::name`]).
 pub fn event_name(k: EventKind) -> &'static str {
-    match k {
-        EventKind::SensorOpen => "sensor_open",
-        EventKind::SensorShort => "sensor_short",
-        EventKind::SensorOutOfRange => "sensor_out_of_range",
-        EventKind::SensorRecovered => "sensor_recovered",
-        EventKind::SensorOffset => "sensor_offset",
-        EventKind::SupplySag => "supply_sag",
-        EventKind::LidOpen => "lid_open",
-        EventKind::SensorStuck => "sensor_stuck",
-        EventKind::SensorSpikes => "sensor_spikes",
-        EventKind::SsrStuckOn => "ssr_stuck_on",
-        EventKind::SsrStuckOff => "ssr_stuck_off",
-        EventKind::FreezeGuardTripped => "freeze_guard_tripped",
-        EventKind::FreezeGuardReleased => "freeze_guard_released",
-        EventKind::SetpointClamped => "setpoint_clamped",
-        EventKind::ControllerNonFinite => "controller_non_finite",
-        EventKind::AdaptiveEngaged => "adaptive_engaged",
-        EventKind::AdaptiveFrozen => "adaptive_frozen",
-        EventKind::FallbackEngaged => "fallback_engaged",
-        EventKind::Restarted(ResetCause::BrownOut) => "restarted_brownout",
-        EventKind::Restarted(ResetCause::Watchdog) => "restarted_watchdog",
-        EventKind::Restarted(ResetCause::Other) => "restarted",
-    }
+    k.name()
 }
 
 fn is_fault(k: EventKind) -> bool {

@@ -1,0 +1,329 @@
+//! What every path that stops the control loop does first, and what survives the reset after it.
+//!
+//! A panic, a HardFault, an NMI or any unexpected interrupt must leave the carrier in its *safe
+//! outputs* — SSR drive low and its timer channel off, the supply-enable switch open, the alarm
+//! on — before anything else can go wrong, then record why, then reset. The board-specific part
+//! (which pins, how to reset) is behind [`SafeOutputs`]; the order and the record are here, so
+//! the very same code runs in the firmware's handlers and on the processor-in-the-loop machine
+//! (`cargo xtask pil` triggers a panic, a HardFault and an NMI there and checks each step).
+//!
+//! The reason lives in a [`ReasonRecord`] that the glue places in RAM the runtime neither zeroes
+//! nor initialises (`.uninit`): it survives a system reset (not a power cycle). The next boot
+//! [`ReasonRecord::take`]s it — a record whose magic or CRC is wrong is noise from a power-up and
+//! is ignored — and reports it as [`crate::event::EventKind::BoardFault`].
+//!
+//! Glossary: *stop* = any path that leaves the control loop for good (until reset); *PC* = the
+//! program counter stacked by the exception entry; *CFSR/HFSR* = the Cortex-M fault status
+//! registers (ARMv7-M ARM B3.2.15–16); *BFAR/MMFAR* = the faulting data address when valid.
+
+use crate::persist::crc32;
+
+/// The board's outputs driven to their safe state from any context (an exception handler, a
+/// panic, the first instructions of `main`): SSR drive low with its timer channel off, the
+/// supply-enable switch open, the alarm on.
+///
+/// Implementations write registers directly (no locks, no allocation, nothing that can block
+/// or fault) and are idempotent: a second fault inside the first handler calls it again.
+pub trait SafeOutputs {
+    /// Drive every output to its safe level now.
+    fn force_safe(&mut self);
+}
+
+/// Which path stopped the control loop.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum StopKind {
+    /// A Rust panic (`detail` = source line, `text` = file and message as far as they fit).
+    Panic = 1,
+    /// A HardFault (or an escalated MemManage/BusFault/UsageFault): `pc` stacked, `addr` the
+    /// faulting data address when the CPU latched one (else 0), `detail` = CFSR.
+    HardFault = 2,
+    /// An NMI not caused by the persistence region's flash ECC (clock security system, a
+    /// double ECC error elsewhere in flash): `detail` = the source's status word.
+    Nmi = 3,
+    /// An interrupt without a handler fired (`detail` = its exception number).
+    UnexpectedInterrupt = 4,
+    /// The control loop stopped making progress and the glue noticed before the watchdog did
+    /// (`detail` = milliseconds since the last completed step).
+    ControlStall = 5,
+}
+
+impl StopKind {
+    /// Every kind, in code order.
+    pub const ALL: [StopKind; 5] =
+        [StopKind::Panic, StopKind::HardFault, StopKind::Nmi, StopKind::UnexpectedInterrupt, StopKind::ControlStall];
+
+    /// The kind stored as `code`, if any.
+    pub fn from_code(code: u8) -> Option<StopKind> {
+        StopKind::ALL.into_iter().find(|k| *k as u8 == code)
+    }
+
+    /// Stable lower-case name for logs and CSV.
+    pub fn name(self) -> &'static str {
+        match self {
+            StopKind::Panic => "panic",
+            StopKind::HardFault => "hard_fault",
+            StopKind::Nmi => "nmi",
+            StopKind::UnexpectedInterrupt => "unexpected_interrupt",
+            StopKind::ControlStall => "control_stall",
+        }
+    }
+}
+
+/// Bytes of text a [`StopInfo`] keeps (a panic's file and message, truncated).
+pub const STOP_TEXT: usize = 48;
+
+/// Why the board stopped: what a handler records and the next boot reports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StopInfo {
+    /// The path.
+    pub kind: StopKind,
+    /// Program counter of the faulting instruction (0 for a panic, which has no single one).
+    pub pc: u32,
+    /// Faulting data address, or 0 when none was latched.
+    pub addr: u32,
+    /// Kind-specific word: the panic's line, CFSR, the NMI source's status, the exception number.
+    pub detail: u32,
+    text: [u8; STOP_TEXT],
+    text_len: u8,
+}
+
+impl StopInfo {
+    /// A reason without text.
+    pub const fn new(kind: StopKind, pc: u32, addr: u32, detail: u32) -> Self {
+        StopInfo { kind, pc, addr, detail, text: [0; STOP_TEXT], text_len: 0 }
+    }
+
+    /// Appends `s` to the text, truncating at [`STOP_TEXT`] bytes (on a UTF-8 boundary).
+    pub fn push_text(&mut self, s: &str) {
+        let room = STOP_TEXT - usize::from(self.text_len);
+        let mut n = s.len().min(room);
+        while n > 0 && !s.is_char_boundary(n) {
+            n -= 1;
+        }
+        let at = usize::from(self.text_len);
+        if let (Some(dst), Some(src)) = (self.text.get_mut(at..at + n), s.as_bytes().get(..n)) {
+            dst.copy_from_slice(src);
+            self.text_len += n as u8;
+        }
+    }
+
+    /// The recorded text (empty if none).
+    pub fn text(&self) -> &str {
+        let bytes = self.text.get(..usize::from(self.text_len)).unwrap_or(&[]);
+        core::str::from_utf8(bytes).unwrap_or("")
+    }
+}
+
+impl core::fmt::Write for StopInfo {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        self.push_text(s);
+        Ok(())
+    }
+}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for StopInfo {
+    fn format(&self, f: defmt::Formatter) {
+        defmt::write!(
+            f,
+            "{} pc={=u32:#010x} addr={=u32:#010x} detail={=u32:#x} {=str}",
+            self.kind,
+            self.pc,
+            self.addr,
+            self.detail,
+            self.text()
+        )
+    }
+}
+
+/// `"HTSR"`: a record written by [`ReasonRecord::write`].
+const MAGIC: u32 = 0x5253_5448;
+
+/// The reset-surviving record of a stop, laid out as plain words so that uninitialised RAM can
+/// hold it: the glue declares one `static mut` in `.uninit` and never lets the runtime touch it.
+#[derive(Clone, Copy, Debug)]
+#[repr(C)]
+pub struct ReasonRecord {
+    magic: u32,
+    kind: u32,
+    pc: u32,
+    addr: u32,
+    detail: u32,
+    text_len: u32,
+    text: [u8; STOP_TEXT],
+    crc: u32,
+}
+
+impl ReasonRecord {
+    /// An empty record (what a fresh boot holds after [`ReasonRecord::take`]).
+    pub const EMPTY: ReasonRecord =
+        ReasonRecord { magic: 0, kind: 0, pc: 0, addr: 0, detail: 0, text_len: 0, text: [0; STOP_TEXT], crc: 0 };
+
+    fn crc(&self) -> u32 {
+        let mut bytes = [0u8; 24 + STOP_TEXT];
+        for (i, w) in [self.magic, self.kind, self.pc, self.addr, self.detail, self.text_len].iter().enumerate() {
+            bytes[4 * i..4 * i + 4].copy_from_slice(&w.to_le_bytes());
+        }
+        bytes[24..].copy_from_slice(&self.text);
+        crc32(&bytes)
+    }
+
+    /// Records `info` (replacing whatever was there).
+    pub fn write(&mut self, info: &StopInfo) {
+        *self = ReasonRecord {
+            magic: MAGIC,
+            kind: u32::from(info.kind as u8),
+            pc: info.pc,
+            addr: info.addr,
+            detail: info.detail,
+            text_len: u32::from(info.text_len),
+            text: info.text,
+            crc: 0,
+        };
+        self.crc = self.crc();
+    }
+
+    /// The recorded stop, if the record is intact (magic, CRC, kind and text length valid);
+    /// clears the record either way, so each stop is reported once.
+    pub fn take(&mut self) -> Option<StopInfo> {
+        let found = self.peek();
+        *self = ReasonRecord::EMPTY;
+        found
+    }
+
+    /// The recorded stop without clearing it.
+    pub fn peek(&self) -> Option<StopInfo> {
+        if self.magic != MAGIC || self.crc != self.crc() {
+            return None;
+        }
+        let kind = StopKind::from_code(u8::try_from(self.kind).ok()?)?;
+        let text_len = u8::try_from(self.text_len).ok().filter(|n| usize::from(*n) <= STOP_TEXT)?;
+        let info = StopInfo { kind, pc: self.pc, addr: self.addr, detail: self.detail, text: self.text, text_len };
+        core::str::from_utf8(info.text.get(..usize::from(text_len))?).ok()?;
+        Some(info)
+    }
+}
+
+/// The first thing every stop path does: safe outputs, then the record. The caller resets
+/// afterwards (`SCB::sys_reset` on the board, a semihosting exit on the PIL machine).
+///
+/// The outputs come first so that nothing the record needs (a CRC over 72 bytes) can delay
+/// them, and the record is written whole before the reset so the next boot can trust it.
+pub fn stop<O: SafeOutputs + ?Sized>(outputs: &mut O, record: &mut ReasonRecord, info: &StopInfo) {
+    outputs.force_safe();
+    record.write(info);
+}
+
+/// The heartbeat of the fail-loud alarm: a level that toggles once per *healthy* control step
+/// and holds still otherwise. The board drives it into a retriggerable monostable (README,
+/// wiring) whose output silences the alarm only while edges keep arriving: a hung, reset or dead
+/// MCU stops the edges and the alarm sounds, whatever state its pins are left in.
+///
+/// "Healthy" is the glue's verdict for the step: it completed, in time, and the step did not ask
+/// for the alarm. An alarm request therefore also stops the heartbeat, so the monostable is the
+/// one path to the buzzer and the firmware's own alarm pin is a second one.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Heartbeat {
+    level: bool,
+}
+
+impl Heartbeat {
+    /// A heartbeat at low level.
+    pub const fn new() -> Self {
+        Heartbeat { level: false }
+    }
+
+    /// The level after a step: toggled if the step was healthy, unchanged otherwise.
+    pub fn beat(&mut self, healthy: bool) -> bool {
+        if healthy {
+            self.level = !self.level;
+        }
+        self.level
+    }
+
+    /// The present level.
+    pub fn level(&self) -> bool {
+        self.level
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::fmt::Write;
+
+    struct Pins {
+        log: [Option<&'static str>; 4],
+        n: usize,
+    }
+
+    impl SafeOutputs for Pins {
+        fn force_safe(&mut self) {
+            self.log[self.n] = Some("safe");
+            self.n += 1;
+        }
+    }
+
+    #[test]
+    fn stop_drives_the_outputs_then_records() {
+        let mut pins = Pins { log: [None; 4], n: 0 };
+        let mut rec = ReasonRecord::EMPTY;
+        let mut info = StopInfo::new(StopKind::Panic, 0, 0, 42);
+        write!(info, "src/step.rs: index out of bounds").unwrap();
+        stop(&mut pins, &mut rec, &info);
+        assert_eq!(pins.log[0], Some("safe"));
+        let got = rec.peek().unwrap();
+        assert_eq!(got, info);
+        assert_eq!(got.text(), "src/step.rs: index out of bounds");
+        assert_eq!(rec.take(), Some(info));
+        assert_eq!(rec.take(), None, "a stop is reported once");
+    }
+
+    #[test]
+    fn noise_is_not_a_record() {
+        // Power-up RAM: anything. Every single-bit flip of a good record is rejected too.
+        let mut rec = ReasonRecord::EMPTY;
+        assert_eq!(rec.peek(), None);
+        rec.write(&StopInfo::new(StopKind::HardFault, 0x0800_1234, 0x2001_8000, 0x0000_8200));
+        let words = core::mem::size_of::<ReasonRecord>() / 4;
+        for bit in 0..words * 32 {
+            let mut r = rec;
+            // SAFETY: ReasonRecord is repr(C) plain words and bytes; any bit pattern is valid.
+            let w = unsafe { &mut *(&mut r as *mut ReasonRecord as *mut [u32; 19]) };
+            w[bit / 32] ^= 1 << (bit % 32);
+            assert_eq!(r.peek(), None, "flip of bit {bit} accepted");
+        }
+    }
+
+    #[test]
+    fn text_truncates_on_a_char_boundary() {
+        let mut info = StopInfo::new(StopKind::Panic, 0, 0, 1);
+        info.push_text(&"é".repeat(40)); // 80 bytes of 2-byte chars
+        assert_eq!(info.text().len(), STOP_TEXT);
+        info.push_text("more");
+        assert_eq!(info.text().len(), STOP_TEXT);
+        let mut odd = StopInfo::new(StopKind::Panic, 0, 0, 1);
+        odd.push_text("x");
+        odd.push_text(&"é".repeat(40));
+        assert_eq!(odd.text().len(), STOP_TEXT - 1, "never half a character");
+    }
+
+    #[test]
+    fn heartbeat_stops_with_the_loop() {
+        let mut hb = Heartbeat::new();
+        let healthy: [bool; 6] = [true, true, true, false, false, true];
+        let levels: [bool; 6] = healthy.map(|h| hb.beat(h));
+        assert_eq!(levels, [true, false, true, true, true, false]);
+    }
+
+    #[test]
+    fn kinds_round_trip() {
+        for k in StopKind::ALL {
+            assert_eq!(StopKind::from_code(k as u8), Some(k));
+        }
+        assert_eq!(StopKind::from_code(0), None);
+        assert_eq!(core::mem::size_of::<ReasonRecord>(), 19 * 4);
+    }
+}
