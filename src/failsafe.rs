@@ -216,6 +216,48 @@ pub fn stop<O: SafeOutputs + ?Sized>(outputs: &mut O, record: &mut ReasonRecord,
     record.write(info);
 }
 
+/// The record of a panic at `file:line`: the line in `detail`, the file's last bytes in the
+/// text (the end of a path names the module; its start is the same for every file).
+pub fn panic_info(file: &str, line: u32) -> StopInfo {
+    let mut info = StopInfo::new(StopKind::Panic, 0, 0, line);
+    let mut from = file.len().saturating_sub(STOP_TEXT);
+    while from < file.len() && !file.is_char_boundary(from) {
+        from += 1;
+    }
+    info.push_text(file.get(from..).unwrap_or(""));
+    info
+}
+
+/// CFSR bit: BFAR holds a valid fault address (ARMv7-M ARM B3.2.15, BusFault status).
+pub const CFSR_BFARVALID: u32 = 1 << 15;
+/// CFSR bit: MMFAR holds a valid fault address (MemManage status).
+pub const CFSR_MMARVALID: u32 = 1 << 7;
+
+/// The record of a HardFault from the stacked PC and the fault status and address registers:
+/// the data address is BFAR or MMFAR only when CFSR says the CPU latched it, else 0.
+pub fn hard_fault_info(pc: u32, cfsr: u32, bfar: u32, mmfar: u32) -> StopInfo {
+    let addr = if cfsr & CFSR_BFARVALID != 0 {
+        bfar
+    } else if cfsr & CFSR_MMARVALID != 0 {
+        mmfar
+    } else {
+        0
+    };
+    StopInfo::new(StopKind::HardFault, pc, addr, cfsr)
+}
+
+/// The record of an NMI the board could not recover from (`source` = the status word that
+/// names it, e.g. FLASH_ECCR for an ECC error outside the persistence region).
+pub fn nmi_info(pc: u32, source: u32) -> StopInfo {
+    StopInfo::new(StopKind::Nmi, pc, 0, source)
+}
+
+/// The record of an interrupt that has no handler (`irqn` = its exception number, as
+/// cortex-m-rt's `DefaultHandler` receives it).
+pub fn unexpected_interrupt_info(irqn: i16) -> StopInfo {
+    StopInfo::new(StopKind::UnexpectedInterrupt, 0, 0, irqn as i32 as u32)
+}
+
 /// The heartbeat of the fail-loud alarm: a level that toggles once per *healthy* control step
 /// and holds still otherwise. The board drives it into a retriggerable monostable (README,
 /// wiring) whose output silences the alarm only while edges keep arriving: a hung, reset or dead
@@ -316,6 +358,19 @@ mod tests {
         let healthy: [bool; 6] = [true, true, true, false, false, true];
         let levels: [bool; 6] = healthy.map(|h| hb.beat(h));
         assert_eq!(levels, [true, false, true, true, true, false]);
+    }
+
+    #[test]
+    fn fault_address_only_when_latched() {
+        let bus = hard_fault_info(0x0800_0100, CFSR_BFARVALID | 0x200, 0x6000_0000, 0x1234);
+        assert_eq!((bus.pc, bus.addr, bus.kind), (0x0800_0100, 0x6000_0000, StopKind::HardFault));
+        assert_eq!(hard_fault_info(1, CFSR_MMARVALID, 2, 3).addr, 3);
+        assert_eq!(hard_fault_info(1, 0x0001_0000, 2, 3).addr, 0, "UNDEFINSTR has no address");
+        let p = panic_info("/home/builder/.cargo/registry/src/index.crates.io/nalgebra-0.35.0/src/base/matrix.rs", 77);
+        assert_eq!(p.detail, 77);
+        assert!(p.text().ends_with("src/base/matrix.rs") && p.text().len() <= STOP_TEXT, "{}", p.text());
+        assert_eq!(panic_info("src/step.rs", 9).text(), "src/step.rs");
+        assert_eq!(unexpected_interrupt_info(-1).detail, u32::MAX);
     }
 
     #[test]
