@@ -7,8 +7,32 @@ use std::path::Path;
 use anyhow::{anyhow, bail, Context, Result};
 
 /// Reads the named columns of a CSV log, in the order asked. Rows must have finite numbers in
-/// those columns.
+/// those columns; an empty cell (a sensor-fault row of `hter log2csv`) is refused with its line.
 pub fn read_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>> {
+    let shown = path.display();
+    read_cells(path, names)?
+        .into_iter()
+        .zip(names)
+        .map(|(col, name)| {
+            col.into_iter()
+                .enumerate()
+                .map(|(i, v)| {
+                    v.ok_or_else(|| {
+                        anyhow!(
+                            "'{shown}' line {}, column '{name}': empty (a sensor-fault sample); this command needs \
+                             a value in every row, give it a span without faults",
+                            i + 2
+                        )
+                    })
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Like [`read_columns`], but an empty cell is `None` (a sample with no reading: `hter log2csv`
+/// leaves `temp_c` empty on a sensor fault). Anything else in a cell must be a finite number.
+pub fn read_cells(path: &Path, names: &[&str]) -> Result<Vec<Vec<Option<f64>>>> {
     let shown = path.display();
     let file = std::fs::File::open(path).with_context(|| format!("cannot read '{shown}'"))?;
     let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(false).trim(csv::Trim::All).from_reader(file);
@@ -30,13 +54,17 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>> {
         let rec = rec.map_err(|e| anyhow!("'{shown}' line {line}: {}", first_line(&e.to_string())))?;
         for (c, (&j, name)) in idx.iter().zip(names).enumerate() {
             let cell = rec.get(j).unwrap_or("");
+            if cell.is_empty() {
+                cols[c].push(None);
+                continue;
+            }
             let v: f64 = cell
                 .parse()
                 .map_err(|_| anyhow!("'{shown}' line {line}, column '{name}': '{cell}' is not a number"))?;
             if !v.is_finite() {
                 bail!("'{shown}' line {line}, column '{name}': '{cell}' is not a finite number");
             }
-            cols[c].push(v);
+            cols[c].push(Some(v));
         }
     }
     Ok(cols)
@@ -86,5 +114,16 @@ mod tests {
         let e = read_columns(&p, &["t_s", "temp_c"]).unwrap_err().to_string();
         assert!(e.contains("line 3"), "{e}");
         assert!(check_increasing(&p, &[0.0, 10.0, 10.0]).unwrap_err().to_string().contains("line 4"));
+    }
+
+    #[test]
+    fn empty_cells_are_gaps_or_refused() {
+        let p = write("gap", "t_s,temp_c\n0,\n10,4.5\n");
+        assert_eq!(read_cells(&p, &["t_s", "temp_c"]).unwrap(), vec![vec![Some(0.0), Some(10.0)], vec![None, Some(4.5)]]);
+        let e = read_columns(&p, &["t_s", "temp_c"]).unwrap_err().to_string();
+        assert!(e.contains("line 2") && e.contains("'temp_c'") && e.contains("sensor-fault"), "{e}");
+        let p = write("gap-nan", "t_s,temp_c\n0,\n10,NaN\n");
+        let e = read_cells(&p, &["t_s", "temp_c"]).unwrap_err().to_string();
+        assert!(e.contains("line 3") && e.contains("finite"), "{e}");
     }
 }

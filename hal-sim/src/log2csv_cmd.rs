@@ -2,15 +2,38 @@
 //! into the CSV that `hter identify` and `hter monitor` read.
 //!
 //! The firmware prints one line per sample, `t=… temp=… sp=… duty=… mode=… counts=… supply=…
-//! alarm=…`, possibly behind a timestamp, a level and a location; every other line (events,
-//! boot messages, estimates, summaries) is skipped. `counts` (the RTD conversion), `supply`
-//! (V, NaN when not measured) and `alarm` (the indicator's state) are kept when present; logs
-//! of older firmware without them leave those cells empty.
+//! alarm=…`, possibly behind a timestamp, a level and a location; a `t_ms=` field (a
+//! millisecond clock) is preferred over `t=` when both are there. `counts` (the RTD
+//! conversion), `supply` (V, NaN when not measured) and `alarm` (the indicator's state) are
+//! kept when present; logs of older firmware without them leave those cells empty.
+//!
+//! Field logs are not clean, and one bad sample must not cost the whole record:
+//! - a sample whose temperature is not finite (`temp=NaN`: a sensor fault before the first
+//!   good reading, when the filter has nothing to hold) is kept as a *fault row*: `temp_c`
+//!   empty, every other cell (the mode, e.g. `SensorFault`) as printed;
+//! - a log that spans resets is split into *boots*. A boot starts at the firmware's
+//!   `reset cause: Watchdog|BrownOut|Other` line, or, when that line was lost, where `t` stops
+//!   increasing. The board's clock restarts at 0 on every boot and the log has no wall clock,
+//!   so the length of the reset gap is unknown: each later boot's `t = 0` is placed one sample
+//!   period after the previous boot's last sample (the period from the boot line
+//!   `Ts = … s`, else the median sample interval of the log), and the command says so. When a
+//!   boot's first `t` is later than the previous boot's last one (a clock that survived the
+//!   reset), the times are kept as they are.
+//!
+//! The CSV's `boot` column numbers the boots from 0; `reset_cause` is filled on the first row
+//! of each boot with the library's event name: `restarted_watchdog`, `restarted_brownout`,
+//! `restarted`, or `board_fault_panic` (…`_hard_fault`, `_nmi`, `_unexpected_interrupt`,
+//! `_control_stall`) when the boot reported a fail-safe stop (`board fault: Panic pc=…`);
+//! `unknown` for a boot found only by its time going back; empty on the first boot when the
+//! log began while the board was already running.
 
 use std::io::{BufRead, Write};
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
+use hter::event::EventKind;
+use hter::failsafe::StopKind;
+use hter::persist::ResetCause;
 
 /// Arguments of `hter log2csv`.
 #[derive(clap::Args, Debug, Clone)]
@@ -18,20 +41,25 @@ pub struct Log2CsvArgs {
     /// The saved log (e.g. `cargo fw-run | tee carrier.log`).
     #[arg(long)]
     pub input: PathBuf,
-    /// Where to write the CSV (columns t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm).
+    /// Where to write the CSV (columns t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,
+    /// boot,reset_cause).
     #[arg(long)]
     pub output: PathBuf,
 }
 
+/// The CSV header `hter log2csv` writes.
+pub const HEADER: &str = "t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,boot,reset_cause";
+
 /// One telemetry sample.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Sample {
-    /// Time, s.
+    /// Time since the boot, s (from `t_ms=` when present, else `t=`).
     pub t_s: f64,
     /// Setpoint, °C.
     pub setpoint_c: f64,
-    /// Filtered temperature, °C.
-    pub temp_c: f64,
+    /// Filtered temperature, °C; `None` when the firmware printed a non-finite one (a sensor
+    /// fault with no earlier good reading).
+    pub temp_c: Option<f64>,
     /// Duty applied.
     pub duty: f64,
     /// Safety mode.
@@ -44,20 +72,90 @@ pub struct Sample {
     pub alarm: String,
 }
 
+/// One row of the CSV: a sample on the log's continuous time axis.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    /// The sample, its `t_s` moved onto the continuous axis.
+    pub sample: Sample,
+    /// Boot number, from 0.
+    pub boot: u32,
+    /// Why this boot started (first row of a boot only; see the module doc).
+    pub reset_cause: Option<String>,
+}
+
+/// Where the sample period used to join boots came from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PeriodSource {
+    /// The firmware's boot line `Ts = … s`.
+    BootLine,
+    /// The median interval between samples of one boot.
+    Median,
+}
+
+/// A converted log.
+#[derive(Clone, Debug)]
+pub struct Converted {
+    /// Every sample, in log order.
+    pub rows: Vec<Row>,
+    /// Boots joined by placing their `t = 0` one sample period after the previous boot's last
+    /// sample (the gap's real length is unknown), and the period used, s.
+    pub joined: Option<(u32, f64, PeriodSource)>,
+    /// Boot lines that were not understood (recorded as [`UNKNOWN_CAUSE`]), one sentence each.
+    pub warnings: Vec<String>,
+}
+
 fn field<'a>(line: &'a str, key: &str) -> Option<&'a str> {
     let start = line.split_whitespace().find_map(|w| w.strip_prefix(key))?;
     Some(start.trim_end_matches(','))
 }
 
+/// The word after `marker` in `line`, if the line has the marker.
+fn word_after<'a>(line: &'a str, marker: &str) -> Option<&'a str> {
+    let at = line.find(marker)? + marker.len();
+    Some(line.get(at..)?.split_whitespace().next().unwrap_or(""))
+}
+
+/// The event name of a `reset cause: …` line (the defmt of [`ResetCause`]); `Err` with the
+/// word when it names no known cause.
+fn reset_line(line: &str) -> Option<Result<&'static str, String>> {
+    let word = word_after(line, "reset cause:")?;
+    let cause = [ResetCause::Watchdog, ResetCause::BrownOut, ResetCause::Other]
+        .into_iter()
+        .find(|c| format!("{c:?}") == word);
+    Some(cause.map(|c| EventKind::Restarted(c).name()).ok_or_else(|| word.to_string()))
+}
+
+/// The event name of a `board fault: Panic pc=…` line (the defmt of the stop's record); `Err`
+/// with the word when it names no known stop.
+fn fault_line(line: &str) -> Option<Result<&'static str, String>> {
+    let word = word_after(line, "board fault:")?;
+    let kind = StopKind::ALL.into_iter().find(|k| format!("{k:?}") == word);
+    Some(kind.map(|k| EventKind::BoardFault(k).name()).ok_or_else(|| word.to_string()))
+}
+
+/// The cause recorded for a boot whose reset line was lost or not understood.
+pub const UNKNOWN_CAUSE: &str = "unknown";
+
+/// The sample period of the firmware's boot line (`hter firmware …: Ts = 10 s, …`), s.
+fn period_line(line: &str) -> Option<f64> {
+    word_after(line, "Ts = ")?.parse::<f64>().ok().filter(|ts| ts.is_finite() && *ts > 0.0)
+}
+
 /// Parses one telemetry line; `None` for any other line.
 pub fn parse_line(line: &str) -> Option<Result<Sample>> {
-    let (t, temp, sp, duty) = (field(line, "t=")?, field(line, "temp=")?, field(line, "sp=")?, field(line, "duty=")?);
+    let (temp, sp, duty) = (field(line, "temp=")?, field(line, "sp=")?, field(line, "duty=")?);
+    let t_ms = field(line, "t_ms=");
+    let t = field(line, "t=");
+    if t_ms.is_none() && t.is_none() {
+        return None;
+    }
     let mode = field(line, "mode=").unwrap_or("").to_string();
     let alarm = field(line, "alarm=").unwrap_or("").to_string();
     let counts = field(line, "counts=");
     let supply = field(line, "supply=");
+    let any = |name: &str, v: &str| -> Result<f64> { v.parse().with_context(|| format!("{name} '{v}' is not a number")) };
     let num = |name: &str, v: &str| -> Result<f64> {
-        let x: f64 = v.parse().with_context(|| format!("{name} '{v}' is not a number"))?;
+        let x = any(name, v)?;
         if x.is_finite() {
             Ok(x)
         } else {
@@ -65,9 +163,18 @@ pub fn parse_line(line: &str) -> Option<Result<Sample>> {
         }
     };
     Some((|| {
+        let t_s = match (t_ms, t) {
+            (Some(ms), _) => {
+                ms.parse::<u64>().with_context(|| format!("t_ms '{ms}' is not a whole number of milliseconds"))? as f64
+                    / 1000.0
+            }
+            (None, Some(t)) => num("t", t)?,
+            (None, None) => bail!("no time"),
+        };
         Ok(Sample {
-            t_s: num("t", t)?,
-            temp_c: num("temp", temp)?,
+            t_s,
+            // NaN or inf: no reading (the firmware holds the last good value once it has one).
+            temp_c: Some(any("temp", temp)?).filter(|c| c.is_finite()),
             setpoint_c: num("sp", sp)?,
             duty: num("duty", duty)?,
             mode,
@@ -75,53 +182,178 @@ pub fn parse_line(line: &str) -> Option<Result<Sample>> {
                 .map(|c| c.parse::<u32>().with_context(|| format!("counts '{c}' is not a whole number")))
                 .transpose()?,
             // NaN is how the firmware says "not measured".
-            supply_v: supply
-                .map(|v| v.parse::<f64>().with_context(|| format!("supply '{v}' is not a number")))
-                .transpose()?
-                .filter(|v| v.is_finite()),
+            supply_v: supply.map(|v| any("supply", v)).transpose()?.filter(|v| v.is_finite()),
             alarm,
         })
     })())
 }
 
-/// `hter log2csv`.
-pub fn run(args: &Log2CsvArgs) -> Result<()> {
-    let f = std::fs::File::open(&args.input).with_context(|| format!("cannot read '{}'", args.input.display()))?;
-    let mut rows = Vec::new();
-    for (i, line) in std::io::BufReader::new(f).lines().enumerate() {
-        let line = line.with_context(|| format!("'{}' line {}: not text", args.input.display(), i + 1))?;
-        if let Some(s) = parse_line(&line) {
-            rows.push(s.with_context(|| format!("'{}' line {}", args.input.display(), i + 1))?);
+/// Median of the positive intervals between consecutive samples of one boot, s.
+fn median_interval(raw: &[(f64, u32)]) -> Option<f64> {
+    let mut d: Vec<f64> =
+        raw.windows(2).filter(|w| w[0].1 == w[1].1).map(|w| w[1].0 - w[0].0).filter(|d| *d > 0.0).collect();
+    d.sort_by(f64::total_cmp);
+    d.get(d.len() / 2).copied()
+}
+
+/// A time rounded to the microsecond, so that a shifted `12.345` prints as `122.345`, not as
+/// the sum's binary neighbour (the firmware's clocks resolve 1 ms at best).
+fn micros(t: f64) -> f64 {
+    (t * 1e6).round() / 1e6
+}
+
+/// Converts a whole log (its lines, in order); errors name the 1-based line.
+pub fn convert<I: IntoIterator<Item = std::io::Result<String>>>(lines: I) -> Result<Converted> {
+    let mut rows: Vec<Row> = Vec::new();
+    // Per row: its time since boot and its boot.
+    let mut raw: Vec<(f64, u32)> = Vec::new();
+    // Each boot after the first: its first row, and whether its clock went on from the last.
+    let mut starts: Vec<(usize, bool)> = Vec::new();
+    let mut boot_period: Option<f64> = None;
+    let mut pending_reset: Option<&'static str> = None;
+    let mut pending_fault: Option<&'static str> = None;
+    let mut warnings = Vec::new();
+    let mut understood = |found: Result<&'static str, String>, what: &str, n: usize| {
+        found.unwrap_or_else(|word| {
+            warnings.push(format!("line {n}: unknown {what} '{word}', recorded as '{UNKNOWN_CAUSE}'"));
+            UNKNOWN_CAUSE
+        })
+    };
+    for (i, line) in lines.into_iter().enumerate() {
+        let n = i + 1;
+        let line = line.with_context(|| format!("line {n}: not text"))?;
+        if let Some(cause) = reset_line(&line) {
+            pending_reset = Some(understood(cause, "reset cause", n));
+            continue;
         }
+        if let Some(kind) = fault_line(&line) {
+            pending_fault = Some(understood(kind, "board fault", n));
+            continue;
+        }
+        if let Some(ts) = period_line(&line) {
+            boot_period.get_or_insert(ts);
+            continue;
+        }
+        let Some(s) = parse_line(&line) else { continue };
+        let s = s.with_context(|| format!("line {n}"))?;
+        let prev = raw.last().copied();
+        let backwards = prev.is_some_and(|(t, _)| s.t_s <= t);
+        let new_boot = prev.is_some() && (pending_reset.is_some() || backwards);
+        let boot = prev.map_or(0, |(_, b)| b + u32::from(new_boot));
+        let cause = if new_boot {
+            starts.push((rows.len(), !backwards));
+            Some(pending_fault.or(pending_reset).unwrap_or(UNKNOWN_CAUSE))
+        } else if prev.is_none() {
+            pending_fault.or(pending_reset)
+        } else {
+            // A fail-safe report after the boot's first sample still belongs to that boot.
+            if let Some(kind) = pending_fault {
+                let first = starts.last().map_or(0, |&(r, _)| r);
+                if let Some(r) = rows.get_mut(first) {
+                    r.reset_cause = Some(kind.to_string());
+                }
+            }
+            None
+        };
+        pending_reset = None;
+        pending_fault = None;
+        raw.push((s.t_s, boot));
+        rows.push(Row { sample: s, boot, reset_cause: cause.map(str::to_string) });
     }
     if rows.is_empty() {
-        bail!("'{}' has no telemetry lines (t=… temp=… sp=… duty=…)", args.input.display());
+        bail!("no telemetry lines (t=… temp=… sp=… duty=…)");
     }
-    let mut out =
-        std::fs::File::create(&args.output).with_context(|| format!("cannot write '{}'", args.output.display()))?;
-    let mut text = String::from("t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm\n");
+    let period = boot_period
+        .map(|ts| (ts, PeriodSource::BootLine))
+        .or_else(|| median_interval(&raw).map(|ts| (ts, PeriodSource::Median)));
+    let mut joined = 0;
+    let mut offset = 0.0;
+    let mut next_start = starts.iter().peekable();
+    for i in 0..rows.len() {
+        if let Some(&&(first, clock_went_on)) = next_start.peek().filter(|(r, _)| *r == i) {
+            next_start.next();
+            if !clock_went_on {
+                let (ts, _) = period.ok_or_else(|| {
+                    anyhow!(
+                        "{} boots but no sample period to join them: no 'Ts = … s' boot line and no boot with two \
+                         samples",
+                        starts.len() + 1
+                    )
+                })?;
+                let last = first.checked_sub(1).and_then(|p| rows.get(p)).map_or(0.0, |r| r.sample.t_s);
+                offset = last + ts;
+                joined += 1;
+            }
+        }
+        if let (Some(r), Some(&(t, _))) = (rows.get_mut(i), raw.get(i)) {
+            r.sample.t_s = micros(t + offset);
+        }
+    }
+    let joined = period.filter(|_| joined > 0).map(|(ts, src)| (joined, ts, src));
+    Ok(Converted { rows, joined, warnings })
+}
+
+/// The CSV text of converted rows, with [`HEADER`].
+pub fn csv_text(rows: &[Row]) -> String {
+    let mut text = format!("{HEADER}\n");
     let opt = |v: Option<String>| v.unwrap_or_default();
-    for r in &rows {
+    for r in rows {
+        let s = &r.sample;
         text.push_str(&format!(
-            "{},{},{},{},{},{},{},{}\n",
-            r.t_s,
-            r.setpoint_c,
-            r.temp_c,
-            r.duty,
-            r.mode,
-            opt(r.counts.map(|c| c.to_string())),
-            opt(r.supply_v.map(|v| v.to_string())),
-            r.alarm
+            "{},{},{},{},{},{},{},{},{},{}\n",
+            s.t_s,
+            s.setpoint_c,
+            opt(s.temp_c.map(|c| c.to_string())),
+            s.duty,
+            s.mode,
+            opt(s.counts.map(|c| c.to_string())),
+            opt(s.supply_v.map(|v| v.to_string())),
+            s.alarm,
+            r.boot,
+            r.reset_cause.as_deref().unwrap_or("")
         ));
     }
-    out.write_all(text.as_bytes()).with_context(|| format!("cannot write '{}'", args.output.display()))?;
-    eprintln!("{} samples written to {}", rows.len(), args.output.display());
+    text
+}
+
+/// `hter log2csv`.
+pub fn run(args: &Log2CsvArgs) -> Result<()> {
+    let shown = args.input.display();
+    let f = std::fs::File::open(&args.input).with_context(|| format!("cannot read '{shown}'"))?;
+    let c = convert(std::io::BufReader::new(f).lines()).with_context(|| format!("'{shown}'"))?;
+    let mut out =
+        std::fs::File::create(&args.output).with_context(|| format!("cannot write '{}'", args.output.display()))?;
+    out.write_all(csv_text(&c.rows).as_bytes()).with_context(|| format!("cannot write '{}'", args.output.display()))?;
+    for w in &c.warnings {
+        eprintln!("warning: '{shown}' {w}");
+    }
+    let faults = c.rows.iter().filter(|r| r.sample.temp_c.is_none()).count();
+    let boots = c.rows.last().map_or(0, |r| r.boot + 1);
+    eprintln!(
+        "{} samples ({faults} with no temperature: sensor fault) from {boots} boot(s) written to {}",
+        c.rows.len(),
+        args.output.display()
+    );
+    if let Some((n, ts, src)) = c.joined {
+        let from = match src {
+            PeriodSource::BootLine => "the boot line",
+            PeriodSource::Median => "the median sample interval",
+        };
+        eprintln!(
+            "the log has no wall clock: {n} reset gap(s) of unknown length; each boot's t = 0 is placed one sample \
+             period ({ts} s, from {from}) after the previous boot's last sample"
+        );
+    }
     Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn lines(text: &str) -> Vec<std::io::Result<String>> {
+        text.lines().map(|l| Ok(l.to_string())).collect()
+    }
 
     #[test]
     fn parses_probe_rs_lines_and_skips_others() {
@@ -132,7 +364,7 @@ mod tests {
             Sample {
                 t_s: 10.0,
                 setpoint_c: 4.0,
-                temp_c: 4.0123,
+                temp_c: Some(4.0123),
                 duty: 0.456,
                 mode: "Normal".into(),
                 counts: None,
@@ -150,7 +382,114 @@ mod tests {
         assert!(bad.unwrap_err().to_string().contains("counts"));
         assert!(parse_line("WARN  event t=10 SensorOpen").is_none());
         assert!(parse_line("INFO  hter firmware 0.1.0: Ts = 10 s").is_none());
+        assert!(parse_line("INFO  est t=10 ctl=Adaptive theta=[-1.7] trace_p=0.8 pe=0.1").is_none());
         let bad = parse_line("INFO t=10 temp=warm sp=4 duty=0.5 mode=Normal").unwrap();
         assert!(bad.unwrap_err().to_string().contains("temp"));
+        let bad = parse_line("INFO t=NaN temp=4 sp=4 duty=0.5 mode=Normal").unwrap();
+        assert!(bad.unwrap_err().to_string().contains("t is not finite"));
+    }
+
+    #[test]
+    fn a_non_finite_temperature_is_a_fault_row_and_t_ms_wins() {
+        for nan in ["NaN", "inf", "-inf"] {
+            let l = format!("0.1 INFO  t=0 temp={nan} sp=4 duty=0 mode=SensorFault counts=65535 supply=12 alarm=On");
+            let s = parse_line(&l).unwrap().unwrap();
+            assert_eq!((s.temp_c, s.mode.as_str(), s.counts), (None, "SensorFault", Some(65_535)), "{nan}");
+        }
+        let s = parse_line("t_ms=7776000123 t=7776000 temp=4 sp=4 duty=0.5 mode=Normal").unwrap().unwrap();
+        assert_eq!(s.t_s, 7_776_000.123);
+        let s = parse_line("t_ms=2500 temp=4 sp=4 duty=0.5 mode=Normal").unwrap().unwrap();
+        assert_eq!(s.t_s, 2.5);
+        let bad = parse_line("t_ms=2.5 t=2 temp=4 sp=4 duty=0.5 mode=Normal").unwrap();
+        assert!(bad.unwrap_err().to_string().contains("t_ms"));
+    }
+
+    #[test]
+    fn boots_are_joined_and_keep_their_causes() {
+        let log = "\
+0.0 INFO  reset cause: BrownOut
+0.0 INFO  hter firmware 0.1.0: Ts = 10 s, setpoint 4 °C, SSR PWM 1 Hz (1000 ticks)
+t=0 temp=NaN sp=4 duty=0 mode=SensorFault
+t=10 temp=5 sp=4 duty=0.5 mode=Normal
+WARN  event t=10 SensorRecovered
+INFO  reset cause: Watchdog
+t=0 temp=6 sp=4 duty=0.5 mode=Normal
+t=10 temp=6 sp=4 duty=0.5 mode=Normal
+INFO  reset cause: Other
+INFO  board fault: HardFault pc=0x08001234 addr=0x20018000 detail=0x8200
+t=0 temp=7 sp=4 duty=0.5 mode=Normal
+t=5 temp=7 sp=4 duty=0.5 mode=Normal
+t=0 temp=8 sp=4 duty=0.5 mode=Normal
+INFO  board fault: Panic pc=0x00000000 addr=0x00000000 detail=0x2a src/step.rs
+t=10 temp=8 sp=4 duty=0.5 mode=Normal
+";
+        let c = convert(lines(log)).unwrap();
+        let got: Vec<(f64, Option<f64>, u32, Option<&str>)> =
+            c.rows.iter().map(|r| (r.sample.t_s, r.sample.temp_c, r.boot, r.reset_cause.as_deref())).collect();
+        assert_eq!(
+            got,
+            vec![
+                (0.0, None, 0, Some("restarted_brownout")),
+                (10.0, Some(5.0), 0, None),
+                (20.0, Some(6.0), 1, Some("restarted_watchdog")),
+                (30.0, Some(6.0), 1, None),
+                (40.0, Some(7.0), 2, Some("board_fault_hard_fault")),
+                (45.0, Some(7.0), 2, None),
+                // t went back with no reset line: a boot whose cause was lost, until the late
+                // fail-safe report names it.
+                (55.0, Some(8.0), 3, Some("board_fault_panic")),
+                (65.0, Some(8.0), 3, None),
+            ]
+        );
+        assert_eq!(c.joined, Some((3, 10.0, PeriodSource::BootLine)));
+        let text = csv_text(&c.rows);
+        assert_eq!(text.lines().next(), Some(HEADER));
+        assert_eq!(text.lines().nth(1), Some("0,4,,0,SensorFault,,,,0,restarted_brownout"));
+        assert_eq!(text.lines().nth(2), Some("10,4,5,0.5,Normal,,,,0,"));
+    }
+
+    #[test]
+    fn joins_use_the_median_interval_and_keep_a_clock_that_went_on() {
+        // No boot line: the period is the median interval (10 s); a lost reset line is `unknown`.
+        let log = "t=0 temp=4 sp=4 duty=0 mode=Normal\nt=10 temp=4 sp=4 duty=0 mode=Normal\n\
+                   t=20 temp=4 sp=4 duty=0 mode=Normal\nt=3 temp=4 sp=4 duty=0 mode=Normal\n";
+        let c = convert(lines(log)).unwrap();
+        let t: Vec<f64> = c.rows.iter().map(|r| r.sample.t_s).collect();
+        assert_eq!(t, vec![0.0, 10.0, 20.0, 33.0]);
+        assert_eq!(c.rows[3].reset_cause.as_deref(), Some("unknown"));
+        assert_eq!(c.rows[0].reset_cause, None, "the log began on a running board");
+        assert_eq!(c.joined, Some((1, 10.0, PeriodSource::Median)));
+        // A clock that survived the reset (later than the last sample) is kept as it is.
+        let log = "t_ms=1000 temp=4 sp=4 duty=0 mode=Normal\nreset cause: Watchdog\n\
+                   t_ms=40123 temp=4 sp=4 duty=0 mode=Normal\n";
+        let c = convert(lines(log)).unwrap();
+        assert_eq!((c.rows[1].sample.t_s, c.rows[1].boot, c.joined), (40.123, 1, None));
+        // Fractional times stay decimal after the shift.
+        let log = "Ts = 0.1 s\nt=0 temp=4 sp=4 duty=0 mode=Normal\nt_ms=12345 temp=4 sp=4 duty=0 mode=Normal\n\
+                   reset cause: Other\nt_ms=0 temp=4 sp=4 duty=0 mode=Normal\n";
+        let c = convert(lines(log)).unwrap();
+        assert_eq!(csv_text(&c.rows).lines().nth(3).unwrap().split(',').next(), Some("12.445"));
+    }
+
+    #[test]
+    fn bad_logs_are_errors_with_the_line() {
+        let e = convert(lines("hello\nt=0 temp=4 sp=x duty=0 mode=Normal\n")).unwrap_err();
+        assert!(format!("{e:#}").contains("line 2: sp 'x'"), "{e:#}");
+        // A garbled boot line costs its cause, not the log.
+        let c = convert(lines("reset cause: Cosmic\nboard fault: Gremlin pc=0\nt=0 temp=4 sp=4 duty=0 mode=Normal\n"))
+            .unwrap();
+        assert_eq!(c.rows[0].reset_cause.as_deref(), Some(UNKNOWN_CAUSE));
+        assert_eq!(
+            c.warnings,
+            vec![
+                "line 1: unknown reset cause 'Cosmic', recorded as 'unknown'".to_string(),
+                "line 2: unknown board fault 'Gremlin', recorded as 'unknown'".to_string()
+            ]
+        );
+        let e = convert(lines("INFO boot\n")).unwrap_err();
+        assert!(e.to_string().contains("no telemetry lines"), "{e}");
+        // Two one-sample boots and no boot line: nothing says how far apart the samples are.
+        let e = convert(lines("t=5 temp=4 sp=4 duty=0 mode=Normal\nt=5 temp=4 sp=4 duty=0 mode=Normal\n")).unwrap_err();
+        assert!(e.to_string().contains("no sample period"), "{e}");
     }
 }

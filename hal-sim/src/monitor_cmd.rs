@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use hter::coldchain::ColdChainMonitor;
 use serde::Serialize;
 
@@ -12,7 +12,7 @@ use crate::log;
 /// Arguments of `hter monitor`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct MonitorArgs {
-    /// CSV log with columns t_s and temp_c.
+    /// CSV log with columns t_s and temp_c (an empty temp_c is a sample with no reading).
     #[arg(long)]
     pub input: PathBuf,
     /// Print one JSON object.
@@ -36,7 +36,7 @@ pub struct AlarmOut {
 pub struct Report {
     /// Alarms raised.
     pub alarms: Vec<AlarmOut>,
-    /// Mean kinetic temperature, °C.
+    /// Mean kinetic temperature over the time with a reading, °C.
     pub mkt_c: f64,
     /// Lowest temperature, °C.
     pub min_c: f64,
@@ -46,56 +46,131 @@ pub struct Report {
     pub time_below_2_s: f64,
     /// Time above +8 °C, s.
     pub time_above_8_s: f64,
+    /// Time within 2–8 °C, s.
+    pub time_in_range_s: f64,
+    /// Time with no reading (after a sample with an empty `temp_c`), s.
+    pub time_no_reading_s: f64,
+    /// Samples with no reading.
+    pub fault_samples: u32,
     /// Number of excursions outside 2–8 °C.
     pub excursions: u32,
 }
 
-/// Runs the monitor over a log.
-pub fn report(t: &[f64], temp: &[f64]) -> Result<Report> {
-    if t.len() < 2 {
-        bail!("the log needs at least 2 samples, it has {}", t.len());
-    }
-    let mut m = ColdChainMonitor::new();
-    let mut alarms = Vec::new();
-    for (&ts, &c) in t.iter().zip(temp) {
-        for a in m.push(ts as f32, c as f32).into_iter().flatten() {
-            alarms.push(AlarmOut {
-                kind: a.kind.name(),
-                start_s: f64::from(a.start_s),
-                trigger_s: f64::from(a.trigger_s),
-            });
+/// The library monitor fed on the record's time (the log's time less the gaps so far).
+struct Record {
+    m: ColdChainMonitor,
+    alarms: Vec<(&'static str, f32, f32)>,
+    /// Each sample given to the monitor: its record time and its time in the log, to give the
+    /// alarms back on the log's axis.
+    pushed: Vec<(f32, f64)>,
+}
+
+impl Record {
+    fn push(&mut self, record_t: f64, log_t: f64, c: f64) {
+        let record_t = record_t as f32;
+        self.pushed.push((record_t, log_t));
+        for a in self.m.push(record_t, c as f32).into_iter().flatten() {
+            self.alarms.push((a.kind.name(), a.start_s, a.trigger_s));
         }
     }
+}
+
+/// Runs the monitor over a log; `None` is a sample with no reading (a sensor fault).
+///
+/// Samples hold over the interval to the next one (the library monitor's rule). The interval
+/// after a sample with no reading is *unknown*: it is cut out of the record before the library
+/// monitor sees it, so it counts neither as in range nor as out of range, adds nothing to any
+/// alarm's duration and nothing to the mean kinetic temperature, and is reported on its own
+/// (`time_no_reading_s`). A run that meets an alarm's condition on both sides of the gap goes
+/// on (a failed sensor must not reset the clock of a heat or freeze excursion); only the time
+/// with a reading counts toward its duration, so the alarm triggers later by the gap's length.
+/// That is what a 30-day recorder can defend: it never claims a temperature it did not
+/// measure, and it never forgets an excursion it did. Alarm times are given on the log's own
+/// time axis.
+pub fn report(t: &[f64], temp: &[Option<f64>]) -> Result<Report> {
+    let readings = temp.iter().filter(|c| c.is_some()).count();
+    if readings < 2 {
+        bail!("the log needs at least 2 samples with a temperature, it has {readings}");
+    }
+    let mut rec = Record { m: ColdChainMonitor::new(), alarms: Vec::new(), pushed: Vec::new() };
+    let mut gaps_s = 0.0;
+    let mut no_reading_s = 0.0;
+    let mut fault_samples = 0u32;
+    let last_reading = temp.iter().rposition(Option::is_some);
+    let mut held = None;
+    for (i, (&ts, &c)) in t.iter().zip(temp).enumerate() {
+        if let Some(c) = c {
+            rec.push(ts - gaps_s, ts, c);
+            held = Some(c);
+            continue;
+        }
+        // A log that ends in faults: the last reading holds until the first of them (a gap
+        // inside the log is closed by the reading after it).
+        if let Some(c) = held.filter(|_| last_reading.is_some_and(|r| r + 1 == i)) {
+            rec.push(ts - gaps_s, ts, c);
+        }
+        fault_samples += 1;
+        // The last sample has no interval after it.
+        let unknown = t.get(i + 1).map_or(0.0, |&next| next - ts);
+        no_reading_s += unknown;
+        gaps_s += unknown;
+    }
+    let Record { m, alarms, pushed } = rec;
+    let on_log = |x: f32| {
+        let k = pushed.partition_point(|p| p.0 < x);
+        pushed.get(k).filter(|p| p.0 == x).map_or(f64::from(x), |p| p.1)
+    };
+    let alarms =
+        alarms.into_iter().map(|(kind, s, tr)| AlarmOut { kind, start_s: on_log(s), trigger_s: on_log(tr) }).collect();
     let f = |x: Option<f32>| x.map_or(f64::NAN, f64::from);
+    let (below, above) = (f64::from(m.time_below_2_s()), f64::from(m.time_above_8_s()));
     Ok(Report {
         alarms,
         mkt_c: f(m.mkt_c()),
         min_c: f(m.min_c()),
         max_c: f(m.max_c()),
-        time_below_2_s: f64::from(m.time_below_2_s()),
-        time_above_8_s: f64::from(m.time_above_8_s()),
+        time_below_2_s: below,
+        time_above_8_s: above,
+        time_in_range_s: f64::from(m.recorded_s()) - below - above,
+        time_no_reading_s: no_reading_s,
+        fault_samples,
         excursions: m.excursion_count(),
     })
 }
 
 /// `hter monitor`.
 pub fn run(args: &MonitorArgs) -> Result<()> {
-    let cols = log::read_columns(&args.input, &["t_s", "temp_c"])?;
-    log::check_increasing(&args.input, &cols[0])?;
-    if cols[0].last().is_some_and(|&t| t > 16_000_000.0) {
-        bail!("'{}': t_s beyond 16e6 s (185 days) is not supported", args.input.display());
+    let shown = args.input.display();
+    let mut cols = log::read_cells(&args.input, &["t_s", "temp_c"])?.into_iter();
+    let (t, temp) = (cols.next().unwrap_or_default(), cols.next().unwrap_or_default());
+    let t: Vec<f64> = t
+        .into_iter()
+        .enumerate()
+        .map(|(i, v)| v.ok_or_else(|| anyhow!("'{shown}' line {}, column 't_s': empty", i + 2)))
+        .collect::<Result<_>>()?;
+    log::check_increasing(&args.input, &t)?;
+    if t.last().is_some_and(|&t| t > 16_000_000.0) {
+        bail!("'{shown}': t_s beyond 16e6 s (185 days) is not supported");
     }
-    let r = report(&cols[0], &cols[1])?;
+    let r = report(&t, &temp).with_context(|| format!("'{shown}'"))?;
     if args.json {
         println!("{}", serde_json::to_string(&r)?);
         return Ok(());
     }
     let hours = |s: f64| s / 3600.0;
-    println!("cold-chain record of {} ({} samples)", args.input.display(), cols[0].len());
+    println!("cold-chain record of {shown} ({} samples)", t.len());
     println!("  mean kinetic temperature  {:7.2} °C  (WHO: must lie within 2–8 °C)", r.mkt_c);
     println!("  min / max                 {:7.2} / {:.2} °C", r.min_c, r.max_c);
     println!("  time below +2 °C          {:7.2} h", hours(r.time_below_2_s));
     println!("  time above +8 °C          {:7.2} h", hours(r.time_above_8_s));
+    println!("  time within 2–8 °C        {:7.2} h", hours(r.time_in_range_s));
+    if r.fault_samples > 0 {
+        println!(
+            "  no reading (sensor fault) {:7.2} h  ({} samples; counted neither in nor out of range)",
+            hours(r.time_no_reading_s),
+            r.fault_samples
+        );
+    }
     println!("  excursions outside 2–8 °C {:7}", r.excursions);
     if r.alarms.is_empty() {
         println!("  alarms                    none");
@@ -104,4 +179,40 @@ pub fn run(args: &MonitorArgs) -> Result<()> {
         println!("  ALARM {:<14} started at {:.0} s, triggered at {:.0} s", a.kind, a.start_s, a.trigger_s);
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// −1 °C every minute for 2 h, the sensor out for three samples from minute 30.
+    #[test]
+    fn a_gap_holds_an_alarm_run_without_counting_toward_it() {
+        let t: Vec<f64> = (0..=120).map(|i| 60.0 * f64::from(i)).collect();
+        let temp: Vec<Option<f64>> = (0..=120).map(|i| (!(30..33).contains(&i)).then_some(-1.0)).collect();
+        let r = report(&t, &temp).unwrap();
+        // 60 min of readings at or below −0.5 °C: reached at minute 63 on the log's clock, the
+        // run started at 0 (the gap did not reset it).
+        assert_eq!(r.alarms, vec![AlarmOut { kind: "freeze_60min", start_s: 0.0, trigger_s: 3780.0 }]);
+        assert_eq!((r.fault_samples, r.time_no_reading_s), (3, 180.0));
+        assert_eq!((r.time_below_2_s, r.time_in_range_s, r.time_above_8_s), (7200.0 - 180.0, 0.0, 0.0));
+        assert_eq!(r.excursions, 1);
+        // Without the gap the same run triggers at minute 60.
+        let full = report(&t, &vec![Some(-1.0); t.len()]).unwrap();
+        assert_eq!(full.alarms[0].trigger_s, 3600.0);
+    }
+
+    #[test]
+    fn fault_samples_count_neither_in_nor_out_of_range() {
+        // Faults first (no reading yet), a warm spell, a fault in the middle, the last sample a
+        // fault (no interval after it).
+        let t = [0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0];
+        let temp = [None, None, Some(5.0), Some(9.0), None, Some(9.0), Some(5.0), None];
+        let r = report(&t, &temp).unwrap();
+        assert_eq!((r.fault_samples, r.time_no_reading_s), (4, 30.0));
+        assert_eq!((r.time_above_8_s, r.time_in_range_s, r.time_below_2_s), (20.0, 20.0, 0.0));
+        assert_eq!((r.min_c, r.max_c, r.excursions), (5.0, 9.0, 1));
+        let e = report(&[0.0, 10.0, 20.0], &[None, Some(4.0), None]).unwrap_err();
+        assert!(e.to_string().contains("2 samples with a temperature, it has 1"), "{e}");
+    }
 }
