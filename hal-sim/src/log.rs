@@ -119,7 +119,10 @@ mod tests {
     #[test]
     fn empty_cells_are_gaps_or_refused() {
         let p = write("gap", "t_s,temp_c\n0,\n10,4.5\n");
-        assert_eq!(read_cells(&p, &["t_s", "temp_c"]).unwrap(), vec![vec![Some(0.0), Some(10.0)], vec![None, Some(4.5)]]);
+        assert_eq!(
+            read_cells(&p, &["t_s", "temp_c"]).unwrap(),
+            vec![vec![Some(0.0), Some(10.0)], vec![None, Some(4.5)]]
+        );
         let e = read_columns(&p, &["t_s", "temp_c"]).unwrap_err().to_string();
         assert!(e.contains("line 2") && e.contains("'temp_c'") && e.contains("sensor-fault"), "{e}");
         let p = write("gap-nan", "t_s,temp_c\n0,\n10,NaN\n");

@@ -119,9 +119,8 @@ fn word_after<'a>(line: &'a str, marker: &str) -> Option<&'a str> {
 /// word when it names no known cause.
 fn reset_line(line: &str) -> Option<Result<&'static str, String>> {
     let word = word_after(line, "reset cause:")?;
-    let cause = [ResetCause::Watchdog, ResetCause::BrownOut, ResetCause::Other]
-        .into_iter()
-        .find(|c| format!("{c:?}") == word);
+    let cause =
+        [ResetCause::Watchdog, ResetCause::BrownOut, ResetCause::Other].into_iter().find(|c| format!("{c:?}") == word);
     Some(cause.map(|c| EventKind::Restarted(c).name()).ok_or_else(|| word.to_string()))
 }
 
@@ -153,7 +152,8 @@ pub fn parse_line(line: &str) -> Option<Result<Sample>> {
     let alarm = field(line, "alarm=").unwrap_or("").to_string();
     let counts = field(line, "counts=");
     let supply = field(line, "supply=");
-    let any = |name: &str, v: &str| -> Result<f64> { v.parse().with_context(|| format!("{name} '{v}' is not a number")) };
+    let any =
+        |name: &str, v: &str| -> Result<f64> { v.parse().with_context(|| format!("{name} '{v}' is not a number")) };
     let num = |name: &str, v: &str| -> Result<f64> {
         let x = any(name, v)?;
         if x.is_finite() {
@@ -268,9 +268,10 @@ pub fn convert<I: IntoIterator<Item = std::io::Result<String>>>(lines: I) -> Res
         .or_else(|| median_interval(&raw).map(|ts| (ts, PeriodSource::Median)));
     let mut joined = 0;
     let mut offset = 0.0;
+    let mut last_out = 0.0;
     let mut next_start = starts.iter().peekable();
-    for i in 0..rows.len() {
-        if let Some(&&(first, clock_went_on)) = next_start.peek().filter(|(r, _)| *r == i) {
+    for (i, (r, &(t, _))) in rows.iter_mut().zip(&raw).enumerate() {
+        if let Some(&&(_, clock_went_on)) = next_start.peek().filter(|(first, _)| *first == i) {
             next_start.next();
             if !clock_went_on {
                 let (ts, _) = period.ok_or_else(|| {
@@ -280,14 +281,12 @@ pub fn convert<I: IntoIterator<Item = std::io::Result<String>>>(lines: I) -> Res
                         starts.len() + 1
                     )
                 })?;
-                let last = first.checked_sub(1).and_then(|p| rows.get(p)).map_or(0.0, |r| r.sample.t_s);
-                offset = last + ts;
+                offset = last_out + ts;
                 joined += 1;
             }
         }
-        if let (Some(r), Some(&(t, _))) = (rows.get_mut(i), raw.get(i)) {
-            r.sample.t_s = micros(t + offset);
-        }
+        r.sample.t_s = micros(t + offset);
+        last_out = r.sample.t_s;
     }
     let joined = period.filter(|_| joined > 0).map(|(ts, src)| (joined, ts, src));
     Ok(Converted { rows, joined, warnings })
