@@ -20,6 +20,9 @@
 #[allow(dead_code)]
 mod proto;
 
+mod audit;
+mod failsafe;
+
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -96,8 +99,9 @@ fn main() -> Result<()> {
     match args.first().map(String::as_str) {
         Some("pil") => pil(),
         Some("size") => size(),
+        Some("audit") => audit::audit(),
         _ => {
-            eprintln!("usage: cargo xtask pil | cargo xtask size");
+            eprintln!("usage: cargo xtask pil | cargo xtask size | cargo xtask audit");
             std::process::exit(2)
         }
     }
@@ -255,6 +259,30 @@ fn pil() -> Result<()> {
         flash,
         ram
     );
+    let t0 = Instant::now();
+    let fs = failsafe::run(&elf.with_file_name("failsafe"), &work)?;
+    let yes = |b: bool| if b { "yes" } else { "NO" };
+    println!(
+        "fail-safe paths: {} boots of {} across SYSRESETREQ resets ({:.1} s)",
+        failsafe::FAILSAFE_KINDS.len() + 1,
+        elf.with_file_name("failsafe").display(),
+        t0.elapsed().as_secs_f64()
+    );
+    for c in &fs {
+        println!(
+            "  {:<21} safe outputs first: {:<3}  record survived the reset: {:<3}  next boot reported it: {}",
+            c.kind,
+            yes(c.first),
+            yes(c.survived),
+            yes(c.reported)
+        );
+        for line in &c.why {
+            println!("    {line}");
+        }
+    }
+    let failsafe_ok = fs.iter().all(failsafe::Check::ok);
+    let failsafe_json: Vec<String> = fs.iter().map(|c| format!("\"{}\": {}", c.kind, c.ok())).collect();
+
     let worst = max(&gpc_insn);
     let within = worst <= BUDGET_INSN;
     println!(
@@ -265,7 +293,7 @@ fn pil() -> Result<()> {
         if all_equal { "bit-equal on every sample" } else { "DIFFER" }
     );
     println!(
-        "{{\"steps\": {}, \"bit_equal\": {}, \"insn_per_step_median\": {:.0}, \"insn_per_step_max\": {:.0}, \"flash_bytes\": {}, \"ram_bytes\": {}, \"state_bytes\": {}, \"stack_bytes\": {}, \"ticks_per_insn\": {:.4}}}",
+        "{{\"steps\": {}, \"bit_equal\": {}, \"insn_per_step_median\": {:.0}, \"insn_per_step_max\": {:.0}, \"flash_bytes\": {}, \"ram_bytes\": {}, \"state_bytes\": {}, \"stack_bytes\": {}, \"ticks_per_insn\": {:.4}, \"failsafe\": {{{}}}}}",
         steps,
         all_equal,
         median(&gpc_insn),
@@ -274,13 +302,17 @@ fn pil() -> Result<()> {
         ram,
         state,
         stack,
-        tpi
+        tpi,
+        failsafe_json.join(", ")
     );
     if !all_equal {
         bail!("host and target results differ");
     }
     if !within {
         bail!("instruction budget exceeded: {worst:.0} > {BUDGET_INSN}");
+    }
+    if !failsafe_ok {
+        bail!("a fail-safe check failed");
     }
     Ok(())
 }
