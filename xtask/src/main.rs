@@ -8,13 +8,19 @@
 //! counts. It reports the instructions per sample (the step plus the cold-chain monitor), a
 //! profile by part, the runner's flash and RAM, and ends with one JSON line. It exits non-zero
 //! when a bit differs or when a self-tuning GPC sample takes more than [`BUDGET_INSN`]
-//! instructions (issue 7).
+//! instructions (issue 7). It then boots `pil`'s `failsafe` binary, which takes a panic, a
+//! HardFault, an NMI and an unexpected interrupt through the firmware's stop path, each across a
+//! real system reset, and checks each path ([`failsafe`]); the JSON line's `failsafe` object
+//! says which passed, and any `false` fails the command.
 //!
 //! `cargo xtask size` — the firmware's footprint: builds the release firmware once per
 //! controller (the default self-tuning GPC, then each controller feature), prints flash
 //! (allocated sections with contents: what is programmed) and static RAM (allocated sections
 //! in SRAM: .data, .bss, .uninit) for each, and ends with one JSON line. It exits non-zero when
 //! a build exceeds [`FLASH_BUDGET`] or [`RAM_BUDGET`] (issue 5).
+//!
+//! `cargo xtask audit` — the release firmware image's fail-safe properties ([`audit`]): fault
+//! handlers that do more than spin, defmt-rtt that cannot block, the program in flash bank 1.
 
 #[path = "../../pil/src/proto.rs"]
 #[allow(dead_code)]
