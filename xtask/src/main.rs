@@ -8,17 +8,26 @@
 //! counts. It reports the instructions per sample (the step plus the cold-chain monitor), a
 //! profile by part, the runner's flash and RAM, and ends with one JSON line. It exits non-zero
 //! when a bit differs or when a self-tuning GPC sample takes more than [`BUDGET_INSN`]
-//! instructions (issue 7).
+//! instructions (issue 7). It then boots `pil`'s `failsafe` binary, which takes a panic, a
+//! HardFault, an NMI and an unexpected interrupt through the firmware's stop path, each across a
+//! real system reset, and checks each path ([`failsafe`]); the JSON line's `failsafe` object
+//! says which passed, and any `false` fails the command.
 //!
 //! `cargo xtask size` — the firmware's footprint: builds the release firmware once per
 //! controller (the default self-tuning GPC, then each controller feature), prints flash
 //! (allocated sections with contents: what is programmed) and static RAM (allocated sections
 //! in SRAM: .data, .bss, .uninit) for each, and ends with one JSON line. It exits non-zero when
 //! a build exceeds [`FLASH_BUDGET`] or [`RAM_BUDGET`] (issue 5).
+//!
+//! `cargo xtask audit` — the release firmware image's fail-safe properties ([`audit`]): fault
+//! handlers that do more than spin, defmt-rtt that cannot block, the program in flash bank 1.
 
 #[path = "../../pil/src/proto.rs"]
 #[allow(dead_code)]
 mod proto;
+
+mod audit;
+mod failsafe;
 
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -96,8 +105,9 @@ fn main() -> Result<()> {
     match args.first().map(String::as_str) {
         Some("pil") => pil(),
         Some("size") => size(),
+        Some("audit") => audit::audit(),
         _ => {
-            eprintln!("usage: cargo xtask pil | cargo xtask size");
+            eprintln!("usage: cargo xtask pil | cargo xtask size | cargo xtask audit");
             std::process::exit(2)
         }
     }
@@ -255,6 +265,30 @@ fn pil() -> Result<()> {
         flash,
         ram
     );
+    let t0 = Instant::now();
+    let fs = failsafe::run(&elf.with_file_name("failsafe"), &work)?;
+    let yes = |b: bool| if b { "yes" } else { "NO" };
+    println!(
+        "fail-safe paths: {} boots of {} across SYSRESETREQ resets ({:.1} s)",
+        failsafe::FAILSAFE_KINDS.len() + 1,
+        elf.with_file_name("failsafe").display(),
+        t0.elapsed().as_secs_f64()
+    );
+    for c in &fs {
+        println!(
+            "  {:<21} safe outputs first: {:<3}  record survived the reset: {:<3}  next boot reported it: {}",
+            c.kind,
+            yes(c.first),
+            yes(c.survived),
+            yes(c.reported)
+        );
+        for line in &c.why {
+            println!("    {line}");
+        }
+    }
+    let failsafe_ok = fs.iter().all(failsafe::Check::ok);
+    let failsafe_json: Vec<String> = fs.iter().map(|c| format!("\"{}\": {}", c.kind, c.ok())).collect();
+
     let worst = max(&gpc_insn);
     let within = worst <= BUDGET_INSN;
     println!(
@@ -265,7 +299,7 @@ fn pil() -> Result<()> {
         if all_equal { "bit-equal on every sample" } else { "DIFFER" }
     );
     println!(
-        "{{\"steps\": {}, \"bit_equal\": {}, \"insn_per_step_median\": {:.0}, \"insn_per_step_max\": {:.0}, \"flash_bytes\": {}, \"ram_bytes\": {}, \"state_bytes\": {}, \"stack_bytes\": {}, \"ticks_per_insn\": {:.4}}}",
+        "{{\"steps\": {}, \"bit_equal\": {}, \"insn_per_step_median\": {:.0}, \"insn_per_step_max\": {:.0}, \"flash_bytes\": {}, \"ram_bytes\": {}, \"state_bytes\": {}, \"stack_bytes\": {}, \"ticks_per_insn\": {:.4}, \"failsafe\": {{{}}}}}",
         steps,
         all_equal,
         median(&gpc_insn),
@@ -274,13 +308,17 @@ fn pil() -> Result<()> {
         ram,
         state,
         stack,
-        tpi
+        tpi,
+        failsafe_json.join(", ")
     );
     if !all_equal {
         bail!("host and target results differ");
     }
     if !within {
         bail!("instruction budget exceeded: {worst:.0} > {BUDGET_INSN}");
+    }
+    if !failsafe_ok {
+        bail!("a fail-safe check failed");
     }
     Ok(())
 }

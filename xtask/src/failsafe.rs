@@ -1,0 +1,221 @@
+//! The fail-safe part of `cargo xtask pil`: boots `pil`'s `failsafe` binary on QEMU mps2-an386
+//! and checks, for each stop path, what its boots report on semihosting stdout.
+//!
+//! QEMU turns the guest's SYSRESETREQ (`SCB::sys_reset`) into a machine reset
+//! (`qemu_system_reset_request`; with `-no-reboot` the same request makes QEMU exit instead, which
+//! is how this was verified): the CPU restarts from the reset vector, the fault status and NVIC
+//! state are cleared, and RAM outside the ELF's loaded segments keeps its contents. The ELF's
+//! `.uninit` statics are in a segment with no file bytes, which QEMU's loader does not re-zero
+//! at reset; the checks below fail if that ever changes (the record would not survive).
+
+use std::collections::HashMap;
+use std::io::Read;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+
+/// Each stop path and the boot that reports it (the boot after the one that triggered it).
+pub const FAILSAFE_KINDS: [(&str, u32); 4] = [("panic", 2), ("hard_fault", 3), ("nmi", 4), ("unexpected_interrupt", 5)];
+/// The address the HardFault boot reads (the runner's `UNMAPPED`).
+const FAULT_ADDR: u64 = 0xF000_0000;
+/// CFSR.BFARVALID: the bus fault latched its address.
+const CFSR_BFARVALID: u64 = 1 << 15;
+/// ICSR.VECTACTIVE of the NMI (exception number 2), the NMI record's `detail` on the PIL.
+const NMI_EXCEPTION: u64 = 2;
+/// Five boots take well under a second; a broken boot counter loops forever.
+const FAILSAFE_TIMEOUT: Duration = Duration::from_secs(60);
+
+/// The three checks of one stop path.
+#[derive(Debug)]
+pub struct Check {
+    pub kind: &'static str,
+    /// The safe-outputs hook ran first: stamp 1, before the record was valid, record stamp 2.
+    pub first: bool,
+    /// The record crossed a real reset intact (magic + CRC, kind, kind-specific fields).
+    pub survived: bool,
+    /// The next boot (the boot counter advanced by one) reported it.
+    pub reported: bool,
+    /// Why a check failed, one line each.
+    pub why: Vec<String>,
+}
+
+impl Check {
+    pub fn ok(&self) -> bool {
+        self.first && self.survived && self.reported
+    }
+}
+
+/// Boots the runner until it exits; returns the checks.
+pub fn run(elf: &Path, work: &Path) -> Result<Vec<Check>> {
+    let dir = work.join("failsafe");
+    std::fs::create_dir_all(&dir)?;
+    let mut child = Command::new("qemu-system-arm")
+        .current_dir(&dir)
+        .args(["-M", "mps2-an386", "-display", "none", "-monitor", "none", "-serial", "none"])
+        .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
+        .arg(elf)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .context("starting qemu-system-arm")?;
+    let start = Instant::now();
+    let exited_ok = loop {
+        if let Some(s) = child.try_wait()? {
+            break s.success();
+        }
+        if start.elapsed() > FAILSAFE_TIMEOUT {
+            child.kill()?;
+            child.wait()?;
+            break false;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut out = String::new();
+    if let Some(mut s) = child.stdout.take() {
+        s.read_to_string(&mut out)?;
+    }
+    std::fs::write(dir.join("stdout.txt"), &out)?;
+    Ok(checks(&out, exited_ok))
+}
+
+/// One boot's report: `failsafe boot=<n> key=value ...`.
+fn parse_line(line: &str) -> Option<HashMap<&str, &str>> {
+    let rest = line.strip_prefix("failsafe ")?;
+    let map: HashMap<&str, &str> = rest.split_whitespace().filter_map(|kv| kv.split_once('=')).collect();
+    map.contains_key("boot").then_some(map)
+}
+
+fn num(map: &HashMap<&str, &str>, key: &str) -> Option<u64> {
+    let v = map.get(key)?;
+    match v.strip_prefix("0x") {
+        Some(hex) => u64::from_str_radix(hex, 16).ok(),
+        None => v.parse().ok(),
+    }
+}
+
+/// The checks of every stop path from the runner's stdout and whether it exited with success.
+pub fn checks(stdout: &str, exited_ok: bool) -> Vec<Check> {
+    let boots: Vec<HashMap<&str, &str>> = stdout.lines().filter_map(parse_line).collect();
+    let order: Vec<Option<u64>> = boots.iter().map(|b| num(b, "boot")).collect();
+    let expected: Vec<Option<u64>> = (1..=FAILSAFE_KINDS.len() as u64 + 1).map(Some).collect();
+    let sequence_ok = order == expected;
+    FAILSAFE_KINDS
+        .iter()
+        .map(|&(kind, boot)| {
+            let mut c = Check { kind, first: true, survived: true, reported: true, why: Vec::new() };
+            if !sequence_ok {
+                c.why.push(format!(
+                    "boots reported {order:?}, not 1..={}: the boot counter or a reset failed",
+                    expected.len()
+                ));
+            }
+            if !exited_ok {
+                c.why.push("the runner did not exit with success after its last boot".into());
+            }
+            let Some(b) = boots.iter().find(|b| num(b, "boot") == Some(u64::from(boot))) else {
+                c.why.push(format!("boot {boot} never reported"));
+                c.first = false;
+                c.survived = false;
+                c.reported = false;
+                return c;
+            };
+            let mut need = |flag: &mut bool, ok: bool, what: String| {
+                if !ok {
+                    *flag = false;
+                    c.why.push(what);
+                }
+            };
+            let (mut first, mut survived, mut reported) = (true, true, true);
+            need(
+                &mut reported,
+                b.get("reason") == Some(&kind) && sequence_ok && exited_ok,
+                format!("boot {boot} reported reason={}", b.get("reason").unwrap_or(&"?")),
+            );
+            let stamps =
+                (num(b, "safe_seq"), num(b, "record_seq"), num(b, "record_before_safe"), num(b, "outputs_safe"));
+            need(
+                &mut first,
+                stamps == (Some(1), Some(2), Some(0), Some(1)),
+                format!("safe_seq, record_seq, record_before_safe, outputs_safe = {stamps:?}, not (1, 2, 0, 1)"),
+            );
+            need(&mut survived, b.get("reason") == Some(&kind), "no intact record of this kind after the reset".into());
+            need(&mut survived, num(b, "record_ok_after") == Some(1), "the record did not read back after stop".into());
+            need(
+                &mut survived,
+                num(b, "cfsr") == Some(0) && num(b, "iser0") == Some(0),
+                "fault status or interrupt enables survived: not a system reset".into(),
+            );
+            let detail = num(b, "detail").unwrap_or(u64::MAX);
+            let specific = match kind {
+                "panic" => detail > 0 && b.get("text").is_some_and(|t| t.ends_with("failsafe.rs")),
+                "hard_fault" => num(b, "addr") == Some(FAULT_ADDR) && detail & CFSR_BFARVALID != 0,
+                "nmi" => detail & 0x1ff == NMI_EXCEPTION,
+                _ => detail == 0,
+            };
+            need(&mut survived, specific, format!("{kind} record fields wrong: {b:?}"));
+            c.first = first;
+            c.survived = survived;
+            c.reported = reported;
+            c
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = "\
+failsafe boot=1 cfsr=0x0 iser0=0x0 reason=none
+failsafe boot=2 cfsr=0x0 iser0=0x0 reason=panic pc=0x00000000 addr=0x00000000 detail=0x99 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=src/bin/failsafe.rs
+failsafe boot=3 cfsr=0x0 iser0=0x0 reason=hard_fault pc=0x00000dac addr=0xf0000000 detail=0x8200 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
+failsafe boot=4 cfsr=0x0 iser0=0x0 reason=nmi pc=0x00000000 addr=0x00000000 detail=0x802 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
+failsafe boot=5 cfsr=0x0 iser0=0x0 reason=unexpected_interrupt pc=0x00000000 addr=0x00000000 detail=0x0 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
+";
+
+    fn oks(out: &str, exited: bool) -> Vec<(bool, bool, bool)> {
+        checks(out, exited).iter().map(|c| (c.first, c.survived, c.reported)).collect()
+    }
+
+    #[test]
+    fn a_good_run_passes_every_check() {
+        let c = checks(GOOD, true);
+        assert!(c.iter().all(Check::ok), "{c:?}");
+        assert_eq!(c.len(), 4);
+    }
+
+    #[test]
+    fn each_broken_step_fails_its_own_check() {
+        // The record written before the outputs were driven safe.
+        let late = GOOD.replacen("record_before_safe=0", "record_before_safe=1", 1);
+        assert_eq!(oks(&late, true)[0], (false, true, true));
+        // The hook stamped second.
+        let second = GOOD.replace(
+            "reason=nmi pc=0x00000000 addr=0x00000000 detail=0x802 safe_seq=1 record_seq=2",
+            "reason=nmi pc=0x00000000 addr=0x00000000 detail=0x802 safe_seq=2 record_seq=1",
+        );
+        assert_eq!(oks(&second, true)[2], (false, true, true));
+        // The wrong fault address.
+        let addr = GOOD.replace("addr=0xf0000000", "addr=0x00000000");
+        assert_eq!(oks(&addr, true)[1], (true, false, true));
+        // Fault status still set at the next boot: the CPU jumped to the reset vector.
+        let no_reset = GOOD.replace("boot=4 cfsr=0x0", "boot=4 cfsr=0x8200");
+        assert_eq!(oks(&no_reset, true)[2], (true, false, true));
+        // The record lost across the reset: the next boot finds none.
+        let lost = GOOD.replace("reason=panic", "reason=none");
+        assert_eq!(oks(&lost, true)[0], (true, false, false));
+    }
+
+    #[test]
+    fn a_wiped_boot_counter_or_a_hang_fails_everything() {
+        let looping = "failsafe boot=1 cfsr=0x0 iser0=0x0 reason=none\n".repeat(50);
+        assert!(checks(&looping, false).iter().all(|c| !c.ok()));
+        let first_two: String = GOOD.lines().take(2).map(|l| format!("{l}\n")).collect();
+        let c = checks(&first_two, false);
+        assert!(c.iter().all(|c| !c.ok()));
+        assert!(!c[1].reported && !c[1].survived && !c[1].first, "boot 3 never ran");
+        assert!(checks(GOOD, false).iter().all(|c| !c.reported), "a failed exit is not a report");
+    }
+}
