@@ -213,6 +213,8 @@ impl ReasonRecord {
 /// them, and the record is written whole before the reset so the next boot can trust it.
 pub fn stop<O: SafeOutputs + ?Sized>(outputs: &mut O, record: &mut ReasonRecord, info: &StopInfo) {
     outputs.force_safe();
+    // The record's stores (and the CRC over it) must not be moved ahead of the outputs' writes.
+    core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
     record.write(info);
 }
 
