@@ -621,7 +621,9 @@ impl HistoryRecord {
         let (pc, addr, detail) = (r.u32(), r.u32(), r.u32());
         rec.last_stop = match code {
             0 => None,
-            code => Some(LastStop { kind: StopKind::from_code(code).ok_or(DecodeError::OutOfRange)?, pc, addr, detail }),
+            code => {
+                Some(LastStop { kind: StopKind::from_code(code).ok_or(DecodeError::OutOfRange)?, pc, addr, detail })
+            }
         };
         Ok(rec)
     }
