@@ -23,9 +23,13 @@ use crate::calib::TwoPoint;
 use crate::coldchain::{AlarmKind, ColdChainMonitor, Excursion, Raised, Side};
 use crate::control::adaptive::{model_from_theta, plausible_model, AdaptiveConfig};
 use crate::control::model::{Model, MAX_K};
+use crate::failsafe::{StopInfo, StopKind};
 
 #[cfg(feature = "persist-flash")]
 pub mod flash;
+mod gate;
+
+pub use gate::{PendingSaves, Save, WriteGate, SUPPLY_FRESH_MS, SUPPLY_HOLD_OFF_MS};
 
 /// Why stored bytes were not accepted as a record.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -323,16 +327,42 @@ pub const HISTORY_EXCURSIONS: usize = 4;
 /// Temperatures a stored extreme may have, °C: the RTD chain's measurable span with margin.
 const TEMP_RANGE_C: core::ops::RangeInclusive<f32> = -60.0..=100.0;
 
-/// Cold-chain history summary and reset counts, accumulated over power cycles.
+/// The newest fail-safe stop a [`HistoryRecord`] keeps: the [`StopInfo`] without its text.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LastStop {
+    /// The path that stopped the board.
+    pub kind: StopKind,
+    /// Program counter of the faulting instruction (0 when there is none).
+    pub pc: u32,
+    /// Faulting data address (0 when none was latched).
+    pub addr: u32,
+    /// Kind-specific word ([`StopInfo::detail`]).
+    pub detail: u32,
+}
+
+impl From<&StopInfo> for LastStop {
+    fn from(info: &StopInfo) -> Self {
+        LastStop { kind: info.kind, pc: info.pc, addr: info.addr, detail: info.detail }
+    }
+}
+
+/// Cold-chain history summary, reset counts and board faults, accumulated over power cycles.
 ///
-/// Layout v2, 96 bytes: `'H'`, 2; alarm counts (4 × u16, in [`AlarmKind`] order heat_10h,
+/// Layout v3, 121 bytes: `'H'`, 3; alarm counts (4 × u16, in [`AlarmKind`] order heat_10h,
 /// freeze_60min, ship_45c_1h, ship_30c_10h); reset counts (3 × u16: watchdog, brown-out, other);
 /// min_c, max_c (f32, NaN = no sample yet); time below 2 °C, time above 8 °C, excursion count,
 /// recorded time (4 × u32, seconds and count); [`HISTORY_EXCURSIONS`] × (side u8: 0 none,
-/// 1 cold, 2 warm; start_s, end_s, extreme_c f32); CRC-32. Excursion times are on the record's
-/// own clock: seconds of recorded time since the first boot (each boot's samples start where
-/// the previous boot's record ended), so they stay in order across power cycles. (v1 had no
-/// recorded time and stamped excursions with seconds since their own boot; it is not read.)
+/// 1 cold, 2 warm; start_s, end_s, extreme_c f32); fail-safe stops (5 × u16, in
+/// [`StopKind::ALL`] order); flash pages lost (u16); last stop (kind code u8, 0 = none; pc, addr,
+/// detail u32); CRC-32. Excursion times are on the record's own clock: seconds of recorded time
+/// since the first boot (each boot's samples start where the previous boot's record ended), so
+/// they stay in order across power cycles.
+///
+/// v2 (96 bytes: v3 without the board-fault fields) is still read, with no faults counted: it is
+/// the carrier's cold-chain record, and a firmware update must not erase the alarms and
+/// excursions the vaccines have been through. (v1 had no recorded time and stamped excursions
+/// with seconds since their own boot; it is not read.)
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct HistoryRecord {
@@ -354,6 +384,12 @@ pub struct HistoryRecord {
     pub recorded_s: u32,
     /// The newest excursions, oldest first (`None` entries first while fewer were seen).
     pub last: [Option<Excursion>; HISTORY_EXCURSIONS],
+    /// Fail-safe stops, per kind in [`StopKind::ALL`] order.
+    pub stops: [u16; 5],
+    /// Flash pages found damaged by a power cut (an ECC error) and repaired at boot.
+    pub flash_pages_lost: u16,
+    /// The newest fail-safe stop.
+    pub last_stop: Option<LastStop>,
 }
 
 impl Default for HistoryRecord {
@@ -369,6 +405,10 @@ fn alarm_index(kind: AlarmKind) -> usize {
         AlarmKind::Ship45c1h => 2,
         AlarmKind::Ship30c10h => 3,
     }
+}
+
+fn stop_index(kind: StopKind) -> usize {
+    StopKind::ALL.iter().position(|k| *k == kind).unwrap_or(0)
 }
 
 fn reset_index(cause: ResetCause) -> usize {
@@ -388,9 +428,11 @@ impl HistoryRecord {
     /// Kind tag.
     pub const TAG: u8 = b'H';
     /// Layout version written by this firmware.
-    pub const VERSION: u8 = 2;
+    pub const VERSION: u8 = 3;
+    /// Length of a v2 record (still read), bytes.
+    pub const LEN_V2: usize = 2 + 4 * 2 + 3 * 2 + 2 * 4 + 4 * 4 + HISTORY_EXCURSIONS * 13 + 4;
     /// Encoded length, bytes.
-    pub const LEN: usize = 2 + 4 * 2 + 3 * 2 + 2 * 4 + 4 * 4 + HISTORY_EXCURSIONS * 13 + 4;
+    pub const LEN: usize = Self::LEN_V2 + 5 * 2 + 2 + 1 + 3 * 4;
     /// Nothing seen yet.
     pub const EMPTY: HistoryRecord = HistoryRecord {
         alarms: [0; 4],
@@ -402,6 +444,9 @@ impl HistoryRecord {
         excursions: 0,
         recorded_s: 0,
         last: [None; HISTORY_EXCURSIONS],
+        stops: [0; 5],
+        flash_pages_lost: 0,
+        last_stop: None,
     };
 
     /// Counts an alarm.
@@ -416,6 +461,19 @@ impl HistoryRecord {
         if let Some(n) = self.resets.get_mut(reset_index(cause)) {
             *n = n.saturating_add(1);
         }
+    }
+
+    /// Counts a fail-safe stop and keeps it as the newest.
+    pub fn note_stop(&mut self, info: &StopInfo) {
+        if let Some(n) = self.stops.get_mut(stop_index(info.kind)) {
+            *n = n.saturating_add(1);
+        }
+        self.last_stop = Some(LastStop::from(info));
+    }
+
+    /// Fail-safe stops of `kind` seen.
+    pub fn stops_of(&self, kind: StopKind) -> u16 {
+        self.stops.get(stop_index(kind)).copied().unwrap_or(0)
     }
 
     /// Resets seen with `cause`.
@@ -483,14 +541,33 @@ impl HistoryRecord {
                 None => w.put(&[0; 13]),
             }
         }
+        for n in self.stops {
+            w.u16(n);
+        }
+        w.u16(self.flash_pages_lost);
+        match &self.last_stop {
+            Some(s) => {
+                w.put(&[s.kind as u8]);
+                w.u32(s.pc);
+                w.u32(s.addr);
+                w.u32(s.detail);
+            }
+            None => w.put(&[0; 13]),
+        }
         w.finish();
         buf
     }
 
     /// Parses and range-checks stored bytes: extremes within −60 … 100 °C (or absent) and
-    /// min ≤ max; excursions with a known side, 0 ≤ start ≤ end and a finite extreme in range.
+    /// min ≤ max; excursions with a known side, 0 ≤ start ≤ end and a finite extreme in range;
+    /// a known stop kind. A v2 record decodes with no board faults.
     pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
-        let mut r = open_frame(bytes, Self::LEN, Self::TAG, Self::VERSION)?;
+        let v2 = bytes.len() == Self::LEN_V2 && bytes.get(1) == Some(&2);
+        let mut r = if v2 {
+            open_frame(bytes, Self::LEN_V2, Self::TAG, 2)?
+        } else {
+            open_frame(bytes, Self::LEN, Self::TAG, Self::VERSION)?
+        };
         let mut rec = HistoryRecord::EMPTY;
         for n in rec.alarms.iter_mut().chain(rec.resets.iter_mut()) {
             *n = r.u16();
@@ -533,6 +610,21 @@ impl HistoryRecord {
             let extreme_c = r.f32_in(TEMP_RANGE_C)?;
             *slot = Some(Excursion { side, start_s, end_s, extreme_c });
         }
+        if v2 {
+            return Ok(rec);
+        }
+        for n in rec.stops.iter_mut() {
+            *n = r.u16();
+        }
+        rec.flash_pages_lost = r.u16();
+        let code = r.u8();
+        let (pc, addr, detail) = (r.u32(), r.u32(), r.u32());
+        rec.last_stop = match code {
+            0 => None,
+            code => {
+                Some(LastStop { kind: StopKind::from_code(code).ok_or(DecodeError::OutOfRange)?, pc, addr, detail })
+            }
+        };
         Ok(rec)
     }
 }
@@ -572,10 +664,26 @@ impl Recorder {
         }
     }
 
-    /// Counts the reset that started this boot; returns the history to store at once (a
-    /// brown-out must be on record even if the next one follows within the hour).
+    /// Counts the reset that started this boot; returns the history to store (a brown-out must
+    /// be on record even if the next one follows within the hour). The firmware holds it until
+    /// its [`WriteGate`] opens, so a boot that does not stay up on a good supply writes nothing.
     pub fn note_reset(&mut self, cause: ResetCause) -> HistoryRecord {
         self.boot.note_reset(cause);
+        self.since_save = 0;
+        self.history()
+    }
+
+    /// Counts the fail-safe stop that ended the previous boot (the reason record the boot found);
+    /// returns the history to store.
+    pub fn note_board_fault(&mut self, info: &StopInfo) -> HistoryRecord {
+        self.boot.note_stop(info);
+        self.since_save = 0;
+        self.history()
+    }
+
+    /// Counts a flash page the boot found damaged and repaired; returns the history to store.
+    pub fn note_flash_page_lost(&mut self) -> HistoryRecord {
+        self.boot.flash_pages_lost = self.boot.flash_pages_lost.saturating_add(1);
         self.since_save = 0;
         self.history()
     }
@@ -806,6 +914,54 @@ mod tests {
         assert_eq!(h.last[3].map(|e| (e.side, e.start_s)), Some((Side::Cold, 86_400.0 + 3600.0)));
         assert_eq!(HistoryRecord::decode(&h.encode()), Ok(h));
         assert_eq!(rec.history().alarms_of(AlarmKind::Freeze60min), 1);
+    }
+
+    #[test]
+    fn board_faults_round_trip_and_v2_records_migrate() {
+        let mut rec = Recorder::new(HistoryRecord::EMPTY, 360);
+        let _ = rec.note_reset(ResetCause::Watchdog);
+        let _ = rec.note_board_fault(&StopInfo::new(StopKind::HardFault, 0x0800_1234, 0x2001_8000, 0x0000_8200));
+        let _ = rec.note_board_fault(&StopInfo::new(StopKind::Panic, 0, 0, 417));
+        let h = rec.note_flash_page_lost();
+        assert_eq!(h.stops_of(StopKind::HardFault), 1);
+        assert_eq!(h.stops_of(StopKind::Panic), 1);
+        assert_eq!(h.stops_of(StopKind::Nmi), 0);
+        assert_eq!(h.flash_pages_lost, 1);
+        assert_eq!(h.last_stop, Some(LastStop { kind: StopKind::Panic, pc: 0, addr: 0, detail: 417 }));
+        let bytes = h.encode();
+        assert_eq!(bytes.len(), HistoryRecord::LEN);
+        assert_eq!(&bytes[..2], &[b'H', 3]);
+        assert_eq!(HistoryRecord::decode(&bytes), Ok(h));
+
+        // A v2 record: the v3 bytes before the board-fault fields, version 2, its own CRC.
+        let mut carried = HistoryRecord { excursions: 3, recorded_s: 7200, ..HistoryRecord::EMPTY };
+        carried.note_alarm(AlarmKind::Heat10h);
+        carried.note_reset(ResetCause::BrownOut);
+        carried.note_stop(&StopInfo::new(StopKind::Nmi, 1, 2, 3));
+        let v3 = carried.encode();
+        let mut v2 = [0u8; HistoryRecord::LEN_V2];
+        let body = HistoryRecord::LEN_V2 - 4;
+        v2[..body].copy_from_slice(&v3[..body]);
+        v2[1] = 2;
+        let crc = crc32(&v2[..body]);
+        v2[body..].copy_from_slice(&crc.to_le_bytes());
+        let migrated = HistoryRecord::decode(&v2).expect("v2 is read");
+        assert_eq!(migrated, HistoryRecord { stops: [0; 5], last_stop: None, ..carried });
+        // A v2 version byte on a v3-length record, and a v3 byte on a v2-length one, are not.
+        let mut b = v3;
+        b[1] = 2;
+        assert_eq!(HistoryRecord::decode(&b), Err(DecodeError::Crc));
+        let mut b = v2;
+        b[1] = 3;
+        assert_eq!(HistoryRecord::decode(&b), Err(DecodeError::Length));
+
+        // An unknown stop kind code, re-framed with a valid CRC.
+        let mut b = h.encode();
+        let n = HistoryRecord::LEN - 4;
+        b[n - 13] = 9;
+        let crc = crc32(&b[..n]);
+        b[n..].copy_from_slice(&crc.to_le_bytes());
+        assert_eq!(HistoryRecord::decode(&b), Err(DecodeError::OutOfRange));
     }
 
     #[test]

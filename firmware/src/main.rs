@@ -23,6 +23,7 @@
 
 mod board;
 mod config;
+mod ecc;
 mod persist;
 
 use defmt::{error, info, warn};

@@ -2,43 +2,71 @@
 //! restored at boot (calibration, cold-chain history, the self-tuner's model) and a task that
 //! stores what the control task hands it.
 //!
+//! Writes wait for [`hter::persist::WriteGate`]: the supply (the control task's [`note_supply`]
+//! every sample) good for 60 s since boot and good now, or good now for an alarm record. Until
+//! then requests wait in [`hter::persist::PendingSaves`], the newest of each kind, so a board in
+//! a power-bounce loop never writes (and never tears a word). Reads go through the store's ECC
+//! repair: the NMI handler notes a double ECC error in the region ([`crate::ecc`]), the reader
+//! fails, the store clears the torn word or erases the torn page and retries; the boot reports
+//! how many pages it repaired ([`Restored::pages_lost`]).
+//!
 //! The flash driver is blocking (embassy's `Flash` in blocking mode behind `BlockingAsync`): a
 //! store stalls the executor for at most one page erase (≈ 22 ms on the L4, RM0351 table 50
 //! "tERASE") plus a few double-word writes, about once an hour; the 10 s control loop and the
 //! 30 s watchdog do not notice.
 
+use core::cell::RefCell;
 use defmt::{info, warn};
 use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::peripherals::FLASH;
 use embassy_stm32::Peri;
+
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-use embassy_sync::channel::Channel;
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::signal::Signal;
+use embassy_time::Instant;
 use hter::calib::TwoPoint;
 use hter::control::adaptive::AdaptiveConfig;
 use hter::control::AnyController;
-use hter::persist::flash::{key, LoadStatus, Store, StoreError};
-use hter::persist::{CalibrationRecord, HistoryRecord, ModelRecord};
+use hter::persist::flash::{key, EccErrors, LoadStatus, Store, StoreError};
+pub use hter::persist::Save;
+use hter::persist::{CalibrationRecord, HistoryRecord, ModelRecord, PendingSaves, WriteGate};
 
 use crate::config;
 
-/// The record store over the `PERSIST` region.
-pub type FlashStore = Store<BlockingAsync<Flash<'static, Blocking>>>;
+/// ECC errors of the STM32L4's flash, as the NMI handler notes them ([`crate::ecc`], absolute
+/// addresses), as offsets from the flash base (what embassy's `Flash` and the store address).
+pub struct L4Ecc;
 
-/// A record to store.
-#[derive(Clone, Copy)]
-pub enum Save {
-    /// The self-tuner's trusted model.
-    Model(ModelRecord),
-    /// The cold-chain history.
-    History(HistoryRecord),
-    /// The calibration.
-    Calibration(TwoPoint),
+impl EccErrors for L4Ecc {
+    fn take(&mut self) -> Option<u32> {
+        crate::ecc::take().map(|addr| addr.wrapping_sub(embassy_stm32::flash::FLASH_BASE as u32))
+    }
 }
 
-/// Records waiting for the `persist` task. A full queue drops the request (and says so): the
-/// next hourly history or 4-hourly model carries the same information.
-static SAVES: Channel<CriticalSectionRawMutex, Save, 3> = Channel::new();
+/// The record store over the `PERSIST` region.
+pub type FlashStore = Store<BlockingAsync<Flash<'static, Blocking>>, L4Ecc>;
+
+/// The records waiting for the write gate, and the gate.
+static PENDING: Mutex<CriticalSectionRawMutex, RefCell<(PendingSaves, WriteGate)>> =
+    Mutex::new(RefCell::new((PendingSaves::EMPTY, WriteGate::firmware())));
+
+/// Wakes the `persist` task: a new request, or a supply sample that may open the gate.
+static WAKE: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+
+fn now_ms() -> u64 {
+    Instant::now().as_millis()
+}
+
+/// One supply sample for the write gate: `ok` when the supply is above what a flash write needs
+/// (the control task calls this every sample).
+#[allow(dead_code)] // Called by the control task's supply check.
+pub fn note_supply(ok: bool) {
+    let now = now_ms();
+    PENDING.lock(|p| p.borrow_mut().1.note_supply(now, ok));
+    WAKE.signal(());
+}
 
 /// What the boot restored.
 pub struct Restored {
@@ -48,11 +76,15 @@ pub struct Restored {
     pub history: HistoryRecord,
     /// The self-tuner's configuration, restarted from the stored model if a good one is stored.
     pub adaptive: Option<AdaptiveConfig>,
+    /// Flash pages the boot found torn by a power cut (ECC errors) and repaired: one
+    /// `FlashPageLost` event and one count in the history each.
+    #[allow(dead_code)] // Read by the control task, which reports each page.
+    pub pages_lost: u8,
 }
 
 /// Opens the store; `None` (and says so) if the configured region is unusable.
 pub fn open(flash: Peri<'static, FLASH>) -> Option<FlashStore> {
-    match Store::new(BlockingAsync::new(Flash::new_blocking(flash)), config::PERSIST_RANGE) {
+    match Store::new(BlockingAsync::new(Flash::new_blocking(flash)), L4Ecc, config::PERSIST_RANGE) {
         Ok(store) => Some(store),
         Err(e) => {
             warn!("persist: flash region unusable ({}): nothing is restored or saved", e);
@@ -78,8 +110,12 @@ pub async fn restore(store: Option<&mut FlashStore>) -> Restored {
             cal: config::CALIBRATION.unwrap_or(TwoPoint::IDENTITY),
             history: HistoryRecord::EMPTY,
             adaptive: config::ADAPTIVE,
+            pages_lost: 0,
         };
     };
+    if let Err(e) = store.scrub().await {
+        warn!("persist: scrubbing the region failed ({})", e);
+    }
     let stored_cal = store.load_calibration().await;
     let cal = match config::CALIBRATION {
         Some(cal) => {
@@ -124,14 +160,22 @@ pub async fn restore(store: Option<&mut FlashStore>) -> Restored {
         }
         None => None,
     };
-    Restored { cal, history: history.value, adaptive }
+    let repairs = store.repairs();
+    if repairs.total() > 0 {
+        warn!(
+            "persist: power-cut damage repaired: {} torn words cleared, {} torn pages erased",
+            repairs.words_cleared, repairs.pages_erased
+        );
+    }
+    let pages_lost = u8::try_from(repairs.total()).unwrap_or(u8::MAX);
+    Restored { cal, history: history.value, adaptive, pages_lost }
 }
 
-/// Queues a record for the `persist` task.
+/// Queues a record for the `persist` task (replacing a waiting one of its kind); it is written
+/// once the write gate opens.
 pub fn request(save: Save) {
-    if SAVES.try_send(save).is_err() {
-        warn!("persist: store queue full, a record waits for its next turn");
-    }
+    PENDING.lock(|p| p.borrow_mut().0.put(save));
+    WAKE.signal(());
 }
 
 /// Asks for the controller's trusted model to be stored, if it has one.
@@ -143,12 +187,20 @@ pub fn request_model(controller: &AnyController) {
     }
 }
 
-/// Stores each requested record. A region the storage layer finds corrupt is erased once and
-/// written again (what it held is lost either way; the next requests rewrite the rest).
+/// Stores each requested record the write gate lets through. A region the storage layer finds
+/// corrupt is erased once and written again (what it held is lost either way; the next requests
+/// rewrite the rest).
 #[embassy_executor::task]
 pub async fn persist(mut store: FlashStore) {
     loop {
-        let save = SAVES.receive().await;
+        let next = PENDING.lock(|p| {
+            let (pending, gate) = &mut *p.borrow_mut();
+            pending.next(gate, now_ms())
+        });
+        let Some(save) = next else {
+            WAKE.wait().await;
+            continue;
+        };
         let mut result = write(&mut store, &save).await;
         if result == Err(StoreError::Corrupted) {
             warn!("persist: region corrupt, erasing it");
@@ -160,6 +212,9 @@ pub async fn persist(mut store: FlashStore) {
         match (result, save) {
             (Ok(()), Save::Model(rec)) => info!("persist: model stored: theta={} k={}", rec.theta, rec.k),
             (Ok(()), Save::History(h)) => info!("persist: history stored ({} h recorded)", h.recorded_s / 3600),
+            (Ok(()), Save::AlarmHistory(h)) => {
+                info!("persist: history stored at an alarm ({} h recorded)", h.recorded_s / 3600)
+            }
             (Ok(()), Save::Calibration(_)) => info!("persist: calibration stored"),
             (Err(e), _) => warn!("persist: store failed ({})", e),
         }
@@ -171,7 +226,7 @@ async fn write(store: &mut FlashStore, save: &Save) -> Result<(), StoreError> {
     let mut buf = [0u8; HistoryRecord::LEN];
     let (key, len) = match save {
         Save::Model(rec) => (key::MODEL, put(&mut buf, &rec.encode())),
-        Save::History(h) => (key::HISTORY, put(&mut buf, &h.encode())),
+        Save::History(h) | Save::AlarmHistory(h) => (key::HISTORY, put(&mut buf, &h.encode())),
         Save::Calibration(cal) => (key::CALIBRATION, put(&mut buf, &CalibrationRecord { cal: *cal }.encode())),
     };
     store.store(key, buf.get(..len).unwrap_or(&[])).await

@@ -6,10 +6,41 @@
 //!
 //! Loading never fails: a record that is missing, torn, corrupt or implausible yields the
 //! default and a [`LoadStatus`] saying which, for the firmware to log.
+//!
+//! # Torn words and ECC
+//!
+//! The STM32L4 programs flash by 64-bit double word with 8 ECC bits; a power cut inside a
+//! double-word program, or inside a page erase, can leave words whose data and ECC disagree in
+//! two or more bits. Reading one sets ECCD and raises an NMI; the firmware's NMI handler notes
+//! the address and returns, and [`EccFlash`] turns the note ([`EccErrors`]) into a read error.
+//! `sequential-storage` propagates a read error as `Error::Storage` without repairing anything
+//! (its own repair runs only on `Error::Corrupted`), so every load and store would fail for
+//! good. The [`Store`] therefore repairs the flash at the reported address and retries, at most
+//! [`MAX_REPAIRS`] times per operation:
+//!
+//! - one torn word in a page whose start marker reads: a cut double-word program (a power cut
+//!   stops the flash, so one program leaves one torn word, at the end of what was written). The
+//!   word is programmed to all zeros, which the L4 allows over a programmed word (RM0351
+//!   §3.3.7: programming a non-erased double word is refused "except if the data to write is
+//!   full zero") and whose ECC is all zeros, so it reads again. To the storage layer a zeroed
+//!   word is a marker (the page markers are zero words, so a torn marker reads as completed), an
+//!   item header whose length CRC fails (skipped word by word), or item data whose CRC fails
+//!   (the item is skipped): it loses the record being written, which was never complete, and
+//!   nothing else. Erasing that page instead would lose the newest complete record of every
+//!   other kind written to it (the page being written holds them, and after a page turn it holds
+//!   the only copy of the records moved out of the page erased next).
+//! - a torn start marker, or more than one torn word: a cut page erase (it touches every
+//!   programmed word of the page at once) or a cut start-marker program (written only on an
+//!   erased page). The storage layer erases a page only after moving its live items elsewhere
+//!   (or to retry an erase), and a page being opened held nothing, so the page is erased again:
+//!   nothing that was still needed is lost.
+//!
+//! Each repair is counted ([`Store::repairs`]) for the boot to report and the cold-chain history
+//! to keep.
 
 use core::ops::Range;
 
-use embedded_storage_async::nor_flash::NorFlash;
+use embedded_storage_async::nor_flash::{ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash};
 use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::map::{MapConfig, MapStorage};
 
@@ -28,13 +59,113 @@ pub mod key {
     pub const HISTORY: u8 = 3;
 }
 
+/// Repairs one load or store may make before it gives up with [`StoreError::Flash`]: one power
+/// cut leaves at most one torn word or one torn page, and a boot repairs what it reads, so more
+/// than a few in one operation means a flash that keeps failing, which must not stall the boot
+/// (each repair costs at most one page scan and one page erase, ≈ 22 ms on the L4).
+pub const MAX_REPAIRS: usize = 8;
+
+/// Where a flash reports reads that failed their ECC check.
+pub trait EccErrors {
+    /// The flash offset (as the `NorFlash` addresses it) of a word whose read failed its ECC
+    /// check since the last call, if any; clears it.
+    fn take(&mut self) -> Option<u32>;
+}
+
+/// For a flash without ECC (or whose driver reports ECC errors itself): never reports one.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoEcc;
+
+impl EccErrors for NoEcc {
+    fn take(&mut self) -> Option<u32> {
+        None
+    }
+}
+
+/// An error of [`EccFlash`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum EccFlashError<E> {
+    /// The flash driver's own error (or power lost).
+    Flash(E),
+    /// A read covered a word that failed its ECC check, at this flash offset.
+    Ecc {
+        /// Offset of the word.
+        offset: u32,
+    },
+}
+
+impl<E: NorFlashError> NorFlashError for EccFlashError<E> {
+    fn kind(&self) -> NorFlashErrorKind {
+        match self {
+            EccFlashError::Flash(e) => e.kind(),
+            EccFlashError::Ecc { .. } => NorFlashErrorKind::Other,
+        }
+    }
+}
+
+/// A NOR flash whose reads fail when [`EccErrors`] reports an ECC error during them (on the L4
+/// the read itself returns whatever the word holds).
+pub struct EccFlash<F, E> {
+    flash: F,
+    ecc: E,
+}
+
+impl<F: NorFlash, E: EccErrors> EccFlash<F, E> {
+    /// `flash` with its ECC reports from `ecc`. Any stale report is dropped.
+    pub fn new(flash: F, mut ecc: E) -> Self {
+        let _ = ecc.take();
+        EccFlash { flash, ecc }
+    }
+
+    /// The flash back.
+    pub fn into_inner(self) -> F {
+        self.flash
+    }
+}
+
+impl<F: NorFlash, E> ErrorType for EccFlash<F, E> {
+    type Error = EccFlashError<F::Error>;
+}
+
+impl<F: NorFlash, E: EccErrors> ReadNorFlash for EccFlash<F, E> {
+    const READ_SIZE: usize = F::READ_SIZE;
+
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        let result = self.flash.read(offset, bytes).await;
+        // The report wins over the driver's result: on the L4 the read "succeeds" with bad data.
+        if let Some(offset) = self.ecc.take() {
+            return Err(EccFlashError::Ecc { offset });
+        }
+        result.map_err(EccFlashError::Flash)
+    }
+
+    fn capacity(&self) -> usize {
+        self.flash.capacity()
+    }
+}
+
+impl<F: NorFlash, E: EccErrors> NorFlash for EccFlash<F, E> {
+    const WRITE_SIZE: usize = F::WRITE_SIZE;
+    const ERASE_SIZE: usize = F::ERASE_SIZE;
+
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        self.flash.erase(from, to).await.map_err(EccFlashError::Flash)
+    }
+
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        self.flash.write(offset, bytes).await.map_err(EccFlashError::Flash)
+    }
+}
+
 /// Why a flash operation failed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum StoreError {
     /// The flash range is not page-aligned or spans fewer than two pages.
     Config,
-    /// The flash driver reported an error (or power was lost).
+    /// The flash driver reported an error (or power was lost), or ECC errors outlasted
+    /// [`MAX_REPAIRS`] repairs.
     Flash,
     /// No space left even after erasing stale pages (cannot happen with three keys in ≥ 2 pages
     /// unless the region is far too small).
@@ -53,6 +184,14 @@ impl<E> From<sequential_storage::Error<E>> for StoreError {
             sequential_storage::Error::Corrupted { .. } => StoreError::Corrupted,
             _ => StoreError::Other,
         }
+    }
+}
+
+/// The flash offset of the ECC error behind `e`, if that is what it is.
+fn ecc_offset<E>(e: &sequential_storage::Error<EccFlashError<E>>) -> Option<u32> {
+    match e {
+        sequential_storage::Error::Storage { value: EccFlashError::Ecc { offset }, .. } => Some(*offset),
+        _ => None,
     }
 }
 
@@ -80,27 +219,68 @@ pub struct Loaded<T> {
     pub status: LoadStatus,
 }
 
-/// Working buffer: the largest item (1 key byte + [`HistoryRecord::LEN`]) rounded up to the
-/// flash word, with room for 16-byte words; aligned for flash drivers that want it.
-#[repr(C, align(8))]
-struct Buffer([u8; 128]);
-
-/// The persisted records over a flash region.
-pub struct Store<S: NorFlash> {
-    map: MapStorage<u8, S, Cache<Uncached, Uncached, Uncached, u8>>,
-    buf: Buffer,
+/// ECC damage the [`Store`] repaired since it was opened.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Repairs {
+    /// Torn words programmed to zero (each lost at most the record being written when the
+    /// power went).
+    pub words_cleared: u16,
+    /// Torn pages erased again (each was being erased or opened: nothing still needed was in it).
+    pub pages_erased: u16,
 }
 
-impl<S: NorFlash> Store<S> {
-    /// A store over `range` (absolute flash offsets, page-aligned, at least two pages) of `flash`.
-    pub fn new(flash: S, range: Range<u32>) -> Result<Self, StoreError> {
-        let config = MapConfig::try_new(range).map_err(|_| StoreError::Config)?;
-        Ok(Store { map: MapStorage::new(flash, config, Cache::new_uncached()), buf: Buffer([0; 128]) })
+impl Repairs {
+    /// Pages found damaged, either way.
+    pub fn total(&self) -> u16 {
+        self.words_cleared.saturating_add(self.pages_erased)
+    }
+}
+
+/// Largest word `sequential-storage` supports (its `MAX_WORD_SIZE`), bytes.
+const MAX_WORD: usize = 32;
+
+/// Working buffer: the largest item (1 key byte + [`HistoryRecord::LEN`]) rounded up to the
+/// largest flash word `sequential-storage` supports; aligned for flash drivers that want it.
+const BUF_LEN: usize = (1 + HistoryRecord::LEN).next_multiple_of(MAX_WORD);
+
+#[repr(C, align(8))]
+struct Buffer([u8; BUF_LEN]);
+
+type Map<F, E> = MapStorage<u8, EccFlash<F, E>, Cache<Uncached, Uncached, Uncached, u8>>;
+
+/// The persisted records over a flash region.
+pub struct Store<F: NorFlash, E: EccErrors> {
+    map: Map<F, E>,
+    range: Range<u32>,
+    buf: Buffer,
+    /// The newest fetched record's bytes, copied out of `buf` so a retry can reuse `buf`.
+    rec: [u8; HistoryRecord::LEN],
+    repairs: Repairs,
+}
+
+impl<F: NorFlash, E: EccErrors> Store<F, E> {
+    /// A store over `range` (flash offsets, page-aligned, at least two pages) of `flash`, whose
+    /// ECC errors `ecc` reports.
+    pub fn new(flash: F, ecc: E, range: Range<u32>) -> Result<Self, StoreError> {
+        let config = MapConfig::try_new(range.clone()).map_err(|_| StoreError::Config)?;
+        Ok(Store {
+            map: MapStorage::new(EccFlash::new(flash, ecc), config, Cache::new_uncached()),
+            range,
+            buf: Buffer([0; BUF_LEN]),
+            rec: [0; HistoryRecord::LEN],
+            repairs: Repairs::default(),
+        })
     }
 
     /// The flash back (e.g. to reopen it after a simulated reset).
-    pub fn release(self) -> S {
-        self.map.destroy().0
+    pub fn release(self) -> F {
+        self.map.destroy().0.into_inner()
+    }
+
+    /// ECC damage repaired since the store was opened.
+    pub fn repairs(&self) -> Repairs {
+        self.repairs
     }
 
     /// Erases the whole region.
@@ -108,20 +288,125 @@ impl<S: NorFlash> Store<S> {
         Ok(self.map.erase_all().await?)
     }
 
+    /// Reads every word of the page at `start`: how many fail their ECC check, the first of
+    /// them, and whether the page's start marker is one.
+    async fn scan_page(&mut self, start: u32) -> Result<(usize, Option<u32>, bool), StoreError> {
+        let (page, word) = (F::ERASE_SIZE as u32, F::WRITE_SIZE);
+        let flash = self.map.flash();
+        let mut scratch = [0u8; MAX_WORD];
+        let (mut torn, mut first_torn, mut marker_torn) = (0usize, None, false);
+        for at in (start..start + page).step_by(word) {
+            match flash.read(at, scratch.get_mut(..word).unwrap_or(&mut [])).await {
+                Ok(()) => {}
+                Err(EccFlashError::Ecc { .. }) => {
+                    torn += 1;
+                    first_torn = first_torn.or(Some(at));
+                    marker_torn |= at == start;
+                }
+                Err(EccFlashError::Flash(_)) => return Err(StoreError::Flash),
+            }
+        }
+        Ok((torn, first_torn, marker_torn))
+    }
+
+    /// Repairs the page at `start` given its scan (see the module documentation for the choice
+    /// between clearing the word and erasing the page).
+    async fn repair_page(&mut self, start: u32, scan: (usize, Option<u32>, bool)) -> Result<(), StoreError> {
+        let (page, word) = (F::ERASE_SIZE as u32, F::WRITE_SIZE);
+        let flash = self.map.flash();
+        match scan {
+            // Not torn (any more): nothing to repair, the retry reads it.
+            (_, None, _) => return Ok(()),
+            (1, Some(at), false) => {
+                let zeros = [0u8; MAX_WORD];
+                if flash.write(at, zeros.get(..word).unwrap_or(&[])).await.is_ok() {
+                    self.repairs.words_cleared = self.repairs.words_cleared.saturating_add(1);
+                    return Ok(());
+                }
+                // The flash refused the zeros: the page has to go.
+            }
+            _ => {}
+        }
+        flash.erase(start, start + page).await.map_err(|_| StoreError::Flash)?;
+        self.repairs.pages_erased = self.repairs.pages_erased.saturating_add(1);
+        Ok(())
+    }
+
+    /// Repairs the page holding the word at `offset` that failed its ECC check.
+    async fn repair(&mut self, offset: u32) -> Result<(), StoreError> {
+        let page = F::ERASE_SIZE as u32;
+        if !self.range.contains(&offset) || F::WRITE_SIZE == 0 || F::WRITE_SIZE > MAX_WORD {
+            return Err(StoreError::Flash);
+        }
+        let start = offset - (offset - self.range.start) % page;
+        let scan = self.scan_page(start).await?;
+        self.repair_page(start, scan).await
+    }
+
+    /// Reads the whole region and repairs every page with a word failing its ECC check. The
+    /// loads repair what they read, but a load stops at the page it needs (a page torn while
+    /// being erased lies past the page being written, which is found first); the boot calls
+    /// this before loading, so no damage waits for a later store (≈ 8 KiB read, well under a
+    /// millisecond on the L4, plus a repair per damaged page).
+    pub async fn scrub(&mut self) -> Result<(), StoreError> {
+        if F::WRITE_SIZE == 0 || F::WRITE_SIZE > MAX_WORD {
+            return Err(StoreError::Flash);
+        }
+        let page = F::ERASE_SIZE as u32;
+        for start in self.range.clone().step_by(F::ERASE_SIZE) {
+            if start + page > self.range.end {
+                break;
+            }
+            let scan = self.scan_page(start).await?;
+            self.repair_page(start, scan).await?;
+        }
+        Ok(())
+    }
+
     /// Stores already encoded record bytes under `key` (one call site for every record kind
     /// keeps one copy of the storage layer's write path in the firmware's flash).
     pub async fn store(&mut self, key: u8, bytes: &[u8]) -> Result<(), StoreError> {
-        Ok(self.map.store_item(&mut self.buf.0, &key, &bytes).await?)
+        let mut repairs_left = MAX_REPAIRS;
+        loop {
+            let err = match self.map.store_item(&mut self.buf.0, &key, &bytes).await {
+                Ok(()) => return Ok(()),
+                Err(e) => e,
+            };
+            match ecc_offset(&err) {
+                Some(offset) if repairs_left > 0 => {
+                    repairs_left -= 1;
+                    self.repair(offset).await?;
+                }
+                _ => return Err(err.into()),
+            }
+        }
     }
 
     /// The bytes of the newest item under `key` (not generic: one copy of the storage layer's
     /// read path for every record kind).
     async fn fetch(&mut self, key: u8) -> Result<&[u8], LoadStatus> {
-        match self.map.fetch_item::<&[u8]>(&mut self.buf.0, &key).await {
-            Ok(Some(bytes)) => Ok(bytes),
-            Ok(None) => Err(LoadStatus::Missing),
-            Err(e) => Err(LoadStatus::Flash(e.into())),
-        }
+        let mut repairs_left = MAX_REPAIRS;
+        let len = loop {
+            let err = match self.map.fetch_item::<&[u8]>(&mut self.buf.0, &key).await {
+                Ok(Some(bytes)) => match self.rec.get_mut(..bytes.len()) {
+                    Some(dst) => {
+                        dst.copy_from_slice(bytes);
+                        break bytes.len();
+                    }
+                    None => return Err(LoadStatus::Invalid(DecodeError::Length)),
+                },
+                Ok(None) => return Err(LoadStatus::Missing),
+                Err(e) => e,
+            };
+            match ecc_offset(&err) {
+                Some(offset) if repairs_left > 0 => {
+                    repairs_left -= 1;
+                    self.repair(offset).await.map_err(LoadStatus::Flash)?;
+                }
+                _ => return Err(LoadStatus::Flash(err.into())),
+            }
+        };
+        Ok(self.rec.get(..len).unwrap_or(&[]))
     }
 
     /// Fetches the newest item under `key` and decodes it.
