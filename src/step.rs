@@ -131,7 +131,7 @@ pub struct CarrierConfig {
     /// Samples between test openings of the switch when nothing else opened it: 360 = 1 h, so
     /// a short is found within the hour (and within any 24 h mission). Each test costs
     /// `switch_open_samples` samples (20 s) without cooling, 0.6 % of the time: the load moves
-    /// by less than 0.01 °C in 20 s (its time constant is tens of minutes).
+    /// by less than 0.05 °C in 20 s (its time constant is tens of minutes).
     pub switch_test_interval_samples: u32,
 }
 
@@ -851,11 +851,11 @@ impl<C: Controller> Carrier<C> {
             }
         }
 
-        // Supply-switch test opening: no cooling for its samples (the supply is open anyway).
+        // Supply-switch test opening. The duty stays what the controller asked: told that none
+        // was applied, a PI's anti-windup tracking would unwind its integral and let the load
+        // warm by 0.6 °C over the next 10 min; the 20 s without supply are a small disturbance
+        // it rejects.
         let switch_test = self.switch_test_due(mode);
-        if switch_test {
-            duty = Duty::OFF;
-        }
 
         // Lid open: the duty it takes to hold the setpoint jumps. Two averages of the applied
         // duty; the fast one running well above the slow one while the load is held near its
@@ -1136,7 +1136,8 @@ mod switch_and_reference {
             }
             enabled = out.supply_enable;
             if !enabled {
-                assert_eq!(out.duty, Duty::OFF, "sample {k}: a test opening cools nothing");
+                // The controller's duty stays (the switch alone opens).
+                assert!(out.duty.get() > 0.0, "sample {k}");
                 assert_eq!(out.mode, Mode::Normal);
                 opened.push(k);
             }
