@@ -193,7 +193,8 @@ impl ReferenceWindow {
     /// conversions are ≈ 8 ms apart: the excitation cannot move measurably, and with ≈ 1.5
     /// counts of noise on each their difference exceeds 16 counts (7σ) by chance about once in
     /// 10¹² samples; 16 counts of the reference is 0.04 % of the ratio, 0.1 °C at the RTD.
-    pub const DEFAULT: ReferenceWindow = ReferenceWindow { min_counts: 34_000, max_counts: 46_500, max_diff_counts: 16 };
+    pub const DEFAULT: ReferenceWindow =
+        ReferenceWindow { min_counts: 34_000, max_counts: 46_500, max_diff_counts: 16 };
 
     /// The reference to form the ratio with (the mean of `before` and `after`, which cancels
     /// a linear drift across the RTD conversion), or [`AdcError::ReferenceOutOfRange`] when
@@ -343,5 +344,4 @@ mod tests {
         assert_eq!(r.check(0, 0), Err(AdcError::ReferenceOutOfRange), "no excitation");
         assert_eq!(r.check(u32::MAX, u32::MAX), Err(AdcError::ReferenceOutOfRange));
     }
-
 }

@@ -459,5 +459,4 @@ mod tests {
         adc.set_ssr_duty(1.0);
         assert!((f64::from(adc.sample().unwrap()) - adc.ideal_counts_last()).abs() <= 0.5, "no edge at duty 1");
     }
-
 }

@@ -38,9 +38,9 @@ use crate::arx::{self, ArxPlant};
 use crate::metrics::{self, Sample, SimMetrics, Stamped};
 pub use crate::periph::SamplePhase;
 use crate::periph::{Monostable, SensorFault, SimAdc, SimSsr, SsrFault};
-use hter::failsafe::Heartbeat;
 use crate::plant::{Load, Plant, PlantParams};
 use crate::scenario::{Change, Scenario, Start, PREROLL_S};
+use hter::failsafe::Heartbeat;
 
 /// SSR PWM period, s. The seed drove its SSR from a DAQ with a slow software PWM; 1 s gives 1 %
 /// duty resolution against Ts = 10 s and is far faster than the modules' thermal response.
@@ -269,6 +269,8 @@ pub struct Row {
     /// The board's alarm indicator (`hter::alarm::Indication`): off, not_in_control,
     /// out_of_range, unacknowledged.
     pub alarm: &'static str,
+    /// The step's supply-enable output (the MCU's pin; the board's monostable gates it too).
+    pub supply_enable: bool,
     /// The board's alarm hardware: true while the heartbeat monostable has expired (the MCU
     /// stopped stepping), whatever the MCU's own alarm pin says.
     pub alarm_hw: bool,
@@ -572,6 +574,18 @@ impl Rig {
         }
     }
 
+    /// Advances one sample period at duty `d` before the run (the board not yet involved).
+    fn settle(&mut self, d: f64, ts: f64) {
+        match self {
+            Rig::Physical { plant, .. } => {
+                for _ in 0..(ts / PWM_PERIOD_S).round() as usize {
+                    plant.advance_pwm_period(PWM_PERIOD_S, d);
+                }
+            }
+            Rig::Arx(p) => p.advance(d),
+        }
+    }
+
     /// The duty the modules get at `t_s` with the SSR and the pins as they are (the monostable
     /// gating the supply switch); 0 on an ideal plant, which has no board to hang.
     fn gated_duty(&mut self, t_s: f64) -> f64 {
@@ -633,6 +647,10 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
         // Ideal measurement: no filter between the model's output and the controller.
         cfg.filter.fa = 0.0;
     }
+    if sc.excitation {
+        // As the identification build: no supply-switch test opening in the record.
+        cfg.switch_test_interval_samples = 0;
+    }
     let ts = f64::from(cfg.ts_s);
     let (mut rig, u0) = Rig::new(opts)?;
     rig.set_sample_phase(board.sample_phase);
@@ -640,9 +658,8 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
         // The averaged steady state is not exactly the switched one: let the plant settle at
         // the holding duty for two hours (the slowest mode is ≈ 30 min) so the identification
         // record starts without a drift the input does not explain.
-        let mut last_on = false;
         for _ in 0..(7200.0 / ts) as usize {
-            rig.advance(0.0, u0, ts, &mut last_on, false);
+            rig.settle(u0, ts);
         }
     }
     // What the board keeps in flash: the trusted model, saved every 4 h of learning as the
@@ -745,7 +762,8 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                 alarm_hw_first_s = Some(at);
                 faults.push(Stamped { kind: "firmware_hang".into(), t_s: at });
             }
-            let (out, counts, indication) = held.as_ref().map_or((None, 0, Indication::Off), |(o, c, i)| (Some(o), *c, *i));
+            let (out, counts, indication) =
+                held.as_ref().map_or((None, 0, Indication::Off), |(o, c, i)| (Some(o), *c, *i));
             if indication.is_on() {
                 alarm_on_s += ts;
             }
@@ -766,6 +784,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                 trace_p: None,
                 adaptive_mode: None,
                 alarm: indication_name(indication),
+                supply_enable: out.is_some_and(|o| o.supply_enable),
                 alarm_hw: alarm_hw.is_some(),
                 ideal_counts: f64::NAN,
             });
@@ -818,6 +837,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                     AdaptiveMode::Fallback => "fallback",
                 }),
                 alarm: indication_name(indication),
+                supply_enable: out.supply_enable,
                 alarm_hw: rig.alarm_hw_since(t_s).is_some(),
                 ideal_counts: rig.ideal_counts(),
             });
