@@ -204,9 +204,8 @@ impl ReferenceWindow {
         if !inside(before) || !inside(after) || before.abs_diff(after) > self.max_diff_counts {
             return Err(AdcError::ReferenceOutOfRange);
         }
-        // Both are at most `max_counts`, so the sum cannot overflow unless the window is absurd;
-        // u64 keeps it exact anyway.
-        Ok(((u64::from(before) + u64::from(after) + 1) / 2) as u32)
+        // In u64 the sum cannot overflow; the mean (rounded half up) fits back in u32.
+        Ok((u64::from(before) + u64::from(after)).div_ceil(2) as u32)
     }
 }
 

@@ -57,7 +57,7 @@ pub const BOARD_FAULTS: [Fault; 2] = [Fault::SupplySwitchShort, Fault::FirmwareH
 pub const BOARD_FAULT_P: f64 = 0.1;
 
 /// Salt of the board-fault stream's seed.
-pub const BOARD_FAULT_STREAM: u64 = 0x626f_6172_64; // "board"
+pub const BOARD_FAULT_STREAM: u64 = 0x62_6f61_7264; // "board"
 
 /// Setpoint of every mission, °C.
 pub const MISSION_SETPOINT_C: f64 = 4.0;
