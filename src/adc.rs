@@ -31,8 +31,17 @@
 //! [`SupplySense`] turns a divided conversion of the modules' supply into volts, with VDDA
 //! measured against the MCU's factory-calibrated internal reference (VREFINT), so the reading
 //! does not depend on the 3.3 V regulator's tolerance.
+//!
+//! ## When to convert: the SSR's PWM phase
+//! Each SSR edge switches ≈ 4 A in the module leads; the inductive kick and the ground bounce
+//! reach the front end as a disturbance that decays within a few milliseconds. A conversion
+//! that happens to start on an edge is biased (the simulator models +400 counts decaying with
+//! τ = 1 ms, a model, not a measurement: `hal-sim/src/periph.rs`). [`SampleWindow`] fixes where
+//! in the PWM period the conversions run, and [`SampleWindow::clear_duty`] keeps the SSR's
+//! falling edge out of it. [`ReferenceWindow`] checks the reference-resistor conversions taken
+//! before and after the RTD's.
 
-use crate::units::Ohms;
+use crate::units::{Duty, Ohms};
 
 /// Why a conversion does not describe a working sensor.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -42,6 +51,9 @@ pub enum AdcError {
     Open,
     /// Resistance below [`AdcFrontEnd::short_below_ohm`]: RTD or leads shorted.
     Short,
+    /// The reference-resistor conversions around the RTD's are outside their window or disagree
+    /// ([`ReferenceWindow::check`]): the ratio cannot be trusted.
+    ReferenceOutOfRange,
 }
 
 /// Configuration of the ratiometric front end.
@@ -104,6 +116,97 @@ pub fn ratiometric_counts(signal: u32, reference: u32, full_scale: u32) -> u32 {
     }
     let ratio = u64::from(full_scale) * u64::from(signal) / u64::from(reference);
     u32::try_from(ratio).map_or(full_scale, |r| r.min(full_scale))
+}
+
+/// Where in the SSR's PWM period the reference, RTD and reference conversions run, and the
+/// duties that keep the SSR's edges away from them.
+///
+/// The SSR turns on at the start of each period (phase 0) and off at `duty · period`. The
+/// window sits at the end of the period, so the rising edge is a whole period minus the window
+/// away; the falling edge is moved out of the window and the `settle_ms` before it by
+/// [`SampleWindow::clear_duty`]. Valid when `settle_ms ≤ start_ms` and `start_ms + len_ms ≤
+/// period_ms` ([`SampleWindow::is_valid`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SampleWindow {
+    /// SSR PWM period, ms (the board's TIM3: 1 s).
+    pub period_ms: u32,
+    /// Start of the conversions, ms after the SSR's rising edge.
+    pub start_ms: u32,
+    /// Length of the window, ms: reference, RTD and reference conversion.
+    pub len_ms: u32,
+    /// Quiet time an edge must leave before the window, ms.
+    pub settle_ms: u32,
+}
+
+impl SampleWindow {
+    /// The last 30 ms of the 1 s period: three ×256-oversampled conversions of ≈ 4 ms each
+    /// (the reference, the RTD, the reference again) with room to spare, plus 10 ms of settling
+    /// before it — ten time constants of the 1 ms switching disturbance modelled in the
+    /// simulator (e⁻¹⁰: 0.02 counts of a 400-count kick). Duties between 0.96 and 1 become one
+    /// of the two: a 4 % step at the top of the range, where the controller only passes
+    /// through on its way to full cooling.
+    pub const DEFAULT: SampleWindow = SampleWindow { period_ms: 1000, start_ms: 970, len_ms: 30, settle_ms: 10 };
+
+    /// Whether the window and its settling time fit inside one period.
+    pub const fn is_valid(&self) -> bool {
+        self.period_ms > 0 && self.settle_ms <= self.start_ms && self.start_ms + self.len_ms <= self.period_ms
+    }
+
+    /// `d` moved so that the SSR's falling edge (at `d · period`) is neither inside the window
+    /// nor within `settle_ms` before it: a duty whose edge would fall there goes to the nearer
+    /// edge outside (the start of the settling time, or the end of the window; a window that
+    /// ends with the period gives 1.0, no falling edge at all). 0 and 1 have no edge and stay.
+    /// An invalid window leaves `d` as it is.
+    pub fn clear_duty(&self, d: Duty) -> Duty {
+        if !self.is_valid() {
+            return d;
+        }
+        let p = self.period_ms as f32;
+        let lo = (self.start_ms - self.settle_ms) as f32 / p;
+        let hi = (self.start_ms + self.len_ms) as f32 / p;
+        let x = d.get();
+        if x > lo && x < hi {
+            Duty::saturating(if x - lo < hi - x { lo } else { hi })
+        } else {
+            d
+        }
+    }
+}
+
+/// The window the reference-resistor conversion must fall in, and how far the conversions
+/// before and after the RTD's may disagree.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ReferenceWindow {
+    /// Lowest plausible reference conversion, counts.
+    pub min_counts: u32,
+    /// Highest plausible reference conversion, counts.
+    pub max_counts: u32,
+    /// Largest difference between the conversion before and after the RTD's, counts.
+    pub max_diff_counts: u32,
+}
+
+impl ReferenceWindow {
+    /// 1 mA ± 5 % through 2 kΩ against VDDA 3.0…3.6 V, in 16-bit counts: 1.9 V / 3.6 V = 0.528
+    /// (34 590 counts) to 2.1 V / 3.0 V = 0.70 (45 875), widened to 34 000…46 500. The two
+    /// conversions are ≈ 8 ms apart: the excitation cannot move measurably, and with ≈ 1.5
+    /// counts of noise on each their difference exceeds 16 counts (7σ) by chance about once in
+    /// 10¹² samples; 16 counts of the reference is 0.04 % of the ratio, 0.1 °C at the RTD.
+    pub const DEFAULT: ReferenceWindow =
+        ReferenceWindow { min_counts: 34_000, max_counts: 46_500, max_diff_counts: 16 };
+
+    /// The reference to form the ratio with (the mean of `before` and `after`, which cancels
+    /// a linear drift across the RTD conversion), or [`AdcError::ReferenceOutOfRange`] when
+    /// either is outside the window or they disagree by more than `max_diff_counts`.
+    pub fn check(&self, before: u32, after: u32) -> Result<u32, AdcError> {
+        let inside = |c: u32| (self.min_counts..=self.max_counts).contains(&c);
+        if !inside(before) || !inside(after) || before.abs_diff(after) > self.max_diff_counts {
+            return Err(AdcError::ReferenceOutOfRange);
+        }
+        // In u64 the sum cannot overflow; the mean (rounded half up) fits back in u32.
+        Ok((u64::from(before) + u64::from(after)).div_ceil(2) as u32)
+    }
 }
 
 /// Measurement of the Peltier modules' supply through a resistive divider, with VDDA taken from
@@ -204,5 +307,40 @@ mod tests {
         assert_eq!(fe.ohms(0), Err(AdcError::Short));
         assert_eq!(fe.ohms(fe.counts(Ohms(2.0))), Err(AdcError::Short));
         assert!(fe.ohms(fe.counts(Ohms(80.0))).is_ok());
+    }
+    #[test]
+    fn cleared_duties_keep_the_falling_edge_out_of_the_window() {
+        let w = SampleWindow::DEFAULT;
+        assert!(w.is_valid());
+        let d = |x: f32| w.clear_duty(Duty::new(x).unwrap()).get();
+        for x in [0.0, 0.001, 0.3, 0.5, 0.96, 1.0] {
+            assert_eq!(d(x), x, "{x} has its edge outside already");
+        }
+        assert_eq!(d(0.97), 0.96);
+        assert_eq!(d(0.979), 0.96);
+        assert_eq!(d(0.981), 1.0);
+        assert_eq!(d(0.999), 1.0);
+        // Every duty at 0.1 % steps: the edge is at least `settle_ms` before the window or
+        // there is none.
+        for k in 0..=1000 {
+            let x = d(k as f32 / 1000.0);
+            let edge_ms = x * 1000.0;
+            assert!(x == 1.0 || edge_ms <= 960.0 + 1e-3, "{k}: edge at {edge_ms} ms");
+        }
+        // A window that does not fit leaves the duty alone.
+        let bad = SampleWindow { start_ms: 5, ..w };
+        assert_eq!(bad.clear_duty(Duty::new(0.97).unwrap()).get(), 0.97);
+    }
+
+    #[test]
+    fn reference_outside_its_window_or_moving_is_an_error() {
+        let r = ReferenceWindow::DEFAULT;
+        assert_eq!(r.check(39_700, 39_704), Ok(39_702));
+        assert_eq!(r.check(39_700, 39_716), Ok(39_708));
+        assert_eq!(r.check(39_700, 39_717), Err(AdcError::ReferenceOutOfRange));
+        assert_eq!(r.check(33_999, 34_000), Err(AdcError::ReferenceOutOfRange));
+        assert_eq!(r.check(46_500, 46_501), Err(AdcError::ReferenceOutOfRange));
+        assert_eq!(r.check(0, 0), Err(AdcError::ReferenceOutOfRange), "no excitation");
+        assert_eq!(r.check(u32::MAX, u32::MAX), Err(AdcError::ReferenceOutOfRange));
     }
 }

@@ -116,6 +116,29 @@ pub struct CarrierConfig {
     /// peaks at ≈ 0.13 after 50 min; a 3 W warm item (≈ +0.09) and a 12 → 9 V supply sag
     /// (≈ +0.07) stay below 0.04; On-Off's own duty cycle ripples the difference by < 0.08.
     pub lid_duty_rise: f32,
+    // ---- supply-switch check (switched-rail sense) ----
+    /// Shorted supply switch: with the switch commanded open, the switched rail reading above
+    /// this fraction of the measured supply is a short (a working, open switch leaves the rail
+    /// at the bleeder's few millivolts; a shorted one at the supply minus its ≈ 0.1 V drop)…
+    pub switch_open_max_fraction: f32,
+    /// …but never below this, V (a dead or missing supply reads noise, not a short)…
+    pub switch_open_floor_v: f32,
+    /// …or, without a supply measurement, above this, V (half the 12 V nominal).
+    pub switch_open_max_v: f32,
+    /// Samples the switch must have been commanded open before the rail is judged: 2, so the
+    /// first reading after opening (the rail's capacitance still bleeding down) never counts.
+    pub switch_open_samples: u8,
+    /// Samples between test openings of the switch when nothing else opened it: 720 = 2 h. A
+    /// test costs `switch_open_samples` samples (20 s) without cooling, and an unpowered module
+    /// lets its hot side's heat flow back: the load warms by up to ≈ 0.25 °C (half-loaded
+    /// H-TER I in hal-sim) before the controller has it back. So a test waits until the load is
+    /// at or below its setpoint (it then ends at most that much above it, deep inside 2–8 °C);
+    /// a load held above its setpoint at full capacity is never opened on. Every 2 h finds a
+    /// latent short well within the day, and within any 24 h `hter campaign` mission whose
+    /// load reaches its setpoint after the fault. 0: no test openings (an identification run,
+    /// whose record a 20 s gap in the input would spoil); the switch is then only judged when
+    /// the supervisor opens it.
+    pub switch_test_interval_samples: u32,
 }
 
 impl CarrierConfig {
@@ -150,6 +173,11 @@ impl CarrierConfig {
         lid_fast_s: 1800.0,
         lid_slow_s: 5400.0,
         lid_duty_rise: 0.1,
+        switch_open_max_fraction: 0.5,
+        switch_open_floor_v: 2.0,
+        switch_open_max_v: 6.0,
+        switch_open_samples: 2,
+        switch_test_interval_samples: 720,
     };
 }
 
@@ -270,6 +298,29 @@ pub struct Carrier<C: Controller> {
     /// The setpoint of the last sample and when the load first came within 0.3 °C of it.
     last_w: f32,
     reached_s: Option<f32>,
+    switch: SwitchCheck,
+}
+
+/// State of the supply-switch check (see [`Carrier::observe_switched_rail_v`]), counted in
+/// samples.
+#[derive(Clone, Copy, Debug)]
+struct SwitchCheck {
+    /// The switched rail measured for this sample, V (`None`: the board has no sense).
+    rail_v: Option<f32>,
+    /// The supply-enable level of the previous output (what the rail now shows).
+    last_enable: bool,
+    /// Samples in a row the switch has been commanded open, up to the previous output.
+    open_run: u8,
+    reported: bool,
+    /// Samples since the rail was last seen with the switch open long enough to judge it.
+    since_check: u32,
+    /// Samples of the test opening still to go.
+    test_left: u8,
+}
+
+impl SwitchCheck {
+    const NEW: SwitchCheck =
+        SwitchCheck { rail_v: None, last_enable: true, open_run: 0, reported: false, since_check: 0, test_left: 0 };
 }
 
 /// Samples of filtered temperature kept for the SSR checks.
@@ -324,6 +375,7 @@ impl<C: Controller> Carrier<C> {
             lid_reported: false,
             last_w: f32::NAN,
             reached_s: None,
+            switch: SwitchCheck::NEW,
         }
     }
 
@@ -346,6 +398,83 @@ impl<C: Controller> Carrier<C> {
     pub fn observe_supply_v(&mut self, v: f32) {
         self.supply_v = Some(v);
     }
+
+    /// Gives the step the switched supply rail — the modules' supply measured *after* the
+    /// supply-enable switch — V, for the next sample. With it the step checks the switch: the
+    /// rail reading powered while the switch has been commanded open for
+    /// `switch_open_samples` samples is [`EventKind::SupplySwitchShorted`] (reported once; the
+    /// alarm latches on it). The switch is opened for that whenever the supervisor opens it
+    /// anyway (sensor fault, freeze guard, supply probe, limp home), and otherwise for a test
+    /// every `switch_test_interval_samples` in normal control, once the load is at or below
+    /// its setpoint. Without this call (a board
+    /// without the sense, a replayed trace) there is no check and no test opening.
+    pub fn observe_switched_rail_v(&mut self, v: f32) {
+        self.switch.rail_v = Some(v);
+    }
+
+    /// Runs one sample whose RTD conversion is not valid because the reference conversions
+    /// around it failed [`crate::adc::ReferenceWindow::check`]: a sensor fault
+    /// ([`EventKind::ReferenceOutOfRange`]) with cooling off, exactly as an open sensor would
+    /// be, until a valid sample comes. `input.counts` is ignored (and does not feed the stuck
+    /// check).
+    pub fn step_with_reference_fault(&mut self, input: &StepInput) -> StepOutput {
+        self.run(input.t_s, Err(EventKind::ReferenceOutOfRange), input.setpoint_c, true)
+    }
+
+    // ---- supply-switch check ----
+
+    /// The shorted-switch detector, run every sample on the rail measured with the switch in
+    /// the state of the previous output.
+    fn check_switch(&mut self, emit: &mut impl FnMut(EventKind)) {
+        let sw = &mut self.switch;
+        let Some(rail) = sw.rail_v else { return };
+        sw.open_run = if sw.last_enable { 0 } else { sw.open_run.saturating_add(1) };
+        if sw.open_run < self.cfg.switch_open_samples {
+            return;
+        }
+        sw.since_check = 0;
+        let limit = match self.supply_v {
+            Some(v) if v.is_finite() => max_f32(self.cfg.switch_open_max_fraction * v, self.cfg.switch_open_floor_v),
+            _ => self.cfg.switch_open_max_v,
+        };
+        // NaN (a broken sense) is not a short: it fails `>`.
+        if rail > limit && !sw.reported {
+            sw.reported = true;
+            emit(EventKind::SupplySwitchShorted);
+        }
+    }
+
+    /// Whether this sample opens the switch for the periodic test: only in normal control
+    /// (every other mode opens it itself, or needs it closed to limp home), only with the
+    /// sense present, never once a short has been found (the test can tell nothing more), and
+    /// only starting with the filtered load `temp_c` at or below the setpoint `w`.
+    fn switch_test_due(&mut self, mode: Mode, temp_c: f32, w: f32) -> bool {
+        let cfg = &self.cfg;
+        let sw = &mut self.switch;
+        let off = cfg.switch_test_interval_samples == 0;
+        if off || sw.rail_v.is_none() || sw.reported || mode != Mode::Normal || self.supply_cut {
+            sw.test_left = 0;
+            return false;
+        }
+        sw.since_check = sw.since_check.saturating_add(1);
+        if sw.test_left == 0 && sw.since_check >= cfg.switch_test_interval_samples && temp_c <= w {
+            sw.test_left = cfg.switch_open_samples;
+        }
+        if sw.test_left > 0 {
+            sw.test_left -= 1;
+            true
+        } else {
+            false
+        }
+    }
+
+    /// Remembers the supply-enable level this sample outputs (the next rail reading shows it).
+    fn note_supply_enable(&mut self, enable: bool) -> bool {
+        self.switch.last_enable = enable;
+        enable
+    }
+
+    // ---- end of the supply-switch check ----
 
     /// The configuration.
     pub fn config(&self) -> &CarrierConfig {
@@ -528,6 +657,9 @@ impl<C: Controller> Carrier<C> {
                 }
             }
         }
+
+        // Shorted supply switch, on the switched rail.
+        self.check_switch(&mut emit);
 
         // 4: setpoint.
         let w = if setpoint_c.is_finite() {
@@ -728,6 +860,12 @@ impl<C: Controller> Carrier<C> {
             }
         }
 
+        // Supply-switch test opening. The duty stays what the controller asked: told that none
+        // was applied, a PI's anti-windup tracking would unwind its integral and let the load
+        // warm by 0.6 °C over the next 10 min; the 20 s without supply are a small disturbance
+        // it rejects.
+        let switch_test = self.switch_test_due(mode, temp_c, w);
+
         // Lid open: the duty it takes to hold the setpoint jumps. Two averages of the applied
         // duty; the fast one running well above the slow one while the load is held near its
         // setpoint means a sudden heat load (a slow ambient swing moves both together, a
@@ -800,13 +938,16 @@ impl<C: Controller> Carrier<C> {
             // The supply switch also opens whenever the freeze guard holds cooling off: it costs
             // nothing then, and it is the only thing that stops a shorted SSR before the SSR
             // check has seen enough to be sure.
-            supply_enable: if self.supply_cut {
-                mode == Mode::LimpHome && self.limp_on
-            } else {
-                // No cooling at all without a trustworthy reading either: a shorted SSR must
-                // not cool blind.
-                !(self.freeze_guard || self.probe.is_some() || mode == Mode::SensorFault)
-            },
+            supply_enable: self.note_supply_enable(
+                !switch_test
+                    && if self.supply_cut {
+                        mode == Mode::LimpHome && self.limp_on
+                    } else {
+                        // No cooling at all without a trustworthy reading either: a shorted SSR
+                        // must not cool blind.
+                        !(self.freeze_guard || self.probe.is_some() || mode == Mode::SensorFault)
+                    },
+            ),
             mode,
             events,
             status,
@@ -818,6 +959,7 @@ impl<C: Controller> Carrier<C> {
         let ohms = self.cfg.adc.ohms(counts).map_err(|e| match e {
             AdcError::Open => EventKind::SensorOpen,
             AdcError::Short => EventKind::SensorShort,
+            AdcError::ReferenceOutOfRange => EventKind::ReferenceOutOfRange,
         })?;
         let t = self.cfg.rtd.temperature(ohms).map_err(|_| EventKind::SensorOutOfRange)?;
         self.plausible(self.cfg.cal.apply(t))
@@ -971,5 +1113,120 @@ mod robustness {
                 assert_eq!(out.mode, Mode::SensorFault);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod switch_and_reference {
+    use super::*;
+    use crate::control::{AnyController, Pi, PiConfig};
+
+    fn counts_at(t: f32) -> u32 {
+        let cfg = CarrierConfig::DEFAULT;
+        cfg.adc.counts(cfg.rtd.resistance(Celsius(t)).unwrap())
+    }
+
+    fn carrier() -> Carrier<AnyController> {
+        Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)))
+    }
+
+    /// Runs `n` samples holding 5 °C at setpoint `w` with the rail reading what a switch that is
+    /// `shorted` (or not) shows; returns the samples that opened the switch and when the short
+    /// was reported.
+    fn run(n: u32, shorted: bool, w: f32) -> (Vec<u32>, Option<u32>) {
+        let mut c = carrier();
+        let (mut opened, mut found, mut enabled) = (Vec::new(), None, true);
+        for k in 0..n {
+            c.observe_supply_v(12.0);
+            c.observe_switched_rail_v(if enabled || shorted { 11.9 } else { 0.01 });
+            let out = c.step(&StepInput { t_s: k as f32 * 10.0, counts: counts_at(5.0) + k % 3, setpoint_c: w });
+            if out.events.iter().any(|e| e.kind == EventKind::SupplySwitchShorted) {
+                assert!(found.is_none(), "reported twice");
+                found = Some(k);
+            }
+            enabled = out.supply_enable;
+            if !enabled {
+                // The controller's duty stays (the switch alone opens).
+                assert_eq!(out.duty, Duty::saturating(out.requested), "sample {k}");
+                assert_eq!(out.mode, Mode::Normal);
+                opened.push(k);
+            }
+        }
+        (opened, found)
+    }
+
+    #[test]
+    fn a_shorted_switch_is_found_by_the_test_opening() {
+        let (opened, found) = run(1600, true, 5.1);
+        assert_eq!(opened[..2], [719, 720], "first test after two hours, two samples");
+        assert_eq!(found, Some(721), "judged on the second reading with the switch open");
+        // Found: no more test openings.
+        assert_eq!(opened.len(), 2, "{opened:?}");
+        let (opened, found) = run(1600, false, 5.1);
+        assert_eq!(found, None);
+        assert_eq!(opened, [719, 720, 1440, 1441], "one test every two hours");
+        // A load above its setpoint is never opened on (the test would warm it further).
+        assert_eq!(run(1600, true, 4.9), (vec![], None));
+    }
+
+    #[test]
+    fn no_sense_no_test_and_no_check() {
+        let mut c = carrier();
+        for k in 0..1600u32 {
+            let out = c.step(&StepInput { t_s: k as f32 * 10.0, counts: counts_at(5.0) + k % 3, setpoint_c: 5.1 });
+            assert!(out.supply_enable && out.events.iter().all(|e| e.kind != EventKind::SupplySwitchShorted));
+        }
+        // Test openings off (an identification run): the sense alone opens nothing.
+        let cfg = CarrierConfig { switch_test_interval_samples: 0, ..CarrierConfig::DEFAULT };
+        let mut c = Carrier::new(cfg, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)));
+        for k in 0..1600u32 {
+            c.observe_switched_rail_v(11.9);
+            let out = c.step(&StepInput { t_s: k as f32 * 10.0, counts: counts_at(5.0) + k % 3, setpoint_c: 5.1 });
+            assert!(out.supply_enable, "sample {k}");
+        }
+    }
+
+    #[test]
+    fn a_rail_that_bleeds_down_slowly_is_no_short() {
+        // The first reading after opening still shows the rail's charge: not judged.
+        let mut c = carrier();
+        let (mut enabled, mut open_for, mut opened) = (true, 0, 0);
+        for k in 0..1600u32 {
+            c.observe_supply_v(12.0);
+            open_for = if enabled { 0 } else { open_for + 1 };
+            c.observe_switched_rail_v(if enabled || open_for == 1 { 11.9 } else { 0.05 });
+            let out = c.step(&StepInput { t_s: k as f32 * 10.0, counts: counts_at(5.0) + k % 3, setpoint_c: 5.1 });
+            assert!(out.events.iter().all(|e| e.kind != EventKind::SupplySwitchShorted), "sample {k}");
+            enabled = out.supply_enable;
+            opened += u32::from(!enabled);
+        }
+        assert_eq!(opened, 4, "two test openings were judged");
+        // The floor: a dead supply (0 V) whose rail reads a little noise is not a short.
+        let mut c = carrier();
+        for k in 0..1600u32 {
+            c.observe_supply_v(0.0);
+            c.observe_switched_rail_v(0.3);
+            let out = c.step(&StepInput { t_s: k as f32 * 10.0, counts: counts_at(5.0) + k % 3, setpoint_c: 5.1 });
+            assert!(out.events.iter().all(|e| e.kind != EventKind::SupplySwitchShorted), "sample {k}");
+            opened += u32::from(!out.supply_enable);
+        }
+        assert_eq!(opened, 8, "and judged twice more");
+    }
+
+    #[test]
+    fn a_reference_fault_is_a_sensor_fault_until_a_valid_sample() {
+        let mut c = carrier();
+        let warm = c.step(&StepInput { t_s: 0.0, counts: counts_at(9.0), setpoint_c: 4.0 });
+        assert!(warm.duty.get() > 0.0);
+        let bad = StepInput { t_s: 10.0, counts: counts_at(9.0), setpoint_c: 4.0 };
+        let out = c.step_with_reference_fault(&bad);
+        assert_eq!((out.mode, out.duty, out.supply_enable), (Mode::SensorFault, Duty::OFF, false));
+        assert_eq!(out.events.iter().map(|e| e.kind).collect::<Vec<_>>(), [EventKind::ReferenceOutOfRange]);
+        assert!(crate::alarm::needs_attention(EventKind::ReferenceOutOfRange));
+        let again = c.step_with_reference_fault(&StepInput { t_s: 20.0, ..bad });
+        assert!(again.events.is_empty(), "reported once while it lasts");
+        let back = c.step(&StepInput { t_s: 30.0, ..bad });
+        assert_eq!(back.mode, Mode::Normal);
+        assert_eq!(back.events.iter().map(|e| e.kind).collect::<Vec<_>>(), [EventKind::SensorRecovered]);
     }
 }

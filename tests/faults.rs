@@ -3,7 +3,10 @@
 
 use hal_sim::plant::Load;
 use hal_sim::scenario::Scenario;
-use hal_sim::sim::{run, ControllerChoice, ControllerSpec, Fault, PlantChoice, SimOptions, SimOutput};
+use hal_sim::sim::{
+    run, run_with, BoardOptions, ControllerChoice, ControllerSpec, Fault, PlantChoice, SamplePhase, SimOptions,
+    SimOutput,
+};
 
 const AT_S: f64 = 3600.0;
 
@@ -46,6 +49,8 @@ fn check_with(kind: &str, detected: &str, within_s: f64, controllers: &[Controll
             "{kind}/{c:?}: indicator went off"
         );
         assert!(m.alarm_indicator_s >= last - first.t_s, "{kind}/{c:?}: {} s on", m.alarm_indicator_s);
+        // The MCU kept stepping: the board's own alarm hardware never sounded.
+        assert!(m.alarm_hw_first_s.is_none() && out.rows.iter().all(|r| !r.alarm_hw), "{kind}/{c:?}: alarm hardware");
     }
 }
 
@@ -196,6 +201,7 @@ fn no_false_detections_without_faults() {
                         "{c:?} {scenario} {plant:?} {load:?} {ambient_c}: {:?}",
                         out.metrics.faults_detected
                     );
+                    assert_eq!(out.metrics.alarm_hw_first_s, None, "{c:?} {scenario} {plant:?} {load:?} {ambient_c}");
                 }
             }
         }
@@ -250,4 +256,112 @@ fn a_brownout_restarts_from_the_persisted_model() {
         "restart b0 {after}, persisted ≈ {before}, start {start}"
     );
     assert!(out.metrics.min_temp_c > 2.0, "{:?}", out.metrics);
+}
+
+/// A shorted supply-enable switch is invisible to the supply divider (upstream of it): the
+/// switched-rail sense finds it the next time the switch is commanded open — at the latest at
+/// the two-hourly test opening (two samples, once the load is at or below its setpoint) — and
+/// the alarm latches on it.
+#[test]
+fn a_shorted_supply_switch_is_detected_within_two_hours() {
+    check("supply-switch-short", "supply_switch_shorted", 2.0 * 3600.0 + 60.0);
+    // Injected anywhere between two test openings: found within two hours (and a minute for
+    // the load to be at its setpoint), every controller, both carriers.
+    let mut worst: f64 = 0.0;
+    for c in [ControllerChoice::Pi, ControllerChoice::Gpc, ControllerChoice::Onoff] {
+        for plant in [PlantChoice::Hter1, PlantChoice::Hter2] {
+            for at_s in [3700.0, 6000.0, 9000.0] {
+                let scenario = Scenario::resolve("disturbance").unwrap();
+                let mut opts = SimOptions::new(scenario, ControllerSpec::new(c));
+                opts.duration_s = 6.0 * 3600.0;
+                opts.plant = plant;
+                opts.faults = vec![(at_s, Fault::SupplySwitchShort)];
+                let m = run(&opts).unwrap().metrics;
+                let t = m.faults_detected.iter().find(|f| f.kind == "supply_switch_shorted").map(|f| f.t_s);
+                assert!(
+                    t.is_some_and(|t| t >= at_s && t <= at_s + 2.0 * 3600.0 + 60.0),
+                    "{c:?} {plant:?} {at_s}: {:?}",
+                    m.faults_detected
+                );
+                worst = worst.max(t.unwrap_or(0.0) - at_s);
+                // Reported once; control goes on through the SSR.
+                assert_eq!(m.faults_detected.len(), 1, "{c:?} {plant:?} {at_s}: {:?}", m.faults_detected);
+                assert!(m.min_temp_c > 2.5 && m.max_temp_c < 6.0, "{c:?} {plant:?} {at_s}: {m:?}");
+            }
+        }
+    }
+    eprintln!("supply-switch-short: worst detection latency {worst} s");
+}
+
+/// The step stops being called (the control loop hung) while self-tuning GPC holds 4 °C with
+/// the SSR modulating: the SSR timer keeps its last duty, and only the board's heartbeat
+/// monostable (15 s) opens the supply switch and sounds the alarm hardware, within 2 Ts.
+#[test]
+fn a_firmware_hang_opens_the_supply_and_sounds_the_alarm_hardware() {
+    const TS: f64 = 10.0;
+    // Not at 3600 s: the switch test opening (due then) has the supply open for 20 s.
+    const AT_S: f64 = 5000.0;
+    let mut opts =
+        SimOptions::new(Scenario::resolve("disturbance").unwrap(), ControllerSpec::new(ControllerChoice::Gpc));
+    opts.seed = 11;
+    opts.faults = vec![(AT_S, Fault::FirmwareHang)];
+    let out = run(&opts).unwrap();
+    let m = &out.metrics;
+    let before = out.rows.iter().rev().find(|r| r.t_s < AT_S).unwrap();
+    assert!(before.duty > 0.05 && before.duty < 1.0, "cooling when it hangs: {}", before.duty);
+    let at = m.alarm_hw_first_s.expect("the alarm hardware never sounded");
+    eprintln!("firmware-hang@{AT_S}: alarm hardware and supply open at {at} s (last beat {} s)", before.t_s);
+    assert!(at > AT_S && at <= AT_S + 2.0 * TS, "alarm hardware at {at} s");
+    let kinds: Vec<_> = m.faults_detected.iter().map(|f| (f.kind.as_str(), f.t_s)).collect();
+    assert_eq!(kinds, [("firmware_hang", at)]);
+    // Before the expiry the hung timer still cooled; from the first sample after it, nothing.
+    let after: Vec<_> = out.rows.iter().filter(|r| r.t_s >= AT_S + 2.0 * TS).collect();
+    assert!(after.len() > 500);
+    assert!(after.iter().all(|r| r.duty == 0.0 && r.alarm_hw && r.mode == "hung"));
+    assert!(out.rows.iter().filter(|r| r.t_s < AT_S).all(|r| !r.alarm_hw));
+    // No freeze: the load only warms from there.
+    let t_hang = before.true_temp_c;
+    let min_after = after.iter().map(|r| r.true_temp_c).fold(f64::MAX, f64::min);
+    let last = after.last().unwrap().true_temp_c;
+    assert!(min_after > t_hang - 0.2 && last > t_hang + 3.0, "{t_hang} → min {min_after}, end {last}");
+    // A brownout restarts the MCU: the hang ends and the step cools again.
+    let scenario = Scenario::resolve("disturbance").unwrap();
+    let mut opts = SimOptions::new(scenario, ControllerSpec::new(ControllerChoice::Gpc));
+    opts.faults = vec![Fault::parse("firmware-hang@3600").unwrap(), Fault::parse("brownout@5400").unwrap()];
+    let out = run(&opts).unwrap();
+    assert!(out.rows.iter().filter(|r| r.t_s >= 5400.0).all(|r| r.mode != "hung"));
+    assert!(out.rows.iter().any(|r| r.t_s > 5400.0 && r.duty > 0.0));
+}
+
+/// The SSR's switching disturbance on the ADC: a conversion that starts on the SSR's falling
+/// edge is biased; one at the board's fixed phase, with the duty cleared of the window, is
+/// not (within the front end's 1.5 counts of noise). Counts against the simulator's ideal
+/// conversion over a pull-down and hold (hundreds of modulated samples).
+#[test]
+fn edge_aligned_samples_are_biased_and_synchronised_ones_are_not() {
+    for c in [ControllerChoice::Pi, ControllerChoice::Gpc] {
+        let errors = |phase: SamplePhase| -> (f64, f64, usize) {
+            let opts = SimOptions::new(Scenario::resolve("step").unwrap(), ControllerSpec::new(c));
+            let out = run_with(&opts, &BoardOptions { sample_phase: phase }).unwrap();
+            // Samples whose preceding SSR period switched (the duty applied before them in (0, 1)).
+            let e: Vec<f64> = out
+                .rows
+                .windows(2)
+                .filter(|w| w[0].duty > 0.0 && w[0].duty < 1.0)
+                .map(|w| f64::from(w[1].counts) - w[1].ideal_counts)
+                .collect();
+            let n = e.len() as f64;
+            let mean = e.iter().sum::<f64>() / n;
+            let rms = (e.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
+            (mean, rms, e.len())
+        };
+        let (edge_mean, _, n_edge) = errors(SamplePhase::EdgeAligned);
+        let (sync_mean, sync_rms, n_sync) = errors(SamplePhase::Synchronised);
+        eprintln!(
+            "{c:?}: edge-aligned mean error {edge_mean:.2} counts ({n_edge} samples); synchronised {sync_mean:.3} counts, rms {sync_rms:.2} ({n_sync} samples)"
+        );
+        assert!(n_edge > 300 && n_sync > 300, "{n_edge} {n_sync}");
+        assert!(edge_mean > 50.0, "{c:?}: edge-aligned bias {edge_mean}");
+        assert!(sync_mean.abs() < 0.3 && sync_rms < 1.8, "{c:?}: synchronised {sync_mean} (rms {sync_rms})");
+    }
 }

@@ -9,7 +9,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::mission::{self, Mission, MissionReport, HARDWARE_FAULTS};
+use crate::mission::{self, Mission, MissionReport, BOARD_FAULTS, HARDWARE_FAULTS};
 use crate::sim::{self, ControllerChoice, ControllerSpec};
 
 /// Most missions one campaign may run.
@@ -138,6 +138,7 @@ pub fn run_mission(seed: u64, controller: ControllerChoice) -> Result<MissionRep
 pub fn summarize(reports: &[MissionReport], controller: ControllerChoice, seed: u64, wall_s: f64) -> CampaignSummary {
     let mut by_kind: BTreeMap<String, KindFigures> = HARDWARE_FAULTS
         .iter()
+        .chain(BOARD_FAULTS.iter())
         .map(|&f| {
             (
                 mission::fault_name(f).to_string(),

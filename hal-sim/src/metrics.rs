@@ -79,6 +79,9 @@ pub struct SimMetrics {
     pub alarm_indicator_s: f64,
     /// When the alarm indicator first came on, s (null if never).
     pub alarm_indicator_first_s: Option<f64>,
+    /// When the board's alarm hardware first sounded (the heartbeat monostable expired: the
+    /// control loop stopped), s (null if never).
+    pub alarm_hw_first_s: Option<f64>,
 }
 
 /// Figures computed from the samples alone.

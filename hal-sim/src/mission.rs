@@ -12,7 +12,12 @@
 //! - with probability 0.3 sensor spikes from a random time on (not a hardware fault: the step
 //!   ignores each spike and reports them);
 //! - with probability 0.2 one hardware fault, uniform over [`HARDWARE_FAULTS`], at a random
-//!   time between 2 h and 22 h.
+//!   time between 2 h and 22 h;
+//! - in a mission without one, with probability [`BOARD_FAULT_P`] one fault of the board
+//!   around the step, uniform over [`BOARD_FAULTS`], at a random time between 2 h and 22 h,
+//!   drawn from a second stream (seeded from the seed and [`BOARD_FAULT_STREAM`]) so that the
+//!   draws above, and so every mission without a board fault, stay as they were before the
+//!   board faults existed.
 //!
 //! The setpoint is 4 °C; the run starts at ambient with cooling off (pull-down).
 //!
@@ -39,6 +44,20 @@ pub const HARDWARE_FAULTS: [Fault; 9] = [
     Fault::LidOpen,
     Fault::Brownout,
 ];
+
+/// Faults of the board around the step a mission may carry: a shorted supply switch (found
+/// by the switched-rail check, at the latest at the hourly test opening) and a hung control
+/// loop (found by the board's heartbeat monostable, which opens the supply switch and sounds
+/// the alarm hardware).
+pub const BOARD_FAULTS: [Fault; 2] = [Fault::SupplySwitchShort, Fault::FirmwareHang];
+
+/// Probability of a board fault in a mission without a hardware fault: 0.1, so a 40-mission
+/// campaign carries about three and 1000 missions about 80 (as many of each kind as of the
+/// others).
+pub const BOARD_FAULT_P: f64 = 0.1;
+
+/// Salt of the board-fault stream's seed.
+pub const BOARD_FAULT_STREAM: u64 = 0x62_6f61_7264; // "board"
 
 /// Setpoint of every mission, °C.
 pub const MISSION_SETPOINT_C: f64 = 4.0;
@@ -133,10 +152,17 @@ impl Mission {
             changes.push((t + d, Change::Supply(params.supply_v)));
         }
         let mut spikes_s = rng.gen_bool(0.3).then(|| rng.gen_range(3600.0..23.0 * 3600.0_f64).round());
-        let hardware_fault = rng.gen_bool(0.2).then(|| {
+        let mut hardware_fault = rng.gen_bool(0.2).then(|| {
             let kind = HARDWARE_FAULTS[rng.gen_range(0..HARDWARE_FAULTS.len())];
             (rng.gen_range(2.0 * 3600.0..22.0 * 3600.0_f64).round(), kind)
         });
+        if hardware_fault.is_none() {
+            let mut board = ChaCha8Rng::seed_from_u64(seed ^ BOARD_FAULT_STREAM);
+            if board.gen_bool(BOARD_FAULT_P) {
+                let kind = BOARD_FAULTS[board.gen_range(0..BOARD_FAULTS.len())];
+                hardware_fault = Some((board.gen_range(2.0 * 3600.0..22.0 * 3600.0_f64).round(), kind));
+            }
+        }
 
         // A fault is a lasting state: keep the scheduled changes from undoing it.
         if let Some((tf, kind)) = hardware_fault {
@@ -208,7 +234,9 @@ pub fn fault_name(f: Fault) -> &'static str {
 /// supply), `lid_open` (the holding duty jumps; no check for the relay On-Off controller, whose
 /// limit cycle hides it — `ssr_stuck_off` also counts, "the load warms at full duty"),
 /// `restarted_brownout` (the reset flags the firmware reads at boot, handed to the step by
-/// `Carrier::note_reset`, as the simulator does when it restarts the step).
+/// `Carrier::note_reset`, as the simulator does when it restarts the step),
+/// `supply_switch_shorted` (the switched-rail sense with the switch commanded open) and
+/// `firmware_hang` (not the step: the board's heartbeat monostable expiring).
 pub fn detection(f: Fault) -> (fn(&str) -> bool, bool) {
     match f {
         Fault::SensorOpen => (|k| k == "sensor_open" || k == "sensor_out_of_range", true),
@@ -220,6 +248,10 @@ pub fn detection(f: Fault) -> (fn(&str) -> bool, bool) {
         Fault::SupplySag => (|k| k == "supply_sag", true),
         Fault::LidOpen => (|k| k == "lid_open" || k == "ssr_stuck_off", true),
         Fault::Brownout => (|k| k == "restarted_brownout", true),
+        Fault::SupplySwitchShort => (|k| k == "supply_switch_shorted", true),
+        // The step cannot report its own hang: the board's alarm hardware sounding is the
+        // detection (the simulator lists it at the monostable's expiry).
+        Fault::FirmwareHang => (|k| k == "firmware_hang", true),
         Fault::SensorSpikes => (|k| k == "sensor_spikes", false),
     }
 }
@@ -346,6 +378,12 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
                 // A shorted SSR shows only once less than full cooling is wanted: in a heat that
                 // needs full cooling and still leaves the load above its setpoint it never does.
                 Fault::SsrStuckOn => out.rows.iter().any(|r| r.t_s >= tf && r.true_temp_c < MISSION_SETPOINT_C - 1.0),
+                // A shorted switch shows only once the step commands it open for two samples
+                // (its test opening waits for the load to be at or below the setpoint: a hot
+                // day at full capacity may never give one).
+                Fault::SupplySwitchShort => {
+                    out.rows.windows(2).any(|w| w[0].t_s >= tf && !w[0].supply_enable && !w[1].supply_enable)
+                }
                 _ => true,
             }
     });
@@ -440,7 +478,12 @@ mod tests {
                 assert!((7200.0..=22.0 * 3600.0).contains(&t) && f != Fault::SensorSpikes);
             }
         }
-        let with_fault = (0..1000).filter(|&s| Mission::generate(s).hardware_fault.is_some()).count();
+        let kinds: Vec<_> = (0..1000).filter_map(|s| Mission::generate(s).hardware_fault.map(|(_, k)| k)).collect();
+        let board = kinds.iter().filter(|k| BOARD_FAULTS.contains(k)).count();
+        let with_fault = kinds.len() - board;
         assert!((150..=250).contains(&with_fault), "{with_fault}");
+        // 0.1 of the ≈ 800 missions without a hardware fault.
+        assert!((50..=110).contains(&board), "{board}");
+        assert!(BOARD_FAULTS.iter().all(|b| kinds.contains(b)));
     }
 }

@@ -4,8 +4,14 @@
 //! - [`SimAdc`] implements [`hter::hal::RtdSampler`]: the RTD in °C → ohms with its *own* f64
 //!   Callendar–Van Dusen (the simulator never shares code paths with the controller) → the
 //!   ratiometric front end → Gaussian noise → quantisation to 16-bit counts.
+//!   Each conversion also picks up the SSR's switching disturbance when it starts within a few
+//!   ms of an edge ([`SsrKick`]), and happens at the phase of the PWM period [`SamplePhase`]
+//!   says.
 //! - [`SimSsr`] implements `embedded_hal::pwm::SetDutyCycle` for the SSR, with stuck-on/off
-//!   faults, behind the supply-enable switch.
+//!   faults, behind the supply-enable switch (which can be shorted), with the switched rail
+//!   after it.
+//! - [`Monostable`]: the board's heartbeat watchdog, a retriggerable monostable whose expiry
+//!   opens the supply switch and sounds the alarm hardware.
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -28,6 +34,55 @@ pub enum SensorFault {
     Offset(f64),
 }
 
+/// Where in the SSR's PWM period the RTD conversion happens.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SamplePhase {
+    /// At the board's fixed phase ([`hter::adc::SampleWindow`]: the RTD conversion after the
+    /// first reference conversion, 974 ms into the period), with the duty cleared so no edge
+    /// comes near it. The default.
+    Synchronised,
+    /// On the SSR's falling edge of the last period before the sample (the rising edge at
+    /// duty 1 after a period off): what a free-running sample clock slides onto for ≈ 20 min
+    /// at a time. For tests.
+    EdgeAligned,
+}
+
+/// The SSR switching disturbance on the RTD front end: each SSR edge adds `peak_counts`
+/// decaying with `tau_ms`; a conversion of `conv_ms` averages it over its length.
+///
+/// A model, not a measurement: the SSR switches ≈ 4 A in the module leads, a ground bounce of
+/// a few mV on a front end whose 16-bit count is 50 µV at the ADC makes tens of counts per mV;
+/// 400 counts (≈ 0.8 Ω, 2 °C at the peak) decaying with 1 ms (the RC of the front end's
+/// anti-alias filter and the ground return) is the order of magnitude, and a board must measure
+/// it. Edges more than 10 τ before the conversion contribute nothing (e⁻¹⁰ · 400 = 0.02
+/// counts, far under the noise), so a synchronised sample is exactly unbiased.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SsrKick {
+    /// Disturbance right after an edge, counts (both edges alike, the worst case for the mean).
+    pub peak_counts: f64,
+    /// Its decay time constant, ms.
+    pub tau_ms: f64,
+    /// Length of the RTD conversion (×256 oversampling), ms.
+    pub conv_ms: f64,
+}
+
+impl SsrKick {
+    /// The model above.
+    pub const DEFAULT: SsrKick = SsrKick { peak_counts: 400.0, tau_ms: 1.0, conv_ms: 4.0 };
+
+    /// Mean disturbance over a conversion starting `after_ms` after an edge (negative: the edge
+    /// comes during or after the conversion's start).
+    pub fn bias_counts(&self, after_ms: f64) -> f64 {
+        let (tau, d) = (self.tau_ms.max(1e-9), self.conv_ms.max(1e-9));
+        // The kick integrated over the part of the conversion after the edge, divided by its length.
+        let (from, to) = (after_ms.max(0.0), after_ms + d);
+        if to <= 0.0 || from > 10.0 * tau {
+            return 0.0;
+        }
+        self.peak_counts * tau / d * ((-from / tau).exp() - (-to / tau).exp())
+    }
+}
+
 /// Ratiometric RTD front end with noise.
 #[derive(Clone, Debug)]
 pub struct SimAdc {
@@ -43,8 +98,18 @@ pub struct SimAdc {
     pub noise_counts: f64,
     /// Injected fault.
     pub fault: SensorFault,
+    /// When in the PWM period the RTD conversion happens.
+    pub phase: SamplePhase,
+    /// The board's conversion window in the PWM period.
+    pub window: hter::adc::SampleWindow,
+    /// The SSR switching disturbance.
+    pub kick: SsrKick,
     temp_c: f64,
     last: u32,
+    /// Duty the modules really got in the last PWM period (its edges disturb the conversion).
+    ssr_duty: f64,
+    /// The last conversion without noise or disturbance, counts (not rounded).
+    ideal: f64,
     rng: ChaCha8Rng,
 }
 
@@ -59,8 +124,13 @@ impl SimAdc {
             full_scale: 65_535,
             noise_counts: 1.5,
             fault: SensorFault::None,
+            phase: SamplePhase::Synchronised,
+            window: hter::adc::SampleWindow::DEFAULT,
+            kick: SsrKick::DEFAULT,
             temp_c: 25.0,
             last: 0,
+            ssr_duty: 0.0,
+            ideal: 0.0,
             rng: ChaCha8Rng::seed_from_u64(seed),
         }
     }
@@ -68,6 +138,36 @@ impl SimAdc {
     /// Sets the temperature the RTD is at, °C.
     pub fn set_temperature_c(&mut self, t: f64) {
         self.temp_c = t;
+    }
+
+    /// Tells the ADC the duty the modules got in the PWM period before the next conversion
+    /// (0 with the supply open or the SSR stuck: no current, no edges).
+    pub fn set_ssr_duty(&mut self, d: f64) {
+        self.ssr_duty = d;
+    }
+
+    /// The last conversion as an ideal converter would have made it (no noise, no switching
+    /// disturbance, not rounded), counts; the sensor fault, if any, included (a stuck converter
+    /// repeats its value).
+    pub fn ideal_counts_last(&self) -> f64 {
+        self.ideal
+    }
+
+    /// Mean switching disturbance of a conversion now, counts: the edges of the last PWM
+    /// period (rising at its start, falling at `duty · period`; none at duty 0 or 1).
+    pub fn ssr_bias_counts(&self) -> f64 {
+        let d = self.ssr_duty;
+        if !(d > 0.0 && d < 1.0) {
+            return 0.0;
+        }
+        let period = f64::from(self.window.period_ms);
+        let fall = d * period;
+        let start = match self.phase {
+            // After the first reference conversion.
+            SamplePhase::Synchronised => f64::from(self.window.start_ms) + self.kick.conv_ms,
+            SamplePhase::EdgeAligned => fall,
+        };
+        self.kick.bias_counts(start) + self.kick.bias_counts(start - fall)
     }
 
     /// IEC 60751 resistance at `t` °C, independently of the library.
@@ -86,13 +186,21 @@ impl SimAdc {
     fn convert(&mut self) -> u32 {
         let fs = f64::from(self.full_scale);
         let noise = Normal::new(0.0, self.noise_counts.max(1e-12)).map_or(0.0, |n| n.sample(&mut self.rng));
-        let x = match self.fault {
-            SensorFault::None | SensorFault::Stuck => self.ideal_counts(self.ohms_at(self.temp_c)) + noise,
-            SensorFault::Offset(d) => self.ideal_counts(self.ohms_at(self.temp_c + d)) + noise,
+        let bias = self.ssr_bias_counts();
+        self.ideal = match self.fault {
+            SensorFault::Offset(d) => self.ideal_counts(self.ohms_at(self.temp_c + d)),
             SensorFault::Open => fs,
-            SensorFault::Short => self.ideal_counts(1.0) + noise,
+            SensorFault::Short => self.ideal_counts(1.0),
+            _ => self.ideal_counts(self.ohms_at(self.temp_c)),
+        };
+        let x = match self.fault {
+            SensorFault::None | SensorFault::Stuck => self.ideal_counts(self.ohms_at(self.temp_c)) + noise + bias,
+            SensorFault::Offset(d) => self.ideal_counts(self.ohms_at(self.temp_c + d)) + noise + bias,
+            // The amplifier sits at its rail: nothing moves it.
+            SensorFault::Open => fs,
+            SensorFault::Short => self.ideal_counts(1.0) + noise + bias,
             SensorFault::Spikes => {
-                let base = self.ideal_counts(self.ohms_at(self.temp_c)) + noise;
+                let base = self.ideal_counts(self.ohms_at(self.temp_c)) + noise + bias;
                 let u: f64 = rand::Rng::gen(&mut self.rng);
                 if u < 0.02 {
                     // A spike of ±(5…30) °C worth of counts.
@@ -136,6 +244,8 @@ pub struct SimSsr {
     ticks: u16,
     /// Injected fault.
     pub fault: SsrFault,
+    /// The supply-enable switch is shorted (a failed MOSFET): it conducts whatever it is told.
+    pub switch_shorted: bool,
     supply_enabled: bool,
 }
 
@@ -151,7 +261,24 @@ impl SimSsr {
 
     /// Off, supply enabled, no fault.
     pub fn new() -> Self {
-        SimSsr { ticks: 0, fault: SsrFault::None, supply_enabled: true }
+        SimSsr { ticks: 0, fault: SsrFault::None, switch_shorted: false, supply_enabled: true }
+    }
+
+    /// Whether the supply switch conducts (commanded closed, or shorted).
+    pub fn switch_conducts(&self) -> bool {
+        self.supply_enabled || self.switch_shorted
+    }
+
+    /// The switched rail (after the supply switch, before the SSR) with the supply at
+    /// `supply_v`, V: the supply when the switch conducts, else 0 (the board's bleeder empties
+    /// the rail's capacitance well within a sample; the step ignores the first reading after
+    /// an opening anyway).
+    pub fn switched_rail_v(&self, supply_v: f64) -> f64 {
+        if self.switch_conducts() {
+            supply_v
+        } else {
+            0.0
+        }
     }
 
     /// Opens or closes the supply-enable switch in series with the modules.
@@ -166,7 +293,7 @@ impl SimSsr {
 
     /// Duty the modules really get, [0, 1].
     pub fn effective_duty(&self) -> f64 {
-        if !self.supply_enabled {
+        if !self.switch_conducts() {
             return 0.0;
         }
         match self.fault {
@@ -174,6 +301,48 @@ impl SimSsr {
             SsrFault::StuckOn => 1.0,
             SsrFault::StuckOff => 0.0,
         }
+    }
+}
+
+/// The board's heartbeat watchdog: a retriggerable monostable (a 74HC123-style one-shot) fed
+/// by the heartbeat output, which a healthy control loop toggles once per step
+/// ([`hter::failsafe::Heartbeat`]). Each edge retriggers it; while it runs its output closes
+/// the supply-enable switch's gate (in series with the MCU's supply-enable pin) and keeps the
+/// alarm hardware silent. When the edges stop it expires: the switch opens (cooling stops
+/// whatever duty the hung MCU's timer still drives) and the alarm sounds (powered and driven
+/// by the board, not the MCU). At power-up it has not been triggered: the switch stays open and
+/// the alarm sounds until the first step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Monostable {
+    /// Pulse length, s.
+    pub timeout_s: f64,
+    last_trigger_s: Option<f64>,
+}
+
+impl Monostable {
+    /// 15 s = 1.5 Ts: longer than the 10 s between beats with the RC's tolerance (±20 %: 12 s
+    /// at worst) and the step's jitter, and short enough that cooling stops within 2 Ts of the
+    /// last beat (18 s at worst, before the switch's own turn-off time of microseconds).
+    pub const TIMEOUT_S: f64 = 15.0;
+
+    /// Not yet triggered.
+    pub fn new(timeout_s: f64) -> Self {
+        Monostable { timeout_s, last_trigger_s: None }
+    }
+
+    /// A heartbeat edge at `t_s`.
+    pub fn trigger(&mut self, t_s: f64) {
+        self.last_trigger_s = Some(t_s);
+    }
+
+    /// Whether the pulse is still running at `t_s` (supply gate closed, alarm silent).
+    pub fn is_running(&self, t_s: f64) -> bool {
+        self.expiry_s().is_some_and(|e| t_s < e)
+    }
+
+    /// When the pulse ends (or ended), s; `None` before the first trigger.
+    pub fn expiry_s(&self) -> Option<f64> {
+        self.last_trigger_s.map(|t| t + self.timeout_s)
     }
 }
 
@@ -244,5 +413,50 @@ mod tests {
         ssr.set_supply_enabled(true);
         ssr.fault = SsrFault::StuckOff;
         assert_eq!(ssr.effective_duty(), 0.0);
+    }
+
+    #[test]
+    fn a_shorted_switch_keeps_the_rail_and_the_cooling() {
+        let mut ssr = SimSsr::new();
+        ssr.set_duty_cycle_fraction(1, 2).unwrap();
+        ssr.set_supply_enabled(false);
+        assert_eq!((ssr.effective_duty(), ssr.switched_rail_v(12.0)), (0.0, 0.0));
+        ssr.switch_shorted = true;
+        assert_eq!((ssr.effective_duty(), ssr.switched_rail_v(12.0)), (0.5, 12.0));
+    }
+
+    #[test]
+    fn the_monostable_runs_while_it_is_retriggered() {
+        let mut m = Monostable::new(Monostable::TIMEOUT_S);
+        assert!(!m.is_running(0.0), "not triggered at power-up");
+        for k in 0..10 {
+            m.trigger(k as f64 * 10.0);
+            assert!(m.is_running(k as f64 * 10.0 + 9.99));
+        }
+        assert!(m.is_running(104.9) && !m.is_running(105.0));
+        assert_eq!(m.expiry_s(), Some(105.0));
+    }
+
+    #[test]
+    fn the_switching_disturbance_model() {
+        let k = SsrKick::DEFAULT;
+        // On the edge: the mean of 400·e^(−t/1 ms) over 4 ms, 400/4·(1 − e⁻⁴) ≈ 98 counts.
+        assert!((k.bias_counts(0.0) - 100.0 * (1.0 - (-4.0f64).exp())).abs() < 1e-9);
+        assert!(k.bias_counts(2.0) < k.bias_counts(0.0) * 0.14);
+        assert_eq!(k.bias_counts(10.5), 0.0);
+        assert_eq!(k.bias_counts(-4.0), 0.0, "edge after the conversion");
+        assert!(k.bias_counts(-2.0) > 0.0 && k.bias_counts(-2.0) < k.bias_counts(0.0));
+        // The ADC: edge-aligned conversions carry it, synchronised ones none.
+        let mut adc = SimAdc::new(3);
+        adc.noise_counts = 0.0;
+        adc.set_temperature_c(4.0);
+        adc.set_ssr_duty(0.4);
+        let sync = f64::from(adc.sample().unwrap());
+        assert!((sync - adc.ideal_counts_last()).abs() <= 0.5, "{sync} vs {}", adc.ideal_counts_last());
+        adc.phase = SamplePhase::EdgeAligned;
+        let edge = f64::from(adc.sample().unwrap());
+        assert!((edge - adc.ideal_counts_last() - 98.2).abs() < 1.0, "{edge} vs {}", adc.ideal_counts_last());
+        adc.set_ssr_duty(1.0);
+        assert!((f64::from(adc.sample().unwrap()) - adc.ideal_counts_last()).abs() <= 0.5, "no edge at duty 1");
     }
 }

@@ -6,6 +6,14 @@
 //! 2. [`hter::step::Carrier::step`] turns counts into a duty and events;
 //! 3. the duty goes to the simulated SSR through [`hter::hal::apply_duty`];
 //! 4. the plant integrates Ts / PWM-period SSR periods, each switched on then off for real.
+//!
+//! The board around the step is simulated too: the duty is cleared of the ADC's conversion
+//! window ([`hter::adc::SampleWindow::clear_duty`]) and the RTD is converted at that fixed
+//! phase ([`SamplePhase`]); the supply divider and the switched-rail sense are read every
+//! sample; the heartbeat ([`hter::failsafe::Heartbeat`]) toggles once per step into the
+//! board's [`Monostable`], whose expiry opens the supply switch and sounds the alarm hardware
+//! (`alarm_hw`): the only thing that stops cooling when the step stops being called
+//! (`--fault firmware-hang@T`).
 
 use anyhow::{bail, Result};
 use hter::alarm::{Annunciator, Indication};
@@ -28,9 +36,11 @@ use hter::units::Celsius;
 
 use crate::arx::{self, ArxPlant};
 use crate::metrics::{self, Sample, SimMetrics, Stamped};
-use crate::periph::{SensorFault, SimAdc, SimSsr, SsrFault};
+pub use crate::periph::SamplePhase;
+use crate::periph::{Monostable, SensorFault, SimAdc, SimSsr, SsrFault};
 use crate::plant::{Load, Plant, PlantParams};
 use crate::scenario::{Change, Scenario, Start, PREROLL_S};
+use hter::failsafe::Heartbeat;
 
 /// SSR PWM period, s. The seed drove its SSR from a DAQ with a slow software PWM; 1 s gives 1 %
 /// duty resolution against Ts = 10 s and is far faster than the modules' thermal response.
@@ -259,6 +269,28 @@ pub struct Row {
     /// The board's alarm indicator (`hter::alarm::Indication`): off, not_in_control,
     /// out_of_range, unacknowledged.
     pub alarm: &'static str,
+    /// The step's supply-enable output (the MCU's pin; the board's monostable gates it too).
+    pub supply_enable: bool,
+    /// The board's alarm hardware: true while the heartbeat monostable has expired (the MCU
+    /// stopped stepping), whatever the MCU's own alarm pin says.
+    pub alarm_hw: bool,
+    /// The conversion an ideal ADC would have made of this sample, counts (no noise, no SSR
+    /// switching disturbance, not rounded); not in the CSV.
+    #[serde(skip)]
+    pub ideal_counts: f64,
+}
+
+/// How the simulated board around the step is built (what `run` uses by default).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BoardOptions {
+    /// Where in the SSR period the RTD is converted; [`SamplePhase::Synchronised`] also clears
+    /// the duty of the conversion window, as the firmware does.
+    pub sample_phase: SamplePhase,
+}
+
+impl BoardOptions {
+    /// The reference board: synchronised conversions with cleared duties.
+    pub const DEFAULT: BoardOptions = BoardOptions { sample_phase: SamplePhase::Synchronised };
 }
 
 /// A finished run.
@@ -321,11 +353,16 @@ pub enum Fault {
     LidOpen,
     /// The MCU resets: all controller state is lost and the step restarts.
     Brownout,
+    /// The supply-enable switch shorts: it conducts whatever it is told.
+    SupplySwitchShort,
+    /// The control loop hangs: the step is no longer called, the SSR timer keeps its last duty,
+    /// the MCU's pins hold their levels; only the board's heartbeat monostable can stop cooling.
+    FirmwareHang,
 }
 
 impl Fault {
     /// Every kind, with its CLI name.
-    pub const ALL: [(&'static str, Fault); 10] = [
+    pub const ALL: [(&'static str, Fault); 12] = [
         ("sensor-open", Fault::SensorOpen),
         ("sensor-short", Fault::SensorShort),
         ("sensor-stuck", Fault::SensorStuck),
@@ -336,6 +373,8 @@ impl Fault {
         ("supply-sag", Fault::SupplySag),
         ("lid-open", Fault::LidOpen),
         ("brownout", Fault::Brownout),
+        ("supply-switch-short", Fault::SupplySwitchShort),
+        ("firmware-hang", Fault::FirmwareHang),
     ];
 
     /// Parses `KIND@T_S`.
@@ -359,7 +398,7 @@ impl Fault {
 // One Rig per run: the size difference between variants costs nothing.
 #[allow(clippy::large_enum_variant)]
 enum Rig {
-    Physical { plant: Box<Plant>, adc: SimAdc, ssr: SimSsr },
+    Physical { plant: Box<Plant>, adc: SimAdc, ssr: SimSsr, board: Board },
     Arx(ArxPlant),
 }
 
@@ -387,16 +426,18 @@ impl Rig {
                 None => bail!("the plant cannot hold {t} °C at {} °C ambient", opts.ambient_c),
             },
         };
-        Ok((Rig::Physical { plant: Box::new(plant), adc: SimAdc::new(opts.seed), ssr: SimSsr::new() }, u0))
+        let adc = SimAdc::new(opts.seed);
+        Ok((Rig::Physical { plant: Box::new(plant), adc, ssr: SimSsr::new(), board: Board::new() }, u0))
     }
 
     /// Samples the sensor and runs the step; returns its output and the counts it got.
     fn step<C: Controller>(&mut self, carrier: &mut Carrier<C>, t_s: f64, w: f64) -> (StepOutput, u32) {
         match self {
-            Rig::Physical { plant, adc, .. } => {
+            Rig::Physical { plant, adc, ssr, .. } => {
                 adc.set_temperature_c(plant.sensed_temp_c());
-                // The board's divider on the module supply rail.
+                // The board's divider on the module supply rail, and the sense after the switch.
                 carrier.observe_supply_v(plant.supply_v() as f32);
+                carrier.observe_switched_rail_v(ssr.switched_rail_v(plant.supply_v()) as f32);
                 let counts = match adc.sample() {
                     Ok(c) => c,
                     Err(never) => match never {},
@@ -407,13 +448,20 @@ impl Rig {
         }
     }
 
-    /// Drives the actuator; returns the duty the plant really gets.
-    fn actuate(&mut self, out: &StepOutput) -> f64 {
+    /// Drives the actuator at `t_s`; returns the duty the plant really gets.
+    fn actuate(&mut self, out: &StepOutput, t_s: f64) -> f64 {
         match self {
-            Rig::Physical { ssr, .. } => {
+            Rig::Physical { ssr, adc, board, .. } => {
+                let duty = match adc.phase {
+                    SamplePhase::Synchronised => adc.window.clear_duty(out.duty),
+                    SamplePhase::EdgeAligned => out.duty,
+                };
                 // SimSsr's error type is Infallible.
-                let _ = apply_duty(ssr, out.duty);
-                ssr.set_supply_enabled(out.supply_enable);
+                let _ = apply_duty(ssr, duty);
+                board.supply_pin = out.supply_enable;
+                // A completed step: the heartbeat toggles, the monostable restarts.
+                board.beat(t_s);
+                ssr.set_supply_enabled(board.supply_pin && board.mono.is_running(t_s));
                 ssr.effective_duty()
             }
             Rig::Arx(_) => {
@@ -426,20 +474,31 @@ impl Rig {
         }
     }
 
-    /// Advances one sample period at duty `d` in PWM periods; returns SSR turn-ons.
-    fn advance(&mut self, d: f64, ts: f64, last_on: &mut bool, count: bool) -> u64 {
+    /// Advances one sample period from `t_s` at duty `d` (on the physical rig: the SSR's duty
+    /// behind the supply switch, whose gate the monostable may open in any PWM period) in PWM
+    /// periods; returns SSR turn-ons.
+    fn advance(&mut self, t_s: f64, d: f64, ts: f64, last_on: &mut bool, count: bool) -> u64 {
         let periods = match self {
             Rig::Physical { .. } => (ts / PWM_PERIOD_S).round() as usize,
             Rig::Arx(_) => 1,
         };
         let mut switches = 0;
-        for _ in 0..periods {
+        for i in 0..periods {
+            let d = match self {
+                Rig::Physical { ssr, board, .. } => {
+                    let t = t_s + i as f64 * PWM_PERIOD_S;
+                    ssr.set_supply_enabled(board.supply_pin && board.mono.is_running(t));
+                    ssr.effective_duty()
+                }
+                Rig::Arx(_) => d,
+            };
             if count && d > 0.0 && !*last_on {
                 switches += 1;
             }
             *last_on = d >= 1.0;
-            if let Rig::Physical { plant, .. } = self {
+            if let Rig::Physical { plant, adc, .. } = self {
                 plant.advance_pwm_period(PWM_PERIOD_S, d);
+                adc.set_ssr_duty(d);
             }
         }
         if let Rig::Arx(p) = self {
@@ -470,7 +529,7 @@ impl Rig {
     }
 
     fn inject(&mut self, f: Fault) {
-        if let Rig::Physical { plant, adc, ssr } = self {
+        if let Rig::Physical { plant, adc, ssr, .. } = self {
             match f {
                 Fault::SensorOpen => adc.fault = SensorFault::Open,
                 Fault::SensorShort => adc.fault = SensorFault::Short,
@@ -481,7 +540,9 @@ impl Rig {
                 Fault::SsrStuckOff => ssr.fault = SsrFault::StuckOff,
                 Fault::SupplySag => plant.set_supply_v(9.0),
                 Fault::LidOpen => plant.set_extra_heat_w(15.0),
-                Fault::Brownout => {}
+                Fault::SupplySwitchShort => ssr.switch_shorted = true,
+                // The run loop handles these: they stop or restart the step.
+                Fault::Brownout | Fault::FirmwareHang => {}
             }
         }
     }
@@ -495,10 +556,85 @@ impl Rig {
             }
         }
     }
+
+    /// When the alarm hardware sounds at `t_s` (the monostable has expired), the time it
+    /// began; `None` while the board is healthy or on an ideal plant without a board.
+    fn alarm_hw_since(&self, t_s: f64) -> Option<f64> {
+        match self {
+            Rig::Physical { board, .. } if !board.mono.is_running(t_s) => board.mono.expiry_s().or(Some(t_s)),
+            _ => None,
+        }
+    }
+
+    /// The ideal conversion of the last sample, counts (0 on an ideal plant).
+    fn ideal_counts(&self) -> f64 {
+        match self {
+            Rig::Physical { adc, .. } => adc.ideal_counts_last(),
+            Rig::Arx(_) => 0.0,
+        }
+    }
+
+    /// Advances one sample period at duty `d` before the run (the board not yet involved).
+    fn settle(&mut self, d: f64, ts: f64) {
+        match self {
+            Rig::Physical { plant, .. } => {
+                for _ in 0..(ts / PWM_PERIOD_S).round() as usize {
+                    plant.advance_pwm_period(PWM_PERIOD_S, d);
+                }
+            }
+            Rig::Arx(p) => p.advance(d),
+        }
+    }
+
+    /// The duty the modules get at `t_s` with the SSR and the pins as they are (the monostable
+    /// gating the supply switch); 0 on an ideal plant, which has no board to hang.
+    fn gated_duty(&mut self, t_s: f64) -> f64 {
+        match self {
+            Rig::Physical { ssr, board, .. } => {
+                ssr.set_supply_enabled(board.supply_pin && board.mono.is_running(t_s));
+                ssr.effective_duty()
+            }
+            Rig::Arx(_) => 0.0,
+        }
+    }
+
+    fn set_sample_phase(&mut self, phase: SamplePhase) {
+        if let Rig::Physical { adc, .. } = self {
+            adc.phase = phase;
+        }
+    }
 }
 
-/// Runs a scenario.
+/// The board's fail-safe hardware around the MCU: the supply-enable pin's last level, the
+/// heartbeat output and the monostable it feeds, which gates the supply switch.
+#[derive(Clone, Debug)]
+struct Board {
+    supply_pin: bool,
+    heartbeat: Heartbeat,
+    mono: Monostable,
+}
+
+impl Board {
+    fn new() -> Self {
+        Board { supply_pin: true, heartbeat: Heartbeat::new(), mono: Monostable::new(Monostable::TIMEOUT_S) }
+    }
+
+    /// One healthy step at `t_s`: the heartbeat toggles, and its edge retriggers the monostable.
+    fn beat(&mut self, t_s: f64) {
+        let before = self.heartbeat.level();
+        if self.heartbeat.beat(true) != before {
+            self.mono.trigger(t_s);
+        }
+    }
+}
+
+/// Runs a scenario on the reference board ([`BoardOptions::DEFAULT`]).
 pub fn run(opts: &SimOptions) -> Result<SimOutput> {
+    run_with(opts, &BoardOptions::DEFAULT)
+}
+
+/// Runs a scenario on a board built as `board` says.
+pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
     if !(opts.ambient_c.is_finite() && (-10.0..=50.0).contains(&opts.ambient_c)) {
         bail!("ambient {} °C is outside the supported -10..50 °C", opts.ambient_c);
     }
@@ -511,15 +647,19 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
         // Ideal measurement: no filter between the model's output and the controller.
         cfg.filter.fa = 0.0;
     }
+    if sc.excitation {
+        // As the identification build: no supply-switch test opening in the record.
+        cfg.switch_test_interval_samples = 0;
+    }
     let ts = f64::from(cfg.ts_s);
     let (mut rig, u0) = Rig::new(opts)?;
+    rig.set_sample_phase(board.sample_phase);
     if sc.excitation {
         // The averaged steady state is not exactly the switched one: let the plant settle at
         // the holding duty for two hours (the slowest mode is ≈ 30 min) so the identification
         // record starts without a drift the input does not explain.
-        let mut last_on = false;
         for _ in 0..(7200.0 / ts) as usize {
-            rig.advance(u0, ts, &mut last_on, false);
+            rig.settle(u0, ts);
         }
     }
     // What the board keeps in flash: the trusted model, saved every 4 h of learning as the
@@ -583,6 +723,10 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
     let mut alarms = Vec::new();
     let mut annunciator = Annunciator::new();
     let (mut alarm_on_s, mut alarm_first_s) = (0.0, None);
+    // The step has stopped being called (`firmware-hang`); what the hung MCU's pins still show.
+    let mut hung = false;
+    let mut alarm_hw_first_s: Option<f64> = None;
+    let mut held: Option<(StepOutput, u32, Indication)> = None;
     for k in -preroll..n {
         let t_s = k as f64 * ts;
         while k >= 0 && next_change < sc.changes.len() && sc.changes[next_change].0 <= t_s {
@@ -591,7 +735,11 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
         }
         if k >= 0 {
             for &(_, f) in faults_pending.iter().filter(|(ft, _)| *ft <= t_s && *ft > t_s - ts) {
-                if f == Fault::Brownout {
+                if f == Fault::FirmwareHang {
+                    hung = true;
+                } else if f == Fault::Brownout {
+                    // The reset ends a hang too.
+                    hung = false;
                     // RAM lost: a fresh step, restarted from what flash holds.
                     carrier = Carrier::new(cfg, make_controller(persisted.as_ref())?);
                     // What the firmware reads from RCC_CSR at boot after a brown-out.
@@ -605,6 +753,43 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
             }
         }
         let w = if k >= 0 { sc.setpoint_at(t_s) } else { sc.setpoint_at(0.0) };
+        if hung {
+            // ---- hung control loop: no step, no actuation, no beat ----
+            let duty = rig.gated_duty(t_s);
+            switches += rig.advance(t_s, 0.0, ts, &mut last_on, true);
+            let alarm_hw = rig.alarm_hw_since(t_s);
+            if let (Some(at), None) = (alarm_hw, alarm_hw_first_s) {
+                alarm_hw_first_s = Some(at);
+                faults.push(Stamped { kind: "firmware_hang".into(), t_s: at });
+            }
+            let (out, counts, indication) =
+                held.as_ref().map_or((None, 0, Indication::Off), |(o, c, i)| (Some(o), *c, *i));
+            if indication.is_on() {
+                alarm_on_s += ts;
+            }
+            rows.push(Row {
+                t_s,
+                setpoint_c: w,
+                temp_c: out.map_or(f64::NAN, |o| f64::from(o.temp_c.0)),
+                duty,
+                raw_temp_c: None,
+                true_temp_c: rig.true_temp_c(),
+                ambient_c: rig.ambient_c(opts.ambient_c),
+                mode: "hung",
+                counts,
+                a1: None,
+                a2: None,
+                b0: None,
+                b1: None,
+                trace_p: None,
+                adaptive_mode: None,
+                alarm: indication_name(indication),
+                supply_enable: out.is_some_and(|o| o.supply_enable),
+                alarm_hw: alarm_hw.is_some(),
+                ideal_counts: f64::NAN,
+            });
+            continue;
+        }
         let (out, counts) = rig.step(&mut carrier, t_s, w);
         if let AnyController::SelfTuning(st) = carrier.controller() {
             if st.mode() == AdaptiveMode::Adaptive {
@@ -617,7 +802,7 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
                 }
             }
         }
-        let d = rig.actuate(&out);
+        let d = rig.actuate(&out, t_s);
         if k >= 0 {
             for e in out.events.iter().filter(|e| is_fault(e.kind)) {
                 faults.push(Stamped { kind: event_name(e.kind).into(), t_s: f64::from(e.t_s) });
@@ -652,12 +837,16 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
                     AdaptiveMode::Fallback => "fallback",
                 }),
                 alarm: indication_name(indication),
+                supply_enable: out.supply_enable,
+                alarm_hw: rig.alarm_hw_since(t_s).is_some(),
+                ideal_counts: rig.ideal_counts(),
             });
+            held = Some((out, counts, indication));
         }
         if k == 0 {
             energy0_wh = rig.energy_wh();
         }
-        switches += rig.advance(d, ts, &mut last_on, k >= 0);
+        switches += rig.advance(t_s, d, ts, &mut last_on, k >= 0);
     }
     let samples: Vec<Sample> =
         rows.iter().map(|r| Sample { t_s: r.t_s, setpoint_c: r.setpoint_c, true_temp_c: r.true_temp_c }).collect();
@@ -678,6 +867,7 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
         faults_detected: faults,
         alarm_indicator_s: alarm_on_s,
         alarm_indicator_first_s: alarm_first_s,
+        alarm_hw_first_s,
     };
     Ok(SimOutput { rows, metrics, ts_s: ts })
 }

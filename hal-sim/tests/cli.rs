@@ -193,7 +193,7 @@ fn small_campaign_reports_the_spec_fields() {
     assert!((0.0..=1.0).contains(&frac), "{v}");
     assert!(v["faults_detected"].as_u64().unwrap() <= v["faults_injected"].as_u64().unwrap(), "{v}");
     let kinds = v["faults_by_kind"].as_object().unwrap();
-    assert_eq!(kinds.len(), 9, "{v}");
+    assert_eq!(kinds.len(), 11, "{v}");
     let injected: u64 = kinds.values().map(|k| k["injected"].as_u64().unwrap()).sum();
     assert_eq!(injected, v["faults_injected"].as_u64().unwrap());
     // Every failure is one of the campaign's seeds and comes with its replay command.
