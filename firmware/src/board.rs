@@ -331,7 +331,7 @@ pub fn clear_duty(duty: Duty) -> Duty {
 const VREFINT_CAL: *const u16 = 0x1FFF_75AA as *const u16;
 
 /// Full scale of one oversampled conversion, counts: 256 × 4095 shifted right by 4.
-const CONVERSION_FULL_SCALE: u32 = 256 * 4095 >> 4;
+const CONVERSION_FULL_SCALE: u32 = (256 * 4095) >> 4;
 
 /// The reference resistor's expected voltage window, V: 2 kΩ × 1 mA = 2.0 V, ± 10 % for the
 /// excitation source's tolerance and drift (a REF200 is ± 0.5 %; a Howland with 1 % parts is
