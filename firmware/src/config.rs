@@ -187,7 +187,7 @@ pub const PRBS: hter::ident::prbs::PrbsConfig =
 pub const IDENTIFY_REST_SAMPLES: u32 = 2 * 3600 / (CARRIER.ts_s as u32);
 
 /// The controller type of this build: only the selected law is linked (a run-time choice
-/// through `AnyController` would link all five, ≈ 10 KiB the default build cannot spare).
+/// through `AnyController` links all five: the PI build was 64.3 KB with it, 49.6 KB without).
 #[cfg(not(any(feature = "pi", feature = "onoff", feature = "identify")))]
 pub type Ctl = SelfTuning;
 /// The controller type of this build: only the selected law is linked.
