@@ -260,14 +260,15 @@ pub fn unexpected_interrupt_info(irqn: i16) -> StopInfo {
     StopInfo::new(StopKind::UnexpectedInterrupt, 0, 0, irqn as i32 as u32)
 }
 
-/// The heartbeat of the fail-loud alarm: a level that toggles once per *healthy* control step
-/// and holds still otherwise. The board drives it into a retriggerable monostable (README,
-/// wiring) whose output silences the alarm only while edges keep arriving: a hung, reset or dead
-/// MCU stops the edges and the alarm sounds, whatever state its pins are left in.
+/// The heartbeat of the fail-loud alarm: a level that toggles once per *completed* control
+/// step and holds still otherwise. The board drives it into a retriggerable monostable (README,
+/// wiring) whose output, only while edges keep arriving, silences the buzzer and allows the
+/// modules' supply: a hung, reset or dead MCU stops the edges, the buzzer sounds and cooling
+/// stops, whatever state its pins are left in.
 ///
-/// "Healthy" is the glue's verdict for the step: it completed, in time, and the step did not ask
-/// for the alarm. An alarm request therefore also stops the heartbeat, so the monostable is the
-/// one path to the buzzer and the firmware's own alarm pin is a second one.
+/// "Healthy" is the glue's verdict that the step completed. It is not withheld for an alarm:
+/// the monostable also gates the supply, and a heat alarm must not stop cooling. The firmware's
+/// own alarm pin is ORed into the buzzer for the alarms the step raises.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Heartbeat {
     level: bool,

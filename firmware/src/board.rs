@@ -11,11 +11,21 @@
 //! | SSR input | PA6 (TIM3_CH1) | D12 (CN5-5) | Crydom CMX60D10 (or any DC SSR) input, 3–32 V, through 330 Ω; the SSR switches the Peltier modules' 12 V |
 //! | supply enable | PB0 | A3 (CN8-4) | gate driver of a high-side P-MOSFET switch in series with the SSR and the modules; high = power allowed; pulled down, so a reset or a dead MCU removes power |
 //! | status LED | PA5 | LD2 (on board) | on while cooling is enabled |
-//! | alarm output | PC7 | D9 (CN5-2) | a buzzer or red lamp through a low-side NPN/N-MOSFET driver; high = alarm (`hter::alarm`) |
+//! | switched rail | PC0 (ADC1_IN1) | A5 (CN8-6) | 47 kΩ from the modules' side of the supply-enable switch (after the P-MOSFET) to PC0, 10 kΩ to AGND, 100 nF across the 10 kΩ: reads the rail the modules really see, so a shorted switch shows as voltage while the switch is open |
+//! | alarm output | PC7 | D9 (CN5-2) | a buzzer or red lamp through a low-side NPN/N-MOSFET driver; high = alarm (`hter::alarm`); the second path to the buzzer beside the heartbeat |
+//! | heartbeat | PB5 | D4 (CN9-5) | toggled once per healthy control step (`hter::failsafe::Heartbeat`) into a retriggerable monostable (74HC123, timeout ≈ 15 s = 1.5·Ts): its output silences the buzzer only while edges arrive, and is ANDed into the supply-enable gate drive, so a reset, hung or dead MCU (pins Hi-Z) sounds the buzzer and opens the supply within 2·Ts without software (README, wiring) |
 //! | acknowledge button | PC13 | B1 (on board, blue) | pressed pulls low (the Nucleo's pull-up); clears a latched alarm |
 //!
-//! The supply-enable switch is the independent second cut-off of SPEC §6: SSRs usually fail
-//! shorted, and the supervisor must be able to stop cooling regardless.
+//! The supply-enable switch is the independent second cut-off: SSRs usually fail shorted, and
+//! the supervisor must be able to stop cooling regardless.
+//!
+//! Clocks: MSI at 4 MHz, locked to the Nucleo's 32.768 kHz LSE crystal (X2 on PC14/PC15) by the
+//! MSI PLL mode (MSIPLLEN; ± the crystal's 20 ppm instead of the ±1 % of HSI16), → PLL → 80 MHz.
+//! TIM2 (embassy's time driver) and so the millisecond clock run from it. A board without
+//! the crystal hangs in the LSE start-up until the watchdog resets it: fit one.
+//!
+//! Timers: TIM2 is the time driver, TIM3 the SSR PWM, TIM7 the control-stall check (its
+//! interrupt at the highest priority, so it preempts the executor).
 //!
 //! **Measurement.** In the LQFP64 package VREF+ is bonded to VDDA (3.3 V on the Nucleo), so the
 //! reference resistor cannot be the converter's reference: both the amplified RTD voltage and
@@ -30,20 +40,32 @@
 //! the internal reference VREFINT with it, so the supply reading is corrected for VDDA's
 //! tolerance (RM0351 §16.4.34).
 
+use core::sync::atomic::{AtomicU32, Ordering};
+
 use embassy_stm32::adc::{Adc, AdcChannel, AnyAdcChannel, SampleTime, VrefInt};
 use embassy_stm32::gpio::{Input, Level, Output, OutputType, Pull, Speed};
+use embassy_stm32::interrupt;
+use embassy_stm32::interrupt::InterruptExt;
+use embassy_stm32::pac;
 use embassy_stm32::pac::adc::vals::{OversamplingRatio, OversamplingShift, Rovsm, Trovs};
-use embassy_stm32::peripherals::{ADC1, IWDG, TIM3};
+use embassy_stm32::peripherals::{ADC1, TIM3};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 use embassy_stm32::Peri;
+use embassy_time::Timer;
+use hter::adc::SupplySense;
 
 use crate::config;
 
+/// The persistence region as absolute addresses (`config::PERSIST_RANGE` is relative to the
+/// flash base), for the NMI handler's ECC check.
+pub const PERSIST_ADDRESSES: core::ops::Range<u32> =
+    0x0800_0000 + config::PERSIST_RANGE.start..0x0800_0000 + config::PERSIST_RANGE.end;
+
 /// The board's peripherals, initialised.
 pub struct Board {
-    /// The analog inputs: RTD, reference resistor, supply, VREFINT.
+    /// The analog inputs: RTD, reference resistor, supply, switched rail, VREFINT.
     pub analog: Analog,
     /// SSR PWM timer.
     pub ssr: SimplePwm<'static, TIM3>,
@@ -53,27 +75,82 @@ pub struct Board {
     pub led: Output<'static>,
     /// Alarm indicator output (buzzer or lamp driver).
     pub alarm: Output<'static>,
+    /// Heartbeat into the alarm's monostable.
+    pub heartbeat: Output<'static>,
     /// The user button (acknowledges the alarm).
     pub button: Input<'static>,
-    /// Independent watchdog.
-    pub iwdg: Peri<'static, IWDG>,
     /// Flash controller (persisted records, `config::PERSIST_RANGE`).
     pub flash: Peri<'static, embassy_stm32::peripherals::FLASH>,
 }
 
-/// Clocks: HSI16 → PLL → 80 MHz system clock; the ADC runs from SYSCLK.
+/// Starts the independent watchdog at [`config::IWDG_RELOAD`]: the first thing `main` does,
+/// before the clocks and before flash is read, so no boot path runs without it. Registers only
+/// (embassy's `IndependentWatchdog` would reconfigure it and is not used).
+pub fn start_watchdog() {
+    use pac::iwdg::vals::{Key, Pr};
+    let iwdg = pac::IWDG;
+    // Starting first (which also starts the LSI) means a hardware-started watchdog and a stopped
+    // one take the same path; the reload below replaces the reset value's 0.5 s.
+    iwdg.kr().write(|w| w.set_key(Key::START));
+    iwdg.kr().write(|w| w.set_key(Key::ENABLE));
+    iwdg.pr().write(|w| w.set_pr(Pr::from_bits(config::IWDG_PR)));
+    iwdg.rlr().write(|w| w.set_rl(config::IWDG_RELOAD));
+    // PVU/RVU: the values cross into the LSI domain within a few LSI cycles; the running
+    // watchdog bounds the wait if the LSI is dead.
+    while iwdg.sr().read().0 != 0 {}
+    iwdg.kr().write(|w| w.set_key(Key::RESET));
+    // Halted under a debugger, the watchdog would reset the chip between two steps; only debug
+    // builds freeze it, so a release board with a probe attached behaves as in the field.
+    #[cfg(debug_assertions)]
+    pac::DBGMCU.apb1fzr1().modify(|w| w.set_iwdg(true));
+}
+
+/// Feeds the watchdog.
+pub fn pet_watchdog() {
+    pac::IWDG.kr().write(|w| w.set_key(pac::iwdg::vals::Key::RESET));
+}
+
+/// The IWDG_SW option byte is 0: the chip starts the watchdog itself at every reset.
+pub fn watchdog_is_hardware() -> bool {
+    !pac::FLASH.optr().read().idwg_sw()
+}
+
+/// Drives the outputs safe from any context, through the registers alone: the SSR pin to a
+/// plain output at low with TIM3's channel 1 disabled, the supply enable low, the alarm on.
+/// Works before `init` too (it turns the GPIO clocks on).
+pub fn force_safe() {
+    use pac::gpio::vals::Moder;
+    pac::RCC.ahb2enr().modify(|w| {
+        w.set_gpioaen(true);
+        w.set_gpioben(true);
+        w.set_gpiocen(true);
+    });
+    // Low first, then output mode: the pin never drives the old level as a plain output.
+    pac::GPIOA.bsrr().write(|w| w.set_br(6, true));
+    pac::GPIOA.moder().modify(|w| w.set_moder(6, Moder::OUTPUT));
+    // A write to a timer whose clock is off is ignored: harmless before `init`.
+    pac::TIM3.ccer().modify(|w| w.set_cce(0, false));
+    pac::GPIOB.bsrr().write(|w| w.set_br(0, true));
+    pac::GPIOB.moder().modify(|w| w.set_moder(0, Moder::OUTPUT));
+    pac::GPIOC.bsrr().write(|w| w.set_bs(7, true));
+    pac::GPIOC.moder().modify(|w| w.set_moder(7, Moder::OUTPUT));
+}
+
+/// Clocks: MSI 4 MHz locked to the LSE (embassy sets MSIPLLEN when the LSE is 32.768 kHz) →
+/// PLL → 80 MHz system clock; the ADC runs from SYSCLK.
 fn clocks() -> embassy_stm32::Config {
     use embassy_stm32::rcc::*;
     let mut c = embassy_stm32::Config::default();
-    c.rcc.hsi = true;
-    c.rcc.msi = None;
+    c.rcc.ls = LsConfig::default_lse();
+    c.rcc.hsi = false;
+    c.rcc.msi = Some(MSIRange::RANGE4M);
     c.rcc.pll = Some(Pll {
-        source: PllSource::HSI,
+        source: PllSource::MSI,
         prediv: PllPreDiv::DIV1,
-        mul: PllMul::MUL10,
+        mul: PllMul::MUL40,
         divp: None,
         divq: None,
-        divr: Some(PllRDiv::DIV2), // 16 MHz × 10 / 2 = 80 MHz
+        divr: Some(PllRDiv::DIV2), // 4 MHz × 40 / 2 = 80 MHz (VCO 160 MHz)
     });
     c.rcc.sys = Sysclk::PLL1_R;
     c.rcc.mux.adcsel = mux::Adcsel::SYS;
@@ -95,8 +172,14 @@ pub fn init() -> Board {
     };
     let adc = Adc::new_with_config(p.ADC1, adc_config);
     let vrefint = adc.enable_vrefint();
-    let analog =
-        Analog { adc, rtd: p.PA0.degrade_adc(), reference: p.PA1.degrade_adc(), supply: p.PA4.degrade_adc(), vrefint };
+    let analog = Analog {
+        adc,
+        rtd: p.PA0.degrade_adc(),
+        reference: p.PA1.degrade_adc(),
+        supply: p.PA4.degrade_adc(),
+        switched: p.PC0.degrade_adc(),
+        vrefint,
+    };
 
     let ssr_pin = PwmPin::new(p.PA6, OutputType::PushPull);
     // TIM3 is 16-bit and clocked at 80 MHz (APB1 ÷ 1): embassy picks the smallest prescaler that
@@ -115,9 +198,114 @@ pub fn init() -> Board {
         supply_enable: Output::new(p.PB0, Level::Low, Speed::Low),
         led: Output::new(p.PA5, Level::Low, Speed::Low),
         alarm: Output::new(p.PC7, Level::Low, Speed::Low),
+        heartbeat: Output::new(p.PB5, Level::Low, Speed::Low),
         button: Input::new(p.PC13, Pull::None),
-        iwdg: p.IWDG,
         flash: p.FLASH,
+    }
+}
+
+/// What the boot found of the supply supervision.
+#[derive(Clone, Copy, defmt::Format)]
+pub struct PowerCheck {
+    /// FLASH_OPTR BOR_LEV as found.
+    pub bor_level: u8,
+    /// VDD was above the PVD level.
+    pub supply_ok: bool,
+}
+
+/// Enables the PVD at [`config::PVD_LEVEL`] and checks the brown-out level; a board below
+/// [`config::BOR_LEVEL`] has its option bytes reprogrammed, which reloads them and resets (so
+/// this returns only when the level is right, or when the supply is too low to program now).
+/// Call after `init` (PWR's clock) and before the flash store is opened.
+pub fn power_check() -> PowerCheck {
+    pac::RCC.apb1enr1().modify(|w| w.set_pwren(true));
+    pac::PWR.cr2().modify(|w| {
+        w.set_pls(pac::pwr::vals::Pls::from_bits(config::PVD_LEVEL));
+        w.set_pvde(true);
+    });
+    // The PVD output settles within its start-up time (≤ a few µs, DS10198); a millisecond of
+    // spinning before the first read covers it.
+    cortex_m::asm::delay(80_000);
+    let bor_level = pac::FLASH.optr().read().bor_lev();
+    let supply_ok = supply_ok();
+    if bor_level < config::BOR_LEVEL && supply_ok {
+        defmt::warn!(
+            "brown-out level {} below {}: programming the option bytes (resets)",
+            bor_level,
+            config::BOR_LEVEL
+        );
+        program_bor_level(config::BOR_LEVEL);
+    }
+    PowerCheck { bor_level, supply_ok }
+}
+
+/// VDD is above the PVD level (PVDO clear): flash may be written.
+pub fn supply_ok() -> bool {
+    !pac::PWR.sr2().read().pvdo()
+}
+
+/// Writes BOR_LEV into FLASH_OPTR and launches the option-byte load, which resets the chip
+/// (RM0351 "Option bytes programming"). Unverified on silicon. Only called with the supply above
+/// the PVD level: a write cut by a brown-out can leave the option bytes inconsistent.
+fn program_bor_level(level: u8) {
+    let flash = pac::FLASH;
+    if flash.cr().read().lock() {
+        flash.keyr().write_value(0x4567_0123);
+        flash.keyr().write_value(0xCDEF_89AB);
+    }
+    if flash.cr().read().optlock() {
+        flash.optkeyr().write_value(0x0819_2A3B);
+        flash.optkeyr().write_value(0x4C5D_6E7F);
+    }
+    while flash.sr().read().bsy() {}
+    // Clear every error flag (write 1): a stale one would refuse the start.
+    flash.sr().write_value(pac::flash::regs::Sr(0x0000_C3FA));
+    flash.optr().modify(|w| w.set_bor_lev(level));
+    flash.cr().modify(|w| w.set_optstrt(true));
+    while flash.sr().read().bsy() {}
+    flash.cr().modify(|w| w.set_obl_launch(true));
+    // OBL_LAUNCH resets the chip; should it not, the watchdog does.
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// Whole seconds since the last completed control step, counted by TIM7's interrupt.
+static SINCE_STEP_S: AtomicU32 = AtomicU32::new(0);
+
+/// Starts the control-stall check: TIM7 interrupts once a second at the highest priority and,
+/// once [`config::STALL_LIMIT_MS`] pass without [`note_step`], stops cooling, records the stall
+/// and resets (`failsafe::stall`). A hang inside a critical section masks it; the watchdog
+/// covers that.
+pub fn start_stall_check() {
+    pac::RCC.apb1enr1().modify(|w| w.set_tim7en(true));
+    let tim = pac::TIM7;
+    // 80 MHz / 8000 = 10 kHz, / 10000 = 1 Hz.
+    tim.psc().write_value(8000 - 1);
+    tim.arr().write(|w| w.set_arr(10_000 - 1));
+    tim.egr().write(|w| w.set_ug(true));
+    tim.sr().write_value(pac::timer::regs::SrCore(0));
+    tim.dier().write(|w| w.set_uie(true));
+    tim.cr1().write(|w| w.set_cen(true));
+    SINCE_STEP_S.store(0, Ordering::Relaxed);
+    interrupt::TIM7.set_priority(interrupt::Priority::P0);
+    // SAFETY: the handler below touches only TIM7 and an atomic; no critical section relies on
+    // TIM7 being masked.
+    unsafe { interrupt::TIM7.enable() };
+}
+
+/// A control step completed.
+pub fn note_step() {
+    SINCE_STEP_S.store(0, Ordering::Relaxed);
+}
+
+#[interrupt]
+fn TIM7() {
+    pac::TIM7.sr().write_value(pac::timer::regs::SrCore(0));
+    let s = SINCE_STEP_S.fetch_add(1, Ordering::Relaxed) + 1;
+    let ms = s.saturating_mul(1000);
+    if ms >= config::STALL_LIMIT_MS {
+        crate::failsafe::stall(ms);
     }
 }
 
@@ -125,42 +313,132 @@ pub fn init() -> Board {
 /// VDDA = 3.0 V and 30 °C, written at the factory (datasheet DS10198, "Internal voltage reference calibration values"; ST's LL headers call it `VREFINT_CAL_ADDR`).
 const VREFINT_CAL: *const u16 = 0x1FFF_75AA as *const u16;
 
+/// Full scale of one oversampled conversion, counts: 256 × 4095 shifted right by 4.
+const CONVERSION_FULL_SCALE: u32 = (256 * 4095) >> 4;
+
+/// How many PWM periods the sampler tries to land a conversion inside the window before taking
+/// one unsynchronised (a page erase can block the executor for ≈ 22 ms).
+const SYNC_ATTEMPTS: u32 = 3;
+
 /// The analog inputs, oversampled as configured in [`init`].
 pub struct Analog {
     adc: Adc<'static, ADC1>,
     rtd: AnyAdcChannel<'static, ADC1>,
     reference: AnyAdcChannel<'static, ADC1>,
     supply: AnyAdcChannel<'static, ADC1>,
+    switched: AnyAdcChannel<'static, ADC1>,
     vrefint: VrefInt,
 }
 
 /// 640.5 ADC cycles of sampling per conversion (the longest: the amplifier's output impedance
 /// and the sampling capacitor settle fully, and VREFINT needs ≥ 4 µs) + 12.5 of conversion; 256
 /// of them take 2.1 ms at 80 MHz. embassy converts twice on the L4 and keeps the second (an L4
-/// ADC erratum: the first conversion after a pause longer than 1 ms may be corrupted), so the
-/// four inputs block the executor ≈ 17 ms every Ts — nothing else in it is that time-critical.
+/// ADC erratum: the first conversion after a pause longer than 1 ms may be corrupted), so each
+/// input takes ≈ 4.2 ms and the six conversions of a sample block the executor ≈ 25 ms every Ts.
 const SAMPLE_TIME: SampleTime = SampleTime::CYCLES640_5;
 
+/// One sample of the analog inputs.
+#[derive(Clone, Copy)]
+pub struct Conversion {
+    /// RTD ratio to the mean of the two reference conversions, counts of
+    /// `AdcFrontEnd::DEFAULT.full_scale_counts`.
+    pub counts: u32,
+    /// Both reference conversions inside `hter::adc::ReferenceWindow::DEFAULT` and agreeing, and
+    /// VDDA within `config::VDDA_MIN_V..=VDDA_MAX_V`: otherwise the step treats the sample as a
+    /// sensor fault (`Carrier::step_with_reference_fault`).
+    pub reference_ok: bool,
+    /// The modules' supply ahead of the switch, V (`None` if it could not be measured).
+    pub supply_v: Option<f32>,
+    /// The switched rail after the switch, V (`None` if it could not be measured).
+    pub switched_v: Option<f32>,
+    /// VDDA from VREFINT, V (`None` if it could not be measured).
+    pub vdda_v: Option<f32>,
+    /// The RTD conversion landed inside the sampling window of the SSR PWM period.
+    pub in_window: bool,
+}
+
+fn tim3_update_pending() -> bool {
+    pac::TIM3.sr().read().uif()
+}
+
+fn tim3_clear_update() {
+    // rc_w0: writing 0 clears UIF, the 1s leave the other flags alone.
+    pac::TIM3.sr().write_value(pac::timer::regs::SrGp16(!1));
+}
+
+/// TIM3 ticks in `ms` of the PWM period (ARR + 1 ticks per 1 / SSR_PWM_HZ s).
+fn tim3_ticks(ms: u32) -> u32 {
+    let per_period = u32::from(pac::TIM3.arr().read().arr()) + 1;
+    per_period * config::SSR_PWM_HZ * ms / 1000
+}
+
 impl Analog {
-    /// The modules' supply, V (`None` if the reference reads 0 or the calibration word is blank).
-    pub fn supply_v(&mut self) -> Option<f32> {
-        let supply = u32::from(self.adc.blocking_read(&mut self.supply, SAMPLE_TIME));
+    fn read(&mut self, which: Ain) -> u32 {
+        let ch = match which {
+            Ain::Rtd => &mut self.rtd,
+            Ain::Reference => &mut self.reference,
+            Ain::Supply => &mut self.supply,
+            Ain::Switched => &mut self.switched,
+        };
+        u32::from(self.adc.blocking_read(ch, SAMPLE_TIME))
+    }
+
+    /// Waits for the start of an SSR PWM period (TIM3's update, where the SSR drive rises),
+    /// then for the start of [`config::SAMPLE_WINDOW`], and converts reference, RTD, reference;
+    /// a sample that ends in the next period is retaken. Then the supplies and VREFINT, whose
+    /// readings do not care about the phase.
+    pub async fn sample(&mut self) -> Conversion {
+        let window = config::SAMPLE_WINDOW;
+        let mut attempt = 0;
+        let (signal, before, after, in_window) = loop {
+            attempt += 1;
+            tim3_clear_update();
+            while !tim3_update_pending() {
+                Timer::after_millis(1).await;
+            }
+            tim3_clear_update();
+            Timer::after_millis(u64::from(window.start_ms)).await;
+            let started = u32::from(pac::TIM3.cnt().read().cnt()) >= tim3_ticks(window.start_ms);
+            let before = self.read(Ain::Reference);
+            let signal = self.read(Ain::Rtd);
+            let after = self.read(Ain::Reference);
+            let in_window = started && !tim3_update_pending();
+            if in_window || attempt >= SYNC_ATTEMPTS {
+                break (signal, before, after, in_window);
+            }
+        };
+        // Both references in their window and agreeing; their mean is the reference at the RTD
+        // conversion's midpoint.
+        let reference = hter::adc::ReferenceWindow::DEFAULT.check(before, after);
+        let supply = self.read(Ain::Supply);
+        let switched = self.read(Ain::Switched);
         let vrefint = u32::from(self.adc.blocking_read(&mut self.vrefint, SAMPLE_TIME));
         // SAFETY: a 16-bit read of the factory calibration word in system memory, which is
         // always mapped and read-only.
         let cal = unsafe { core::ptr::read_volatile(VREFINT_CAL) };
-        crate::config::SUPPLY.volts(supply, vrefint, cal)
+        // VDDA is a supply reading through a 1:1 "divider" of VREFINT.
+        let vdda_v = SupplySense { divider: 1.0, ..config::SUPPLY }.volts(CONVERSION_FULL_SCALE, vrefint, cal);
+        let vdda_ok = vdda_v.is_some_and(|v| (config::VDDA_MIN_V..=config::VDDA_MAX_V).contains(&v));
+        let counts = match reference {
+            Ok(r) => hter::adc::ratiometric_counts(signal, r, config::CARRIER.adc.full_scale_counts),
+            Err(_) => 0,
+        };
+        Conversion {
+            counts,
+            reference_ok: reference.is_ok() && vdda_ok,
+            supply_v: config::SUPPLY.volts(supply, vrefint, cal),
+            switched_v: config::SUPPLY.volts(switched, vrefint, cal),
+            vdda_v,
+            in_window,
+        }
     }
 }
 
-impl hter::hal::RtdSampler for Analog {
-    type Error = core::convert::Infallible;
-
-    /// The ratio of the RTD and reference-resistor conversions, in counts of
-    /// `AdcFrontEnd::DEFAULT.full_scale_counts`.
-    fn sample(&mut self) -> Result<u32, Self::Error> {
-        let signal = u32::from(self.adc.blocking_read(&mut self.rtd, SAMPLE_TIME));
-        let reference = u32::from(self.adc.blocking_read(&mut self.reference, SAMPLE_TIME));
-        Ok(hter::adc::ratiometric_counts(signal, reference, crate::config::CARRIER.adc.full_scale_counts))
-    }
+/// Which analog input to convert.
+#[derive(Clone, Copy)]
+enum Ain {
+    Rtd,
+    Reference,
+    Supply,
+    Switched,
 }

@@ -28,7 +28,9 @@ use hter::calib::TwoPoint;
 use hter::control::adaptive::{AdaptiveConfig, SelfTuning};
 use hter::control::gpc::GpcConfig;
 use hter::control::mv::IgmvcConfig;
-use hter::control::{AnyController, Law, OnOff, OnOffConfig, Pi, PiConfig};
+#[allow(unused_imports)]
+use hter::control::{Law, OnOff, OnOffConfig, Pi, PiConfig};
+use hter::persist::ModelRecord;
 use hter::step::CarrierConfig;
 #[allow(unused_imports)]
 use hter::units::Celsius;
@@ -40,7 +42,14 @@ pub const SETPOINT_C: f32 = 4.0;
 /// The step's configuration (Ts = 10 s, Pt100 on the default front end, F_a = 0.5, freeze
 /// guard at 1.5 °C with a 120 s look-ahead): see `hter::step::CarrierConfig::DEFAULT`. Its
 /// calibration is replaced at boot by [`CALIBRATION`] or the one stored in flash.
-pub const CARRIER: CarrierConfig = CarrierConfig::DEFAULT;
+/// The identification build turns off the supply-switch test openings (a 20 s gap in the
+/// excitation every 2 h spoils the fit, as the simulator's `prbs` runs showed); its switch is
+/// still checked whenever the freeze guard or a sensor fault opens it.
+pub const CARRIER: CarrierConfig = if cfg!(feature = "identify") {
+    CarrierConfig { switch_test_interval_samples: 0, ..CarrierConfig::DEFAULT }
+} else {
+    CarrierConfig::DEFAULT
+};
 
 /// Two-point calibration of this board's RTD channel, or `None` to keep the one stored in flash
 /// (identity if none is stored). Measure it as the seed did (ice bath and a second bath against
@@ -83,11 +92,56 @@ pub const SAMPLE_PERIOD_MS: u64 = (CARRIER.ts_s * 1000.0) as u64;
 /// TIM3 at 80 MHz reaches it with prescaler 1221 and ARR 65520 (`board::init`).
 pub const SSR_PWM_HZ: u32 = 1;
 
-/// Independent watchdog timeout, µs: three sample periods. The control task feeds it only after
-/// a completed step, so a hung loop resets the MCU (and the pull-down on the supply-enable line
-/// removes power from the modules meanwhile). The IWDG's longest timeout on the L4 is
-/// 4096 · 256 / 32 kHz = 32.8 s.
-pub const WATCHDOG_TIMEOUT_US: u32 = 30_000_000;
+/// Independent watchdog prescaler: LSI ÷ 256 (IWDG_PR = 6), the slowest, so the 12-bit reload
+/// reaches tens of seconds.
+pub const IWDG_PR: u8 = 6;
+/// Independent watchdog reload, LSI ÷ 256 ticks: 3750 ticks = 30.0 s at the LSI's nominal
+/// 32 kHz, 28.2–32.5 s over its 29.5–34 kHz spread (datasheet DS10198, "LSI oscillator"):
+/// three sample periods, always more than the 2·Ts stall check that acts first. The control
+/// task feeds it only after a completed step. Its longest timeout is 4096 · 256 / 32 kHz = 32.8 s.
+pub const IWDG_RELOAD: u16 = 3750 - 1;
+
+// The watchdog's option byte. The board starts the IWDG in software as the first thing `main`
+// does, but a reset between the chip's reset and that line (none today; a future boot loader,
+// a fault in the runtime's RAM init) would leave it stopped. Programming IWDG_SW = 0 (FLASH_OPTR
+// bit 16, "hardware watchdog") makes the chip start the IWDG itself at every reset, before the
+// first instruction, with the reset-value reload (4095 at ÷ 4, 0.5 s) until `main` sets 30 s;
+// nothing can then stop it. Program it once per board, e.g.
+//
+//     STM32_Programmer_CLI -c port=SWD -ob IWDG_SW=0
+//
+// (STM32CubeProgrammer; in its GUI: Option bytes → User configuration → untick IWDG_SW), or
+// with OpenOCD (`stm32l4x option_write 0 0x20 0 0x10000`, then `stm32l4x option_load 0`).
+// The boot log says which the board has (`watchdog: hardware` / `software`).
+
+/// Brown-out reset level the board needs (FLASH_OPTR BOR_LEV): 3, reset below ≈ 2.47 V falling
+/// / 2.56 V rising (DS10198, "BOR thresholds"). The default level 0 (≈ 1.7 V) lets the CPU run
+/// where the 1 mA excitation source from VDDA and the amplifier have no headroom; level 3 keeps
+/// the core in reset there, and sits below the PVD level ([`PVD_LEVEL`]) so writes stop first.
+/// A board below this level is reprogrammed once at boot (`board::power_check`).
+pub const BOR_LEVEL: u8 = 3;
+
+/// Power voltage detector level (PWR_CR2 PLS): 6, PVDO set below ≈ 2.84 V falling / 2.96 V
+/// rising (DS10198, "PVD thresholds"). Flash writes wait while VDD is under it: a page erase or a
+/// double-word program cut by a brown-out leaves an ECC error behind.
+pub const PVD_LEVEL: u8 = 6;
+
+/// VDDA window in which an RTD sample is trusted, V: the Nucleo's 3.3 V ± 10 % rail is 3.0–3.6 V
+/// (the L4's analog supply range is 1.62–3.6 V; below 3.0 V the excitation source and the
+/// amplifier, designed for 3.3 V, lose headroom). Outside it the step gets a sensor fault.
+pub const VDDA_MIN_V: f32 = 3.0;
+/// Upper end of the VDDA window, V (the L4's absolute VDDA maximum of operation, DS10198).
+pub const VDDA_MAX_V: f32 = 3.6;
+
+/// Control stall limit, ms: two sample periods without a completed step stop cooling and reset
+/// (checked once a second by TIM7's interrupt, which preempts the executor).
+pub const STALL_LIMIT_MS: u32 = 2 * SAMPLE_PERIOD_MS as u32;
+
+/// Where in the SSR PWM period the reference, RTD, reference conversions happen: the last 30 ms
+/// of the 1 s period, with the duty quantised so the SSR's falling edge stays 10 ms clear of it
+/// (`hter::adc::SampleWindow::DEFAULT`, the simulator's too). The three conversions take
+/// 3 × 2 × 2.1 ms = 12.6 ms (`board::SAMPLE_TIME`); one that ends in the next period is retaken.
+pub const SAMPLE_WINDOW: hter::adc::SampleWindow = hter::adc::SampleWindow::DEFAULT;
 
 /// The modules' supply measurement: 47 kΩ over 10 kΩ into PA4, VDDA from VREFINT
 /// (`hter::adc::SupplySense::DEFAULT`). The step reports a sag below 10.8 V
@@ -121,6 +175,7 @@ pub const ADAPTIVE: Option<AdaptiveConfig> = if cfg!(any(feature = "pi", feature
 /// bits), each bit held 12 samples = 120 s, so one period is 4.2 h; levels 0.45 ± 0.1 duty (the
 /// README's holding duty; ±0.1 kept the simulated H-TER I load within 2.6–5.6 °C where ±0.2 took
 /// it below 2 °C, commit d1a13d1).
+#[cfg(feature = "identify")]
 pub const PRBS: hter::ident::prbs::PrbsConfig =
     hter::ident::prbs::PrbsConfig { bits: 7, hold: 12, low: 0.35, high: 0.55 };
 
@@ -128,31 +183,113 @@ pub const PRBS: hter::ident::prbs::PrbsConfig =
 /// two of the carrier's slow time constants): the rest `hter identify` takes as the operating
 /// point. Precool the load to ≈ 4 °C with a normal build before flashing the identification
 /// build, so the rest starts near its equilibrium.
+#[cfg(feature = "identify")]
 pub const IDENTIFY_REST_SAMPLES: u32 = 2 * 3600 / (CARRIER.ts_s as u32);
+
+/// The controller type of this build: only the selected law is linked (a run-time choice
+/// through `AnyController` links all five: the PI build was 64.3 KB with it, 49.6 KB without).
+#[cfg(not(any(feature = "pi", feature = "onoff", feature = "identify")))]
+pub type Ctl = SelfTuning;
+/// The controller type of this build: only the selected law is linked.
+#[cfg(feature = "pi")]
+pub type Ctl = Pi;
+/// The controller type of this build: only the selected law is linked.
+#[cfg(feature = "onoff")]
+pub type Ctl = OnOff;
+/// The controller type of this build: the PRBS, or the PI if the PRBS configuration is refused.
+#[cfg(feature = "identify")]
+pub type Ctl = Identify;
 
 /// The controller of this build. `adaptive` is the self-tuner's configuration as restored from
 /// flash (the built-in one when nothing good is stored); the others ignore it.
-pub fn controller(adaptive: Option<AdaptiveConfig>) -> AnyController {
-    if cfg!(feature = "identify") {
-        let rest_duty = 0.5 * (PRBS.low + PRBS.high);
-        return match hter::control::excite::PrbsExcitation::after_rest(PRBS, rest_duty, IDENTIFY_REST_SAMPLES) {
-            Ok(p) => AnyController::Prbs(p),
-            Err(e) => {
-                // The controller's name is logged at start, so the log shows the PI.
-                defmt::error!("PRBS configuration refused ({}): running PI", e);
-                AnyController::Pi(Pi::new(PI))
-            }
-        };
-    }
-    if cfg!(feature = "onoff") {
-        return AnyController::OnOff(OnOff::new(OnOffConfig::DEFAULT));
-    }
-    match adaptive {
-        // Start from the PI's bias: the duty that holds the load near 4 °C.
-        Some(cfg) => AnyController::SelfTuning(SelfTuning::new(cfg, PI.bias)),
-        None => AnyController::Pi(Pi::new(PI)),
+#[cfg(not(any(feature = "pi", feature = "onoff", feature = "identify")))]
+pub fn controller(adaptive: Option<AdaptiveConfig>) -> Ctl {
+    // Start from the PI's bias: the duty that holds the load near 4 °C.
+    SelfTuning::new(adaptive.unwrap_or(ADAPTIVE_DEFAULT), PI.bias)
+}
+
+/// The self-tuner's configuration when the boot hands none (no store): this build's built-in.
+#[cfg(not(any(feature = "pi", feature = "onoff", feature = "identify")))]
+const ADAPTIVE_DEFAULT: AdaptiveConfig = if cfg!(feature = "igmvc") { ADAPTIVE_IGMVC } else { ADAPTIVE_GPC };
+
+/// The controller of this build (the restored self-tuner configuration does not apply).
+#[cfg(feature = "pi")]
+pub fn controller(_adaptive: Option<AdaptiveConfig>) -> Ctl {
+    Pi::new(PI)
+}
+
+/// The controller of this build (the restored self-tuner configuration does not apply).
+#[cfg(feature = "onoff")]
+pub fn controller(_adaptive: Option<AdaptiveConfig>) -> Ctl {
+    OnOff::new(OnOffConfig::DEFAULT)
+}
+
+/// The controller of this build (the restored self-tuner configuration does not apply).
+#[cfg(feature = "identify")]
+pub fn controller(_adaptive: Option<AdaptiveConfig>) -> Ctl {
+    let rest_duty = 0.5 * (PRBS.low + PRBS.high);
+    match hter::control::excite::PrbsExcitation::after_rest(PRBS, rest_duty, IDENTIFY_REST_SAMPLES) {
+        Ok(p) => Identify::Prbs(p),
+        Err(e) => {
+            // The controller's name is logged at start, so the log shows the PI.
+            defmt::error!("PRBS configuration refused ({}): running PI", e);
+            Identify::Pi(Pi::new(PI))
+        }
     }
 }
+
+/// The identification build's controller: the PRBS, or the PI when its configuration is
+/// refused (two laws, not the five of `AnyController`).
+#[cfg(feature = "identify")]
+pub enum Identify {
+    /// The excitation.
+    Prbs(hter::control::excite::PrbsExcitation),
+    /// The fallback.
+    Pi(Pi),
+}
+
+#[cfg(feature = "identify")]
+impl hter::control::Controller for Identify {
+    fn update(&mut self, input: &hter::control::ControlInput) -> f32 {
+        match self {
+            Identify::Prbs(c) => c.update(input),
+            Identify::Pi(c) => c.update(input),
+        }
+    }
+
+    fn track(&mut self, input: &hter::control::ControlInput, applied: f32) {
+        match self {
+            Identify::Prbs(c) => c.track(input, applied),
+            Identify::Pi(c) => c.track(input, applied),
+        }
+    }
+
+    fn name(&self) -> &'static str {
+        match self {
+            Identify::Prbs(c) => c.name(),
+            Identify::Pi(c) => c.name(),
+        }
+    }
+}
+
+/// The model a controller wants stored in flash, if it has a trusted one: only the self-tuners
+/// learn one.
+pub trait TrustedModel {
+    /// The record of the trusted model, if any.
+    fn trusted_record(&self) -> Option<ModelRecord> {
+        None
+    }
+}
+
+impl TrustedModel for SelfTuning {
+    fn trusted_record(&self) -> Option<ModelRecord> {
+        self.trusted_model().as_ref().and_then(ModelRecord::from_model)
+    }
+}
+impl TrustedModel for Pi {}
+impl TrustedModel for OnOff {}
+#[cfg(feature = "identify")]
+impl TrustedModel for Identify {}
 
 /// Flash region of the persisted records, as offsets from the flash base 0x0800_0000 (what
 /// embassy's `Flash` takes): the last 4 pages of 2 KiB, `PERSIST` in `memory.x`.

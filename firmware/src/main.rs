@@ -10,6 +10,8 @@
 //!                                     └──(model every 4 h of trust, history hourly and at alarms)──► persist ──► flash
 //! ```
 //!
+//! `main` starts the watchdog before anything else, then the clocks; a stop recorded by the
+//! fault handlers before the last reset (`failsafe`) is logged and reported by the first step.
 //! At boot `main` restores the calibration, the cold-chain history and (self-tuning builds) the
 //! learned model from flash (`hter::persist`; a missing, torn or implausible record means its
 //! default, and the boot log says which), counts the reset in the history, and starts the loop.
@@ -24,12 +26,13 @@
 mod board;
 mod config;
 mod ecc;
+mod failsafe;
 mod persist;
 
 use defmt::{error, info, warn};
+use defmt_rtt as _;
 use embassy_executor::Spawner;
 use embassy_stm32::gpio::{Input, Output};
-use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
@@ -37,21 +40,30 @@ use embassy_time::{Duration, Instant, Ticker};
 use hter::alarm::{Annunciator, Indication};
 use hter::control::adaptive::AdaptiveConfig;
 use hter::control::{AdaptiveMode, Controller, ControllerStatus};
-use hter::event::Event;
-use hter::hal::{apply_duty, RtdSampler};
+use hter::event::{Event, EventKind};
+use hter::failsafe::{Heartbeat, StopInfo};
+use hter::hal::apply_duty;
 use hter::persist::{HistoryRecord, Recorder, ResetCause};
 use hter::step::{Carrier, CarrierConfig, Mode, StepInput};
 use hter::units::Duty;
-use {defmt_rtt as _, panic_probe as _};
+
+use config::TrustedModel;
 
 /// One sample of the analog inputs and when it was taken.
 #[derive(Clone, Copy)]
 struct Sample {
-    t_s: f32,
+    /// Milliseconds since boot (monotonic, u64: no wrap, full resolution for any mission).
+    t_ms: u64,
     /// RTD conversion (ratio to the reference resistor), counts.
     counts: u32,
-    /// The modules' supply, V (`None` if it could not be measured).
+    /// The reference conversions on both sides of the RTD's, and VDDA, were in their windows.
+    reference_ok: bool,
+    /// The modules' supply ahead of the switch, V (`None` if it could not be measured).
     supply_v: Option<f32>,
+    /// The switched rail after the supply-enable switch, V (`None` if it could not be measured).
+    switched_v: Option<f32>,
+    /// VDD above the PVD level: flash may be written.
+    supply_ok: bool,
 }
 
 /// What the actuator must do.
@@ -65,13 +77,14 @@ struct Actuation {
 /// One telemetry record per sample.
 #[derive(Clone, Copy, defmt::Format)]
 struct Telemetry {
-    t_s: f32,
+    t_ms: u64,
     temp_c: f32,
     setpoint_c: f32,
     duty: f32,
     mode: Mode,
     counts: u32,
     supply_v: Option<f32>,
+    switched_v: Option<f32>,
     alarm: Indication,
     /// Estimator state of a self-tuning controller (θ, trace P, prediction error, mode).
     status: Option<ControllerStatus>,
@@ -83,6 +96,10 @@ struct Boot {
     adaptive: Option<AdaptiveConfig>,
     history: HistoryRecord,
     reset: ResetCause,
+    /// The stop recorded before the last reset, if any.
+    fault: Option<StopInfo>,
+    /// Flash pages the boot found unreadable (ECC) and treated as lost.
+    pages_lost: u8,
 }
 
 static SAMPLES: Channel<CriticalSectionRawMutex, Sample, 2> = Channel::new();
@@ -92,20 +109,45 @@ static EVENTS: Channel<CriticalSectionRawMutex, Event, 16> = Channel::new();
 /// The user button was pressed: the alarm has been seen.
 static ACKNOWLEDGE: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
+/// The step's input from the board's millisecond clock: the one place the clock's unit meets
+/// the library's.
+fn step_input(t_ms: u64, counts: u32, setpoint_c: f32) -> StepInput {
+    StepInput { t_s: t_ms as f32 / 1000.0, counts, setpoint_c }
+}
+
+/// Whole seconds and the milliseconds after them, for logging `t_ms` as seconds at full
+/// resolution (`{=u64}.{=u32:03}`) without 64-bit float arithmetic.
+fn secs_ms(t_ms: u64) -> (u64, u32) {
+    (t_ms / 1000, (t_ms % 1000) as u32)
+}
+
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
-    // Why we (re)started, before anything else; the flags are cleared so the next boot
-    // reads its own. The step reports it with the first sample and the history counts it (a
-    // brown-out or watchdog bite shows in the log and the cold-chain record as a gap, not as
-    // silence).
+    // Before the clocks and before flash is read: no boot path runs unwatched.
+    board::start_watchdog();
+    // Why we (re)started; the flags are cleared so the next boot reads its own. The step reports
+    // it with the first sample and the history counts it (a brown-out or watchdog bite shows in
+    // the log and the cold-chain record as a gap, not as silence).
     let reset = {
         let rcc = embassy_stm32::pac::RCC;
         let csr = rcc.csr().read().0;
         rcc.csr().modify(|w| w.set_rmvf(true));
         ResetCause::from_stm32l4_csr(csr)
     };
+    let fault = failsafe::take_reason();
     let b = board::init();
     info!("reset cause: {}", reset);
+    if let Some(f) = &fault {
+        error!("board fault: {}", f);
+    }
+    info!("watchdog: {}", if board::watchdog_is_hardware() { "hardware (option byte)" } else { "software" });
+    let power = board::power_check();
+    info!(
+        "power: brown-out level {} (need {}), VDD above PVD: {}",
+        power.bor_level,
+        config::BOR_LEVEL,
+        power.supply_ok
+    );
     info!(
         "hter firmware {}: Ts = {} s, setpoint {} °C, SSR PWM {} Hz ({} ticks)",
         env!("CARGO_PKG_VERSION"),
@@ -124,51 +166,89 @@ async fn main(spawner: Spawner) {
         adaptive: restored.adaptive,
         history: restored.history,
         reset,
+        fault,
+        pages_lost: restored.pages_lost,
     };
-    let mut wdg = IndependentWatchdog::new(b.iwdg, config::WATCHDOG_TIMEOUT_US);
-    wdg.unleash();
     spawner.spawn(sample(b.analog).unwrap());
-    spawner.spawn(control(wdg, boot).unwrap());
+    spawner.spawn(control(boot, b.heartbeat).unwrap());
     spawner.spawn(actuate(b.ssr, b.supply_enable, b.led, b.alarm).unwrap());
     spawner.spawn(acknowledge(b.button).unwrap());
     spawner.spawn(telemetry().unwrap());
 }
 
-/// Takes one oversampled conversion of each analog input every Ts.
+/// Takes one oversampled conversion of each analog input every Ts, at a fixed phase of the SSR
+/// PWM period.
 #[embassy_executor::task]
 async fn sample(mut analog: board::Analog) {
     let mut ticker = Ticker::every(Duration::from_millis(config::SAMPLE_PERIOD_MS));
-    let start = Instant::now();
     loop {
-        let Ok(counts) = analog.sample();
-        let supply_v = analog.supply_v();
-        let t_s = (Instant::now() - start).as_millis() as f32 / 1000.0;
-        SAMPLES.send(Sample { t_s, counts, supply_v }).await;
+        let c = analog.sample().await;
+        if !c.in_window {
+            warn!("sample outside the SSR-quiet window");
+        }
+        if !c.reference_ok {
+            warn!("RTD sample rejected: VDDA {} V or the reference out of its window", c.vdda_v.unwrap_or(f32::NAN));
+        }
+        let t_ms = Instant::now().as_millis();
+        let supply_ok = board::supply_ok();
+        SAMPLES
+            .send(Sample {
+                t_ms,
+                counts: c.counts,
+                reference_ok: c.reference_ok,
+                supply_v: c.supply_v,
+                switched_v: c.switched_v,
+                supply_ok,
+            })
+            .await;
         ticker.next().await;
     }
 }
 
 /// Runs the library's per-sample step on each sample, records it, decides the alarm
-/// indicator; feeds the watchdog after each one.
+/// indicator; after each completed step beats the heartbeat, tells the stall check and feeds
+/// the watchdog.
 #[embassy_executor::task]
-async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>, boot: Boot) {
-    let mut carrier = Carrier::new(boot.cfg, config::controller(boot.adaptive));
+async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
+    let mut carrier: Carrier<config::Ctl> = Carrier::new(boot.cfg, config::controller(boot.adaptive));
     carrier.note_reset(boot.reset);
     let mut recorder = Recorder::new(boot.history, config::HISTORY_SAVE_SAMPLES);
-    persist::request(persist::Save::History(recorder.note_reset(boot.reset)));
+    let mut history = recorder.note_reset(boot.reset);
+    if let Some(f) = &boot.fault {
+        carrier.note_board_fault(f.kind);
+        history = recorder.note_board_fault(f);
+    }
+    for _ in 0..boot.pages_lost {
+        history = recorder.note_flash_page_lost();
+        if EVENTS.try_send(Event { t_s: 0.0, kind: EventKind::FlashPageLost }).is_err() {
+            warn!("event queue full, dropped FlashPageLost");
+        }
+    }
+    // Waits for the write gate: a power-bounce loop does not write at every boot.
+    persist::request(persist::Save::History(history));
     let mut annunciator = Annunciator::new();
+    let mut heartbeat = Heartbeat::new();
     info!("controller: {}", carrier.controller().name());
     let mut trusted_samples = 0u32;
     let mut samples = 0u32;
+    board::start_stall_check();
     loop {
         let s = SAMPLES.receive().await;
+        // Flash writes wait while VDD is under the PVD level.
+        persist::note_supply(s.supply_ok);
         if let Some(v) = s.supply_v {
             carrier.observe_supply_v(v);
         }
-        let out = carrier.step(&StepInput { t_s: s.t_s, counts: s.counts, setpoint_c: config::SETPOINT_C });
-        let rec = recorder.push(s.t_s, out.temp_c.0);
+        if let Some(v) = s.switched_v {
+            carrier.observe_switched_rail_v(v);
+        }
+        let input = step_input(s.t_ms, s.counts, config::SETPOINT_C);
+        let out = if s.reference_ok { carrier.step(&input) } else { carrier.step_with_reference_fault(&input) };
+        // LEAD: the recorder's time follows the step's when `StepInput` carries `t_ms`.
+        let rec = recorder.push(input.t_s, out.temp_c.0);
+        let (t_sec, t_milli) = secs_ms(s.t_ms);
         if ACKNOWLEDGE.try_take().is_some() {
-            info!("alarm acknowledged t={}", s.t_s);
+            info!("alarm acknowledged t={=u64}.{=u32:03}", t_sec, t_milli);
             annunciator.acknowledge();
         }
         let alarm = annunciator.update(&out, &rec.raised);
@@ -185,29 +265,34 @@ async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripheral
         for a in rec.raised.iter().flatten() {
             error!("ALARM {} t={} (condition since t={})", a.kind.name(), a.trigger_s, a.start_s);
         }
-        if rec.save_due {
+        if rec.raised.iter().flatten().next().is_some() {
+            // An alarm is stored as soon as the supply allows, without the boot's hold-off.
+            persist::request(persist::Save::AlarmHistory(recorder.history()));
+        } else if rec.save_due {
             persist::request(persist::Save::History(recorder.history()));
         }
         let record = Telemetry {
-            t_s: s.t_s,
+            t_ms: s.t_ms,
             temp_c: out.temp_c.0,
             setpoint_c: out.setpoint_c.0,
             duty: out.duty.get(),
             mode: out.mode,
             counts: s.counts,
             supply_v: s.supply_v,
+            switched_v: s.switched_v,
             alarm,
             status: out.status,
         };
         if TELEMETRY.try_send(record).is_err() {
-            warn!("telemetry queue full, dropped t={}", s.t_s);
+            warn!("telemetry queue full, dropped t={=u64}.{=u32:03}", t_sec, t_milli);
         }
         samples = samples.wrapping_add(1);
         if samples.is_multiple_of(config::SUMMARY_SAMPLES) {
             let m = recorder.monitor();
             info!(
-                "coldchain t={} mkt={} min={} max={} below2_s={} above8_s={} excursions={}",
-                s.t_s,
+                "coldchain t={=u64}.{=u32:03} mkt={} min={} max={} below2_s={} above8_s={} excursions={}",
+                t_sec,
+                t_milli,
                 m.mkt_c().unwrap_or(f32::NAN),
                 m.min_c().unwrap_or(f32::NAN),
                 m.max_c().unwrap_or(f32::NAN),
@@ -220,10 +305,17 @@ async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripheral
             trusted_samples += 1;
             if trusted_samples >= config::MODEL_SAVE_SAMPLES {
                 trusted_samples = 0;
-                persist::request_model(carrier.controller());
+                if let Some(rec) = carrier.controller().trusted_record() {
+                    persist::request(persist::Save::Model(rec));
+                }
             }
         }
-        wdg.pet();
+        // Healthy = the step completed: the monostable also gates the modules' supply, so a beat
+        // that stopped at every alarm would stop cooling at a heat alarm. The alarm pin sounds
+        // the buzzer through the OR in the wiring (README) instead.
+        heartbeat_pin.set_level(heartbeat.beat(true).into());
+        board::note_step();
+        board::pet_watchdog();
     }
 }
 
@@ -243,14 +335,16 @@ async fn actuate(
         if !a.supply_enable {
             supply_enable.set_low();
         }
+        // The SSR's falling edge stays out of the RTD sampling window.
+        let duty = hter::adc::SampleWindow::DEFAULT.clear_duty(a.duty);
         let mut ch = ssr.ch1();
-        if apply_duty(&mut ch, a.duty).is_err() {
+        if apply_duty(&mut ch, duty).is_err() {
             warn!("SSR duty write failed");
         }
         if a.supply_enable {
             supply_enable.set_high();
         }
-        if a.supply_enable && a.duty.get() > 0.0 {
+        if a.supply_enable && duty.get() > 0.0 {
             led.set_high();
         } else {
             led.set_low();
@@ -262,7 +356,6 @@ async fn actuate(
         }
     }
 }
-
 /// The user button acknowledges the alarm indicator (debounced by a 50 ms re-check).
 #[embassy_executor::task]
 async fn acknowledge(button: Input<'static>) {
@@ -287,21 +380,24 @@ async fn telemetry() {
     loop {
         let r = TELEMETRY.receive().await;
         // `hter log2csv` parses this line: keep its `key=value` fields.
+        let (t_sec, t_milli) = secs_ms(r.t_ms);
         info!(
-            "t={} temp={} sp={} duty={} mode={} counts={} supply={} alarm={}",
-            r.t_s,
+            "t={=u64}.{=u32:03} temp={} sp={} duty={} mode={} counts={} supply={} rail={} alarm={}",
+            t_sec,
+            t_milli,
             r.temp_c,
             r.setpoint_c,
             r.duty,
             r.mode,
             r.counts,
             r.supply_v.unwrap_or(f32::NAN),
+            r.switched_v.unwrap_or(f32::NAN),
             r.alarm
         );
         if let Some(st) = r.status {
             info!(
-                "est t={} ctl={} theta={} trace_p={} pe={}",
-                r.t_s, st.mode, st.theta, st.trace_p, st.prediction_error
+                "est t={=u64}.{=u32:03} ctl={} theta={} trace_p={} pe={}",
+                t_sec, t_milli, st.mode, st.theta, st.trace_p, st.prediction_error
             );
         }
         while let Ok(e) = EVENTS.try_receive() {

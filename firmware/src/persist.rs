@@ -28,10 +28,9 @@ use embassy_sync::signal::Signal;
 use embassy_time::Instant;
 use hter::calib::TwoPoint;
 use hter::control::adaptive::AdaptiveConfig;
-use hter::control::AnyController;
 use hter::persist::flash::{key, EccErrors, LoadStatus, Store, StoreError};
 pub use hter::persist::Save;
-use hter::persist::{CalibrationRecord, HistoryRecord, ModelRecord, PendingSaves, WriteGate};
+use hter::persist::{CalibrationRecord, HistoryRecord, PendingSaves, WriteGate};
 
 use crate::config;
 
@@ -61,7 +60,6 @@ fn now_ms() -> u64 {
 
 /// One supply sample for the write gate: `ok` when the supply is above what a flash write needs
 /// (the control task calls this every sample).
-#[allow(dead_code)] // Called by the control task's supply check.
 pub fn note_supply(ok: bool) {
     let now = now_ms();
     PENDING.lock(|p| p.borrow_mut().1.note_supply(now, ok));
@@ -78,7 +76,6 @@ pub struct Restored {
     pub adaptive: Option<AdaptiveConfig>,
     /// Flash pages the boot found torn by a power cut (ECC errors) and repaired: one
     /// `FlashPageLost` event and one count in the history each.
-    #[allow(dead_code)] // Read by the control task, which reports each page.
     pub pages_lost: u8,
 }
 
@@ -176,15 +173,6 @@ pub async fn restore(store: Option<&mut FlashStore>) -> Restored {
 pub fn request(save: Save) {
     PENDING.lock(|p| p.borrow_mut().0.put(save));
     WAKE.signal(());
-}
-
-/// Asks for the controller's trusted model to be stored, if it has one.
-pub fn request_model(controller: &AnyController) {
-    if let AnyController::SelfTuning(st) = controller {
-        if let Some(rec) = st.trusted_model().as_ref().and_then(ModelRecord::from_model) {
-            request(Save::Model(rec));
-        }
-    }
 }
 
 /// Stores each requested record the write gate lets through. A region the storage layer finds

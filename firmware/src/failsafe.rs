@@ -1,0 +1,120 @@
+//! The board's stop paths: the panic handler, HardFault, NMI, the default handler of every
+//! interrupt without one, and the control-stall check. Each drives the outputs safe first
+//! ([`board::force_safe`], registers only), then records why in [`REASON`] (RAM the runtime leaves
+//! alone, so it survives the reset) and resets; the next boot [`take_reason`]s it.
+//!
+//! One exception returns: an NMI raised by an uncorrectable flash ECC error inside the
+//! persistence region (a double-word whose programming a power cut interrupted). Its address
+//! goes to [`crate::ecc`], the error is cleared, and the read that hit it carries on with garbage
+//! the flash reader then discards, so the boot goes on with that page treated as lost.
+
+use core::mem::MaybeUninit;
+use core::panic::PanicInfo;
+use core::ptr::addr_of_mut;
+
+use cortex_m_rt::{exception, ExceptionFrame};
+use embassy_stm32::pac::FLASH;
+use hter::failsafe::{self, ReasonRecord, SafeOutputs, StopInfo, StopKind};
+
+use crate::board;
+
+/// The stop reason across the reset. `.uninit` is neither zeroed nor initialised by cortex-m-rt,
+/// so after a power-up it holds noise, which the record's magic and CRC reject.
+#[link_section = ".uninit.REASON"]
+static mut REASON: MaybeUninit<ReasonRecord> = MaybeUninit::uninit();
+
+/// The record in [`REASON`].
+///
+/// # Safety
+/// Only one context may hold the reference: the boot (before interrupts run the stop paths) or
+/// a stop path that never returns.
+unsafe fn reason() -> &'static mut ReasonRecord {
+    // SAFETY: ReasonRecord is `repr(C)` words and bytes, so any bit pattern is a valid value;
+    // exclusivity is the caller's promise.
+    unsafe { (*addr_of_mut!(REASON)).assume_init_mut() }
+}
+
+/// The board's outputs behind the library's seam.
+struct BoardOutputs;
+
+impl SafeOutputs for BoardOutputs {
+    fn force_safe(&mut self) {
+        board::force_safe();
+    }
+}
+
+/// Outputs safe, record, reset.
+fn halt(info: &StopInfo) -> ! {
+    // SAFETY: this path does not return, and a fault inside it escalates to a lockup, which the
+    // watchdog resets: no second holder of the record runs after this one.
+    failsafe::stop(&mut BoardOutputs, unsafe { reason() }, info);
+    cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// The stop the last reset came from, if one was recorded; clears the record.
+pub fn take_reason() -> Option<StopInfo> {
+    // SAFETY: called once at boot, before the stall check is armed; a fault meanwhile resets
+    // without returning here.
+    unsafe { reason() }.take()
+}
+
+/// The control loop stalled for `since_ms` (called from the stall check's interrupt).
+pub fn stall(since_ms: u32) -> ! {
+    board::force_safe();
+    halt(&StopInfo::new(StopKind::ControlStall, 0, 0, since_ms))
+}
+
+/// Records the location only: formatting the message would link `core::fmt` (several KiB of
+/// flash) into a binary at its budget. defmt's own panics (`unwrap!`, `defmt::assert!`) have
+/// already logged their message over RTT when they get here.
+#[panic_handler]
+fn panic(info: &PanicInfo) -> ! {
+    board::force_safe();
+    let stop = match info.location() {
+        Some(at) => failsafe::panic_info(at.file(), at.line()),
+        None => StopInfo::new(StopKind::Panic, 0, 0, 0),
+    };
+    halt(&stop)
+}
+
+#[exception]
+unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
+    board::force_safe();
+    // SAFETY: reads of the System Control Block's fault status and address registers.
+    let scb = unsafe { &*cortex_m::peripheral::SCB::PTR };
+    let info = failsafe::hard_fault_info(frame.pc(), scb.cfsr.read(), scb.bfar.read(), scb.mmfar.read());
+    halt(&info)
+}
+
+/// Flash bank size of the STM32L476RG, bytes: FLASH_ECCR's ADDR_ECC is the offset within the
+/// bank BK_ECC names (RM0351 "Flash ECC register"), with the banks not swapped (BFB2 = 0).
+const BANK_SIZE: u32 = 0x8_0000;
+/// Flash base address.
+const FLASH_BASE: u32 = 0x0800_0000;
+
+#[exception]
+unsafe fn NonMaskableInt() {
+    let eccr = FLASH.eccr().read();
+    if eccr.eccd() {
+        let addr = FLASH_BASE + if eccr.bk_ecc() { BANK_SIZE } else { 0 } + eccr.addr_ecc();
+        if board::PERSIST_ADDRESSES.contains(&addr) {
+            // ECCD is write-1-to-clear; ECCC is too and is written 0 (left alone), ECCIE kept.
+            FLASH.eccr().write(|w| {
+                w.set_eccd(true);
+                w.set_eccie(eccr.eccie());
+            });
+            crate::ecc::note(addr);
+            return;
+        }
+    }
+    board::force_safe();
+    // cortex-m-rt hands the NMI no exception frame: the PC is not recorded (0); FLASH_ECCR
+    // (or 0 for another source such as the clock security system) names the cause.
+    halt(&failsafe::nmi_info(0, if eccr.eccd() { eccr.0 } else { 0 }))
+}
+
+#[exception]
+unsafe fn DefaultHandler(irqn: i16) -> ! {
+    board::force_safe();
+    halt(&failsafe::unexpected_interrupt_info(irqn))
+}
