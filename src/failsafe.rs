@@ -109,6 +109,11 @@ impl StopInfo {
         }
     }
 
+    /// The recorded text's bytes (UTF-8; the board logs them without decoding).
+    pub fn text_bytes(&self) -> &[u8] {
+        self.text.get(..usize::from(self.text_len)).unwrap_or(&[])
+    }
+
     /// The recorded text (empty if none).
     pub fn text(&self) -> &str {
         let bytes = self.text.get(..usize::from(self.text_len)).unwrap_or(&[]);
@@ -128,12 +133,12 @@ impl defmt::Format for StopInfo {
     fn format(&self, f: defmt::Formatter) {
         defmt::write!(
             f,
-            "{} pc={=u32:#010x} addr={=u32:#010x} detail={=u32:#x} {=str}",
+            "{} pc={=u32:#010x} addr={=u32:#010x} detail={=u32:#x} {=[u8]:a}",
             self.kind,
             self.pc,
             self.addr,
             self.detail,
-            self.text()
+            self.text_bytes()
         )
     }
 }

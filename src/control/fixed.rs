@@ -48,18 +48,25 @@ impl LawState {
 
     /// Computes the unclipped u(t) for measurement `y`, setpoint `w`, model `m`; `None` on
     /// any numerical failure or without a model (the caller falls back to its safe
-    /// behaviour). The histories advance either way.
+    /// behaviour). The histories advance either way. Without the library feature `mv-laws`
+    /// (a board that runs GPC only) GMVC and IGMVC are not linked and give `None`; with
+    /// `igmvc-only` (a board that runs IGMVC only) GPC is not linked and gives `None`.
     pub fn update(&mut self, law: &Law, m: Option<&Model>, y: f32, w: f32) -> Option<f32> {
         // A reference to the constant (promoted to a static): no 60-byte copy per sample.
         let (m, have_model) = match m {
             Some(m) => (m, true),
             None => (&Model::NEUTRAL, false),
         };
+        #[cfg(feature = "mv-laws")]
         let ok_mv = self.mv.push_y(y, m).is_ok() && have_model;
+        #[cfg(not(feature = "igmvc-only"))]
         let ok_gpc = self.gpc.push_y(y, m).is_ok() && have_model;
         let u = match law {
+            #[cfg(feature = "mv-laws")]
             Law::Gmvc(c) if ok_mv => self.mv.gmvc(m, c, w).ok(),
+            #[cfg(feature = "mv-laws")]
             Law::Igmvc(c) if ok_mv => self.mv.igmvc(m, c, w).ok(),
+            #[cfg(not(feature = "igmvc-only"))]
             Law::Gpc(c) if ok_gpc => self
                 .gpc
                 .design_into(m, c, w, &mut self.gpc_design)

@@ -107,10 +107,19 @@ impl Model {
 /// |a1| < 1 + a2 (a first-order A is a2 = 0). The self-tuner's every-sample check: a caller that
 /// only has second-order models uses this and leaves the general recursion (and the software
 /// f64 it needs on the M4F, ≈ 2 KB of flash) out of its binary.
+///
+/// The comparison is exact in f32 (no software f64 either): 1 + a2 = s + e exactly, with
+/// s = fl(1 + a2) and e = a2 − (s − 1) (Fast2Sum, since |a2| < 1; Higham, "Accuracy and Stability
+/// of Numerical Algorithms", §4.3), so |a1| < 1 + a2 ⟺ |a1| − s < e. |a1| − s is exact when
+/// s/2 ≤ |a1| ≤ 2s (Sterbenz's lemma); outside that its sign is that of the exact difference,
+/// and |e| ≤ ulp(s)/2 cannot change the verdict.
 pub fn second_order_stable(a1: f32, a2: f32) -> bool {
-    // 1 + a2 is exact in f64 for any f32 |a2| ≥ 2⁻³⁰, so only a pole pair within ~1e-9 of the
-    // unit circle could be judged differently from the recursion's f64 roundings.
-    a2.abs() < 1.0 && f64::from(a1.abs()) < 1.0 + f64::from(a2)
+    if !(a2.abs() < 1.0) {
+        return false;
+    }
+    let s = 1.0 + a2;
+    let e = a2 - (s - 1.0);
+    a1.abs() - s < e
 }
 
 /// Schur–Cohn test: are all roots of 1 + a1 z⁻¹ + … + an z⁻ⁿ inside the unit circle?
@@ -148,6 +157,35 @@ pub fn schur_stable(a: &[f32]) -> bool {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn second_order_check_is_exact_against_f64() {
+        use super::second_order_stable;
+        let exact = |a1: f32, a2: f32| a2.abs() < 1.0 && f64::from(a1.abs()) < 1.0 + f64::from(a2);
+        // (f64 is exact for these: |a2| ≥ 2⁻³⁰.) The carrier's poles sit within 1e-4 of 1: probe the boundary |a1| = 1 + a2 ulp by ulp.
+        for a2 in [0.751_4f32, 0.999_9, -0.999_999, 9.5e-7, -0.5, 0.0, 0.3] {
+            let edge = (1.0f64 + f64::from(a2)) as f32;
+            let mut x = edge;
+            for _ in 0..4 {
+                x = f32::from_bits(x.to_bits() - 1);
+            }
+            for _ in 0..8 {
+                for a1 in [x, -x] {
+                    assert_eq!(second_order_stable(a1, a2), exact(a1, a2), "a1 {a1:e} a2 {a2:e}");
+                }
+                x = f32::from_bits(x.to_bits() + 1);
+            }
+        }
+        let mut seed = 12345u32;
+        for _ in 0..200_000 {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let a1 = (seed >> 8) as f32 / (1u32 << 23) as f32 - 1.0;
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let a2 = (seed >> 8) as f32 / (1u32 << 24) as f32 * 2.2 - 1.1;
+            assert_eq!(second_order_stable(a1, a2), exact(a1, a2), "a1 {a1:e} a2 {a2:e}");
+        }
+        assert!(!second_order_stable(0.0, f32::NAN) && !second_order_stable(f32::NAN, 0.5));
+    }
+
     use super::*;
 
     #[test]
