@@ -168,10 +168,24 @@ impl EventKind {
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Event {
-    /// Sample time, s.
-    pub t_s: f32,
+    /// Sample time, ms (the step's integer clock: exact for the whole mission).
+    pub t_ms: u64,
     /// What happened.
     pub kind: EventKind,
+}
+
+impl Event {
+    /// Sample time, s, for display (f64 holds every millisecond exactly).
+    pub fn t_s(&self) -> f64 {
+        self.t_ms as f64 / 1000.0
+    }
+}
+
+/// Milliseconds as f32 seconds, rounded (exact for whole seconds up to 1.5 days, within one
+/// f32 step beyond): for the records kept in f32. Two u32 conversions rather than the u64 one,
+/// which is a library call on the Cortex-M4F (the high word is 0 for the first 49 days).
+pub fn secs_f32(ms: u64) -> f32 {
+    ((ms >> 32) as u32 as f32 * 4_294_967_296.0 + ms as u32 as f32) / 1000.0
 }
 
 /// Most events one step can raise; more are counted in [`Events::dropped`] (never silently lost).
@@ -264,10 +278,10 @@ mod tests {
     fn overflow_is_counted_not_lost_silently() {
         let mut ev = Events::default();
         for i in 0..MAX_EVENTS_PER_STEP + 3 {
-            ev.push(Event { t_s: i as f32, kind: EventKind::SensorOpen });
+            ev.push(Event { t_ms: i as u64, kind: EventKind::SensorOpen });
         }
         assert_eq!(ev.len(), MAX_EVENTS_PER_STEP);
         assert_eq!(ev.dropped(), 3);
-        assert_eq!(ev.iter().next().map(|e| e.t_s), Some(0.0));
+        assert_eq!(ev.iter().next().map(|e| e.t_ms), Some(0));
     }
 }

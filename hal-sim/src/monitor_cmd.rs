@@ -57,13 +57,11 @@ pub fn report(t: &[f64], temp: &[f64]) -> Result<Report> {
     }
     let mut m = ColdChainMonitor::new();
     let mut alarms = Vec::new();
+    // The monitor's clock is integer ms from the first sample (a log may start below 0).
+    let t0 = t.first().copied().unwrap_or(0.0);
     for (&ts, &c) in t.iter().zip(temp) {
-        for a in m.push(ts as f32, c as f32).into_iter().flatten() {
-            alarms.push(AlarmOut {
-                kind: a.kind.name(),
-                start_s: f64::from(a.start_s),
-                trigger_s: f64::from(a.trigger_s),
-            });
+        for a in m.push(((ts - t0) * 1000.0).round() as u64, c as f32).into_iter().flatten() {
+            alarms.push(AlarmOut { kind: a.kind.name(), start_s: a.start_s() + t0, trigger_s: a.trigger_s() + t0 });
         }
     }
     let f = |x: Option<f32>| x.map_or(f64::NAN, f64::from);
@@ -72,8 +70,8 @@ pub fn report(t: &[f64], temp: &[f64]) -> Result<Report> {
         mkt_c: f(m.mkt_c()),
         min_c: f(m.min_c()),
         max_c: f(m.max_c()),
-        time_below_2_s: f64::from(m.time_below_2_s()),
-        time_above_8_s: f64::from(m.time_above_8_s()),
+        time_below_2_s: m.time_below_2_ms() as f64 / 1000.0,
+        time_above_8_s: m.time_above_8_ms() as f64 / 1000.0,
         excursions: m.excursion_count(),
     })
 }
