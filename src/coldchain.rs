@@ -396,6 +396,104 @@ mod tests {
         }
     }
 
+    /// Day 89 on the board's clock, ms.
+    const DAY_89_MS: u64 = 89 * 86_400_000;
+
+    /// What a clock in f32 seconds would have read: even correctly rounded, f32 steps by 0.5 s
+    /// between 48.5 and 97 days.
+    fn f32_s(t_ms: u64) -> f32 {
+        (t_ms as f64 / 1000.0) as f32
+    }
+
+    /// Samples every 10 s from day 89, 249 ms past the second (an f32 clock reads 0.249 s
+    /// early there), with `temp(k)`; sample `short_k` comes `short_ms` early, as a busy
+    /// executor's timestamp can.
+    fn day_89(n: usize, temp: impl Fn(usize) -> f32, short_k: usize, short_ms: u64) -> std::vec::Vec<(u64, f32)> {
+        (0..n)
+            .map(|k| {
+                let t = DAY_89_MS + 249 + 10_000 * k as u64;
+                (if k == short_k { t - short_ms } else { t }, temp(k))
+            })
+            .collect()
+    }
+
+    /// A continuous alarm at day 89 triggers at the first sample whose distance from the run's
+    /// start reaches the duration, to the millisecond: the sample exactly 10 h (60 min) after
+    /// the start, and the next one if that sample is 1 ms short. f32 seconds could not tell
+    /// the two apart and fire one sample early in the second case.
+    #[test]
+    fn continuous_alarms_at_day_89_are_exact_to_the_sample() {
+        for (kind, hot, dur) in [(AlarmKind::Heat10h, 9.0f32, 3600usize), (AlarmKind::Freeze60min, -1.0, 360)] {
+            let k0 = 30;
+            let end = k0 + dur;
+            for short_ms in [0u64, 1] {
+                let s = day_89(end + 5, |k| if k >= k0 { hot } else { 5.0 }, end, short_ms);
+                let mut m = ColdChainMonitor::new();
+                let a: std::vec::Vec<Alarm> = feed(&mut m, s.iter().copied()).into_iter().filter(|a| a.kind == kind).collect();
+                let want = if short_ms == 0 { end } else { end + 1 };
+                assert_eq!(a.len(), 1, "{kind:?}: {a:?}");
+                assert_eq!((a[0].start_ms, a[0].trigger_ms), (s[k0].0, s[want].0), "{kind:?}, {short_ms} ms short");
+                // The same rule on f32 seconds.
+                let dur_s = kind.duration_ms() as f32 / 1000.0;
+                let f32_at = (k0..s.len()).find(|&k| f32_s(s[k].0) - f32_s(s[k0].0) >= dur_s);
+                assert_eq!(f32_at, Some(end), "{kind:?}: f32 seconds fire at the nominal sample");
+                if short_ms > 0 {
+                    assert_ne!(f32_at, Some(want), "{kind:?}: f32 seconds would have been exact too");
+                }
+            }
+        }
+    }
+
+    /// `ship_30c_10h` at day 89, across a cool spell and a 30 min gap in the samples (the board
+    /// was off while hot; the gap belongs to the hot sample before it): 4 h hot, 2 h at 20 °C,
+    /// 40 hot samples, the gap, then hot again. It triggers at the sample where the sum reaches
+    /// 10 h; with the gap 1 ms short, one sample later. f32 seconds round the gap's
+    /// millisecond away and fire a sample early.
+    #[test]
+    fn cumulative_alarm_at_day_89_is_exact_to_the_sample_across_a_gap() {
+        for short_ms in [0u64, 1] {
+            let mut s = std::vec::Vec::new();
+            let mut t = DAY_89_MS + 249;
+            for (n, c) in [(1440, 31.0f32), (720, 20.0), (40, 31.0)] {
+                for _ in 0..n {
+                    s.push((t, c));
+                    t += 10_000;
+                }
+            }
+            // The last hot sample's interval is the gap: 30 min (minus `short_ms`).
+            t += 1_800_000 - 10_000 - short_ms;
+            let after_gap = s.len();
+            for _ in 0..1950 {
+                s.push((t, 31.0));
+                t += 10_000;
+            }
+            // 1440 + 39 intervals of 10 s and the 30 min gap make 4 h 36 min 30 s; 1941 more
+            // intervals make 10 h.
+            let want = after_gap + 1941 + short_ms as usize;
+            let mut m = ColdChainMonitor::new();
+            let a: std::vec::Vec<Alarm> =
+                feed(&mut m, s.iter().copied()).into_iter().filter(|a| a.kind == AlarmKind::Ship30c10h).collect();
+            assert_eq!(a.len(), 1, "{a:?}");
+            assert_eq!((a[0].start_ms, a[0].trigger_ms), (s[0].0, s[want].0), "gap {short_ms} ms short");
+            // The same rule on f32 seconds.
+            let mut acc = 0.0f32;
+            let mut f32_at = None;
+            for k in 1..s.len() {
+                if s[k - 1].1 >= 30.0 {
+                    acc += f32_s(s[k].0) - f32_s(s[k - 1].0);
+                }
+                if acc >= 36_000.0 {
+                    f32_at = Some(k);
+                    break;
+                }
+            }
+            assert_eq!(f32_at, Some(after_gap + 1941), "f32 seconds fire at the nominal sample");
+            if short_ms > 0 {
+                assert_ne!(f32_at, Some(want), "f32 seconds would have been exact too");
+            }
+        }
+    }
+
     #[test]
     fn cumulative_alarm_counts_intervals_by_their_start_sample() {
         // Alternate an hour at 31 °C with an hour at 20 °C, sampled every 600 s.

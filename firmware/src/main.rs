@@ -46,7 +46,8 @@ use {defmt_rtt as _, panic_probe as _};
 /// One sample of the analog inputs and when it was taken.
 #[derive(Clone, Copy)]
 struct Sample {
-    t_s: f32,
+    /// Milliseconds since the sampler started (u64: exact for the whole mission).
+    t_ms: u64,
     /// RTD conversion (ratio to the reference resistor), counts.
     counts: u32,
     /// The modules' supply, V (`None` if it could not be measured).
@@ -64,7 +65,7 @@ struct Actuation {
 /// One telemetry record per sample.
 #[derive(Clone, Copy, defmt::Format)]
 struct Telemetry {
-    t_s: f32,
+    t_ms: u64,
     temp_c: f32,
     setpoint_c: f32,
     duty: f32,
@@ -141,8 +142,8 @@ async fn sample(mut analog: board::Analog) {
     loop {
         let Ok(counts) = analog.sample();
         let supply_v = analog.supply_v();
-        let t_s = (Instant::now() - start).as_millis() as f32 / 1000.0;
-        SAMPLES.send(Sample { t_s, counts, supply_v }).await;
+        let t_ms = (Instant::now() - start).as_millis();
+        SAMPLES.send(Sample { t_ms, counts, supply_v }).await;
         ticker.next().await;
     }
 }
@@ -164,10 +165,10 @@ async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripheral
         if let Some(v) = s.supply_v {
             carrier.observe_supply_v(v);
         }
-        let out = carrier.step(&StepInput { t_s: s.t_s, counts: s.counts, setpoint_c: config::SETPOINT_C });
-        let rec = recorder.push(s.t_s, out.temp_c.0);
+        let out = carrier.step(&StepInput { t_ms: s.t_ms, counts: s.counts, setpoint_c: config::SETPOINT_C });
+        let rec = recorder.push(s.t_ms, out.temp_c.0);
         if ACKNOWLEDGE.try_take().is_some() {
-            info!("alarm acknowledged t={}", s.t_s);
+            info!("alarm acknowledged t={=u64:ms}", s.t_ms);
             annunciator.acknowledge();
         }
         let alarm = annunciator.update(&out, &rec.raised);
@@ -182,13 +183,13 @@ async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripheral
             warn!("{} events of this step did not fit the step's list", out.events.dropped());
         }
         for a in rec.raised.iter().flatten() {
-            error!("ALARM {} t={} (condition since t={})", a.kind.name(), a.trigger_s, a.start_s);
+            error!("ALARM {} t={=u64:ms} (condition since t={=u64:ms})", a.kind.name(), a.trigger_ms, a.start_ms);
         }
         if rec.save_due {
             persist::request(persist::Save::History(recorder.history()));
         }
         let record = Telemetry {
-            t_s: s.t_s,
+            t_ms: s.t_ms,
             temp_c: out.temp_c.0,
             setpoint_c: out.setpoint_c.0,
             duty: out.duty.get(),
@@ -199,14 +200,14 @@ async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripheral
             status: out.status,
         };
         if TELEMETRY.try_send(record).is_err() {
-            warn!("telemetry queue full, dropped t={}", s.t_s);
+            warn!("telemetry queue full, dropped t={=u64:ms}", s.t_ms);
         }
         samples = samples.wrapping_add(1);
         if samples.is_multiple_of(config::SUMMARY_SAMPLES) {
             let m = recorder.monitor();
             info!(
-                "coldchain t={} mkt={} min={} max={} below2_s={} above8_s={} excursions={}",
-                s.t_s,
+                "coldchain t={=u64:ms} mkt={} min={} max={} below2_s={} above8_s={} excursions={}",
+                s.t_ms,
                 m.mkt_c().unwrap_or(f32::NAN),
                 m.min_c().unwrap_or(f32::NAN),
                 m.max_c().unwrap_or(f32::NAN),
@@ -287,8 +288,8 @@ async fn telemetry() {
         let r = TELEMETRY.receive().await;
         // `hter log2csv` parses this line: keep its `key=value` fields.
         info!(
-            "t={} temp={} sp={} duty={} mode={} counts={} supply={} alarm={}",
-            r.t_s,
+            "t={=u64:ms} temp={} sp={} duty={} mode={} counts={} supply={} alarm={}",
+            r.t_ms,
             r.temp_c,
             r.setpoint_c,
             r.duty,
@@ -299,12 +300,12 @@ async fn telemetry() {
         );
         if let Some(st) = r.status {
             info!(
-                "est t={} ctl={} theta={} trace_p={} pe={}",
-                r.t_s, st.mode, st.theta, st.trace_p, st.prediction_error
+                "est t={=u64:ms} ctl={} theta={} trace_p={} pe={}",
+                r.t_ms, st.mode, st.theta, st.trace_p, st.prediction_error
             );
         }
         while let Ok(e) = EVENTS.try_receive() {
-            warn!("event t={} {}", e.t_s, e.kind);
+            warn!("event t={=u64:ms} {}", e.t_ms, e.kind);
         }
     }
 }
