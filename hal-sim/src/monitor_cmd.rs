@@ -57,8 +57,8 @@ pub fn report(t: &[f64], temp: &[f64]) -> Result<Report> {
     }
     let mut m = ColdChainMonitor::new();
     let mut alarms = Vec::new();
-    // The monitor's clock is integer ms from the first sample (a log may start below 0).
-    let t0 = t.first().copied().unwrap_or(0.0);
+    // The monitor's clock is integer ms, from 0 or from the first sample if that is earlier.
+    let t0 = t.first().copied().unwrap_or(0.0).min(0.0);
     for (&ts, &c) in t.iter().zip(temp) {
         for a in m.push(((ts - t0) * 1000.0).round() as u64, c as f32).into_iter().flatten() {
             alarms.push(AlarmOut { kind: a.kind.name(), start_s: a.start_s() + t0, trigger_s: a.trigger_s() + t0 });
