@@ -247,7 +247,8 @@ impl ColdChainMonitor {
                 }
             } else if meets {
                 let t0 = *tr.start.get_or_insert(t_ms);
-                if !tr.fired && t_ms.saturating_sub(t0) >= kind.duration_ms() {
+                // t0 ≤ t_ms: times only increase past the guard above.
+                if !tr.fired && t_ms - t0 >= kind.duration_ms() {
                     tr.fired = true;
                     raised[i] = Some(Alarm { kind, start_ms: t0, trigger_ms: t_ms });
                 }
@@ -429,7 +430,8 @@ mod tests {
             for short_ms in [0u64, 1] {
                 let s = day_89(end + 5, |k| if k >= k0 { hot } else { 5.0 }, end, short_ms);
                 let mut m = ColdChainMonitor::new();
-                let a: std::vec::Vec<Alarm> = feed(&mut m, s.iter().copied()).into_iter().filter(|a| a.kind == kind).collect();
+                let a: std::vec::Vec<Alarm> =
+                    feed(&mut m, s.iter().copied()).into_iter().filter(|a| a.kind == kind).collect();
                 let want = if short_ms == 0 { end } else { end + 1 };
                 assert_eq!(a.len(), 1, "{kind:?}: {a:?}");
                 assert_eq!((a[0].start_ms, a[0].trigger_ms), (s[k0].0, s[want].0), "{kind:?}, {short_ms} ms short");

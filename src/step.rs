@@ -272,8 +272,6 @@ pub struct Carrier<C: Controller> {
     /// The setpoint of the last sample and when the load first came within 0.3 °C of it, ms.
     last_w: f32,
     reached_ms: Option<u64>,
-    /// The first sample's time, ms: the controllers' time origin.
-    t0_ms: Option<u64>,
 }
 
 /// Samples of filtered temperature kept for the SSR checks.
@@ -328,7 +326,6 @@ impl<C: Controller> Carrier<C> {
             lid_reported: false,
             last_w: f32::NAN,
             reached_ms: None,
-            t0_ms: None,
         }
     }
 
@@ -551,8 +548,7 @@ impl<C: Controller> Carrier<C> {
         self.setpoint_clamped = clamped;
 
         // 5: controller (only with a trustworthy measurement).
-        let t0 = *self.t0_ms.get_or_insert(t_ms);
-        let ci = ControlInput { t_s: crate::event::secs_f32(since(t0)), y_c: temp_c, w_c: w };
+        let ci = ControlInput { y_c: temp_c, w_c: w };
         let requested = if self.sensor_fault.is_none() { self.controller.update(&ci) } else { 0.0 };
         let mut duty = if requested.is_finite() {
             Duty::saturating(requested)
@@ -776,7 +772,9 @@ impl<C: Controller> Carrier<C> {
         let settled = averaged
             && modulated
             && mode == Mode::Normal
-            && self.reached_ms.is_some_and(|r| crate::event::secs_f32(since(r)) >= self.cfg.lid_fast_s);
+            && self
+                .reached_ms
+                .is_some_and(|r| since(r).min(u64::from(u32::MAX)) as u32 as f32 >= 1000.0 * self.cfg.lid_fast_s);
         // Either the holding duty jumped (a controller that keeps the load on target), or full
         // cooling for 10 min no longer holds the load within 1 °C (one that cannot, On-Off).
         let duty_jump = (temp_c - w).abs() < 1.0 && fast - self.duty_slow > self.cfg.lid_duty_rise;
@@ -922,11 +920,8 @@ mod tests {
                 }
                 // Back above 2.5 °C (through the filter): cooling may resume.
                 let released = (0..3).any(|k| {
-                    let warm = c.step(&StepInput {
-                        t_ms: t + 200_000 + 10_000 * k,
-                        counts: counts_at(2.8),
-                        setpoint_c: 2.0,
-                    });
+                    let warm =
+                        c.step(&StepInput { t_ms: t + 200_000 + 10_000 * k, counts: counts_at(2.8), setpoint_c: 2.0 });
                     warm.mode == Mode::Normal && warm.events.iter().any(|e| e.kind == EventKind::FreezeGuardReleased)
                 });
                 assert!(released);

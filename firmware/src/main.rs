@@ -175,7 +175,7 @@ async fn control(mut wdg: IndependentWatchdog<'static, embassy_stm32::peripheral
         ACTUATION.signal(Actuation { duty: out.duty, supply_enable: out.supply_enable, alarm: alarm.is_on() });
         for e in out.events.iter() {
             // Never block the loop on logging: a full queue drops the event, and says so.
-            if EVENTS.try_send(*e).is_err() {
+            if EVENTS.try_send(e).is_err() {
                 warn!("event queue full, dropped {}", e);
             }
         }

@@ -297,7 +297,7 @@ fn run() -> Result<(), &'static str> {
             .1;
 
             // Profile on shadows.
-            let ci = ControlInput { t_s: hter::event::secs_f32(inp.t_ms), y_c: o.temp_c.0, w_c: o.setpoint_c.0 };
+            let ci = ControlInput { y_c: o.temp_c.0, w_c: o.setpoint_c.0 };
             let mut c2 = ctrl_before;
             ticks[2] = timed(|| c2.update(&ci)).1;
             let cfg = proto::CARRIER;

@@ -28,9 +28,6 @@ pub use pi::{Pi, PiConfig};
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ControlInput {
-    /// Seconds since the step's first sample (f32: for a law that wants a time axis; none of
-    /// these reads it, and the step's own timing runs on its integer millisecond clock).
-    pub t_s: f32,
     /// Filtered, calibrated load temperature, °C.
     pub y_c: f32,
     /// Setpoint, °C (already clamped to the safe band by the step).
