@@ -35,7 +35,7 @@ fn recorded(choice: ControllerChoice) -> Vec<StepInput> {
     let out = run(&sim_options("piecewise", None, choice)).expect("simulation runs");
     out.rows
         .iter()
-        .map(|r| StepInput { t_s: r.t_s as f32, counts: r.counts, setpoint_c: r.setpoint_c as f32 })
+        .map(|r| StepInput { t_ms: (r.t_s * 1000.0).round() as u64, counts: r.counts, setpoint_c: r.setpoint_c as f32 })
         .collect()
 }
 

@@ -99,7 +99,7 @@ mod tests {
     fn out(temp_c: f32, mode: Mode, events: &[EventKind]) -> StepOutput {
         let mut ev = Events::default();
         for k in events {
-            ev.push(Event { t_s: 0.0, kind: *k });
+            ev.push(Event { t_ms: 0, kind: *k });
         }
         StepOutput {
             raw_c: Some(Celsius(temp_c)),
@@ -134,7 +134,7 @@ mod tests {
         assert_eq!(a.update(&out(7.9, Mode::Normal, &[]), &none), Indication::Off);
         // A cold-chain alarm latches.
         let raised: Raised =
-            [Some(Alarm { kind: AlarmKind::Heat10h, start_s: 0.0, trigger_s: 36_000.0 }), None, None, None];
+            [Some(Alarm { kind: AlarmKind::Heat10h, start_ms: 0, trigger_ms: 36_000_000 }), None, None, None];
         assert_eq!(a.update(&out(7.9, Mode::Normal, &[]), &raised), Indication::Unacknowledged);
         assert!(a.update(&out(5.0, Mode::Normal, &[]), &none).is_on());
         // A shorted SSR: limp home is not in control, even acknowledged.

@@ -1,7 +1,8 @@
 //! Cold-chain monitoring (SPEC §6): WHO PQS E006-style temperature-recorder alarms, shipping
 //! indicator alarms, mean kinetic temperature, extremes, time out of range and an excursion log.
 //!
-//! Alarm rules (durations from sample times):
+//! Alarm rules (durations from sample times, integer milliseconds: exact for the whole mission,
+//! where f32 seconds would step by 0.5 s at day 89 and move a trigger across a sample):
 //! - *continuous*: a run starts at the first sample t0 that meets the condition; the alarm
 //!   triggers at the first sample t with t − t0 ≥ duration while every sample since t0 met it;
 //!   it triggers once per run (a new run after the condition cleared can trigger again);
@@ -77,12 +78,12 @@ impl AlarmKind {
         }
     }
 
-    fn duration_s(self) -> f32 {
+    fn duration_ms(self) -> u64 {
         match self {
-            AlarmKind::Heat10h => 10.0 * 3600.0,
-            AlarmKind::Freeze60min => 3600.0,
-            AlarmKind::Ship45c1h => 3600.0,
-            AlarmKind::Ship30c10h => 10.0 * 3600.0,
+            AlarmKind::Heat10h => 10 * 3_600_000,
+            AlarmKind::Freeze60min => 3_600_000,
+            AlarmKind::Ship45c1h => 3_600_000,
+            AlarmKind::Ship30c10h => 10 * 3_600_000,
         }
     }
 
@@ -97,10 +98,22 @@ impl AlarmKind {
 pub struct Alarm {
     /// Kind.
     pub kind: AlarmKind,
-    /// Start of the run (continuous) or first qualifying sample (cumulative), s.
-    pub start_s: f32,
-    /// Sample at which it triggered, s.
-    pub trigger_s: f32,
+    /// Start of the run (continuous) or first qualifying sample (cumulative), ms.
+    pub start_ms: u64,
+    /// Sample at which it triggered, ms.
+    pub trigger_ms: u64,
+}
+
+impl Alarm {
+    /// Start, s, for display.
+    pub fn start_s(&self) -> f64 {
+        self.start_ms as f64 / 1000.0
+    }
+
+    /// Trigger, s, for display.
+    pub fn trigger_s(&self) -> f64 {
+        self.trigger_ms as f64 / 1000.0
+    }
 }
 
 /// Which side of 2…8 °C an excursion is on.
@@ -113,7 +126,9 @@ pub enum Side {
     Warm,
 }
 
-/// One excursion outside 2…8 °C.
+/// One excursion outside 2…8 °C. Its times are f32 seconds, the form the history record
+/// stores them in ([`crate::persist::HistoryRecord`]), rounded from the millisecond clock (0.5 s
+/// steps at day 89, far below the sample period; no alarm rule reads them).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Excursion {
@@ -133,8 +148,8 @@ pub const EXCURSION_LOG: usize = 16;
 
 #[derive(Clone, Copy, Debug, Default)]
 struct Tracker {
-    start: Option<f32>,
-    acc_s: f32,
+    start: Option<u64>,
+    acc_ms: u64,
     fired: bool,
 }
 
@@ -142,13 +157,13 @@ struct Tracker {
 #[derive(Clone, Debug)]
 pub struct ColdChainMonitor {
     trackers: [Tracker; 4],
-    last: Option<(f32, f32)>,
-    elapsed_s: f32,
+    last: Option<(u64, f32)>,
+    elapsed_ms: u64,
     mkt_mean: f32,
     min_c: f32,
     max_c: f32,
-    below_2_s: f32,
-    above_8_s: f32,
+    below_2_ms: u64,
+    above_8_ms: u64,
     /// Closed excursions, oldest overwritten first.
     log: HistoryBuf<Excursion, EXCURSION_LOG>,
     /// The excursion under way.
@@ -169,49 +184,54 @@ impl ColdChainMonitor {
     /// An empty record.
     pub const fn new() -> Self {
         Self {
-            trackers: [Tracker { start: None, acc_s: 0.0, fired: false }; 4],
+            trackers: [Tracker { start: None, acc_ms: 0, fired: false }; 4],
             last: None,
-            elapsed_s: 0.0,
+            elapsed_ms: 0,
             mkt_mean: 0.0,
             min_c: f32::INFINITY,
             max_c: f32::NEG_INFINITY,
-            below_2_s: 0.0,
-            above_8_s: 0.0,
+            below_2_ms: 0,
+            above_8_ms: 0,
             log: HistoryBuf::new(),
             open: None,
             excursions: 0,
         }
     }
 
-    /// Adds a sample. Times must increase; a sample that is not later than the previous one or
-    /// not finite is ignored (returns no alarm) so a glitch cannot corrupt the record.
-    pub fn push(&mut self, t_s: f32, temp_c: f32) -> Raised {
+    /// Adds a sample at `t_ms`, ms. Times must increase; a sample that is not later than the
+    /// previous one or not finite is ignored (returns no alarm) so a glitch cannot corrupt the
+    /// record.
+    pub fn push(&mut self, t_ms: u64, temp_c: f32) -> Raised {
         let mut raised: Raised = [None; 4];
-        if !(t_s.is_finite() && temp_c.is_finite()) {
+        if !temp_c.is_finite() {
             return raised;
         }
         if let Some((t_prev, c_prev)) = self.last {
-            if !(t_s > t_prev) {
+            if t_ms <= t_prev {
                 return raised;
             }
-            // The interval (t_prev, t_s) belongs to the previous sample.
-            let dt = t_s - t_prev;
-            self.elapsed_s += dt;
+            // The interval (t_prev, t_ms) belongs to the previous sample. The sums cannot
+            // overflow: each is at most the last time minus the first.
+            let dt = t_ms - t_prev;
+            self.elapsed_ms += dt;
             let x = libm::expf(-MKT_DH_OVER_R_K * (1.0 / (c_prev + 273.15) - 1.0 / T_REF_K));
-            self.mkt_mean += (x - self.mkt_mean) * dt / self.elapsed_s;
+            // The weight in seconds, as f32: the ratio is all that matters, and whole seconds
+            // stay exact this way.
+            let (dt_s, elapsed_s) = (crate::event::secs_f32(dt), crate::event::secs_f32(self.elapsed_ms));
+            self.mkt_mean += (x - self.mkt_mean) * dt_s / elapsed_s;
             if c_prev < 2.0 {
-                self.below_2_s += dt;
+                self.below_2_ms += dt;
             }
             if c_prev > 8.0 {
-                self.above_8_s += dt;
+                self.above_8_ms += dt;
             }
             for (tr, kind) in self.trackers.iter_mut().zip(AlarmKind::ALL) {
                 if kind.cumulative() && kind.meets(c_prev) {
-                    tr.acc_s += dt;
+                    tr.acc_ms += dt;
                 }
             }
         }
-        self.last = Some((t_s, temp_c));
+        self.last = Some((t_ms, temp_c));
         self.min_c = min_f32(self.min_c, temp_c);
         self.max_c = max_f32(self.max_c, temp_c);
 
@@ -219,27 +239,28 @@ impl ColdChainMonitor {
             let meets = kind.meets(temp_c);
             if kind.cumulative() {
                 if meets && tr.start.is_none() {
-                    tr.start = Some(t_s);
+                    tr.start = Some(t_ms);
                 }
-                if !tr.fired && tr.acc_s >= kind.duration_s() {
+                if !tr.fired && tr.acc_ms >= kind.duration_ms() {
                     tr.fired = true;
-                    raised[i] = Some(Alarm { kind, start_s: tr.start.unwrap_or(t_s), trigger_s: t_s });
+                    raised[i] = Some(Alarm { kind, start_ms: tr.start.unwrap_or(t_ms), trigger_ms: t_ms });
                 }
             } else if meets {
-                let t0 = *tr.start.get_or_insert(t_s);
-                if !tr.fired && t_s - t0 >= kind.duration_s() {
+                let t0 = *tr.start.get_or_insert(t_ms);
+                // t0 ≤ t_ms: times only increase past the guard above.
+                if !tr.fired && t_ms - t0 >= kind.duration_ms() {
                     tr.fired = true;
-                    raised[i] = Some(Alarm { kind, start_s: t0, trigger_s: t_s });
+                    raised[i] = Some(Alarm { kind, start_ms: t0, trigger_ms: t_ms });
                 }
             } else {
                 *tr = Tracker::default();
             }
         }
-        self.log_excursion(t_s, temp_c);
+        self.log_excursion(t_ms, temp_c);
         raised
     }
 
-    fn log_excursion(&mut self, t_s: f32, temp_c: f32) {
+    fn log_excursion(&mut self, t_ms: u64, temp_c: f32) {
         let side = if temp_c < 2.0 {
             Some(Side::Cold)
         } else if temp_c > 8.0 {
@@ -249,7 +270,7 @@ impl ColdChainMonitor {
         };
         match (side, self.open.as_mut()) {
             (Some(s), Some(e)) if e.side == s => {
-                e.end_s = t_s;
+                e.end_s = crate::event::secs_f32(t_ms);
                 e.extreme_c = if s == Side::Cold { min_f32(e.extreme_c, temp_c) } else { max_f32(e.extreme_c, temp_c) };
             }
             (side, _) => {
@@ -257,6 +278,7 @@ impl ColdChainMonitor {
                     self.log.write(done);
                 }
                 if let Some(s) = side {
+                    let t_s = crate::event::secs_f32(t_ms);
                     self.open = Some(Excursion { side: s, start_s: t_s, end_s: t_s, extreme_c: temp_c });
                     self.excursions = self.excursions.saturating_add(1);
                 }
@@ -266,7 +288,7 @@ impl ColdChainMonitor {
 
     /// Mean kinetic temperature so far, °C (`None` before two samples).
     pub fn mkt_c(&self) -> Option<f32> {
-        (self.elapsed_s > 0.0 && self.mkt_mean > 0.0)
+        (self.elapsed_ms > 0 && self.mkt_mean > 0.0)
             .then(|| 1.0 / (1.0 / T_REF_K - libm::logf(self.mkt_mean) / MKT_DH_OVER_R_K) - 273.15)
     }
 
@@ -280,19 +302,34 @@ impl ColdChainMonitor {
         self.last.map(|_| self.max_c)
     }
 
-    /// Time covered by the record (first to last sample), s: the excursions' clock.
+    /// Time covered by the record (first to last sample), ms: the excursions' clock.
+    pub fn recorded_ms(&self) -> u64 {
+        self.elapsed_ms
+    }
+
+    /// Time below +2 °C, ms.
+    pub fn time_below_2_ms(&self) -> u64 {
+        self.below_2_ms
+    }
+
+    /// Time above +8 °C, ms.
+    pub fn time_above_8_ms(&self) -> u64 {
+        self.above_8_ms
+    }
+
+    /// [`Self::recorded_ms`] as f32 seconds (the history record's form).
     pub fn recorded_s(&self) -> f32 {
-        self.elapsed_s
+        crate::event::secs_f32(self.elapsed_ms)
     }
 
-    /// Time below +2 °C, s.
+    /// [`Self::time_below_2_ms`] as f32 seconds.
     pub fn time_below_2_s(&self) -> f32 {
-        self.below_2_s
+        crate::event::secs_f32(self.below_2_ms)
     }
 
-    /// Time above +8 °C, s.
+    /// [`Self::time_above_8_ms`] as f32 seconds.
     pub fn time_above_8_s(&self) -> f32 {
-        self.above_8_s
+        crate::event::secs_f32(self.above_8_ms)
     }
 
     /// The newest closed excursions and the one under way, oldest first.
@@ -310,7 +347,7 @@ impl ColdChainMonitor {
 mod tests {
     use super::*;
 
-    fn feed(m: &mut ColdChainMonitor, samples: impl IntoIterator<Item = (f32, f32)>) -> std::vec::Vec<Alarm> {
+    fn feed(m: &mut ColdChainMonitor, samples: impl IntoIterator<Item = (u64, f32)>) -> std::vec::Vec<Alarm> {
         samples.into_iter().flat_map(|(t, c)| m.push(t, c)).flatten().collect()
     }
 
@@ -329,16 +366,16 @@ mod tests {
             let mut m = ColdChainMonitor::new();
             let s = (0..=(600 + dur) / step).map(|i| {
                 let t = i * step;
-                (t as f32, if t >= 600 { hot } else { 5.0 })
+                (u64::from(t) * 1000, if t >= 600 { hot } else { 5.0 })
             });
             let a = feed(&mut m, s);
             assert_eq!(a.len(), 1, "{kind:?}: {a:?}");
-            assert_eq!((a[0].kind, a[0].start_s, a[0].trigger_s), (kind, 600.0, (600 + dur) as f32));
+            assert_eq!((a[0].kind, a[0].start_ms, a[0].trigger_ms), (kind, 600_000, u64::from(600 + dur) * 1000));
             // One sample short: no alarm.
             let mut m = ColdChainMonitor::new();
             let s = (0..(600 + dur) / step).map(|i| {
                 let t = i * step;
-                (t as f32, if t >= 600 { hot } else { 5.0 })
+                (u64::from(t) * 1000, if t >= 600 { hot } else { 5.0 })
             });
             assert!(feed(&mut m, s).is_empty(), "{kind:?} fired early");
             // Interrupted by one sample just on the safe side of the threshold: no alarm.
@@ -346,7 +383,7 @@ mod tests {
             let s = (0..=(600 + dur) / step).map(|i| {
                 let t = i * step;
                 (
-                    t as f32,
+                    u64::from(t) * 1000,
                     if t == 1200 {
                         cold
                     } else if t >= 600 {
@@ -360,6 +397,105 @@ mod tests {
         }
     }
 
+    /// Day 89 on the board's clock, ms.
+    const DAY_89_MS: u64 = 89 * 86_400_000;
+
+    /// What a clock in f32 seconds would have read: even correctly rounded, f32 steps by 0.5 s
+    /// between 48.5 and 97 days.
+    fn f32_s(t_ms: u64) -> f32 {
+        (t_ms as f64 / 1000.0) as f32
+    }
+
+    /// Samples every 10 s from day 89, 249 ms past the second (an f32 clock reads 0.249 s
+    /// early there), with `temp(k)`; sample `short_k` comes `short_ms` early, as a busy
+    /// executor's timestamp can.
+    fn day_89(n: usize, temp: impl Fn(usize) -> f32, short_k: usize, short_ms: u64) -> std::vec::Vec<(u64, f32)> {
+        (0..n)
+            .map(|k| {
+                let t = DAY_89_MS + 249 + 10_000 * k as u64;
+                (if k == short_k { t - short_ms } else { t }, temp(k))
+            })
+            .collect()
+    }
+
+    /// A continuous alarm at day 89 triggers at the first sample whose distance from the run's
+    /// start reaches the duration, to the millisecond: the sample exactly 10 h (60 min) after
+    /// the start, and the next one if that sample is 1 ms short. f32 seconds could not tell
+    /// the two apart and fire one sample early in the second case.
+    #[test]
+    fn continuous_alarms_at_day_89_are_exact_to_the_sample() {
+        for (kind, hot, dur) in [(AlarmKind::Heat10h, 9.0f32, 3600usize), (AlarmKind::Freeze60min, -1.0, 360)] {
+            let k0 = 30;
+            let end = k0 + dur;
+            for short_ms in [0u64, 1] {
+                let s = day_89(end + 5, |k| if k >= k0 { hot } else { 5.0 }, end, short_ms);
+                let mut m = ColdChainMonitor::new();
+                let a: std::vec::Vec<Alarm> =
+                    feed(&mut m, s.iter().copied()).into_iter().filter(|a| a.kind == kind).collect();
+                let want = if short_ms == 0 { end } else { end + 1 };
+                assert_eq!(a.len(), 1, "{kind:?}: {a:?}");
+                assert_eq!((a[0].start_ms, a[0].trigger_ms), (s[k0].0, s[want].0), "{kind:?}, {short_ms} ms short");
+                // The same rule on f32 seconds.
+                let dur_s = kind.duration_ms() as f32 / 1000.0;
+                let f32_at = (k0..s.len()).find(|&k| f32_s(s[k].0) - f32_s(s[k0].0) >= dur_s);
+                assert_eq!(f32_at, Some(end), "{kind:?}: f32 seconds fire at the nominal sample");
+                if short_ms > 0 {
+                    assert_ne!(f32_at, Some(want), "{kind:?}: f32 seconds would have been exact too");
+                }
+            }
+        }
+    }
+
+    /// `ship_30c_10h` at day 89, across a cool spell and a 30 min gap in the samples (the board
+    /// was off while hot; the gap belongs to the hot sample before it): 4 h hot, 2 h at 20 °C,
+    /// 40 hot samples, the gap, then hot again. It triggers at the sample where the sum reaches
+    /// 10 h; with the gap 1 ms short, one sample later. f32 seconds round the gap's
+    /// millisecond away and fire a sample early.
+    #[test]
+    fn cumulative_alarm_at_day_89_is_exact_to_the_sample_across_a_gap() {
+        for short_ms in [0u64, 1] {
+            let mut s = std::vec::Vec::new();
+            let mut t = DAY_89_MS + 249;
+            for (n, c) in [(1440, 31.0f32), (720, 20.0), (40, 31.0)] {
+                for _ in 0..n {
+                    s.push((t, c));
+                    t += 10_000;
+                }
+            }
+            // The last hot sample's interval is the gap: 30 min (minus `short_ms`).
+            t += 1_800_000 - 10_000 - short_ms;
+            let after_gap = s.len();
+            for _ in 0..1950 {
+                s.push((t, 31.0));
+                t += 10_000;
+            }
+            // 1440 + 39 intervals of 10 s and the 30 min gap make 4 h 36 min 30 s; 1941 more
+            // intervals make 10 h.
+            let want = after_gap + 1941 + short_ms as usize;
+            let mut m = ColdChainMonitor::new();
+            let a: std::vec::Vec<Alarm> =
+                feed(&mut m, s.iter().copied()).into_iter().filter(|a| a.kind == AlarmKind::Ship30c10h).collect();
+            assert_eq!(a.len(), 1, "{a:?}");
+            assert_eq!((a[0].start_ms, a[0].trigger_ms), (s[0].0, s[want].0), "gap {short_ms} ms short");
+            // The same rule on f32 seconds.
+            let mut acc = 0.0f32;
+            let mut f32_at = None;
+            for k in 1..s.len() {
+                if s[k - 1].1 >= 30.0 {
+                    acc += f32_s(s[k].0) - f32_s(s[k - 1].0);
+                }
+                if acc >= 36_000.0 {
+                    f32_at = Some(k);
+                    break;
+                }
+            }
+            assert_eq!(f32_at, Some(after_gap + 1941), "f32 seconds fire at the nominal sample");
+            if short_ms > 0 {
+                assert_ne!(f32_at, Some(want), "f32 seconds would have been exact too");
+            }
+        }
+    }
+
     #[test]
     fn cumulative_alarm_counts_intervals_by_their_start_sample() {
         // Alternate an hour at 31 °C with an hour at 20 °C, sampled every 600 s.
@@ -368,13 +504,13 @@ mod tests {
         let mut t = 0u32;
         while t <= 20 * 3600 {
             let hot = (t / 3600).is_multiple_of(2);
-            alarms.extend(m.push(t as f32, if hot { 31.0 } else { 20.0 }).into_iter().flatten());
+            alarms.extend(m.push(u64::from(t) * 1000, if hot { 31.0 } else { 20.0 }).into_iter().flatten());
             t += 600;
         }
         // The 10th hot hour ends at 19 h: (0–1 h, 2–3 h, …, 18–19 h) — trigger at 19 h = 68 400 s.
         let a: std::vec::Vec<_> = alarms.iter().filter(|a| a.kind == AlarmKind::Ship30c10h).collect();
         assert_eq!(a.len(), 1);
-        assert_eq!((a[0].start_s, a[0].trigger_s), (0.0, 68_400.0));
+        assert_eq!((a[0].start_ms, a[0].trigger_ms), (0, 68_400_000));
         // One sample earlier the sum is 9 h 50 min.
         let mut m = ColdChainMonitor::new();
         let mut n = 0;
@@ -382,7 +518,7 @@ mod tests {
         while t < 68_400 {
             let hot = (t / 3600).is_multiple_of(2);
             n += m
-                .push(t as f32, if hot { 31.0 } else { 20.0 })
+                .push(u64::from(t) * 1000, if hot { 31.0 } else { 20.0 })
                 .iter()
                 .flatten()
                 .filter(|a| a.kind == AlarmKind::Ship30c10h)
@@ -396,14 +532,14 @@ mod tests {
     fn mkt_of_a_constant_is_that_constant_and_weights_heat() {
         let mut m = ColdChainMonitor::new();
         for i in 0..100 {
-            m.push(i as f32 * 10.0, 5.0);
+            m.push(i * 10_000, 5.0);
         }
         assert!((m.mkt_c().unwrap() - 5.0).abs() < 1e-3);
         // Half the time at 2 °C, half at 8 °C: MKT is above the 5 °C arithmetic mean.
         // Reference (f64): Tk = 10000/−ln((e^{−10000/275.15} + e^{−10000/281.15})/2) − 273.15 = 5.1277 °C.
         let mut m = ColdChainMonitor::new();
         for i in 0..=1000 {
-            m.push(i as f32 * 10.0, if i % 2 == 0 { 2.0 } else { 8.0 });
+            m.push(i * 10_000, if i % 2 == 0 { 2.0 } else { 8.0 });
         }
         let mkt = m.mkt_c().unwrap();
         let want = {
@@ -429,7 +565,7 @@ mod tests {
         let check = |temps: &[f64], tol: f64| {
             let mut m = ColdChainMonitor::new();
             for (i, c) in temps.iter().enumerate() {
-                m.push(i as f32 * 10.0, *c as f32);
+                m.push(i as u64 * 10_000, *c as f32);
             }
             let got = f64::from(m.mkt_c().unwrap());
             let want = mkt_f64(temps);
@@ -451,11 +587,11 @@ mod tests {
     fn the_log_keeps_the_newest_excursions_and_counts_all() {
         let mut m = ColdChainMonitor::new();
         // 20 warm excursions of 2 samples each, the last one still under way.
-        let mut t = 0.0;
+        let mut t = 0u64;
         for i in 0..20 {
             for c in [5.0, 9.0 + i as f32, 9.0] {
                 m.push(t, c);
-                t += 10.0;
+                t += 10_000;
             }
         }
         assert_eq!(m.excursion_count(), 20);
@@ -465,7 +601,7 @@ mod tests {
         let extremes: std::vec::Vec<f32> = ex.iter().map(|e| e.extreme_c).collect();
         let want: std::vec::Vec<f32> = (3..20).map(|i| 9.0 + i as f32).collect();
         assert_eq!(extremes, want);
-        assert_eq!(ex.last().map(|e| e.end_s), Some(t - 10.0));
+        assert_eq!(ex.last().map(|e| e.end_s), Some(((t - 10_000) / 1000) as f32));
     }
 
     #[test]
@@ -473,19 +609,20 @@ mod tests {
         let mut m = ColdChainMonitor::new();
         let temps = [5.0, 1.5, 1.0, 5.0, 9.0, 10.0, 9.5, 5.0];
         for (i, c) in temps.iter().enumerate() {
-            m.push(i as f32 * 10.0, *c);
+            m.push(i as u64 * 10_000, *c);
         }
         assert_eq!(m.min_c(), Some(1.0));
         assert_eq!(m.max_c(), Some(10.0));
-        assert_eq!(m.time_below_2_s(), 20.0);
-        assert_eq!(m.time_above_8_s(), 30.0);
+        assert_eq!(m.time_below_2_ms(), 20_000);
+        assert_eq!(m.time_above_8_ms(), 30_000);
         let ex: std::vec::Vec<_> = m.excursions().copied().collect();
         assert_eq!(ex.len(), 2);
         assert_eq!((ex[0].side, ex[0].start_s, ex[0].end_s, ex[0].extreme_c), (Side::Cold, 10.0, 20.0, 1.0));
         assert_eq!((ex[1].side, ex[1].extreme_c), (Side::Warm, 10.0));
         // Glitches are ignored.
-        m.push(f32::NAN, 5.0);
-        m.push(5.0, 5.0);
+        m.push(80_000, f32::NAN);
+        m.push(5_000, 5.0);
+        m.push(70_000, 12.0);
         assert_eq!(m.max_c(), Some(10.0));
     }
 }

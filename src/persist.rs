@@ -690,8 +690,8 @@ impl Recorder {
 
     /// Records one sample: the temperature the controller saw (`temp_c` of the step's output,
     /// as `hter sim` and the processor-in-the-loop runner record it).
-    pub fn push(&mut self, t_s: f32, temp_c: f32) -> Recorded {
-        let raised = self.monitor.push(t_s, temp_c);
+    pub fn push(&mut self, t_ms: u64, temp_c: f32) -> Recorded {
+        let raised = self.monitor.push(t_ms, temp_c);
         let mut alarm = false;
         for a in raised.iter().flatten() {
             self.boot.note_alarm(a.kind);
@@ -820,7 +820,7 @@ mod tests {
     fn monitor(samples: &[(f32, f32)]) -> ColdChainMonitor {
         let mut m = ColdChainMonitor::new();
         for &(t, c) in samples {
-            m.push(t, c);
+            m.push(t as u64 * 1000, c);
         }
         m
     }
@@ -891,16 +891,16 @@ mod tests {
         assert_eq!(boot.alarms_of(AlarmKind::Heat10h), 1);
         // 359 samples at 5 °C: nothing to store; the 360th stores.
         for i in 0..359 {
-            assert!(!rec.push(i as f32 * 10.0, 5.0).save_due, "sample {i}");
+            assert!(!rec.push(i * 10_000, 5.0).save_due, "sample {i}");
         }
-        assert!(rec.push(3590.0, 5.0).save_due, "hourly store");
+        assert!(rec.push(3_590_000, 5.0).save_due, "hourly store");
         let hourly = rec.history();
         assert_eq!(hourly.recorded_s, 86_400 + 3590);
         // Freezing: the freeze_60min alarm stores at once, counted once; the excursion is on
         // the record's clock.
         let mut stored_alarm = None;
         for i in 0..=360 {
-            let out = rec.push(3600.0 + i as f32 * 10.0, -1.0);
+            let out = rec.push(3_600_000 + i * 10_000, -1.0);
             if out.raised.iter().flatten().any(|a| a.kind == AlarmKind::Freeze60min) {
                 assert!(out.save_due, "an alarm is stored at once");
                 stored_alarm = Some(rec.history());

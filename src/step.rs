@@ -185,8 +185,10 @@ impl CarrierConfig {
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct StepInput {
-    /// Sample time, s (f32: 0.25 s resolution after 30 days, ample at Ts = 10 s).
-    pub t_s: f32,
+    /// Sample time, ms, on a monotonic clock (integer: every duration the step and the
+    /// cold-chain rules measure stays exact to the millisecond for the whole mission, where f32
+    /// seconds step by 0.5 s at day 89).
+    pub t_ms: u64,
     /// Oversampled RTD conversion, counts of the front end's full scale.
     pub counts: u32,
     /// Requested setpoint, °C.
@@ -246,8 +248,8 @@ pub struct Carrier<C: Controller> {
     last_counts: Option<u32>,
     same_counts: u16,
     spike_run: u8,
-    spike_times: [f32; 3],
-    spikes_reported_s: Option<f32>,
+    spike_times: [Option<u64>; 3],
+    spikes_reported_ms: Option<u64>,
     history: [f32; HISTORY],
     history_len: usize,
     history_head: usize,
@@ -261,14 +263,14 @@ pub struct Carrier<C: Controller> {
     pending_reset: Option<crate::persist::ResetCause>,
     /// A fail-safe stop of the previous boot to report with the next sample.
     pending_stop: Option<crate::failsafe::StopKind>,
-    /// When the supply probe under way began.
-    probe: Option<f32>,
-    /// When the last supply probe began.
-    probe_s: Option<f32>,
-    /// When the freeze guard last tripped.
-    trip_s: Option<f32>,
-    /// When the freeze guard last tripped with cooling not requested.
-    unrequested_trip_s: Option<f32>,
+    /// When the supply probe under way began, ms.
+    probe: Option<u64>,
+    /// When the last supply probe began, ms.
+    probe_ms: Option<u64>,
+    /// When the freeze guard last tripped, ms.
+    trip_ms: Option<u64>,
+    /// When the freeze guard last tripped with cooling not requested, ms.
+    unrequested_trip_ms: Option<u64>,
     /// Filtered temperature when the current run of full duty began.
     on_start_c: f32,
     req_off_run: u16,
@@ -295,9 +297,9 @@ pub struct Carrier<C: Controller> {
     /// Samples since the applied duty was last strictly between 0 and 1.
     since_modulated: u32,
     lid_reported: bool,
-    /// The setpoint of the last sample and when the load first came within 0.3 °C of it.
+    /// The setpoint of the last sample and when the load first came within 0.3 °C of it, ms.
     last_w: f32,
-    reached_s: Option<f32>,
+    reached_ms: Option<u64>,
     switch: SwitchCheck,
 }
 
@@ -342,18 +344,18 @@ impl<C: Controller> Carrier<C> {
             last_counts: None,
             same_counts: 0,
             spike_run: 0,
-            spike_times: [f32::NEG_INFINITY; 3],
-            spikes_reported_s: None,
+            spike_times: [None; 3],
+            spikes_reported_ms: None,
             history: [0.0; HISTORY],
             history_len: 0,
             history_head: 0,
             off_run: 0,
             on_run: 0,
             on_start_c: 0.0,
-            unrequested_trip_s: None,
-            trip_s: None,
+            unrequested_trip_ms: None,
+            trip_ms: None,
             probe: None,
-            probe_s: None,
+            probe_ms: None,
             pending_reset: None,
             pending_stop: None,
             limp_on: false,
@@ -374,7 +376,7 @@ impl<C: Controller> Carrier<C> {
             since_modulated: u32::MAX,
             lid_reported: false,
             last_w: f32::NAN,
-            reached_s: None,
+            reached_ms: None,
             switch: SwitchCheck::NEW,
         }
     }
@@ -418,7 +420,7 @@ impl<C: Controller> Carrier<C> {
     /// be, until a valid sample comes. `input.counts` is ignored (and does not feed the stuck
     /// check).
     pub fn step_with_reference_fault(&mut self, input: &StepInput) -> StepOutput {
-        self.run(input.t_s, Err(EventKind::ReferenceOutOfRange), input.setpoint_c, true)
+        self.run(input.t_ms, Err(EventKind::ReferenceOutOfRange), input.setpoint_c, true)
     }
 
     // ---- supply-switch check ----
@@ -495,15 +497,15 @@ impl<C: Controller> Carrier<C> {
             Ok(_) if self.same_counts.saturating_add(1) >= self.cfg.stuck_samples => Err(EventKind::SensorStuck),
             m => m,
         };
-        self.run(input.t_s, measured, input.setpoint_c, true)
+        self.run(input.t_ms, measured, input.setpoint_c, true)
     }
 
     /// Runs one sample from an already converted temperature, skipping the ADC and RTD
     /// conversion (ideal-measurement plants, replay of temperature logs). The plausibility
     /// check, filter, controller and safety still apply.
-    pub fn step_celsius(&mut self, t_s: f32, temp: Celsius, setpoint_c: f32) -> StepOutput {
+    pub fn step_celsius(&mut self, t_ms: u64, temp: Celsius, setpoint_c: f32) -> StepOutput {
         let measured = self.plausible(temp);
-        self.run(t_s, measured, setpoint_c, false)
+        self.run(t_ms, measured, setpoint_c, false)
     }
 
     /// Sensor offset: a reading that steps by more than physics allows and stays there is a
@@ -553,9 +555,11 @@ impl<C: Controller> Carrier<C> {
         }
     }
 
-    fn run(&mut self, t_s: f32, raw: Result<Celsius, EventKind>, setpoint_c: f32, sensor: bool) -> StepOutput {
+    fn run(&mut self, t_ms: u64, raw: Result<Celsius, EventKind>, setpoint_c: f32, sensor: bool) -> StepOutput {
         let mut events = Events::default();
-        let mut emit = |kind| events.push(Event { t_s, kind });
+        let mut emit = |kind| events.push(Event { t_ms, kind });
+        // Time since an earlier instant, ms (0 if the clock went back: "just now").
+        let since = move |t0: u64| t_ms.saturating_sub(t0);
         if let Some(cause) = self.pending_reset.take() {
             emit(EventKind::Restarted(cause));
         }
@@ -622,12 +626,12 @@ impl<C: Controller> Carrier<C> {
         if spike {
             self.spike_run = self.spike_run.saturating_add(1);
             self.spike_times.copy_within(0..2, 1);
-            self.spike_times[0] = t_s;
-            let burst = t_s - self.spike_times[2] <= 3600.0;
-            let quiet = self.spikes_reported_s.is_none_or(|r| t_s - r > 3600.0);
+            self.spike_times[0] = Some(t_ms);
+            let burst = self.spike_times[2].is_some_and(|t0| since(t0) <= 3_600_000);
+            let quiet = self.spikes_reported_ms.is_none_or(|r| since(r) > 3_600_000);
             if burst && quiet {
                 emit(EventKind::SensorSpikes);
-                self.spikes_reported_s = Some(t_s);
+                self.spikes_reported_ms = Some(t_ms);
             }
             if self.spike_run >= 3 {
                 self.filter.reset();
@@ -676,7 +680,7 @@ impl<C: Controller> Carrier<C> {
         self.setpoint_clamped = clamped;
 
         // 5: controller (only with a trustworthy measurement).
-        let ci = ControlInput { t_s, y_c: temp_c, w_c: w };
+        let ci = ControlInput { y_c: temp_c, w_c: w };
         let requested = if self.sensor_fault.is_none() { self.controller.update(&ci) } else { 0.0 };
         let mut duty = if requested.is_finite() {
             Duty::saturating(requested)
@@ -712,7 +716,7 @@ impl<C: Controller> Carrier<C> {
             let predicted = temp_c + min_f32(self.slope_c_per_s, 0.0) * self.cfg.freeze_lookahead_s;
             if !self.freeze_guard && predicted <= self.cfg.freeze_cut_c {
                 self.freeze_guard = true;
-                self.trip_s = Some(t_s);
+                self.trip_ms = Some(t_ms);
                 emit(EventKind::FreezeGuardTripped);
                 // No cooling asked for a minute, and either falling fast without slowing down
                 // or tripping for the second time in half an hour: only a shorted SSR does
@@ -725,12 +729,12 @@ impl<C: Controller> Carrier<C> {
                 // cold ambient pulls the load down once, and needs hours to warm it past the
                 // release and back.
                 if !self.supply_cut && self.req_off_run >= 6 {
-                    let again = self.unrequested_trip_s.is_some_and(|t0| t_s - t0 <= 1800.0);
+                    let again = self.unrequested_trip_ms.is_some_and(|t0| since(t0) <= 1_800_000);
                     if again || (self.slope_c_per_s < -0.003 && drop_c >= self.last_drop_c) {
                         self.supply_cut = true;
                         emit(EventKind::SsrStuckOn);
                     } else {
-                        self.unrequested_trip_s = Some(t_s);
+                        self.unrequested_trip_ms = Some(t_ms);
                     }
                 }
             }
@@ -740,7 +744,7 @@ impl<C: Controller> Carrier<C> {
             // trip comes too late (mission 28631). Not outside that window: the coast after a
             // pull-down does the same for a minute or two on light carriers.
             if !self.supply_cut
-                && self.trip_s.is_some_and(|t0| t_s - t0 <= 1800.0)
+                && self.trip_ms.is_some_and(|t0| since(t0) <= 1_800_000)
                 && self.req_off_run >= 6
                 && drop_c > 0.1
                 && drop_c >= self.last_drop_c
@@ -813,17 +817,17 @@ impl<C: Controller> Carrier<C> {
                             self.supply_cut = true;
                             emit(EventKind::SsrStuckOn);
                         }
-                    } else if self.req_off_run == 0 || t_s - t0 >= 300.0 {
+                    } else if self.req_off_run == 0 || since(t0) >= 300_000 {
                         self.probe = None; // no verdict: cooling wanted again, or time is up
                     }
                 }
                 None => {
-                    let idle = self.probe_s.is_none_or(|p| t_s - p >= 3600.0);
+                    let idle = self.probe_ms.is_none_or(|p| since(p) >= 3_600_000);
                     if idle && !self.supply_cut && self.req_off_run >= 60 && temp_c < w - 1.0 {
                         if let Some(past) = ago(30) {
                             if past - temp_c > 0.05 {
-                                self.probe = Some(t_s);
-                                self.probe_s = Some(t_s);
+                                self.probe = Some(t_ms);
+                                self.probe_ms = Some(t_ms);
                             }
                         }
                     }
@@ -877,11 +881,11 @@ impl<C: Controller> Carrier<C> {
         // show at 23 % two hours later and hide a lid opening behind). A load that warms up to
         // the setpoint (a cold ambient) keeps them: its zero duty is the holding duty until then.
         if (w - self.last_w).abs() > 0.01 || !self.last_w.is_finite() {
-            self.reached_s = None;
+            self.reached_ms = None;
         }
         self.last_w = w;
-        if self.reached_s.is_none() && (temp_c - w).abs() < 0.3 {
-            self.reached_s = Some(t_s);
+        if self.reached_ms.is_none() && (temp_c - w).abs() < 0.3 {
+            self.reached_ms = Some(t_ms);
             if self.slope_c_per_s < 0.0 {
                 self.duty_n = 0;
                 self.duty_fast = None;
@@ -906,7 +910,9 @@ impl<C: Controller> Carrier<C> {
         let settled = averaged
             && modulated
             && mode == Mode::Normal
-            && self.reached_s.is_some_and(|r| t_s - r >= self.cfg.lid_fast_s);
+            && self
+                .reached_ms
+                .is_some_and(|r| since(r).min(u64::from(u32::MAX)) as u32 as f32 >= 1000.0 * self.cfg.lid_fast_s);
         // Either the holding duty jumped (a controller that keeps the load on target), or full
         // cooling for 10 min no longer holds the load within 1 °C (one that cannot, On-Off).
         let duty_jump = (temp_c - w).abs() < 1.0 && fast - self.duty_slow > self.cfg.lid_duty_rise;
@@ -993,7 +999,7 @@ mod tests {
     #[test]
     fn measures_within_the_resolution() {
         let mut c = pi_carrier();
-        let out = c.step(&StepInput { t_s: 0.0, counts: counts_at(4.0), setpoint_c: 4.0 });
+        let out = c.step(&StepInput { t_ms: 0, counts: counts_at(4.0), setpoint_c: 4.0 });
         assert!((out.temp_c.0 - 4.0).abs() < 0.01, "{:?}", out.temp_c);
         assert_eq!(out.mode, Mode::Normal);
         assert!(out.supply_enable);
@@ -1002,16 +1008,16 @@ mod tests {
     #[test]
     fn open_sensor_stops_cooling_on_the_first_sample_and_recovers() {
         let mut c = pi_carrier();
-        let warm = c.step(&StepInput { t_s: 0.0, counts: counts_at(10.0), setpoint_c: 4.0 });
+        let warm = c.step(&StepInput { t_ms: 0, counts: counts_at(10.0), setpoint_c: 4.0 });
         assert!(warm.duty.get() > 0.5);
-        let open = c.step(&StepInput { t_s: 10.0, counts: 65_535, setpoint_c: 4.0 });
+        let open = c.step(&StepInput { t_ms: 10_000, counts: 65_535, setpoint_c: 4.0 });
         assert_eq!(open.duty, Duty::OFF);
         assert_eq!(open.mode, Mode::SensorFault);
-        assert_eq!(open.events.iter().next().map(|e| (e.kind, e.t_s)), Some((EventKind::SensorOpen, 10.0)));
+        assert_eq!(open.events.iter().next().map(|e| (e.kind, e.t_ms)), Some((EventKind::SensorOpen, 10_000)));
         // No repeated event while the fault persists.
-        let still = c.step(&StepInput { t_s: 20.0, counts: 65_535, setpoint_c: 4.0 });
+        let still = c.step(&StepInput { t_ms: 20_000, counts: 65_535, setpoint_c: 4.0 });
         assert!(still.events.is_empty());
-        let back = c.step(&StepInput { t_s: 30.0, counts: counts_at(5.0), setpoint_c: 4.0 });
+        let back = c.step(&StepInput { t_ms: 30_000, counts: counts_at(5.0), setpoint_c: 4.0 });
         assert_eq!(back.mode, Mode::Normal);
         assert_eq!(back.events.iter().next().map(|e| e.kind), Some(EventKind::SensorRecovered));
     }
@@ -1019,10 +1025,10 @@ mod tests {
     #[test]
     fn short_and_implausible_readings_are_faults() {
         let mut c = pi_carrier();
-        let short = c.step(&StepInput { t_s: 0.0, counts: 10, setpoint_c: 4.0 });
+        let short = c.step(&StepInput { t_ms: 0, counts: 10, setpoint_c: 4.0 });
         assert_eq!(short.events.iter().next().map(|e| e.kind), Some(EventKind::SensorShort));
         let cold = CarrierConfig::DEFAULT.adc.counts(Ohms(80.0)); // ≈ −50 °C
-        let out = c.step(&StepInput { t_s: 10.0, counts: cold, setpoint_c: 4.0 });
+        let out = c.step(&StepInput { t_ms: 10_000, counts: cold, setpoint_c: 4.0 });
         assert_eq!(out.events.iter().next().map(|e| e.kind), Some(EventKind::SensorOutOfRange));
         assert_eq!(out.duty, Duty::OFF);
     }
@@ -1030,10 +1036,10 @@ mod tests {
     #[test]
     fn setpoint_below_two_degrees_is_clamped() {
         let mut c = pi_carrier();
-        let out = c.step(&StepInput { t_s: 0.0, counts: counts_at(4.0), setpoint_c: -5.0 });
+        let out = c.step(&StepInput { t_ms: 0, counts: counts_at(4.0), setpoint_c: -5.0 });
         assert_eq!(out.setpoint_c.0, 2.0);
         assert_eq!(out.events.iter().next().map(|e| e.kind), Some(EventKind::SetpointClamped));
-        let nan = c.step(&StepInput { t_s: 10.0, counts: counts_at(4.0), setpoint_c: f32::NAN });
+        let nan = c.step(&StepInput { t_ms: 10_000, counts: counts_at(4.0), setpoint_c: f32::NAN });
         assert!((2.0..=8.0).contains(&nan.setpoint_c.0));
     }
 
@@ -1043,31 +1049,28 @@ mod tests {
         let onoff = OnOff::new(OnOffConfig { hysteresis_c: 0.1 });
         let mut c = Carrier::new(CarrierConfig::DEFAULT, AnyController::OnOff(onoff));
         let mut temp = 9.0f32;
-        let mut t = 0.0;
+        let mut t = 0u64;
         while temp > 0.0 {
-            let out = c.step(&StepInput { t_s: t, counts: counts_at(temp), setpoint_c: 2.0 });
+            let out = c.step(&StepInput { t_ms: t, counts: counts_at(temp), setpoint_c: 2.0 });
             if out.mode == Mode::FreezeGuard {
                 assert_eq!(out.duty, Duty::OFF);
                 assert!(out.events.iter().any(|e| e.kind == EventKind::FreezeGuardTripped));
                 // It holds until the load is back above the release threshold.
                 for k in 1..20 {
-                    let back = c.step(&StepInput { t_s: t + 10.0 * k as f32, counts: counts_at(2.2), setpoint_c: 2.0 });
+                    let back = c.step(&StepInput { t_ms: t + 10_000 * k, counts: counts_at(2.2), setpoint_c: 2.0 });
                     assert_eq!(back.duty, Duty::OFF);
                 }
                 // Back above 2.5 °C (through the filter): cooling may resume.
                 let released = (0..3).any(|k| {
-                    let warm = c.step(&StepInput {
-                        t_s: t + 200.0 + 10.0 * k as f32,
-                        counts: counts_at(2.8),
-                        setpoint_c: 2.0,
-                    });
+                    let warm =
+                        c.step(&StepInput { t_ms: t + 200_000 + 10_000 * k, counts: counts_at(2.8), setpoint_c: 2.0 });
                     warm.mode == Mode::Normal && warm.events.iter().any(|e| e.kind == EventKind::FreezeGuardReleased)
                 });
                 assert!(released);
                 return out.temp_c.0;
             }
             temp -= rate_c_per_s * 10.0;
-            t += 10.0;
+            t += 10_000;
         }
         panic!("guard never tripped");
     }
@@ -1098,7 +1101,7 @@ mod robustness {
         fn arbitrary_counts_give_a_valid_duty(counts in proptest::collection::vec(prop_oneof![any::<u32>(), 0u32..70_000, Just(49_900u32)], 1..400)) {
             let mut c = Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)));
             for (k, n) in counts.iter().enumerate() {
-                let out = c.step(&StepInput { t_s: k as f32 * 10.0, counts: *n, setpoint_c: 4.0 });
+                let out = c.step(&StepInput { t_ms: k as u64 * 10_000, counts: *n, setpoint_c: 4.0 });
                 prop_assert!(out.duty.get().is_finite() && (0.0..=1.0).contains(&out.duty.get()));
             }
         }
@@ -1108,7 +1111,7 @@ mod robustness {
     fn a_week_of_identical_counts_does_not_overflow() {
         let mut c = Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)));
         for k in 0..70_000u32 {
-            let out = c.step(&StepInput { t_s: k as f32 * 10.0, counts: 49_900, setpoint_c: 4.0 });
+            let out = c.step(&StepInput { t_ms: k as u64 * 10_000, counts: 49_900, setpoint_c: 4.0 });
             if k > 20 {
                 assert_eq!(out.mode, Mode::SensorFault);
             }
@@ -1139,7 +1142,7 @@ mod switch_and_reference {
         for k in 0..n {
             c.observe_supply_v(12.0);
             c.observe_switched_rail_v(if enabled || shorted { 11.9 } else { 0.01 });
-            let out = c.step(&StepInput { t_s: k as f32 * 10.0, counts: counts_at(5.0) + k % 3, setpoint_c: w });
+            let out = c.step(&StepInput { t_ms: u64::from(k) * 10_000, counts: counts_at(5.0) + k % 3, setpoint_c: w });
             if out.events.iter().any(|e| e.kind == EventKind::SupplySwitchShorted) {
                 assert!(found.is_none(), "reported twice");
                 found = Some(k);
@@ -1173,7 +1176,8 @@ mod switch_and_reference {
     fn no_sense_no_test_and_no_check() {
         let mut c = carrier();
         for k in 0..1600u32 {
-            let out = c.step(&StepInput { t_s: k as f32 * 10.0, counts: counts_at(5.0) + k % 3, setpoint_c: 5.1 });
+            let out =
+                c.step(&StepInput { t_ms: u64::from(k) * 10_000, counts: counts_at(5.0) + k % 3, setpoint_c: 5.1 });
             assert!(out.supply_enable && out.events.iter().all(|e| e.kind != EventKind::SupplySwitchShorted));
         }
         // Test openings off (an identification run): the sense alone opens nothing.
@@ -1181,7 +1185,8 @@ mod switch_and_reference {
         let mut c = Carrier::new(cfg, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)));
         for k in 0..1600u32 {
             c.observe_switched_rail_v(11.9);
-            let out = c.step(&StepInput { t_s: k as f32 * 10.0, counts: counts_at(5.0) + k % 3, setpoint_c: 5.1 });
+            let out =
+                c.step(&StepInput { t_ms: u64::from(k) * 10_000, counts: counts_at(5.0) + k % 3, setpoint_c: 5.1 });
             assert!(out.supply_enable, "sample {k}");
         }
     }
@@ -1195,7 +1200,8 @@ mod switch_and_reference {
             c.observe_supply_v(12.0);
             open_for = if enabled { 0 } else { open_for + 1 };
             c.observe_switched_rail_v(if enabled || open_for == 1 { 11.9 } else { 0.05 });
-            let out = c.step(&StepInput { t_s: k as f32 * 10.0, counts: counts_at(5.0) + k % 3, setpoint_c: 5.1 });
+            let out =
+                c.step(&StepInput { t_ms: u64::from(k) * 10_000, counts: counts_at(5.0) + k % 3, setpoint_c: 5.1 });
             assert!(out.events.iter().all(|e| e.kind != EventKind::SupplySwitchShorted), "sample {k}");
             enabled = out.supply_enable;
             opened += u32::from(!enabled);
@@ -1206,7 +1212,8 @@ mod switch_and_reference {
         for k in 0..1600u32 {
             c.observe_supply_v(0.0);
             c.observe_switched_rail_v(0.3);
-            let out = c.step(&StepInput { t_s: k as f32 * 10.0, counts: counts_at(5.0) + k % 3, setpoint_c: 5.1 });
+            let out =
+                c.step(&StepInput { t_ms: u64::from(k) * 10_000, counts: counts_at(5.0) + k % 3, setpoint_c: 5.1 });
             assert!(out.events.iter().all(|e| e.kind != EventKind::SupplySwitchShorted), "sample {k}");
             opened += u32::from(!out.supply_enable);
         }
@@ -1216,16 +1223,16 @@ mod switch_and_reference {
     #[test]
     fn a_reference_fault_is_a_sensor_fault_until_a_valid_sample() {
         let mut c = carrier();
-        let warm = c.step(&StepInput { t_s: 0.0, counts: counts_at(9.0), setpoint_c: 4.0 });
+        let warm = c.step(&StepInput { t_ms: 0_000, counts: counts_at(9.0), setpoint_c: 4.0 });
         assert!(warm.duty.get() > 0.0);
-        let bad = StepInput { t_s: 10.0, counts: counts_at(9.0), setpoint_c: 4.0 };
+        let bad = StepInput { t_ms: 10_000, counts: counts_at(9.0), setpoint_c: 4.0 };
         let out = c.step_with_reference_fault(&bad);
         assert_eq!((out.mode, out.duty, out.supply_enable), (Mode::SensorFault, Duty::OFF, false));
         assert_eq!(out.events.iter().map(|e| e.kind).collect::<Vec<_>>(), [EventKind::ReferenceOutOfRange]);
         assert!(crate::alarm::needs_attention(EventKind::ReferenceOutOfRange));
-        let again = c.step_with_reference_fault(&StepInput { t_s: 20.0, ..bad });
+        let again = c.step_with_reference_fault(&StepInput { t_ms: 20_000, ..bad });
         assert!(again.events.is_empty(), "reported once while it lasts");
-        let back = c.step(&StepInput { t_s: 30.0, ..bad });
+        let back = c.step(&StepInput { t_ms: 30_000, ..bad });
         assert_eq!(back.mode, Mode::Normal);
         assert_eq!(back.events.iter().map(|e| e.kind).collect::<Vec<_>>(), [EventKind::SensorRecovered]);
     }

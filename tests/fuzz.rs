@@ -87,7 +87,7 @@ fn ten_million_arbitrary_samples_through_every_controller() {
                 3 => f32::from_bits(r as u32),
                 _ => 4.0,
             };
-            let out = carrier.step(&StepInput { t_s: i as f32 * 10.0, counts: c, setpoint_c });
+            let out = carrier.step(&StepInput { t_ms: i as u64 * 10_000, counts: c, setpoint_c });
             let d = out.duty.get();
             assert!(d.is_finite() && (0.0..=1.0).contains(&d), "{choice:?} sample {i}: duty {d}");
             assert!((2.0..=8.0).contains(&out.setpoint_c.0), "{choice:?} sample {i}: setpoint {:?}", out.setpoint_c);

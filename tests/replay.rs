@@ -46,7 +46,7 @@ fn replay(kind: u32, rows: &[(f32, u32, f32)]) -> Vec<(u32, String)> {
     let (mut c, _) = proto::carrier(kind).expect("known controller kind");
     rows.iter()
         .map(|&(t_s, counts, setpoint_c)| {
-            let out = c.step(&StepInput { t_s, counts, setpoint_c });
+            let out = c.step(&StepInput { t_ms: (f64::from(t_s) * 1000.0).round() as u64, counts, setpoint_c });
             let events: Vec<String> = out.events.iter().map(|e| e.kind.code().to_string()).collect();
             (out.duty.get().to_bits(), events.join("+"))
         })

@@ -109,18 +109,6 @@ static EVENTS: Channel<CriticalSectionRawMutex, Event, 16> = Channel::new();
 /// The user button was pressed: the alarm has been seen.
 static ACKNOWLEDGE: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
-/// The step's input from the board's millisecond clock: the one place the clock's unit meets
-/// the library's.
-fn step_input(t_ms: u64, counts: u32, setpoint_c: f32) -> StepInput {
-    StepInput { t_s: t_ms as f32 / 1000.0, counts, setpoint_c }
-}
-
-/// Whole seconds and the milliseconds after them, for logging `t_ms` as seconds at full
-/// resolution (`{=u64}.{=u32:03}`) without 64-bit float arithmetic.
-fn secs_ms(t_ms: u64) -> (u64, u32) {
-    (t_ms / 1000, (t_ms % 1000) as u32)
-}
-
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
     // Before the clocks and before flash is read: no boot path runs unwatched.
@@ -220,7 +208,7 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
     }
     for _ in 0..boot.pages_lost {
         history = recorder.note_flash_page_lost();
-        if EVENTS.try_send(Event { t_s: 0.0, kind: EventKind::FlashPageLost }).is_err() {
+        if EVENTS.try_send(Event { t_ms: 0, kind: EventKind::FlashPageLost }).is_err() {
             warn!("event queue full, dropped FlashPageLost");
         }
     }
@@ -242,20 +230,18 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
         if let Some(v) = s.switched_v {
             carrier.observe_switched_rail_v(v);
         }
-        let input = step_input(s.t_ms, s.counts, config::SETPOINT_C);
+        let input = StepInput { t_ms: s.t_ms, counts: s.counts, setpoint_c: config::SETPOINT_C };
         let out = if s.reference_ok { carrier.step(&input) } else { carrier.step_with_reference_fault(&input) };
-        // LEAD: the recorder's time follows the step's when `StepInput` carries `t_ms`.
-        let rec = recorder.push(input.t_s, out.temp_c.0);
-        let (t_sec, t_milli) = secs_ms(s.t_ms);
+        let rec = recorder.push(s.t_ms, out.temp_c.0);
         if ACKNOWLEDGE.try_take().is_some() {
-            info!("alarm acknowledged t={=u64}.{=u32:03}", t_sec, t_milli);
+            info!("alarm acknowledged t={=u64:ms}", s.t_ms);
             annunciator.acknowledge();
         }
         let alarm = annunciator.update(&out, &rec.raised);
         ACTUATION.signal(Actuation { duty: out.duty, supply_enable: out.supply_enable, alarm: alarm.is_on() });
         for e in out.events.iter() {
             // Never block the loop on logging: a full queue drops the event, and says so.
-            if EVENTS.try_send(*e).is_err() {
+            if EVENTS.try_send(e).is_err() {
                 warn!("event queue full, dropped {}", e);
             }
         }
@@ -263,7 +249,7 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             warn!("{} events of this step did not fit the step's list", out.events.dropped());
         }
         for a in rec.raised.iter().flatten() {
-            error!("ALARM {} t={} (condition since t={})", a.kind.name(), a.trigger_s, a.start_s);
+            error!("ALARM {} t={=u64:ms} (condition since t={=u64:ms})", a.kind.name(), a.trigger_ms, a.start_ms);
         }
         if rec.raised.iter().flatten().next().is_some() {
             // An alarm is stored as soon as the supply allows, without the boot's hold-off.
@@ -284,15 +270,14 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             status: out.status,
         };
         if TELEMETRY.try_send(record).is_err() {
-            warn!("telemetry queue full, dropped t={=u64}.{=u32:03}", t_sec, t_milli);
+            warn!("telemetry queue full, dropped t={=u64:ms}", s.t_ms);
         }
         samples = samples.wrapping_add(1);
         if samples.is_multiple_of(config::SUMMARY_SAMPLES) {
             let m = recorder.monitor();
             info!(
-                "coldchain t={=u64}.{=u32:03} mkt={} min={} max={} below2_s={} above8_s={} excursions={}",
-                t_sec,
-                t_milli,
+                "coldchain t={=u64:ms} mkt={} min={} max={} below2_s={} above8_s={} excursions={}",
+                s.t_ms,
                 m.mkt_c().unwrap_or(f32::NAN),
                 m.min_c().unwrap_or(f32::NAN),
                 m.max_c().unwrap_or(f32::NAN),
@@ -380,11 +365,9 @@ async fn telemetry() {
     loop {
         let r = TELEMETRY.receive().await;
         // `hter log2csv` parses this line: keep its `key=value` fields.
-        let (t_sec, t_milli) = secs_ms(r.t_ms);
         info!(
-            "t={=u64}.{=u32:03} temp={} sp={} duty={} mode={} counts={} supply={} rail={} alarm={}",
-            t_sec,
-            t_milli,
+            "t={=u64:ms} temp={} sp={} duty={} mode={} counts={} supply={} rail={} alarm={}",
+            r.t_ms,
             r.temp_c,
             r.setpoint_c,
             r.duty,
@@ -396,12 +379,12 @@ async fn telemetry() {
         );
         if let Some(st) = r.status {
             info!(
-                "est t={=u64}.{=u32:03} ctl={} theta={} trace_p={} pe={}",
-                t_sec, t_milli, st.mode, st.theta, st.trace_p, st.prediction_error
+                "est t={=u64:ms} ctl={} theta={} trace_p={} pe={}",
+                r.t_ms, st.mode, st.theta, st.trace_p, st.prediction_error
             );
         }
         while let Ok(e) = EVENTS.try_receive() {
-            warn!("event t={} {}", e.t_s, e.kind);
+            warn!("event t={=u64:ms} {}", e.t_ms, e.kind);
         }
     }
 }

@@ -56,21 +56,23 @@ pub struct Report {
     pub excursions: u32,
 }
 
-/// The library monitor fed on the record's time (the log's time less the gaps so far).
+/// The library monitor fed on the record's time (the log's time less the gaps so far), on its
+/// integer millisecond clock from `t0_s` (0, or the first sample if that is earlier).
 struct Record {
     m: ColdChainMonitor,
-    alarms: Vec<(&'static str, f32, f32)>,
-    /// Each sample given to the monitor: its record time and its time in the log, to give the
-    /// alarms back on the log's axis.
-    pushed: Vec<(f32, f64)>,
+    t0_s: f64,
+    alarms: Vec<(&'static str, u64, u64)>,
+    /// Each sample given to the monitor: its record time (ms) and its time in the log, to give
+    /// the alarms back on the log's axis.
+    pushed: Vec<(u64, f64)>,
 }
 
 impl Record {
     fn push(&mut self, record_t: f64, log_t: f64, c: f64) {
-        let record_t = record_t as f32;
-        self.pushed.push((record_t, log_t));
-        for a in self.m.push(record_t, c as f32).into_iter().flatten() {
-            self.alarms.push((a.kind.name(), a.start_s, a.trigger_s));
+        let record_ms = ((record_t - self.t0_s) * 1000.0).round().max(0.0) as u64;
+        self.pushed.push((record_ms, log_t));
+        for a in self.m.push(record_ms, c as f32).into_iter().flatten() {
+            self.alarms.push((a.kind.name(), a.start_ms, a.trigger_ms));
         }
     }
 }
@@ -92,7 +94,8 @@ pub fn report(t: &[f64], temp: &[Option<f64>]) -> Result<Report> {
     if readings < 2 {
         bail!("the log needs at least 2 samples with a temperature, it has {readings}");
     }
-    let mut rec = Record { m: ColdChainMonitor::new(), alarms: Vec::new(), pushed: Vec::new() };
+    let t0_s = t.first().copied().unwrap_or(0.0).min(0.0);
+    let mut rec = Record { m: ColdChainMonitor::new(), t0_s, alarms: Vec::new(), pushed: Vec::new() };
     let mut gaps_s = 0.0;
     let mut no_reading_s = 0.0;
     let mut fault_samples = 0u32;
@@ -115,15 +118,15 @@ pub fn report(t: &[f64], temp: &[Option<f64>]) -> Result<Report> {
         no_reading_s += unknown;
         gaps_s += unknown;
     }
-    let Record { m, alarms, pushed } = rec;
-    let on_log = |x: f32| {
+    let Record { m, alarms, pushed, .. } = rec;
+    let on_log = |x: u64| {
         let k = pushed.partition_point(|p| p.0 < x);
-        pushed.get(k).filter(|p| p.0 == x).map_or(f64::from(x), |p| p.1)
+        pushed.get(k).filter(|p| p.0 == x).map_or(x as f64 / 1000.0 + t0_s, |p| p.1)
     };
     let alarms =
         alarms.into_iter().map(|(kind, s, tr)| AlarmOut { kind, start_s: on_log(s), trigger_s: on_log(tr) }).collect();
     let f = |x: Option<f32>| x.map_or(f64::NAN, f64::from);
-    let (below, above) = (f64::from(m.time_below_2_s()), f64::from(m.time_above_8_s()));
+    let (below, above) = (m.time_below_2_ms() as f64 / 1000.0, m.time_above_8_ms() as f64 / 1000.0);
     Ok(Report {
         alarms,
         mkt_c: f(m.mkt_c()),
@@ -131,7 +134,7 @@ pub fn report(t: &[f64], temp: &[Option<f64>]) -> Result<Report> {
         max_c: f(m.max_c()),
         time_below_2_s: below,
         time_above_8_s: above,
-        time_in_range_s: f64::from(m.recorded_s()) - below - above,
+        time_in_range_s: m.recorded_ms() as f64 / 1000.0 - below - above,
         time_no_reading_s: no_reading_s,
         fault_samples,
         excursions: m.excursion_count(),

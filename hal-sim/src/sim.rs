@@ -393,6 +393,13 @@ impl Fault {
     }
 }
 
+/// The step's clock for sim time `t_s`, ms: the board's monotonic millisecond clock, which
+/// counts from boot and so cannot go negative; the pre-roll starts at sim time −[`PREROLL_S`],
+/// so the clock is sim time + [`PREROLL_S`] (converted once per sample, rounded to the ms).
+fn step_clock_ms(t_s: f64) -> u64 {
+    ((t_s + PREROLL_S) * 1000.0).round() as u64
+}
+
 /// The simulated hardware: the physical carrier behind a simulated ADC and SSR, or an ideal
 /// ARX plant read and driven directly.
 // One Rig per run: the size difference between variants costs nothing.
@@ -431,6 +438,7 @@ impl Rig {
     }
 
     /// Samples the sensor and runs the step; returns its output and the counts it got.
+    /// The step runs on the board's clock, [`step_clock_ms`].
     fn step<C: Controller>(&mut self, carrier: &mut Carrier<C>, t_s: f64, w: f64) -> (StepOutput, u32) {
         match self {
             Rig::Physical { plant, adc, ssr, .. } => {
@@ -442,9 +450,9 @@ impl Rig {
                     Ok(c) => c,
                     Err(never) => match never {},
                 };
-                (carrier.step(&StepInput { t_s: t_s as f32, counts, setpoint_c: w as f32 }), counts)
+                (carrier.step(&StepInput { t_ms: step_clock_ms(t_s), counts, setpoint_c: w as f32 }), counts)
             }
-            Rig::Arx(p) => (carrier.step_celsius(t_s as f32, Celsius(p.temp_c() as f32), w as f32), 0),
+            Rig::Arx(p) => (carrier.step_celsius(step_clock_ms(t_s), Celsius(p.temp_c() as f32), w as f32), 0),
         }
     }
 
@@ -805,11 +813,11 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
         let d = rig.actuate(&out, t_s);
         if k >= 0 {
             for e in out.events.iter().filter(|e| is_fault(e.kind)) {
-                faults.push(Stamped { kind: event_name(e.kind).into(), t_s: f64::from(e.t_s) });
+                faults.push(Stamped { kind: event_name(e.kind).into(), t_s: e.t_s() - PREROLL_S });
             }
-            let raised = monitor.push(t_s as f32, out.temp_c.0);
+            let raised = monitor.push(step_clock_ms(t_s), out.temp_c.0);
             for a in raised.iter().flatten() {
-                alarms.push(Stamped { kind: a.kind.name().into(), t_s: f64::from(a.trigger_s) });
+                alarms.push(Stamped { kind: a.kind.name().into(), t_s: a.trigger_s() - PREROLL_S });
             }
             let indication = annunciator.update(&out, &raised);
             if indication.is_on() {

@@ -269,17 +269,14 @@ fn run() -> Result<(), &'static str> {
     let mut recorder = Recorder::new(HistoryRecord::EMPTY, proto::HISTORY_SAVE_SAMPLES);
     let mut annunciator = Annunciator::new();
 
-    let mut chunk = [0u8; 12 * CHUNK];
+    const SAMPLE_BYTES: usize = 4 * proto::INPUT_WORDS;
+    let mut chunk = [0u8; SAMPLE_BYTES * CHUNK];
     let mut done = 0;
     while done < n {
         let take = (n - done).min(CHUNK);
-        input.read_exact(&mut chunk[..12 * take])?;
+        input.read_exact(&mut chunk[..SAMPLE_BYTES * take])?;
         for s in 0..take {
-            let inp = StepInput {
-                t_s: f32::from_bits(word(&chunk, 3 * s)),
-                counts: word(&chunk, 3 * s + 1),
-                setpoint_c: f32::from_bits(word(&chunk, 3 * s + 2)),
-            };
+            let inp: StepInput = proto::input_of(core::array::from_fn(|i| word(&chunk, proto::INPUT_WORDS * s + i)));
             let mut ticks = [0u32; proto::PARTS.len()];
             let ctrl_before: AnyController = carrier.controller().clone();
 
@@ -290,7 +287,7 @@ fn run() -> Result<(), &'static str> {
             let (raised, t) = timed(|| proto::monitor_push(&mut monitor, &inp_b, &o));
             ticks[proto::PART_MONITOR] = t;
             ticks[proto::PART_BOARD] = timed(|| {
-                let rec = recorder.push(inp_b.t_s, o.temp_c.0);
+                let rec = recorder.push(inp_b.t_ms, o.temp_c.0);
                 if rec.save_due {
                     // What the control task hands the persist task (its queue copies it once).
                     black_box(recorder.history());
@@ -300,7 +297,7 @@ fn run() -> Result<(), &'static str> {
             .1;
 
             // Profile on shadows.
-            let ci = ControlInput { t_s: inp.t_s, y_c: o.temp_c.0, w_c: o.setpoint_c.0 };
+            let ci = ControlInput { y_c: o.temp_c.0, w_c: o.setpoint_c.0 };
             let mut c2 = ctrl_before;
             ticks[2] = timed(|| c2.update(&ci)).1;
             let cfg = proto::CARRIER;
@@ -336,7 +333,7 @@ fn run() -> Result<(), &'static str> {
             for t in ticks {
                 out.word(t)?;
             }
-            let mut ev = [(0u32, 0u32); 2 * hter::event::MAX_EVENTS_PER_STEP + 9];
+            let mut ev = [(0u32, 0u32); proto::MAX_EVENT_WORDS];
             let mut m = 0;
             proto::event_words(&o, &raised, |c, v| {
                 if let Some(slot) = ev.get_mut(m) {

@@ -4,7 +4,8 @@
 //! cannot drift apart.
 //!
 //! Input file ([`INPUT_FILE`], little-endian u32 words):
-//! `MAGIC_IN, controller kind, n`, then n × `t_s (f32 bits), counts, setpoint_c (f32 bits)`.
+//! `MAGIC_IN, controller kind, n`, then n × [`INPUT_WORDS`] words from [`input_words`]:
+//! `t_ms low word, t_ms high word, counts, setpoint_c (f32 bits)`.
 //!
 //! Output file ([`OUTPUT_FILE`]): `MAGIC_OUT`, the calibration (3 words, [`CAL_LOOP`]), n, then
 //! per sample: `duty (f32 bits)`, one SysTick count per entry of [`PARTS`], the number of event
@@ -58,7 +59,31 @@ pub fn carrier(kind: u32) -> Option<(Carrier<AnyController>, ColdChainMonitor)> 
 
 /// The cold-chain record's share of a sample: it is fed what the controller saw.
 pub fn monitor_push(monitor: &mut ColdChainMonitor, input: &StepInput, out: &StepOutput) -> Raised {
-    monitor.push(input.t_s, out.temp_c.0)
+    monitor.push(input.t_ms, out.temp_c.0)
+}
+
+/// Words per sample in the input file.
+pub const INPUT_WORDS: usize = 4;
+
+/// One sample's words in the input file (the u64 clock as low word, high word).
+#[allow(dead_code)] // the host writes the file, the runner only reads it
+pub fn input_words(i: &StepInput) -> [u32; INPUT_WORDS] {
+    [i.t_ms as u32, (i.t_ms >> 32) as u32, i.counts, i.setpoint_c.to_bits()]
+}
+
+/// The sample of [`input_words`].
+pub fn input_of(w: [u32; INPUT_WORDS]) -> StepInput {
+    StepInput { t_ms: u64::from(w[0]) | u64::from(w[1]) << 32, counts: w[2], setpoint_c: f32::from_bits(w[3]) }
+}
+
+/// Most `(code, value)` pairs [`event_words`] gives for one sample: two per step event, the
+/// dropped count, four per alarm kind.
+pub const MAX_EVENT_WORDS: usize = 2 * hter::event::MAX_EVENTS_PER_STEP + 1 + 4 * 4;
+
+/// A time, ms, as the two pairs `(code, low word)`, `(code, high word)`.
+fn push_time(code: u32, t_ms: u64, push: &mut impl FnMut(u32, u32)) {
+    push(code, t_ms as u32);
+    push(code, (t_ms >> 32) as u32);
 }
 
 /// Timed parts of a sample, one SysTick count each (0 where a part did not run).
@@ -99,17 +124,17 @@ pub const CODE_ALARM: u32 = 0x100;
 pub const CODE_DROPPED: u32 = 0x200;
 
 /// The events and alarms of one sample as `(code, value)` pairs: step events as
-/// `(EventKind as u32, t_s bits)`, alarms as `(CODE_ALARM + kind, trigger_s bits)` then
-/// `(start_s bits)` folded in as a second pair with the same code.
+/// `(EventKind as u32, t_ms)`, alarms as `(CODE_ALARM + kind, trigger_ms)` then
+/// `(CODE_ALARM + kind, start_ms)`, each time (u64) as two pairs, low word first.
 pub fn event_words(out: &StepOutput, raised: &Raised, mut push: impl FnMut(u32, u32)) {
     for e in out.events.iter() {
-        push(e.kind.code(), e.t_s.to_bits());
+        push_time(e.kind.code(), e.t_ms, &mut push);
     }
     if out.events.dropped() > 0 {
         push(CODE_DROPPED, u32::from(out.events.dropped()));
     }
     for a in raised.iter().flatten() {
-        push(CODE_ALARM + a.kind as u32, a.trigger_s.to_bits());
-        push(CODE_ALARM + a.kind as u32, a.start_s.to_bits());
+        push_time(CODE_ALARM + a.kind as u32, a.trigger_ms, &mut push);
+        push_time(CODE_ALARM + a.kind as u32, a.start_ms, &mut push);
     }
 }

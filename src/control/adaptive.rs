@@ -152,7 +152,7 @@ impl SelfTuning {
         };
         let trusted = cfg.initial.filter(|m| plausible_model(&cfg, m));
         let mut fallback = Pi::new(PiConfig { bias: u0, ..cfg.fallback });
-        fallback.track(&ControlInput { t_s: 0.0, y_c: 0.0, w_c: 0.0 }, u0);
+        fallback.track(&ControlInput { y_c: 0.0, w_c: 0.0 }, u0);
         Self {
             cfg,
             rls: Rls::new(&cfg.rls, theta0),

@@ -59,7 +59,7 @@ mod tests {
     #[test]
     fn rest_comes_first_then_the_same_sequence() {
         let cfg = PrbsConfig { bits: 5, hold: 3, low: 0.35, high: 0.55 };
-        let input = ControlInput { t_s: 0.0, y_c: 4.0, w_c: 4.0 };
+        let input = ControlInput { y_c: 4.0, w_c: 4.0 };
         let mut plain = PrbsExcitation::new(cfg).unwrap();
         let mut rested = PrbsExcitation::after_rest(cfg, 0.45, 4).unwrap();
         let head: std::vec::Vec<f32> = (0..4).map(|_| rested.update(&input)).collect();

@@ -28,8 +28,6 @@ pub use pi::{Pi, PiConfig};
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ControlInput {
-    /// Sample time, s.
-    pub t_s: f32,
     /// Filtered, calibrated load temperature, °C.
     pub y_c: f32,
     /// Setpoint, °C (already clamped to the safe band by the step).

@@ -68,7 +68,7 @@ mod tests {
     #[test]
     fn switches_only_outside_the_band() {
         let mut c = OnOff::new(OnOffConfig::DEFAULT);
-        let at = |y| ControlInput { t_s: 0.0, y_c: y, w_c: 4.0 };
+        let at = |y| ControlInput { y_c: y, w_c: 4.0 };
         assert_eq!(c.update(&at(4.29)), 0.0);
         assert_eq!(c.update(&at(4.31)), 1.0);
         assert_eq!(c.update(&at(4.0)), 1.0);

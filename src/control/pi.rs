@@ -127,7 +127,7 @@ mod tests {
     use super::*;
 
     fn input(y: f32) -> ControlInput {
-        ControlInput { t_s: 0.0, y_c: y, w_c: 4.0 }
+        ControlInput { y_c: y, w_c: 4.0 }
     }
 
     fn run(c: &mut Pi, y: f32) -> f32 {

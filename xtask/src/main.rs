@@ -358,8 +358,13 @@ fn record(case: &Case) -> Result<Vec<StepInput>> {
     Ok(out
         .rows
         .iter()
-        .map(|r| StepInput { t_s: r.t_s as f32, counts: r.counts, setpoint_c: r.setpoint_c as f32 })
+        .map(|r| StepInput { t_ms: sim_clock_ms(r.t_s), counts: r.counts, setpoint_c: r.setpoint_c as f32 })
         .collect())
+}
+
+/// The board's millisecond clock at sim time `t_s` (rows start at 0), converted once per sample.
+fn sim_clock_ms(t_s: f64) -> u64 {
+    (t_s * 1000.0).round() as u64
 }
 
 /// One host sample: the duty's bits and the event words.
@@ -402,12 +407,12 @@ fn compare(host: &[HostSample], target: &[TargetSample]) -> Vec<String> {
 }
 
 fn run_target(elf: &Path, dir: &Path, kind: u32, inputs: &[StepInput]) -> Result<TargetRun> {
-    let mut bytes = Vec::with_capacity(12 + 12 * inputs.len());
+    let mut bytes = Vec::with_capacity(12 + 4 * proto::INPUT_WORDS * inputs.len());
     for w in [proto::MAGIC_IN, kind, inputs.len() as u32] {
         bytes.extend_from_slice(&w.to_le_bytes());
     }
     for i in inputs {
-        for w in [i.t_s.to_bits(), i.counts, i.setpoint_c.to_bits()] {
+        for w in proto::input_words(i) {
             bytes.extend_from_slice(&w.to_le_bytes());
         }
     }
@@ -595,7 +600,7 @@ mod tests {
     #[test]
     fn host_replay_of_the_library_is_deterministic() {
         let inputs: Vec<StepInput> = (0..50)
-            .map(|k| StepInput { t_s: 10.0 * k as f32, counts: 49_000 + (k * 7919 % 13), setpoint_c: 4.0 })
+            .map(|k| StepInput { t_ms: 10_000 * k as u64, counts: 49_000 + (k * 7919 % 13), setpoint_c: 4.0 })
             .collect();
         let a = run_host(proto::KIND_GPC, &inputs).unwrap();
         let b = run_host(proto::KIND_GPC, &inputs).unwrap();
