@@ -79,6 +79,7 @@ pub struct Elf<'a> {
 pub struct Section {
     pub name: String,
     pub ty: u64,
+    pub flags: u64,
     pub addr: u64,
     pub offset: u64,
     pub size: u64,
@@ -116,6 +117,7 @@ impl<'a> Elf<'a> {
             raw.push((
                 u32_at(sh)?,
                 u32_at(sh + 4)?,
+                u32_at(sh + 8)?,
                 u32_at(sh + 12)?,
                 u32_at(sh + 16)?,
                 u32_at(sh + 20)?,
@@ -123,7 +125,7 @@ impl<'a> Elf<'a> {
             ));
         }
         let name_at = |table: u64, at: u64| -> Result<String> {
-            let (_, _, _, off, size, _) = *raw.get(table as usize).context("string table index out of range")?;
+            let (_, _, _, _, off, size, _) = *raw.get(table as usize).context("string table index out of range")?;
             let s = get(bytes, off, size)?;
             let tail = s.get(at as usize..).context("name offset out of range")?;
             let end = tail.iter().position(|b| *b == 0).context("unterminated name")?;
@@ -131,8 +133,8 @@ impl<'a> Elf<'a> {
         };
         let mut sections = Vec::new();
         let mut symbols = Vec::new();
-        for &(name, ty, addr, offset, size, link) in &raw {
-            sections.push(Section { name: name_at(shstrndx, name)?, ty, addr, offset, size });
+        for &(name, ty, flags, addr, offset, size, link) in &raw {
+            sections.push(Section { name: name_at(shstrndx, name)?, ty, flags, addr, offset, size });
             if ty == SHT_SYMTAB {
                 for k in 0..size / 16 {
                     let sym = offset + 16 * k;
@@ -144,6 +146,17 @@ impl<'a> Elf<'a> {
             }
         }
         Ok(Elf { bytes, sections, segments, symbols })
+    }
+
+    /// Flash (allocated sections with contents: what is programmed) and static RAM (allocated
+    /// sections in SRAM at 0x2000_0000 and up: .data, .bss, .uninit), bytes.
+    pub fn sizes(&self) -> (u64, u64) {
+        const SHF_ALLOC: u64 = 2;
+        const SHT_NOBITS: u64 = 8;
+        let alloc = || self.sections.iter().filter(|s| s.flags & SHF_ALLOC != 0);
+        let flash = alloc().filter(|s| s.ty != SHT_NOBITS).map(|s| s.size).sum();
+        let ram = alloc().filter(|s| s.addr >= 0x2000_0000).map(|s| s.size).sum();
+        (flash, ram)
     }
 
     /// `len` bytes at address `addr` of a section with contents.

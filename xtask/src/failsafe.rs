@@ -9,12 +9,10 @@
 //! at reset; the checks below fail if that ever changes (the record would not survive).
 
 use std::collections::HashMap;
-use std::io::Read;
 use std::path::Path;
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 
 /// Each stop path and the boot that reports it (the boot after the one that triggered it).
 pub const FAILSAFE_KINDS: [(&str, u32); 4] = [("panic", 2), ("hard_fault", 3), ("nmi", 4), ("unexpected_interrupt", 5)];
@@ -51,31 +49,8 @@ impl Check {
 pub fn run(elf: &Path, work: &Path) -> Result<Vec<Check>> {
     let dir = work.join("failsafe");
     std::fs::create_dir_all(&dir)?;
-    let mut child = Command::new("qemu-system-arm")
-        .current_dir(&dir)
-        .args(["-M", "mps2-an386", "-display", "none", "-monitor", "none", "-serial", "none"])
-        .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
-        .arg(elf)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .context("starting qemu-system-arm")?;
-    let start = Instant::now();
-    let exited_ok = loop {
-        if let Some(s) = child.try_wait()? {
-            break s.success();
-        }
-        if start.elapsed() > FAILSAFE_TIMEOUT {
-            child.kill()?;
-            child.wait()?;
-            break false;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    };
-    let mut out = String::new();
-    if let Some(mut s) = child.stdout.take() {
-        s.read_to_string(&mut out)?;
-    }
+    let run = crate::qemu(elf, &dir, &[], FAILSAFE_TIMEOUT)?;
+    let (exited_ok, out) = (run.status.is_some_and(|s| s.success()), run.stdout);
     std::fs::write(dir.join("stdout.txt"), &out)?;
     Ok(checks(&out, exited_ok))
 }

@@ -406,6 +406,50 @@ fn compare(host: &[HostSample], target: &[TargetSample]) -> Vec<String> {
     out
 }
 
+/// What one QEMU run printed, and how it ended.
+pub struct QemuRun {
+    /// `None`: still running after the timeout, and killed.
+    pub status: Option<std::process::ExitStatus>,
+    pub stdout: String,
+    pub stderr: String,
+}
+
+/// Runs `elf` on `qemu-system-arm -M mps2-an386` in `dir`, with semihosting and the `extra`
+/// arguments, killing it if it has not exited within `timeout`.
+pub fn qemu(elf: &Path, dir: &Path, extra: &[&str], timeout: Duration) -> Result<QemuRun> {
+    let mut child = Command::new("qemu-system-arm")
+        .current_dir(dir)
+        .args(["-M", "mps2-an386", "-display", "none", "-monitor", "none", "-serial", "none"])
+        .args(["-semihosting-config", "enable=on,target=native"])
+        .args(extra)
+        .arg("-kernel")
+        .arg(elf)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .context("starting qemu-system-arm")?;
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait()? {
+            break Some(s);
+        }
+        if start.elapsed() > timeout {
+            child.kill()?;
+            child.wait()?;
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let (mut stdout, mut stderr) = (String::new(), String::new());
+    if let Some(mut s) = child.stdout.take() {
+        s.read_to_string(&mut stdout)?;
+    }
+    if let Some(mut s) = child.stderr.take() {
+        s.read_to_string(&mut stderr)?;
+    }
+    Ok(QemuRun { status, stdout, stderr })
+}
+
 fn run_target(elf: &Path, dir: &Path, kind: u32, inputs: &[StepInput]) -> Result<TargetRun> {
     let mut bytes = Vec::with_capacity(12 + 4 * proto::INPUT_WORDS * inputs.len());
     for w in [proto::MAGIC_IN, kind, inputs.len() as u32] {
@@ -420,34 +464,11 @@ fn run_target(elf: &Path, dir: &Path, kind: u32, inputs: &[StepInput]) -> Result
     let output = dir.join(proto::OUTPUT_FILE.trim_end_matches('\0'));
     std::fs::write(&input, bytes)?;
     let _ = std::fs::remove_file(&output);
-    let mut child = Command::new("qemu-system-arm")
-        .current_dir(dir)
-        .args(["-M", "mps2-an386", "-display", "none", "-monitor", "none", "-serial", "none"])
-        .args(["-semihosting-config", "enable=on,target=native", "-icount", "shift=6,sleep=off", "-kernel"])
-        .arg(elf)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .context("starting qemu-system-arm")?;
-    let start = Instant::now();
-    let status = loop {
-        if let Some(s) = child.try_wait()? {
-            break s;
-        }
-        if start.elapsed() > QEMU_TIMEOUT {
-            child.kill()?;
-            child.wait()?;
-            bail!("QEMU did not finish within {} s", QEMU_TIMEOUT.as_secs());
-        }
-        std::thread::sleep(Duration::from_millis(20));
+    let run = qemu(elf, dir, &["-icount", "shift=6,sleep=off"], QEMU_TIMEOUT)?;
+    let Some(status) = run.status else {
+        bail!("QEMU did not finish within {} s", QEMU_TIMEOUT.as_secs());
     };
-    let mut msg = String::new();
-    if let Some(mut s) = child.stdout.take() {
-        s.read_to_string(&mut msg)?;
-    }
-    if let Some(mut s) = child.stderr.take() {
-        s.read_to_string(&mut msg)?;
-    }
+    let msg = run.stdout + &run.stderr;
     if !status.success() {
         bail!("the PIL runner failed ({status}): {}", msg.trim());
     }
@@ -497,37 +518,10 @@ fn calibration(cal: &[u32; 3]) -> Result<(u32, f64)> {
 }
 
 /// Flash (allocated sections with contents) and static RAM (allocated sections at or above
-/// 0x2000_0000) of a little-endian ELF32 image, as `size` counts text + data and data + bss.
+/// 0x2000_0000) of a little-endian ELF32 image, as `size` counts text + data and data + bss
+/// ([`audit::Elf::sizes`]).
 fn elf_sizes(elf: &[u8]) -> Result<(u64, u64)> {
-    let u16_at = |o: usize| -> Result<u64> {
-        Ok(u64::from(u16::from_le_bytes(elf.get(o..o + 2).context("ELF truncated")?.try_into()?)))
-    };
-    let u32_at = |o: usize| -> Result<u64> {
-        Ok(u64::from(u32::from_le_bytes(elf.get(o..o + 4).context("ELF truncated")?.try_into()?)))
-    };
-    if elf.get(..5) != Some(&[0x7f, b'E', b'L', b'F', 1][..]) {
-        bail!("not an ELF32 file");
-    }
-    let shoff = u32_at(0x20)? as usize;
-    let shentsize = u16_at(0x2e)? as usize;
-    let shnum = u16_at(0x30)? as usize;
-    let (mut flash, mut ram) = (0, 0);
-    for i in 0..shnum {
-        let sh = shoff + i * shentsize;
-        let (ty, flags, addr, size) = (u32_at(sh + 4)?, u32_at(sh + 8)?, u32_at(sh + 12)?, u32_at(sh + 20)?);
-        const SHF_ALLOC: u64 = 2;
-        const SHT_NOBITS: u64 = 8;
-        if flags & SHF_ALLOC == 0 {
-            continue;
-        }
-        if ty != SHT_NOBITS {
-            flash += size;
-        }
-        if addr >= 0x2000_0000 {
-            ram += size;
-        }
-    }
-    Ok((flash, ram))
+    Ok(audit::Elf::parse(elf)?.sizes())
 }
 
 fn median(v: &[f64]) -> f64 {
