@@ -211,16 +211,25 @@ impl ReasonRecord {
     }
 }
 
-/// The first thing every stop path does: safe outputs, then the record. The caller resets
-/// afterwards (`SCB::sys_reset` on the board, a semihosting exit on the PIL machine).
+/// The first thing every stop path does: safe outputs, then the reason, then the record. The
+/// caller resets afterwards (`SCB::sys_reset` on the board and the PIL machine).
 ///
-/// The outputs come first so that nothing the record needs (a CRC over 72 bytes) can delay
-/// them, and the record is written whole before the reset so the next boot can trust it.
-pub fn stop<O: SafeOutputs + ?Sized>(outputs: &mut O, record: &mut ReasonRecord, info: &StopInfo) {
+/// The reason is built by `info` only once the outputs are safe: reading fault registers or
+/// cutting a file name down costs little, but a fault in it must not find the SSR still driven.
+/// The record (a CRC over 72 bytes) comes last and is written whole before the reset, so the
+/// next boot can trust it. Returns what was recorded.
+pub fn stop<O: SafeOutputs + ?Sized>(
+    outputs: &mut O,
+    record: &mut ReasonRecord,
+    info: impl FnOnce() -> StopInfo,
+) -> StopInfo {
     outputs.force_safe();
-    // The record's stores (and the CRC over it) must not be moved ahead of the outputs' writes.
+    // Neither the reason's register reads nor the record's stores may be moved ahead of the
+    // outputs' writes.
     core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
-    record.write(info);
+    let info = info();
+    record.write(&info);
+    info
 }
 
 /// The record of a panic at `file:line`: the line in `detail`, the file's last bytes in the
@@ -304,30 +313,41 @@ mod tests {
     use super::*;
     use core::fmt::Write;
 
-    struct Pins {
-        log: [Option<&'static str>; 4],
-        n: usize,
+    /// Stamps each step of a stop path with the next number of a shared counter.
+    struct Pins<'a> {
+        seq: &'a core::cell::Cell<u32>,
+        safe_at: Option<u32>,
     }
 
-    impl SafeOutputs for Pins {
+    fn next(seq: &core::cell::Cell<u32>) -> u32 {
+        seq.set(seq.get() + 1);
+        seq.get()
+    }
+
+    impl SafeOutputs for Pins<'_> {
         fn force_safe(&mut self) {
-            self.log[self.n] = Some("safe");
-            self.n += 1;
+            self.safe_at = Some(next(self.seq));
         }
     }
 
     #[test]
-    fn stop_drives_the_outputs_then_records() {
-        let mut pins = Pins { log: [None; 4], n: 0 };
+    fn stop_drives_the_outputs_then_builds_the_reason_then_records() {
+        let seq = core::cell::Cell::new(0);
+        let mut pins = Pins { seq: &seq, safe_at: None };
         let mut rec = ReasonRecord::EMPTY;
-        let mut info = StopInfo::new(StopKind::Panic, 0, 0, 42);
-        write!(info, "src/step.rs: index out of bounds").unwrap();
-        stop(&mut pins, &mut rec, &info);
-        assert_eq!(pins.log[0], Some("safe"));
-        let got = rec.peek().unwrap();
-        assert_eq!(got, info);
-        assert_eq!(got.text(), "src/step.rs: index out of bounds");
-        assert_eq!(rec.take(), Some(info));
+        let mut built_at = None;
+        let mut want = StopInfo::new(StopKind::Panic, 0, 0, 42);
+        write!(want, "src/step.rs: index out of bounds").unwrap();
+        let got = stop(&mut pins, &mut rec, || {
+            built_at = Some(next(&seq));
+            want
+        });
+        assert_eq!((pins.safe_at, built_at), (Some(1), Some(2)), "outputs safe before the reason is built");
+        assert_eq!(got, want);
+        let stored = rec.peek().unwrap();
+        assert_eq!(stored, want);
+        assert_eq!(stored.text(), "src/step.rs: index out of bounds");
+        assert_eq!(rec.take(), Some(want));
         assert_eq!(rec.take(), None, "a stop is reported once");
     }
 

@@ -43,8 +43,8 @@ impl SafeOutputs for BoardOutputs {
     }
 }
 
-/// Outputs safe, record, reset.
-fn halt(info: &StopInfo) -> ! {
+/// Outputs safe, then the reason `info` builds, recorded, then reset.
+fn halt(info: impl FnOnce() -> StopInfo) -> ! {
     // SAFETY: this path does not return, and a fault inside it escalates to a lockup, which the
     // watchdog resets: no second holder of the record runs after this one.
     failsafe::stop(&mut BoardOutputs, unsafe { reason() }, info);
@@ -60,8 +60,7 @@ pub fn take_reason() -> Option<StopInfo> {
 
 /// The control loop stalled for `since_ms` (called from the stall check's interrupt).
 pub fn stall(since_ms: u32) -> ! {
-    board::force_safe();
-    halt(&StopInfo::new(StopKind::ControlStall, 0, 0, since_ms))
+    halt(|| StopInfo::new(StopKind::ControlStall, 0, 0, since_ms))
 }
 
 /// Records the location only: formatting the message would link `core::fmt` (several KiB of
@@ -69,34 +68,30 @@ pub fn stall(since_ms: u32) -> ! {
 /// already logged their message over RTT when they get here.
 #[panic_handler]
 fn panic(info: &PanicInfo) -> ! {
-    board::force_safe();
-    let stop = match info.location() {
+    halt(|| match info.location() {
         Some(at) => failsafe::panic_info(at.file(), at.line()),
         None => StopInfo::new(StopKind::Panic, 0, 0, 0),
-    };
-    halt(&stop)
+    })
 }
 
 #[exception]
 unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
-    board::force_safe();
-    // SAFETY: reads of the System Control Block's fault status and address registers.
-    let scb = unsafe { &*cortex_m::peripheral::SCB::PTR };
-    let info = failsafe::hard_fault_info(frame.pc(), scb.cfsr.read(), scb.bfar.read(), scb.mmfar.read());
-    halt(&info)
+    halt(|| {
+        // SAFETY: reads of the System Control Block's fault status and address registers.
+        let scb = unsafe { &*cortex_m::peripheral::SCB::PTR };
+        failsafe::hard_fault_info(frame.pc(), scb.cfsr.read(), scb.bfar.read(), scb.mmfar.read())
+    })
 }
 
 /// Flash bank size of the STM32L476RG, bytes: FLASH_ECCR's ADDR_ECC is the offset within the
 /// bank BK_ECC names (RM0351 "Flash ECC register"), with the banks not swapped (BFB2 = 0).
 const BANK_SIZE: u32 = 0x8_0000;
-/// Flash base address.
-const FLASH_BASE: u32 = 0x0800_0000;
 
 #[exception]
 unsafe fn NonMaskableInt() {
     let eccr = FLASH.eccr().read();
     if eccr.eccd() {
-        let addr = FLASH_BASE + if eccr.bk_ecc() { BANK_SIZE } else { 0 } + eccr.addr_ecc();
+        let addr = board::FLASH_BASE + if eccr.bk_ecc() { BANK_SIZE } else { 0 } + eccr.addr_ecc();
         if board::PERSIST_ADDRESSES.contains(&addr) {
             // ECCD is write-1-to-clear; ECCC is too and is written 0 (left alone), ECCIE kept.
             FLASH.eccr().write(|w| {
@@ -107,14 +102,12 @@ unsafe fn NonMaskableInt() {
             return;
         }
     }
-    board::force_safe();
     // cortex-m-rt hands the NMI no exception frame: the PC is not recorded (0); FLASH_ECCR
     // (or 0 for another source such as the clock security system) names the cause.
-    halt(&failsafe::nmi_info(0, if eccr.eccd() { eccr.0 } else { 0 }))
+    halt(|| failsafe::nmi_info(0, if eccr.eccd() { eccr.0 } else { 0 }))
 }
 
 #[exception]
 unsafe fn DefaultHandler(irqn: i16) -> ! {
-    board::force_safe();
-    halt(&failsafe::unexpected_interrupt_info(irqn))
+    halt(|| failsafe::unexpected_interrupt_info(irqn))
 }

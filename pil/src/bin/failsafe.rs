@@ -107,9 +107,9 @@ impl SafeOutputs for PilOutputs {
 
 /// The firmware's stop path with the PIL's outputs, then the checks of the order, then reset.
 /// The boot cleared the stop's log fields, so the hook's stamp is the first of this path.
-fn fail(info: &StopInfo) -> ! {
+fn fail(info: impl FnOnce() -> StopInfo) -> ! {
     // SAFETY: the record's memory is ours; the hook reads it only through volatile loads.
-    stop(&mut PilOutputs, unsafe { &mut *reason() }, info);
+    let info = stop(&mut PilOutputs, unsafe { &mut *reason() }, info);
     let mut l = read_log();
     l.seq += 1;
     l.record_seq = l.seq;
@@ -208,7 +208,7 @@ fn report(boot: u32, cfsr: u32, iser0: u32, prev: &BootLog, found: Option<&StopI
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     let (file, line) = info.location().map(|l| (l.file(), l.line())).unwrap_or(("", 0));
-    fail(&panic_info(file, line))
+    fail(|| panic_info(file, line))
 }
 
 /// SCB fault status and address registers (ARMv7-M ARM B3.2.15–18).
@@ -222,9 +222,11 @@ const NVIC_ISPR0: *mut u32 = 0xE000_E200 as *mut u32;
 
 #[exception]
 unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
-    // SAFETY: reads of the system control block's status registers.
-    let (cfsr, bfar, mmfar) = unsafe { (read_volatile(CFSR), read_volatile(BFAR), read_volatile(MMFAR)) };
-    fail(&hard_fault_info(ef.pc(), cfsr, bfar, mmfar))
+    fail(|| {
+        // SAFETY: reads of the system control block's status registers.
+        let (cfsr, bfar, mmfar) = unsafe { (read_volatile(CFSR), read_volatile(BFAR), read_volatile(MMFAR)) };
+        hard_fault_info(ef.pc(), cfsr, bfar, mmfar)
+    })
 }
 
 #[exception]
@@ -232,11 +234,10 @@ unsafe fn NonMaskableInt() {
     // ICSR: its VECTACTIVE field (2 in the NMI) says which exception this is; the board passes
     // the NMI source's status word here instead.
     // SAFETY: a read of a system control block register.
-    let icsr = unsafe { read_volatile(ICSR) };
-    fail(&nmi_info(0, icsr))
+    fail(|| nmi_info(0, unsafe { read_volatile(ICSR) }))
 }
 
 #[exception]
 unsafe fn DefaultHandler(irqn: i16) {
-    fail(&unexpected_interrupt_info(irqn))
+    fail(|| unexpected_interrupt_info(irqn))
 }
