@@ -52,6 +52,16 @@ impl Indication {
     pub fn is_on(self) -> bool {
         self != Indication::Off
     }
+
+    /// Stable snake_case name, as the simulator's CSV (`alarm` column) spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Indication::Off => "off",
+            Indication::NotInControl => "not_in_control",
+            Indication::OutOfRange => "out_of_range",
+            Indication::Unacknowledged => "unacknowledged",
+        }
+    }
 }
 
 /// The indicator's state.

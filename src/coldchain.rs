@@ -107,12 +107,12 @@ pub struct Alarm {
 impl Alarm {
     /// Start, s, for display.
     pub fn start_s(&self) -> f64 {
-        self.start_ms as f64 / 1000.0
+        crate::units::secs_f64(self.start_ms)
     }
 
     /// Trigger, s, for display.
     pub fn trigger_s(&self) -> f64 {
-        self.trigger_ms as f64 / 1000.0
+        crate::units::secs_f64(self.trigger_ms)
     }
 }
 
@@ -217,7 +217,7 @@ impl ColdChainMonitor {
             let x = libm::expf(-MKT_DH_OVER_R_K * (1.0 / (c_prev + 273.15) - 1.0 / T_REF_K));
             // The weight in seconds, as f32: the ratio is all that matters, and whole seconds
             // stay exact this way.
-            let (dt_s, elapsed_s) = (crate::event::secs_f32(dt), crate::event::secs_f32(self.elapsed_ms));
+            let (dt_s, elapsed_s) = (crate::units::secs_f32(dt), crate::units::secs_f32(self.elapsed_ms));
             self.mkt_mean += (x - self.mkt_mean) * dt_s / elapsed_s;
             if c_prev < 2.0 {
                 self.below_2_ms += dt;
@@ -270,7 +270,7 @@ impl ColdChainMonitor {
         };
         match (side, self.open.as_mut()) {
             (Some(s), Some(e)) if e.side == s => {
-                e.end_s = crate::event::secs_f32(t_ms);
+                e.end_s = crate::units::secs_f32(t_ms);
                 e.extreme_c = if s == Side::Cold { min_f32(e.extreme_c, temp_c) } else { max_f32(e.extreme_c, temp_c) };
             }
             (side, _) => {
@@ -278,7 +278,7 @@ impl ColdChainMonitor {
                     self.log.write(done);
                 }
                 if let Some(s) = side {
-                    let t_s = crate::event::secs_f32(t_ms);
+                    let t_s = crate::units::secs_f32(t_ms);
                     self.open = Some(Excursion { side: s, start_s: t_s, end_s: t_s, extreme_c: temp_c });
                     self.excursions = self.excursions.saturating_add(1);
                 }
@@ -319,17 +319,17 @@ impl ColdChainMonitor {
 
     /// [`Self::recorded_ms`] as f32 seconds (the history record's form).
     pub fn recorded_s(&self) -> f32 {
-        crate::event::secs_f32(self.elapsed_ms)
+        crate::units::secs_f32(self.elapsed_ms)
     }
 
     /// [`Self::time_below_2_ms`] as f32 seconds.
     pub fn time_below_2_s(&self) -> f32 {
-        crate::event::secs_f32(self.below_2_ms)
+        crate::units::secs_f32(self.below_2_ms)
     }
 
     /// [`Self::time_above_8_ms`] as f32 seconds.
     pub fn time_above_8_s(&self) -> f32 {
-        crate::event::secs_f32(self.above_8_ms)
+        crate::units::secs_f32(self.above_8_ms)
     }
 
     /// The newest closed excursions and the one under way, oldest first.

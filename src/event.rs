@@ -59,9 +59,10 @@ pub enum EventKind {
     /// interrupt, a control stall): its outputs went safe, its reason survived the reset in
     /// RAM ([`crate::failsafe::ReasonRecord`]), and this boot reports it with its first sample.
     BoardFault(crate::failsafe::StopKind),
-    /// A flash page of the persistence region could not be read (an ECC error: a double-word
-    /// whose programming a power cut interrupted). The page was treated as lost and erased; the
-    /// records in the other pages were kept.
+    /// The persistence region could not be read where a power cut interrupted a flash write (an
+    /// ECC error on the L4: a torn double-word). The store repaired it at boot — the torn word
+    /// cleared, or the page erased when its header or an erase was torn — so only the record
+    /// being written then was lost; every other record was kept.
     FlashPageLost,
     /// The switched supply rail (after the supply-enable switch) reads powered although the
     /// switch is commanded open: the switch is shorted and the second cut-off is gone. The SSR
@@ -177,15 +178,8 @@ pub struct Event {
 impl Event {
     /// Sample time, s, for display (f64 holds every millisecond exactly).
     pub fn t_s(&self) -> f64 {
-        self.t_ms as f64 / 1000.0
+        crate::units::secs_f64(self.t_ms)
     }
-}
-
-/// Milliseconds as f32 seconds, rounded (exact for whole seconds up to 1.5 days, within one
-/// f32 step beyond): for the records kept in f32. Two u32 conversions rather than the u64 one,
-/// which is a library call on the Cortex-M4F (the high word is 0 for the first 49 days).
-pub fn secs_f32(ms: u64) -> f32 {
-    ((ms >> 32) as u32 as f32 * 4_294_967_296.0 + ms as u32 as f32) / 1000.0
 }
 
 /// Most events one step can raise; more are counted in [`Events::dropped`] (never silently lost).
@@ -277,6 +271,13 @@ mod tests {
             for b in &all[i + 1..] {
                 assert_ne!(a.code(), b.code(), "{a:?} {b:?}");
             }
+        }
+    }
+
+    #[test]
+    fn board_fault_names_follow_the_stop_kinds() {
+        for k in crate::failsafe::StopKind::ALL {
+            assert_eq!(EventKind::BoardFault(k).name(), format!("board_fault_{}", k.name()));
         }
     }
 

@@ -385,7 +385,7 @@ pub struct HistoryRecord {
     /// The newest excursions, oldest first (`None` entries first while fewer were seen).
     pub last: [Option<Excursion>; HISTORY_EXCURSIONS],
     /// Fail-safe stops, per kind in [`StopKind::ALL`] order.
-    pub stops: [u16; 5],
+    pub stops: [u16; StopKind::ALL.len()],
     /// Flash pages found damaged by a power cut (an ECC error) and repaired at boot.
     pub flash_pages_lost: u16,
     /// The newest fail-safe stop.
@@ -432,7 +432,7 @@ impl HistoryRecord {
     /// Length of a v2 record (still read), bytes.
     pub const LEN_V2: usize = 2 + 4 * 2 + 3 * 2 + 2 * 4 + 4 * 4 + HISTORY_EXCURSIONS * 13 + 4;
     /// Encoded length, bytes.
-    pub const LEN: usize = Self::LEN_V2 + 5 * 2 + 2 + 1 + 3 * 4;
+    pub const LEN: usize = Self::LEN_V2 + StopKind::ALL.len() * 2 + 2 + 1 + 3 * 4;
     /// Nothing seen yet.
     pub const EMPTY: HistoryRecord = HistoryRecord {
         alarms: [0; 4],
@@ -444,7 +444,7 @@ impl HistoryRecord {
         excursions: 0,
         recorded_s: 0,
         last: [None; HISTORY_EXCURSIONS],
-        stops: [0; 5],
+        stops: [0; StopKind::ALL.len()],
         flash_pages_lost: 0,
         last_stop: None,
     };

@@ -33,7 +33,7 @@ use crate::control::{AdaptiveMode, ControlInput, Controller, ControllerStatus};
 use crate::event::{Event, EventKind, Events};
 use crate::filter::{FirstOrder, FirstOrderConfig};
 use crate::rtd::Rtd;
-use crate::units::{max_f32, min_f32, Celsius, Duty};
+use crate::units::{max_f32, min_f32, secs_f32, Celsius, Duty};
 
 /// Everything the step needs to know that does not change while it runs.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -910,9 +910,7 @@ impl<C: Controller> Carrier<C> {
         let settled = averaged
             && modulated
             && mode == Mode::Normal
-            && self
-                .reached_ms
-                .is_some_and(|r| since(r).min(u64::from(u32::MAX)) as u32 as f32 >= 1000.0 * self.cfg.lid_fast_s);
+            && self.reached_ms.is_some_and(|r| secs_f32(since(r)) >= self.cfg.lid_fast_s);
         // Either the holding duty jumped (a controller that keeps the load on target), or full
         // cooling for 10 min no longer holds the load within 1 °C (one that cannot, On-Off).
         let duty_jump = (temp_c - w).abs() < 1.0 && fast - self.duty_slow > self.cfg.lid_duty_rise;
@@ -987,12 +985,12 @@ mod tests {
     use crate::control::{AnyController, OnOff, OnOffConfig, Pi, PiConfig};
     use crate::units::Ohms;
 
-    fn counts_at(t: f32) -> u32 {
+    pub(super) fn counts_at(t: f32) -> u32 {
         let cfg = CarrierConfig::DEFAULT;
         cfg.adc.counts(cfg.rtd.resistance(Celsius(t)).unwrap())
     }
 
-    fn pi_carrier() -> Carrier<AnyController> {
+    pub(super) fn pi_carrier() -> Carrier<AnyController> {
         Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)))
     }
 
@@ -1121,17 +1119,9 @@ mod robustness {
 
 #[cfg(test)]
 mod switch_and_reference {
+    use super::tests::{counts_at, pi_carrier as carrier};
     use super::*;
     use crate::control::{AnyController, Pi, PiConfig};
-
-    fn counts_at(t: f32) -> u32 {
-        let cfg = CarrierConfig::DEFAULT;
-        cfg.adc.counts(cfg.rtd.resistance(Celsius(t)).unwrap())
-    }
-
-    fn carrier() -> Carrier<AnyController> {
-        Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)))
-    }
 
     /// Runs `n` samples holding 5 °C at setpoint `w` with the rail reading what a switch that is
     /// `shorted` (or not) shows; returns the samples that opened the switch and when the short
@@ -1223,7 +1213,7 @@ mod switch_and_reference {
     #[test]
     fn a_reference_fault_is_a_sensor_fault_until_a_valid_sample() {
         let mut c = carrier();
-        let warm = c.step(&StepInput { t_ms: 0_000, counts: counts_at(9.0), setpoint_c: 4.0 });
+        let warm = c.step(&StepInput { t_ms: 0, counts: counts_at(9.0), setpoint_c: 4.0 });
         assert!(warm.duty.get() > 0.0);
         let bad = StepInput { t_ms: 10_000, counts: counts_at(9.0), setpoint_c: 4.0 };
         let out = c.step_with_reference_fault(&bad);

@@ -61,7 +61,11 @@ use crate::config;
 /// The persistence region as absolute addresses (`config::PERSIST_RANGE` is relative to the
 /// flash base), for the NMI handler's ECC check.
 pub const PERSIST_ADDRESSES: core::ops::Range<u32> =
-    0x0800_0000 + config::PERSIST_RANGE.start..0x0800_0000 + config::PERSIST_RANGE.end;
+    FLASH_BASE + config::PERSIST_RANGE.start..FLASH_BASE + config::PERSIST_RANGE.end;
+
+/// The flash's base address (0x0800_0000): `config::PERSIST_RANGE` and embassy's `Flash` count
+/// from it, the NMI's FLASH_ECCR address and the ECC note are absolute.
+pub const FLASH_BASE: u32 = embassy_stm32::flash::FLASH_BASE as u32;
 
 /// The board's peripherals, initialised.
 pub struct Board {

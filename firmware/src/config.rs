@@ -25,12 +25,13 @@ compile_error!("features `pi`, `onoff`, `igmvc` and `identify` each select a con
 
 use hter::adc::SupplySense;
 use hter::calib::TwoPoint;
-use hter::control::adaptive::{AdaptiveConfig, SelfTuning};
+use hter::control::adaptive::AdaptiveConfig;
+#[cfg(not(any(feature = "pi", feature = "onoff", feature = "identify")))]
+use hter::control::adaptive::SelfTuning;
 use hter::control::gpc::GpcConfig;
 use hter::control::mv::IgmvcConfig;
 #[allow(unused_imports)]
 use hter::control::{Law, OnOff, OnOffConfig, Pi, PiConfig};
-use hter::persist::ModelRecord;
 use hter::step::CarrierConfig;
 #[allow(unused_imports)]
 use hter::units::Celsius;
@@ -271,25 +272,6 @@ impl hter::control::Controller for Identify {
         }
     }
 }
-
-/// The model a controller wants stored in flash, if it has a trusted one: only the self-tuners
-/// learn one.
-pub trait TrustedModel {
-    /// The record of the trusted model, if any.
-    fn trusted_record(&self) -> Option<ModelRecord> {
-        None
-    }
-}
-
-impl TrustedModel for SelfTuning {
-    fn trusted_record(&self) -> Option<ModelRecord> {
-        self.trusted_model().as_ref().and_then(ModelRecord::from_model)
-    }
-}
-impl TrustedModel for Pi {}
-impl TrustedModel for OnOff {}
-#[cfg(feature = "identify")]
-impl TrustedModel for Identify {}
 
 /// Flash region of the persisted records, as offsets from the flash base 0x0800_0000 (what
 /// embassy's `Flash` takes): the last 4 pages of 2 KiB, `PERSIST` in `memory.x`.

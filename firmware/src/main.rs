@@ -43,11 +43,9 @@ use hter::control::{AdaptiveMode, Controller, ControllerStatus};
 use hter::event::{Event, EventKind};
 use hter::failsafe::{Heartbeat, StopInfo};
 use hter::hal::apply_duty;
-use hter::persist::{HistoryRecord, Recorder, ResetCause};
+use hter::persist::{HistoryRecord, ModelRecord, Recorder, ResetCause};
 use hter::step::{Carrier, CarrierConfig, Mode, StepInput};
 use hter::units::Duty;
-
-use config::TrustedModel;
 
 /// One sample of the analog inputs and when it was taken.
 #[derive(Clone, Copy)]
@@ -290,7 +288,7 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             trusted_samples += 1;
             if trusted_samples >= config::MODEL_SAVE_SAMPLES {
                 trusted_samples = 0;
-                if let Some(rec) = carrier.controller().trusted_record() {
+                if let Some(rec) = carrier.controller().trusted_model().as_ref().and_then(ModelRecord::from_model) {
                     persist::request(persist::Save::Model(rec));
                 }
             }
@@ -321,7 +319,7 @@ async fn actuate(
             supply_enable.set_low();
         }
         // The SSR's falling edge stays out of the RTD sampling window.
-        let duty = hter::adc::SampleWindow::DEFAULT.clear_duty(a.duty);
+        let duty = config::SAMPLE_WINDOW.clear_duty(a.duty);
         let mut ch = ssr.ch1();
         if apply_duty(&mut ch, duty).is_err() {
             warn!("SSR duty write failed");

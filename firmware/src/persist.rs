@@ -40,7 +40,7 @@ pub struct L4Ecc;
 
 impl EccErrors for L4Ecc {
     fn take(&mut self) -> Option<u32> {
-        crate::ecc::take().map(|addr| addr.wrapping_sub(embassy_stm32::flash::FLASH_BASE as u32))
+        crate::ecc::take().map(|addr| addr.wrapping_sub(crate::board::FLASH_BASE))
     }
 }
 

@@ -188,10 +188,15 @@ pub fn parse_line(line: &str) -> Option<Result<Sample>> {
     })())
 }
 
-/// Median of the positive intervals between consecutive samples of one boot, s.
-fn median_interval(raw: &[(f64, u32)]) -> Option<f64> {
-    let mut d: Vec<f64> =
-        raw.windows(2).filter(|w| w[0].1 == w[1].1).map(|w| w[1].0 - w[0].0).filter(|d| *d > 0.0).collect();
+/// Median of the positive intervals between consecutive samples of one boot (times since the
+/// boot, before the boots are joined), s.
+fn median_interval(rows: &[Row]) -> Option<f64> {
+    let mut d: Vec<f64> = rows
+        .windows(2)
+        .filter(|w| w[0].boot == w[1].boot)
+        .map(|w| w[1].sample.t_s - w[0].sample.t_s)
+        .filter(|d| *d > 0.0)
+        .collect();
     d.sort_by(f64::total_cmp);
     d.get(d.len() / 2).copied()
 }
@@ -204,9 +209,8 @@ fn micros(t: f64) -> f64 {
 
 /// Converts a whole log (its lines, in order); errors name the 1-based line.
 pub fn convert<I: IntoIterator<Item = std::io::Result<String>>>(lines: I) -> Result<Converted> {
+    // Each row's `t_s` is its time since its boot until the boots are joined below.
     let mut rows: Vec<Row> = Vec::new();
-    // Per row: its time since boot and its boot.
-    let mut raw: Vec<(f64, u32)> = Vec::new();
     // Each boot after the first: its first row, and whether its clock went on from the last.
     let mut starts: Vec<(usize, bool)> = Vec::new();
     let mut boot_period: Option<f64> = None;
@@ -236,7 +240,7 @@ pub fn convert<I: IntoIterator<Item = std::io::Result<String>>>(lines: I) -> Res
         }
         let Some(s) = parse_line(&line) else { continue };
         let s = s.with_context(|| format!("line {n}"))?;
-        let prev = raw.last().copied();
+        let prev = rows.last().map(|r| (r.sample.t_s, r.boot));
         let backwards = prev.is_some_and(|(t, _)| s.t_s <= t);
         let new_boot = prev.is_some() && (pending_reset.is_some() || backwards);
         let boot = prev.map_or(0, |(_, b)| b + u32::from(new_boot));
@@ -257,7 +261,6 @@ pub fn convert<I: IntoIterator<Item = std::io::Result<String>>>(lines: I) -> Res
         };
         pending_reset = None;
         pending_fault = None;
-        raw.push((s.t_s, boot));
         rows.push(Row { sample: s, boot, reset_cause: cause.map(str::to_string) });
     }
     if rows.is_empty() {
@@ -265,12 +268,13 @@ pub fn convert<I: IntoIterator<Item = std::io::Result<String>>>(lines: I) -> Res
     }
     let period = boot_period
         .map(|ts| (ts, PeriodSource::BootLine))
-        .or_else(|| median_interval(&raw).map(|ts| (ts, PeriodSource::Median)));
+        .or_else(|| median_interval(&rows).map(|ts| (ts, PeriodSource::Median)));
     let mut joined = 0;
     let mut offset = 0.0;
     let mut last_out = 0.0;
     let mut next_start = starts.iter().peekable();
-    for (i, (r, &(t, _))) in rows.iter_mut().zip(&raw).enumerate() {
+    for (i, r) in rows.iter_mut().enumerate() {
+        let t = r.sample.t_s;
         if let Some(&&(_, clock_went_on)) = next_start.peek().filter(|(first, _)| *first == i) {
             next_start.next();
             if !clock_went_on {

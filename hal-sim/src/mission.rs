@@ -46,7 +46,7 @@ pub const HARDWARE_FAULTS: [Fault; 9] = [
 ];
 
 /// Faults of the board around the step a mission may carry: a shorted supply switch (found
-/// by the switched-rail check, at the latest at the hourly test opening) and a hung control
+/// by the switched-rail check, at the latest at the two-hourly test opening) and a hung control
 /// loop (found by the board's heartbeat monostable, which opens the supply switch and sounds
 /// the alarm hardware).
 pub const BOARD_FAULTS: [Fault; 2] = [Fault::SupplySwitchShort, Fault::FirmwareHang];

@@ -187,20 +187,20 @@ impl SimAdc {
         let fs = f64::from(self.full_scale);
         let noise = Normal::new(0.0, self.noise_counts.max(1e-12)).map_or(0.0, |n| n.sample(&mut self.rng));
         let bias = self.ssr_bias_counts();
-        self.ideal = match self.fault {
+        let ideal = match self.fault {
             SensorFault::Offset(d) => self.ideal_counts(self.ohms_at(self.temp_c + d)),
             SensorFault::Open => fs,
             SensorFault::Short => self.ideal_counts(1.0),
-            _ => self.ideal_counts(self.ohms_at(self.temp_c)),
+            SensorFault::None | SensorFault::Stuck | SensorFault::Spikes => {
+                self.ideal_counts(self.ohms_at(self.temp_c))
+            }
         };
+        self.ideal = ideal;
         let x = match self.fault {
-            SensorFault::None | SensorFault::Stuck => self.ideal_counts(self.ohms_at(self.temp_c)) + noise + bias,
-            SensorFault::Offset(d) => self.ideal_counts(self.ohms_at(self.temp_c + d)) + noise + bias,
             // The amplifier sits at its rail: nothing moves it.
             SensorFault::Open => fs,
-            SensorFault::Short => self.ideal_counts(1.0) + noise + bias,
             SensorFault::Spikes => {
-                let base = self.ideal_counts(self.ohms_at(self.temp_c)) + noise + bias;
+                let base = ideal + noise + bias;
                 let u: f64 = rand::Rng::gen(&mut self.rng);
                 if u < 0.02 {
                     // A spike of ±(5…30) °C worth of counts.
@@ -210,6 +210,9 @@ impl SimAdc {
                 } else {
                     base
                 }
+            }
+            SensorFault::None | SensorFault::Stuck | SensorFault::Offset(_) | SensorFault::Short => {
+                ideal + noise + bias
             }
         };
         x.round().clamp(0.0, fs) as u32

@@ -303,15 +303,6 @@ pub struct SimOutput {
     pub ts_s: f64,
 }
 
-fn indication_name(i: Indication) -> &'static str {
-    match i {
-        Indication::Off => "off",
-        Indication::NotInControl => "not_in_control",
-        Indication::OutOfRange => "out_of_range",
-        Indication::Unacknowledged => "unacknowledged",
-    }
-}
-
 fn mode_name(m: Mode) -> &'static str {
     match m {
         Mode::Normal => "normal",
@@ -469,7 +460,7 @@ impl Rig {
                 board.supply_pin = out.supply_enable;
                 // A completed step: the heartbeat toggles, the monostable restarts.
                 board.beat(t_s);
-                ssr.set_supply_enabled(board.supply_pin && board.mono.is_running(t_s));
+                ssr.set_supply_enabled(board.supply_on(t_s));
                 ssr.effective_duty()
             }
             Rig::Arx(_) => {
@@ -495,7 +486,7 @@ impl Rig {
             let d = match self {
                 Rig::Physical { ssr, board, .. } => {
                     let t = t_s + i as f64 * PWM_PERIOD_S;
-                    ssr.set_supply_enabled(board.supply_pin && board.mono.is_running(t));
+                    ssr.set_supply_enabled(board.supply_on(t));
                     ssr.effective_duty()
                 }
                 Rig::Arx(_) => d,
@@ -599,7 +590,7 @@ impl Rig {
     fn gated_duty(&mut self, t_s: f64) -> f64 {
         match self {
             Rig::Physical { ssr, board, .. } => {
-                ssr.set_supply_enabled(board.supply_pin && board.mono.is_running(t_s));
+                ssr.set_supply_enabled(board.supply_on(t_s));
                 ssr.effective_duty()
             }
             Rig::Arx(_) => 0.0,
@@ -625,6 +616,11 @@ struct Board {
 impl Board {
     fn new() -> Self {
         Board { supply_pin: true, heartbeat: Heartbeat::new(), mono: Monostable::new(Monostable::TIMEOUT_S) }
+    }
+
+    /// Whether the supply switch conducts at `t_s`: the MCU's pin, ANDed with the monostable.
+    fn supply_on(&self, t_s: f64) -> bool {
+        self.supply_pin && self.mono.is_running(t_s)
     }
 
     /// One healthy step at `t_s`: the heartbeat toggles, and its edge retriggers the monostable.
@@ -791,7 +787,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                 b1: None,
                 trace_p: None,
                 adaptive_mode: None,
-                alarm: indication_name(indication),
+                alarm: indication.name(),
                 supply_enable: out.is_some_and(|o| o.supply_enable),
                 alarm_hw: alarm_hw.is_some(),
                 ideal_counts: f64::NAN,
@@ -844,7 +840,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                     AdaptiveMode::Frozen => "frozen",
                     AdaptiveMode::Fallback => "fallback",
                 }),
-                alarm: indication_name(indication),
+                alarm: indication.name(),
                 supply_enable: out.supply_enable,
                 alarm_hw: rig.alarm_hw_since(t_s).is_some(),
                 ideal_counts: rig.ideal_counts(),

@@ -301,4 +301,8 @@ impl Controller for SelfTuning {
             prediction_error: self.last_error,
         })
     }
+
+    fn trusted_model(&self) -> Option<Model> {
+        self.trusted
+    }
 }

@@ -50,6 +50,12 @@ pub trait Controller {
     fn status(&self) -> Option<ControllerStatus> {
         None
     }
+
+    /// The model a self-tuning controller last trusted (what a board persists); `None` for the
+    /// controllers that learn none.
+    fn trusted_model(&self) -> Option<model::Model> {
+        None
+    }
 }
 
 /// Which controller drives the SSR.
@@ -121,6 +127,13 @@ impl Controller for AnyController {
     fn status(&self) -> Option<ControllerStatus> {
         match self {
             AnyController::SelfTuning(c) => c.status(),
+            _ => None,
+        }
+    }
+
+    fn trusted_model(&self) -> Option<model::Model> {
+        match self {
+            AnyController::SelfTuning(c) => c.trusted_model(),
             _ => None,
         }
     }

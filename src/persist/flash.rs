@@ -290,8 +290,12 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
 
     /// Reads every word of the page at `start`: how many fail their ECC check, the first of
     /// them, and whether the page's start marker is one.
+    /// A flash word the scratch buffer cannot hold is [`StoreError::Flash`].
     async fn scan_page(&mut self, start: u32) -> Result<(usize, Option<u32>, bool), StoreError> {
         let (page, word) = (F::ERASE_SIZE as u32, F::WRITE_SIZE);
+        if word == 0 || word > MAX_WORD {
+            return Err(StoreError::Flash);
+        }
         let flash = self.map.flash();
         let mut scratch = [0u8; MAX_WORD];
         let (mut torn, mut first_torn, mut marker_torn) = (0usize, None, false);
@@ -335,7 +339,7 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
     /// Repairs the page holding the word at `offset` that failed its ECC check.
     async fn repair(&mut self, offset: u32) -> Result<(), StoreError> {
         let page = F::ERASE_SIZE as u32;
-        if !self.range.contains(&offset) || F::WRITE_SIZE == 0 || F::WRITE_SIZE > MAX_WORD {
+        if !self.range.contains(&offset) {
             return Err(StoreError::Flash);
         }
         let start = offset - (offset - self.range.start) % page;
@@ -349,9 +353,6 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
     /// this before loading, so no damage waits for a later store (≈ 8 KiB read, well under a
     /// millisecond on the L4, plus a repair per damaged page).
     pub async fn scrub(&mut self) -> Result<(), StoreError> {
-        if F::WRITE_SIZE == 0 || F::WRITE_SIZE > MAX_WORD {
-            return Err(StoreError::Flash);
-        }
         let page = F::ERASE_SIZE as u32;
         for start in self.range.clone().step_by(F::ERASE_SIZE) {
             if start + page > self.range.end {
