@@ -592,13 +592,25 @@ mod tests {
     }
 
     #[test]
-    fn host_replay_of_the_library_is_deterministic() {
-        let inputs: Vec<StepInput> = (0..50)
-            .map(|k| StepInput { t_ms: 10_000 * k as u64, counts: 49_000 + (k * 7919 % 13), setpoint_c: 4.0 })
+    fn host_replay_records_the_steps_duties_and_events() {
+        // 20 samples at 9 °C (cooling wanted), then an open sensor at sample 20 (t = 200 s).
+        let cfg = proto::CARRIER;
+        let warm = cfg.adc.counts(cfg.rtd.resistance(hter::units::Celsius(9.0)).unwrap());
+        let inputs: Vec<StepInput> = (0..30u32)
+            .map(|k| StepInput {
+                t_ms: 10_000 * u64::from(k),
+                counts: if k < 20 { warm + k % 3 } else { 65_535 },
+                setpoint_c: 4.0,
+            })
             .collect();
-        let a = run_host(proto::KIND_GPC, &inputs).unwrap();
-        let b = run_host(proto::KIND_GPC, &inputs).unwrap();
-        assert_eq!(a, b);
-        assert!(run_host(7, &inputs).is_err());
+        let host = run_host(proto::KIND_PI, &inputs).unwrap();
+        assert_eq!(host.len(), inputs.len());
+        assert!(host[..20].iter().all(|(d, _)| f32::from_bits(*d) > 0.0), "a warm load is cooled");
+        assert!(host[20..].iter().all(|(d, _)| f32::from_bits(*d) == 0.0), "an open sensor stops cooling");
+        // The open sensor is reported once, at its sample's time (low word, high word).
+        let open = hter::event::EventKind::SensorOpen.code();
+        assert_eq!(host[20].1, [(open, 200_000), (open, 0)]);
+        assert!(host[21..].iter().all(|(_, e)| e.is_empty()), "{:?}", &host[21..]);
+        assert!(run_host(7, &inputs).is_err(), "unknown controller kind");
     }
 }
