@@ -8,7 +8,7 @@ fn sim(scenario: &str, controller: ControllerChoice, plant: PlantChoice, load: L
     sim_spec(scenario, ControllerSpec::new(controller), plant, load)
 }
 
-/// Issue 2's acceptance run: PI pulls the full-load H-TER I carrier from 28 °C to 4 °C without
+/// PI pulls the full-load H-TER I carrier from 28 °C to 4 °C without
 /// going below 2 °C and then holds it within ±0.5 °C.
 #[test]
 fn pi_pulls_down_from_28_to_4_without_freezing_and_holds() {
@@ -88,15 +88,35 @@ fn gpc_on_its_own_arx_model_tracks_piecewise_without_offset() {
     assert!(out.metrics.min_temp_c >= 2.0);
 }
 
-/// Self-tuning GPC on the physical plant: never below 2 °C on the seed's experiments, logs its
-/// mode changes, and survives a supply sag from 12 to 10 V mid-run.
+/// The self-tuner's mode in every row, with the time it began: one entry per mode change.
+fn mode_changes(out: &SimOutput) -> Vec<(f64, &'static str)> {
+    let mut changes: Vec<(f64, &'static str)> = Vec::new();
+    for r in &out.rows {
+        let m = r.adaptive_mode.expect("the self-tuner's mode is logged every sample");
+        if changes.last().is_none_or(|&(_, last)| last != m) {
+            changes.push((r.t_s, m));
+        }
+    }
+    changes
+}
+
+/// Self-tuning GPC on the physical plant: never below 2 °C on the seed's experiments; its own
+/// estimate becomes trusted (mode `adaptive`) within the first setpoint step and it never needs
+/// the fallback PI on healthy hardware; and it survives a supply sag from 12 to 10 V mid-run
+/// with a finite estimate throughout.
 #[test]
-fn self_tuning_gpc_stays_in_range_and_reports_its_modes() {
+fn self_tuning_gpc_stays_in_range_and_trusts_its_own_estimate() {
     for (plant, load) in
         [(PlantChoice::Hter1, Load::Full), (PlantChoice::Hter1, Load::Half), (PlantChoice::Hter2, Load::Full)]
     {
-        let m = sim_spec("piecewise", spec(ControllerChoice::Gpc), plant, load).metrics;
+        let out = sim_spec("piecewise", spec(ControllerChoice::Gpc), plant, load);
+        let m = &out.metrics;
         assert!(m.min_temp_c >= 2.0 && m.max_temp_c <= 8.0, "{plant:?} {load:?}: {m:?}");
+        let changes = mode_changes(&out);
+        // Measured: adaptive from 0–480 s on the three carriers (the first step lasts 1 h).
+        let engaged = changes.iter().find(|&&(_, m)| m == "adaptive").map(|&(t, _)| t);
+        assert!(engaged.is_some_and(|t| t < 1800.0), "{plant:?} {load:?}: {changes:?}");
+        assert!(changes.iter().all(|&(_, m)| m != "fallback"), "{plant:?} {load:?}: {changes:?}");
     }
     let mut scenario = Scenario::resolve("disturbance").unwrap();
     scenario.changes = vec![(1800.0, hal_sim::scenario::Change::Supply(10.0))];
@@ -112,8 +132,9 @@ fn self_tuning_gpc_stays_in_range_and_reports_its_modes() {
     })
     .unwrap();
     assert!(out.metrics.min_temp_c >= 2.0 && out.metrics.max_temp_c <= 8.0, "{:?}", out.metrics);
-    assert!(out.rows.iter().all(|r| r.adaptive_mode.is_some()), "the self-tuning status is logged every sample");
-    assert!(out.rows.iter().any(|r| r.a1.is_some_and(|a| a.is_finite())));
+    assert!(mode_changes(&out).iter().all(|&(_, m)| m != "fallback"), "{:?}", mode_changes(&out));
+    let finite = |r: &hal_sim::sim::Row| [r.a1, r.a2, r.b0, r.b1].iter().all(|p| p.is_some_and(f32::is_finite));
+    assert!(out.rows.iter().all(finite), "a non-finite estimate");
 }
 
 fn sim_spec(scenario: &str, controller: ControllerSpec, plant: PlantChoice, load: Load) -> SimOutput {
@@ -153,7 +174,15 @@ fn seed_conclusions_hold_on_piecewise() {
 /// Self-tuning copes with the plant changing under it: at 4 °C the supply sags from 12 to 9 V
 /// after an hour (a quarter less cooling power) and the ambient jumps from 28 to 36 °C after two.
 /// Every law keeps the load within 2–8 °C, is back within ±0.3 °C of the setpoint in the last
-/// half hour, and its estimate has moved.
+/// half hour, and its estimate follows the plant: the estimated effect of the duty, B(1) =
+/// b0 + b1, is at least a quarter smaller in magnitude at the end than before the sag (less
+/// cooling per unit duty at 9 V). Measured: 80 %, 41 % and 75 % smaller for GMVC, IGMVC, GPC.
+///
+/// (The estimate does not converge to the plant's static gain in closed loop: on `piecewise`
+/// the final B(1)/A(1) ranges from −15 to −74 °C per unit duty against the plant's −42.8 at
+/// 4 °C, the excitation of a regulated load being weak. The estimator's structure is the
+/// subject of the start-model work; what the laws need, a stable A and a cooling B, is checked
+/// by the projection every sample.)
 #[test]
 fn self_tuning_laws_survive_a_plant_change_mid_run() {
     use hal_sim::scenario::{Change, Start};
@@ -184,7 +213,12 @@ fn self_tuning_laws_survive_a_plant_change_mid_run() {
         let tail = out.rows.iter().filter(|r| r.t_s >= 3.5 * 3600.0);
         let worst = tail.map(|r| (r.true_temp_c - 4.0).abs()).fold(0.0, f64::max);
         assert!(worst <= 0.3, "{c:?}: |T − 4| up to {worst} °C in the last half hour");
-        let b0 = |t: f64| out.rows.iter().find(|r| r.t_s >= t).and_then(|r| r.b0).unwrap();
-        assert!((b0(3500.0) - b0(14000.0)).abs() > 1e-4, "{c:?}: the estimate did not move");
+        let b_sum = |t: f64| {
+            let r = out.rows.iter().find(|r| r.t_s >= t).unwrap();
+            r.b0.unwrap() + r.b1.unwrap()
+        };
+        let (before, after) = (b_sum(3500.0), b_sum(14000.0));
+        assert!(before < 0.0 && after < 0.0, "{c:?}: B(1) {before} → {after} must cool");
+        assert!(after.abs() < 0.75 * before.abs(), "{c:?}: B(1) {before} → {after} did not follow the sag");
     }
 }
