@@ -46,7 +46,7 @@ fn baselines_never_take_the_load_below_2_on_piecewise() {
 
 #[test]
 fn pi_has_less_steady_state_error_than_onoff() {
-    // The seed's finding (§5.2): PI beats On-Off on steady-state error.
+    // The integral action removes the offset that On-Off's hysteresis leaves.
     let pi = sim("piecewise", ControllerChoice::Pi, PlantChoice::Hter1, Load::Full).metrics;
     let onoff = sim("piecewise", ControllerChoice::Onoff, PlantChoice::Hter1, Load::Full).metrics;
     assert!(pi.steady_state_error_c < onoff.steady_state_error_c, "pi {pi:?}\nonoff {onoff:?}");
@@ -100,7 +100,7 @@ fn mode_changes(out: &SimOutput) -> Vec<(f64, &'static str)> {
     changes
 }
 
-/// Self-tuning GPC on the physical plant: never below 2 °C on the seed's experiments; its own
+/// Self-tuning GPC on the physical plant: never below 2 °C on the piecewise experiment; its own
 /// estimate becomes trusted (mode `adaptive`) within the first setpoint step and it never needs
 /// the fallback PI on healthy hardware; and it survives a supply sag from 12 to 10 V mid-run
 /// with a finite estimate throughout.
@@ -144,7 +144,7 @@ fn sim_spec(scenario: &str, controller: ControllerSpec, plant: PlantChoice, load
         .unwrap()
 }
 
-/// The seed's conclusions on `piecewise` (§5.4, §6.4), with the self-tuning laws at their
+/// The method's conclusions on `piecewise`, with the self-tuning laws at their
 /// defaults, each carrier's own start model and seed 7: IGMVC holds the steady-state error
 /// within ±0.15 °C on the full load, the half load and H-TER II; GPC has a lower IAE than IGMVC
 /// and PI on all three; no controller takes the load below 2 °C. (Across seeds 1–8 two runs

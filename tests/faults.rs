@@ -111,8 +111,8 @@ fn a_shorted_ssr_limps_home_within_2_to_8() {
 }
 
 /// A +1.5 °C step of the reading is caught in three samples, measured and subtracted: the load
-/// stays on target instead of being cooled 1.5 °C too far (it reached 2.4 °C with PI and 1.6 °C
-/// with On-Off before this check).
+/// stays on target instead of being cooled 1.5 °C too far (without the offset check the load
+/// reaches 2.4 °C with PI and 1.6 °C with On-Off).
 #[test]
 fn a_sensor_offset_is_detected_and_compensated() {
     check("sensor-offset", "sensor_offset", 40.0);

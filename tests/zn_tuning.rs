@@ -1,5 +1,5 @@
-//! The default PI gains come from the seed's method: Ziegler–Nichols on the open-loop step
-//! response of the full-load H-TER I carrier (seed Table 5.1). This re-derives them from the
+//! The default PI gains come from Ziegler–Nichols on the open-loop step response of the
+//! full-load H-TER I carrier (the reaction-curve method). This re-derives them from the
 //! simulated plant, so the documented origin of `PiConfig::HTER1_DEFAULT` stays true.
 
 use hal_sim::plant::{Load, Plant, PlantParams};

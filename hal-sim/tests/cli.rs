@@ -119,7 +119,7 @@ fn sim_json_has_every_contract_field_and_writes_csv_and_plot() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// The seed's order conclusion (ch. 4) on the simulator's PRBS runs, from the default command a
+/// The method's order conclusion on the simulator's PRBS runs, from the default command a
 /// new user types (`hter identify --input prbs.csv`: output error, each order at its best delay
 /// 1–10, deviations from the initial rest the log starts with): a 2nd-order model simulates
 /// the carrier within a few points of the 4th-order one on both carriers, clearly better than

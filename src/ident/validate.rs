@@ -1,7 +1,7 @@
 //! Model validation on recorded data, in f64 (host tool and tests; no allocation, slices in):
 //!
-//! - **one-step-ahead MSE**: mean of (y(t) − φ(t)ᵀθ)², the seed's measure (its 2nd-order models
-//!   reached 0.0009 and 0.0007 °C²);
+//! - **one-step-ahead MSE**: mean of (y(t) − φ(t)ᵀθ)², the measure the identification
+//!   method reports (its 2nd-order models of the real carriers reached 0.0009 and 0.0007 °C²);
 //! - **simulated fit**: the model run from the input alone (MATLAB `compare`),
 //!   `fit = 100 (1 − ‖y − ŷ_sim‖ / ‖y − ȳ‖)` %;
 //! - **poles and zeros**: roots of `z^na A(z⁻¹)` and `z^(nb−1) B(z⁻¹)` (closed form up to
