@@ -12,8 +12,8 @@ pub enum EventKind {
     SensorShort,
     /// The RTD reads a temperature outside the plausible range of the carrier.
     SensorOutOfRange,
-    /// The RTD conversion has not changed for [`crate::step::CarrierConfig::stuck_samples`]
-    /// samples: a real reading always carries some noise (stuck converter, frozen front end).
+    /// The RTD conversion has not changed for [`crate::supervisor::sensor::SensorConfig::stuck_s`]
+    /// seconds: a real reading always carries some noise (stuck converter, frozen front end).
     SensorStuck,
     /// Readings jumped by more than physics allows several times within an hour (EMI, a loose
     /// contact); each spike is ignored and control continues on the filtered value.

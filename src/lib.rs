@@ -16,7 +16,9 @@
 //! - [`failsafe`]: the safe-outputs seam, the reset-surviving reason record and the heartbeat
 //!   of the fail-loud alarm.
 //! - [`hal`]: the small hardware seams the firmware and `hal-sim` implement.
-//! - [`step`]: the per-sample application step.
+//! - [`step`]: the per-sample application step: convert, check, control, guard, actuate.
+//! - [`supervisor`]: the safety supervisor the step runs: its mode, and one detector per file
+//!   (sensor checks, freeze guard, SSR monitor and limp home, supply sag, supply switch, lid).
 //! - [`coldchain`]: WHO-style alarms, mean kinetic temperature, excursions; [`alarm`]: the
 //!   board's alarm indicator.
 //! - [`persist`]: versioned, CRC-checked records of what survives a power cycle (model, calibration,
@@ -42,4 +44,5 @@ pub mod ident;
 pub mod persist;
 pub mod rtd;
 pub mod step;
+pub mod supervisor;
 pub mod units;

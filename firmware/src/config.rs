@@ -33,6 +33,8 @@ use hter::control::mv::IgmvcConfig;
 #[allow(unused_imports)]
 use hter::control::{Law, OnOff, OnOffConfig, Pi, PiConfig};
 use hter::step::CarrierConfig;
+use hter::supervisor::switch::SwitchConfig;
+use hter::supervisor::SupervisorConfig;
 #[allow(unused_imports)]
 use hter::units::Celsius;
 
@@ -47,7 +49,13 @@ pub const SETPOINT_C: f32 = 4.0;
 /// excitation every 2 h spoils the fit, as the simulator's `prbs` runs showed); its switch is
 /// still checked whenever the freeze guard or a sensor fault opens it.
 pub const CARRIER: CarrierConfig = if cfg!(feature = "identify") {
-    CarrierConfig { switch_test_interval_samples: 0, ..CarrierConfig::DEFAULT }
+    CarrierConfig {
+        supervisor: SupervisorConfig {
+            switch: SwitchConfig { test_interval_s: 0.0, ..SwitchConfig::DEFAULT },
+            ..SupervisorConfig::DEFAULT
+        },
+        ..CarrierConfig::DEFAULT
+    }
 } else {
     CarrierConfig::DEFAULT
 };
@@ -146,7 +154,7 @@ pub const SAMPLE_WINDOW: hter::adc::SampleWindow = hter::adc::SampleWindow::DEFA
 
 /// The modules' supply measurement: 47 kΩ over 10 kΩ into PA4, VDDA from VREFINT
 /// (`hter::adc::SupplySense::DEFAULT`). The step reports a sag below 10.8 V
-/// (`CarrierConfig::supply_min_v`).
+/// (`hter::supervisor::supply::SupplyConfig::min_v`).
 pub const SUPPLY: SupplySense = SupplySense::DEFAULT;
 
 /// PI tuning at the carrier's sample period (Ziegler–Nichols, detuned 2×;

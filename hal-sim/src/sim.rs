@@ -653,7 +653,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
     }
     if sc.excitation {
         // As the identification build: no supply-switch test opening in the record.
-        cfg.switch_test_interval_samples = 0;
+        cfg.supervisor.switch.test_interval_s = 0.0;
     }
     let ts = f64::from(cfg.ts_s);
     let (mut rig, u0) = Rig::new(opts)?;

@@ -1,0 +1,193 @@
+//! Freeze guard: cut cooling before the load reaches 0 °C.
+//!
+//! The guard acts on the filtered temperature extrapolated along its smoothed downward slope:
+//!
+//! ```text
+//! s(k) = m·s(k−1) + (1 − m)·(y(k) − y(k−1))/Ts        (m = slope_smoothing)
+//! ŷ(k) = y(k) + min(s(k), 0)·T_la                     (T_la = lookahead_s)
+//! trip:    ŷ(k) ≤ cut_c
+//! release: y(k) ≥ release_c and ŷ(k) > cut_c
+//! ```
+//!
+//! Cut at full cooling, the cold side (≈ −10 °C) keeps pulling the load down for minutes and the
+//! sensor lags the load by ≈ 50 s, so a guard on the present reading alone lets the load coast
+//! ≈ 1 °C past it. Whether the guard holds is the supervisor's mode
+//! ([`super::State::FreezeGuard`]); this type keeps the slope and answers the two questions.
+
+/// Settings of the freeze guard.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FreezeConfig {
+    /// Cooling is cut when the predicted load is at or below this, °C. 1.5 °C leaves 0.5 °C of
+    /// margin to the +1 °C freezing limit of the vaccines for the sensor lag.
+    pub cut_c: f32,
+    /// Cooling may resume once the measured load is at or above this, °C.
+    pub release_c: f32,
+    /// Look-ahead, s: how far along its current downward slope the load is extrapolated. 120 s
+    /// covers the coast after full cooling stops seen through the ≈ 50 s sensor lag (measured
+    /// on the hal-sim plant with On-Off at a 3 °C setpoint).
+    pub lookahead_s: f32,
+    /// Weight of the previous slope in the smoothed one (0.7: smoothed over ≈ 3 samples, so one
+    /// noisy reading cannot trip the guard).
+    pub slope_smoothing: f32,
+}
+
+impl FreezeConfig {
+    /// The reference board's settings.
+    pub const DEFAULT: FreezeConfig = FreezeConfig { cut_c: 1.5, release_c: 2.5, lookahead_s: 120.0, slope_smoothing: 0.7 };
+}
+
+/// This sample's movement of the filtered temperature.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Trend {
+    /// The fall over the last sample, °C (positive falling; 0 without a previous sample).
+    pub(crate) drop_c: f32,
+    /// The smoothed slope, °C/s.
+    pub(crate) slope_c_per_s: f32,
+    /// The temperature extrapolated `lookahead_s` along a falling slope, °C.
+    pub(crate) predicted_c: f32,
+}
+
+/// The freeze guard's slope estimate.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct FreezeGuard {
+    cfg: FreezeConfig,
+    ts_s: f32,
+    /// 1 − `slope_smoothing`: the weight of this sample's slope.
+    gain: f32,
+    last_temp_c: Option<f32>,
+    slope_c_per_s: f32,
+}
+
+impl FreezeGuard {
+    pub(crate) fn new(cfg: &FreezeConfig, ts_s: f32) -> Self {
+        FreezeGuard { cfg: *cfg, ts_s, gain: 1.0 - cfg.slope_smoothing, last_temp_c: None, slope_c_per_s: 0.0 }
+    }
+
+    /// The smoothed slope, °C/s.
+    pub(crate) fn slope_c_per_s(&self) -> f32 {
+        self.slope_c_per_s
+    }
+
+    /// Forgets the history (the filter restarted after a sensor fault).
+    pub(crate) fn restart(&mut self) {
+        self.last_temp_c = None;
+        self.slope_c_per_s = 0.0;
+    }
+
+    /// Takes this sample's filtered temperature.
+    pub(crate) fn observe(&mut self, temp_c: f32) -> Trend {
+        let mut drop_c = 0.0;
+        if let Some(prev) = self.last_temp_c.filter(|p| p.is_finite()) {
+            drop_c = prev - temp_c;
+            let raw_slope = (temp_c - prev) / self.ts_s;
+            if raw_slope.is_finite() {
+                self.slope_c_per_s = self.cfg.slope_smoothing * self.slope_c_per_s + self.gain * raw_slope;
+            }
+        }
+        self.last_temp_c = Some(temp_c);
+        let predicted_c = temp_c + crate::units::min_f32(self.slope_c_per_s, 0.0) * self.cfg.lookahead_s;
+        Trend { drop_c, slope_c_per_s: self.slope_c_per_s, predicted_c }
+    }
+
+    /// Whether the guard trips on `trend`.
+    pub(crate) fn trips(&self, trend: &Trend) -> bool {
+        trend.predicted_c <= self.cfg.cut_c
+    }
+
+    /// Whether a tripped guard releases at `temp_c` on `trend` (never on a sample that trips).
+    pub(crate) fn releases(&self, temp_c: f32, trend: &Trend) -> bool {
+        temp_c >= self.cfg.release_c && trend.predicted_c > self.cfg.cut_c
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn guard() -> FreezeGuard {
+        FreezeGuard::new(&FreezeConfig::DEFAULT, 10.0)
+    }
+
+    #[test]
+    fn the_smoothing_gain_is_the_literal_it_replaces() {
+        // `1 − 0.7` in f32 is bit for bit the 0.3 the slope was smoothed with.
+        assert_eq!(guard().gain.to_bits(), 0.3f32.to_bits());
+    }
+
+    #[test]
+    fn a_steady_load_trips_at_the_cut_and_releases_at_the_release() {
+        let mut g = guard();
+        let t = g.observe(1.51);
+        assert!(!g.trips(&t));
+        let t = g.observe(1.51);
+        assert_eq!((t.drop_c, t.slope_c_per_s), (0.0, 0.0));
+        assert!(!g.trips(&t));
+        let mut g = guard();
+        let t = g.observe(1.5);
+        assert!(g.trips(&t), "at the cut");
+        let mut g = guard();
+        let t = g.observe(2.49);
+        assert!(!g.releases(2.49, &t));
+        let mut g = guard();
+        let t = g.observe(2.5);
+        assert!(g.releases(2.5, &t));
+    }
+
+    #[test]
+    fn it_trips_on_the_look_ahead_of_a_falling_load() {
+        // Falling 0.6 °C/min: the smoothed slope approaches −0.01 °C/s, so the prediction runs
+        // ≈ 1.2 °C below the reading.
+        let mut g = guard();
+        let mut temp = 5.0f32;
+        let mut tripped = None;
+        for _ in 0..40 {
+            let t = g.observe(temp);
+            if g.trips(&t) {
+                tripped = Some((temp, t.predicted_c));
+                break;
+            }
+            temp -= 0.1;
+        }
+        let (temp, predicted) = tripped.expect("never tripped");
+        assert!(temp > 2.5 && temp < 2.8, "tripped at {temp} °C");
+        assert!(predicted <= 1.5);
+        // Not released at 2.5 °C or more while the fall still predicts the cut.
+        let t = g.observe(temp - 0.1);
+        assert!(temp - 0.1 >= 2.5 && !g.releases(temp - 0.1, &t));
+    }
+
+    #[test]
+    fn a_rising_load_is_not_extrapolated() {
+        let mut g = guard();
+        g.observe(1.0);
+        let t = g.observe(1.6);
+        assert!(t.slope_c_per_s > 0.0);
+        assert_eq!(t.predicted_c, 1.6);
+        assert!((t.drop_c + 0.6).abs() < 1e-6);
+    }
+
+    #[test]
+    fn restart_forgets_the_slope() {
+        let mut g = guard();
+        g.observe(5.0);
+        g.observe(4.0);
+        assert!(g.slope_c_per_s() < 0.0);
+        g.restart();
+        let t = g.observe(1.6);
+        assert_eq!((t.drop_c, t.slope_c_per_s, t.predicted_c), (0.0, 0.0, 1.6));
+    }
+
+    #[test]
+    fn a_non_finite_reading_leaves_the_slope_alone() {
+        let mut g = guard();
+        g.observe(5.0);
+        g.observe(4.9);
+        let s = g.slope_c_per_s();
+        g.observe(f32::NAN);
+        assert_eq!(g.slope_c_per_s(), s);
+        // And the sample after it has no previous reading to take a slope from.
+        let t = g.observe(4.8);
+        assert_eq!((t.drop_c, t.slope_c_per_s), (0.0, s));
+    }
+}

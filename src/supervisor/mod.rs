@@ -1,0 +1,534 @@
+//! The safety supervisor: what the step does about safety, independent of what the controller
+//! wants.
+//!
+//! Cooling vaccines is safe when it stops: a load that warms a little is an alarm, one that
+//! freezes is lost. So every detector here, when in doubt, takes cooling away — the duty and,
+//! through the supply-enable switch, the modules' supply — and the controller only drives when
+//! nothing holds the outputs.
+//!
+//! ## Modes
+//! [`State`] is the supervisor's mode; each variant carries what that mode needs, and each edge
+//! is one named transition (a method of [`State`]):
+//!
+//! ```text
+//!                    guard_tripped
+//!   +-------------+ --------------> +----------------+
+//!   | Running(d)  |                 | FreezeGuard(d) |
+//!   +-------------+ <-------------- +----------------+
+//!      |      ^      guard_released     |      ^
+//!      |      |                         |      |
+//!      |      | sensor_recovered        |      | sensor_recovered
+//!      |      | (guard: false)          |      | (guard: true)
+//!      |      |                         |      |
+//!      | sensor_failed                  | sensor_failed
+//!      v      |                         v      |
+//!   +--------------------------------------------------+   sensor_failed
+//!   | SensorFault { kind, guard, d }                   | <-----------------+
+//!   +--------------------------------------------------+ ------------------+
+//!                                                         (another kind)
+//!
+//!   d, who drives when nothing holds cooling off (carried through every mode):
+//!
+//!   Controller { probe: None } --probe_started--> Controller { probe: Some(t0) }
+//!              ^                                              |
+//!              +------------------- probe_ended --------------+
+//!
+//!   Controller { .. } --ssr_shorted--> LimpHome { supply_on }   (latched until reset;
+//!                                        |    ^                  limp_switched flips
+//!                                        +----+ limp_switched    supply_on)
+//! ```
+//!
+//! The summary the step reports, [`Mode`], is `SensorFault` in `SensorFault`, `FreezeGuard` in
+//! `FreezeGuard`, and in `Running` `Normal` or `LimpHome` by who drives. During a sensor fault
+//! nothing that needs a reading runs, so the freeze guard's verdict, the probe and limp home's
+//! supply state wait in the variant for the reading to come back.
+//!
+//! ## Order of the checks in one sample
+//! The order is fixed here, in [`Supervisor::check`] (before the controller) and
+//! [`Supervisor::guard`] (after it):
+//! 1. the sensor: fault diagnosis and recovery ([`sensor::diagnose`]), then the offset watch and
+//!    the spike filter, which decide what the measurement filter takes ([`sensor`]);
+//! 2. the supply sag ([`supply`]), then the supply switch on its rail ([`switch`], which needs
+//!    the supply measured);
+//! 3. — the controller runs, with a trusted reading only —
+//! 4. with a trusted reading: the freeze guard's trend ([`freeze`]), its trip and the two SSR
+//!    stuck-on verdicts that come with a trip ([`ssr`], paths 1 and 2), its release; then the
+//!    SSR checks on the temperature history (stuck on after the off-run, stuck off, the supply
+//!    probe);
+//! 5. the mode's outputs: no duty unless the controller drives, limp home's On-Off;
+//! 6. the supply switch's test opening, the lid detector ([`lid`]) on the applied duty;
+//! 7. last, the SSR monitor counts this sample's duty: every check above saw the runs up to the
+//!    previous sample.
+//!
+//! ## Units
+//! Every setting is in seconds, °C, V or duty. The sample counts they mean are derived from the
+//! sample period once, when the supervisor is built (rounded to the nearest sample).
+
+pub mod freeze;
+pub mod lid;
+pub mod sensor;
+pub mod ssr;
+pub mod supply;
+pub mod switch;
+
+use crate::event::EventKind;
+use crate::filter::{FirstOrder, FirstOrderConfig};
+use crate::step::Mode;
+use crate::units::{Celsius, Duty};
+
+use freeze::{FreezeConfig, FreezeGuard};
+use lid::{LidConfig, LidDetector, LidInput};
+use sensor::{Diagnosis, Reading, SensorChecks, SensorConfig};
+use ssr::{Probe, SsrConfig, SsrMonitor};
+use supply::{SupplyConfig, SupplyMonitor};
+use switch::{SwitchCheck, SwitchConfig};
+
+/// Settings of every detector.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SupervisorConfig {
+    /// Sensor checks: stuck converter, spikes, offset.
+    pub sensor: SensorConfig,
+    /// Freeze guard.
+    pub freeze: FreezeConfig,
+    /// SSR monitor: stuck on, stuck off, the supply probe, limp home.
+    pub ssr: SsrConfig,
+    /// Supply sag.
+    pub supply: SupplyConfig,
+    /// Supply-switch check.
+    pub switch: SwitchConfig,
+    /// Lid detector.
+    pub lid: LidConfig,
+}
+
+impl SupervisorConfig {
+    /// The reference board's settings.
+    pub const DEFAULT: SupervisorConfig = SupervisorConfig {
+        sensor: SensorConfig::DEFAULT,
+        freeze: FreezeConfig::DEFAULT,
+        ssr: SsrConfig::DEFAULT,
+        supply: SupplyConfig::DEFAULT,
+        switch: SwitchConfig::DEFAULT,
+        lid: LidConfig::DEFAULT,
+    };
+}
+
+/// The samples in `s` seconds at the sample period `ts_s`, rounded to the nearest (saturating;
+/// 0 for a negative or NaN duration).
+pub(crate) const fn samples_u32(s: f32, ts_s: f32) -> u32 {
+    (s / ts_s + 0.5) as u32
+}
+
+/// [`samples_u32`] for a u16 count.
+pub(crate) const fn samples_u16(s: f32, ts_s: f32) -> u16 {
+    (s / ts_s + 0.5) as u16
+}
+
+/// [`samples_u32`] for a u8 count.
+pub(crate) const fn samples_u8(s: f32, ts_s: f32) -> u8 {
+    (s / ts_s + 0.5) as u8
+}
+
+/// `s` seconds in whole milliseconds (through u32: f32 → u64 is a library call on the M4F; 49
+/// days at most).
+pub(crate) const fn ms(s: f32) -> u64 {
+    (s * 1000.0 + 0.5) as u32 as u64
+}
+
+/// Time from `t0` to `t_ms`, ms (0 if the clock went back: "just now").
+pub(crate) fn since(t_ms: u64, t0: u64) -> u64 {
+    t_ms.saturating_sub(t0)
+}
+
+/// Who drives cooling when no safety action holds it off.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Drive {
+    /// The controller, through the SSR. `probe`: when the supply probe under way began, ms (the
+    /// supply switch is open meanwhile).
+    Controller {
+        /// When the probe under way began, ms.
+        probe: Option<u64>,
+    },
+    /// The SSR was found shorted: cooling is switched On-Off through the supply-enable switch
+    /// ([`ssr::LimpConfig`]), the controller is idle. Latched until reset.
+    LimpHome {
+        /// The supply is switched on.
+        supply_on: bool,
+    },
+}
+
+/// The supervisor's mode (see the state diagram in the module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum State {
+    /// Nothing holds cooling off; `Drive` drives it.
+    Running(Drive),
+    /// The freeze guard holds cooling off until the load is warm again.
+    FreezeGuard(Drive),
+    /// The sensor is faulty: cooling off until it reads plausibly again.
+    SensorFault {
+        /// The fault reported.
+        kind: EventKind,
+        /// The freeze guard held when the fault began, and holds again when it ends.
+        guard: bool,
+        /// Who drives once the outputs are free again.
+        drive: Drive,
+    },
+}
+
+impl State {
+    /// Power-up: the controller drives, no probe.
+    pub const START: State = State::Running(Drive::Controller { probe: None });
+
+    /// The sensor reads a fault `kind` (a first fault, or another kind than the one in force).
+    pub fn sensor_failed(self, kind: EventKind) -> State {
+        match self {
+            State::Running(drive) => State::SensorFault { kind, guard: false, drive },
+            State::FreezeGuard(drive) => State::SensorFault { kind, guard: true, drive },
+            State::SensorFault { guard, drive, .. } => State::SensorFault { kind, guard, drive },
+        }
+    }
+
+    /// The sensor reads plausibly again: back to the mode the fault interrupted.
+    pub fn sensor_recovered(self) -> State {
+        match self {
+            State::SensorFault { guard: true, drive, .. } => State::FreezeGuard(drive),
+            State::SensorFault { guard: false, drive, .. } => State::Running(drive),
+            other => other,
+        }
+    }
+
+    /// The freeze guard trips.
+    pub fn guard_tripped(self) -> State {
+        match self {
+            State::Running(drive) => State::FreezeGuard(drive),
+            other => other,
+        }
+    }
+
+    /// The freeze guard releases.
+    pub fn guard_released(self) -> State {
+        match self {
+            State::FreezeGuard(drive) => State::Running(drive),
+            other => other,
+        }
+    }
+
+    /// The SSR is found shorted: limp home from now on, supply off until limp home switches it.
+    pub fn ssr_shorted(self) -> State {
+        self.with_drive(|d| match d {
+            Drive::Controller { .. } => Drive::LimpHome { supply_on: false },
+            limp => limp,
+        })
+    }
+
+    /// A supply probe begins at `t_ms`.
+    pub fn probe_started(self, t_ms: u64) -> State {
+        self.with_drive(|d| match d {
+            Drive::Controller { .. } => Drive::Controller { probe: Some(t_ms) },
+            limp => limp,
+        })
+    }
+
+    /// The supply probe ends.
+    pub fn probe_ended(self) -> State {
+        self.with_drive(|d| match d {
+            Drive::Controller { .. } => Drive::Controller { probe: None },
+            limp => limp,
+        })
+    }
+
+    /// Limp home switches the supply on or off.
+    pub fn limp_switched(self, supply_on: bool) -> State {
+        self.with_drive(|d| match d {
+            Drive::LimpHome { .. } => Drive::LimpHome { supply_on },
+            controller => controller,
+        })
+    }
+
+    fn with_drive(self, f: impl FnOnce(Drive) -> Drive) -> State {
+        match self {
+            State::Running(d) => State::Running(f(d)),
+            State::FreezeGuard(d) => State::FreezeGuard(f(d)),
+            State::SensorFault { kind, guard, drive } => State::SensorFault { kind, guard, drive: f(drive) },
+        }
+    }
+
+    /// Who drives once nothing holds the outputs.
+    pub fn drive(self) -> Drive {
+        match self {
+            State::Running(d) | State::FreezeGuard(d) | State::SensorFault { drive: d, .. } => d,
+        }
+    }
+
+    /// The fault in force, if the sensor is faulty.
+    pub fn sensor_fault(self) -> Option<EventKind> {
+        match self {
+            State::SensorFault { kind, .. } => Some(kind),
+            _ => None,
+        }
+    }
+
+    /// The summary the step reports.
+    pub fn mode(self) -> Mode {
+        match self {
+            State::Running(Drive::Controller { .. }) => Mode::Normal,
+            State::Running(Drive::LimpHome { .. }) => Mode::LimpHome,
+            State::FreezeGuard(_) => Mode::FreezeGuard,
+            State::SensorFault { .. } => Mode::SensorFault,
+        }
+    }
+
+    /// The level of the supply-enable output in this mode (before a switch test opening): closed
+    /// while the controller drives without a probe, and while limp home has it on. It also opens
+    /// whenever the freeze guard holds cooling off: that costs nothing, and it is the only thing
+    /// that stops a shorted SSR before the SSR checks have seen enough to be sure. No cooling
+    /// at all without a trustworthy reading either: a shorted SSR must not cool blind.
+    pub fn supply_enable(self) -> bool {
+        match self {
+            State::Running(Drive::Controller { probe }) => probe.is_none(),
+            State::Running(Drive::LimpHome { supply_on }) => supply_on,
+            State::FreezeGuard(_) | State::SensorFault { .. } => false,
+        }
+    }
+}
+
+/// What the supervisor decided for this sample's outputs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Verdict {
+    /// Duty to apply to the SSR.
+    pub(crate) duty: Duty,
+    /// Level of the supply-enable output.
+    pub(crate) supply_enable: bool,
+    /// The mode after this sample.
+    pub(crate) mode: Mode,
+}
+
+/// The supervisor: its mode and every detector's state.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Supervisor {
+    state: State,
+    sensor: SensorChecks,
+    freeze: FreezeGuard,
+    ssr: SsrMonitor,
+    supply: SupplyMonitor,
+    switch: SwitchCheck,
+    lid: LidDetector,
+}
+
+impl Supervisor {
+    /// A supervisor that has not seen a sample, for the sample period `ts_s`.
+    pub(crate) fn new(cfg: &SupervisorConfig, ts_s: f32) -> Self {
+        Supervisor {
+            state: State::START,
+            sensor: SensorChecks::new(&cfg.sensor, ts_s),
+            freeze: FreezeGuard::new(&cfg.freeze, ts_s),
+            ssr: SsrMonitor::new(&cfg.ssr, ts_s),
+            supply: SupplyMonitor::new(&cfg.supply, ts_s),
+            switch: SwitchCheck::new(&cfg.switch, ts_s),
+            lid: LidDetector::new(&cfg.lid, ts_s),
+        }
+    }
+
+    /// Whether the reading is trusted (no sensor fault): the controller runs only then.
+    pub(crate) fn trusts_reading(&self) -> bool {
+        self.state.sensor_fault().is_none()
+    }
+
+    /// The measured module supply for the next sample, V.
+    pub(crate) fn observe_supply_v(&mut self, v: f32) {
+        self.supply.observe(v);
+    }
+
+    /// The switched supply rail for the next sample, V.
+    pub(crate) fn observe_switched_rail_v(&mut self, v: f32) {
+        self.switch.observe(v);
+    }
+
+    /// The stuck-converter check on this sample's raw counts: whether they are stuck.
+    pub(crate) fn counts_stuck(&mut self, counts: u32) -> bool {
+        self.sensor.stuck.run(counts)
+    }
+
+    /// Steps 1–2, before the controller: the sensor (its fault state, offset and spikes, then
+    /// the measurement filter), the supply and the supply switch. `raw` is this sample's
+    /// calibrated reading or its fault; `sensor`: it came from the sensor (not an ideal plant).
+    pub(crate) fn check(
+        &mut self,
+        t_ms: u64,
+        raw: Result<Celsius, EventKind>,
+        sensor: bool,
+        filter: &mut FirstOrder,
+        filter_cfg: &FirstOrderConfig,
+        emit: &mut impl FnMut(EventKind),
+    ) -> Reading {
+        match sensor::diagnose(&raw, self.state.sensor_fault()) {
+            Some(Diagnosis::Failed(kind)) => {
+                emit(kind);
+                self.state = self.state.sensor_failed(kind);
+            }
+            Some(Diagnosis::Recovered) => {
+                emit(EventKind::SensorRecovered);
+                self.state = self.state.sensor_recovered();
+                // The filter and the slope predate the fault; start afresh from the first good
+                // reading.
+                filter.reset();
+                self.freeze.restart();
+            }
+            None => {}
+        }
+        let reading = self.sensor.reading(t_ms, raw, sensor, filter, filter_cfg, emit);
+        self.supply.run(emit);
+        self.switch.check(self.supply.v(), emit);
+        reading
+    }
+
+    /// Steps 4–7, after the controller asked for `requested` (saturated to `duty`): the freeze
+    /// guard and the SSR checks on the filtered load `temp_c` at setpoint `w`, then the outputs.
+    pub(crate) fn guard(
+        &mut self,
+        t_ms: u64,
+        temp_c: f32,
+        w: f32,
+        requested: f32,
+        duty: Duty,
+        emit: &mut impl FnMut(EventKind),
+    ) -> Verdict {
+        if self.trusts_reading() {
+            self.freeze_guard(t_ms, temp_c, emit);
+            self.ssr_checks(t_ms, temp_c, w, emit);
+        }
+        let mode = self.state.mode();
+        let mut duty = if mode == Mode::Normal { duty } else { Duty::OFF };
+        if let State::Running(Drive::LimpHome { supply_on }) = self.state {
+            let on = self.ssr.config().limp.supply_on(supply_on, temp_c, w);
+            self.state = self.state.limp_switched(on);
+            if on {
+                duty = Duty::FULL;
+            }
+        }
+        let switch_test = self.switch.test_due(mode == Mode::Normal, temp_c, w);
+        let lid = LidInput {
+            t_ms,
+            duty: duty.get(),
+            temp_c,
+            w,
+            slope_c_per_s: self.freeze.slope_c_per_s(),
+            normal: mode == Mode::Normal,
+            full_duty_run: self.ssr.full_duty_run(),
+        };
+        self.lid.run(&lid, emit);
+        self.ssr.applied(duty, requested, temp_c);
+        let supply_enable = self.switch.note_enable(!switch_test && self.state.supply_enable());
+        Verdict { duty, supply_enable, mode }
+    }
+
+    /// The freeze guard: trip (with SSR stuck-on paths 1 and 2) and release.
+    fn freeze_guard(&mut self, t_ms: u64, temp_c: f32, emit: &mut impl FnMut(EventKind)) {
+        let trend = self.freeze.observe(temp_c);
+        let shorted = |s: &State| matches!(s.drive(), Drive::LimpHome { .. });
+        if matches!(self.state, State::Running(_)) && self.freeze.trips(&trend) {
+            self.state = self.state.guard_tripped();
+            emit(EventKind::FreezeGuardTripped);
+            if self.ssr.freeze_tripped(t_ms, &trend, shorted(&self.state)) {
+                self.ssr_shorted(emit);
+            }
+        }
+        if self.ssr.between_trips(t_ms, &trend, shorted(&self.state)) {
+            self.ssr_shorted(emit);
+        }
+        if matches!(self.state, State::FreezeGuard(_)) && self.freeze.releases(temp_c, &trend) {
+            self.state = self.state.guard_released();
+            emit(EventKind::FreezeGuardReleased);
+        }
+    }
+
+    /// The SSR checks on the temperature history: stuck on after the off-run (path 3), stuck
+    /// off, the supply probe.
+    fn ssr_checks(&mut self, t_ms: u64, temp_c: f32, w: f32, emit: &mut impl FnMut(EventKind)) {
+        self.ssr.remember(temp_c);
+        if matches!(self.state.drive(), Drive::Controller { .. }) && self.ssr.still_falling(temp_c) {
+            self.ssr_shorted(emit);
+        }
+        if self.ssr.warms_at_full_duty(temp_c) {
+            emit(EventKind::SsrStuckOff);
+        }
+        if let Drive::Controller { probe } = self.state.drive() {
+            match self.ssr.probe(t_ms, probe, temp_c, w) {
+                Probe::Keep => {}
+                Probe::Start => self.state = self.state.probe_started(t_ms),
+                Probe::End => self.state = self.state.probe_ended(),
+                Probe::Shorted => {
+                    self.state = self.state.probe_ended();
+                    self.ssr_shorted(emit);
+                }
+            }
+        }
+    }
+
+    fn ssr_shorted(&mut self, emit: &mut impl FnMut(EventKind)) {
+        self.state = self.state.ssr_shorted();
+        emit(EventKind::SsrStuckOn);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const CONTROLLER: Drive = Drive::Controller { probe: None };
+
+    #[test]
+    fn every_transition_of_the_diagram() {
+        let run = State::START;
+        assert_eq!(run.mode(), Mode::Normal);
+        let guarded = run.guard_tripped();
+        assert_eq!(guarded, State::FreezeGuard(CONTROLLER));
+        assert_eq!(guarded.guard_released(), run);
+        // A sensor fault remembers whether the guard held, and who drives.
+        let open = EventKind::SensorOpen;
+        assert_eq!(run.sensor_failed(open), State::SensorFault { kind: open, guard: false, drive: CONTROLLER });
+        assert_eq!(run.sensor_failed(open).sensor_recovered(), run);
+        assert_eq!(guarded.sensor_failed(open).sensor_recovered(), guarded);
+        let short = guarded.sensor_failed(open).sensor_failed(EventKind::SensorShort);
+        assert_eq!(short, State::SensorFault { kind: EventKind::SensorShort, guard: true, drive: CONTROLLER });
+        // The probe and the short live in the drive, whatever holds the outputs.
+        let probing = run.probe_started(7);
+        assert_eq!(probing.drive(), Drive::Controller { probe: Some(7) });
+        assert_eq!(probing.guard_tripped().guard_released().probe_ended(), run);
+        let limp = probing.ssr_shorted();
+        assert_eq!(limp, State::Running(Drive::LimpHome { supply_on: false }));
+        assert_eq!(limp.mode(), Mode::LimpHome);
+        assert_eq!(limp.probe_started(9), limp, "no probe once shorted");
+        assert_eq!(limp.limp_switched(true).drive(), Drive::LimpHome { supply_on: true });
+        assert_eq!(limp.limp_switched(true).ssr_shorted(), limp.limp_switched(true), "latched");
+        assert_eq!(guarded.ssr_shorted().mode(), Mode::FreezeGuard);
+        assert_eq!(guarded.ssr_shorted().guard_released(), limp);
+        assert_eq!(run.limp_switched(true), run);
+    }
+
+    #[test]
+    fn the_supply_opens_in_every_mode_but_running_unprobed_or_limping_on() {
+        let limp = |supply_on| State::Running(Drive::LimpHome { supply_on });
+        assert!(State::START.supply_enable());
+        assert!(!State::START.probe_started(0).supply_enable());
+        assert!(limp(true).supply_enable() && !limp(false).supply_enable());
+        assert!(!State::FreezeGuard(CONTROLLER).supply_enable());
+        assert!(!State::FreezeGuard(Drive::LimpHome { supply_on: true }).supply_enable());
+        let fault = State::SensorFault { kind: EventKind::SensorOpen, guard: false, drive: CONTROLLER };
+        assert!(!fault.supply_enable());
+        assert_eq!(fault.mode(), Mode::SensorFault);
+    }
+
+    #[test]
+    fn seconds_become_todays_sample_counts() {
+        assert_eq!(samples_u16(180.0, 10.0), 18);
+        assert_eq!(samples_u8(20.0, 10.0), 2);
+        assert_eq!(samples_u32(7200.0, 10.0), 720);
+        assert_eq!(samples_u32(0.0, 10.0), 0);
+        assert_eq!(samples_u8(14.0, 10.0), 1, "rounded to the nearest");
+        assert_eq!(samples_u8(15.0, 10.0), 2);
+        assert_eq!(samples_u8(1e6, 10.0), 255, "saturating");
+        assert_eq!(ms(1800.0), 1_800_000);
+        assert_eq!(ms(3600.0), 3_600_000);
+    }
+}

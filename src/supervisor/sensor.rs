@@ -1,0 +1,520 @@
+//! Sensor checks: is the reading the load, or the sensor?
+//!
+//! - **Diagnosis and recovery** ([`diagnose`]): the conversion chain reports open, short,
+//!   out-of-range and reference faults; a fault is reported once per kind and ends with the
+//!   first plausible reading ([`crate::event::EventKind::SensorRecovered`]).
+//! - **Stuck converter** ([`StuckConverter`]): a real reading always carries some noise, so the
+//!   same 16-bit result [`SensorConfig::stuck_s`] in a row is a frozen front end.
+//! - **Spikes** ([`SpikeFilter`]): a reading further than [`SpikeConfig::c`] from the filtered
+//!   value is ignored; a run of them that agree with each other is a real jump (a re-seated
+//!   probe) and restarts the filter; several within [`SpikeConfig::window_s`] are reported.
+//! - **Offset** ([`OffsetWatch`]): a step larger than physics allows that stays at its new level
+//!   is a sensor offset; it is reported, and an upward one is measured and subtracted.
+//!
+//! [`SensorChecks::reading`] runs the last three in their order and feeds the measurement
+//! filter F_a.
+
+use super::{samples_u16, samples_u8, since, ms};
+use crate::event::EventKind;
+use crate::filter::{FirstOrder, FirstOrderConfig};
+use crate::units::{min_f32, Celsius};
+
+/// Settings of the sensor checks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SensorConfig {
+    /// Identical conversions in a row for this long mean a stuck converter, s. 180 s = 18
+    /// samples at 10 s: with the front end's ≈ 1.5 counts of noise, 18 equal 16-bit results in
+    /// a row happen by chance about once in 10¹² samples.
+    pub stuck_s: f32,
+    /// The spike filter.
+    pub spike: SpikeConfig,
+    /// The offset watch.
+    pub offset: OffsetConfig,
+}
+
+impl SensorConfig {
+    /// The reference board's settings.
+    pub const DEFAULT: SensorConfig =
+        SensorConfig { stuck_s: 180.0, spike: SpikeConfig::DEFAULT, offset: OffsetConfig::DEFAULT };
+}
+
+/// Settings of the spike filter.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SpikeConfig {
+    /// A reading further than this from the filtered temperature is a spike, °C. The load
+    /// cannot move more than ≈ 0.2 °C in one 10 s sample; 2 °C leaves a wide margin.
+    pub c: f32,
+    /// Spikes agree with each other when they are within this fraction of [`Self::c`] of the
+    /// previous one (a real jump reads the same level again; noise does not).
+    pub agree_fraction: f32,
+    /// Agreeing spikes in a row for this long are a real jump, s (30 s = 3 samples: a probe
+    /// re-seated in another load reads its new level from then on).
+    pub jump_s: f32,
+    /// Three spikes within this window are reported, and reported at most once per window, s
+    /// (one an hour is noise worth ignoring; three an hour is a loose contact or EMI).
+    pub window_s: f32,
+}
+
+impl SpikeConfig {
+    /// The reference board's settings.
+    pub const DEFAULT: SpikeConfig = SpikeConfig { c: 2.0, agree_fraction: 0.5, jump_s: 30.0, window_s: 3600.0 };
+}
+
+/// Settings of the offset watch.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct OffsetConfig {
+    /// A step of the calibrated reading larger than this between two samples, °C… The sensed
+    /// load moves at most ≈ 0.46 °C per 10 s sample (pull-down from 43 °C, half load, measured
+    /// on the hal-sim plant), so 0.7 °C is more than physics allows.
+    pub step_c: f32,
+    /// …that stays at its new level, within this fraction of the step…
+    pub hold_fraction: f32,
+    /// …and never looser than this, °C (a burst of spikes tens of degrees off must not pass for
+    /// a level that holds)…
+    pub hold_max_c: f32,
+    /// …for this long, counting the sample of the step, s (30 s = 3 samples).
+    pub confirm_s: f32,
+    /// Largest upward offset that is measured and subtracted, °C (larger ones, and any step
+    /// down, are reported only).
+    pub max_comp_c: f32,
+}
+
+impl OffsetConfig {
+    /// The reference board's settings.
+    pub const DEFAULT: OffsetConfig =
+        OffsetConfig { step_c: 0.7, hold_fraction: 0.25, hold_max_c: 0.5, confirm_s: 30.0, max_comp_c: 3.0 };
+}
+
+/// What the conversion result of this sample does to the sensor-fault state.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Diagnosis {
+    /// A fault begins, or a fault of another kind replaces the one in force: report it.
+    Failed(EventKind),
+    /// A plausible reading ends the fault.
+    Recovered,
+}
+
+/// The sensor-fault transition of a sample whose conversion gave `raw`, with `fault` in force.
+/// A fault that persists is reported once.
+pub(crate) fn diagnose(raw: &Result<Celsius, EventKind>, fault: Option<EventKind>) -> Option<Diagnosis> {
+    match (raw, fault) {
+        (Err(kind), None) => Some(Diagnosis::Failed(*kind)),
+        (Err(kind), Some(prev)) if *kind != prev => Some(Diagnosis::Failed(*kind)),
+        (Ok(_), Some(_)) => Some(Diagnosis::Recovered),
+        _ => None,
+    }
+}
+
+/// The stuck-converter check, on the raw counts.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct StuckConverter {
+    /// Identical conversions in a row that are stuck.
+    limit: u16,
+    last: Option<u32>,
+    /// Conversions in a row equal to the one before.
+    repeats: u16,
+}
+
+impl StuckConverter {
+    pub(crate) fn new(cfg: &SensorConfig, ts_s: f32) -> Self {
+        StuckConverter { limit: samples_u16(cfg.stuck_s, ts_s), last: None, repeats: 0 }
+    }
+
+    /// Takes this sample's conversion; whether it makes `limit` identical ones in a row.
+    pub(crate) fn run(&mut self, counts: u32) -> bool {
+        self.repeats = if self.last == Some(counts) { self.repeats.saturating_add(1) } else { 0 };
+        self.last = Some(counts);
+        self.repeats.saturating_add(1) >= self.limit
+    }
+}
+
+/// What the spike filter makes of a reading.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Spike {
+    /// Not a spike.
+    No,
+    /// A spike: the filter keeps its value.
+    Ignored,
+    /// The last of a run of agreeing spikes: a real jump, the filter restarts from it.
+    Jump,
+}
+
+/// Spikes in a burst that is reported ([`EventKind::SensorSpikes`]).
+const BURST: usize = 3;
+
+/// The spike filter and its burst report.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SpikeFilter {
+    cfg: SpikeConfig,
+    /// Agreeing spikes in a row that are a jump.
+    jump_n: u8,
+    window_ms: u64,
+    /// Agreeing spikes in a row so far.
+    run: u8,
+    /// The last spike's reading, °C.
+    last_c: f32,
+    /// When the last [`BURST`] spikes came, newest first.
+    times: [Option<u64>; BURST],
+    /// When a burst was last reported.
+    reported_ms: Option<u64>,
+}
+
+impl SpikeFilter {
+    pub(crate) fn new(cfg: &SpikeConfig, ts_s: f32) -> Self {
+        SpikeFilter {
+            cfg: *cfg,
+            jump_n: samples_u8(cfg.jump_s, ts_s),
+            window_ms: ms(cfg.window_s),
+            run: 0,
+            last_c: f32::NAN,
+            times: [None; BURST],
+            reported_ms: None,
+        }
+    }
+
+    /// Whether the reading `t` is a spike against the filtered value `filtered` (no spike
+    /// without both).
+    pub(crate) fn is_spike(&self, t: Option<Celsius>, filtered: Option<f32>) -> bool {
+        match (t, filtered) {
+            (Some(t), Some(prev)) => (t.0 - prev).abs() > self.cfg.c,
+            _ => false,
+        }
+    }
+
+    /// Takes the reading `t` at `t_ms` and whether it is a spike ([`Self::is_spike`]).
+    pub(crate) fn run(&mut self, t_ms: u64, t: Option<Celsius>, spike: bool, emit: &mut impl FnMut(EventKind)) -> Spike {
+        // Spikes that agree with each other are a real jump; ones that do not are noise, and
+        // the filter keeps its value.
+        let consistent = t.is_some_and(|t| (t.0 - self.last_c).abs() < self.cfg.agree_fraction * self.cfg.c);
+        let Some(t) = t.filter(|_| spike) else {
+            self.run = 0;
+            return Spike::No;
+        };
+        self.last_c = t.0;
+        if self.run > 0 && !consistent {
+            self.run = 0;
+        }
+        self.run = self.run.saturating_add(1);
+        self.times.copy_within(0..BURST - 1, 1);
+        self.times[0] = Some(t_ms);
+        let burst = self.times[BURST - 1].is_some_and(|t0| since(t_ms, t0) <= self.window_ms);
+        let quiet = self.reported_ms.is_none_or(|r| since(t_ms, r) > self.window_ms);
+        if burst && quiet {
+            emit(EventKind::SensorSpikes);
+            self.reported_ms = Some(t_ms);
+        }
+        if self.run >= self.jump_n {
+            Spike::Jump
+        } else {
+            Spike::Ignored
+        }
+    }
+}
+
+/// The sensor-offset watch.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct OffsetWatch {
+    cfg: OffsetConfig,
+    /// Samples a step must hold, counting its own.
+    confirm_n: u8,
+    /// Offset measured and subtracted, °C.
+    offset_c: f32,
+    /// The last offset-corrected reading that was not a spike: the reference for a step.
+    /// After a spike the good reading that follows must not look like a step from the spike,
+    /// and the filtered value lags a fast pull-down too much to serve.
+    last_good_c: Option<f32>,
+    /// A step under watch: (level before, step, samples it has held).
+    pending: Option<(f32, f32, u8)>,
+}
+
+impl OffsetWatch {
+    pub(crate) fn new(cfg: &OffsetConfig, ts_s: f32) -> Self {
+        OffsetWatch {
+            cfg: *cfg,
+            confirm_n: samples_u8(cfg.confirm_s, ts_s),
+            offset_c: 0.0,
+            last_good_c: None,
+            pending: None,
+        }
+    }
+
+    /// The offset subtracted from every reading, °C.
+    pub(crate) fn offset_c(&self) -> f32 {
+        self.offset_c
+    }
+
+    /// Watches the offset-corrected reading `raw`; returns whether the filter must hold this
+    /// sample (a step is under watch). Once a step has held its level for `confirm_n` samples
+    /// it is measured, subtracted from every later reading and reported.
+    pub(crate) fn watch(&mut self, raw: f32, emit: &mut impl FnMut(EventKind)) -> bool {
+        match (self.pending, self.last_good_c) {
+            (Some((before, step, n)), _) => {
+                if (raw - (before + step)).abs() <= min_f32(self.cfg.hold_fraction * step.abs(), self.cfg.hold_max_c) {
+                    let n = n.saturating_add(1);
+                    if n >= self.confirm_n {
+                        // Measured on this sample: the load itself has not moved measurably.
+                        // Only a step *up* of at most `max_comp_c` is subtracted: a reading too
+                        // warm makes the controller overcool — the freezing side — while one
+                        // too cold only under-cools, which the warm alarms catch, and which is
+                        // also what a probe re-seated in a colder load looks like.
+                        let measured = raw - before;
+                        if measured > 0.0 && measured <= self.cfg.max_comp_c {
+                            self.offset_c += measured;
+                        }
+                        self.pending = None;
+                        emit(EventKind::SensorOffset);
+                    } else {
+                        self.pending = Some((before, step, n));
+                    }
+                    true
+                } else {
+                    // Back (a transient, which the spike filter handles) or somewhere else.
+                    self.pending = None;
+                    false
+                }
+            }
+            (None, Some(p)) if (raw - p).abs() > self.cfg.step_c => {
+                self.pending = Some((p, raw - p, 1));
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// No reading this sample: a step under watch, and the reference, are gone.
+    pub(crate) fn forget(&mut self) {
+        self.last_good_c = None;
+        self.pending = None;
+    }
+
+    /// `t`, which was not a spike, is the reference for the next step, in the frame of the
+    /// offset in force after this sample (`offset_before` was in force before it).
+    pub(crate) fn keep_reference(&mut self, t: f32, offset_before: f32) {
+        self.last_good_c = Some(t - (self.offset_c - offset_before));
+    }
+}
+
+/// This sample's reading after the sensor checks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Reading {
+    /// The calibrated, offset-corrected reading (`None` on a sensor fault).
+    pub(crate) raw_c: Option<Celsius>,
+    /// The filtered temperature, °C (the last good value on a fault or a spike; NaN before the
+    /// first good reading).
+    pub(crate) temp_c: f32,
+}
+
+/// The stuck, spike and offset checks of the sensor.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SensorChecks {
+    pub(crate) stuck: StuckConverter,
+    spikes: SpikeFilter,
+    offset: OffsetWatch,
+}
+
+impl SensorChecks {
+    pub(crate) fn new(cfg: &SensorConfig, ts_s: f32) -> Self {
+        SensorChecks {
+            stuck: StuckConverter::new(cfg, ts_s),
+            spikes: SpikeFilter::new(&cfg.spike, ts_s),
+            offset: OffsetWatch::new(&cfg.offset, ts_s),
+        }
+    }
+
+    /// Takes this sample's conversion result `raw` (calibrated, `Err` on a fault) and feeds the
+    /// measurement filter with what passes. The offset watch runs on the raw sensor path only
+    /// (`sensor`; an ideal-measurement plant has no sensor); then the spike filter, whose
+    /// verdict needs the filter's value before this sample.
+    pub(crate) fn reading(
+        &mut self,
+        t_ms: u64,
+        raw: Result<Celsius, EventKind>,
+        sensor: bool,
+        filter: &mut FirstOrder,
+        filter_cfg: &FirstOrderConfig,
+        emit: &mut impl FnMut(EventKind),
+    ) -> Reading {
+        let mut hold = false;
+        let offset_before = self.offset.offset_c();
+        let raw_c = match raw.ok() {
+            Some(t) if sensor => {
+                let corrected = t.0 - self.offset.offset_c();
+                hold = self.offset.watch(corrected, emit);
+                Some(Celsius(corrected))
+            }
+            other => other,
+        };
+        if raw_c.is_none() {
+            self.offset.forget();
+        }
+        let spike = self.spikes.is_spike(raw_c, filter.output());
+        if let (Some(t), false) = (raw_c, spike) {
+            self.offset.keep_reference(t.0, offset_before);
+        }
+        let verdict = self.spikes.run(t_ms, raw_c, spike, emit);
+        if verdict == Spike::Jump {
+            filter.reset();
+        }
+        let temp_c = match raw_c {
+            Some(t) if !hold && verdict != Spike::Ignored => filter.step(filter_cfg, t.0),
+            // An empty filter (just reset) starts from the reading rather than report nothing.
+            Some(t) if filter.output().is_none() => filter.step(filter_cfg, t.0),
+            _ => filter.output().unwrap_or(f32::NAN),
+        };
+        Reading { raw_c, temp_c }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TS: f32 = 10.0;
+
+    fn kinds(f: impl FnOnce(&mut dyn FnMut(EventKind))) -> Vec<EventKind> {
+        let mut v = Vec::new();
+        f(&mut |k| v.push(k));
+        v
+    }
+
+    #[test]
+    fn a_fault_is_reported_once_per_kind_and_ends_with_a_good_reading() {
+        let open = Err(EventKind::SensorOpen);
+        assert_eq!(diagnose(&open, None), Some(Diagnosis::Failed(EventKind::SensorOpen)));
+        assert_eq!(diagnose(&open, Some(EventKind::SensorOpen)), None);
+        assert_eq!(
+            diagnose(&Err(EventKind::SensorShort), Some(EventKind::SensorOpen)),
+            Some(Diagnosis::Failed(EventKind::SensorShort))
+        );
+        assert_eq!(diagnose(&Ok(Celsius(4.0)), Some(EventKind::SensorShort)), Some(Diagnosis::Recovered));
+        assert_eq!(diagnose(&Ok(Celsius(4.0)), None), None);
+    }
+
+    #[test]
+    fn a_stuck_converter_is_eighteen_identical_counts_not_seventeen() {
+        let mut s = StuckConverter::new(&SensorConfig::DEFAULT, TS);
+        assert_eq!(s.limit, 18);
+        let verdicts: Vec<bool> = (0..18).map(|_| s.run(49_900)).collect();
+        assert!(verdicts[..17].iter().all(|v| !v), "fired before 18: {verdicts:?}");
+        assert!(verdicts[17]);
+        // One different count starts the run again.
+        assert!(!s.run(49_901));
+        assert!((1..17).all(|_| !s.run(49_901)));
+        assert!(s.run(49_901));
+    }
+
+    #[test]
+    fn spikes_are_ignored_and_three_agreeing_ones_are_a_jump() {
+        let mut f = SpikeFilter::new(&SpikeConfig::DEFAULT, TS);
+        assert!(!f.is_spike(Some(Celsius(6.0)), Some(4.0)), "2 °C off is not yet a spike");
+        assert!(f.is_spike(Some(Celsius(6.01)), Some(4.0)));
+        assert!(!f.is_spike(Some(Celsius(10.0)), None), "no spike without a filtered value");
+        let mut e = |_: EventKind| {};
+        assert_eq!(f.run(0, Some(Celsius(10.0)), true, &mut e), Spike::Ignored);
+        assert_eq!(f.run(10_000, Some(Celsius(10.4)), true, &mut e), Spike::Ignored);
+        assert_eq!(f.run(20_000, Some(Celsius(10.2)), true, &mut e), Spike::Jump);
+        // Spikes that disagree (more than 1 °C apart) start the run again.
+        let mut f = SpikeFilter::new(&SpikeConfig::DEFAULT, TS);
+        assert_eq!(f.run(0, Some(Celsius(10.0)), true, &mut e), Spike::Ignored);
+        assert_eq!(f.run(10_000, Some(Celsius(20.0)), true, &mut e), Spike::Ignored);
+        assert_eq!(f.run(20_000, Some(Celsius(30.0)), true, &mut e), Spike::Ignored);
+        // A good reading between them too.
+        assert_eq!(f.run(30_000, Some(Celsius(30.0)), true, &mut e), Spike::Ignored);
+        assert_eq!(f.run(40_000, Some(Celsius(4.0)), false, &mut e), Spike::No);
+        assert_eq!(f.run(50_000, Some(Celsius(30.0)), true, &mut e), Spike::Ignored);
+    }
+
+    #[test]
+    fn three_spikes_within_an_hour_are_reported_once_an_hour() {
+        let mut f = SpikeFilter::new(&SpikeConfig::DEFAULT, TS);
+        let spike_at = |f: &mut SpikeFilter, t_s: u64| {
+            kinds(|e| {
+                f.run(t_s * 1000, Some(Celsius(30.0 + t_s as f32)), true, &mut |k| e(k));
+            })
+        };
+        assert!(spike_at(&mut f, 0).is_empty());
+        assert!(spike_at(&mut f, 1800).is_empty());
+        // The third within 3600 s of the first: reported.
+        assert_eq!(spike_at(&mut f, 3600), [EventKind::SensorSpikes]);
+        // Not again within the hour after the report…
+        assert!(spike_at(&mut f, 4000).is_empty());
+        assert!(spike_at(&mut f, 7200).is_empty());
+        // …and again after it, once three fall within an hour.
+        assert_eq!(spike_at(&mut f, 7201), [EventKind::SensorSpikes]);
+        // Three spread over more than an hour are not a burst.
+        let mut f = SpikeFilter::new(&SpikeConfig::DEFAULT, TS);
+        assert!(spike_at(&mut f, 0).is_empty());
+        assert!(spike_at(&mut f, 1801).is_empty());
+        assert!(spike_at(&mut f, 3601).is_empty());
+    }
+
+    #[test]
+    fn an_offset_that_holds_three_samples_is_measured_and_subtracted() {
+        let mut w = OffsetWatch::new(&OffsetConfig::DEFAULT, TS);
+        assert_eq!(w.confirm_n, 3);
+        let mut e = |_: EventKind| {};
+        assert!(!w.watch(4.0, &mut e));
+        w.keep_reference(4.0, 0.0);
+        // A 0.6 °C step is still physics; 1.5 °C is not.
+        assert!(!w.watch(4.6, &mut e));
+        w.keep_reference(4.0, 0.0);
+        assert!(w.watch(5.5, &mut e), "held while under watch");
+        assert!(w.watch(5.6, &mut e));
+        let ev = kinds(|k| assert!(w.watch(5.45, &mut |x| k(x))));
+        assert_eq!(ev, [EventKind::SensorOffset]);
+        assert!((w.offset_c() - 1.45).abs() < 1e-6, "{}", w.offset_c());
+        // A step down is reported but not subtracted.
+        let mut w = OffsetWatch::new(&OffsetConfig::DEFAULT, TS);
+        w.keep_reference(6.0, 0.0);
+        assert!(w.watch(4.0, &mut e) && w.watch(4.0, &mut e));
+        assert_eq!(kinds(|k| assert!(w.watch(4.0, &mut |x| k(x)))), [EventKind::SensorOffset]);
+        assert_eq!(w.offset_c(), 0.0);
+    }
+
+    #[test]
+    fn a_step_that_does_not_hold_its_level_is_no_offset() {
+        let mut w = OffsetWatch::new(&OffsetConfig::DEFAULT, TS);
+        let mut e = |k: EventKind| panic!("reported {k:?}");
+        w.keep_reference(4.0, 0.0);
+        assert!(w.watch(6.0, &mut e));
+        // Within a quarter of the 2 °C step is 0.5 °C; 0.51 °C off is not holding.
+        assert!(!w.watch(6.51, &mut e), "released");
+        // A 10 °C step must hold within 0.5 °C, not within a quarter of it.
+        w.keep_reference(4.0, 0.0);
+        assert!(w.watch(14.0, &mut e));
+        assert!(!w.watch(14.6, &mut e));
+    }
+
+    #[test]
+    fn an_upward_offset_above_the_limit_is_reported_only() {
+        let mut w = OffsetWatch::new(&OffsetConfig::DEFAULT, TS);
+        let mut e = |_: EventKind| {};
+        w.keep_reference(4.0, 0.0);
+        assert!(w.watch(7.5, &mut e) && w.watch(7.5, &mut e) && w.watch(7.5, &mut e));
+        assert_eq!(w.offset_c(), 0.0, "3.5 °C is more than the 3 °C compensated");
+        let mut w = OffsetWatch::new(&OffsetConfig::DEFAULT, TS);
+        w.keep_reference(4.0, 0.0);
+        assert!(w.watch(7.0, &mut e) && w.watch(7.0, &mut e) && w.watch(7.0, &mut e));
+        assert_eq!(w.offset_c(), 3.0);
+    }
+
+    #[test]
+    fn the_filter_holds_on_spikes_and_restarts_on_a_jump() {
+        let mut s = SensorChecks::new(&SensorConfig::DEFAULT, TS);
+        let (mut f, fc) = (FirstOrder::default(), FirstOrderConfig { fa: 0.5 });
+        let mut e = |_: EventKind| {};
+        let mut read = |s: &mut SensorChecks, f: &mut FirstOrder, k: u64, t: f32| {
+            s.reading(k * 10_000, Ok(Celsius(t)), false, f, &fc, &mut e).temp_c
+        };
+        assert_eq!(read(&mut s, &mut f, 0, 4.0), 4.0);
+        assert_eq!(read(&mut s, &mut f, 1, 4.2), 4.1);
+        assert_eq!(read(&mut s, &mut f, 2, 9.0), 4.1, "a spike is ignored");
+        assert_eq!(read(&mut s, &mut f, 3, 9.0), 4.1);
+        assert_eq!(read(&mut s, &mut f, 4, 9.0), 9.0, "the third in a row restarts the filter");
+        let none = s.reading(50_000, Err(EventKind::SensorOpen), false, &mut f, &fc, &mut e);
+        assert_eq!((none.raw_c, none.temp_c), (None, 9.0));
+    }
+}

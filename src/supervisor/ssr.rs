@@ -1,0 +1,611 @@
+//! SSR monitor: is the solid-state relay doing what it is told?
+//!
+//! - **Stuck on** (shorted: the modules cool whatever the duty). Three paths, because a shorted
+//!   SSR shows itself differently on light and heavy carriers and in hot and cold ambients:
+//!   1. *on an unrequested trip* ([`SsrMonitor::freeze_tripped`]): the freeze guard trips with
+//!      no cooling asked for a minute, and the load either falls fast without slowing down or
+//!      trips for the second time within half an hour. A light carrier pulled down from a cool
+//!      ambient coasts fast after cooling stops, seen through the ≈ 50 s sensor lag, but its
+//!      fall slows down; a very light one fed by a shorted SSR falls faster every sample. In a
+//!      hot ambient a shorted SSR only holds the load near its full-cooling floor (≈ 1.5 °C),
+//!      and the guard trips, opens the supply, releases and trips again every ≈ 15 min; a cold
+//!      ambient pulls the load down once and needs hours to warm it past the release and back.
+//!   2. *between trips* ([`SsrMonitor::between_trips`]): within half an hour of a trip,
+//!      nothing asked for a minute, yet falling more than 0.6 °C a minute and faster every
+//!      sample: a very light carrier on a shorted SSR after the guard has released, before the
+//!      next trip comes too late. Not outside that window: the coast after a pull-down does the
+//!      same for a minute or two on light carriers.
+//!   3. *after the off-run* ([`SsrMonitor::still_falling`]): the duty was 0 for three minutes
+//!      and the load still falls, and not slower than the minute before — the coast after full
+//!      cooling stops decelerates, a shorted SSR does not.
+//!
+//!   And the **supply probe** ([`SsrMonitor::probe`]) for the case none of them sees: a
+//!   shorted SSR that holds the load below its setpoint at a cooling floor above the freeze
+//!   guard (a hot day: full cooling barely wins) never trips the guard. Nothing asked for
+//!   10 min, 1 °C below the setpoint and still falling: the supply switch opens for 5 min
+//!   (harmless, no cooling is wanted). A shorted SSR stops cooling and the load turns up; a load
+//!   falling toward a cold ambient does not notice. One probe an hour at most.
+//! - **Stuck off** ([`SsrMonitor::warms_at_full_duty`]): full duty for 5 min and the load
+//!   warmed (fast), or for 15 min and it is warmer than when full duty began and still rising
+//!   (slow, a cool day).
+//! - **Limp home** ([`LimpConfig`]): after a shorted SSR, On-Off through the supply switch.
+//!
+//! The checks read `off_run`/`on_run`/`req_off_run`, the runs of the applied and requested duty
+//! up to the *previous* sample ([`SsrMonitor::applied`] counts this one last), and a ring of
+//! the filtered temperature.
+
+use super::{ms, samples_u16, since};
+use crate::units::Duty;
+
+/// Settings of the SSR monitor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SsrConfig {
+    /// An applied duty at or above this is full cooling, duty (the runs of the stuck-off check,
+    /// and of the lid check's "overwhelmed").
+    pub full_duty: f32,
+    /// The stuck-on check.
+    pub stuck_on: StuckOnConfig,
+    /// The stuck-off check.
+    pub stuck_off: StuckOffConfig,
+    /// The supply probe.
+    pub probe: ProbeConfig,
+    /// Limp home after a shorted SSR.
+    pub limp: LimpConfig,
+}
+
+impl SsrConfig {
+    /// The reference board's settings.
+    pub const DEFAULT: SsrConfig = SsrConfig {
+        full_duty: 0.9,
+        stuck_on: StuckOnConfig::DEFAULT,
+        stuck_off: StuckOffConfig::DEFAULT,
+        probe: ProbeConfig::DEFAULT,
+        limp: LimpConfig::DEFAULT,
+    };
+}
+
+/// Settings of the stuck-on (shorted SSR) check.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StuckOnConfig {
+    /// Paths 1 and 2: no cooling requested for this long before the sample, s (60 s: longer than
+    /// a controller's own pauses while it holds).
+    pub unrequested_s: f32,
+    /// Path 1: a second unrequested trip within this time of the first is a short; path 2 only
+    /// looks this long after a trip, s (half an hour: a hot ambient on a shorted SSR trips
+    /// every ≈ 15 min).
+    pub trip_window_s: f32,
+    /// Paths 1 and 2: the smoothed slope below this is falling fast, °C/s (−0.003 °C/s
+    /// = −0.18 °C/min, faster than the coast of a loaded carrier after cooling stops).
+    pub falling_c_per_s: f32,
+    /// Path 2: a fall over one sample larger than this, °C (0.1 °C in 10 s = 0.6 °C/min).
+    pub between_trips_drop_c: f32,
+    /// Path 3: the duty was 0 for this long, s (3 min: the coast after full cooling stops has
+    /// slowed down by then)…
+    pub off_s: f32,
+    /// …and the load fell by more than [`Self::drop_c`] over the last window of this length, s
+    /// (one minute)…
+    pub window_s: f32,
+    /// …°C…
+    pub drop_c: f32,
+    /// …at least this fraction as fast as over the window before (a shorted SSR keeps cooling
+    /// at full rate; the coast slows down by more than 5 % a minute).
+    pub keep_pace: f32,
+}
+
+impl StuckOnConfig {
+    /// The reference board's settings.
+    pub const DEFAULT: StuckOnConfig = StuckOnConfig {
+        unrequested_s: 60.0,
+        trip_window_s: 1800.0,
+        falling_c_per_s: -0.003,
+        between_trips_drop_c: 0.1,
+        off_s: 180.0,
+        window_s: 60.0,
+        drop_c: 0.15,
+        keep_pace: 0.95,
+    };
+}
+
+/// Settings of the stuck-off (open SSR or modules) check.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StuckOffConfig {
+    /// Fast warming: full duty for this long, s (5 min: longer than the warming the sensor lag
+    /// shows right after cooling starts)…
+    pub on_s: f32,
+    /// …and the load rose by more than this over that time, °C.
+    pub rise_c: f32,
+    /// Slow warming (a cool day, when a dead SSR lets the load rise only ≈ 0.3 °C in 5 min):
+    /// full duty for this long, s (15 min, three times the longest lag between cooling starting
+    /// and the load turning down)…
+    pub slow_on_s: f32,
+    /// …the load higher than when full duty began by more than this, °C, and still rising over
+    /// the last [`Self::on_s`]. A working SSR has turned the load around long before.
+    pub slow_rise_c: f32,
+}
+
+impl StuckOffConfig {
+    /// The reference board's settings.
+    pub const DEFAULT: StuckOffConfig = StuckOffConfig { on_s: 300.0, rise_c: 0.5, slow_on_s: 900.0, slow_rise_c: 0.3 };
+}
+
+/// Settings of the supply probe.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ProbeConfig {
+    /// A probe starts when no cooling was requested for this long, s (10 min)…
+    pub unrequested_s: f32,
+    /// …the load is more than this below the setpoint, °C…
+    pub below_setpoint_c: f32,
+    /// …and it fell by more than [`Self::fall_c`] over this window, s (5 min)…
+    pub fall_window_s: f32,
+    /// …°C.
+    pub fall_c: f32,
+    /// The supply stays open for at most this long, s (5 min), and the probe ends early when
+    /// cooling is requested again.
+    pub open_s: f32,
+    /// A rise of more than [`Self::turn_up_c`] over this window while the supply is open, s…
+    pub turn_up_window_s: f32,
+    /// …°C, was the supply cooling: a shorted SSR. A shorted SSR's cold side warms the load by
+    /// 0.2–0.4 °C in 30 s once it stops (the hot side's heat flows back); a lid opening or a
+    /// warmer ambient that happens to coincide warms it by ≤ 0.1 °C in 30 s.
+    pub turn_up_c: f32,
+    /// At most one probe in this time, s (an hour).
+    pub interval_s: f32,
+}
+
+impl ProbeConfig {
+    /// The reference board's settings.
+    pub const DEFAULT: ProbeConfig = ProbeConfig {
+        unrequested_s: 600.0,
+        below_setpoint_c: 1.0,
+        fall_window_s: 300.0,
+        fall_c: 0.05,
+        open_s: 300.0,
+        turn_up_window_s: 30.0,
+        turn_up_c: 0.15,
+        interval_s: 3600.0,
+    };
+}
+
+/// Limp home after a shorted SSR: On-Off through the supply switch (with the SSR commanded
+/// alike, in case the short was a false alarm). Cooling that cannot be modulated still keeps
+/// vaccines in 2–8 °C, where a latched-off supply would let them warm to the ambient; the
+/// freeze guard still cuts.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LimpConfig {
+    /// The supply switches on at or above the setpoint plus this, °C…
+    pub on_above_c: f32,
+    /// …and off at or below the setpoint minus this, °C (the coast after full cooling stops
+    /// carries the load ≈ 1 °C further).
+    pub off_below_c: f32,
+}
+
+impl LimpConfig {
+    /// The reference board's settings.
+    pub const DEFAULT: LimpConfig = LimpConfig { on_above_c: 1.0, off_below_c: 0.5 };
+
+    /// Whether the supply is on this sample, with the load at `temp_c`, the setpoint `w`, and
+    /// the supply `on` the sample before (a hysteresis).
+    pub(crate) fn supply_on(&self, on: bool, temp_c: f32, w: f32) -> bool {
+        if temp_c >= w + self.on_above_c {
+            true
+        } else if temp_c <= w - self.off_below_c {
+            false
+        } else {
+            on
+        }
+    }
+}
+
+/// Samples of filtered temperature kept for the SSR checks: more than the longest window
+/// ([`StuckOffConfig::on_s`], [`ProbeConfig::fall_window_s`]: 30 samples at 10 s). A window
+/// longer than the ring never has its sample, and its check never fires.
+pub(crate) const HISTORY: usize = 32;
+
+/// What the supply probe does this sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Probe {
+    /// Nothing changes.
+    Keep,
+    /// A probe begins: open the supply.
+    Start,
+    /// The probe ends without a verdict: cooling wanted again, or time is up.
+    End,
+    /// The load turned up with the supply open: the SSR is shorted.
+    Shorted,
+}
+
+/// The sample counts and times the configuration means at the sample period.
+#[derive(Clone, Copy, Debug)]
+struct Limits {
+    unrequested: u16,
+    trip_window_ms: u64,
+    off: u16,
+    window: usize,
+    stuck_off: u16,
+    slow: u16,
+    probe_unrequested: u16,
+    probe_fall: usize,
+    probe_turn_up: usize,
+    probe_open_ms: u64,
+    probe_interval_ms: u64,
+}
+
+/// The SSR monitor's state.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SsrMonitor {
+    cfg: SsrConfig,
+    n: Limits,
+    /// A ring (not a shifted array: the shift cost ≈ 100 instructions a sample on the M4F).
+    history: [f32; HISTORY],
+    /// Samples in the ring, up to HISTORY.
+    history_len: usize,
+    /// Where the next sample goes.
+    history_head: usize,
+    /// Samples in a row with the applied duty 0, up to the previous sample.
+    off_run: u16,
+    /// Samples in a row at full duty, up to the previous sample.
+    on_run: u16,
+    /// Filtered temperature when the current run of full duty began, °C.
+    on_start_c: f32,
+    /// Samples in a row with no cooling requested, up to the previous sample.
+    req_off_run: u16,
+    /// Stuck off was reported during this run of full duty.
+    off_reported: bool,
+    /// When the freeze guard last tripped, ms.
+    trip_ms: Option<u64>,
+    /// When the freeze guard last tripped with cooling not requested, ms.
+    unrequested_trip_ms: Option<u64>,
+    /// The fall of the filtered temperature over the previous sample, °C.
+    last_drop_c: f32,
+    /// When the last supply probe began, ms.
+    probe_ms: Option<u64>,
+}
+
+impl SsrMonitor {
+    pub(crate) fn new(cfg: &SsrConfig, ts_s: f32) -> Self {
+        let (on, off, p) = (&cfg.stuck_on, &cfg.stuck_off, &cfg.probe);
+        let n = Limits {
+            unrequested: samples_u16(on.unrequested_s, ts_s),
+            trip_window_ms: ms(on.trip_window_s),
+            off: samples_u16(on.off_s, ts_s),
+            window: samples_u16(on.window_s, ts_s) as usize,
+            stuck_off: samples_u16(off.on_s, ts_s),
+            slow: samples_u16(off.slow_on_s, ts_s),
+            probe_unrequested: samples_u16(p.unrequested_s, ts_s),
+            probe_fall: samples_u16(p.fall_window_s, ts_s) as usize,
+            probe_turn_up: samples_u16(p.turn_up_window_s, ts_s) as usize,
+            probe_open_ms: ms(p.open_s),
+            probe_interval_ms: ms(p.interval_s),
+        };
+        SsrMonitor {
+            cfg: *cfg,
+            n,
+            history: [0.0; HISTORY],
+            history_len: 0,
+            history_head: 0,
+            off_run: 0,
+            on_run: 0,
+            on_start_c: 0.0,
+            req_off_run: 0,
+            off_reported: false,
+            trip_ms: None,
+            unrequested_trip_ms: None,
+            last_drop_c: 0.0,
+            probe_ms: None,
+        }
+    }
+
+    /// Samples in a row at full duty, up to the previous sample.
+    pub(crate) fn full_duty_run(&self) -> u16 {
+        self.on_run
+    }
+
+    /// The settings.
+    pub(crate) fn config(&self) -> &SsrConfig {
+        &self.cfg
+    }
+
+    /// Path 1, on a sample where the freeze guard trips: whether the trip shows a shorted SSR
+    /// (`shorted`: one was found already, nothing more to tell).
+    pub(crate) fn freeze_tripped(&mut self, t_ms: u64, trend: &super::freeze::Trend, shorted: bool) -> bool {
+        self.trip_ms = Some(t_ms);
+        if shorted || self.req_off_run < self.n.unrequested {
+            return false;
+        }
+        let again = self.unrequested_trip_ms.is_some_and(|t0| since(t_ms, t0) <= self.n.trip_window_ms);
+        if again || (trend.slope_c_per_s < self.cfg.stuck_on.falling_c_per_s && trend.drop_c >= self.last_drop_c) {
+            true
+        } else {
+            self.unrequested_trip_ms = Some(t_ms);
+            false
+        }
+    }
+
+    /// Path 2, every sample with a trusted reading, after [`Self::freeze_tripped`]: whether the
+    /// load falls fast and faster between trips. Remembers this sample's fall for the next.
+    pub(crate) fn between_trips(&mut self, t_ms: u64, trend: &super::freeze::Trend, shorted: bool) -> bool {
+        let c = &self.cfg.stuck_on;
+        let found = !shorted
+            && self.trip_ms.is_some_and(|t0| since(t_ms, t0) <= self.n.trip_window_ms)
+            && self.req_off_run >= self.n.unrequested
+            && trend.drop_c > c.between_trips_drop_c
+            && trend.drop_c >= self.last_drop_c
+            && trend.slope_c_per_s < c.falling_c_per_s;
+        self.last_drop_c = trend.drop_c;
+        found
+    }
+
+    /// Puts this sample's filtered temperature in the ring (before the checks that read it).
+    pub(crate) fn remember(&mut self, temp_c: f32) {
+        self.history[self.history_head] = temp_c;
+        self.history_head = if self.history_head + 1 == HISTORY { 0 } else { self.history_head + 1 };
+        self.history_len = (self.history_len + 1).min(HISTORY);
+    }
+
+    /// The filtered temperature `n` samples before the last one remembered.
+    fn ago(&self, n: usize) -> Option<f32> {
+        let (head, len) = (self.history_head, self.history_len);
+        (n < len).then(|| self.history.get((head + HISTORY - 1 - n) % HISTORY).copied()).flatten()
+    }
+
+    /// Path 3: whether the load at `temp_c` still falls after the SSR has been off for a
+    /// while, and not slower.
+    pub(crate) fn still_falling(&self, temp_c: f32) -> bool {
+        let c = &self.cfg.stuck_on;
+        if self.off_run < self.n.off {
+            return false;
+        }
+        match (self.ago(self.n.window), self.ago(2 * self.n.window)) {
+            (Some(t1), Some(t2)) => {
+                let (last, before) = (t1 - temp_c, t2 - t1);
+                last > c.drop_c && last >= c.keep_pace * before
+            }
+            _ => false,
+        }
+    }
+
+    /// Stuck off: whether the load at `temp_c` warms at full duty; true once per run of full
+    /// duty.
+    pub(crate) fn warms_at_full_duty(&mut self, temp_c: f32) -> bool {
+        let c = &self.cfg.stuck_off;
+        let mut found = false;
+        if !self.off_reported && self.on_run >= self.n.stuck_off {
+            if let Some(past) = self.ago(self.n.stuck_off as usize) {
+                let fast = temp_c - past > c.rise_c;
+                let slow = self.on_run >= self.n.slow && temp_c - self.on_start_c > c.slow_rise_c && temp_c > past;
+                if fast || slow {
+                    self.off_reported = true;
+                    found = true;
+                }
+            }
+        }
+        if self.on_run == 0 {
+            self.off_reported = false;
+        }
+        found
+    }
+
+    /// The supply probe at `t_ms`, with the one under way (`under_way`: when it began), the
+    /// load at `temp_c` and the setpoint `w`. Only while no short has been found.
+    pub(crate) fn probe(&mut self, t_ms: u64, under_way: Option<u64>, temp_c: f32, w: f32) -> Probe {
+        let p = &self.cfg.probe;
+        match under_way {
+            Some(t0) => {
+                if self.ago(self.n.probe_turn_up).is_some_and(|past| temp_c - past > p.turn_up_c) {
+                    Probe::Shorted
+                } else if self.req_off_run == 0 || since(t_ms, t0) >= self.n.probe_open_ms {
+                    Probe::End
+                } else {
+                    Probe::Keep
+                }
+            }
+            None => {
+                let idle = self.probe_ms.is_none_or(|t| since(t_ms, t) >= self.n.probe_interval_ms);
+                if idle && self.req_off_run >= self.n.probe_unrequested && temp_c < w - p.below_setpoint_c {
+                    if let Some(past) = self.ago(self.n.probe_fall) {
+                        if past - temp_c > p.fall_c {
+                            self.probe_ms = Some(t_ms);
+                            return Probe::Start;
+                        }
+                    }
+                }
+                Probe::Keep
+            }
+        }
+    }
+
+    /// Counts this sample's applied `duty` and `requested` duty (last: every check of the sample
+    /// sees the runs up to the one before), with the load at `temp_c`.
+    pub(crate) fn applied(&mut self, duty: Duty, requested: f32, temp_c: f32) {
+        let full = duty.get() >= self.cfg.full_duty;
+        self.off_run = if duty.get() == 0.0 { self.off_run.saturating_add(1) } else { 0 };
+        if self.on_run == 0 && full {
+            self.on_start_c = temp_c;
+        }
+        self.on_run = if full { self.on_run.saturating_add(1) } else { 0 };
+        self.req_off_run = if requested <= 0.0 { self.req_off_run.saturating_add(1) } else { 0 };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::freeze::Trend;
+    use super::*;
+
+    const TS: f32 = 10.0;
+
+    fn monitor() -> SsrMonitor {
+        SsrMonitor::new(&SsrConfig::DEFAULT, TS)
+    }
+
+    /// `n` samples of `duty` with `requested` applied, the load at `temp_c`.
+    fn apply(m: &mut SsrMonitor, n: usize, duty: Duty, requested: f32, temp_c: f32) {
+        for _ in 0..n {
+            m.applied(duty, requested, temp_c);
+        }
+    }
+
+    fn trend(drop_c: f32, slope_c_per_s: f32) -> Trend {
+        Trend { drop_c, slope_c_per_s, predicted_c: 1.5 }
+    }
+
+    #[test]
+    fn the_windows_are_todays_sample_counts() {
+        let n = monitor().n;
+        assert_eq!((n.unrequested, n.off, n.window, n.stuck_off, n.slow), (6, 18, 6, 30, 90));
+        assert_eq!((n.probe_unrequested, n.probe_fall, n.probe_turn_up), (60, 30, 3));
+        assert_eq!((n.trip_window_ms, n.probe_open_ms, n.probe_interval_ms), (1_800_000, 300_000, 3_600_000));
+        // Every window fits the ring.
+        assert!(2 * n.window < HISTORY && n.probe_fall < HISTORY && (n.stuck_off as usize) < HISTORY);
+    }
+
+    #[test]
+    fn stuck_on_path_1_needs_a_minute_unrequested_and_a_fast_fall_or_a_second_trip() {
+        let fast = trend(0.1, -0.004);
+        let mut m = monitor();
+        apply(&mut m, 5, Duty::OFF, 0.0, 2.0);
+        assert!(!m.freeze_tripped(0, &fast, false), "five samples unrequested are not a minute");
+        m.applied(Duty::OFF, 0.0, 2.0);
+        assert!(m.freeze_tripped(10_000, &fast, false));
+        assert!(!m.freeze_tripped(10_000, &fast, true), "already found");
+        // Slowing down (this fall smaller than the last) or slow: not on the first trip…
+        let mut m = monitor();
+        apply(&mut m, 6, Duty::OFF, 0.0, 2.0);
+        assert!(!m.between_trips(0, &trend(0.2, -0.004), false));
+        assert!(!m.freeze_tripped(0, &trend(0.1, -0.004), false), "slowing down");
+        let mut m = monitor();
+        apply(&mut m, 6, Duty::OFF, 0.0, 2.0);
+        assert!(!m.freeze_tripped(0, &trend(0.3, -0.003), false), "−0.003 °C/s is not below −0.003");
+        // …but a second unrequested trip within half an hour is.
+        assert!(m.freeze_tripped(1_800_000, &trend(0.0, 0.0), false));
+        let mut m = monitor();
+        apply(&mut m, 6, Duty::OFF, 0.0, 2.0);
+        assert!(!m.freeze_tripped(0, &trend(0.0, 0.0), false));
+        assert!(!m.freeze_tripped(1_800_001, &trend(0.0, 0.0), false), "half an hour and a millisecond later");
+    }
+
+    #[test]
+    fn stuck_on_path_2_within_half_an_hour_of_a_trip() {
+        let mut m = monitor();
+        apply(&mut m, 6, Duty::OFF, 0.0, 2.0);
+        assert!(!m.between_trips(0, &trend(0.2, -0.004), false), "no trip yet");
+        // A trip with cooling requested: no verdict, but the window opens.
+        let mut m = monitor();
+        assert!(!m.freeze_tripped(0, &trend(0.0, 0.0), false));
+        apply(&mut m, 6, Duty::OFF, 0.0, 2.0);
+        assert!(!m.between_trips(600_000, &trend(0.1, -0.004), false), "0.1 °C is not more than 0.1");
+        assert!(!m.between_trips(610_000, &trend(0.11, -0.003), false), "not falling fast");
+        assert!(!m.between_trips(620_000, &trend(0.105, -0.004), false), "slower than the sample before");
+        assert!(m.between_trips(630_000, &trend(0.105, -0.004), false), "as fast as the sample before");
+        assert!(!m.between_trips(640_000, &trend(0.2, -0.004), true), "already found");
+        assert!(!m.between_trips(1_800_001, &trend(0.3, -0.004), false), "outside the window");
+    }
+
+    #[test]
+    fn stuck_on_path_3_after_three_minutes_off_and_not_slowing() {
+        let mut m = monitor();
+        // The load falls 0.03 °C a sample: 0.18 °C a minute, the same every minute.
+        let temps: Vec<f32> = (0..13).map(|k| 5.0 - 0.03 * k as f32).collect();
+        for t in &temps[..12] {
+            m.remember(*t);
+        }
+        m.remember(temps[12]);
+        apply(&mut m, 17, Duty::OFF, 0.0, 2.0);
+        assert!(!m.still_falling(temps[12]), "17 samples off are not three minutes");
+        m.applied(Duty::OFF, 0.0, 2.0);
+        assert!(m.still_falling(temps[12]));
+        // A coast that slows: 0.18 °C in the last minute after 0.2 °C in the one before.
+        let mut m = monitor();
+        for k in 0..13 {
+            m.remember(if k <= 6 { 5.0 - 0.2 * k as f32 / 6.0 } else { 4.8 - 0.18 * (k - 6) as f32 / 6.0 });
+        }
+        apply(&mut m, 18, Duty::OFF, 0.0, 2.0);
+        assert!(!m.still_falling(4.62));
+        // Too little fall: 0.144 °C a minute, not more than 0.15.
+        let mut m = monitor();
+        for k in 0..13 {
+            m.remember(5.0 - 0.024 * k as f32);
+        }
+        apply(&mut m, 18, Duty::OFF, 0.0, 2.0);
+        assert!(!m.still_falling(5.0 - 0.024 * 12.0));
+    }
+
+    #[test]
+    fn stuck_off_fast_after_five_minutes_slow_after_fifteen() {
+        let mut m = monitor();
+        // Full duty; the load rises 0.02 °C a sample (0.6 °C in 5 min).
+        let mut t = 5.0f32;
+        let mut found = None;
+        for k in 0..40 {
+            m.remember(t);
+            if m.warms_at_full_duty(t) {
+                assert!(found.is_none(), "reported twice");
+                found = Some(k);
+            }
+            m.applied(Duty::FULL, 1.0, t);
+            t += 0.02;
+        }
+        assert_eq!(found, Some(30), "judged once 30 samples of full duty and a 30-sample window are in");
+        // Slow: 0.005 °C a sample, 0.15 °C in 5 min; after 15 min 0.45 °C above the start.
+        let mut m = monitor();
+        let (mut t, mut found) = (5.0f32, None);
+        for k in 0..100 {
+            m.remember(t);
+            if m.warms_at_full_duty(t) && found.is_none() {
+                found = Some(k);
+            }
+            m.applied(Duty::FULL, 1.0, t);
+            t += 0.005;
+        }
+        assert_eq!(found, Some(90));
+        // A working SSR turns the load around: no report.
+        let mut m = monitor();
+        for k in 0..100u16 {
+            let t = 5.0 + 0.01 * (k.min(20) as f32) - 0.01 * (k.saturating_sub(20) as f32);
+            m.remember(t);
+            assert!(!m.warms_at_full_duty(t), "sample {k}");
+            m.applied(Duty::FULL, 1.0, t);
+        }
+    }
+
+    #[test]
+    fn the_probe_starts_below_the_setpoint_and_finds_a_turn_up() {
+        let mut m = monitor();
+        // Falling 0.002 °C a sample, 3 °C at setpoint 4.1 °C, nothing asked for 10 min.
+        for k in 0..31 {
+            m.remember(3.06 - 0.002 * k as f32);
+        }
+        apply(&mut m, 59, Duty::OFF, 0.0, 3.0);
+        assert_eq!(m.probe(0, None, 3.0, 4.1), Probe::Keep, "59 samples are not 10 min");
+        m.applied(Duty::OFF, 0.0, 3.0);
+        assert_eq!(m.probe(0, None, 3.0, 4.0), Probe::Keep, "not more than 1 °C below");
+        assert_eq!(m.probe(0, None, 3.0, 4.1), Probe::Start);
+        assert_eq!(m.probe(10_000, None, 3.0, 4.1), Probe::Keep, "one an hour");
+        assert_eq!(m.probe(10_000, Some(0), 3.0, 4.1), Probe::Keep);
+        assert_eq!(m.probe(300_000, Some(0), 3.0, 4.1), Probe::End, "five minutes");
+        // 0.2 °C up in 30 s: the supply was cooling.
+        m.remember(3.2);
+        assert_eq!(m.probe(20_000, Some(0), 3.2, 4.1), Probe::Shorted);
+        // Cooling requested again ends it.
+        m.applied(Duty::OFF, 0.5, 3.0);
+        m.remember(3.0);
+        m.remember(3.0);
+        m.remember(3.0);
+        assert_eq!(m.probe(30_000, Some(0), 3.0, 4.1), Probe::End);
+    }
+
+    #[test]
+    fn limp_home_has_a_hysteresis() {
+        let l = LimpConfig::DEFAULT;
+        assert!(!l.supply_on(false, 4.99, 4.0));
+        assert!(l.supply_on(false, 5.0, 4.0));
+        assert!(l.supply_on(true, 3.51, 4.0));
+        assert!(!l.supply_on(true, 3.5, 4.0));
+        assert!(!l.supply_on(false, 4.5, 4.0));
+    }
+}
