@@ -7,11 +7,12 @@
 //!
 //! Pipeline per sample:
 //! 1. **convert**: counts → ohms (ratiometric front end, [`crate::adc`]); ohms → °C
-//!    (Callendar–Van Dusen, [`crate::rtd`]); two-point calibration ([`crate::calib`]);
-//!    plausibility range check;
-//! 2. **check**: the sensor checks of the [`crate::supervisor`] (faults, stuck converter,
-//!    offset, spikes) decide what the first-order filter F_a ([`crate::filter`]) takes; the
-//!    supply and the supply switch are checked;
+//!    (Callendar–Van Dusen, [`crate::rtd`]); two-point calibration ([`crate::calib`]); the
+//!    faults the counts reveal (open, short, out of range, stuck:
+//!    [`crate::supervisor::sensor`]);
+//! 2. **check**: the [`crate::supervisor`]'s sensor checks (fault state, offset, spikes)
+//!    decide what the first-order filter F_a ([`crate::filter`]) takes; the supply and the
+//!    supply switch are checked;
 //! 3. **control**: the setpoint clamped to the vaccine band 2…8 °C (a controller may never aim
 //!    below +2 °C), then the controller ([`crate::control`]), with a trusted reading only;
 //! 4. **guard**: the supervisor's freeze guard, SSR monitor, limp home and lid detector decide
@@ -28,13 +29,13 @@
 //! samples = 5 minutes, the scale of the closed-loop settling time, and lets open/short faults be
 //! confirmed within two samples = 20 s.
 
-use crate::adc::{AdcError, AdcFrontEnd};
+use crate::adc::AdcFrontEnd;
 use crate::calib::TwoPoint;
 use crate::control::{AdaptiveMode, ControlInput, Controller, ControllerStatus};
 use crate::event::{Event, EventKind, Events};
 use crate::filter::{FirstOrder, FirstOrderConfig};
 use crate::rtd::Rtd;
-use crate::supervisor::{Supervisor, SupervisorConfig};
+use crate::supervisor::{sensor, Supervisor, SupervisorConfig};
 use crate::units::{max_f32, min_f32, Celsius, Duty};
 
 /// Everything the step needs to know that does not change while it runs.
@@ -218,7 +219,7 @@ impl<C: Controller> Carrier<C> {
     pub fn step(&mut self, input: &StepInput) -> StepOutput {
         let stuck = self.supervisor.counts_stuck(input.counts);
         // Only a plausible reading can be "stuck": open and short keep their own diagnosis.
-        let measured = match self.measure(input.counts) {
+        let measured = match sensor::measure(&self.cfg, input.counts) {
             Ok(_) if stuck => Err(EventKind::SensorStuck),
             m => m,
         };
@@ -229,7 +230,7 @@ impl<C: Controller> Carrier<C> {
     /// conversion (ideal-measurement plants, replay of temperature logs). The plausibility
     /// check, filter, controller and safety still apply.
     pub fn step_celsius(&mut self, t_ms: u64, temp: Celsius, setpoint_c: f32) -> StepOutput {
-        let measured = self.plausible(temp);
+        let measured = sensor::plausible(&self.cfg, temp);
         self.run(t_ms, measured, setpoint_c, false)
     }
 
@@ -310,32 +311,13 @@ impl<C: Controller> Carrier<C> {
             }
         }
     }
-
-    /// Counts → calibrated °C, or the fault the counts reveal.
-    fn measure(&self, counts: u32) -> Result<Celsius, EventKind> {
-        let ohms = self.cfg.adc.ohms(counts).map_err(|e| match e {
-            AdcError::Open => EventKind::SensorOpen,
-            AdcError::Short => EventKind::SensorShort,
-            AdcError::ReferenceOutOfRange => EventKind::ReferenceOutOfRange,
-        })?;
-        let t = self.cfg.rtd.temperature(ohms).map_err(|_| EventKind::SensorOutOfRange)?;
-        self.plausible(self.cfg.cal.apply(t))
-    }
-
-    /// The plausibility range check of a calibrated temperature.
-    fn plausible(&self, t: Celsius) -> Result<Celsius, EventKind> {
-        if t.0.is_finite() && (self.cfg.plausible_min_c..=self.cfg.plausible_max_c).contains(&t.0) {
-            Ok(t)
-        } else {
-            Err(EventKind::SensorOutOfRange)
-        }
-    }
 }
 
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
     use crate::control::{AnyController, Pi, PiConfig};
+    use proptest::prelude::*;
 
     /// The counts the default front end reads at `t` °C.
     pub(crate) fn counts_at(t: f32) -> u32 {
@@ -391,13 +373,6 @@ pub(crate) mod tests {
         );
         assert!(c.step(&StepInput { t_ms: 10_000, counts: counts_at(4.0), setpoint_c: 4.0 }).events.is_empty());
     }
-}
-
-#[cfg(test)]
-mod robustness {
-    use super::tests::pi_carrier;
-    use super::*;
-    use proptest::prelude::*;
 
     proptest! {
         #![proptest_config(ProptestConfig { cases: 64, .. ProptestConfig::default() })]

@@ -34,7 +34,8 @@ pub struct FreezeConfig {
 
 impl FreezeConfig {
     /// The reference board's settings.
-    pub const DEFAULT: FreezeConfig = FreezeConfig { cut_c: 1.5, release_c: 2.5, lookahead_s: 120.0, slope_smoothing: 0.7 };
+    pub const DEFAULT: FreezeConfig =
+        FreezeConfig { cut_c: 1.5, release_c: 2.5, lookahead_s: 120.0, slope_smoothing: 0.7 };
 }
 
 /// This sample's movement of the filtered temperature.
@@ -189,5 +190,57 @@ mod tests {
         // And the sample after it has no previous reading to take a slope from.
         let t = g.observe(4.8);
         assert_eq!((t.drop_c, t.slope_c_per_s), (0.0, s));
+    }
+}
+
+/// The freeze guard as the step runs it.
+#[cfg(test)]
+mod carrier {
+    use crate::control::{AnyController, OnOff, OnOffConfig};
+    use crate::event::EventKind;
+    use crate::step::tests::counts_at;
+    use crate::step::{Carrier, CarrierConfig, Mode, StepInput};
+    use crate::units::Duty;
+
+    /// Feeds a load falling at `rate_c_per_s` from 9 °C under an On-Off controller that keeps
+    /// asking for cooling; returns the measured temperature at which the guard cut it.
+    fn guard_trip(rate_c_per_s: f32) -> f32 {
+        let onoff = OnOff::new(OnOffConfig { hysteresis_c: 0.1 });
+        let mut c = Carrier::new(CarrierConfig::DEFAULT, AnyController::OnOff(onoff));
+        let mut temp = 9.0f32;
+        let mut t = 0u64;
+        while temp > 0.0 {
+            let out = c.step(&StepInput { t_ms: t, counts: counts_at(temp), setpoint_c: 2.0 });
+            if out.mode == Mode::FreezeGuard {
+                assert_eq!(out.duty, Duty::OFF);
+                assert!(out.events.iter().any(|e| e.kind == EventKind::FreezeGuardTripped));
+                // It holds until the load is back above the release threshold.
+                for k in 1..20 {
+                    let back = c.step(&StepInput { t_ms: t + 10_000 * k, counts: counts_at(2.2), setpoint_c: 2.0 });
+                    assert_eq!(back.duty, Duty::OFF);
+                }
+                // Back above 2.5 °C (through the filter): cooling may resume.
+                let released = (0..3).any(|k| {
+                    let warm =
+                        c.step(&StepInput { t_ms: t + 200_000 + 10_000 * k, counts: counts_at(2.8), setpoint_c: 2.0 });
+                    warm.mode == Mode::Normal && warm.events.iter().any(|e| e.kind == EventKind::FreezeGuardReleased)
+                });
+                assert!(released);
+                return out.temp_c.0;
+            }
+            temp -= rate_c_per_s * 10.0;
+            t += 10_000;
+        }
+        panic!("guard never tripped");
+    }
+
+    #[test]
+    fn freeze_guard_cuts_cooling_ahead_of_a_falling_load() {
+        // Slow fall (0.06 °C/min): the guard acts close to its 1.5 °C threshold.
+        let slow = guard_trip(0.001);
+        assert!(slow <= 1.7 && slow > 1.0, "slow fall tripped at {slow}");
+        // Fast fall (0.6 °C/min, full cooling): it acts ≈ 120 s ahead, above 2 °C.
+        let fast = guard_trip(0.01);
+        assert!(fast > 2.0 && fast <= 2.8, "fast fall tripped at {fast}");
     }
 }

@@ -1,8 +1,9 @@
 //! Sensor checks: is the reading the load, or the sensor?
 //!
-//! - **Diagnosis and recovery** ([`diagnose`]): the conversion chain reports open, short,
-//!   out-of-range and reference faults; a fault is reported once per kind and ends with the
-//!   first plausible reading ([`crate::event::EventKind::SensorRecovered`]).
+//! - **Diagnosis and recovery** ([`measure`], [`diagnose`]): the conversion chain's open,
+//!   short, out-of-range and reference faults, and readings outside the plausible range; a
+//!   fault is reported once per kind and ends with the first plausible reading
+//!   ([`crate::event::EventKind::SensorRecovered`]).
 //! - **Stuck converter** ([`StuckConverter`]): a real reading always carries some noise, so the
 //!   same 16-bit result [`SensorConfig::stuck_s`] in a row is a frozen front end.
 //! - **Spikes** ([`SpikeFilter`]): a reading further than [`SpikeConfig::c`] from the filtered
@@ -14,9 +15,11 @@
 //! [`SensorChecks::reading`] runs the last three in their order and feeds the measurement
 //! filter F_a.
 
-use super::{samples_u16, samples_u8, since, ms};
+use super::{ms, samples_u16, samples_u8, since};
+use crate::adc::AdcError;
 use crate::event::EventKind;
 use crate::filter::{FirstOrder, FirstOrderConfig};
+use crate::step::CarrierConfig;
 use crate::units::{min_f32, Celsius};
 
 /// Settings of the sensor checks.
@@ -86,6 +89,28 @@ impl OffsetConfig {
     /// The reference board's settings.
     pub const DEFAULT: OffsetConfig =
         OffsetConfig { step_c: 0.7, hold_fraction: 0.25, hold_max_c: 0.5, confirm_s: 30.0, max_comp_c: 3.0 };
+}
+
+/// Counts → calibrated °C through the channel of `cfg`, or the fault the counts reveal: open
+/// and short from the front end, a resistance outside the RTD's range, a reading outside the
+/// plausible range.
+pub(crate) fn measure(cfg: &CarrierConfig, counts: u32) -> Result<Celsius, EventKind> {
+    let ohms = cfg.adc.ohms(counts).map_err(|e| match e {
+        AdcError::Open => EventKind::SensorOpen,
+        AdcError::Short => EventKind::SensorShort,
+        AdcError::ReferenceOutOfRange => EventKind::ReferenceOutOfRange,
+    })?;
+    let t = cfg.rtd.temperature(ohms).map_err(|_| EventKind::SensorOutOfRange)?;
+    plausible(cfg, cfg.cal.apply(t))
+}
+
+/// The plausibility range check of a calibrated temperature.
+pub(crate) fn plausible(cfg: &CarrierConfig, t: Celsius) -> Result<Celsius, EventKind> {
+    if t.0.is_finite() && (cfg.plausible_min_c..=cfg.plausible_max_c).contains(&t.0) {
+        Ok(t)
+    } else {
+        Err(EventKind::SensorOutOfRange)
+    }
 }
 
 /// What the conversion result of this sample does to the sensor-fault state.
@@ -185,7 +210,13 @@ impl SpikeFilter {
     }
 
     /// Takes the reading `t` at `t_ms` and whether it is a spike ([`Self::is_spike`]).
-    pub(crate) fn run(&mut self, t_ms: u64, t: Option<Celsius>, spike: bool, emit: &mut impl FnMut(EventKind)) -> Spike {
+    pub(crate) fn run(
+        &mut self,
+        t_ms: u64,
+        t: Option<Celsius>,
+        spike: bool,
+        emit: &mut impl FnMut(EventKind),
+    ) -> Spike {
         // Spikes that agree with each other are a real jump; ones that do not are noise, and
         // the filter keeps its value.
         let consistent = t.is_some_and(|t| (t.0 - self.last_c).abs() < self.cfg.agree_fraction * self.cfg.c);
@@ -516,5 +547,70 @@ mod tests {
         assert_eq!(read(&mut s, &mut f, 4, 9.0), 9.0, "the third in a row restarts the filter");
         let none = s.reading(50_000, Err(EventKind::SensorOpen), false, &mut f, &fc, &mut e);
         assert_eq!((none.raw_c, none.temp_c), (None, 9.0));
+    }
+}
+
+/// The sensor checks as the step runs them.
+#[cfg(test)]
+mod carrier {
+    use crate::event::EventKind;
+    use crate::step::tests::{counts_at, pi_carrier};
+    use crate::step::{CarrierConfig, Mode, StepInput};
+    use crate::units::{Duty, Ohms};
+
+    #[test]
+    fn open_sensor_stops_cooling_on_the_first_sample_and_recovers() {
+        let mut c = pi_carrier();
+        let warm = c.step(&StepInput { t_ms: 0, counts: counts_at(10.0), setpoint_c: 4.0 });
+        assert!(warm.duty.get() > 0.5);
+        let open = c.step(&StepInput { t_ms: 10_000, counts: 65_535, setpoint_c: 4.0 });
+        assert_eq!(open.duty, Duty::OFF);
+        assert_eq!(open.mode, Mode::SensorFault);
+        assert_eq!(open.events.iter().next().map(|e| (e.kind, e.t_ms)), Some((EventKind::SensorOpen, 10_000)));
+        // No repeated event while the fault persists.
+        let still = c.step(&StepInput { t_ms: 20_000, counts: 65_535, setpoint_c: 4.0 });
+        assert!(still.events.is_empty());
+        let back = c.step(&StepInput { t_ms: 30_000, counts: counts_at(5.0), setpoint_c: 4.0 });
+        assert_eq!(back.mode, Mode::Normal);
+        assert_eq!(back.events.iter().next().map(|e| e.kind), Some(EventKind::SensorRecovered));
+    }
+
+    #[test]
+    fn short_and_implausible_readings_are_faults() {
+        let mut c = pi_carrier();
+        let short = c.step(&StepInput { t_ms: 0, counts: 10, setpoint_c: 4.0 });
+        assert_eq!(short.events.iter().next().map(|e| e.kind), Some(EventKind::SensorShort));
+        let cold = CarrierConfig::DEFAULT.adc.counts(Ohms(80.0)); // ≈ −50 °C
+        let out = c.step(&StepInput { t_ms: 10_000, counts: cold, setpoint_c: 4.0 });
+        assert_eq!(out.events.iter().next().map(|e| e.kind), Some(EventKind::SensorOutOfRange));
+        assert_eq!(out.duty, Duty::OFF);
+    }
+
+    #[test]
+    fn a_reference_fault_is_a_sensor_fault_until_a_valid_sample() {
+        let mut c = pi_carrier();
+        let warm = c.step(&StepInput { t_ms: 0, counts: counts_at(9.0), setpoint_c: 4.0 });
+        assert!(warm.duty.get() > 0.0);
+        let bad = StepInput { t_ms: 10_000, counts: counts_at(9.0), setpoint_c: 4.0 };
+        let out = c.step_with_reference_fault(&bad);
+        assert_eq!((out.mode, out.duty, out.supply_enable), (Mode::SensorFault, Duty::OFF, false));
+        assert_eq!(out.events.iter().map(|e| e.kind).collect::<Vec<_>>(), [EventKind::ReferenceOutOfRange]);
+        assert!(crate::alarm::needs_attention(EventKind::ReferenceOutOfRange));
+        let again = c.step_with_reference_fault(&StepInput { t_ms: 20_000, ..bad });
+        assert!(again.events.is_empty(), "reported once while it lasts");
+        let back = c.step(&StepInput { t_ms: 30_000, ..bad });
+        assert_eq!(back.mode, Mode::Normal);
+        assert_eq!(back.events.iter().map(|e| e.kind).collect::<Vec<_>>(), [EventKind::SensorRecovered]);
+    }
+
+    #[test]
+    fn a_week_of_identical_counts_does_not_overflow() {
+        let mut c = pi_carrier();
+        for k in 0..70_000u32 {
+            let out = c.step(&StepInput { t_ms: k as u64 * 10_000, counts: 49_900, setpoint_c: 4.0 });
+            if k > 20 {
+                assert_eq!(out.mode, Mode::SensorFault);
+            }
+        }
     }
 }

@@ -12,7 +12,7 @@
 //! anti-windup tracking would unwind its integral and let the load warm by 0.6 °C over the
 //! next 10 min; the 20 s without supply are a small disturbance it rejects.
 
-use super::{samples_u8, samples_u32};
+use super::{samples_u32, samples_u8};
 use crate::event::EventKind;
 use crate::units::max_f32;
 
@@ -221,5 +221,103 @@ mod tests {
         sample(&mut c, 11.9, Some(12.0), false);
         assert!(sample(&mut c, 11.9, Some(12.0), true));
         assert!((0..1500).all(|_| !c.test_due(true, 5.0, 5.1)), "found");
+    }
+}
+
+/// The supply-switch check as the step runs it.
+#[cfg(test)]
+mod carrier {
+    use crate::control::{AnyController, Pi, PiConfig};
+    use crate::event::EventKind;
+    use crate::step::tests::{counts_at, pi_carrier as carrier};
+    use crate::step::{Carrier, CarrierConfig, Mode, StepInput};
+    use crate::units::Duty;
+
+    /// Runs `n` samples holding 5 °C at setpoint `w` with the rail reading what a switch that is
+    /// `shorted` (or not) shows; returns the samples that opened the switch and when the short
+    /// was reported.
+    fn run(n: u32, shorted: bool, w: f32) -> (Vec<u32>, Option<u32>) {
+        let mut c = carrier();
+        let (mut opened, mut found, mut enabled) = (Vec::new(), None, true);
+        for k in 0..n {
+            c.observe_supply_v(12.0);
+            c.observe_switched_rail_v(if enabled || shorted { 11.9 } else { 0.01 });
+            let out = c.step(&StepInput { t_ms: u64::from(k) * 10_000, counts: counts_at(5.0) + k % 3, setpoint_c: w });
+            if out.events.iter().any(|e| e.kind == EventKind::SupplySwitchShorted) {
+                assert!(found.is_none(), "reported twice");
+                found = Some(k);
+            }
+            enabled = out.supply_enable;
+            if !enabled {
+                // The controller's duty stays (the switch alone opens).
+                assert_eq!(out.duty, Duty::saturating(out.requested), "sample {k}");
+                assert_eq!(out.mode, Mode::Normal);
+                opened.push(k);
+            }
+        }
+        (opened, found)
+    }
+
+    #[test]
+    fn a_shorted_switch_is_found_by_the_test_opening() {
+        let (opened, found) = run(1600, true, 5.1);
+        assert_eq!(opened[..2], [719, 720], "first test after two hours, two samples");
+        assert_eq!(found, Some(721), "judged on the second reading with the switch open");
+        // Found: no more test openings.
+        assert_eq!(opened.len(), 2, "{opened:?}");
+        let (opened, found) = run(1600, false, 5.1);
+        assert_eq!(found, None);
+        assert_eq!(opened, [719, 720, 1440, 1441], "one test every two hours");
+        // A load above its setpoint is never opened on (the test would warm it further).
+        assert_eq!(run(1600, true, 4.9), (vec![], None));
+    }
+
+    #[test]
+    fn no_sense_no_test_and_no_check() {
+        let mut c = carrier();
+        for k in 0..1600u32 {
+            let out =
+                c.step(&StepInput { t_ms: u64::from(k) * 10_000, counts: counts_at(5.0) + k % 3, setpoint_c: 5.1 });
+            assert!(out.supply_enable && out.events.iter().all(|e| e.kind != EventKind::SupplySwitchShorted));
+        }
+        // Test openings off (an identification run): the sense alone opens nothing.
+        let mut cfg = CarrierConfig::DEFAULT;
+        cfg.supervisor.switch.test_interval_s = 0.0;
+        let mut c = Carrier::new(cfg, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)));
+        for k in 0..1600u32 {
+            c.observe_switched_rail_v(11.9);
+            let out =
+                c.step(&StepInput { t_ms: u64::from(k) * 10_000, counts: counts_at(5.0) + k % 3, setpoint_c: 5.1 });
+            assert!(out.supply_enable, "sample {k}");
+        }
+    }
+
+    #[test]
+    fn a_rail_that_bleeds_down_slowly_is_no_short() {
+        // The first reading after opening still shows the rail's charge: not judged.
+        let mut c = carrier();
+        let (mut enabled, mut open_for, mut opened) = (true, 0, 0);
+        for k in 0..1600u32 {
+            c.observe_supply_v(12.0);
+            open_for = if enabled { 0 } else { open_for + 1 };
+            c.observe_switched_rail_v(if enabled || open_for == 1 { 11.9 } else { 0.05 });
+            let out =
+                c.step(&StepInput { t_ms: u64::from(k) * 10_000, counts: counts_at(5.0) + k % 3, setpoint_c: 5.1 });
+            assert!(out.events.iter().all(|e| e.kind != EventKind::SupplySwitchShorted), "sample {k}");
+            enabled = out.supply_enable;
+            opened += u32::from(!enabled);
+        }
+        assert_eq!(opened, 4, "two test openings were judged");
+        // The floor: a dead supply (0 V) whose rail reads a little noise is not a short.
+        let mut c = carrier();
+        for k in 0..1600u32 {
+            c.observe_supply_v(0.0);
+            c.observe_switched_rail_v(0.3);
+            let out =
+                c.step(&StepInput { t_ms: u64::from(k) * 10_000, counts: counts_at(5.0) + k % 3, setpoint_c: 5.1 });
+            assert!(out.events.iter().all(|e| e.kind != EventKind::SupplySwitchShorted), "sample {k}");
+            opened += u32::from(!out.supply_enable);
+        }
+        assert_eq!(opened, 8, "and judged twice more");
     }
 }
