@@ -246,7 +246,9 @@ impl<C: Controller> Carrier<C> {
             emit(EventKind::BoardFault(kind));
         }
 
-        let reading = self.supervisor.check(t_ms, raw, sensor, &mut self.filter, &self.cfg.filter, &mut emit);
+        let cfg = &self.cfg;
+        let reading =
+            self.supervisor.check(&cfg.supervisor, t_ms, raw, sensor, &mut self.filter, &cfg.filter, &mut emit);
         let temp_c = reading.temp_c;
 
         let w = self.setpoint(setpoint_c, &mut emit);
@@ -261,7 +263,7 @@ impl<C: Controller> Carrier<C> {
         let status = self.controller.status();
         self.note_adaptive_mode(status, &mut emit);
 
-        let verdict = self.supervisor.guard(t_ms, temp_c, w, requested, duty, &mut emit);
+        let verdict = self.supervisor.guard(&self.cfg.supervisor, t_ms, temp_c, w, requested, duty, &mut emit);
 
         // Tell the controller what was really applied.
         if self.supervisor.trusts_reading() {

@@ -39,6 +39,7 @@ use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant, Ticker};
 use hter::alarm::{Annunciator, Indication};
+use hter::calib::TwoPoint;
 use hter::control::adaptive::AdaptiveConfig;
 use hter::control::{AdaptiveMode, Controller, ControllerStatus};
 use hter::event::{Event, EventKind};
@@ -91,7 +92,8 @@ struct Telemetry {
 
 /// Everything the boot hands the control task.
 struct Boot {
-    cfg: CarrierConfig,
+    /// The RTD channel's calibration (stored, or identity).
+    cal: TwoPoint,
     adaptive: Option<AdaptiveConfig>,
     history: HistoryRecord,
     reset: ResetCause,
@@ -149,7 +151,7 @@ async fn main(spawner: Spawner) {
         spawner.spawn(persist::persist(store).unwrap());
     }
     let boot = Boot {
-        cfg: CarrierConfig { cal: restored.cal, ..config::CARRIER },
+        cal: restored.cal,
         adaptive: restored.adaptive,
         history: restored.history,
         reset,
@@ -197,7 +199,12 @@ async fn sample(mut analog: board::Analog) {
 /// the watchdog.
 #[embassy_executor::task]
 async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
-    let mut carrier: Carrier<config::Ctl> = Carrier::new(boot.cfg, config::controller(boot.adaptive));
+    let mut carrier: Carrier<config::Ctl> = Carrier::new(
+        // Built here from the constant profile, so that its derived sample counts fold at
+        // compile time.
+        CarrierConfig { cal: boot.cal, ..config::CARRIER },
+        config::controller(boot.adaptive),
+    );
     carrier.note_reset(boot.reset);
     let mut recorder = Recorder::new(boot.history, config::HISTORY_SAVE_SAMPLES);
     let mut history = recorder.note_reset(boot.reset);

@@ -52,8 +52,6 @@ pub(crate) struct Trend {
 /// The freeze guard's slope estimate.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct FreezeGuard {
-    cfg: FreezeConfig,
-    ts_s: f32,
     /// 1 − `slope_smoothing`: the weight of this sample's slope.
     gain: f32,
     last_temp_c: Option<f32>,
@@ -61,8 +59,8 @@ pub(crate) struct FreezeGuard {
 }
 
 impl FreezeGuard {
-    pub(crate) fn new(cfg: &FreezeConfig, ts_s: f32) -> Self {
-        FreezeGuard { cfg: *cfg, ts_s, gain: 1.0 - cfg.slope_smoothing, last_temp_c: None, slope_c_per_s: 0.0 }
+    pub(crate) fn new(cfg: &FreezeConfig) -> Self {
+        FreezeGuard { gain: 1.0 - cfg.slope_smoothing, last_temp_c: None, slope_c_per_s: 0.0 }
     }
 
     /// The smoothed slope, °C/s.
@@ -76,29 +74,29 @@ impl FreezeGuard {
         self.slope_c_per_s = 0.0;
     }
 
-    /// Takes this sample's filtered temperature.
-    pub(crate) fn observe(&mut self, temp_c: f32) -> Trend {
+    /// Takes this sample's filtered temperature (`ts_s`: the sample period, s).
+    pub(crate) fn observe(&mut self, cfg: &FreezeConfig, ts_s: f32, temp_c: f32) -> Trend {
         let mut drop_c = 0.0;
         if let Some(prev) = self.last_temp_c.filter(|p| p.is_finite()) {
             drop_c = prev - temp_c;
-            let raw_slope = (temp_c - prev) / self.ts_s;
+            let raw_slope = (temp_c - prev) / ts_s;
             if raw_slope.is_finite() {
-                self.slope_c_per_s = self.cfg.slope_smoothing * self.slope_c_per_s + self.gain * raw_slope;
+                self.slope_c_per_s = cfg.slope_smoothing * self.slope_c_per_s + self.gain * raw_slope;
             }
         }
         self.last_temp_c = Some(temp_c);
-        let predicted_c = temp_c + crate::units::min_f32(self.slope_c_per_s, 0.0) * self.cfg.lookahead_s;
+        let predicted_c = temp_c + crate::units::min_f32(self.slope_c_per_s, 0.0) * cfg.lookahead_s;
         Trend { drop_c, slope_c_per_s: self.slope_c_per_s, predicted_c }
     }
 
     /// Whether the guard trips on `trend`.
-    pub(crate) fn trips(&self, trend: &Trend) -> bool {
-        trend.predicted_c <= self.cfg.cut_c
+    pub(crate) fn trips(cfg: &FreezeConfig, trend: &Trend) -> bool {
+        trend.predicted_c <= cfg.cut_c
     }
 
     /// Whether a tripped guard releases at `temp_c` on `trend` (never on a sample that trips).
-    pub(crate) fn releases(&self, temp_c: f32, trend: &Trend) -> bool {
-        temp_c >= self.cfg.release_c && trend.predicted_c > self.cfg.cut_c
+    pub(crate) fn releases(cfg: &FreezeConfig, temp_c: f32, trend: &Trend) -> bool {
+        temp_c >= cfg.release_c && trend.predicted_c > cfg.cut_c
     }
 }
 
@@ -106,8 +104,10 @@ impl FreezeGuard {
 mod tests {
     use super::*;
 
+    const CFG: FreezeConfig = FreezeConfig::DEFAULT;
+
     fn guard() -> FreezeGuard {
-        FreezeGuard::new(&FreezeConfig::DEFAULT, 10.0)
+        FreezeGuard::new(&CFG)
     }
 
     #[test]
@@ -119,20 +119,20 @@ mod tests {
     #[test]
     fn a_steady_load_trips_at_the_cut_and_releases_at_the_release() {
         let mut g = guard();
-        let t = g.observe(1.51);
-        assert!(!g.trips(&t));
-        let t = g.observe(1.51);
+        let t = g.observe(&CFG, 10.0, 1.51);
+        assert!(!FreezeGuard::trips(&CFG, &t));
+        let t = g.observe(&CFG, 10.0, 1.51);
         assert_eq!((t.drop_c, t.slope_c_per_s), (0.0, 0.0));
-        assert!(!g.trips(&t));
+        assert!(!FreezeGuard::trips(&CFG, &t));
         let mut g = guard();
-        let t = g.observe(1.5);
-        assert!(g.trips(&t), "at the cut");
+        let t = g.observe(&CFG, 10.0, 1.5);
+        assert!(FreezeGuard::trips(&CFG, &t), "at the cut");
         let mut g = guard();
-        let t = g.observe(2.49);
-        assert!(!g.releases(2.49, &t));
+        let t = g.observe(&CFG, 10.0, 2.49);
+        assert!(!FreezeGuard::releases(&CFG, 2.49, &t));
         let mut g = guard();
-        let t = g.observe(2.5);
-        assert!(g.releases(2.5, &t));
+        let t = g.observe(&CFG, 10.0, 2.5);
+        assert!(FreezeGuard::releases(&CFG, 2.5, &t));
     }
 
     #[test]
@@ -143,8 +143,8 @@ mod tests {
         let mut temp = 5.0f32;
         let mut tripped = None;
         for _ in 0..40 {
-            let t = g.observe(temp);
-            if g.trips(&t) {
+            let t = g.observe(&CFG, 10.0, temp);
+            if FreezeGuard::trips(&CFG, &t) {
                 tripped = Some((temp, t.predicted_c));
                 break;
             }
@@ -154,15 +154,15 @@ mod tests {
         assert!(temp > 2.5 && temp < 2.8, "tripped at {temp} °C");
         assert!(predicted <= 1.5);
         // Not released at 2.5 °C or more while the fall still predicts the cut.
-        let t = g.observe(temp - 0.1);
-        assert!(temp - 0.1 >= 2.5 && !g.releases(temp - 0.1, &t));
+        let t = g.observe(&CFG, 10.0, temp - 0.1);
+        assert!(temp - 0.1 >= 2.5 && !FreezeGuard::releases(&CFG, temp - 0.1, &t));
     }
 
     #[test]
     fn a_rising_load_is_not_extrapolated() {
         let mut g = guard();
-        g.observe(1.0);
-        let t = g.observe(1.6);
+        g.observe(&CFG, 10.0, 1.0);
+        let t = g.observe(&CFG, 10.0, 1.6);
         assert!(t.slope_c_per_s > 0.0);
         assert_eq!(t.predicted_c, 1.6);
         assert!((t.drop_c + 0.6).abs() < 1e-6);
@@ -171,24 +171,24 @@ mod tests {
     #[test]
     fn restart_forgets_the_slope() {
         let mut g = guard();
-        g.observe(5.0);
-        g.observe(4.0);
+        g.observe(&CFG, 10.0, 5.0);
+        g.observe(&CFG, 10.0, 4.0);
         assert!(g.slope_c_per_s() < 0.0);
         g.restart();
-        let t = g.observe(1.6);
+        let t = g.observe(&CFG, 10.0, 1.6);
         assert_eq!((t.drop_c, t.slope_c_per_s, t.predicted_c), (0.0, 0.0, 1.6));
     }
 
     #[test]
     fn a_non_finite_reading_leaves_the_slope_alone() {
         let mut g = guard();
-        g.observe(5.0);
-        g.observe(4.9);
+        g.observe(&CFG, 10.0, 5.0);
+        g.observe(&CFG, 10.0, 4.9);
         let s = g.slope_c_per_s();
-        g.observe(f32::NAN);
+        g.observe(&CFG, 10.0, f32::NAN);
         assert_eq!(g.slope_c_per_s(), s);
         // And the sample after it has no previous reading to take a slope from.
-        let t = g.observe(4.8);
+        let t = g.observe(&CFG, 10.0, 4.8);
         assert_eq!((t.drop_c, t.slope_c_per_s), (0.0, s));
     }
 }

@@ -95,8 +95,6 @@ pub(crate) struct LidInput {
 /// The lid detector's state.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct LidDetector {
-    cfg: LidConfig,
-    ts_s: f32,
     overwhelmed_n: u16,
     /// Fast and slow averages of the applied duty (`None`: starting afresh).
     duty_fast: Option<f32>,
@@ -115,8 +113,6 @@ pub(crate) struct LidDetector {
 impl LidDetector {
     pub(crate) fn new(cfg: &LidConfig, ts_s: f32) -> Self {
         LidDetector {
-            cfg: *cfg,
-            ts_s,
             overwhelmed_n: samples_u16(cfg.overwhelmed_s, ts_s),
             duty_fast: None,
             duty_slow: 0.0,
@@ -128,9 +124,9 @@ impl LidDetector {
         }
     }
 
-    /// Runs once a sample, after the duty is decided.
-    pub(crate) fn run(&mut self, s: &LidInput, emit: &mut impl FnMut(EventKind)) {
-        let (c, d, ts) = (&self.cfg, s.duty, self.ts_s);
+    /// Runs once a sample, after the duty is decided (`ts`: the sample period, s).
+    pub(crate) fn run(&mut self, c: &LidConfig, ts: f32, s: &LidInput, emit: &mut impl FnMut(EventKind)) {
+        let d = s.duty;
         if (s.w - self.last_w).abs() > c.setpoint_change_c || !self.last_w.is_finite() {
             self.reached_ms = None;
         }
@@ -189,7 +185,7 @@ mod tests {
                 normal: true,
                 full_duty_run: 0,
             };
-            l.run(&s, &mut |e| {
+            l.run(&LidConfig::DEFAULT, TS, &s, &mut |e| {
                 assert_eq!(e, EventKind::LidOpen);
                 out.push(k);
             });
@@ -248,10 +244,10 @@ mod tests {
         let mut l = LidDetector::new(&LidConfig::DEFAULT, TS);
         assert!(run(&mut l, 0, 720, 4.0, |_| 0.3).is_empty());
         let mut n = 0;
-        l.run(&full(7200, 59, 5.5), &mut |_| n += 1);
-        l.run(&full(7210, 60, 5.0), &mut |_| n += 1);
+        l.run(&LidConfig::DEFAULT, TS, &full(7200, 59, 5.5), &mut |_| n += 1);
+        l.run(&LidConfig::DEFAULT, TS, &full(7210, 60, 5.0), &mut |_| n += 1);
         assert_eq!(n, 0, "59 samples, or 1 °C above, are not enough");
-        l.run(&full(7220, 60, 5.01), &mut |_| n += 1);
+        l.run(&LidConfig::DEFAULT, TS, &full(7220, 60, 5.01), &mut |_| n += 1);
         assert_eq!(n, 1);
     }
 
@@ -261,6 +257,6 @@ mod tests {
         let mut l = LidDetector::new(&LidConfig::DEFAULT, TS);
         assert!(run(&mut l, 0, 1440, 4.0, |k| if k % 10 < 3 { 1.0 } else { 0.0 }).is_empty());
         assert!(run(&mut l, 1440, 720, 4.0, |k| if k % 10 < 7 { 1.0 } else { 0.0 }).is_empty());
-        l.run(&full(21_600, 60, 5.5), &mut |e| panic!("{e:?}"));
+        l.run(&LidConfig::DEFAULT, TS, &full(21_600, 60, 5.5), &mut |e| panic!("{e:?}"));
     }
 }

@@ -129,10 +129,10 @@ pub(crate) const fn samples_u8(s: f32, ts_s: f32) -> u8 {
     (s / ts_s + 0.5) as u8
 }
 
-/// `s` seconds in whole milliseconds (through u32: f32 → u64 is a library call on the M4F; 49
-/// days at most).
-pub(crate) const fn ms(s: f32) -> u64 {
-    (s * 1000.0 + 0.5) as u32 as u64
+/// `s` seconds in whole milliseconds (u32: f32 → u64 is a library call on the M4F; 49 days at
+/// most).
+pub(crate) const fn ms(s: f32) -> u32 {
+    (s * 1000.0 + 0.5) as u32
 }
 
 /// Time from `t0` to `t_ms`, ms (0 if the clock went back: "just now").
@@ -158,7 +158,10 @@ pub enum Drive {
 }
 
 /// The supervisor's mode (see the state diagram in the module docs).
+// `repr(u8)` with the drive first in every variant puts it at one offset, so the transitions of
+// the drive compile to one store whatever the mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
 pub enum State {
     /// Nothing holds cooling off; `Drive` drives it.
     Running(Drive),
@@ -166,12 +169,12 @@ pub enum State {
     FreezeGuard(Drive),
     /// The sensor is faulty: cooling off until it reads plausibly again.
     SensorFault {
+        /// Who drives once the outputs are free again.
+        drive: Drive,
         /// The fault reported.
         kind: EventKind,
         /// The freeze guard held when the fault began, and holds again when it ends.
         guard: bool,
-        /// Who drives once the outputs are free again.
-        drive: Drive,
     },
 }
 
@@ -180,76 +183,67 @@ impl State {
     pub const START: State = State::Running(Drive::Controller { probe: None });
 
     /// The sensor reads a fault `kind` (a first fault, or another kind than the one in force).
-    pub fn sensor_failed(self, kind: EventKind) -> State {
-        match self {
+    pub fn sensor_failed(&mut self, kind: EventKind) {
+        *self = match *self {
             State::Running(drive) => State::SensorFault { kind, guard: false, drive },
             State::FreezeGuard(drive) => State::SensorFault { kind, guard: true, drive },
             State::SensorFault { guard, drive, .. } => State::SensorFault { kind, guard, drive },
-        }
+        };
     }
 
     /// The sensor reads plausibly again: back to the mode the fault interrupted.
-    pub fn sensor_recovered(self) -> State {
-        match self {
-            State::SensorFault { guard: true, drive, .. } => State::FreezeGuard(drive),
-            State::SensorFault { guard: false, drive, .. } => State::Running(drive),
-            other => other,
+    pub fn sensor_recovered(&mut self) {
+        if let State::SensorFault { guard, drive, .. } = *self {
+            *self = if guard { State::FreezeGuard(drive) } else { State::Running(drive) };
         }
     }
 
     /// The freeze guard trips.
-    pub fn guard_tripped(self) -> State {
-        match self {
-            State::Running(drive) => State::FreezeGuard(drive),
-            other => other,
+    pub fn guard_tripped(&mut self) {
+        if let State::Running(drive) = *self {
+            *self = State::FreezeGuard(drive);
         }
     }
 
     /// The freeze guard releases.
-    pub fn guard_released(self) -> State {
-        match self {
-            State::FreezeGuard(drive) => State::Running(drive),
-            other => other,
+    pub fn guard_released(&mut self) {
+        if let State::FreezeGuard(drive) = *self {
+            *self = State::Running(drive);
         }
     }
 
     /// The SSR is found shorted: limp home from now on, supply off until limp home switches it.
-    pub fn ssr_shorted(self) -> State {
-        self.with_drive(|d| match d {
-            Drive::Controller { .. } => Drive::LimpHome { supply_on: false },
-            limp => limp,
-        })
+    pub fn ssr_shorted(&mut self) {
+        let d = self.drive_mut();
+        if let Drive::Controller { .. } = d {
+            *d = Drive::LimpHome { supply_on: false };
+        }
     }
 
     /// A supply probe begins at `t_ms`.
-    pub fn probe_started(self, t_ms: u64) -> State {
-        self.with_drive(|d| match d {
-            Drive::Controller { .. } => Drive::Controller { probe: Some(t_ms) },
-            limp => limp,
-        })
+    pub fn probe_started(&mut self, t_ms: u64) {
+        if let Drive::Controller { probe } = self.drive_mut() {
+            *probe = Some(t_ms);
+        }
     }
 
     /// The supply probe ends.
-    pub fn probe_ended(self) -> State {
-        self.with_drive(|d| match d {
-            Drive::Controller { .. } => Drive::Controller { probe: None },
-            limp => limp,
-        })
+    pub fn probe_ended(&mut self) {
+        if let Drive::Controller { probe } = self.drive_mut() {
+            *probe = None;
+        }
     }
 
     /// Limp home switches the supply on or off.
-    pub fn limp_switched(self, supply_on: bool) -> State {
-        self.with_drive(|d| match d {
-            Drive::LimpHome { .. } => Drive::LimpHome { supply_on },
-            controller => controller,
-        })
+    pub fn limp_switched(&mut self, on: bool) {
+        if let Drive::LimpHome { supply_on } = self.drive_mut() {
+            *supply_on = on;
+        }
     }
 
-    fn with_drive(self, f: impl FnOnce(Drive) -> Drive) -> State {
+    fn drive_mut(&mut self) -> &mut Drive {
         match self {
-            State::Running(d) => State::Running(f(d)),
-            State::FreezeGuard(d) => State::FreezeGuard(f(d)),
-            State::SensorFault { kind, guard, drive } => State::SensorFault { kind, guard, drive: f(drive) },
+            State::Running(d) | State::FreezeGuard(d) | State::SensorFault { drive: d, .. } => d,
         }
     }
 
@@ -306,6 +300,8 @@ pub(crate) struct Verdict {
 /// The supervisor: its mode and every detector's state.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Supervisor {
+    /// The sample period, s.
+    ts_s: f32,
     state: State,
     sensor: SensorChecks,
     freeze: FreezeGuard,
@@ -319,9 +315,10 @@ impl Supervisor {
     /// A supervisor that has not seen a sample, for the sample period `ts_s`.
     pub(crate) fn new(cfg: &SupervisorConfig, ts_s: f32) -> Self {
         Supervisor {
+            ts_s,
             state: State::START,
             sensor: SensorChecks::new(&cfg.sensor, ts_s),
-            freeze: FreezeGuard::new(&cfg.freeze, ts_s),
+            freeze: FreezeGuard::new(&cfg.freeze),
             ssr: SsrMonitor::new(&cfg.ssr, ts_s),
             supply: SupplyMonitor::new(&cfg.supply, ts_s),
             switch: SwitchCheck::new(&cfg.switch, ts_s),
@@ -354,6 +351,7 @@ impl Supervisor {
     /// calibrated reading or its fault; `sensor`: it came from the sensor (not an ideal plant).
     pub(crate) fn check(
         &mut self,
+        cfg: &SupervisorConfig,
         t_ms: u64,
         raw: Result<Celsius, EventKind>,
         sensor: bool,
@@ -364,11 +362,11 @@ impl Supervisor {
         match sensor::diagnose(&raw, self.state.sensor_fault()) {
             Some(Diagnosis::Failed(kind)) => {
                 emit(kind);
-                self.state = self.state.sensor_failed(kind);
+                self.state.sensor_failed(kind);
             }
             Some(Diagnosis::Recovered) => {
                 emit(EventKind::SensorRecovered);
-                self.state = self.state.sensor_recovered();
+                self.state.sensor_recovered();
                 // The filter and the slope predate the fault; start afresh from the first good
                 // reading.
                 filter.reset();
@@ -376,9 +374,9 @@ impl Supervisor {
             }
             None => {}
         }
-        let reading = self.sensor.reading(t_ms, raw, sensor, filter, filter_cfg, emit);
-        self.supply.run(emit);
-        self.switch.check(self.supply.v(), emit);
+        let reading = self.sensor.reading(&cfg.sensor, t_ms, raw, sensor, filter, filter_cfg, emit);
+        self.supply.run(&cfg.supply, emit);
+        self.switch.check(&cfg.switch, self.supply.v(), emit);
         reading
     }
 
@@ -386,6 +384,7 @@ impl Supervisor {
     /// guard and the SSR checks on the filtered load `temp_c` at setpoint `w`, then the outputs.
     pub(crate) fn guard(
         &mut self,
+        cfg: &SupervisorConfig,
         t_ms: u64,
         temp_c: f32,
         w: f32,
@@ -394,14 +393,14 @@ impl Supervisor {
         emit: &mut impl FnMut(EventKind),
     ) -> Verdict {
         if self.trusts_reading() {
-            self.freeze_guard(t_ms, temp_c, emit);
-            self.ssr_checks(t_ms, temp_c, w, emit);
+            self.freeze_guard(cfg, t_ms, temp_c, emit);
+            self.ssr_checks(&cfg.ssr, t_ms, temp_c, w, emit);
         }
         let mode = self.state.mode();
         let mut duty = if mode == Mode::Normal { duty } else { Duty::OFF };
         if let State::Running(Drive::LimpHome { supply_on }) = self.state {
-            let on = self.ssr.config().limp.supply_on(supply_on, temp_c, w);
-            self.state = self.state.limp_switched(on);
+            let on = cfg.ssr.limp.supply_on(supply_on, temp_c, w);
+            self.state.limp_switched(on);
             if on {
                 duty = Duty::FULL;
             }
@@ -416,49 +415,49 @@ impl Supervisor {
             normal: mode == Mode::Normal,
             full_duty_run: self.ssr.full_duty_run(),
         };
-        self.lid.run(&lid, emit);
-        self.ssr.applied(duty, requested, temp_c);
+        self.lid.run(&cfg.lid, self.ts_s, &lid, emit);
+        self.ssr.applied(&cfg.ssr, duty, requested, temp_c);
         let supply_enable = self.switch.note_enable(!switch_test && self.state.supply_enable());
         Verdict { duty, supply_enable, mode }
     }
 
     /// The freeze guard: trip (with SSR stuck-on paths 1 and 2) and release.
-    fn freeze_guard(&mut self, t_ms: u64, temp_c: f32, emit: &mut impl FnMut(EventKind)) {
-        let trend = self.freeze.observe(temp_c);
+    fn freeze_guard(&mut self, cfg: &SupervisorConfig, t_ms: u64, temp_c: f32, emit: &mut impl FnMut(EventKind)) {
+        let trend = self.freeze.observe(&cfg.freeze, self.ts_s, temp_c);
         let shorted = |s: &State| matches!(s.drive(), Drive::LimpHome { .. });
-        if matches!(self.state, State::Running(_)) && self.freeze.trips(&trend) {
-            self.state = self.state.guard_tripped();
+        if matches!(self.state, State::Running(_)) && FreezeGuard::trips(&cfg.freeze, &trend) {
+            self.state.guard_tripped();
             emit(EventKind::FreezeGuardTripped);
-            if self.ssr.freeze_tripped(t_ms, &trend, shorted(&self.state)) {
+            if self.ssr.freeze_tripped(&cfg.ssr.stuck_on, t_ms, &trend, shorted(&self.state)) {
                 self.ssr_shorted(emit);
             }
         }
-        if self.ssr.between_trips(t_ms, &trend, shorted(&self.state)) {
+        if self.ssr.between_trips(&cfg.ssr.stuck_on, t_ms, &trend, shorted(&self.state)) {
             self.ssr_shorted(emit);
         }
-        if matches!(self.state, State::FreezeGuard(_)) && self.freeze.releases(temp_c, &trend) {
-            self.state = self.state.guard_released();
+        if matches!(self.state, State::FreezeGuard(_)) && FreezeGuard::releases(&cfg.freeze, temp_c, &trend) {
+            self.state.guard_released();
             emit(EventKind::FreezeGuardReleased);
         }
     }
 
     /// The SSR checks on the temperature history: stuck on after the off-run (path 3), stuck
     /// off, the supply probe.
-    fn ssr_checks(&mut self, t_ms: u64, temp_c: f32, w: f32, emit: &mut impl FnMut(EventKind)) {
+    fn ssr_checks(&mut self, cfg: &SsrConfig, t_ms: u64, temp_c: f32, w: f32, emit: &mut impl FnMut(EventKind)) {
         self.ssr.remember(temp_c);
-        if matches!(self.state.drive(), Drive::Controller { .. }) && self.ssr.still_falling(temp_c) {
+        if matches!(self.state.drive(), Drive::Controller { .. }) && self.ssr.still_falling(&cfg.stuck_on, temp_c) {
             self.ssr_shorted(emit);
         }
-        if self.ssr.warms_at_full_duty(temp_c) {
+        if self.ssr.warms_at_full_duty(&cfg.stuck_off, temp_c) {
             emit(EventKind::SsrStuckOff);
         }
         if let Drive::Controller { probe } = self.state.drive() {
-            match self.ssr.probe(t_ms, probe, temp_c, w) {
+            match self.ssr.probe(&cfg.probe, t_ms, probe, temp_c, w) {
                 Probe::Keep => {}
-                Probe::Start => self.state = self.state.probe_started(t_ms),
-                Probe::End => self.state = self.state.probe_ended(),
+                Probe::Start => self.state.probe_started(t_ms),
+                Probe::End => self.state.probe_ended(),
                 Probe::Shorted => {
-                    self.state = self.state.probe_ended();
+                    self.state.probe_ended();
                     self.ssr_shorted(emit);
                 }
             }
@@ -466,7 +465,7 @@ impl Supervisor {
     }
 
     fn ssr_shorted(&mut self, emit: &mut impl FnMut(EventKind)) {
-        self.state = self.state.ssr_shorted();
+        self.state.ssr_shorted();
         emit(EventKind::SsrStuckOn);
     }
 }
@@ -477,40 +476,58 @@ mod tests {
 
     const CONTROLLER: Drive = Drive::Controller { probe: None };
 
+    /// `s` after the transition `f`.
+    fn after(mut s: State, f: impl FnOnce(&mut State)) -> State {
+        f(&mut s);
+        s
+    }
+
     #[test]
     fn every_transition_of_the_diagram() {
         let run = State::START;
         assert_eq!(run.mode(), Mode::Normal);
-        let guarded = run.guard_tripped();
+        let guarded = after(run, State::guard_tripped);
         assert_eq!(guarded, State::FreezeGuard(CONTROLLER));
-        assert_eq!(guarded.guard_released(), run);
+        assert_eq!(after(guarded, State::guard_released), run);
+        assert_eq!(after(guarded, State::guard_tripped), guarded);
+        assert_eq!(after(run, State::guard_released), run);
         // A sensor fault remembers whether the guard held, and who drives.
         let open = EventKind::SensorOpen;
-        assert_eq!(run.sensor_failed(open), State::SensorFault { kind: open, guard: false, drive: CONTROLLER });
-        assert_eq!(run.sensor_failed(open).sensor_recovered(), run);
-        assert_eq!(guarded.sensor_failed(open).sensor_recovered(), guarded);
-        let short = guarded.sensor_failed(open).sensor_failed(EventKind::SensorShort);
+        let fault = after(run, |s| s.sensor_failed(open));
+        assert_eq!(fault, State::SensorFault { kind: open, guard: false, drive: CONTROLLER });
+        assert_eq!(after(fault, State::sensor_recovered), run);
+        assert_eq!(after(fault, State::guard_tripped), fault, "the guard waits for a reading");
+        let guarded_fault = after(guarded, |s| s.sensor_failed(open));
+        assert_eq!(after(guarded_fault, State::sensor_recovered), guarded);
+        let short = after(guarded_fault, |s| s.sensor_failed(EventKind::SensorShort));
         assert_eq!(short, State::SensorFault { kind: EventKind::SensorShort, guard: true, drive: CONTROLLER });
+        assert_eq!(after(run, State::sensor_recovered), run);
         // The probe and the short live in the drive, whatever holds the outputs.
-        let probing = run.probe_started(7);
+        let probing = after(run, |s| s.probe_started(7));
         assert_eq!(probing.drive(), Drive::Controller { probe: Some(7) });
-        assert_eq!(probing.guard_tripped().guard_released().probe_ended(), run);
-        let limp = probing.ssr_shorted();
+        let round = after(probing, |s| {
+            s.guard_tripped();
+            s.guard_released();
+            s.probe_ended();
+        });
+        assert_eq!(round, run);
+        let limp = after(probing, State::ssr_shorted);
         assert_eq!(limp, State::Running(Drive::LimpHome { supply_on: false }));
         assert_eq!(limp.mode(), Mode::LimpHome);
-        assert_eq!(limp.probe_started(9), limp, "no probe once shorted");
-        assert_eq!(limp.limp_switched(true).drive(), Drive::LimpHome { supply_on: true });
-        assert_eq!(limp.limp_switched(true).ssr_shorted(), limp.limp_switched(true), "latched");
-        assert_eq!(guarded.ssr_shorted().mode(), Mode::FreezeGuard);
-        assert_eq!(guarded.ssr_shorted().guard_released(), limp);
-        assert_eq!(run.limp_switched(true), run);
+        assert_eq!(after(limp, |s| s.probe_started(9)), limp, "no probe once shorted");
+        let on = after(limp, |s| s.limp_switched(true));
+        assert_eq!(on.drive(), Drive::LimpHome { supply_on: true });
+        assert_eq!(after(on, State::ssr_shorted), on, "latched");
+        assert_eq!(after(guarded, State::ssr_shorted).mode(), Mode::FreezeGuard);
+        assert_eq!(after(after(guarded, State::ssr_shorted), State::guard_released), limp);
+        assert_eq!(after(run, |s| s.limp_switched(true)), run);
     }
 
     #[test]
     fn the_supply_opens_in_every_mode_but_running_unprobed_or_limping_on() {
         let limp = |supply_on| State::Running(Drive::LimpHome { supply_on });
         assert!(State::START.supply_enable());
-        assert!(!State::START.probe_started(0).supply_enable());
+        assert!(!after(State::START, |s| s.probe_started(0)).supply_enable());
         assert!(limp(true).supply_enable() && !limp(false).supply_enable());
         assert!(!State::FreezeGuard(CONTROLLER).supply_enable());
         assert!(!State::FreezeGuard(Drive::LimpHome { supply_on: true }).supply_enable());
@@ -528,7 +545,7 @@ mod tests {
         assert_eq!(samples_u8(14.0, 10.0), 1, "rounded to the nearest");
         assert_eq!(samples_u8(15.0, 10.0), 2);
         assert_eq!(samples_u8(1e6, 10.0), 255, "saturating");
-        assert_eq!(ms(1800.0), 1_800_000);
+        assert_eq!(ms(1800.0), 1_800_000u32);
         assert_eq!(ms(3600.0), 3_600_000);
     }
 }

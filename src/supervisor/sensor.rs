@@ -173,10 +173,9 @@ const BURST: usize = 3;
 /// The spike filter and its burst report.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SpikeFilter {
-    cfg: SpikeConfig,
     /// Agreeing spikes in a row that are a jump.
     jump_n: u8,
-    window_ms: u64,
+    window_ms: u32,
     /// Agreeing spikes in a row so far.
     run: u8,
     /// The last spike's reading, °C.
@@ -190,7 +189,6 @@ pub(crate) struct SpikeFilter {
 impl SpikeFilter {
     pub(crate) fn new(cfg: &SpikeConfig, ts_s: f32) -> Self {
         SpikeFilter {
-            cfg: *cfg,
             jump_n: samples_u8(cfg.jump_s, ts_s),
             window_ms: ms(cfg.window_s),
             run: 0,
@@ -202,9 +200,9 @@ impl SpikeFilter {
 
     /// Whether the reading `t` is a spike against the filtered value `filtered` (no spike
     /// without both).
-    pub(crate) fn is_spike(&self, t: Option<Celsius>, filtered: Option<f32>) -> bool {
+    pub(crate) fn is_spike(cfg: &SpikeConfig, t: Option<Celsius>, filtered: Option<f32>) -> bool {
         match (t, filtered) {
-            (Some(t), Some(prev)) => (t.0 - prev).abs() > self.cfg.c,
+            (Some(t), Some(prev)) => (t.0 - prev).abs() > cfg.c,
             _ => false,
         }
     }
@@ -212,6 +210,7 @@ impl SpikeFilter {
     /// Takes the reading `t` at `t_ms` and whether it is a spike ([`Self::is_spike`]).
     pub(crate) fn run(
         &mut self,
+        cfg: &SpikeConfig,
         t_ms: u64,
         t: Option<Celsius>,
         spike: bool,
@@ -219,7 +218,7 @@ impl SpikeFilter {
     ) -> Spike {
         // Spikes that agree with each other are a real jump; ones that do not are noise, and
         // the filter keeps its value.
-        let consistent = t.is_some_and(|t| (t.0 - self.last_c).abs() < self.cfg.agree_fraction * self.cfg.c);
+        let consistent = t.is_some_and(|t| (t.0 - self.last_c).abs() < cfg.agree_fraction * cfg.c);
         let Some(t) = t.filter(|_| spike) else {
             self.run = 0;
             return Spike::No;
@@ -231,8 +230,8 @@ impl SpikeFilter {
         self.run = self.run.saturating_add(1);
         self.times.copy_within(0..BURST - 1, 1);
         self.times[0] = Some(t_ms);
-        let burst = self.times[BURST - 1].is_some_and(|t0| since(t_ms, t0) <= self.window_ms);
-        let quiet = self.reported_ms.is_none_or(|r| since(t_ms, r) > self.window_ms);
+        let burst = self.times[BURST - 1].is_some_and(|t0| since(t_ms, t0) <= u64::from(self.window_ms));
+        let quiet = self.reported_ms.is_none_or(|r| since(t_ms, r) > u64::from(self.window_ms));
         if burst && quiet {
             emit(EventKind::SensorSpikes);
             self.reported_ms = Some(t_ms);
@@ -248,7 +247,6 @@ impl SpikeFilter {
 /// The sensor-offset watch.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct OffsetWatch {
-    cfg: OffsetConfig,
     /// Samples a step must hold, counting its own.
     confirm_n: u8,
     /// Offset measured and subtracted, °C.
@@ -263,13 +261,7 @@ pub(crate) struct OffsetWatch {
 
 impl OffsetWatch {
     pub(crate) fn new(cfg: &OffsetConfig, ts_s: f32) -> Self {
-        OffsetWatch {
-            cfg: *cfg,
-            confirm_n: samples_u8(cfg.confirm_s, ts_s),
-            offset_c: 0.0,
-            last_good_c: None,
-            pending: None,
-        }
+        OffsetWatch { confirm_n: samples_u8(cfg.confirm_s, ts_s), offset_c: 0.0, last_good_c: None, pending: None }
     }
 
     /// The offset subtracted from every reading, °C.
@@ -280,10 +272,10 @@ impl OffsetWatch {
     /// Watches the offset-corrected reading `raw`; returns whether the filter must hold this
     /// sample (a step is under watch). Once a step has held its level for `confirm_n` samples
     /// it is measured, subtracted from every later reading and reported.
-    pub(crate) fn watch(&mut self, raw: f32, emit: &mut impl FnMut(EventKind)) -> bool {
+    pub(crate) fn watch(&mut self, cfg: &OffsetConfig, raw: f32, emit: &mut impl FnMut(EventKind)) -> bool {
         match (self.pending, self.last_good_c) {
             (Some((before, step, n)), _) => {
-                if (raw - (before + step)).abs() <= min_f32(self.cfg.hold_fraction * step.abs(), self.cfg.hold_max_c) {
+                if (raw - (before + step)).abs() <= min_f32(cfg.hold_fraction * step.abs(), cfg.hold_max_c) {
                     let n = n.saturating_add(1);
                     if n >= self.confirm_n {
                         // Measured on this sample: the load itself has not moved measurably.
@@ -292,7 +284,7 @@ impl OffsetWatch {
                         // too cold only under-cools, which the warm alarms catch, and which is
                         // also what a probe re-seated in a colder load looks like.
                         let measured = raw - before;
-                        if measured > 0.0 && measured <= self.cfg.max_comp_c {
+                        if measured > 0.0 && measured <= cfg.max_comp_c {
                             self.offset_c += measured;
                         }
                         self.pending = None;
@@ -307,7 +299,7 @@ impl OffsetWatch {
                     false
                 }
             }
-            (None, Some(p)) if (raw - p).abs() > self.cfg.step_c => {
+            (None, Some(p)) if (raw - p).abs() > cfg.step_c => {
                 self.pending = Some((p, raw - p, 1));
                 true
             }
@@ -361,6 +353,7 @@ impl SensorChecks {
     /// verdict needs the filter's value before this sample.
     pub(crate) fn reading(
         &mut self,
+        cfg: &SensorConfig,
         t_ms: u64,
         raw: Result<Celsius, EventKind>,
         sensor: bool,
@@ -373,7 +366,7 @@ impl SensorChecks {
         let raw_c = match raw.ok() {
             Some(t) if sensor => {
                 let corrected = t.0 - self.offset.offset_c();
-                hold = self.offset.watch(corrected, emit);
+                hold = self.offset.watch(&cfg.offset, corrected, emit);
                 Some(Celsius(corrected))
             }
             other => other,
@@ -381,11 +374,11 @@ impl SensorChecks {
         if raw_c.is_none() {
             self.offset.forget();
         }
-        let spike = self.spikes.is_spike(raw_c, filter.output());
+        let spike = SpikeFilter::is_spike(&cfg.spike, raw_c, filter.output());
         if let (Some(t), false) = (raw_c, spike) {
             self.offset.keep_reference(t.0, offset_before);
         }
-        let verdict = self.spikes.run(t_ms, raw_c, spike, emit);
+        let verdict = self.spikes.run(&cfg.spike, t_ms, raw_c, spike, emit);
         if verdict == Spike::Jump {
             filter.reset();
         }
@@ -404,6 +397,8 @@ mod tests {
     use super::*;
 
     const TS: f32 = 10.0;
+    const SPIKE: SpikeConfig = SpikeConfig::DEFAULT;
+    const OFFSET: OffsetConfig = OffsetConfig::DEFAULT;
 
     fn kinds(f: impl FnOnce(&mut dyn FnMut(EventKind))) -> Vec<EventKind> {
         let mut v = Vec::new();
@@ -440,22 +435,22 @@ mod tests {
     #[test]
     fn spikes_are_ignored_and_three_agreeing_ones_are_a_jump() {
         let mut f = SpikeFilter::new(&SpikeConfig::DEFAULT, TS);
-        assert!(!f.is_spike(Some(Celsius(6.0)), Some(4.0)), "2 °C off is not yet a spike");
-        assert!(f.is_spike(Some(Celsius(6.01)), Some(4.0)));
-        assert!(!f.is_spike(Some(Celsius(10.0)), None), "no spike without a filtered value");
+        assert!(!SpikeFilter::is_spike(&SPIKE, Some(Celsius(6.0)), Some(4.0)), "2 °C off is not yet a spike");
+        assert!(SpikeFilter::is_spike(&SPIKE, Some(Celsius(6.01)), Some(4.0)));
+        assert!(!SpikeFilter::is_spike(&SPIKE, Some(Celsius(10.0)), None), "no spike without a filtered value");
         let mut e = |_: EventKind| {};
-        assert_eq!(f.run(0, Some(Celsius(10.0)), true, &mut e), Spike::Ignored);
-        assert_eq!(f.run(10_000, Some(Celsius(10.4)), true, &mut e), Spike::Ignored);
-        assert_eq!(f.run(20_000, Some(Celsius(10.2)), true, &mut e), Spike::Jump);
+        assert_eq!(f.run(&SPIKE, 0, Some(Celsius(10.0)), true, &mut e), Spike::Ignored);
+        assert_eq!(f.run(&SPIKE, 10_000, Some(Celsius(10.4)), true, &mut e), Spike::Ignored);
+        assert_eq!(f.run(&SPIKE, 20_000, Some(Celsius(10.2)), true, &mut e), Spike::Jump);
         // Spikes that disagree (more than 1 °C apart) start the run again.
         let mut f = SpikeFilter::new(&SpikeConfig::DEFAULT, TS);
-        assert_eq!(f.run(0, Some(Celsius(10.0)), true, &mut e), Spike::Ignored);
-        assert_eq!(f.run(10_000, Some(Celsius(20.0)), true, &mut e), Spike::Ignored);
-        assert_eq!(f.run(20_000, Some(Celsius(30.0)), true, &mut e), Spike::Ignored);
+        assert_eq!(f.run(&SPIKE, 0, Some(Celsius(10.0)), true, &mut e), Spike::Ignored);
+        assert_eq!(f.run(&SPIKE, 10_000, Some(Celsius(20.0)), true, &mut e), Spike::Ignored);
+        assert_eq!(f.run(&SPIKE, 20_000, Some(Celsius(30.0)), true, &mut e), Spike::Ignored);
         // A good reading between them too.
-        assert_eq!(f.run(30_000, Some(Celsius(30.0)), true, &mut e), Spike::Ignored);
-        assert_eq!(f.run(40_000, Some(Celsius(4.0)), false, &mut e), Spike::No);
-        assert_eq!(f.run(50_000, Some(Celsius(30.0)), true, &mut e), Spike::Ignored);
+        assert_eq!(f.run(&SPIKE, 30_000, Some(Celsius(30.0)), true, &mut e), Spike::Ignored);
+        assert_eq!(f.run(&SPIKE, 40_000, Some(Celsius(4.0)), false, &mut e), Spike::No);
+        assert_eq!(f.run(&SPIKE, 50_000, Some(Celsius(30.0)), true, &mut e), Spike::Ignored);
     }
 
     #[test]
@@ -463,7 +458,7 @@ mod tests {
         let mut f = SpikeFilter::new(&SpikeConfig::DEFAULT, TS);
         let spike_at = |f: &mut SpikeFilter, t_s: u64| {
             kinds(|e| {
-                f.run(t_s * 1000, Some(Celsius(30.0 + t_s as f32)), true, &mut |k| e(k));
+                f.run(&SPIKE, t_s * 1000, Some(Celsius(30.0 + t_s as f32)), true, &mut |k| e(k));
             })
         };
         assert!(spike_at(&mut f, 0).is_empty());
@@ -487,21 +482,21 @@ mod tests {
         let mut w = OffsetWatch::new(&OffsetConfig::DEFAULT, TS);
         assert_eq!(w.confirm_n, 3);
         let mut e = |_: EventKind| {};
-        assert!(!w.watch(4.0, &mut e));
+        assert!(!w.watch(&OFFSET, 4.0, &mut e));
         w.keep_reference(4.0, 0.0);
         // A 0.6 °C step is still physics; 1.5 °C is not.
-        assert!(!w.watch(4.6, &mut e));
+        assert!(!w.watch(&OFFSET, 4.6, &mut e));
         w.keep_reference(4.0, 0.0);
-        assert!(w.watch(5.5, &mut e), "held while under watch");
-        assert!(w.watch(5.6, &mut e));
-        let ev = kinds(|k| assert!(w.watch(5.45, &mut |x| k(x))));
+        assert!(w.watch(&OFFSET, 5.5, &mut e), "held while under watch");
+        assert!(w.watch(&OFFSET, 5.6, &mut e));
+        let ev = kinds(|k| assert!(w.watch(&OFFSET, 5.45, &mut |x| k(x))));
         assert_eq!(ev, [EventKind::SensorOffset]);
         assert!((w.offset_c() - 1.45).abs() < 1e-6, "{}", w.offset_c());
         // A step down is reported but not subtracted.
         let mut w = OffsetWatch::new(&OffsetConfig::DEFAULT, TS);
         w.keep_reference(6.0, 0.0);
-        assert!(w.watch(4.0, &mut e) && w.watch(4.0, &mut e));
-        assert_eq!(kinds(|k| assert!(w.watch(4.0, &mut |x| k(x)))), [EventKind::SensorOffset]);
+        assert!(w.watch(&OFFSET, 4.0, &mut e) && w.watch(&OFFSET, 4.0, &mut e));
+        assert_eq!(kinds(|k| assert!(w.watch(&OFFSET, 4.0, &mut |x| k(x)))), [EventKind::SensorOffset]);
         assert_eq!(w.offset_c(), 0.0);
     }
 
@@ -510,13 +505,13 @@ mod tests {
         let mut w = OffsetWatch::new(&OffsetConfig::DEFAULT, TS);
         let mut e = |k: EventKind| panic!("reported {k:?}");
         w.keep_reference(4.0, 0.0);
-        assert!(w.watch(6.0, &mut e));
+        assert!(w.watch(&OFFSET, 6.0, &mut e));
         // Within a quarter of the 2 °C step is 0.5 °C; 0.51 °C off is not holding.
-        assert!(!w.watch(6.51, &mut e), "released");
+        assert!(!w.watch(&OFFSET, 6.51, &mut e), "released");
         // A 10 °C step must hold within 0.5 °C, not within a quarter of it.
         w.keep_reference(4.0, 0.0);
-        assert!(w.watch(14.0, &mut e));
-        assert!(!w.watch(14.6, &mut e));
+        assert!(w.watch(&OFFSET, 14.0, &mut e));
+        assert!(!w.watch(&OFFSET, 14.6, &mut e));
     }
 
     #[test]
@@ -524,11 +519,11 @@ mod tests {
         let mut w = OffsetWatch::new(&OffsetConfig::DEFAULT, TS);
         let mut e = |_: EventKind| {};
         w.keep_reference(4.0, 0.0);
-        assert!(w.watch(7.5, &mut e) && w.watch(7.5, &mut e) && w.watch(7.5, &mut e));
+        assert!(w.watch(&OFFSET, 7.5, &mut e) && w.watch(&OFFSET, 7.5, &mut e) && w.watch(&OFFSET, 7.5, &mut e));
         assert_eq!(w.offset_c(), 0.0, "3.5 °C is more than the 3 °C compensated");
         let mut w = OffsetWatch::new(&OffsetConfig::DEFAULT, TS);
         w.keep_reference(4.0, 0.0);
-        assert!(w.watch(7.0, &mut e) && w.watch(7.0, &mut e) && w.watch(7.0, &mut e));
+        assert!(w.watch(&OFFSET, 7.0, &mut e) && w.watch(&OFFSET, 7.0, &mut e) && w.watch(&OFFSET, 7.0, &mut e));
         assert_eq!(w.offset_c(), 3.0);
     }
 
@@ -538,14 +533,14 @@ mod tests {
         let (mut f, fc) = (FirstOrder::default(), FirstOrderConfig { fa: 0.5 });
         let mut e = |_: EventKind| {};
         let mut read = |s: &mut SensorChecks, f: &mut FirstOrder, k: u64, t: f32| {
-            s.reading(k * 10_000, Ok(Celsius(t)), false, f, &fc, &mut e).temp_c
+            s.reading(&SensorConfig::DEFAULT, k * 10_000, Ok(Celsius(t)), false, f, &fc, &mut e).temp_c
         };
         assert_eq!(read(&mut s, &mut f, 0, 4.0), 4.0);
         assert_eq!(read(&mut s, &mut f, 1, 4.2), 4.1);
         assert_eq!(read(&mut s, &mut f, 2, 9.0), 4.1, "a spike is ignored");
         assert_eq!(read(&mut s, &mut f, 3, 9.0), 4.1);
         assert_eq!(read(&mut s, &mut f, 4, 9.0), 9.0, "the third in a row restarts the filter");
-        let none = s.reading(50_000, Err(EventKind::SensorOpen), false, &mut f, &fc, &mut e);
+        let none = s.reading(&SensorConfig::DEFAULT, 50_000, Err(EventKind::SensorOpen), false, &mut f, &fc, &mut e);
         assert_eq!((none.raw_c, none.temp_c), (None, 9.0));
     }
 }

@@ -223,7 +223,7 @@ pub(crate) enum Probe {
 #[derive(Clone, Copy, Debug)]
 struct Limits {
     unrequested: u16,
-    trip_window_ms: u64,
+    trip_window_ms: u32,
     off: u16,
     window: usize,
     stuck_off: u16,
@@ -231,14 +231,13 @@ struct Limits {
     probe_unrequested: u16,
     probe_fall: usize,
     probe_turn_up: usize,
-    probe_open_ms: u64,
-    probe_interval_ms: u64,
+    probe_open_ms: u32,
+    probe_interval_ms: u32,
 }
 
 /// The SSR monitor's state.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SsrMonitor {
-    cfg: SsrConfig,
     n: Limits,
     /// A ring (not a shifted array: the shift cost ≈ 100 instructions a sample on the M4F).
     history: [f32; HISTORY],
@@ -283,7 +282,6 @@ impl SsrMonitor {
             probe_interval_ms: ms(p.interval_s),
         };
         SsrMonitor {
-            cfg: *cfg,
             n,
             history: [0.0; HISTORY],
             history_len: 0,
@@ -305,20 +303,21 @@ impl SsrMonitor {
         self.on_run
     }
 
-    /// The settings.
-    pub(crate) fn config(&self) -> &SsrConfig {
-        &self.cfg
-    }
-
     /// Path 1, on a sample where the freeze guard trips: whether the trip shows a shorted SSR
     /// (`shorted`: one was found already, nothing more to tell).
-    pub(crate) fn freeze_tripped(&mut self, t_ms: u64, trend: &super::freeze::Trend, shorted: bool) -> bool {
+    pub(crate) fn freeze_tripped(
+        &mut self,
+        cfg: &StuckOnConfig,
+        t_ms: u64,
+        trend: &super::freeze::Trend,
+        shorted: bool,
+    ) -> bool {
         self.trip_ms = Some(t_ms);
         if shorted || self.req_off_run < self.n.unrequested {
             return false;
         }
-        let again = self.unrequested_trip_ms.is_some_and(|t0| since(t_ms, t0) <= self.n.trip_window_ms);
-        if again || (trend.slope_c_per_s < self.cfg.stuck_on.falling_c_per_s && trend.drop_c >= self.last_drop_c) {
+        let again = self.unrequested_trip_ms.is_some_and(|t0| since(t_ms, t0) <= u64::from(self.n.trip_window_ms));
+        if again || (trend.slope_c_per_s < cfg.falling_c_per_s && trend.drop_c >= self.last_drop_c) {
             true
         } else {
             self.unrequested_trip_ms = Some(t_ms);
@@ -328,10 +327,15 @@ impl SsrMonitor {
 
     /// Path 2, every sample with a trusted reading, after [`Self::freeze_tripped`]: whether the
     /// load falls fast and faster between trips. Remembers this sample's fall for the next.
-    pub(crate) fn between_trips(&mut self, t_ms: u64, trend: &super::freeze::Trend, shorted: bool) -> bool {
-        let c = &self.cfg.stuck_on;
+    pub(crate) fn between_trips(
+        &mut self,
+        c: &StuckOnConfig,
+        t_ms: u64,
+        trend: &super::freeze::Trend,
+        shorted: bool,
+    ) -> bool {
         let found = !shorted
-            && self.trip_ms.is_some_and(|t0| since(t_ms, t0) <= self.n.trip_window_ms)
+            && self.trip_ms.is_some_and(|t0| since(t_ms, t0) <= u64::from(self.n.trip_window_ms))
             && self.req_off_run >= self.n.unrequested
             && trend.drop_c > c.between_trips_drop_c
             && trend.drop_c >= self.last_drop_c
@@ -342,7 +346,9 @@ impl SsrMonitor {
 
     /// Puts this sample's filtered temperature in the ring (before the checks that read it).
     pub(crate) fn remember(&mut self, temp_c: f32) {
-        self.history[self.history_head] = temp_c;
+        if let Some(slot) = self.history.get_mut(self.history_head) {
+            *slot = temp_c;
+        }
         self.history_head = if self.history_head + 1 == HISTORY { 0 } else { self.history_head + 1 };
         self.history_len = (self.history_len + 1).min(HISTORY);
     }
@@ -355,8 +361,7 @@ impl SsrMonitor {
 
     /// Path 3: whether the load at `temp_c` still falls after the SSR has been off for a
     /// while, and not slower.
-    pub(crate) fn still_falling(&self, temp_c: f32) -> bool {
-        let c = &self.cfg.stuck_on;
+    pub(crate) fn still_falling(&self, c: &StuckOnConfig, temp_c: f32) -> bool {
         if self.off_run < self.n.off {
             return false;
         }
@@ -371,8 +376,7 @@ impl SsrMonitor {
 
     /// Stuck off: whether the load at `temp_c` warms at full duty; true once per run of full
     /// duty.
-    pub(crate) fn warms_at_full_duty(&mut self, temp_c: f32) -> bool {
-        let c = &self.cfg.stuck_off;
+    pub(crate) fn warms_at_full_duty(&mut self, c: &StuckOffConfig, temp_c: f32) -> bool {
         let mut found = false;
         if !self.off_reported && self.on_run >= self.n.stuck_off {
             if let Some(past) = self.ago(self.n.stuck_off as usize) {
@@ -392,20 +396,19 @@ impl SsrMonitor {
 
     /// The supply probe at `t_ms`, with the one under way (`under_way`: when it began), the
     /// load at `temp_c` and the setpoint `w`. Only while no short has been found.
-    pub(crate) fn probe(&mut self, t_ms: u64, under_way: Option<u64>, temp_c: f32, w: f32) -> Probe {
-        let p = &self.cfg.probe;
+    pub(crate) fn probe(&mut self, p: &ProbeConfig, t_ms: u64, under_way: Option<u64>, temp_c: f32, w: f32) -> Probe {
         match under_way {
             Some(t0) => {
                 if self.ago(self.n.probe_turn_up).is_some_and(|past| temp_c - past > p.turn_up_c) {
                     Probe::Shorted
-                } else if self.req_off_run == 0 || since(t_ms, t0) >= self.n.probe_open_ms {
+                } else if self.req_off_run == 0 || since(t_ms, t0) >= u64::from(self.n.probe_open_ms) {
                     Probe::End
                 } else {
                     Probe::Keep
                 }
             }
             None => {
-                let idle = self.probe_ms.is_none_or(|t| since(t_ms, t) >= self.n.probe_interval_ms);
+                let idle = self.probe_ms.is_none_or(|t| since(t_ms, t) >= u64::from(self.n.probe_interval_ms));
                 if idle && self.req_off_run >= self.n.probe_unrequested && temp_c < w - p.below_setpoint_c {
                     if let Some(past) = self.ago(self.n.probe_fall) {
                         if past - temp_c > p.fall_c {
@@ -421,8 +424,8 @@ impl SsrMonitor {
 
     /// Counts this sample's applied `duty` and `requested` duty (last: every check of the sample
     /// sees the runs up to the one before), with the load at `temp_c`.
-    pub(crate) fn applied(&mut self, duty: Duty, requested: f32, temp_c: f32) {
-        let full = duty.get() >= self.cfg.full_duty;
+    pub(crate) fn applied(&mut self, cfg: &SsrConfig, duty: Duty, requested: f32, temp_c: f32) {
+        let full = duty.get() >= cfg.full_duty;
         self.off_run = if duty.get() == 0.0 { self.off_run.saturating_add(1) } else { 0 };
         if self.on_run == 0 && full {
             self.on_start_c = temp_c;
@@ -438,15 +441,16 @@ mod tests {
     use super::*;
 
     const TS: f32 = 10.0;
+    const CFG: SsrConfig = SsrConfig::DEFAULT;
 
     fn monitor() -> SsrMonitor {
-        SsrMonitor::new(&SsrConfig::DEFAULT, TS)
+        SsrMonitor::new(&CFG, TS)
     }
 
     /// `n` samples of `duty` with `requested` applied, the load at `temp_c`.
     fn apply(m: &mut SsrMonitor, n: usize, duty: Duty, requested: f32, temp_c: f32) {
         for _ in 0..n {
-            m.applied(duty, requested, temp_c);
+            m.applied(&CFG, duty, requested, temp_c);
         }
     }
 
@@ -469,41 +473,47 @@ mod tests {
         let fast = trend(0.1, -0.004);
         let mut m = monitor();
         apply(&mut m, 5, Duty::OFF, 0.0, 2.0);
-        assert!(!m.freeze_tripped(0, &fast, false), "five samples unrequested are not a minute");
-        m.applied(Duty::OFF, 0.0, 2.0);
-        assert!(m.freeze_tripped(10_000, &fast, false));
-        assert!(!m.freeze_tripped(10_000, &fast, true), "already found");
+        assert!(!m.freeze_tripped(&CFG.stuck_on, 0, &fast, false), "five samples unrequested are not a minute");
+        m.applied(&CFG, Duty::OFF, 0.0, 2.0);
+        assert!(m.freeze_tripped(&CFG.stuck_on, 10_000, &fast, false));
+        assert!(!m.freeze_tripped(&CFG.stuck_on, 10_000, &fast, true), "already found");
         // Slowing down (this fall smaller than the last) or slow: not on the first trip…
         let mut m = monitor();
         apply(&mut m, 6, Duty::OFF, 0.0, 2.0);
-        assert!(!m.between_trips(0, &trend(0.2, -0.004), false));
-        assert!(!m.freeze_tripped(0, &trend(0.1, -0.004), false), "slowing down");
+        assert!(!m.between_trips(&CFG.stuck_on, 0, &trend(0.2, -0.004), false));
+        assert!(!m.freeze_tripped(&CFG.stuck_on, 0, &trend(0.1, -0.004), false), "slowing down");
         let mut m = monitor();
         apply(&mut m, 6, Duty::OFF, 0.0, 2.0);
-        assert!(!m.freeze_tripped(0, &trend(0.3, -0.003), false), "−0.003 °C/s is not below −0.003");
+        assert!(!m.freeze_tripped(&CFG.stuck_on, 0, &trend(0.3, -0.003), false), "−0.003 °C/s is not below −0.003");
         // …but a second unrequested trip within half an hour is.
-        assert!(m.freeze_tripped(1_800_000, &trend(0.0, 0.0), false));
+        assert!(m.freeze_tripped(&CFG.stuck_on, 1_800_000, &trend(0.0, 0.0), false));
         let mut m = monitor();
         apply(&mut m, 6, Duty::OFF, 0.0, 2.0);
-        assert!(!m.freeze_tripped(0, &trend(0.0, 0.0), false));
-        assert!(!m.freeze_tripped(1_800_001, &trend(0.0, 0.0), false), "half an hour and a millisecond later");
+        assert!(!m.freeze_tripped(&CFG.stuck_on, 0, &trend(0.0, 0.0), false));
+        assert!(
+            !m.freeze_tripped(&CFG.stuck_on, 1_800_001, &trend(0.0, 0.0), false),
+            "half an hour and a millisecond later"
+        );
     }
 
     #[test]
     fn stuck_on_path_2_within_half_an_hour_of_a_trip() {
         let mut m = monitor();
         apply(&mut m, 6, Duty::OFF, 0.0, 2.0);
-        assert!(!m.between_trips(0, &trend(0.2, -0.004), false), "no trip yet");
+        assert!(!m.between_trips(&CFG.stuck_on, 0, &trend(0.2, -0.004), false), "no trip yet");
         // A trip with cooling requested: no verdict, but the window opens.
         let mut m = monitor();
-        assert!(!m.freeze_tripped(0, &trend(0.0, 0.0), false));
+        assert!(!m.freeze_tripped(&CFG.stuck_on, 0, &trend(0.0, 0.0), false));
         apply(&mut m, 6, Duty::OFF, 0.0, 2.0);
-        assert!(!m.between_trips(600_000, &trend(0.1, -0.004), false), "0.1 °C is not more than 0.1");
-        assert!(!m.between_trips(610_000, &trend(0.11, -0.003), false), "not falling fast");
-        assert!(!m.between_trips(620_000, &trend(0.105, -0.004), false), "slower than the sample before");
-        assert!(m.between_trips(630_000, &trend(0.105, -0.004), false), "as fast as the sample before");
-        assert!(!m.between_trips(640_000, &trend(0.2, -0.004), true), "already found");
-        assert!(!m.between_trips(1_800_001, &trend(0.3, -0.004), false), "outside the window");
+        assert!(!m.between_trips(&CFG.stuck_on, 600_000, &trend(0.1, -0.004), false), "0.1 °C is not more than 0.1");
+        assert!(!m.between_trips(&CFG.stuck_on, 610_000, &trend(0.11, -0.003), false), "not falling fast");
+        assert!(
+            !m.between_trips(&CFG.stuck_on, 620_000, &trend(0.105, -0.004), false),
+            "slower than the sample before"
+        );
+        assert!(m.between_trips(&CFG.stuck_on, 630_000, &trend(0.105, -0.004), false), "as fast as the sample before");
+        assert!(!m.between_trips(&CFG.stuck_on, 640_000, &trend(0.2, -0.004), true), "already found");
+        assert!(!m.between_trips(&CFG.stuck_on, 1_800_001, &trend(0.3, -0.004), false), "outside the window");
     }
 
     #[test]
@@ -516,23 +526,23 @@ mod tests {
         }
         m.remember(temps[12]);
         apply(&mut m, 17, Duty::OFF, 0.0, 2.0);
-        assert!(!m.still_falling(temps[12]), "17 samples off are not three minutes");
-        m.applied(Duty::OFF, 0.0, 2.0);
-        assert!(m.still_falling(temps[12]));
+        assert!(!m.still_falling(&CFG.stuck_on, temps[12]), "17 samples off are not three minutes");
+        m.applied(&CFG, Duty::OFF, 0.0, 2.0);
+        assert!(m.still_falling(&CFG.stuck_on, temps[12]));
         // A coast that slows: 0.18 °C in the last minute after 0.2 °C in the one before.
         let mut m = monitor();
         for k in 0..13 {
             m.remember(if k <= 6 { 5.0 - 0.2 * k as f32 / 6.0 } else { 4.8 - 0.18 * (k - 6) as f32 / 6.0 });
         }
         apply(&mut m, 18, Duty::OFF, 0.0, 2.0);
-        assert!(!m.still_falling(4.62));
+        assert!(!m.still_falling(&CFG.stuck_on, 4.62));
         // Too little fall: 0.144 °C a minute, not more than 0.15.
         let mut m = monitor();
         for k in 0..13 {
             m.remember(5.0 - 0.024 * k as f32);
         }
         apply(&mut m, 18, Duty::OFF, 0.0, 2.0);
-        assert!(!m.still_falling(5.0 - 0.024 * 12.0));
+        assert!(!m.still_falling(&CFG.stuck_on, 5.0 - 0.024 * 12.0));
     }
 
     #[test]
@@ -543,11 +553,11 @@ mod tests {
         let mut found = None;
         for k in 0..40 {
             m.remember(t);
-            if m.warms_at_full_duty(t) {
+            if m.warms_at_full_duty(&CFG.stuck_off, t) {
                 assert!(found.is_none(), "reported twice");
                 found = Some(k);
             }
-            m.applied(Duty::FULL, 1.0, t);
+            m.applied(&CFG, Duty::FULL, 1.0, t);
             t += 0.02;
         }
         assert_eq!(found, Some(30), "judged once 30 samples of full duty and a 30-sample window are in");
@@ -556,10 +566,10 @@ mod tests {
         let (mut t, mut found) = (5.0f32, None);
         for k in 0..100 {
             m.remember(t);
-            if m.warms_at_full_duty(t) && found.is_none() {
+            if m.warms_at_full_duty(&CFG.stuck_off, t) && found.is_none() {
                 found = Some(k);
             }
-            m.applied(Duty::FULL, 1.0, t);
+            m.applied(&CFG, Duty::FULL, 1.0, t);
             t += 0.005;
         }
         assert_eq!(found, Some(90));
@@ -568,8 +578,8 @@ mod tests {
         for k in 0..100u16 {
             let t = 5.0 + 0.01 * (k.min(20) as f32) - 0.01 * (k.saturating_sub(20) as f32);
             m.remember(t);
-            assert!(!m.warms_at_full_duty(t), "sample {k}");
-            m.applied(Duty::FULL, 1.0, t);
+            assert!(!m.warms_at_full_duty(&CFG.stuck_off, t), "sample {k}");
+            m.applied(&CFG, Duty::FULL, 1.0, t);
         }
     }
 
@@ -581,22 +591,22 @@ mod tests {
             m.remember(3.06 - 0.002 * k as f32);
         }
         apply(&mut m, 59, Duty::OFF, 0.0, 3.0);
-        assert_eq!(m.probe(0, None, 3.0, 4.1), Probe::Keep, "59 samples are not 10 min");
-        m.applied(Duty::OFF, 0.0, 3.0);
-        assert_eq!(m.probe(0, None, 3.0, 4.0), Probe::Keep, "not more than 1 °C below");
-        assert_eq!(m.probe(0, None, 3.0, 4.1), Probe::Start);
-        assert_eq!(m.probe(10_000, None, 3.0, 4.1), Probe::Keep, "one an hour");
-        assert_eq!(m.probe(10_000, Some(0), 3.0, 4.1), Probe::Keep);
-        assert_eq!(m.probe(300_000, Some(0), 3.0, 4.1), Probe::End, "five minutes");
+        assert_eq!(m.probe(&CFG.probe, 0, None, 3.0, 4.1), Probe::Keep, "59 samples are not 10 min");
+        m.applied(&CFG, Duty::OFF, 0.0, 3.0);
+        assert_eq!(m.probe(&CFG.probe, 0, None, 3.0, 4.0), Probe::Keep, "not more than 1 °C below");
+        assert_eq!(m.probe(&CFG.probe, 0, None, 3.0, 4.1), Probe::Start);
+        assert_eq!(m.probe(&CFG.probe, 10_000, None, 3.0, 4.1), Probe::Keep, "one an hour");
+        assert_eq!(m.probe(&CFG.probe, 10_000, Some(0), 3.0, 4.1), Probe::Keep);
+        assert_eq!(m.probe(&CFG.probe, 300_000, Some(0), 3.0, 4.1), Probe::End, "five minutes");
         // 0.2 °C up in 30 s: the supply was cooling.
         m.remember(3.2);
-        assert_eq!(m.probe(20_000, Some(0), 3.2, 4.1), Probe::Shorted);
+        assert_eq!(m.probe(&CFG.probe, 20_000, Some(0), 3.2, 4.1), Probe::Shorted);
         // Cooling requested again ends it.
-        m.applied(Duty::OFF, 0.5, 3.0);
+        m.applied(&CFG, Duty::OFF, 0.5, 3.0);
         m.remember(3.0);
         m.remember(3.0);
         m.remember(3.0);
-        assert_eq!(m.probe(30_000, Some(0), 3.0, 4.1), Probe::End);
+        assert_eq!(m.probe(&CFG.probe, 30_000, Some(0), 3.0, 4.1), Probe::End);
     }
 
     #[test]

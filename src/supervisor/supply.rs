@@ -26,7 +26,6 @@ impl SupplyConfig {
 /// The supply monitor's state.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SupplyMonitor {
-    cfg: SupplyConfig,
     /// Samples below the minimum that are a sag.
     sag_n: u8,
     /// The last measured supply, V (`None`: the board does not measure it).
@@ -38,7 +37,7 @@ pub(crate) struct SupplyMonitor {
 
 impl SupplyMonitor {
     pub(crate) fn new(cfg: &SupplyConfig, ts_s: f32) -> Self {
-        SupplyMonitor { cfg: *cfg, sag_n: samples_u8(cfg.sag_s, ts_s), v: None, low_run: 0, reported: false }
+        SupplyMonitor { sag_n: samples_u8(cfg.sag_s, ts_s), v: None, low_run: 0, reported: false }
     }
 
     /// Takes the measured supply for the next sample, V.
@@ -52,9 +51,9 @@ impl SupplyMonitor {
     }
 
     /// The check, once a sample, on the last measured supply (none: no check).
-    pub(crate) fn run(&mut self, emit: &mut impl FnMut(EventKind)) {
+    pub(crate) fn run(&mut self, cfg: &SupplyConfig, emit: &mut impl FnMut(EventKind)) {
         let Some(v) = self.v else { return };
-        if v < self.cfg.min_v {
+        if v < cfg.min_v {
             self.low_run = self.low_run.saturating_add(1);
             if self.low_run >= self.sag_n && !self.reported {
                 self.reported = true;
@@ -62,7 +61,7 @@ impl SupplyMonitor {
             }
         } else {
             self.low_run = 0;
-            if v >= self.cfg.min_v + self.cfg.rearm_margin_v {
+            if v >= cfg.min_v + cfg.rearm_margin_v {
                 self.reported = false;
             }
         }
@@ -79,7 +78,7 @@ mod tests {
         for (k, v) in volts.iter().enumerate() {
             m.observe(*v);
             let mut n = 0;
-            m.run(&mut |e| {
+            m.run(&SupplyConfig::DEFAULT, &mut |e| {
                 assert_eq!(e, EventKind::SupplySag);
                 n += 1;
             });
@@ -112,7 +111,7 @@ mod tests {
     fn no_measurement_no_check() {
         let mut m = SupplyMonitor::new(&SupplyConfig::DEFAULT, 10.0);
         for _ in 0..10 {
-            m.run(&mut |e| panic!("{e:?}"));
+            m.run(&SupplyConfig::DEFAULT, &mut |e| panic!("{e:?}"));
         }
         assert_eq!(m.v(), None);
     }

@@ -58,7 +58,6 @@ impl SwitchConfig {
 /// State of the supply-switch check, counted in samples.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SwitchCheck {
-    cfg: SwitchConfig,
     /// Samples open before the rail is judged, and the length of a test opening.
     settle_n: u8,
     /// Samples between test openings (0: none).
@@ -79,7 +78,6 @@ pub(crate) struct SwitchCheck {
 impl SwitchCheck {
     pub(crate) fn new(cfg: &SwitchConfig, ts_s: f32) -> Self {
         SwitchCheck {
-            cfg: *cfg,
             settle_n: samples_u8(cfg.settle_s, ts_s),
             interval_n: samples_u32(cfg.test_interval_s, ts_s),
             rail_v: None,
@@ -98,7 +96,7 @@ impl SwitchCheck {
 
     /// The shorted-switch detector, run every sample on the rail measured with the switch in
     /// the state of the previous output, against the measured supply `supply_v`.
-    pub(crate) fn check(&mut self, supply_v: Option<f32>, emit: &mut impl FnMut(EventKind)) {
+    pub(crate) fn check(&mut self, cfg: &SwitchConfig, supply_v: Option<f32>, emit: &mut impl FnMut(EventKind)) {
         let Some(rail) = self.rail_v else { return };
         self.open_run = if self.last_enable { 0 } else { self.open_run.saturating_add(1) };
         if self.open_run < self.settle_n {
@@ -106,8 +104,8 @@ impl SwitchCheck {
         }
         self.since_check = 0;
         let limit = match supply_v {
-            Some(v) if v.is_finite() => max_f32(self.cfg.open_max_fraction * v, self.cfg.open_floor_v),
-            _ => self.cfg.open_max_v,
+            Some(v) if v.is_finite() => max_f32(cfg.open_max_fraction * v, cfg.open_floor_v),
+            _ => cfg.open_max_v,
         };
         // NaN (a broken sense) is not a short: it fails `>`.
         if rail > limit && !self.reported {
@@ -156,7 +154,7 @@ mod tests {
     fn sample(c: &mut SwitchCheck, rail_v: f32, supply_v: Option<f32>, enable: bool) -> bool {
         c.observe(rail_v);
         let mut found = false;
-        c.check(supply_v, &mut |e| {
+        c.check(&SwitchConfig::DEFAULT, supply_v, &mut |e| {
             assert_eq!(e, EventKind::SupplySwitchShorted);
             found = true;
         });
@@ -196,7 +194,7 @@ mod tests {
         (0..n)
             .filter(|_| {
                 c.observe(if enabled { 11.9 } else { 0.01 });
-                c.check(Some(12.0), &mut |e| panic!("{e:?}"));
+                c.check(&SwitchConfig::DEFAULT, Some(12.0), &mut |e| panic!("{e:?}"));
                 let test = c.test_due(normal, temp_c, w);
                 enabled = c.note_enable(!test);
                 test
