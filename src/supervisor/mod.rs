@@ -7,41 +7,40 @@
 //! nothing holds the outputs.
 //!
 //! ## Modes
-//! [`State`] is the supervisor's mode; each variant carries what that mode needs, and each edge
-//! is one named transition (a method of [`State`]):
+//! The supervisor's mode, [`State`], has two parts that change independently, each a
+//! state-carrying enum whose variants hold what that state needs, and each edge one named
+//! transition (a method of [`State`]): [`Hold`], what holds cooling off, and [`Drive`], who
+//! drives it when nothing does.
 //!
 //! ```text
-//!                    guard_tripped
-//!   +-------------+ --------------> +----------------+
-//!   | Running(d)  |                 | FreezeGuard(d) |
-//!   +-------------+ <-------------- +----------------+
-//!      |      ^      guard_released     |      ^
-//!      |      |                         |      |
-//!      |      | sensor_recovered        |      | sensor_recovered
-//!      |      | (guard: false)          |      | (guard: true)
-//!      |      |                         |      |
-//!      | sensor_failed                  | sensor_failed
-//!      v      |                         v      |
-//!   +--------------------------------------------------+   sensor_failed
-//!   | SensorFault { kind, guard, d }                   | <-----------------+
-//!   +--------------------------------------------------+ ------------------+
-//!                                                         (another kind)
+//!   Hold:                guard_tripped
+//!   +-------------+ --------------------> +-------------+
+//!   |    Free     |                       | FreezeGuard |
+//!   +-------------+ <-------------------- +-------------+
+//!      |      ^          guard_released      |      ^
+//!      |      | sensor_recovered             |      | sensor_recovered
+//!      |      | (guard: false)               |      | (guard: true)
+//!      | sensor_failed                       | sensor_failed
+//!      v      |                              v      |
+//!   +------------------------------------------------+   sensor_failed
+//!   | SensorFault { kind, guard }                    | <-----------------+
+//!   +------------------------------------------------+ ------------------+
+//!                                                        (another kind)
 //!
-//!   d, who drives when nothing holds cooling off (carried through every mode):
-//!
+//!   Drive:
 //!   Controller { probe: None } --probe_started--> Controller { probe: Some(t0) }
 //!              ^                                              |
 //!              +------------------- probe_ended --------------+
 //!
-//!   Controller { .. } --ssr_shorted--> LimpHome { supply_on }   (latched until reset;
-//!                                        |    ^                  limp_switched flips
-//!                                        +----+ limp_switched    supply_on)
+//!   Controller { .. } --ssr_shorted--> LimpHome { supply_on }   (latched until reset)
+//!                                        |    ^
+//!                                        +----+ limp_switched
 //! ```
 //!
-//! The summary the step reports, [`Mode`], is `SensorFault` in `SensorFault`, `FreezeGuard` in
-//! `FreezeGuard`, and in `Running` `Normal` or `LimpHome` by who drives. During a sensor fault
-//! nothing that needs a reading runs, so the freeze guard's verdict, the probe and limp home's
-//! supply state wait in the variant for the reading to come back.
+//! The summary the step reports, [`Mode`], is `SensorFault` or `FreezeGuard` while those hold
+//! cooling off, and otherwise `Normal` or `LimpHome` by who drives. During a sensor fault
+//! nothing that needs a reading runs, so the freeze guard's verdict (`guard`), the probe and
+//! limp home's supply state wait for the reading to come back.
 //!
 //! ## Order of the checks in one sample
 //! The order is fixed here, in [`Supervisor::check`] (before the controller) and
@@ -143,8 +142,8 @@ pub(crate) fn since(t_ms: u64, t0: u64) -> u64 {
 /// Who drives cooling when no safety action holds it off.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Drive {
-    /// The controller, through the SSR. `probe`: when the supply probe under way began, ms (the
-    /// supply switch is open meanwhile).
+    /// The controller, through the SSR (the supply switch is open while a supply probe is under
+    /// way).
     Controller {
         /// When the probe under way began, ms.
         probe: Option<u64>,
@@ -157,20 +156,15 @@ pub enum Drive {
     },
 }
 
-/// The supervisor's mode (see the state diagram in the module docs).
-// `repr(u8)` with the drive first in every variant puts it at one offset, so the transitions of
-// the drive compile to one store whatever the mode.
+/// What holds cooling off.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u8)]
-pub enum State {
-    /// Nothing holds cooling off; `Drive` drives it.
-    Running(Drive),
-    /// The freeze guard holds cooling off until the load is warm again.
-    FreezeGuard(Drive),
-    /// The sensor is faulty: cooling off until it reads plausibly again.
+pub enum Hold {
+    /// Nothing: the [`Drive`] drives.
+    Free,
+    /// The freeze guard, until the load is warm again.
+    FreezeGuard,
+    /// A faulty sensor, until it reads plausibly again.
     SensorFault {
-        /// Who drives once the outputs are free again.
-        drive: Drive,
         /// The fault reported.
         kind: EventKind,
         /// The freeze guard held when the fault began, and holds again when it ends.
@@ -178,97 +172,98 @@ pub enum State {
     },
 }
 
+/// The supervisor's mode (see the state diagram in the module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct State {
+    /// What holds cooling off.
+    pub hold: Hold,
+    /// Who drives it otherwise.
+    pub drive: Drive,
+}
+
 impl State {
-    /// Power-up: the controller drives, no probe.
-    pub const START: State = State::Running(Drive::Controller { probe: None });
+    /// Power-up: nothing holds, the controller drives, no probe.
+    pub const START: State = State { hold: Hold::Free, drive: Drive::Controller { probe: None } };
 
     /// The sensor reads a fault `kind` (a first fault, or another kind than the one in force).
     pub fn sensor_failed(&mut self, kind: EventKind) {
-        *self = match *self {
-            State::Running(drive) => State::SensorFault { kind, guard: false, drive },
-            State::FreezeGuard(drive) => State::SensorFault { kind, guard: true, drive },
-            State::SensorFault { guard, drive, .. } => State::SensorFault { kind, guard, drive },
+        let guard = match self.hold {
+            Hold::Free => false,
+            Hold::FreezeGuard => true,
+            Hold::SensorFault { guard, .. } => guard,
         };
+        self.hold = Hold::SensorFault { kind, guard };
     }
 
-    /// The sensor reads plausibly again: back to the mode the fault interrupted.
+    /// The sensor reads plausibly again: back to what the fault interrupted.
     pub fn sensor_recovered(&mut self) {
-        if let State::SensorFault { guard, drive, .. } = *self {
-            *self = if guard { State::FreezeGuard(drive) } else { State::Running(drive) };
+        if let Hold::SensorFault { guard, .. } = self.hold {
+            self.hold = if guard { Hold::FreezeGuard } else { Hold::Free };
         }
     }
 
     /// The freeze guard trips.
     pub fn guard_tripped(&mut self) {
-        if let State::Running(drive) = *self {
-            *self = State::FreezeGuard(drive);
+        if self.hold == Hold::Free {
+            self.hold = Hold::FreezeGuard;
         }
     }
 
     /// The freeze guard releases.
     pub fn guard_released(&mut self) {
-        if let State::FreezeGuard(drive) = *self {
-            *self = State::Running(drive);
+        if self.hold == Hold::FreezeGuard {
+            self.hold = Hold::Free;
         }
     }
 
     /// The SSR is found shorted: limp home from now on, supply off until limp home switches it.
     pub fn ssr_shorted(&mut self) {
-        let d = self.drive_mut();
-        if let Drive::Controller { .. } = d {
-            *d = Drive::LimpHome { supply_on: false };
+        if let Drive::Controller { .. } = self.drive {
+            self.drive = Drive::LimpHome { supply_on: false };
         }
     }
 
     /// A supply probe begins at `t_ms`.
     pub fn probe_started(&mut self, t_ms: u64) {
-        if let Drive::Controller { probe } = self.drive_mut() {
+        if let Drive::Controller { probe } = &mut self.drive {
             *probe = Some(t_ms);
         }
     }
 
     /// The supply probe ends.
     pub fn probe_ended(&mut self) {
-        if let Drive::Controller { probe } = self.drive_mut() {
+        if let Drive::Controller { probe } = &mut self.drive {
             *probe = None;
         }
     }
 
     /// Limp home switches the supply on or off.
     pub fn limp_switched(&mut self, on: bool) {
-        if let Drive::LimpHome { supply_on } = self.drive_mut() {
+        if let Drive::LimpHome { supply_on } = &mut self.drive {
             *supply_on = on;
-        }
-    }
-
-    fn drive_mut(&mut self) -> &mut Drive {
-        match self {
-            State::Running(d) | State::FreezeGuard(d) | State::SensorFault { drive: d, .. } => d,
-        }
-    }
-
-    /// Who drives once nothing holds the outputs.
-    pub fn drive(self) -> Drive {
-        match self {
-            State::Running(d) | State::FreezeGuard(d) | State::SensorFault { drive: d, .. } => d,
         }
     }
 
     /// The fault in force, if the sensor is faulty.
     pub fn sensor_fault(self) -> Option<EventKind> {
-        match self {
-            State::SensorFault { kind, .. } => Some(kind),
+        match self.hold {
+            Hold::SensorFault { kind, .. } => Some(kind),
             _ => None,
         }
     }
 
+    /// Whether a short was found (limp home drives).
+    pub fn shorted(self) -> bool {
+        matches!(self.drive, Drive::LimpHome { .. })
+    }
+
     /// The summary the step reports.
     pub fn mode(self) -> Mode {
-        match self {
-            State::Running(Drive::Controller { .. }) => Mode::Normal,
-            State::Running(Drive::LimpHome { .. }) => Mode::LimpHome,
-            State::FreezeGuard(_) => Mode::FreezeGuard,
-            State::SensorFault { .. } => Mode::SensorFault,
+        match (self.hold, self.drive) {
+            (Hold::Free, Drive::Controller { .. }) => Mode::Normal,
+            (Hold::Free, Drive::LimpHome { .. }) => Mode::LimpHome,
+            (Hold::FreezeGuard, _) => Mode::FreezeGuard,
+            (Hold::SensorFault { .. }, _) => Mode::SensorFault,
         }
     }
 
@@ -278,10 +273,10 @@ impl State {
     /// that stops a shorted SSR before the SSR checks have seen enough to be sure. No cooling
     /// at all without a trustworthy reading either: a shorted SSR must not cool blind.
     pub fn supply_enable(self) -> bool {
-        match self {
-            State::Running(Drive::Controller { probe }) => probe.is_none(),
-            State::Running(Drive::LimpHome { supply_on }) => supply_on,
-            State::FreezeGuard(_) | State::SensorFault { .. } => false,
+        match (self.hold, self.drive) {
+            (Hold::Free, Drive::Controller { probe }) => probe.is_none(),
+            (Hold::Free, Drive::LimpHome { supply_on }) => supply_on,
+            (Hold::FreezeGuard | Hold::SensorFault { .. }, _) => false,
         }
     }
 }
@@ -312,7 +307,9 @@ pub(crate) struct Supervisor {
 }
 
 impl Supervisor {
-    /// A supervisor that has not seen a sample, for the sample period `ts_s`.
+    /// A supervisor that has not seen a sample, for the sample period `ts_s`. Inline, so that
+    /// where the configuration is a constant its sample counts fold into constants too.
+    #[inline]
     pub(crate) fn new(cfg: &SupervisorConfig, ts_s: f32) -> Self {
         Supervisor {
             ts_s,
@@ -398,7 +395,7 @@ impl Supervisor {
         }
         let mode = self.state.mode();
         let mut duty = if mode == Mode::Normal { duty } else { Duty::OFF };
-        if let State::Running(Drive::LimpHome { supply_on }) = self.state {
+        if let State { hold: Hold::Free, drive: Drive::LimpHome { supply_on } } = self.state {
             let on = cfg.ssr.limp.supply_on(supply_on, temp_c, w);
             self.state.limp_switched(on);
             if on {
@@ -424,18 +421,17 @@ impl Supervisor {
     /// The freeze guard: trip (with SSR stuck-on paths 1 and 2) and release.
     fn freeze_guard(&mut self, cfg: &SupervisorConfig, t_ms: u64, temp_c: f32, emit: &mut impl FnMut(EventKind)) {
         let trend = self.freeze.observe(&cfg.freeze, self.ts_s, temp_c);
-        let shorted = |s: &State| matches!(s.drive(), Drive::LimpHome { .. });
-        if matches!(self.state, State::Running(_)) && FreezeGuard::trips(&cfg.freeze, &trend) {
+        if self.state.hold == Hold::Free && FreezeGuard::trips(&cfg.freeze, &trend) {
             self.state.guard_tripped();
             emit(EventKind::FreezeGuardTripped);
-            if self.ssr.freeze_tripped(&cfg.ssr.stuck_on, t_ms, &trend, shorted(&self.state)) {
+            if self.ssr.freeze_tripped(&cfg.ssr.stuck_on, t_ms, &trend, self.state.shorted()) {
                 self.ssr_shorted(emit);
             }
         }
-        if self.ssr.between_trips(&cfg.ssr.stuck_on, t_ms, &trend, shorted(&self.state)) {
+        if self.ssr.between_trips(&cfg.ssr.stuck_on, t_ms, &trend, self.state.shorted()) {
             self.ssr_shorted(emit);
         }
-        if matches!(self.state, State::FreezeGuard(_)) && FreezeGuard::releases(&cfg.freeze, temp_c, &trend) {
+        if self.state.hold == Hold::FreezeGuard && FreezeGuard::releases(&cfg.freeze, temp_c, &trend) {
             self.state.guard_released();
             emit(EventKind::FreezeGuardReleased);
         }
@@ -445,13 +441,13 @@ impl Supervisor {
     /// off, the supply probe.
     fn ssr_checks(&mut self, cfg: &SsrConfig, t_ms: u64, temp_c: f32, w: f32, emit: &mut impl FnMut(EventKind)) {
         self.ssr.remember(temp_c);
-        if matches!(self.state.drive(), Drive::Controller { .. }) && self.ssr.still_falling(&cfg.stuck_on, temp_c) {
+        if !self.state.shorted() && self.ssr.still_falling(&cfg.stuck_on, temp_c) {
             self.ssr_shorted(emit);
         }
         if self.ssr.warms_at_full_duty(&cfg.stuck_off, temp_c) {
             emit(EventKind::SsrStuckOff);
         }
-        if let Drive::Controller { probe } = self.state.drive() {
+        if let Drive::Controller { probe } = self.state.drive {
             match self.ssr.probe(&cfg.probe, t_ms, probe, temp_c, w) {
                 Probe::Keep => {}
                 Probe::Start => self.state.probe_started(t_ms),
@@ -476,6 +472,10 @@ mod tests {
 
     const CONTROLLER: Drive = Drive::Controller { probe: None };
 
+    fn state(hold: Hold, drive: Drive) -> State {
+        State { hold, drive }
+    }
+
     /// `s` after the transition `f`.
     fn after(mut s: State, f: impl FnOnce(&mut State)) -> State {
         f(&mut s);
@@ -487,24 +487,24 @@ mod tests {
         let run = State::START;
         assert_eq!(run.mode(), Mode::Normal);
         let guarded = after(run, State::guard_tripped);
-        assert_eq!(guarded, State::FreezeGuard(CONTROLLER));
+        assert_eq!(guarded, state(Hold::FreezeGuard, CONTROLLER));
         assert_eq!(after(guarded, State::guard_released), run);
         assert_eq!(after(guarded, State::guard_tripped), guarded);
         assert_eq!(after(run, State::guard_released), run);
         // A sensor fault remembers whether the guard held, and who drives.
         let open = EventKind::SensorOpen;
         let fault = after(run, |s| s.sensor_failed(open));
-        assert_eq!(fault, State::SensorFault { kind: open, guard: false, drive: CONTROLLER });
+        assert_eq!(fault, state(Hold::SensorFault { kind: open, guard: false }, CONTROLLER));
         assert_eq!(after(fault, State::sensor_recovered), run);
         assert_eq!(after(fault, State::guard_tripped), fault, "the guard waits for a reading");
         let guarded_fault = after(guarded, |s| s.sensor_failed(open));
         assert_eq!(after(guarded_fault, State::sensor_recovered), guarded);
         let short = after(guarded_fault, |s| s.sensor_failed(EventKind::SensorShort));
-        assert_eq!(short, State::SensorFault { kind: EventKind::SensorShort, guard: true, drive: CONTROLLER });
+        assert_eq!(short, state(Hold::SensorFault { kind: EventKind::SensorShort, guard: true }, CONTROLLER));
         assert_eq!(after(run, State::sensor_recovered), run);
         // The probe and the short live in the drive, whatever holds the outputs.
         let probing = after(run, |s| s.probe_started(7));
-        assert_eq!(probing.drive(), Drive::Controller { probe: Some(7) });
+        assert_eq!(probing.drive, Drive::Controller { probe: Some(7) });
         let round = after(probing, |s| {
             s.guard_tripped();
             s.guard_released();
@@ -512,11 +512,11 @@ mod tests {
         });
         assert_eq!(round, run);
         let limp = after(probing, State::ssr_shorted);
-        assert_eq!(limp, State::Running(Drive::LimpHome { supply_on: false }));
+        assert_eq!(limp, state(Hold::Free, Drive::LimpHome { supply_on: false }));
         assert_eq!(limp.mode(), Mode::LimpHome);
         assert_eq!(after(limp, |s| s.probe_started(9)), limp, "no probe once shorted");
         let on = after(limp, |s| s.limp_switched(true));
-        assert_eq!(on.drive(), Drive::LimpHome { supply_on: true });
+        assert_eq!(on.drive, Drive::LimpHome { supply_on: true });
         assert_eq!(after(on, State::ssr_shorted), on, "latched");
         assert_eq!(after(guarded, State::ssr_shorted).mode(), Mode::FreezeGuard);
         assert_eq!(after(after(guarded, State::ssr_shorted), State::guard_released), limp);
@@ -525,13 +525,13 @@ mod tests {
 
     #[test]
     fn the_supply_opens_in_every_mode_but_running_unprobed_or_limping_on() {
-        let limp = |supply_on| State::Running(Drive::LimpHome { supply_on });
+        let limp = |supply_on| state(Hold::Free, Drive::LimpHome { supply_on });
         assert!(State::START.supply_enable());
         assert!(!after(State::START, |s| s.probe_started(0)).supply_enable());
         assert!(limp(true).supply_enable() && !limp(false).supply_enable());
-        assert!(!State::FreezeGuard(CONTROLLER).supply_enable());
-        assert!(!State::FreezeGuard(Drive::LimpHome { supply_on: true }).supply_enable());
-        let fault = State::SensorFault { kind: EventKind::SensorOpen, guard: false, drive: CONTROLLER };
+        assert!(!state(Hold::FreezeGuard, CONTROLLER).supply_enable());
+        assert!(!state(Hold::FreezeGuard, Drive::LimpHome { supply_on: true }).supply_enable());
+        let fault = state(Hold::SensorFault { kind: EventKind::SensorOpen, guard: false }, CONTROLLER);
         assert!(!fault.supply_enable());
         assert_eq!(fault.mode(), Mode::SensorFault);
     }
