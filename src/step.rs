@@ -246,9 +246,7 @@ impl<C: Controller> Carrier<C> {
             emit(EventKind::BoardFault(kind));
         }
 
-        let cfg = &self.cfg;
-        let reading =
-            self.supervisor.check(&cfg.supervisor, t_ms, raw, sensor, &mut self.filter, &cfg.filter, &mut emit);
+        let reading = self.supervisor.check(&self.cfg, t_ms, raw, sensor, &mut self.filter, &mut emit);
         let temp_c = reading.temp_c;
 
         let w = self.setpoint(setpoint_c, &mut emit);
@@ -263,7 +261,7 @@ impl<C: Controller> Carrier<C> {
         let status = self.controller.status();
         self.note_adaptive_mode(status, &mut emit);
 
-        let verdict = self.supervisor.guard(&self.cfg.supervisor, t_ms, temp_c, w, requested, duty, &mut emit);
+        let verdict = self.supervisor.guard(&self.cfg.supervisor, t_ms, &ci, requested, duty, &mut emit);
 
         // Tell the controller what was really applied.
         if self.supervisor.trusts_reading() {

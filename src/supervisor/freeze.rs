@@ -12,7 +12,7 @@
 //! Cut at full cooling, the cold side (≈ −10 °C) keeps pulling the load down for minutes and the
 //! sensor lags the load by ≈ 50 s, so a guard on the present reading alone lets the load coast
 //! ≈ 1 °C past it. Whether the guard holds is the supervisor's mode
-//! ([`super::State::FreezeGuard`]); this type keeps the slope and answers the two questions.
+//! ([`super::Hold::FreezeGuard`]); this type keeps the slope and answers the two questions.
 
 /// Settings of the freeze guard.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -43,10 +43,11 @@
 //! limp home's supply state wait for the reading to come back.
 //!
 //! ## Order of the checks in one sample
-//! The order is fixed here, in [`Supervisor::check`] (before the controller) and
-//! [`Supervisor::guard`] (after it):
-//! 1. the sensor: fault diagnosis and recovery ([`sensor::diagnose`]), then the offset watch and
-//!    the spike filter, which decide what the measurement filter takes ([`sensor`]);
+//! The order is fixed here, in `Supervisor::check` (before the controller) and
+//! `Supervisor::guard` (after it), and it is also the order of the sample's events:
+//! 1. the sensor: fault diagnosis and recovery (`sensor::diagnose`; the stuck-converter check
+//!    has run on the raw counts during the conversion), then the offset watch and the spike
+//!    filter, which decide what the measurement filter takes ([`sensor`]);
 //! 2. the supply sag ([`supply`]), then the supply switch on its rail ([`switch`], which needs
 //!    the supply measured);
 //! 3. — the controller runs, with a trusted reading only —
@@ -70,9 +71,10 @@ pub mod ssr;
 pub mod supply;
 pub mod switch;
 
+use crate::control::ControlInput;
 use crate::event::EventKind;
-use crate::filter::{FirstOrder, FirstOrderConfig};
-use crate::step::Mode;
+use crate::filter::FirstOrder;
+use crate::step::{CarrierConfig, Mode};
 use crate::units::{Celsius, Duty};
 
 use freeze::{FreezeConfig, FreezeGuard};
@@ -348,12 +350,11 @@ impl Supervisor {
     /// calibrated reading or its fault; `sensor`: it came from the sensor (not an ideal plant).
     pub(crate) fn check(
         &mut self,
-        cfg: &SupervisorConfig,
+        cfg: &CarrierConfig,
         t_ms: u64,
         raw: Result<Celsius, EventKind>,
         sensor: bool,
         filter: &mut FirstOrder,
-        filter_cfg: &FirstOrderConfig,
         emit: &mut impl FnMut(EventKind),
     ) -> Reading {
         match sensor::diagnose(&raw, self.state.sensor_fault()) {
@@ -371,9 +372,9 @@ impl Supervisor {
             }
             None => {}
         }
-        let reading = self.sensor.reading(&cfg.sensor, t_ms, raw, sensor, filter, filter_cfg, emit);
-        self.supply.run(&cfg.supply, emit);
-        self.switch.check(&cfg.switch, self.supply.v(), emit);
+        let reading = self.sensor.reading(cfg, t_ms, raw, sensor, filter, emit);
+        self.supply.run(&cfg.supervisor.supply, emit);
+        self.switch.check(&cfg.supervisor.switch, self.supply.v(), emit);
         reading
     }
 
@@ -383,12 +384,12 @@ impl Supervisor {
         &mut self,
         cfg: &SupervisorConfig,
         t_ms: u64,
-        temp_c: f32,
-        w: f32,
+        ci: &ControlInput,
         requested: f32,
         duty: Duty,
         emit: &mut impl FnMut(EventKind),
     ) -> Verdict {
+        let (temp_c, w) = (ci.y_c, ci.w_c);
         if self.trusts_reading() {
             self.freeze_guard(cfg, t_ms, temp_c, emit);
             self.ssr_checks(&cfg.ssr, t_ms, temp_c, w, emit);

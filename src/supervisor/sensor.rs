@@ -1,24 +1,24 @@
 //! Sensor checks: is the reading the load, or the sensor?
 //!
-//! - **Diagnosis and recovery** ([`measure`], [`diagnose`]): the conversion chain's open,
+//! - **Diagnosis and recovery** (`measure`, `diagnose`): the conversion chain's open,
 //!   short, out-of-range and reference faults, and readings outside the plausible range; a
 //!   fault is reported once per kind and ends with the first plausible reading
 //!   ([`crate::event::EventKind::SensorRecovered`]).
-//! - **Stuck converter** ([`StuckConverter`]): a real reading always carries some noise, so the
+//! - **Stuck converter** (`StuckConverter`): a real reading always carries some noise, so the
 //!   same 16-bit result [`SensorConfig::stuck_s`] in a row is a frozen front end.
-//! - **Spikes** ([`SpikeFilter`]): a reading further than [`SpikeConfig::c`] from the filtered
+//! - **Spikes** (`SpikeFilter`): a reading further than [`SpikeConfig::c`] from the filtered
 //!   value is ignored; a run of them that agree with each other is a real jump (a re-seated
 //!   probe) and restarts the filter; several within [`SpikeConfig::window_s`] are reported.
-//! - **Offset** ([`OffsetWatch`]): a step larger than physics allows that stays at its new level
+//! - **Offset** (`OffsetWatch`): a step larger than physics allows that stays at its new level
 //!   is a sensor offset; it is reported, and an upward one is measured and subtracted.
 //!
-//! [`SensorChecks::reading`] runs the last three in their order and feeds the measurement
+//! `SensorChecks::reading` runs the last three in their order and feeds the measurement
 //! filter F_a.
 
 use super::{ms, samples_u16, samples_u8, since};
 use crate::adc::AdcError;
 use crate::event::EventKind;
-use crate::filter::{FirstOrder, FirstOrderConfig};
+use crate::filter::FirstOrder;
 use crate::step::CarrierConfig;
 use crate::units::{min_f32, Celsius};
 
@@ -353,20 +353,20 @@ impl SensorChecks {
     /// verdict needs the filter's value before this sample.
     pub(crate) fn reading(
         &mut self,
-        cfg: &SensorConfig,
+        cfg: &CarrierConfig,
         t_ms: u64,
         raw: Result<Celsius, EventKind>,
         sensor: bool,
         filter: &mut FirstOrder,
-        filter_cfg: &FirstOrderConfig,
         emit: &mut impl FnMut(EventKind),
     ) -> Reading {
+        let (sc, filter_cfg) = (&cfg.supervisor.sensor, &cfg.filter);
         let mut hold = false;
         let offset_before = self.offset.offset_c();
         let raw_c = match raw.ok() {
             Some(t) if sensor => {
                 let corrected = t.0 - self.offset.offset_c();
-                hold = self.offset.watch(&cfg.offset, corrected, emit);
+                hold = self.offset.watch(&sc.offset, corrected, emit);
                 Some(Celsius(corrected))
             }
             other => other,
@@ -374,11 +374,11 @@ impl SensorChecks {
         if raw_c.is_none() {
             self.offset.forget();
         }
-        let spike = SpikeFilter::is_spike(&cfg.spike, raw_c, filter.output());
+        let spike = SpikeFilter::is_spike(&sc.spike, raw_c, filter.output());
         if let (Some(t), false) = (raw_c, spike) {
             self.offset.keep_reference(t.0, offset_before);
         }
-        let verdict = self.spikes.run(&cfg.spike, t_ms, raw_c, spike, emit);
+        let verdict = self.spikes.run(&sc.spike, t_ms, raw_c, spike, emit);
         if verdict == Spike::Jump {
             filter.reset();
         }
@@ -530,17 +530,17 @@ mod tests {
     #[test]
     fn the_filter_holds_on_spikes_and_restarts_on_a_jump() {
         let mut s = SensorChecks::new(&SensorConfig::DEFAULT, TS);
-        let (mut f, fc) = (FirstOrder::default(), FirstOrderConfig { fa: 0.5 });
-        let mut e = |_: EventKind| {};
-        let mut read = |s: &mut SensorChecks, f: &mut FirstOrder, k: u64, t: f32| {
-            s.reading(&SensorConfig::DEFAULT, k * 10_000, Ok(Celsius(t)), false, f, &fc, &mut e).temp_c
+        let cfg = CarrierConfig::DEFAULT;
+        let mut f = FirstOrder::default();
+        let read = |s: &mut SensorChecks, f: &mut FirstOrder, k: u64, t: f32| {
+            s.reading(&cfg, k * 10_000, Ok(Celsius(t)), false, f, &mut |_| {}).temp_c
         };
         assert_eq!(read(&mut s, &mut f, 0, 4.0), 4.0);
         assert_eq!(read(&mut s, &mut f, 1, 4.2), 4.1);
         assert_eq!(read(&mut s, &mut f, 2, 9.0), 4.1, "a spike is ignored");
         assert_eq!(read(&mut s, &mut f, 3, 9.0), 4.1);
         assert_eq!(read(&mut s, &mut f, 4, 9.0), 9.0, "the third in a row restarts the filter");
-        let none = s.reading(&SensorConfig::DEFAULT, 50_000, Err(EventKind::SensorOpen), false, &mut f, &fc, &mut e);
+        let none = s.reading(&cfg, 50_000, Err(EventKind::SensorOpen), false, &mut f, &mut |_| {});
         assert_eq!((none.raw_c, none.temp_c), (None, 9.0));
     }
 }

@@ -2,7 +2,7 @@
 //!
 //! - **Stuck on** (shorted: the modules cool whatever the duty). Three paths, because a shorted
 //!   SSR shows itself differently on light and heavy carriers and in hot and cold ambients:
-//!   1. *on an unrequested trip* ([`SsrMonitor::freeze_tripped`]): the freeze guard trips with
+//!   1. *on an unrequested trip* (`SsrMonitor::freeze_tripped`): the freeze guard trips with
 //!      no cooling asked for a minute, and the load either falls fast without slowing down or
 //!      trips for the second time within half an hour. A light carrier pulled down from a cool
 //!      ambient coasts fast after cooling stops, seen through the ≈ 50 s sensor lag, but its
@@ -10,28 +10,28 @@
 //!      hot ambient a shorted SSR only holds the load near its full-cooling floor (≈ 1.5 °C),
 //!      and the guard trips, opens the supply, releases and trips again every ≈ 15 min; a cold
 //!      ambient pulls the load down once and needs hours to warm it past the release and back.
-//!   2. *between trips* ([`SsrMonitor::between_trips`]): within half an hour of a trip,
+//!   2. *between trips* (`SsrMonitor::between_trips`): within half an hour of a trip,
 //!      nothing asked for a minute, yet falling more than 0.6 °C a minute and faster every
 //!      sample: a very light carrier on a shorted SSR after the guard has released, before the
 //!      next trip comes too late. Not outside that window: the coast after a pull-down does the
 //!      same for a minute or two on light carriers.
-//!   3. *after the off-run* ([`SsrMonitor::still_falling`]): the duty was 0 for three minutes
+//!   3. *after the off-run* (`SsrMonitor::still_falling`): the duty was 0 for three minutes
 //!      and the load still falls, and not slower than the minute before — the coast after full
 //!      cooling stops decelerates, a shorted SSR does not.
 //!
-//!   And the **supply probe** ([`SsrMonitor::probe`]) for the case none of them sees: a
+//!   And the **supply probe** (`SsrMonitor::probe`) for the case none of them sees: a
 //!   shorted SSR that holds the load below its setpoint at a cooling floor above the freeze
 //!   guard (a hot day: full cooling barely wins) never trips the guard. Nothing asked for
 //!   10 min, 1 °C below the setpoint and still falling: the supply switch opens for 5 min
 //!   (harmless, no cooling is wanted). A shorted SSR stops cooling and the load turns up; a load
 //!   falling toward a cold ambient does not notice. One probe an hour at most.
-//! - **Stuck off** ([`SsrMonitor::warms_at_full_duty`]): full duty for 5 min and the load
+//! - **Stuck off** (`SsrMonitor::warms_at_full_duty`): full duty for 5 min and the load
 //!   warmed (fast), or for 15 min and it is warmer than when full duty began and still rising
 //!   (slow, a cool day).
 //! - **Limp home** ([`LimpConfig`]): after a shorted SSR, On-Off through the supply switch.
 //!
 //! The checks read `off_run`/`on_run`/`req_off_run`, the runs of the applied and requested duty
-//! up to the *previous* sample ([`SsrMonitor::applied`] counts this one last), and a ring of
+//! up to the *previous* sample (`SsrMonitor::applied` counts this one last), and a ring of
 //! the filtered temperature.
 
 use super::{ms, samples_u16, since};
