@@ -681,7 +681,9 @@ impl<C: Controller> Carrier<C> {
 
         // 5: controller (only with a trustworthy measurement).
         let ci = ControlInput { y_c: temp_c, w_c: w };
-        let requested = if self.sensor_fault.is_none() { self.controller.update(&ci) } else { 0.0 };
+        let requested = if self.sensor_fault.is_none() { self.controller.update(&ci) } else { Ok(0.0) };
+        // A failed controller's request is NaN: the check below applies the safe state and says so.
+        let requested = requested.unwrap_or(f32::NAN);
         let mut duty = if requested.is_finite() {
             Duty::saturating(requested)
         } else {
@@ -982,7 +984,7 @@ impl<C: Controller> Carrier<C> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::control::{AnyController, OnOff, OnOffConfig, Pi, PiConfig};
+    use crate::control::{AnyController, OnOff, OnOffConfig};
     use crate::units::Ohms;
 
     pub(super) fn counts_at(t: f32) -> u32 {
@@ -991,7 +993,7 @@ mod tests {
     }
 
     pub(super) fn pi_carrier() -> Carrier<AnyController> {
-        Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)))
+        Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(crate::profile::pi(CarrierConfig::DEFAULT.ts_s)))
     }
 
     #[test]
@@ -1087,7 +1089,7 @@ mod tests {
 #[cfg(test)]
 mod robustness {
     use super::*;
-    use crate::control::{AnyController, Pi, PiConfig};
+    use crate::control::AnyController;
     use proptest::prelude::*;
 
     proptest! {
@@ -1097,7 +1099,7 @@ mod robustness {
         /// a non-finite or out-of-range duty.
         #[test]
         fn arbitrary_counts_give_a_valid_duty(counts in proptest::collection::vec(prop_oneof![any::<u32>(), 0u32..70_000, Just(49_900u32)], 1..400)) {
-            let mut c = Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)));
+            let mut c = Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(crate::profile::pi(CarrierConfig::DEFAULT.ts_s)));
             for (k, n) in counts.iter().enumerate() {
                 let out = c.step(&StepInput { t_ms: k as u64 * 10_000, counts: *n, setpoint_c: 4.0 });
                 prop_assert!(out.duty.get().is_finite() && (0.0..=1.0).contains(&out.duty.get()));
@@ -1107,7 +1109,8 @@ mod robustness {
 
     #[test]
     fn a_week_of_identical_counts_does_not_overflow() {
-        let mut c = Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)));
+        let mut c =
+            Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(crate::profile::pi(CarrierConfig::DEFAULT.ts_s)));
         for k in 0..70_000u32 {
             let out = c.step(&StepInput { t_ms: k as u64 * 10_000, counts: 49_900, setpoint_c: 4.0 });
             if k > 20 {
@@ -1121,7 +1124,7 @@ mod robustness {
 mod switch_and_reference {
     use super::tests::{counts_at, pi_carrier as carrier};
     use super::*;
-    use crate::control::{AnyController, Pi, PiConfig};
+    use crate::control::AnyController;
 
     /// Runs `n` samples holding 5 °C at setpoint `w` with the rail reading what a switch that is
     /// `shorted` (or not) shows; returns the samples that opened the switch and when the short
@@ -1172,7 +1175,7 @@ mod switch_and_reference {
         }
         // Test openings off (an identification run): the sense alone opens nothing.
         let cfg = CarrierConfig { switch_test_interval_samples: 0, ..CarrierConfig::DEFAULT };
-        let mut c = Carrier::new(cfg, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)));
+        let mut c = Carrier::new(cfg, AnyController::Pi(crate::profile::pi(CarrierConfig::DEFAULT.ts_s)));
         for k in 0..1600u32 {
             c.observe_switched_rail_v(11.9);
             let out =

@@ -241,16 +241,15 @@ fn a_brownout_restart_is_safe_and_control_resumes() {
 /// power dips at 5 h; the restart picks that up.
 #[test]
 fn a_brownout_restarts_from_the_persisted_model() {
-    use hter::control::adaptive::AdaptiveConfig;
     let scenario = Scenario::resolve("step").unwrap();
     let mut spec = ControllerSpec::new(ControllerChoice::Gpc);
-    spec.initial = Some(AdaptiveConfig::HTER2_MODEL);
+    spec.initial = Some(hter::profile::START_MODEL_HTER2);
     let mut opts = SimOptions::new(scenario, spec);
     opts.duration_s = 6.0 * 3600.0;
     opts.faults = vec![Fault::parse("brownout@18000").unwrap()];
     let out = run(&opts).unwrap();
     let b0 = |t: f64| out.rows.iter().find(|r| r.t_s >= t).and_then(|r| r.b0).unwrap();
-    let (before, after, start) = (b0(17990.0), b0(18000.0), AdaptiveConfig::HTER2_MODEL.b[0]);
+    let (before, after, start) = (b0(17990.0), b0(18000.0), hter::profile::START_MODEL_HTER2.b()[0]);
     assert!((before - start).abs() > 0.002, "the estimate should have moved: {start} → {before}");
     assert!(
         (after - before).abs() < 0.25 * (before - start).abs(),

@@ -79,10 +79,11 @@ struct SimArgs {
     #[arg(long, allow_negative_numbers = true)]
     s_weight: Option<f64>,
     /// GMVC and IGMVC: pole α of the output weight P = (1 − α q⁻¹)/(1 − α), 0 ≤ α < 1
-    /// (default 0.95; 0 gives the classical P = 1).
+    /// (default 0.9 for GMVC, 0.93 for IGMVC; 0 gives the classical P = 1).
     #[arg(long, allow_negative_numbers = true)]
     p_pole: Option<f64>,
-    /// IGMVC and self-tuning GPC: pole τ of the T-filter T = 1 − τ q⁻¹, 0 ≤ τ < 1 (0: none).
+    /// IGMVC and self-tuning GPC: pole τ of the T-filter T = 1 − τ q⁻¹, 0 ≤ τ < 1 (0: none;
+    /// default 0.9 for IGMVC, 0.8 for self-tuning GPC).
     #[arg(long, allow_negative_numbers = true)]
     t_pole: Option<f64>,
     /// Water load: full (100 ml) or half (50 ml).

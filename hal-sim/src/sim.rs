@@ -15,22 +15,21 @@
 //! (`alarm_hw`): the only thing that stops cooling when the step stops being called
 //! (`--fault firmware-hang@T`).
 
-use anyhow::{bail, Result};
+use anyhow::{anyhow, bail, Result};
 use hter::alarm::{Annunciator, Indication};
-use hter::coldchain::ColdChainMonitor;
 use hter::control::adaptive::{AdaptiveConfig, SelfTuning};
 use hter::control::excite::PrbsExcitation;
 use hter::control::gpc::GpcConfig;
-use hter::control::model::Model;
 use hter::control::mv::{GmvcConfig, IgmvcConfig};
 use hter::control::AdaptiveMode;
 use hter::control::Controller;
-use hter::control::{AnyController, FixedModel, Law, OnOff, OnOffConfig, Pi, PiConfig};
+use hter::control::{AnyController, FixedModel, Law};
 use hter::event::EventKind;
 use hter::hal::{apply_duty, RtdSampler};
 use hter::ident::prbs::PrbsConfig;
-use hter::persist::ModelRecord;
-use hter::persist::ResetCause;
+use hter::model::Model;
+use hter::persist::{HistoryRecord, ModelCadence, ModelRecord, Recorder, ResetCause, Save};
+use hter::profile::{self, Kind};
 use hter::step::{Carrier, CarrierConfig, Mode, StepInput, StepOutput};
 use hter::units::Celsius;
 
@@ -85,8 +84,8 @@ pub struct ControllerSpec {
     /// Self-tuning GPC: T-filter pole (`AdaptiveConfig::t_filter`).
     pub gpc_t_filter: f32,
     /// Model the self-tuning laws start from; `None`: the one identified on the simulated
-    /// carrier (`AdaptiveConfig::HTER1_MODEL`, `HTER2_MODEL`), as a board starts from the model
-    /// persisted from its own identification run.
+    /// carrier (`profile::START_MODEL_HTER1`, `START_MODEL_HTER2`), as a board starts from the
+    /// model persisted from its own identification run.
     pub initial: Option<Model>,
 }
 
@@ -99,7 +98,7 @@ impl ControllerSpec {
             gpc: GpcConfig::DEFAULT,
             gmvc: GmvcConfig::DEFAULT,
             igmvc: IgmvcConfig::DEFAULT,
-            gpc_t_filter: AdaptiveConfig::default_for(Law::Gpc(GpcConfig::DEFAULT)).t_filter,
+            gpc_t_filter: profile::GPC_T_FILTER,
             initial: None,
         }
     }
@@ -114,45 +113,50 @@ impl ControllerSpec {
         }
     }
 
-    /// Builds the controller for a loop sampled every `ts_s`, starting from duty `u0`.
+    /// Builds the controller for a loop sampled every `ts_s`, starting from duty `u0`: the
+    /// board profile's ([`profile::controller`]), with this spec's tuning of the laws.
     pub fn build(&self, ts_s: f32, u0: f32) -> Result<AnyController> {
-        let pi = PiConfig { ts_s, ..PiConfig::HTER1_DEFAULT };
-        Ok(match (self.choice, self.law()) {
-            (ControllerChoice::Onoff, _) => AnyController::OnOff(OnOff::new(OnOffConfig::DEFAULT)),
-            // ZN P gain is Kp_PI / 0.9; the same 2× detuning as the PI.
-            (ControllerChoice::P, _) => {
-                AnyController::Pi(Pi::new(PiConfig { kp_per_c: pi.kp_per_c / 0.9, ti_s: f32::INFINITY, ..pi }))
+        let kind = self.choice.kind();
+        let refused = |e| anyhow!("{:?}: configuration refused ({e:?})", self.choice);
+        let (Some(profile_cfg), Some(law)) = (kind.adaptive(), self.law()) else {
+            return profile::controller(kind, ts_s, u0).map_err(refused);
+        };
+        Ok(match self.model {
+            Some(m) => AnyController::Fixed(FixedModel::new(law, m, u0)),
+            None => {
+                let initial = self.initial.or(profile_cfg.initial);
+                let cfg = AdaptiveConfig {
+                    law,
+                    t_filter: self.gpc_t_filter,
+                    initial,
+                    // The estimator uses the start model's delay.
+                    k: initial.map_or(profile_cfg.k, |m| m.k()),
+                    ..profile_cfg
+                };
+                AnyController::SelfTuning(SelfTuning::new(cfg, ts_s, u0).map_err(refused)?)
             }
-            (ControllerChoice::Pi, _) => AnyController::Pi(Pi::new(pi)),
-            (_, Some(law)) => match self.model {
-                Some(m) => AnyController::Fixed(FixedModel::new(law, m, u0)),
-                None => {
-                    let d = AdaptiveConfig::default_for(law);
-                    let initial = self.initial.or(d.initial);
-                    AnyController::SelfTuning(SelfTuning::new(
-                        AdaptiveConfig {
-                            fallback: pi,
-                            t_filter: self.gpc_t_filter,
-                            initial,
-                            // The estimator uses the start model's delay.
-                            k: initial.map_or(d.k, |m| m.k),
-                            ..d
-                        },
-                        u0,
-                    ))
-                }
-            },
-            (_, None) => bail!("no law for {:?}", self.choice),
         })
     }
 }
 
 impl ControllerChoice {
+    /// The board profile's kind.
+    pub fn kind(self) -> Kind {
+        match self {
+            ControllerChoice::Onoff => Kind::OnOff,
+            ControllerChoice::P => Kind::P,
+            ControllerChoice::Pi => Kind::Pi,
+            ControllerChoice::Gmvc => Kind::Gmvc,
+            ControllerChoice::Igmvc => Kind::Igmvc,
+            ControllerChoice::Gpc => Kind::Gpc,
+        }
+    }
+
     /// Builds the controller with default tuning (baselines only; model-based ones need a model).
     pub fn build(self, ts_s: f32) -> AnyController {
         match ControllerSpec::new(self).build(ts_s, 0.0) {
             Ok(c) => c,
-            Err(_) => AnyController::Pi(Pi::new(PiConfig { ts_s, ..PiConfig::HTER1_DEFAULT })),
+            Err(_) => AnyController::Pi(profile::pi(ts_s)),
         }
     }
 }
@@ -301,6 +305,10 @@ pub struct SimOutput {
     pub metrics: SimMetrics,
     /// Sample period, s.
     pub ts_s: f64,
+    /// What the simulated board stored in flash, in order, with the sample time (s) of each
+    /// store: the history when the board's [`Recorder`] asks (hourly, at an alarm, after a
+    /// reset) and the model at the board profile's [`ModelCadence`].
+    pub stores: Vec<(f64, Save)>,
 }
 
 fn mode_name(m: Mode) -> &'static str {
@@ -666,11 +674,13 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             rig.settle(u0, ts);
         }
     }
-    // What the board keeps in flash: the trusted model, saved every 4 h of learning as the
-    // firmware does (`firmware/src/persist.rs`), as the same record bytes.
-    const SAVE_EVERY: u32 = 1440;
+    // What the board keeps in flash, stored when the firmware stores it: the trusted model at
+    // the profile's cadence (as the same record bytes), the cold-chain history when the
+    // board's record asks.
+    let model_cadence = || ModelCadence::new(profile::samples(profile::MODEL_SAVE_S, cfg.ts_s));
+    let mut cadence = model_cadence();
     let mut persisted: Option<[u8; ModelRecord::LEN]> = None;
-    let mut since_save = 0u32;
+    let mut stores = Vec::new();
     let make_controller = |persisted: Option<&[u8; ModelRecord::LEN]>| -> Result<AnyController> {
         Ok(if sc.excitation {
             let prbs =
@@ -689,12 +699,11 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                 _ => false,
             };
             if spec.initial.is_none() && stainless {
-                spec.initial = Some(AdaptiveConfig::HTER2_MODEL);
+                spec.initial = Some(profile::START_MODEL_HTER2);
             }
             // After a reset: the stored model, if it decodes and is still plausible for this law
             // (else the built-in start model, as on the board).
-            if let (Some(bytes), Some(law)) = (persisted, spec.law()) {
-                let check = AdaptiveConfig::default_for(law);
+            if let (Some(bytes), Some(check)) = (persisted, spec.choice.kind().adaptive()) {
                 if let Ok(m) = ModelRecord::decode(bytes).and_then(|r| r.to_model(&check)) {
                     spec.initial = Some(m);
                 }
@@ -722,8 +731,10 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
     let mut next_change = 0;
     let mut energy0_wh = 0.0;
     // The carrier's own record and alarm indicator, fed as the firmware feeds them: the
-    // monitor sees what the sensor saw.
-    let mut monitor = ColdChainMonitor::new();
+    // monitor sees what the sensor saw. A brown-out counts the reset in the record and stores
+    // it, as the board's boot does; the simulated monitor runs on through it, where the board's
+    // restarts from the stored history.
+    let mut recorder = Recorder::new(HistoryRecord::EMPTY, profile::samples(profile::HISTORY_SAVE_S, cfg.ts_s));
     let mut alarms = Vec::new();
     let mut annunciator = Annunciator::new();
     let (mut alarm_on_s, mut alarm_first_s) = (0.0, None);
@@ -748,7 +759,8 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                     carrier = Carrier::new(cfg, make_controller(persisted.as_ref())?);
                     // What the firmware reads from RCC_CSR at boot after a brown-out.
                     carrier.note_reset(ResetCause::BrownOut);
-                    since_save = 0;
+                    cadence = model_cadence();
+                    stores.push((t_s, Save::History(recorder.note_reset(ResetCause::BrownOut))));
                     // The indicator's latch is RAM too.
                     annunciator = Annunciator::new();
                 } else {
@@ -795,23 +807,20 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             continue;
         }
         let (out, counts) = rig.step(&mut carrier, t_s, w);
-        if let AnyController::SelfTuning(st) = carrier.controller() {
-            if st.mode() == AdaptiveMode::Adaptive {
-                since_save += 1;
-                if since_save >= SAVE_EVERY {
-                    since_save = 0;
-                    if let Some(rec) = st.trusted_model().as_ref().and_then(ModelRecord::from_model) {
-                        persisted = Some(rec.encode());
-                    }
-                }
-            }
+        if let Some(rec) = cadence.push(out.status.map(|st| st.mode), carrier.controller()) {
+            persisted = Some(rec.encode());
+            stores.push((t_s, Save::Model(rec)));
         }
         let d = rig.actuate(&out, t_s);
         if k >= 0 {
             for e in out.events.iter().filter(|e| is_fault(e.kind)) {
                 faults.push(Stamped { kind: event_name(e.kind).into(), t_s: e.t_s() - PREROLL_S });
             }
-            let raised = monitor.push(step_clock_ms(t_s), out.temp_c.0);
+            let recorded = recorder.push(step_clock_ms(t_s), out.temp_c.0);
+            if let Some(save) = recorder.due_save(&recorded) {
+                stores.push((t_s, save));
+            }
+            let raised = recorded.raised;
             for a in raised.iter().flatten() {
                 alarms.push(Stamped { kind: a.kind.name().into(), t_s: a.trigger_s() - PREROLL_S });
             }
@@ -873,5 +882,5 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
         alarm_indicator_first_s: alarm_first_s,
         alarm_hw_first_s,
     };
-    Ok(SimOutput { rows, metrics, ts_s: ts })
+    Ok(SimOutput { rows, metrics, ts_s: ts, stores })
 }
