@@ -4,6 +4,7 @@
 
 pub mod arx;
 pub mod campaign_cmd;
+pub mod fault;
 pub mod identify_cmd;
 pub mod log;
 pub mod log2csv_cmd;

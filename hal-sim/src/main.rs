@@ -329,17 +329,17 @@ fn compare_cmd(a: &CompareArgs) -> Result<()> {
     println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for (_, out) in &runs {
         let m = &out.metrics;
-        let settle = m.settle_time_s.map_or("never".to_string(), |s| format!("{s:.0}"));
+        let settle = m.tracking.settle_time_s.map_or("never".to_string(), |s| format!("{s:.0}"));
         println!(
             "| {} | {:.0} | {:.3} | {:.2} | {} | {:.2} / {:.2} | {:.0} | {:.1} | {} |",
             m.controller,
-            m.iae,
-            m.steady_state_error_c,
-            m.overshoot_c,
+            m.tracking.iae,
+            m.tracking.steady_state_error_c,
+            m.tracking.overshoot_c,
             settle,
-            m.min_temp_c,
-            m.max_temp_c,
-            m.time_outside_2_8_s,
+            m.tracking.min_temp_c,
+            m.tracking.max_temp_c,
+            m.tracking.time_outside_2_8_s,
             m.energy_wh,
             m.ssr_switches
         );
@@ -455,16 +455,16 @@ fn print_summary(opts: &SimOptions, out: &SimOutput) {
         m.controller,
         out.ts_s
     );
-    println!("IAE                         {:10.1} °C·s", m.iae);
-    match m.settle_time_s {
+    println!("IAE                         {:10.1} °C·s", m.tracking.iae);
+    match m.tracking.settle_time_s {
         Some(s) => println!("settle time (±0.5 °C)       {:10.0} s", s),
         None => println!("settle time (±0.5 °C)          never"),
     }
-    println!("max |error| after settling  {:10.2} °C", m.max_abs_error_after_settle_c);
-    println!("steady-state |error|        {:10.2} °C", m.steady_state_error_c);
-    println!("overshoot                   {:10.2} °C", m.overshoot_c);
-    println!("min / max load temperature  {:6.2} / {:.2} °C", m.min_temp_c, m.max_temp_c);
-    println!("time outside 2–8 °C         {:10.0} s", m.time_outside_2_8_s);
+    println!("max |error| after settling  {:10.2} °C", m.tracking.max_abs_error_after_settle_c);
+    println!("steady-state |error|        {:10.2} °C", m.tracking.steady_state_error_c);
+    println!("overshoot                   {:10.2} °C", m.tracking.overshoot_c);
+    println!("min / max load temperature  {:6.2} / {:.2} °C", m.tracking.min_temp_c, m.tracking.max_temp_c);
+    println!("time outside 2–8 °C         {:10.0} s", m.tracking.time_outside_2_8_s);
     println!("energy                      {:10.2} Wh", m.energy_wh);
     println!("SSR switches                {:10}", m.ssr_switches);
     if !m.faults_detected.is_empty() {
