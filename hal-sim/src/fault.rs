@@ -85,10 +85,12 @@ impl Fault {
     ///
     /// The detections: an open or shorted RTD may read as implausible before it reads as
     /// open or short (`sensor_out_of_range`); an open lid on a loop already at full duty shows
-    /// as the load warming at full duty (`ssr_stuck_off`); a brown-out is the reset flags the
-    /// firmware reads at boot (`restarted_brownout`, handed to the step by
-    /// `Carrier::note_reset`, as the simulator does when it restarts the step); a hang is the
-    /// board's heartbeat monostable expiring, not the step.
+    /// as the load warming at full duty (`ssr_stuck_off`), and under the relay On-Off
+    /// controller the lid check stays silent (its limit cycle hides the jump of the holding
+    /// duty the check looks for); a brown-out is the reset flags the firmware reads at boot
+    /// (`restarted_brownout`, handed to the step by `Carrier::note_reset`, as the simulator
+    /// does when it restarts the step); a hang is the board's heartbeat monostable expiring,
+    /// not the step.
     pub const fn spec(self) -> FaultSpec {
         use Detected::Event;
         use EventKind as E;
