@@ -121,7 +121,7 @@ fn first_order(cfg: &FirstOrderConfig, x: &[f64]) -> Vec<f64> {
     x.iter().map(|v| f64::from(f.step(cfg, *v as f32))).collect()
 }
 
-/// Reads and pre-processes a log (steps 1–5 of the module docs).
+/// Reads and pre-processes a log (steps 1–5 of the module docs of [`super`]).
 pub fn load(
     path: &Path,
     y_column: &str,
