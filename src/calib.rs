@@ -1,4 +1,5 @@
-//! Two-point calibration of the measurement chain (seed, Appendix A and §3.4.1).
+//! Two-point calibration of the measurement chain: an ice bath and a second bath against a
+//! reference thermometer give two (measured, true) pairs.
 //!
 //! The seed calibrated its RTD channel in an ice-water bath against a reference thermometer
 //! (SIRIM) and fitted a straight line. We do the same with two points: the ice bath (the

@@ -1,4 +1,4 @@
-//! Cold-chain monitoring (SPEC §6): WHO PQS E006-style temperature-recorder alarms, shipping
+//! Cold-chain monitoring: WHO PQS E006-style temperature-recorder alarms, shipping
 //! indicator alarms, mean kinetic temperature, extremes, time out of range and an excursion log.
 //!
 //! Alarm rules (durations from sample times, integer milliseconds: exact for the whole mission,

@@ -1,4 +1,4 @@
-//! First-order low-pass filter with parameter F_a (seed §3.4.3):
+//! First-order low-pass filter with parameter F_a:
 //!
 //! ```text
 //! y_f(t) = F_a · y_f(t − 1) + (1 − F_a) · y(t),     0 ≤ F_a < 1

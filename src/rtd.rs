@@ -3,7 +3,7 @@
 //! ```text
 //! T ≥ 0 °C:  R(T) = R0 · (1 + A·T + B·T²)
 //! T < 0 °C:  R(T) = R0 · (1 + A·T + B·T² + C·(T − 100)·T³)
-//! A = 3.9083e-3 /°C,  B = −5.775e-7 /°C²,  C = −4.183e-12 /°C⁴   (IEC 60751, SPEC §6)
+//! A = 3.9083e-3 /°C,  B = −5.775e-7 /°C²,  C = −4.183e-12 /°C⁴   (IEC 60751)
 //! ```
 //!
 //! The inverse for R ≥ R0 is the positive root of the quadratic. Below 0 °C the C term makes it

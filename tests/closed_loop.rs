@@ -4,12 +4,13 @@ use hal_sim::plant::Load;
 use hal_sim::scenario::Scenario;
 use hal_sim::sim::{run, ControllerChoice, ControllerSpec, PlantChoice, SimOptions, SimOutput};
 use hter::alarm::Indication;
+use hter::control::AdaptiveMode;
 
 fn sim(scenario: &str, controller: ControllerChoice, plant: PlantChoice, load: Load) -> SimOutput {
     sim_spec(scenario, ControllerSpec::new(controller), plant, load)
 }
 
-/// Issue 2's acceptance run: PI pulls the full-load H-TER I carrier from 28 °C to 4 °C without
+/// PI pulls the full-load H-TER I carrier from 28 °C to 4 °C without
 /// going below 2 °C and then holds it within ±0.5 °C.
 #[test]
 fn pi_pulls_down_from_28_to_4_without_freezing_and_holds() {
@@ -47,7 +48,7 @@ fn baselines_never_take_the_load_below_2_on_piecewise() {
 
 #[test]
 fn pi_has_less_steady_state_error_than_onoff() {
-    // The seed's finding (§5.2): PI beats On-Off on steady-state error.
+    // The integral action removes the offset that On-Off's hysteresis leaves.
     let pi = sim("piecewise", ControllerChoice::Pi, PlantChoice::Hter1, Load::Full).metrics;
     let onoff = sim("piecewise", ControllerChoice::Onoff, PlantChoice::Hter1, Load::Full).metrics;
     assert!(pi.tracking.steady_state_error_c < onoff.tracking.steady_state_error_c, "pi {pi:?}\nonoff {onoff:?}");
@@ -89,15 +90,35 @@ fn gpc_on_its_own_arx_model_tracks_piecewise_without_offset() {
     assert!(out.metrics.tracking.min_temp_c >= 2.0);
 }
 
-/// Self-tuning GPC on the physical plant: never below 2 °C on the seed's experiments, logs its
-/// mode changes, and survives a supply sag from 12 to 10 V mid-run.
+/// The self-tuner's mode in every row, with the time it began: one entry per mode change.
+fn mode_changes(out: &SimOutput) -> Vec<(f64, AdaptiveMode)> {
+    let mut changes: Vec<(f64, AdaptiveMode)> = Vec::new();
+    for r in &out.rows {
+        let m = r.adaptive_mode.expect("the self-tuner's mode is logged every sample");
+        if changes.last().is_none_or(|&(_, last)| last != m) {
+            changes.push((r.t_s, m));
+        }
+    }
+    changes
+}
+
+/// Self-tuning GPC on the physical plant: never below 2 °C on the piecewise experiment; its own
+/// estimate becomes trusted (mode `adaptive`) within the first setpoint step and it never needs
+/// the fallback PI on healthy hardware; and it survives a supply sag from 12 to 10 V mid-run
+/// with a finite estimate throughout.
 #[test]
-fn self_tuning_gpc_stays_in_range_and_reports_its_modes() {
+fn self_tuning_gpc_stays_in_range_and_trusts_its_own_estimate() {
     for (plant, load) in
         [(PlantChoice::Hter1, Load::Full), (PlantChoice::Hter1, Load::Half), (PlantChoice::Hter2, Load::Full)]
     {
-        let m = sim_spec("piecewise", spec(ControllerChoice::Gpc), plant, load).metrics;
+        let out = sim_spec("piecewise", spec(ControllerChoice::Gpc), plant, load);
+        let m = &out.metrics;
         assert!(m.tracking.min_temp_c >= 2.0 && m.tracking.max_temp_c <= 8.0, "{plant:?} {load:?}: {m:?}");
+        let changes = mode_changes(&out);
+        // Measured: adaptive from 0–480 s on the three carriers (the first step lasts 1 h).
+        let engaged = changes.iter().find(|&&(_, m)| m == AdaptiveMode::Adaptive).map(|&(t, _)| t);
+        assert!(engaged.is_some_and(|t| t < 1800.0), "{plant:?} {load:?}: {changes:?}");
+        assert!(changes.iter().all(|&(_, m)| m != AdaptiveMode::Fallback), "{plant:?} {load:?}: {changes:?}");
     }
     let mut scenario = Scenario::resolve("disturbance").unwrap();
     scenario.changes = vec![(1800.0, hal_sim::scenario::Change::Supply(10.0))];
@@ -113,8 +134,9 @@ fn self_tuning_gpc_stays_in_range_and_reports_its_modes() {
     })
     .unwrap();
     assert!(out.metrics.tracking.min_temp_c >= 2.0 && out.metrics.tracking.max_temp_c <= 8.0, "{:?}", out.metrics);
-    assert!(out.rows.iter().all(|r| r.adaptive_mode.is_some()), "the self-tuning status is logged every sample");
-    assert!(out.rows.iter().any(|r| r.a1.is_some_and(|a| a.is_finite())));
+    assert!(mode_changes(&out).iter().all(|&(_, m)| m != AdaptiveMode::Fallback), "{:?}", mode_changes(&out));
+    let finite = |r: &hal_sim::sim::Row| [r.a1, r.a2, r.b0, r.b1].iter().all(|p| p.is_some_and(f32::is_finite));
+    assert!(out.rows.iter().all(finite), "a non-finite estimate");
 }
 
 fn sim_spec(scenario: &str, controller: ControllerSpec, plant: PlantChoice, load: Load) -> SimOutput {
@@ -124,7 +146,7 @@ fn sim_spec(scenario: &str, controller: ControllerSpec, plant: PlantChoice, load
         .unwrap()
 }
 
-/// The seed's conclusions on `piecewise` (§5.4, §6.4), with the self-tuning laws at their
+/// The method's conclusions on `piecewise`, with the self-tuning laws at their
 /// defaults, each carrier's own start model and seed 7: IGMVC holds the steady-state error
 /// within ±0.15 °C on the full load, the half load and H-TER II; GPC has a lower IAE than IGMVC
 /// and PI on all three; no controller takes the load below 2 °C. (Across seeds 1–8 two runs
@@ -164,7 +186,15 @@ fn seed_conclusions_hold_on_piecewise() {
 /// Self-tuning copes with the plant changing under it: at 4 °C the supply sags from 12 to 9 V
 /// after an hour (a quarter less cooling power) and the ambient jumps from 28 to 36 °C after two.
 /// Every law keeps the load within 2–8 °C, is back within ±0.3 °C of the setpoint in the last
-/// half hour, and its estimate has moved.
+/// half hour, and its estimate follows the plant: the estimated effect of the duty, B(1) =
+/// b0 + b1, is at least a quarter smaller in magnitude at the end than before the sag (less
+/// cooling per unit duty at 9 V). Measured: 80 %, 41 % and 75 % smaller for GMVC, IGMVC, GPC.
+///
+/// (The estimate does not converge to the plant's static gain in closed loop: on `piecewise`
+/// the final B(1)/A(1) ranges from −15 to −74 °C per unit duty against the plant's −42.8 at
+/// 4 °C, the excitation of a regulated load being weak. The estimator's structure is the
+/// subject of the start-model work; what the laws need, a stable A and a cooling B, is checked
+/// by the projection every sample.)
 #[test]
 fn self_tuning_laws_survive_a_plant_change_mid_run() {
     use hal_sim::scenario::{Change, Start};
@@ -195,7 +225,12 @@ fn self_tuning_laws_survive_a_plant_change_mid_run() {
         let tail = out.rows.iter().filter(|r| r.t_s >= 3.5 * 3600.0);
         let worst = tail.map(|r| (r.true_temp_c - 4.0).abs()).fold(0.0, f64::max);
         assert!(worst <= 0.3, "{c:?}: |T − 4| up to {worst} °C in the last half hour");
-        let b0 = |t: f64| out.rows.iter().find(|r| r.t_s >= t).and_then(|r| r.b0).unwrap();
-        assert!((b0(3500.0) - b0(14000.0)).abs() > 1e-4, "{c:?}: the estimate did not move");
+        let b_sum = |t: f64| {
+            let r = out.rows.iter().find(|r| r.t_s >= t).unwrap();
+            r.b0.unwrap() + r.b1.unwrap()
+        };
+        let (before, after) = (b_sum(3500.0), b_sum(14000.0));
+        assert!(before < 0.0 && after < 0.0, "{c:?}: B(1) {before} → {after} must cool");
+        assert!(after.abs() < 0.75 * before.abs(), "{c:?}: B(1) {before} → {after} did not follow the sag");
     }
 }

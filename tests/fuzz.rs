@@ -1,4 +1,4 @@
-//! 10⁷ arbitrary ADC samples through the whole step (issue 6): no panic, a finite duty in
+//! 10⁷ arbitrary ADC samples through the whole step: no panic, a finite duty in
 //! [0, 1] every sample, a finite filtered temperature whenever the step says the sensor is fine,
 //! and the supply switch open whenever cooling is held off for safety.
 //!

@@ -1,4 +1,4 @@
-//! Acceptance tests of the PRBS generator and the validation measures (issue 3).
+//! Acceptance tests of the PRBS generator and the validation measures.
 
 use hter::ident::batch::BatchLs;
 use hter::ident::model::{Arx, Structure};

@@ -1,6 +1,7 @@
 //! hter firmware: the vaccine carrier controller on a NUCLEO-L476RG.
 //!
-//! One task per concern, talking through static channels (STYLE.md, layer 3); `main` only
+//! One task per concern, talking through static channels (the tasks share no mutable
+//! state; each channel has one writer); `main` only
 //! initialises, restores what flash holds and spawns:
 //!
 //! ```text

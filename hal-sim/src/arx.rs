@@ -1,4 +1,4 @@
-//! `arx:A;B;K` model strings (SPEC §3) and the ideal ARX plant of `--plant arx:...`.
+//! `arx:A;B;K` model strings and the ideal ARX plant of `--plant arx:...`.
 //!
 //! `arx:-1.8,0.81;-0.02,-0.01;1` is A = 1 − 1.8 q⁻¹ + 0.81 q⁻², B = −0.02 − 0.01 q⁻¹, k = 1:
 //! `y(t) = 1.8 y(t−1) − 0.81 y(t−2) − 0.02 u(t−1) − 0.01 u(t−2)`, with y the temperature minus
@@ -135,8 +135,8 @@ mod tests {
     }
 
     #[test]
-    fn steady_state_holds_and_the_equation_is_the_spec_one() {
-        // The SPEC's example has a static gain of −3 °C per unit duty: it cannot hold 4 °C at
+    fn steady_state_holds_and_the_equation_is_the_documented_one() {
+        // The documented example model has a static gain of −3 °C per unit duty: it cannot hold 4 °C at
         // 28 °C ambient (it would need u = 8).
         let spec = parse("arx:-1.8,0.81;-0.02,-0.01;1").unwrap();
         assert!(ArxPlant::at_steady_state(spec, 28.0, 4.0).is_err());

@@ -1,4 +1,4 @@
-//! `hter monitor`: the cold-chain record of any CSV log (SPEC §3, §6), computed by the same
+//! `hter monitor`: the cold-chain record of any CSV log, computed by the same
 //! library monitor the firmware runs.
 
 use std::path::PathBuf;

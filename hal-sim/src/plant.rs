@@ -1,4 +1,4 @@
-//! Physical model of the thermoelectric vaccine carrier (SPEC §4), in f64.
+//! Physical model of the thermoelectric vaccine carrier, in f64.
 //!
 //! A lumped thermal network of five nodes, integrated with explicit Euler at ≤ 0.1 s (the
 //! fastest node, the modules' cold side, has a time constant of ≈ 15 s), with the SSR switched
@@ -19,14 +19,14 @@
 //! `I = (V − α ΔT)/R` (the Seebeck back-EMF reduces it) when on and 0 when off, and it draws
 //! `P = N(α I ΔT + I² R) = Q_h − Q_c`. Switched off, the module is a plain conductance K: heat
 //! flows back from the hot sink into the cabinet, which is why the carrier warms quickly with
-//! the SSR open (SPEC §1). Equations: Rowe (ed.), *CRC Handbook of Thermoelectrics*, 1995,
+//! the SSR open. Equations: Rowe (ed.), *CRC Handbook of Thermoelectrics*, 1995,
 //! ch. 54; Huang et al., "Design of thermoelectric coolers", Int. J. Refrig. 23, 2000.
 //!
 //! ## Parameters
 //!
 //! | parameter | H-TER I | H-TER II | unit | source / reasoning |
 //! | --- | --- | --- | --- | --- |
-//! | modules N | 1 | 1 | – | one 12 V module per carrier (the seed's direct + air-to-air heat pumps lumped into one cold side) |
+//! | modules N | 1 | 1 | – | one 12 V module per carrier (the direct and air-to-air heat pumps of the real carriers lumped into one cold side) |
 //! | Seebeck α | 0.053 | 0.053 | V/K | TEC1-12706 class (127 couples × 0.42 mV/K) |
 //! | resistance R | 2.0 | 2.0 | Ω | TEC1-12706 datasheet, at 25–50 °C |
 //! | conductance K | 0.55 | 0.55 | W/K | TEC1-12706 datasheet (ΔT_max 66 K, Q_max 50 W) |
@@ -42,7 +42,7 @@
 //! | insulation leak G_leak | 0.20 | 0.20 | W/K | 0.3 m² of 4 cm PU foam (k = 0.025) plus lid seal |
 //! | water C_w | 419 / 209 | 419 / 209 | J/K | 100 ml (full) / 50 ml (half) × 4186 J/(kg K) |
 //! | RTD lag τ_rtd | 20 | 20 | s | Pt100 in a stainless sheath in still water |
-//! | dead time L | 20 | 20 | s | transport through the water to the probe; the seed's step responses show tens of seconds |
+//! | dead time L | 20 | 20 | s | transport through the water to the probe; the real carriers' step responses show tens of seconds |
 //!
 //! Resulting open-loop behaviour (`cargo test -p hal-sim plant`): H-TER I full load pulls down
 //! from 28 °C to 4 °C in ≈ 30 min with the SSR fully on; the duty that holds 4 °C is ≈ 0.40,

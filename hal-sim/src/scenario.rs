@@ -1,4 +1,4 @@
-//! Scenarios (SPEC §5): what happens to the carrier during a simulated run.
+//! Scenarios: what happens to the carrier during a simulated run.
 //!
 //! A scenario is a setpoint schedule, an initial condition, a default duration and timed
 //! changes of the surroundings (ambient, extra heat, supply voltage). Built-in scenarios are

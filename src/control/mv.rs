@@ -296,6 +296,11 @@ mod tests {
 
     /// Runs a law in closed loop on the model itself (no noise) and returns the final y.
     fn closed_loop(incremental: bool, d: f32) -> (f32, f32) {
+        closed_loop_s(incremental, d, 0.3)
+    }
+
+    /// [`closed_loop`] with GMVC's control weight `s`.
+    fn closed_loop_s(incremental: bool, d: f32, s_weight: f32) -> (f32, f32) {
         // y(t) = 0.9 y(t−1) − 0.5 u(t−1) + d : a cooler with offset d (ambient share).
         let m = Model::new(&[-0.9], &[-0.5], &[], 1).unwrap();
         let mut s = MvState::new(0.0);
@@ -305,7 +310,7 @@ mod tests {
             let u = if incremental {
                 s.igmvc(&m, &IgmvcConfig { lambda: 0.1, p_pole: 0.0, t_pole: 0.0 }, 4.0).unwrap()
             } else {
-                s.gmvc(&m, &GmvcConfig { p: 1.0, r: 1.0, s: 0.3, p_pole: 0.0 }, 4.0).unwrap()
+                s.gmvc(&m, &GmvcConfig { p: 1.0, r: 1.0, s: s_weight, p_pole: 0.0 }, 4.0).unwrap()
             };
             s.track(u);
             y = 0.9 * y - 0.5 * u + d;
@@ -323,10 +328,25 @@ mod tests {
     }
 
     #[test]
-    fn gmvc_with_control_weight_leaves_an_offset_that_shrinks_with_s() {
-        let (y, _) = closed_loop(false, 2.8);
-        assert!((y - 4.0).abs() > 1e-3, "S > 0 should leave an offset, y = {y}");
-        assert!((y - 4.0).abs() < 1.0, "but a bounded one, y = {y}");
+    fn gmvc_offset_is_the_analytic_one_and_vanishes_as_s_goes_to_zero() {
+        // On y(t) = 0.9 y(t−1) − 0.5 u(t−1) + d with P = R = 1 and k = 1 (E = 1, F = 0.9,
+        // G = b0 = −0.5), the law u = b0 (w − d − 0.9 y) / (b0² + S²) settles where
+        // 0.1 y = d − 0.5 u: y = (c d + 0.25 (w − d)) / (0.1 c + 0.225) with c = 0.25 + S².
+        let (d, w) = (2.8f32, 4.0f32);
+        let mut last = 0.0f32;
+        for s_weight in [0.0f32, 0.1, 0.3, 1.0] {
+            let (y, _) = closed_loop_s(false, d, s_weight);
+            let c = 0.25 + s_weight * s_weight;
+            let want = (c * d + 0.25 * (w - d)) / (0.1 * c + 0.225);
+            assert!((y - want).abs() < 1e-3, "S = {s_weight}: y = {y}, analytic {want}");
+            let offset = (y - w).abs();
+            if s_weight == 0.0 {
+                assert!(offset < 1e-3, "no control weight, no offset: {offset}");
+            } else {
+                assert!(offset > last, "S = {s_weight}: offset {offset}, not above {last} of the smaller S");
+            }
+            last = offset;
+        }
     }
 
     #[test]

@@ -8,7 +8,7 @@
 //! counts. It reports the instructions per sample (the step plus the cold-chain monitor), a
 //! profile by part, the runner's flash and RAM, and ends with one JSON line. It exits non-zero
 //! when a bit differs or when a self-tuning GPC sample takes more than [`BUDGET_INSN`]
-//! instructions (issue 7). It then boots `pil`'s `failsafe` binary, which takes a panic, a
+//! instructions. It then boots `pil`'s `failsafe` binary, which takes a panic, a
 //! HardFault, an NMI and an unexpected interrupt through the firmware's stop path, each across a
 //! real system reset, and checks each path ([`failsafe`]); the JSON line's `failsafe` object
 //! says which passed, and any `false` fails the command.
@@ -17,7 +17,7 @@
 //! controller (the default self-tuning GPC, then each controller feature), prints flash
 //! (allocated sections with contents: what is programmed) and static RAM (allocated sections
 //! in SRAM: .data, .bss, .uninit) for each, and ends with one JSON line. It exits non-zero when
-//! a build exceeds [`FLASH_BUDGET`] or [`RAM_BUDGET`] (issue 5).
+//! a build exceeds [`FLASH_BUDGET`] or [`RAM_BUDGET`].
 //!
 //! `cargo xtask audit` — the release firmware image's fail-safe properties ([`audit`]): fault
 //! handlers that do more than spin, defmt-rtt that cannot block, the program in flash bank 1.
@@ -41,9 +41,10 @@ use hter::step::StepInput;
 
 /// Worst-case instructions allowed for one sample (step + monitor) with self-tuning GPC.
 const BUDGET_INSN: f64 = 5000.0;
-/// Release firmware flash budget, bytes (issue 5: 64 KiB with adaptive GPC and RLS).
+/// Release firmware flash budget, bytes: the product's 64 KiB, so that the firmware also fits
+/// parts much smaller than the NUCLEO's 1 MiB STM32L476RG.
 const FLASH_BUDGET: u64 = 64 * 1024;
-/// Release firmware static RAM budget, bytes (issue 5: 16 KiB).
+/// Release firmware static RAM budget, bytes: the product's 16 KiB (the L476RG's SRAM1 has 96).
 const RAM_BUDGET: u64 = 16 * 1024;
 /// The firmware builds `size` reports: (cargo features, what they run).
 const FIRMWARE_BUILDS: [(&str, &str); 5] = [
@@ -592,13 +593,25 @@ mod tests {
     }
 
     #[test]
-    fn host_replay_of_the_library_is_deterministic() {
-        let inputs: Vec<StepInput> = (0..50)
-            .map(|k| StepInput { t_ms: 10_000 * k as u64, counts: 49_000 + (k * 7919 % 13), setpoint_c: 4.0 })
+    fn host_replay_records_the_steps_duties_and_events() {
+        // 20 samples at 9 °C (cooling wanted), then an open sensor at sample 20 (t = 200 s).
+        let cfg = proto::CARRIER;
+        let warm = cfg.adc.counts(cfg.rtd.resistance(hter::units::Celsius(9.0)).unwrap());
+        let inputs: Vec<StepInput> = (0..30u32)
+            .map(|k| StepInput {
+                t_ms: 10_000 * u64::from(k),
+                counts: if k < 20 { warm + k % 3 } else { 65_535 },
+                setpoint_c: 4.0,
+            })
             .collect();
-        let a = run_host(proto::KIND_GPC, &inputs).unwrap();
-        let b = run_host(proto::KIND_GPC, &inputs).unwrap();
-        assert_eq!(a, b);
-        assert!(run_host(7, &inputs).is_err());
+        let host = run_host(proto::KIND_PI, &inputs).unwrap();
+        assert_eq!(host.len(), inputs.len());
+        assert!(host[..20].iter().all(|(d, _)| f32::from_bits(*d) > 0.0), "a warm load is cooled");
+        assert!(host[20..].iter().all(|(d, _)| f32::from_bits(*d) == 0.0), "an open sensor stops cooling");
+        // The open sensor is reported once, at its sample's time (low word, high word).
+        let open = hter::event::EventKind::SensorOpen.code();
+        assert_eq!(host[20].1, [(open, 200_000), (open, 0)]);
+        assert!(host[21..].iter().all(|(_, e)| e.is_empty()), "{:?}", &host[21..]);
+        assert!(run_host(7, &inputs).is_err(), "unknown controller kind");
     }
 }
