@@ -210,6 +210,22 @@ pub enum Mode {
     LimpHome,
 }
 
+impl Mode {
+    /// Every mode, in declaration order.
+    pub const ALL: [Mode; 4] = [Mode::Normal, Mode::SensorFault, Mode::FreezeGuard, Mode::LimpHome];
+
+    /// Stable snake_case name: the `mode` column of `hter sim --csv` and `hter log2csv` (the
+    /// board's telemetry prints the variant name, which `hter log2csv` maps to this).
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Normal => "normal",
+            Mode::SensorFault => "sensor_fault",
+            Mode::FreezeGuard => "freeze_guard",
+            Mode::LimpHome => "limp_home",
+        }
+    }
+}
+
 /// One sample's output.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepOutput {

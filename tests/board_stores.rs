@@ -4,6 +4,7 @@
 
 use hal_sim::scenario::Scenario;
 use hal_sim::sim::{run, ControllerChoice, ControllerSpec, Fault, SimOptions, SimOutput};
+use hter::control::AdaptiveMode;
 use hter::persist::{ModelRecord, ResetCause, Save};
 use hter::profile::{samples, HISTORY_SAVE_S, MODEL_SAVE_S};
 
@@ -28,7 +29,7 @@ fn models(out: &SimOutput) -> Vec<(f64, ModelRecord)> {
 
 /// Rows in (t0, t1] in which the self-tuner's estimate was trusted.
 fn adaptive_rows(out: &SimOutput, t0: f64, t1: f64) -> usize {
-    out.rows.iter().filter(|r| r.t_s > t0 && r.t_s <= t1 && r.adaptive_mode == Some("adaptive")).count()
+    out.rows.iter().filter(|r| r.t_s > t0 && r.t_s <= t1 && r.adaptive_mode == Some(AdaptiveMode::Adaptive)).count()
 }
 
 #[test]
@@ -58,7 +59,7 @@ fn a_day_stores_the_history_hourly_and_the_model_after_every_4_h_of_trust() {
     }
     for (t, rec) in &stored {
         let row = out.rows.iter().find(|r| r.t_s == *t).unwrap();
-        assert_eq!(row.adaptive_mode, Some("adaptive"), "stored at {t} s");
+        assert_eq!(row.adaptive_mode, Some(AdaptiveMode::Adaptive), "stored at {t} s");
         assert_eq!(rec.theta, [row.a1, row.a2, row.b0, row.b1].map(Option::unwrap), "stored at {t} s");
         assert_eq!(rec.k, 5);
     }

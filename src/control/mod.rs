@@ -110,6 +110,20 @@ pub enum AdaptiveMode {
     Fallback,
 }
 
+impl AdaptiveMode {
+    /// Every mode, in declaration order.
+    pub const ALL: [AdaptiveMode; 3] = [AdaptiveMode::Adaptive, AdaptiveMode::Frozen, AdaptiveMode::Fallback];
+
+    /// Stable snake_case name: the `adaptive_mode` column of `hter sim --csv`.
+    pub fn name(self) -> &'static str {
+        match self {
+            AdaptiveMode::Adaptive => "adaptive",
+            AdaptiveMode::Frozen => "frozen",
+            AdaptiveMode::Fallback => "fallback",
+        }
+    }
+}
+
 /// What an adaptive controller exposes for logging.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

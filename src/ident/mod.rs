@@ -81,8 +81,9 @@
 //! - [`rls`]: f32 U-D RLS ([`rls::Rls`], [`rls::RlsConfig`], [`rls::EstError`]).
 //! - [`recursive`]: RELS ([`recursive::Rels`]) and a record runner for RLS/RELS.
 //! - [`batch`]: f64 batch least squares and instrumental variables through the normal
-//!   equations.
+//!   equations, and both run on a whole record.
 //! - [`oe`]: f64 output-error refinement (Levenberg–Marquardt on the simulated-output error).
+//! - [`oe_search`]: the multi-start output-error search over [`oe`] (f64, host side).
 //! - [`prbs`]: PRBS generator for the SSR.
 //! - [`validate`]: MSE, fit, roots, autocorrelation, order choice (f64, host side).
 #![allow(non_snake_case)]
@@ -90,6 +91,7 @@
 pub mod batch;
 pub mod model;
 pub mod oe;
+pub mod oe_search;
 pub mod prbs;
 pub mod recursive;
 pub mod rls;
