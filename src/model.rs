@@ -96,11 +96,11 @@ impl Model {
     /// Splits θ = [a1 … a_na, b0 … b_{nb−1}, c1 … c_nc] (the identification parameter vector)
     /// into a model with delay `k`. θ must hold exactly na + nb + nc values.
     pub fn from_theta(theta: &[f32], na: usize, nb: usize, nc: usize, k: usize) -> Result<Model, ModelError> {
-        if theta.len() != na + nb + nc {
+        if na.checked_add(nb).and_then(|n| n.checked_add(nc)) != Some(theta.len()) {
             return Err(ModelError::Order);
         }
-        let (a, rest) = theta.split_at(na);
-        let (b, c) = rest.split_at(nb);
+        let (a, rest) = theta.split_at_checked(na).ok_or(ModelError::Order)?;
+        let (b, c) = rest.split_at_checked(nb).ok_or(ModelError::Order)?;
         Model::new(a, b, c, k)
     }
 
@@ -343,6 +343,7 @@ mod tests {
         let seven = [0.1f32; 7];
         assert_eq!(Model::new(&seven, &[1.0], &[], 1), Err(ModelError::Order));
         assert_eq!(Model::from_theta(&[0.1; 8], 7, 1, 0, 1), Err(ModelError::Order));
+        assert_eq!(Model::from_theta(&[0.1; 2], usize::MAX, 3, 0, 1), Err(ModelError::Order));
         let m = Model::new(&[0.1; MAX_NA], &[1.0], &[], 1).unwrap();
         assert!(m.a_is_stable());
         assert!(!Model::new(&[-4.0, 6.0, -4.0, 1.0], &[1.0], &[], 1).unwrap().a_is_stable());
