@@ -5,7 +5,7 @@
 //! - the load is outside +2…+8 °C now (the vaccines are at risk this minute), or
 //! - the step is not in control: a sensor fault (cooling is off) or limping home on a shorted
 //!   SSR ([`Mode::SensorFault`], [`Mode::LimpHome`]), or
-//! - something was detected since the last acknowledgement: a cold-chain alarm of SPEC §6
+//! - something was detected since the last acknowledgement: a cold-chain alarm
 //!   (`heat_10h`, `freeze_60min`, …) or a hardware fault event (sensor, SSR, supply, lid,
 //!   offset). These latch: a fault that cleared by itself still needs a look, and the one who
 //!   carries the box may not have been there when it happened.

@@ -1,5 +1,5 @@
 //! Generalized Predictive Control (Clarke, Mohtadi & Tuffs, "Generalized predictive control —
-//! Part I. The basic algorithm", Automatica 23(2), 1987), SPEC §3.
+//! Part I. The basic algorithm", Automatica 23(2), 1987).
 //!
 //! Model (CARIMA, [`Model`]): `A y(t) = q^−k B u(t) + C e(t)/Δ`, Δ = 1 − q⁻¹. Cost
 //!
@@ -71,7 +71,7 @@ pub struct GpcConfig {
 impl GpcConfig {
     /// N1 = 1, N2 = 30 (5 min at Ts = 10 s, the closed-loop settling scale), Nu = 3, λ = 3.
     /// λ weighs Δu² (duty in [0, 1], so Δu ≤ 1) against squared errors in °C summed over 30
-    /// predictions, with step-response coefficients of tens of °C per unit duty: the seed's
+    /// predictions, with step-response coefficients of tens of °C per unit duty: values of
     /// 0.01–1 are negligible at this scale and let GPC bang the SSR between 0 and 1 on the
     /// hal-sim plant (its unmodelled lag). Without a T-filter λ = 10 was best in a sweep of 1, 3,
     /// 10, 30; with the self-tuner's T-filter (τ = 0.8, `AdaptiveConfig::t_filter`) λ = 3 gave

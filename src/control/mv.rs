@@ -1,6 +1,6 @@
 //! Generalized minimum-variance control: GMVC (Clarke & Gawthrop, "Self-tuning controller",
 //! Proc. IEE 122(9), 1975; "Self-tuning control", Proc. IEE 126(6), 1979) and its incremental
-//! form IGMVC (seed §5.3.1–5.3.2).
+//! form IGMVC, which weighs Δu instead of u and so has no steady-state offset.
 //!
 //! **GMVC** minimises `J = E{(P y(t+k) − R w(t))² + (S u(t))²}` with scalar weights P, R, S.
 //! With `P = A E + q^−k F` ([`super::diophantine`]) and `G = E B`,
@@ -11,7 +11,8 @@
 //!
 //! where d is the constant offset of the model (`A y = q^−k B u + d`, the ambient's share of
 //! the load temperature), tracked by a slow filter of the equation error. S > 0 trades
-//! control effort for a steady-state offset, as the seed observed.
+//! control effort for a steady-state offset that grows with S (the
+//! `gmvc_offset_is_the_analytic_one_and_vanishes_as_s_goes_to_zero` test derives it).
 //!
 //! **P as a polynomial.** P is `p (1 − α q⁻¹)/(1 − α)` (P(1) = p, so the static tracking is
 //! unchanged). With S = 0 the closed loop of GMVC is `P B = 0`, and IGMVC's is
@@ -67,8 +68,8 @@ pub struct GmvcConfig {
 
 impl GmvcConfig {
     /// P = R = 1 with α = 0.9, S = 0.05: α moves the closed-loop poles off B's unstable zero
-    /// (module docs); S is a small control weight, because the seed's Fig. 5.14 shows the offset
-    /// growing with S. Best worst-case steady-state error on `piecewise` (full, half load,
+    /// (module docs); S is a small control weight, because the offset grows
+    /// with S. Best worst-case steady-state error on `piecewise` (full, half load,
     /// H-TER II) in a sweep of S ∈ {0, 0.02, 0.05}, α ∈ {0, 0.9, 0.93, 0.95}
     /// (`hter sim --scenario piecewise --controller gmvc --s-weight S --p-pole A --json`).
     pub const DEFAULT: GmvcConfig = GmvcConfig { p: 1.0, r: 1.0, s: 0.05, p_pole: 0.9 };
