@@ -64,8 +64,8 @@ fn step(c: &mut Criterion) {
 }
 
 fn parts(c: &mut Criterion) {
-    let acfg: AdaptiveConfig = proto::adaptive_config();
-    let m = AdaptiveConfig::HTER1_MODEL;
+    let acfg: AdaptiveConfig = proto::ADAPTIVE;
+    let m = hter::profile::START_MODEL_HTER1;
 
     // RLS: 5 parameters (the self-tuning controller's) and 4, on a fixed regressor cycle.
     let phis: Vec<[f32; 5]> = (0..64)
@@ -74,7 +74,7 @@ fn parts(c: &mut Criterion) {
             [-y, -(y - 0.01), 0.45 + 0.1 * (k as f32 * 0.7).cos(), 0.45, 1.0]
         })
         .collect();
-    let mut rls5 = Rls::new(&acfg.rls, SVector::<f32, 5>::from([m.a[0], m.a[1], m.b[0], m.b[1], 0.0]));
+    let mut rls5 = Rls::new(&acfg.rls, SVector::<f32, 5>::from([m.a()[0], m.a()[1], m.b()[0], m.b()[1], 0.0]));
     let mut k = 0;
     c.bench_function("rls_update_5", |b| {
         b.iter(|| {
@@ -83,7 +83,7 @@ fn parts(c: &mut Criterion) {
             rls5.update(&acfg.rls, black_box(&p), black_box(4.0 + 0.001 * k as f32))
         })
     });
-    let mut rls4 = Rls::new(&acfg.rls, SVector::<f32, 4>::from([m.a[0], m.a[1], m.b[0], m.b[1]]));
+    let mut rls4 = Rls::new(&acfg.rls, SVector::<f32, 4>::from([m.a()[0], m.a()[1], m.b()[0], m.b()[1]]));
     c.bench_function("rls_update_4", |b| {
         b.iter(|| {
             k = (k + 1) % phis.len();
@@ -103,7 +103,7 @@ fn parts(c: &mut Criterion) {
 
     // Diophantine identity for Ã of the same model and k = 5 (GMVC/IGMVC; GPC does not need it).
     let at = m.atilde();
-    c.bench_function("diophantine_k5", |b| b.iter(|| diophantine::solve(black_box(&at[..m.na + 2]), &[1.0], 5)));
+    c.bench_function("diophantine_k5", |b| b.iter(|| diophantine::solve(black_box(&at[..m.na() + 2]), &[1.0], 5)));
 
     // Callendar–Van Dusen inversion, ohms → °C (Pt100 near 4 °C).
     let rtd = proto::CARRIER.rtd;

@@ -5,7 +5,7 @@
 //! - the load is outside +2…+8 °C now (the vaccines are at risk this minute), or
 //! - the step is not in control: a sensor fault (cooling is off) or limping home on a shorted
 //!   SSR ([`Mode::SensorFault`], [`Mode::LimpHome`]), or
-//! - something was detected since the last acknowledgement: a cold-chain alarm of SPEC §6
+//! - something was detected since the last acknowledgement: a cold-chain alarm
 //!   (`heat_10h`, `freeze_60min`, …) or a hardware fault event (sensor, SSR, supply, lid,
 //!   offset). These latch: a fault that cleared by itself still needs a look, and the one who
 //!   carries the box may not have been there when it happened.
@@ -48,12 +48,17 @@ pub enum Indication {
 }
 
 impl Indication {
+    /// Every indication, in declaration order.
+    pub const ALL: [Indication; 4] =
+        [Indication::Off, Indication::NotInControl, Indication::OutOfRange, Indication::Unacknowledged];
+
     /// True if the indicator is on.
     pub fn is_on(self) -> bool {
         self != Indication::Off
     }
 
-    /// Stable snake_case name, as the simulator's CSV (`alarm` column) spells it.
+    /// Stable snake_case name: the `alarm` column of `hter sim --csv` and `hter log2csv` (the
+    /// board's telemetry prints the variant name, which `hter log2csv` maps to this).
     pub fn name(self) -> &'static str {
         match self {
             Indication::Off => "off",
@@ -155,35 +160,34 @@ mod tests {
     }
 
     #[test]
-    fn every_fault_kind_asks_for_attention() {
+    fn exactly_the_faults_and_a_watchdog_bite_ask_for_attention() {
+        use crate::persist::ResetCause;
         use EventKind::*;
-        for k in [
+        let attention = [
             SensorOpen,
             SensorShort,
             SensorOutOfRange,
             SensorStuck,
             SensorSpikes,
             SensorOffset,
+            ReferenceOutOfRange,
             SsrStuckOn,
             SsrStuckOff,
             SupplySag,
+            SupplySwitchShorted,
             LidOpen,
-        ] {
-            assert!(needs_attention(k), "{k:?}");
+            ControllerNonFinite,
+            Restarted(ResetCause::Watchdog),
+        ];
+        for k in EventKind::ALL {
+            assert_eq!(needs_attention(k), attention.contains(&k), "{k:?}");
         }
-        assert!(needs_attention(Restarted(crate::persist::ResetCause::Watchdog)));
-        for k in [
-            Restarted(crate::persist::ResetCause::BrownOut),
-            Restarted(crate::persist::ResetCause::Other),
-            SensorRecovered,
-            FreezeGuardTripped,
-            FreezeGuardReleased,
-            SetpointClamped,
-            AdaptiveEngaged,
-            AdaptiveFrozen,
-            FallbackEngaged,
-        ] {
-            assert!(!needs_attention(k), "{k:?}");
+    }
+
+    #[test]
+    fn indication_names_are_unique() {
+        for (i, a) in Indication::ALL.iter().enumerate() {
+            assert!(Indication::ALL[i + 1..].iter().all(|b| a.name() != b.name()), "{a:?}");
         }
     }
 }

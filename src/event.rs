@@ -75,9 +75,47 @@ pub enum EventKind {
 }
 
 impl EventKind {
-    /// A detected hardware fault of the carrier (sensor, SSR, supply, lid): what
-    /// `hter sim --fault` can inject and the supervisor reports. Restarts, guard actions and
-    /// the self-tuner's mode changes are not.
+    /// Every kind, in declaration order (each reset cause and fail-safe stop its own kind).
+    pub const ALL: [EventKind; 29] = {
+        use crate::failsafe::StopKind;
+        use crate::persist::ResetCause;
+        [
+            EventKind::SensorOpen,
+            EventKind::SensorShort,
+            EventKind::SensorOutOfRange,
+            EventKind::SensorStuck,
+            EventKind::SensorSpikes,
+            EventKind::SsrStuckOn,
+            EventKind::SsrStuckOff,
+            EventKind::SensorOffset,
+            EventKind::SupplySag,
+            EventKind::LidOpen,
+            EventKind::SensorRecovered,
+            EventKind::FreezeGuardTripped,
+            EventKind::FreezeGuardReleased,
+            EventKind::SetpointClamped,
+            EventKind::ControllerNonFinite,
+            EventKind::AdaptiveEngaged,
+            EventKind::AdaptiveFrozen,
+            EventKind::FallbackEngaged,
+            EventKind::Restarted(ResetCause::Watchdog),
+            EventKind::Restarted(ResetCause::BrownOut),
+            EventKind::Restarted(ResetCause::Other),
+            EventKind::BoardFault(StopKind::Panic),
+            EventKind::BoardFault(StopKind::HardFault),
+            EventKind::BoardFault(StopKind::Nmi),
+            EventKind::BoardFault(StopKind::UnexpectedInterrupt),
+            EventKind::BoardFault(StopKind::ControlStall),
+            EventKind::FlashPageLost,
+            EventKind::SupplySwitchShorted,
+            EventKind::ReferenceOutOfRange,
+        ]
+    };
+
+    /// A detected hardware fault of the carrier (sensor, front end, SSR, supply, supply
+    /// switch, lid): the supervisor's detections, each of which asks for a person
+    /// ([`crate::alarm::needs_attention`]). Restarts, guard actions, the self-tuner's mode
+    /// changes and the board's fail-safe stops are not.
     pub fn is_hardware_fault(self) -> bool {
         matches!(
             self,
@@ -237,40 +275,28 @@ mod tests {
     use super::*;
 
     #[test]
-    fn event_codes_are_unique() {
-        use crate::persist::ResetCause;
-        let all = [
-            EventKind::SensorOpen,
-            EventKind::SensorShort,
-            EventKind::SensorOutOfRange,
-            EventKind::SensorStuck,
-            EventKind::SensorSpikes,
-            EventKind::SsrStuckOn,
-            EventKind::SsrStuckOff,
-            EventKind::SensorOffset,
-            EventKind::SupplySag,
-            EventKind::LidOpen,
-            EventKind::SensorRecovered,
-            EventKind::FreezeGuardTripped,
-            EventKind::FreezeGuardReleased,
-            EventKind::SetpointClamped,
-            EventKind::ControllerNonFinite,
-            EventKind::AdaptiveEngaged,
-            EventKind::AdaptiveFrozen,
-            EventKind::FallbackEngaged,
-            EventKind::Restarted(ResetCause::Watchdog),
-            EventKind::Restarted(ResetCause::BrownOut),
-            EventKind::Restarted(ResetCause::Other),
-            EventKind::FlashPageLost,
-            EventKind::SupplySwitchShorted,
-            EventKind::ReferenceOutOfRange,
-        ];
-        let faults = crate::failsafe::StopKind::ALL.map(EventKind::BoardFault);
-        let all: Vec<EventKind> = all.into_iter().chain(faults).collect();
+    fn event_codes_and_names_are_unique() {
+        let all = EventKind::ALL;
         for (i, a) in all.iter().enumerate() {
             for b in &all[i + 1..] {
+                assert_ne!(a, b);
                 assert_ne!(a.code(), b.code(), "{a:?} {b:?}");
+                assert_ne!(a.name(), b.name(), "{a:?} {b:?}");
             }
+        }
+    }
+
+    #[test]
+    fn every_reset_cause_and_stop_is_listed() {
+        for c in [
+            crate::persist::ResetCause::Watchdog,
+            crate::persist::ResetCause::BrownOut,
+            crate::persist::ResetCause::Other,
+        ] {
+            assert!(EventKind::ALL.contains(&EventKind::Restarted(c)), "{c:?}");
+        }
+        for k in crate::failsafe::StopKind::ALL {
+            assert!(EventKind::ALL.contains(&EventKind::BoardFault(k)), "{k:?}");
         }
     }
 

@@ -10,8 +10,13 @@
 //! Layout:
 //! - [`units`]: `Celsius`, `Ohms`, `Duty` newtypes for values that cross modules.
 //! - [`rtd`], [`adc`], [`calib`], [`filter`]: counts → ohms → °C → calibrated → filtered.
-//! - [`control`]: the [`control::Controller`] trait and the baseline controllers.
-//! - [`ident`]: ARX/ARMAX models, LS/RLS/RELS estimators, PRBS, validation.
+//! - [`model`]: the one ARX/CARIMA [`model::Model`] that identification estimates and the
+//!   model-based laws are designed from.
+//! - [`control`]: the [`control::Controller`] trait, the baseline controllers, the model-based
+//!   laws and the self-tuner.
+//! - [`profile`]: the board's tuning of those controllers and its save cadences, written once
+//!   for the firmware, the processor-in-the-loop runner and the simulator.
+//! - [`ident`]: ARX/ARMAX structures, LS/RLS/RELS estimators, PRBS, validation.
 //! - [`event`]: timestamped events the step reports (sensor faults, guard actions, mode changes).
 //! - [`failsafe`]: the safe-outputs seam, the reset-surviving reason record and the heartbeat
 //!   of the fail-loud alarm.
@@ -41,7 +46,10 @@ pub mod failsafe;
 pub mod filter;
 pub mod hal;
 pub mod ident;
+pub mod model;
+pub(crate) mod numerics;
 pub mod persist;
+pub mod profile;
 pub mod rtd;
 pub mod step;
 pub mod supervisor;

@@ -22,8 +22,9 @@
 use crate::calib::TwoPoint;
 use crate::coldchain::{AlarmKind, ColdChainMonitor, Excursion, Raised, Side};
 use crate::control::adaptive::{model_from_theta, plausible_model, AdaptiveConfig};
-use crate::control::model::{Model, MAX_K};
+use crate::control::{AdaptiveMode, Controller};
 use crate::failsafe::{StopInfo, StopKind};
+use crate::model::{Model, MAX_K};
 
 #[cfg(feature = "persist-flash")]
 pub mod flash;
@@ -190,12 +191,14 @@ impl ModelRecord {
     pub const LEN: usize = 2 + 4 * 4 + 1 + 4;
 
     /// The record of a second-order model (what [`crate::control::adaptive::SelfTuning`]
-    /// estimates); `None` for other orders or a delay that does not fit.
+    /// estimates); `None` for other orders.
     pub fn from_model(m: &Model) -> Option<Self> {
-        if m.na != 2 || m.nb != 2 || m.k == 0 || m.k > MAX_K {
+        if m.na() != 2 || m.nb() != 2 {
             return None;
         }
-        Some(ModelRecord { theta: [m.a[0], m.a[1], m.b[0], m.b[1]], k: m.k as u8 })
+        let (a, b) = (m.a(), m.b());
+        // A model's delay is 1 … MAX_K, which fits a byte.
+        Some(ModelRecord { theta: [a[0], a[1], b[0], b[1]], k: m.k() as u8 })
     }
 
     /// The bytes to store.
@@ -705,6 +708,19 @@ impl Recorder {
         Recorded { raised, save_due }
     }
 
+    /// What to store after the sample `r` recorded: the history at once when it raised an alarm
+    /// ([`Save::AlarmHistory`], which skips the write gate's hold-off), or when the periodic
+    /// store is due ([`Save::History`]).
+    pub fn due_save(&self, r: &Recorded) -> Option<Save> {
+        if r.raised.iter().flatten().next().is_some() {
+            Some(Save::AlarmHistory(self.history()))
+        } else if r.save_due {
+            Some(Save::History(self.history()))
+        } else {
+            None
+        }
+    }
+
     /// This boot's monitor (MKT, extremes, excursions since boot).
     pub fn monitor(&self) -> &ColdChainMonitor {
         &self.monitor
@@ -716,14 +732,47 @@ impl Recorder {
     }
 }
 
+/// When to store the self-tuner's trusted model: once every `every_samples` samples in which
+/// its estimate was trusted (mode [`AdaptiveMode::Adaptive`]), so a board that is not learning
+/// (frozen, on its fallback, or not self-tuning) never rewrites the same model. The count
+/// starts again at every boot; a power cut loses at most the learning since the last store.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ModelCadence {
+    every_samples: u32,
+    trusted_samples: u32,
+}
+
+impl ModelCadence {
+    /// A store every `every_samples` trusted samples (at least 1;
+    /// [`crate::profile::MODEL_SAVE_S`] in samples on the board).
+    pub fn new(every_samples: u32) -> Self {
+        ModelCadence { every_samples: every_samples.max(1), trusted_samples: 0 }
+    }
+
+    /// Counts one step of `controller` (after `Carrier::step`), `mode` the self-tuner's mode
+    /// that step reported (`StepOutput::status`; `None` for a controller that learns nothing);
+    /// the record to store when one is due. A due store of a model [`ModelRecord`] cannot hold
+    /// (not second order) is skipped, and the count starts again.
+    pub fn push(&mut self, mode: Option<AdaptiveMode>, controller: &impl Controller) -> Option<ModelRecord> {
+        if mode != Some(AdaptiveMode::Adaptive) {
+            return None;
+        }
+        self.trusted_samples = self.trusted_samples.saturating_add(1);
+        if self.trusted_samples < self.every_samples {
+            return None;
+        }
+        self.trusted_samples = 0;
+        controller.trusted_model().as_ref().and_then(ModelRecord::from_model)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::control::fixed::Law;
-    use crate::control::gpc::GpcConfig;
+    use crate::profile::{ADAPTIVE_GPC, START_MODEL_HTER1, START_MODEL_HTER2};
 
     fn cfg() -> AdaptiveConfig {
-        AdaptiveConfig::default_for(Law::Gpc(GpcConfig::DEFAULT))
+        ADAPTIVE_GPC
     }
 
     /// RCC_CSR values as RM0351 documents them: the reset value after a power-on (BORRSTF and
@@ -748,7 +797,7 @@ mod tests {
 
     #[test]
     fn model_round_trip_and_restore() {
-        let rec = ModelRecord::from_model(&AdaptiveConfig::HTER2_MODEL).unwrap();
+        let rec = ModelRecord::from_model(&START_MODEL_HTER2).unwrap();
         assert_eq!(rec.k, 6);
         let bytes = rec.encode();
         assert_eq!(bytes.len(), ModelRecord::LEN);
@@ -757,15 +806,18 @@ mod tests {
         let restored = rec.restore(&cfg()).unwrap();
         assert_eq!(restored.k, 6);
         let m = restored.initial.unwrap();
-        assert_eq!(m.a[..2], AdaptiveConfig::HTER2_MODEL.a[..2]);
-        assert_eq!(m.b[..2], AdaptiveConfig::HTER2_MODEL.b[..2]);
+        assert_eq!(m.a()[..2], START_MODEL_HTER2.a()[..2]);
+        assert_eq!(m.b()[..2], START_MODEL_HTER2.b()[..2]);
         // GPC's T-filter is rebuilt from the configuration, as for a live estimate.
-        assert_eq!(m.nc, 1);
+        assert_eq!(m.nc(), 1);
+        // Only the self-tuner's second-order structure has a record.
+        let first_order = Model::new(&[-0.9], &[-0.5], &[], 3).unwrap();
+        assert_eq!(ModelRecord::from_model(&first_order), None);
     }
 
     #[test]
     fn every_single_bit_flip_is_caught() {
-        let bytes = ModelRecord::from_model(&AdaptiveConfig::HTER1_MODEL).unwrap().encode();
+        let bytes = ModelRecord::from_model(&START_MODEL_HTER1).unwrap().encode();
         for i in 0..bytes.len() * 8 {
             let mut b = bytes;
             b[i / 8] ^= 1 << (i % 8);
@@ -893,8 +945,10 @@ mod tests {
         for i in 0..359 {
             assert!(!rec.push(i * 10_000, 5.0).save_due, "sample {i}");
         }
-        assert!(rec.push(3_590_000, 5.0).save_due, "hourly store");
+        let due = rec.push(3_590_000, 5.0);
+        assert!(due.save_due, "hourly store");
         let hourly = rec.history();
+        assert_eq!(rec.due_save(&due), Some(Save::History(hourly)));
         assert_eq!(hourly.recorded_s, 86_400 + 3590);
         // Freezing: the freeze_60min alarm stores at once, counted once; the excursion is on
         // the record's clock.
@@ -904,7 +958,11 @@ mod tests {
             if out.raised.iter().flatten().any(|a| a.kind == AlarmKind::Freeze60min) {
                 assert!(out.save_due, "an alarm is stored at once");
                 stored_alarm = Some(rec.history());
+                assert_eq!(rec.due_save(&out), Some(Save::AlarmHistory(rec.history())));
                 assert_eq!(i, 360, "triggers exactly 60 min after the run began");
+            } else {
+                let want = out.save_due.then(|| Save::History(rec.history()));
+                assert_eq!(rec.due_save(&out), want, "sample {i}");
             }
         }
         let h = stored_alarm.expect("the alarm triggered");
@@ -914,6 +972,57 @@ mod tests {
         assert_eq!(h.last[3].map(|e| (e.side, e.start_s)), Some((Side::Cold, 86_400.0 + 3600.0)));
         assert_eq!(HistoryRecord::decode(&h.encode()), Ok(h));
         assert_eq!(rec.history().alarms_of(AlarmKind::Freeze60min), 1);
+    }
+
+    /// A controller whose mode and trusted model the test sets.
+    struct Scripted {
+        mode: Option<AdaptiveMode>,
+        trusted: Option<Model>,
+    }
+
+    impl Controller for Scripted {
+        fn update(&mut self, _: &crate::control::ControlInput) -> Result<f32, crate::control::ControlError> {
+            Ok(0.0)
+        }
+        fn track(&mut self, _: &crate::control::ControlInput, _: f32) {}
+        fn name(&self) -> &'static str {
+            "scripted"
+        }
+        fn status(&self) -> Option<crate::control::ControllerStatus> {
+            self.mode.map(|mode| crate::control::ControllerStatus {
+                mode,
+                theta: [0.0; 4],
+                trace_p: 0.0,
+                prediction_error: 0.0,
+            })
+        }
+        fn trusted_model(&self) -> Option<Model> {
+            self.trusted
+        }
+    }
+
+    #[test]
+    fn the_model_is_stored_after_every_n_trusted_samples_only() {
+        let mut cadence = ModelCadence::new(3);
+        let mut c = Scripted { mode: Some(AdaptiveMode::Adaptive), trusted: Some(START_MODEL_HTER2) };
+        let want = ModelRecord::from_model(&START_MODEL_HTER2);
+        assert_eq!([cadence.push(c.mode, &c), cadence.push(c.mode, &c)], [None, None]);
+        // Frozen and fallback samples do not count: the third trusted sample stores.
+        for mode in [Some(AdaptiveMode::Frozen), Some(AdaptiveMode::Fallback), None] {
+            c.mode = mode;
+            assert_eq!(cadence.push(c.mode, &c), None, "{mode:?}");
+        }
+        c.mode = Some(AdaptiveMode::Adaptive);
+        assert_eq!(cadence.push(c.mode, &c), want);
+        // The count starts again after a store.
+        assert_eq!([cadence.push(c.mode, &c), cadence.push(c.mode, &c), cadence.push(c.mode, &c)], [None, None, want]);
+        // A model without a record (not second order) is skipped, and the count restarts.
+        c.trusted = Some(Model::new(&[-0.9], &[-0.5], &[], 3).unwrap());
+        assert_eq!([cadence.push(c.mode, &c), cadence.push(c.mode, &c), cadence.push(c.mode, &c)], [None, None, None]);
+        c.trusted = Some(START_MODEL_HTER2);
+        assert_eq!([cadence.push(c.mode, &c), cadence.push(c.mode, &c), cadence.push(c.mode, &c)], [None, None, want]);
+        // At least one sample between stores.
+        assert_eq!(ModelCadence::new(0).push(c.mode, &c), want);
     }
 
     #[test]

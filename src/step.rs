@@ -114,6 +114,22 @@ pub enum Mode {
     LimpHome,
 }
 
+impl Mode {
+    /// Every mode, in declaration order.
+    pub const ALL: [Mode; 4] = [Mode::Normal, Mode::SensorFault, Mode::FreezeGuard, Mode::LimpHome];
+
+    /// Stable snake_case name: the `mode` column of `hter sim --csv` and `hter log2csv` (the
+    /// board's telemetry prints the variant name, which `hter log2csv` maps to this).
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Normal => "normal",
+            Mode::SensorFault => "sensor_fault",
+            Mode::FreezeGuard => "freeze_guard",
+            Mode::LimpHome => "limp_home",
+        }
+    }
+}
+
 /// One sample's output.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepOutput {
@@ -251,7 +267,9 @@ impl<C: Controller> Carrier<C> {
 
         let w = self.setpoint(setpoint_c, &mut emit);
         let ci = ControlInput { y_c: temp_c, w_c: w };
-        let requested = if self.supervisor.trusts_reading() { self.controller.update(&ci) } else { 0.0 };
+        let requested = if self.supervisor.trusts_reading() { self.controller.update(&ci) } else { Ok(0.0) };
+        // A failed controller's request is NaN: the check below applies the safe state and says so.
+        let requested = requested.unwrap_or(f32::NAN);
         let duty = if requested.is_finite() {
             Duty::saturating(requested)
         } else {
@@ -316,7 +334,7 @@ impl<C: Controller> Carrier<C> {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::control::{AnyController, Pi, PiConfig};
+    use crate::control::AnyController;
     use proptest::prelude::*;
 
     /// The counts the default front end reads at `t` °C.
@@ -325,9 +343,9 @@ pub(crate) mod tests {
         cfg.adc.counts(cfg.rtd.resistance(Celsius(t)).unwrap())
     }
 
-    /// A default carrier under the default PI.
+    /// A default carrier under the profile's PI.
     pub(crate) fn pi_carrier() -> Carrier<AnyController> {
-        Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)))
+        Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(crate::profile::pi(CarrierConfig::DEFAULT.ts_s)))
     }
 
     /// The kinds of a sample's events, in order.

@@ -3,6 +3,8 @@
 use hal_sim::plant::Load;
 use hal_sim::scenario::Scenario;
 use hal_sim::sim::{run, ControllerChoice, ControllerSpec, PlantChoice, SimOptions, SimOutput};
+use hter::alarm::Indication;
+use hter::control::AdaptiveMode;
 
 fn sim(scenario: &str, controller: ControllerChoice, plant: PlantChoice, load: Load) -> SimOutput {
     sim_spec(scenario, ControllerSpec::new(controller), plant, load)
@@ -14,18 +16,18 @@ fn sim(scenario: &str, controller: ControllerChoice, plant: PlantChoice, load: L
 fn pi_pulls_down_from_28_to_4_without_freezing_and_holds() {
     let out = sim("step", ControllerChoice::Pi, PlantChoice::Hter1, Load::Full);
     let m = &out.metrics;
-    assert!(m.min_temp_c >= 2.0, "load went down to {} °C", m.min_temp_c);
-    let settle = m.settle_time_s.expect("never reached 4 ± 0.5 °C");
+    assert!(m.tracking.min_temp_c >= 2.0, "load went down to {} °C", m.tracking.min_temp_c);
+    let settle = m.tracking.settle_time_s.expect("never reached 4 ± 0.5 °C");
     assert!(settle < 2.0 * 3600.0, "pull-down took {settle} s");
-    assert!(m.max_abs_error_after_settle_c <= 0.5, "{m:?}");
+    assert!(m.tracking.max_abs_error_after_settle_c <= 0.5, "{m:?}");
     // It really started warm.
     assert!(out.rows[0].true_temp_c > 27.0);
     // The alarm indicator shows the warm box (out of range) from the first sample and goes
     // off once the measured load is within 2–8 °C: a pull-down is no fault, nothing latches.
-    assert_eq!(out.rows[0].alarm, "out_of_range");
+    assert_eq!(out.rows[0].alarm, Indication::OutOfRange);
     let inside = out.rows.iter().position(|r| (2.0..=8.0).contains(&r.temp_c)).expect("reaches 2–8 °C");
-    assert!(out.rows[..inside].iter().all(|r| r.alarm == "out_of_range"));
-    assert!(out.rows[inside..].iter().all(|r| r.alarm == "off"), "indicator on after the pull-down");
+    assert!(out.rows[..inside].iter().all(|r| r.alarm == Indication::OutOfRange));
+    assert!(out.rows[inside..].iter().all(|r| r.alarm == Indication::Off), "indicator on after the pull-down");
     assert!((m.alarm_indicator_s - inside as f64 * 10.0).abs() < 1e-9, "{} s", m.alarm_indicator_s);
 }
 
@@ -36,8 +38,8 @@ fn baselines_never_take_the_load_below_2_on_piecewise() {
             [(PlantChoice::Hter1, Load::Full), (PlantChoice::Hter1, Load::Half), (PlantChoice::Hter2, Load::Full)]
         {
             let m = sim("piecewise", c, plant, load).metrics;
-            assert!(m.min_temp_c >= 2.0, "{c:?} {plant:?} {load:?}: min {}", m.min_temp_c);
-            assert!(m.max_temp_c <= 8.0, "{c:?} {plant:?} {load:?}: max {}", m.max_temp_c);
+            assert!(m.tracking.min_temp_c >= 2.0, "{c:?} {plant:?} {load:?}: min {}", m.tracking.min_temp_c);
+            assert!(m.tracking.max_temp_c <= 8.0, "{c:?} {plant:?} {load:?}: max {}", m.tracking.max_temp_c);
             // Nothing wrong, nothing to see: the board's alarm indicator stays off.
             assert_eq!(m.alarm_indicator_first_s, None, "{c:?} {plant:?} {load:?}: indicator on");
         }
@@ -49,14 +51,14 @@ fn pi_has_less_steady_state_error_than_onoff() {
     // The integral action removes the offset that On-Off's hysteresis leaves.
     let pi = sim("piecewise", ControllerChoice::Pi, PlantChoice::Hter1, Load::Full).metrics;
     let onoff = sim("piecewise", ControllerChoice::Onoff, PlantChoice::Hter1, Load::Full).metrics;
-    assert!(pi.steady_state_error_c < onoff.steady_state_error_c, "pi {pi:?}\nonoff {onoff:?}");
+    assert!(pi.tracking.steady_state_error_c < onoff.tracking.steady_state_error_c, "pi {pi:?}\nonoff {onoff:?}");
 }
 
 #[test]
 fn disturbance_is_rejected_by_pi() {
     let m = sim("disturbance", ControllerChoice::Pi, PlantChoice::Hter1, Load::Full).metrics;
-    assert!(m.max_temp_c < 6.0, "{m:?}");
-    assert!(m.steady_state_error_c < 0.2, "{m:?}");
+    assert!(m.tracking.max_temp_c < 6.0, "{m:?}");
+    assert!(m.tracking.steady_state_error_c < 0.2, "{m:?}");
 }
 
 fn spec(choice: ControllerChoice) -> ControllerSpec {
@@ -84,13 +86,13 @@ fn gpc_on_its_own_arx_model_tracks_piecewise_without_offset() {
         faults: vec![],
     })
     .unwrap();
-    assert!(out.metrics.steady_state_error_c < 0.01, "{:?}", out.metrics);
-    assert!(out.metrics.min_temp_c >= 2.0);
+    assert!(out.metrics.tracking.steady_state_error_c < 0.01, "{:?}", out.metrics);
+    assert!(out.metrics.tracking.min_temp_c >= 2.0);
 }
 
 /// The self-tuner's mode in every row, with the time it began: one entry per mode change.
-fn mode_changes(out: &SimOutput) -> Vec<(f64, &'static str)> {
-    let mut changes: Vec<(f64, &'static str)> = Vec::new();
+fn mode_changes(out: &SimOutput) -> Vec<(f64, AdaptiveMode)> {
+    let mut changes: Vec<(f64, AdaptiveMode)> = Vec::new();
     for r in &out.rows {
         let m = r.adaptive_mode.expect("the self-tuner's mode is logged every sample");
         if changes.last().is_none_or(|&(_, last)| last != m) {
@@ -111,12 +113,12 @@ fn self_tuning_gpc_stays_in_range_and_trusts_its_own_estimate() {
     {
         let out = sim_spec("piecewise", spec(ControllerChoice::Gpc), plant, load);
         let m = &out.metrics;
-        assert!(m.min_temp_c >= 2.0 && m.max_temp_c <= 8.0, "{plant:?} {load:?}: {m:?}");
+        assert!(m.tracking.min_temp_c >= 2.0 && m.tracking.max_temp_c <= 8.0, "{plant:?} {load:?}: {m:?}");
         let changes = mode_changes(&out);
         // Measured: adaptive from 0–480 s on the three carriers (the first step lasts 1 h).
-        let engaged = changes.iter().find(|&&(_, m)| m == "adaptive").map(|&(t, _)| t);
+        let engaged = changes.iter().find(|&&(_, m)| m == AdaptiveMode::Adaptive).map(|&(t, _)| t);
         assert!(engaged.is_some_and(|t| t < 1800.0), "{plant:?} {load:?}: {changes:?}");
-        assert!(changes.iter().all(|&(_, m)| m != "fallback"), "{plant:?} {load:?}: {changes:?}");
+        assert!(changes.iter().all(|&(_, m)| m != AdaptiveMode::Fallback), "{plant:?} {load:?}: {changes:?}");
     }
     let mut scenario = Scenario::resolve("disturbance").unwrap();
     scenario.changes = vec![(1800.0, hal_sim::scenario::Change::Supply(10.0))];
@@ -131,8 +133,8 @@ fn self_tuning_gpc_stays_in_range_and_trusts_its_own_estimate() {
         faults: vec![],
     })
     .unwrap();
-    assert!(out.metrics.min_temp_c >= 2.0 && out.metrics.max_temp_c <= 8.0, "{:?}", out.metrics);
-    assert!(mode_changes(&out).iter().all(|&(_, m)| m != "fallback"), "{:?}", mode_changes(&out));
+    assert!(out.metrics.tracking.min_temp_c >= 2.0 && out.metrics.tracking.max_temp_c <= 8.0, "{:?}", out.metrics);
+    assert!(mode_changes(&out).iter().all(|&(_, m)| m != AdaptiveMode::Fallback), "{:?}", mode_changes(&out));
     let finite = |r: &hal_sim::sim::Row| [r.a1, r.a2, r.b0, r.b1].iter().all(|p| p.is_some_and(f32::is_finite));
     assert!(out.rows.iter().all(finite), "a non-finite estimate");
 }
@@ -162,12 +164,22 @@ fn seed_conclusions_hold_on_piecewise() {
             run(ControllerChoice::Gpc),
         );
         for m in [&pi, &gmvc, &igmvc, &gpc] {
-            assert!(m.min_temp_c >= 2.0 && m.max_temp_c <= 8.0, "{plant:?} {load:?}: {m:?}");
+            assert!(m.tracking.min_temp_c >= 2.0 && m.tracking.max_temp_c <= 8.0, "{plant:?} {load:?}: {m:?}");
             assert_eq!(m.alarm_indicator_first_s, None, "{plant:?} {load:?}: indicator on: {m:?}");
         }
-        assert!(igmvc.steady_state_error_c <= 0.15, "{plant:?} {load:?} IGMVC: {igmvc:?}");
-        assert!(gpc.iae < pi.iae, "{plant:?} {load:?}: GPC {} vs PI {}", gpc.iae, pi.iae);
-        assert!(gpc.iae < igmvc.iae, "{plant:?} {load:?}: GPC {} vs IGMVC {}", gpc.iae, igmvc.iae);
+        assert!(igmvc.tracking.steady_state_error_c <= 0.15, "{plant:?} {load:?} IGMVC: {igmvc:?}");
+        assert!(
+            gpc.tracking.iae < pi.tracking.iae,
+            "{plant:?} {load:?}: GPC {} vs PI {}",
+            gpc.tracking.iae,
+            pi.tracking.iae
+        );
+        assert!(
+            gpc.tracking.iae < igmvc.tracking.iae,
+            "{plant:?} {load:?}: GPC {} vs IGMVC {}",
+            gpc.tracking.iae,
+            igmvc.tracking.iae
+        );
     }
 }
 
@@ -209,7 +221,7 @@ fn self_tuning_laws_survive_a_plant_change_mid_run() {
         })
         .unwrap();
         let m = &out.metrics;
-        assert!(m.min_temp_c >= 2.0 && m.max_temp_c <= 8.0, "{c:?}: {m:?}");
+        assert!(m.tracking.min_temp_c >= 2.0 && m.tracking.max_temp_c <= 8.0, "{c:?}: {m:?}");
         let tail = out.rows.iter().filter(|r| r.t_s >= 3.5 * 3600.0);
         let worst = tail.map(|r| (r.true_temp_c - 4.0).abs()).fold(0.0, f64::max);
         assert!(worst <= 0.3, "{c:?}: |T − 4| up to {worst} °C in the last half hour");

@@ -1,16 +1,22 @@
 //! Injected hardware faults (`hter sim --fault KIND@T_S`): each is detected, nothing is detected
 //! before it, and the load never reaches 0 °C.
 
+use hal_sim::fault::Fault;
+use hal_sim::metrics::Detected;
 use hal_sim::plant::Load;
 use hal_sim::scenario::Scenario;
 use hal_sim::sim::{
-    run, run_with, BoardOptions, ControllerChoice, ControllerSpec, Fault, PlantChoice, SamplePhase, SimOptions,
+    run, run_with, BoardOptions, ControllerChoice, ControllerSpec, PlantChoice, RowMode, SamplePhase, SimOptions,
     SimOutput,
 };
+use hter::alarm::Indication;
+use hter::event::EventKind;
+use hter::persist::ResetCause;
+use hter::step::Mode;
 
 const AT_S: f64 = 3600.0;
 
-fn with_fault(kind: &str, controller: ControllerChoice) -> SimOutput {
+fn with_fault(kind: Fault, controller: ControllerChoice) -> SimOutput {
     let scenario = Scenario::resolve("disturbance").unwrap();
     run(&SimOptions {
         duration_s: scenario.duration_s,
@@ -20,62 +26,65 @@ fn with_fault(kind: &str, controller: ControllerChoice) -> SimOutput {
         load: Load::Full,
         ambient_c: 28.0,
         seed: 11,
-        faults: vec![Fault::parse(&format!("{kind}@{AT_S}")).unwrap()],
+        faults: vec![(AT_S, kind)],
     })
     .unwrap()
 }
 
-/// Asserts the fault `detected` is reported within `within_s` of the injection, nothing before.
-fn check(kind: &str, detected: &str, within_s: f64) {
-    check_with(kind, detected, within_s, &[ControllerChoice::Pi, ControllerChoice::Gpc, ControllerChoice::Onoff]);
+/// Asserts the fault's most specific detection (the first of its table row) is reported
+/// within `within_s` of the injection, and nothing before it.
+fn check(kind: Fault, within_s: f64) {
+    check_with(kind, within_s, &[ControllerChoice::Pi, ControllerChoice::Gpc, ControllerChoice::Onoff]);
 }
 
-fn check_with(kind: &str, detected: &str, within_s: f64, controllers: &[ControllerChoice]) {
+fn check_with(kind: Fault, within_s: f64, controllers: &[ControllerChoice]) {
+    let detected = kind.spec().detected_by[0];
     for &c in controllers {
         let out = with_fault(kind, c);
         let m = &out.metrics;
-        assert!(m.faults_detected.iter().all(|f| f.t_s >= AT_S), "{kind}/{c:?}: detection before the fault: {m:?}");
+        assert!(m.faults_detected.iter().all(|f| f.t_s >= AT_S), "{kind:?}/{c:?}: detection before the fault: {m:?}");
         let first = m.faults_detected.iter().find(|f| f.kind == detected);
-        let first = first.unwrap_or_else(|| panic!("{kind}/{c:?}: {detected} never reported: {:?}", m.faults_detected));
-        assert!(first.t_s - AT_S <= within_s, "{kind}/{c:?}: detected after {} s", first.t_s - AT_S);
-        assert!(m.min_temp_c > 0.0, "{kind}/{c:?}: load reached {} °C", m.min_temp_c);
+        let first =
+            first.unwrap_or_else(|| panic!("{kind:?}/{c:?}: {detected} never reported: {:?}", m.faults_detected));
+        assert!(first.t_s - AT_S <= within_s, "{kind:?}/{c:?}: detected after {} s", first.t_s - AT_S);
+        assert!(m.tracking.min_temp_c > 0.0, "{kind:?}/{c:?}: load reached {} °C", m.tracking.min_temp_c);
         // The board's alarm indicator (`hter::alarm`): off until the fault, on by its detection
         // at the latest, and, nobody pressing the button, on from then to the end.
-        let on = m.alarm_indicator_first_s.unwrap_or_else(|| panic!("{kind}/{c:?}: the indicator never came on"));
-        assert!(on >= AT_S && on <= first.t_s, "{kind}/{c:?}: indicator on at {on} s, detection at {} s", first.t_s);
+        let on = m.alarm_indicator_first_s.unwrap_or_else(|| panic!("{kind:?}/{c:?}: the indicator never came on"));
+        assert!(on >= AT_S && on <= first.t_s, "{kind:?}/{c:?}: indicator on at {on} s, detection at {} s", first.t_s);
         let last = out.rows.last().map_or(0.0, |r| r.t_s);
         assert!(
-            out.rows.iter().filter(|r| r.t_s >= first.t_s).all(|r| r.alarm != "off"),
-            "{kind}/{c:?}: indicator went off"
+            out.rows.iter().filter(|r| r.t_s >= first.t_s).all(|r| r.alarm != Indication::Off),
+            "{kind:?}/{c:?}: indicator went off"
         );
-        assert!(m.alarm_indicator_s >= last - first.t_s, "{kind}/{c:?}: {} s on", m.alarm_indicator_s);
+        assert!(m.alarm_indicator_s >= last - first.t_s, "{kind:?}/{c:?}: {} s on", m.alarm_indicator_s);
         // The MCU kept stepping: the board's own alarm hardware never sounded.
-        assert!(m.alarm_hw_first_s.is_none() && out.rows.iter().all(|r| !r.alarm_hw), "{kind}/{c:?}: alarm hardware");
+        assert!(m.alarm_hw_first_s.is_none() && out.rows.iter().all(|r| !r.alarm_hw), "{kind:?}/{c:?}: alarm hardware");
     }
 }
 
 #[test]
 fn open_and_short_sensors_are_detected_within_two_samples() {
-    check("sensor-open", "sensor_open", 20.0);
-    check("sensor-short", "sensor_short", 20.0);
+    check(Fault::SensorOpen, 20.0);
+    check(Fault::SensorShort, 20.0);
 }
 
 #[test]
 fn a_stuck_converter_is_detected() {
-    check("sensor-stuck", "sensor_stuck", 1800.0);
+    check(Fault::SensorStuck, 1800.0);
 }
 
 #[test]
 fn spikes_are_detected_and_filtered_out() {
-    check("sensor-spikes", "sensor_spikes", 1800.0);
+    check(Fault::SensorSpikes, 1800.0);
     // Filtered: control goes on, the load stays on target.
-    let m = with_fault("sensor-spikes", ControllerChoice::Pi).metrics;
-    assert!(m.min_temp_c > 3.5 && m.max_temp_c < 6.0, "{m:?}");
+    let m = with_fault(Fault::SensorSpikes, ControllerChoice::Pi).metrics;
+    assert!(m.tracking.min_temp_c > 3.5 && m.tracking.max_temp_c < 6.0, "{m:?}");
 }
 
 #[test]
 fn a_shorted_ssr_is_detected_and_the_supply_switch_opened() {
-    check("ssr-stuck-on", "ssr_stuck_on", 1800.0);
+    check(Fault::SsrStuckOn, 1800.0);
 }
 
 /// After a shorted SSR the step limps home: the supply-enable switch does the On-Off control,
@@ -94,13 +103,19 @@ fn a_shorted_ssr_limps_home_within_2_to_8() {
                 load: Load::Full,
                 ambient_c: 28.0,
                 seed: 11,
-                faults: vec![Fault::parse(&format!("ssr-stuck-on@{AT_S}")).unwrap()],
+                faults: vec![(AT_S, Fault::SsrStuckOn)],
             })
             .unwrap();
-            let at = out.metrics.faults_detected.iter().find(|f| f.kind == "ssr_stuck_on").expect("detected").t_s;
+            let at = out
+                .metrics
+                .faults_detected
+                .iter()
+                .find(|f| f.kind == Detected::Event(EventKind::SsrStuckOn))
+                .expect("detected")
+                .t_s;
             let after: Vec<_> = out.rows.iter().filter(|r| r.t_s > at + 1800.0).collect();
             assert!(after.len() > 100, "{plant:?} {c:?}: too little left after {at} s");
-            assert!(after.iter().all(|r| r.mode == "limp_home"), "{plant:?} {c:?}");
+            assert!(after.iter().all(|r| r.mode == RowMode::Step(Mode::LimpHome)), "{plant:?} {c:?}");
             let (lo, hi) =
                 after.iter().fold((f64::MAX, f64::MIN), |(lo, hi), r| (lo.min(r.true_temp_c), hi.max(r.true_temp_c)));
             assert!(lo > 2.0 && hi < 8.0, "{plant:?} {c:?}: {lo:.2}…{hi:.2} °C in limp-home");
@@ -115,17 +130,17 @@ fn a_shorted_ssr_limps_home_within_2_to_8() {
 /// reaches 2.4 °C with PI and 1.6 °C with On-Off).
 #[test]
 fn a_sensor_offset_is_detected_and_compensated() {
-    check("sensor-offset", "sensor_offset", 40.0);
+    check(Fault::SensorOffset, 40.0);
     for c in [ControllerChoice::Pi, ControllerChoice::Onoff] {
-        let m = with_fault("sensor-offset", c).metrics;
-        assert!(m.min_temp_c > 2.5, "{c:?}: {m:?}");
+        let m = with_fault(Fault::SensorOffset, c).metrics;
+        assert!(m.tracking.min_temp_c > 2.5, "{c:?}: {m:?}");
     }
 }
 
 /// The measured module supply falling from 12 to 9 V is reported within three samples.
 #[test]
 fn a_supply_sag_is_detected() {
-    check("supply-sag", "supply_sag", 40.0);
+    check(Fault::SupplySag, 40.0);
 }
 
 /// A 15 W heat load (the lid left open) is reported within half an hour by the controllers that
@@ -134,8 +149,7 @@ fn a_supply_sag_is_detected() {
 #[test]
 fn an_open_lid_is_detected() {
     check_with(
-        "lid-open",
-        "lid_open",
+        Fault::LidOpen,
         1800.0,
         &[ControllerChoice::Pi, ControllerChoice::Gpc, ControllerChoice::Igmvc, ControllerChoice::Gmvc],
     );
@@ -143,7 +157,7 @@ fn an_open_lid_is_detected() {
 
 #[test]
 fn an_open_ssr_is_detected() {
-    check("ssr-stuck-off", "ssr_stuck_off", 1800.0);
+    check(Fault::SsrStuckOff, 1800.0);
 }
 
 /// Missions that `hter campaign` once failed, each for a reason since fixed in the step:
@@ -164,7 +178,9 @@ fn campaign_missions_that_once_failed_pass() {
         let r = evaluate(&m, &out);
         assert!(r.reasons.is_empty(), "mission {seed}: {:?}", r.reasons);
         assert!(
-            r.spurious.iter().all(|(k, _)| k != "ssr_stuck_on" && k != "sensor_offset"),
+            r.spurious.iter().all(|(k, _)| {
+                ![Detected::Event(EventKind::SsrStuckOn), Detected::Event(EventKind::SensorOffset)].contains(k)
+            }),
             "{seed}: {:?}",
             r.spurious
         );
@@ -223,12 +239,12 @@ fn fault_strings_are_checked() {
 #[test]
 fn a_brownout_restart_is_safe_and_control_resumes() {
     for c in [ControllerChoice::Pi, ControllerChoice::Gpc, ControllerChoice::Onoff] {
-        let out = with_fault("brownout", c);
+        let out = with_fault(Fault::Brownout, c);
         let m = &out.metrics;
         // Reported with the first sample after the restart (the reset flags), and nothing else.
-        let kinds: Vec<_> = m.faults_detected.iter().map(|f| (f.kind.as_str(), f.t_s)).collect();
-        assert_eq!(kinds, [("restarted_brownout", AT_S)], "{c:?}");
-        assert!(m.min_temp_c > 2.0 && m.max_temp_c < 8.0, "{c:?}: {m:?}");
+        let kinds: Vec<_> = m.faults_detected.iter().map(|f| (f.kind, f.t_s)).collect();
+        assert_eq!(kinds, [(Detected::Event(EventKind::Restarted(ResetCause::BrownOut)), AT_S)], "{c:?}");
+        assert!(m.tracking.min_temp_c > 2.0 && m.tracking.max_temp_c < 8.0, "{c:?}: {m:?}");
         let after: Vec<_> = out.rows.iter().filter(|r| r.t_s > AT_S + 1800.0).collect();
         assert!(after.iter().any(|r| r.duty > 0.0), "{c:?}: no cooling after the restart");
         assert!(after.iter().all(|r| (r.true_temp_c - 4.0).abs() < 1.5), "{c:?}: not back on the setpoint");
@@ -241,22 +257,21 @@ fn a_brownout_restart_is_safe_and_control_resumes() {
 /// power dips at 5 h; the restart picks that up.
 #[test]
 fn a_brownout_restarts_from_the_persisted_model() {
-    use hter::control::adaptive::AdaptiveConfig;
     let scenario = Scenario::resolve("step").unwrap();
     let mut spec = ControllerSpec::new(ControllerChoice::Gpc);
-    spec.initial = Some(AdaptiveConfig::HTER2_MODEL);
+    spec.initial = Some(hter::profile::START_MODEL_HTER2);
     let mut opts = SimOptions::new(scenario, spec);
     opts.duration_s = 6.0 * 3600.0;
     opts.faults = vec![Fault::parse("brownout@18000").unwrap()];
     let out = run(&opts).unwrap();
     let b0 = |t: f64| out.rows.iter().find(|r| r.t_s >= t).and_then(|r| r.b0).unwrap();
-    let (before, after, start) = (b0(17990.0), b0(18000.0), AdaptiveConfig::HTER2_MODEL.b[0]);
+    let (before, after, start) = (b0(17990.0), b0(18000.0), hter::profile::START_MODEL_HTER2.b()[0]);
     assert!((before - start).abs() > 0.002, "the estimate should have moved: {start} → {before}");
     assert!(
         (after - before).abs() < 0.25 * (before - start).abs(),
         "restart b0 {after}, persisted ≈ {before}, start {start}"
     );
-    assert!(out.metrics.min_temp_c > 2.0, "{:?}", out.metrics);
+    assert!(out.metrics.tracking.min_temp_c > 2.0, "{:?}", out.metrics);
 }
 
 /// A shorted supply-enable switch is invisible to the supply divider (upstream of it): the
@@ -265,7 +280,7 @@ fn a_brownout_restarts_from_the_persisted_model() {
 /// the alarm latches on it.
 #[test]
 fn a_shorted_supply_switch_is_detected_within_two_hours() {
-    check("supply-switch-short", "supply_switch_shorted", 2.0 * 3600.0 + 60.0);
+    check(Fault::SupplySwitchShort, 2.0 * 3600.0 + 60.0);
     // Injected anywhere between two test openings: found within two hours (and a minute for
     // the load to be at its setpoint), every controller, both carriers.
     let mut worst: f64 = 0.0;
@@ -278,7 +293,11 @@ fn a_shorted_supply_switch_is_detected_within_two_hours() {
                 opts.plant = plant;
                 opts.faults = vec![(at_s, Fault::SupplySwitchShort)];
                 let m = run(&opts).unwrap().metrics;
-                let t = m.faults_detected.iter().find(|f| f.kind == "supply_switch_shorted").map(|f| f.t_s);
+                let t = m
+                    .faults_detected
+                    .iter()
+                    .find(|f| f.kind == Detected::Event(EventKind::SupplySwitchShorted))
+                    .map(|f| f.t_s);
                 assert!(
                     t.is_some_and(|t| t >= at_s && t <= at_s + 2.0 * 3600.0 + 60.0),
                     "{c:?} {plant:?} {at_s}: {:?}",
@@ -287,7 +306,7 @@ fn a_shorted_supply_switch_is_detected_within_two_hours() {
                 worst = worst.max(t.unwrap_or(0.0) - at_s);
                 // Reported once; control goes on through the SSR.
                 assert_eq!(m.faults_detected.len(), 1, "{c:?} {plant:?} {at_s}: {:?}", m.faults_detected);
-                assert!(m.min_temp_c > 2.5 && m.max_temp_c < 6.0, "{c:?} {plant:?} {at_s}: {m:?}");
+                assert!(m.tracking.min_temp_c > 2.5 && m.tracking.max_temp_c < 6.0, "{c:?} {plant:?} {at_s}: {m:?}");
             }
         }
     }
@@ -313,12 +332,12 @@ fn a_firmware_hang_opens_the_supply_and_sounds_the_alarm_hardware() {
     let at = m.alarm_hw_first_s.expect("the alarm hardware never sounded");
     eprintln!("firmware-hang@{AT_S}: alarm hardware and supply open at {at} s (last beat {} s)", before.t_s);
     assert!(at > AT_S && at <= AT_S + 2.0 * TS, "alarm hardware at {at} s");
-    let kinds: Vec<_> = m.faults_detected.iter().map(|f| (f.kind.as_str(), f.t_s)).collect();
-    assert_eq!(kinds, [("firmware_hang", at)]);
+    let kinds: Vec<_> = m.faults_detected.iter().map(|f| (f.kind, f.t_s)).collect();
+    assert_eq!(kinds, [(Detected::FirmwareHang, at)]);
     // Before the expiry the hung timer still cooled; from the first sample after it, nothing.
     let after: Vec<_> = out.rows.iter().filter(|r| r.t_s >= AT_S + 2.0 * TS).collect();
     assert!(after.len() > 500);
-    assert!(after.iter().all(|r| r.duty == 0.0 && r.alarm_hw && r.mode == "hung"));
+    assert!(after.iter().all(|r| r.duty == 0.0 && r.alarm_hw && r.mode == RowMode::Hung));
     assert!(out.rows.iter().filter(|r| r.t_s < AT_S).all(|r| !r.alarm_hw));
     // No freeze: the load only warms from there.
     let t_hang = before.true_temp_c;
@@ -330,7 +349,7 @@ fn a_firmware_hang_opens_the_supply_and_sounds_the_alarm_hardware() {
     let mut opts = SimOptions::new(scenario, ControllerSpec::new(ControllerChoice::Gpc));
     opts.faults = vec![Fault::parse("firmware-hang@3600").unwrap(), Fault::parse("brownout@5400").unwrap()];
     let out = run(&opts).unwrap();
-    assert!(out.rows.iter().filter(|r| r.t_s >= 5400.0).all(|r| r.mode != "hung"));
+    assert!(out.rows.iter().filter(|r| r.t_s >= 5400.0).all(|r| r.mode != RowMode::Hung));
     assert!(out.rows.iter().any(|r| r.t_s > 5400.0 && r.duty > 0.0));
 }
 

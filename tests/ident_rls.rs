@@ -1,7 +1,7 @@
 //! Acceptance tests of the f32 recursive estimators against independent references.
 
 use hter::ident::batch::BatchLs;
-use hter::ident::model::{Arx, OperatingPoint, Regressor, Structure};
+use hter::ident::model::{OperatingPoint, Regressor, Structure};
 use hter::ident::prbs::{Prbs, PrbsConfig};
 use hter::ident::recursive;
 use hter::ident::rls::{EstError, Rls, RlsConfig};
@@ -125,8 +125,8 @@ fn streaming_rls_with_an_operating_point_matches_batch_ls_on_raw_logs() {
             reg.push(y, u);
         }
         // b back to physical units: b = b_scaled · y_scale / u_scale.
-        let m = Arx::<2, 2>::from_theta(rls.theta(), 1).unscaled(&op);
-        vec![m.a[0], m.a[1], m.b[0], m.b[1]].into_iter().map(f64::from).collect::<Vec<f64>>()
+        let m = op.unscale(&Structure::new(2, 2, 0, 1).unwrap().model(rls.theta().as_slice()).unwrap()).unwrap();
+        vec![m.a()[0], m.a()[1], m.b()[0], m.b()[1]].into_iter().map(f64::from).collect::<Vec<f64>>()
     };
     let scaled = run(OperatingPoint::new(y0 as f32, u0 as f32, 2.0, 0.2).unwrap());
     let rel = relative_difference(&scaled, &th_ls);

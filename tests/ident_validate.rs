@@ -1,7 +1,7 @@
 //! Acceptance tests of the PRBS generator and the validation measures.
 
 use hter::ident::batch::BatchLs;
-use hter::ident::model::{Arx, Structure};
+use hter::ident::model::Structure;
 use hter::ident::prbs::{Prbs, PrbsConfig, PrbsError};
 use hter::ident::validate::{self, OrderCandidate};
 
@@ -78,7 +78,7 @@ fn exact_model_fits_100_percent() {
     let mut eps = vec![0.0; n];
     assert!(validate::one_step(&s, &th, &y, &u, &mut eps) < 1e-20);
     // The f32 per-sample model simulates the same trajectory.
-    let m = Arx::<2, 2> { a: [th[0] as f32, th[1] as f32], b: [th[2] as f32, th[3] as f32], c: [], nk: 2 };
+    let m = s.model(&[th[0] as f32, th[1] as f32, th[2] as f32, th[3] as f32]).unwrap();
     let uf: Vec<f32> = u.iter().map(|v| *v as f32).collect();
     let yf: Vec<f32> = y.iter().map(|v| *v as f32).collect();
     let mut ys32 = vec![0.0f32; n];

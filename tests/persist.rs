@@ -20,10 +20,9 @@ use embassy_futures::block_on;
 use embedded_storage_async::nor_flash::{ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash};
 use hter::calib::TwoPoint;
 use hter::control::adaptive::{AdaptiveConfig, SelfTuning};
-use hter::control::fixed::Law;
-use hter::control::gpc::GpcConfig;
 use hter::persist::flash::{EccErrors, LoadStatus, Repairs, Store, StoreError, MAX_REPAIRS};
 use hter::persist::{DecodeError, HistoryRecord, ModelRecord, ResetCause};
+use hter::profile::{ADAPTIVE_GPC, START_MODEL_HTER1, START_MODEL_HTER2};
 
 /// Flash word of the STM32L4 (double-word programming, 8 ECC bits per double word).
 const WORD: usize = 8;
@@ -254,7 +253,7 @@ impl<const PAGE: usize> NorFlash for MockFlash<PAGE> {
 type MockStore<const PAGE: usize> = Store<MockFlash<PAGE>, MockEcc>;
 
 fn gpc() -> AdaptiveConfig {
-    AdaptiveConfig::default_for(Law::Gpc(GpcConfig::DEFAULT))
+    ADAPTIVE_GPC
 }
 
 fn open<const PAGE: usize>(flash: MockFlash<PAGE>, pages: usize) -> MockStore<PAGE> {
@@ -292,7 +291,7 @@ fn region_must_be_two_aligned_pages() {
 #[test]
 fn records_survive_a_reboot_and_restart_the_self_tuner() {
     let mut store = open(MockFlash::<2048>::blank(4), 4);
-    let model = ModelRecord::from_model(&AdaptiveConfig::HTER2_MODEL).unwrap();
+    let model = ModelRecord::from_model(&START_MODEL_HTER2).unwrap();
     let cal = TwoPoint { gain: 1.013, offset_c: -0.42 };
     let mut hist = HistoryRecord::EMPTY;
     hist.note_reset(ResetCause::Watchdog);
@@ -308,7 +307,7 @@ fn records_survive_a_reboot_and_restart_the_self_tuner() {
         let cfg = store.load_adaptive(gpc()).await;
         assert_eq!(cfg.status, LoadStatus::Restored);
         assert_eq!(cfg.value.k, 6);
-        let tuner = SelfTuning::new(cfg.value, 0.5);
+        let tuner = SelfTuning::new(cfg.value, 10.0, 0.5).expect("a restored configuration is valid");
         let trusted = tuner.trusted_model().expect("a plausible restored model is trusted at once");
         assert_eq!(ModelRecord::from_model(&trusted), Some(model));
         assert_eq!(tuner.theta(), model.theta);
@@ -368,7 +367,7 @@ fn garbage_flash_gives_defaults_and_can_be_reclaimed() {
             assert_ne!(hist.status, LoadStatus::Restored);
             assert_eq!(hist.value, HistoryRecord::EMPTY);
             // What the firmware does when a save fails on a corrupt region: erase, then save.
-            let rec = ModelRecord::from_model(&AdaptiveConfig::HTER1_MODEL).unwrap();
+            let rec = ModelRecord::from_model(&START_MODEL_HTER1).unwrap();
             if store.save_model(&rec).await.is_err() {
                 store.erase_all().await.unwrap();
                 store.save_model(&rec).await.unwrap();
@@ -719,29 +718,31 @@ fn wear_per_save() {
     assert!(saves / erases >= 60, "{erases} erases for {saves} saves");
 }
 
-/// The firmware's cadence (`firmware/src/config.rs`): the history every hour, the model every
-/// 4 h of trusted learning, plus the history each boot stores once its write gate opens
-/// (`BOOTS_PER_DAY`, a pessimistic field use: a carrier unplugged and replugged every hour).
-/// Prints and checks how long the four pages last at the L4's 10 000 erase cycles (datasheet
-/// DS10198, "NEND"), without and with the boot writes.
+/// The board's cadence (`hter::profile`): the history every `HISTORY_SAVE_S` (an hour), the
+/// model every `MODEL_SAVE_S` (4 h) of trusted learning, plus the history each boot stores once
+/// its write gate opens (`BOOTS_PER_DAY`, a pessimistic field use: a carrier unplugged and
+/// replugged every hour). Prints and checks how long the four pages last at the L4's 10 000
+/// erase cycles (datasheet DS10198, "NEND"), without and with the boot writes.
 #[test]
 fn wear_at_the_firmware_cadence() {
+    use hter::profile::{HISTORY_SAVE_S, MODEL_SAVE_S};
     const BOOTS_PER_DAY: u32 = 24;
     let days = 60;
     let years = |boots_per_day: u32| {
         let mut store = open(MockFlash::<2048>::blank(4), 4);
-        let boot_every_h = 24 / boots_per_day.max(1);
+        let boot_every_s = 86_400 / boots_per_day.max(1);
         block_on(async {
-            for hour in 0..24 * days {
-                let h = HistoryRecord { recorded_s: 3600 * hour, excursions: hour / 7, ..HistoryRecord::EMPTY };
-                if boots_per_day > 0 && hour % boot_every_h == 0 {
+            for n in 0..days * 86_400 / HISTORY_SAVE_S {
+                let t_s = n * HISTORY_SAVE_S;
+                let h = HistoryRecord { recorded_s: t_s, excursions: t_s / (7 * 3600), ..HistoryRecord::EMPTY };
+                if boots_per_day > 0 && t_s.is_multiple_of(boot_every_s) {
                     let mut boot = h;
                     boot.note_reset(ResetCause::BrownOut);
                     store.save_history(&boot).await.unwrap();
                 }
                 store.save_history(&h).await.unwrap();
-                if hour % 4 == 3 {
-                    let rec = ModelRecord { theta: [-1.75 + 1e-5 * hour as f32, 0.75, -0.027, -0.03], k: 5 };
+                if (t_s + HISTORY_SAVE_S).is_multiple_of(MODEL_SAVE_S) {
+                    let rec = ModelRecord { theta: [-1.75 + 1e-5 * n as f32, 0.75, -0.027, -0.03], k: 5 };
                     store.save_model(&rec).await.unwrap();
                 }
             }

@@ -1,10 +1,9 @@
 //! The default PI gains come from Ziegler–Nichols on the open-loop step response of the
 //! full-load H-TER I carrier (the reaction-curve method). This re-derives them from the
-//! simulated plant, so the documented origin of `PiConfig::HTER1_DEFAULT` stays true.
+//! simulated plant, so the documented origin of `hter::profile::PI` stays true.
 
 use hal_sim::plant::{Load, Plant, PlantParams};
 use hter::control::zn::ReactionCurve;
-use hter::control::PiConfig;
 
 #[test]
 fn default_pi_gains_are_detuned_ziegler_nichols_of_the_plant() {
@@ -24,7 +23,7 @@ fn default_pi_gains_are_detuned_ziegler_nichols_of_the_plant() {
     let (kp, ti) = rc.pi_gains();
     println!("reaction curve {rc:?}: ZN PI Kp = {kp:.3} /°C, Ti = {ti:.0} s");
     assert!(rc.gain_c_per_duty < 0.0, "a cooler has a negative gain");
-    let d = PiConfig::HTER1_DEFAULT;
+    let d = hter::profile::PI;
     // Detuned by 2 on Kp and ×2 on Ti. The defaults are these numbers rounded (they match to
     // 0.7 % and 0.03 % today), so 2 % catches a plant or a tuning that moved.
     let rel = |a: f32, b: f32| (a - b).abs() / b;

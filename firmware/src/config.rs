@@ -5,16 +5,18 @@
 //!
 //! | feature | controller | host equivalent |
 //! | --- | --- | --- |
-//! | (none) | self-tuning GPC, [`ADAPTIVE_GPC`], restarted from the model stored in flash | `hter sim --controller gpc` |
-//! | `igmvc` | self-tuning IGMVC, [`ADAPTIVE_IGMVC`], restarted from the model stored in flash | `hter sim --controller igmvc` |
-//! | `pi` | PI, `PiConfig::HTER1_DEFAULT` (Ziegler–Nichols, detuned 2×) | `hter sim --controller pi` |
+//! | (none) | self-tuning GPC, `hter::profile::ADAPTIVE_GPC`, restarted from the model stored in flash | `hter sim --controller gpc` |
+//! | `igmvc` | self-tuning IGMVC, `hter::profile::ADAPTIVE_IGMVC`, restarted from the model stored in flash | `hter sim --controller igmvc` |
+//! | `pi` | PI, `hter::profile::PI` (Ziegler–Nichols, detuned 2×) | `hter sim --controller pi` |
 //! | `onoff` | On-Off, ±0.3 °C (`OnOffConfig::DEFAULT`) | `hter sim --controller onoff` |
 //! | `identify` | open-loop PRBS on the SSR (sensor checks and freeze guard stay on) | `hter sim --scenario prbs` |
 //!
 //! (`adaptive` is accepted and changes nothing: self-tuning GPC used to need it.)
 //!
-//! Every build keeps the calibration, the cold-chain history and, for the self-tuning
-//! controllers, the learned model in flash ([`PERSIST_RANGE`], `hter::persist`).
+//! The controllers' tuning and the save cadences are the library's board profile
+//! (`hter::profile`), which the simulator and the processor-in-the-loop runner build from too;
+//! this file picks from it. Every build keeps the calibration, the cold-chain history and, for
+//! the self-tuning controllers, the learned model in flash ([`PERSIST_RANGE`], `hter::persist`).
 
 #[cfg(any(
     all(feature = "pi", any(feature = "onoff", feature = "igmvc", feature = "identify")),
@@ -26,12 +28,9 @@ compile_error!("features `pi`, `onoff`, `igmvc` and `identify` each select a con
 use hter::adc::SupplySense;
 use hter::calib::TwoPoint;
 use hter::control::adaptive::AdaptiveConfig;
-#[cfg(not(any(feature = "pi", feature = "onoff", feature = "identify")))]
-use hter::control::adaptive::SelfTuning;
-use hter::control::gpc::GpcConfig;
-use hter::control::mv::IgmvcConfig;
 #[allow(unused_imports)]
-use hter::control::{Law, OnOff, OnOffConfig, Pi, PiConfig};
+use hter::control::{OnOff, OnOffConfig, Pi};
+use hter::profile;
 use hter::step::CarrierConfig;
 use hter::supervisor::switch::SwitchConfig;
 use hter::supervisor::SupervisorConfig;
@@ -157,27 +156,16 @@ pub const SAMPLE_WINDOW: hter::adc::SampleWindow = hter::adc::SampleWindow::DEFA
 /// (`hter::supervisor::supply::SupplyConfig::min_v`).
 pub const SUPPLY: SupplySense = SupplySense::DEFAULT;
 
-/// PI tuning at the carrier's sample period (Ziegler–Nichols, detuned 2×;
-/// `PiConfig::HTER1_DEFAULT`): the `pi` build's controller and the self-tuners' fallback.
-const PI: PiConfig = PiConfig { ts_s: CARRIER.ts_s, ..PiConfig::HTER1_DEFAULT };
-
-/// Self-tuning GPC (N2 = 30, Nu = 3, λ = 3, T-filter τ = 0.8; RLS λ_f = 0.995) starting from the
-/// H-TER I model, with the PI as its bumpless fallback — the host's `--controller gpc`.
-pub const ADAPTIVE_GPC: AdaptiveConfig =
-    AdaptiveConfig { fallback: PI, ..AdaptiveConfig::default_for(Law::Gpc(GpcConfig::DEFAULT)) };
-
-/// Self-tuning IGMVC (λ = 0.5, P pole 0.93, T pole 0.9) on the same estimator and start model,
-/// with the same fallback — the host's `--controller igmvc`.
-pub const ADAPTIVE_IGMVC: AdaptiveConfig =
-    AdaptiveConfig { fallback: PI, ..AdaptiveConfig::default_for(Law::Igmvc(IgmvcConfig::DEFAULT)) };
-
-/// The self-tuner this build runs, if any (its model is restored from and saved to flash).
+/// The self-tuner this build runs, if any (its model is restored from and saved to flash):
+/// the board profile's self-tuning GPC (N2 = 30, Nu = 3, λ = 3, T-filter τ = 0.8; RLS
+/// λ_f = 0.995), or IGMVC (λ = 0.5, P pole 0.93, T pole 0.9) in the `igmvc` build, from the
+/// H-TER I start model with the profile's PI as the bumpless fallback.
 pub const ADAPTIVE: Option<AdaptiveConfig> = if cfg!(any(feature = "pi", feature = "onoff", feature = "identify")) {
     None
 } else if cfg!(feature = "igmvc") {
-    Some(ADAPTIVE_IGMVC)
+    Some(profile::ADAPTIVE_IGMVC)
 } else {
-    Some(ADAPTIVE_GPC)
+    Some(profile::ADAPTIVE_GPC)
 };
 
 /// Identification excitation, as `hter sim --scenario prbs` plays it: a 7-bit PRBS (period 127
@@ -197,8 +185,9 @@ pub const IDENTIFY_REST_SAMPLES: u32 = 2 * 3600 / (CARRIER.ts_s as u32);
 
 /// The controller type of this build: only the selected law is linked (a run-time choice
 /// through `AnyController` links all five: the PI build was 64.3 KB with it, 49.6 KB without).
+/// The self-tuner, or the PI if its configuration is refused.
 #[cfg(not(any(feature = "pi", feature = "onoff", feature = "identify")))]
-pub type Ctl = SelfTuning;
+pub type Ctl = profile::SelfTuningOrPi;
 /// The controller type of this build: only the selected law is linked.
 #[cfg(feature = "pi")]
 pub type Ctl = Pi;
@@ -213,18 +202,38 @@ pub type Ctl = Identify;
 /// flash (the built-in one when nothing good is stored); the others ignore it.
 #[cfg(not(any(feature = "pi", feature = "onoff", feature = "identify")))]
 pub fn controller(adaptive: Option<AdaptiveConfig>) -> Ctl {
-    // Start from the PI's bias: the duty that holds the load near 4 °C.
-    SelfTuning::new(adaptive.unwrap_or(ADAPTIVE_DEFAULT), PI.bias)
+    // Only the start model and its delay come from flash (`AdaptiveConfig::restored_from`);
+    // taking the rest from the constant lets the compiler fold its checks, which
+    // `ADAPTIVE_DEFAULT` passed when the firmware compiled.
+    let cfg = match adaptive {
+        Some(a) => AdaptiveConfig { initial: a.initial, k: a.k, ..ADAPTIVE_DEFAULT },
+        None => ADAPTIVE_DEFAULT,
+    };
+    // Starts from the PI's bias: the duty that holds the load near 4 °C.
+    let (ctl, refused) = profile::SelfTuningOrPi::new(cfg, CARRIER.ts_s);
+    if let Some(e) = refused {
+        // The controller's name is logged at start, so the log shows the PI.
+        defmt::error!("self-tuner configuration refused ({}): running PI", e);
+    }
+    ctl
 }
 
 /// The self-tuner's configuration when the boot hands none (no store): this build's built-in.
 #[cfg(not(any(feature = "pi", feature = "onoff", feature = "identify")))]
-const ADAPTIVE_DEFAULT: AdaptiveConfig = if cfg!(feature = "igmvc") { ADAPTIVE_IGMVC } else { ADAPTIVE_GPC };
+const ADAPTIVE_DEFAULT: AdaptiveConfig = match ADAPTIVE {
+    Some(cfg) => cfg,
+    None => profile::ADAPTIVE_GPC,
+};
+
+// The built-in configuration is valid for this build's law: a profile change that breaks it
+// stops the build instead of running the PI on every board.
+#[cfg(not(any(feature = "pi", feature = "onoff", feature = "identify")))]
+const _: () = assert!(ADAPTIVE_DEFAULT.validate().is_ok(), "the self-tuner's configuration is refused");
 
 /// The controller of this build (the restored self-tuner configuration does not apply).
 #[cfg(feature = "pi")]
 pub fn controller(_adaptive: Option<AdaptiveConfig>) -> Ctl {
-    Pi::new(PI)
+    profile::pi(CARRIER.ts_s)
 }
 
 /// The controller of this build (the restored self-tuner configuration does not apply).
@@ -242,7 +251,7 @@ pub fn controller(_adaptive: Option<AdaptiveConfig>) -> Ctl {
         Err(e) => {
             // The controller's name is logged at start, so the log shows the PI.
             defmt::error!("PRBS configuration refused ({}): running PI", e);
-            Identify::Pi(Pi::new(PI))
+            Identify::Pi(profile::pi(CARRIER.ts_s))
         }
     }
 }
@@ -259,7 +268,7 @@ pub enum Identify {
 
 #[cfg(feature = "identify")]
 impl hter::control::Controller for Identify {
-    fn update(&mut self, input: &hter::control::ControlInput) -> f32 {
+    fn update(&mut self, input: &hter::control::ControlInput) -> Result<f32, hter::control::ControlError> {
         match self {
             Identify::Prbs(c) => c.update(input),
             Identify::Pi(c) => c.update(input),
@@ -286,18 +295,18 @@ impl hter::control::Controller for Identify {
 pub const PERSIST_RANGE: core::ops::Range<u32> = 0x000F_E000..0x0010_0000;
 
 /// Samples with a trusted, freshly updated estimate (mode `Adaptive`) between model saves:
-/// 4 h at Ts = 10 s. Power lost within 4 h of learning loses at most those 4 h.
-pub const MODEL_SAVE_SAMPLES: u32 = 4 * 3600 / (CARRIER.ts_s as u32);
+/// the board profile's `MODEL_SAVE_S` (4 h).
+pub const MODEL_SAVE_SAMPLES: u32 = profile::samples(profile::MODEL_SAVE_S, CARRIER.ts_s);
 
-/// Samples between stores of the cold-chain history (an alarm stores at once): 1 h at
-/// Ts = 10 s. A power cut loses at most that hour of statistics, never an alarm.
-pub const HISTORY_SAVE_SAMPLES: u32 = 3600 / (CARRIER.ts_s as u32);
+/// Samples between stores of the cold-chain history (an alarm stores at once): the board
+/// profile's `HISTORY_SAVE_S` (1 h).
+pub const HISTORY_SAVE_SAMPLES: u32 = profile::samples(profile::HISTORY_SAVE_S, CARRIER.ts_s);
 
 /// Samples between cold-chain summaries in the log (MKT, extremes, time out of range): 1 h.
 pub const SUMMARY_SAMPLES: u32 = 3600 / (CARRIER.ts_s as u32);
 
 // Flash wear (sequential-storage erases the four pages of `PERSIST` in turn): a model item takes
 // ≈ 32 bytes (1 key + 23 record bytes and the item header, in 8-byte words), a history item
-// ≈ 112 (1 + 96 and the header), a calibration item ≈ 24. At the hourly history and 4-hourly
-// model cadence each page is erased every 2.9 days, so the L4's 10 000 cycles (datasheet
-// DS10198, "NEND") last ≈ 79 years (`tests/persist.rs::wear_at_the_firmware_cadence`).
+// ≈ 112 (1 + 96 and the header), a calibration item ≈ 24. At the profile's hourly history and
+// 4-hourly model cadence each page is erased every 2.9 days, so the L4's 10 000 cycles
+// (datasheet DS10198, "NEND") last ≈ 79 years (`tests/persist.rs::wear_at_the_firmware_cadence`).

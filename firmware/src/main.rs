@@ -41,11 +41,11 @@ use embassy_time::{Duration, Instant, Ticker};
 use hter::alarm::{Annunciator, Indication};
 use hter::calib::TwoPoint;
 use hter::control::adaptive::AdaptiveConfig;
-use hter::control::{AdaptiveMode, Controller, ControllerStatus};
+use hter::control::{Controller, ControllerStatus};
 use hter::event::{Event, EventKind};
 use hter::failsafe::{Heartbeat, StopInfo};
 use hter::hal::apply_duty;
-use hter::persist::{HistoryRecord, ModelRecord, Recorder, ResetCause};
+use hter::persist::{HistoryRecord, ModelCadence, Recorder, ResetCause};
 use hter::step::{Carrier, CarrierConfig, Mode, StepInput};
 use hter::units::Duty;
 
@@ -223,7 +223,7 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
     let mut annunciator = Annunciator::new();
     let mut heartbeat = Heartbeat::new();
     info!("controller: {}", carrier.controller().name());
-    let mut trusted_samples = 0u32;
+    let mut model_cadence = ModelCadence::new(config::MODEL_SAVE_SAMPLES);
     let mut samples = 0u32;
     board::start_stall_check();
     loop {
@@ -257,11 +257,9 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
         for a in rec.raised.iter().flatten() {
             error!("ALARM {} t={=u64:ms} (condition since t={=u64:ms})", a.kind.name(), a.trigger_ms, a.start_ms);
         }
-        if rec.raised.iter().flatten().next().is_some() {
-            // An alarm is stored as soon as the supply allows, without the boot's hold-off.
-            persist::request(persist::Save::AlarmHistory(recorder.history()));
-        } else if rec.save_due {
-            persist::request(persist::Save::History(recorder.history()));
+        // An alarm's history is stored as soon as the supply allows, without the boot's hold-off.
+        if let Some(save) = recorder.due_save(&rec) {
+            persist::request(save);
         }
         let record = Telemetry {
             t_ms: s.t_ms,
@@ -292,14 +290,8 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
                 m.excursion_count()
             );
         }
-        if out.status.is_some_and(|st| st.mode == AdaptiveMode::Adaptive) {
-            trusted_samples += 1;
-            if trusted_samples >= config::MODEL_SAVE_SAMPLES {
-                trusted_samples = 0;
-                if let Some(rec) = carrier.controller().trusted_model().as_ref().and_then(ModelRecord::from_model) {
-                    persist::request(persist::Save::Model(rec));
-                }
-            }
+        if let Some(rec) = model_cadence.push(out.status.map(|st| st.mode), carrier.controller()) {
+            persist::request(persist::Save::Model(rec));
         }
         // Healthy = the step completed: the monostable also gates the modules' supply, so a beat
         // that stopped at every alarm would stop cooling at a heat alarm. The alarm pin sounds

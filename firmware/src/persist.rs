@@ -150,7 +150,9 @@ pub async fn restore(store: Option<&mut FlashStore>) -> Restored {
         Some(cfg) => {
             let loaded = store.load_adaptive(cfg).await;
             match (loaded.status, loaded.value.initial) {
-                (LoadStatus::Restored, Some(m)) => info!("persist: model restored: a={} b={} k={}", m.a, m.b, m.k),
+                (LoadStatus::Restored, Some(m)) => {
+                    info!("persist: model restored: a={} b={} k={}", m.a(), m.b(), m.k())
+                }
                 (status, _) => log_status("model", status),
             }
             Some(loaded.value)

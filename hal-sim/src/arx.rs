@@ -6,7 +6,7 @@
 //! T-filter: `arx:A;B;K;C`.
 
 use anyhow::{anyhow, bail, Result};
-use hter::control::model::{Model, MAX_K, MAX_NA, MAX_NB, MAX_NC};
+use hter::model::{Model, MAX_K, MAX_NA, MAX_NB, MAX_NC};
 
 /// Parses `arx:A;B;K[;C]`.
 pub fn parse(spec: &str) -> Result<Model> {
@@ -67,8 +67,8 @@ impl ArxPlant {
     /// At steady state holding `temp_c`: past y and u at their steady values. Fails if the
     /// model has no static gain or the steady duty lies outside [0, 1].
     pub fn at_steady_state(model: Model, ambient_c: f64, temp_c: f64) -> Result<ArxPlant> {
-        let a1 = 1.0 + model.a[..model.na].iter().map(|&x| f64::from(x)).sum::<f64>();
-        let b1: f64 = model.b[..model.nb].iter().map(|&x| f64::from(x)).sum();
+        let a1 = 1.0 + model.a()[..model.na()].iter().map(|&x| f64::from(x)).sum::<f64>();
+        let b1: f64 = model.b()[..model.nb()].iter().map(|&x| f64::from(x)).sum();
         let y_ss = temp_c - ambient_c;
         let u_ss = if y_ss == 0.0 {
             0.0
@@ -80,7 +80,7 @@ impl ArxPlant {
         if !(0.0..=1.0).contains(&u_ss) {
             bail!("the ARX plant cannot hold {temp_c} °C at {ambient_c} °C ambient: steady duty would be {u_ss:.3}");
         }
-        Ok(ArxPlant { model, ambient_c, y: vec![y_ss; model.na + 1], u: vec![u_ss; model.nb + model.k] })
+        Ok(ArxPlant { model, ambient_c, y: vec![y_ss; model.na() + 1], u: vec![u_ss; model.nb() + model.k()] })
     }
 
     /// Temperature now, °C.
@@ -99,11 +99,11 @@ impl ArxPlant {
         self.u.rotate_right(1);
         self.u[0] = u.clamp(0.0, 1.0);
         let mut y = 0.0;
-        for i in 0..m.na {
-            y -= f64::from(m.a[i]) * self.y[i];
+        for i in 0..m.na() {
+            y -= f64::from(m.a()[i]) * self.y[i];
         }
-        for i in 0..m.nb {
-            y += f64::from(m.b[i]) * self.u[m.k + i - 1];
+        for i in 0..m.nb() {
+            y += f64::from(m.b()[i]) * self.u[m.k() + i - 1];
         }
         self.y.rotate_right(1);
         self.y[0] = y;
@@ -117,11 +117,11 @@ mod tests {
     #[test]
     fn parses_the_spec_example() {
         let m = parse("arx:-1.8,0.81;-0.02,-0.01;1").unwrap();
-        assert_eq!((m.na, m.nb, m.k, m.nc), (2, 2, 1, 0));
-        assert_eq!(&m.a[..2], &[-1.8, 0.81]);
-        assert_eq!(&m.b[..2], &[-0.02, -0.01]);
+        assert_eq!((m.na(), m.nb(), m.k(), m.nc()), (2, 2, 1, 0));
+        assert_eq!(&m.a()[..2], &[-1.8, 0.81]);
+        assert_eq!(&m.b()[..2], &[-0.02, -0.01]);
         let m = parse("arx:-0.9;0.1;2;0.5").unwrap();
-        assert_eq!((m.k, m.nc, m.c[0]), (2, 1, 0.5));
+        assert_eq!((m.k(), m.nc(), m.c()[0]), (2, 1, 0.5));
     }
 
     #[test]

@@ -9,7 +9,8 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::mission::{self, Mission, MissionReport, BOARD_FAULTS, HARDWARE_FAULTS};
+use crate::fault::{Fault, FaultClass};
+use crate::mission::{self, Mission, MissionReport};
 use crate::sim::{self, ControllerChoice, ControllerSpec};
 
 /// Most missions one campaign may run.
@@ -42,8 +43,8 @@ pub struct KindFigures {
     pub injected: u64,
     /// Of which the step reported it.
     pub detected: u64,
-    /// Whether the library has a detector for it (missed detections of kinds without one are
-    /// not mission failures; see `mission::detection`).
+    /// Whether the step has a detection for it (the fault table lists the reports that count;
+    /// missed detections of kinds without one would not be mission failures).
     pub detector: bool,
     /// Of the missed ones, those the fault never showed in (a dead SSR during a cold spell
     /// that never asked for cooling; see `mission::evaluate`): not failures.
@@ -136,14 +137,11 @@ pub fn run_mission(seed: u64, controller: ControllerChoice) -> Result<MissionRep
 
 /// Summarizes judged missions.
 pub fn summarize(reports: &[MissionReport], controller: ControllerChoice, seed: u64, wall_s: f64) -> CampaignSummary {
-    let mut by_kind: BTreeMap<String, KindFigures> = HARDWARE_FAULTS
-        .iter()
-        .chain(BOARD_FAULTS.iter())
-        .map(|&f| {
-            (
-                mission::fault_name(f).to_string(),
-                KindFigures { detector: mission::detection(f).1, ..Default::default() },
-            )
+    let mut by_kind: BTreeMap<String, KindFigures> = Fault::ALL
+        .into_iter()
+        .filter(|f| f.spec().class != FaultClass::Nuisance)
+        .map(|f| {
+            (f.name().to_string(), KindFigures { detector: !f.spec().detected_by.is_empty(), ..Default::default() })
         })
         .collect();
     let sum = |f: &dyn Fn(&MissionReport) -> f64| reports.iter().map(f).sum::<f64>();
@@ -152,8 +150,8 @@ pub fn summarize(reports: &[MissionReport], controller: ControllerChoice, seed: 
     let mut failures = Vec::new();
     let mut details = Vec::new();
     for r in reports {
-        if let Some((name, t, at)) = r.fault {
-            let k = by_kind.entry(name.to_string()).or_default();
+        if let Some((kind, t, at)) = r.fault {
+            let k = by_kind.entry(kind.name().to_string()).or_default();
             k.injected += 1;
             if let Some(at) = at {
                 k.detected += 1;
@@ -194,7 +192,7 @@ pub fn summarize(reports: &[MissionReport], controller: ControllerChoice, seed: 
         faults_by_kind: by_kind,
         spurious_missions: reports.iter().filter(|r| !r.spurious.is_empty()).count() as u64,
         spurious_by_kind: reports.iter().flat_map(|r| r.spurious.iter()).fold(BTreeMap::new(), |mut m, (k, _)| {
-            *m.entry(k.clone()).or_insert(0) += 1;
+            *m.entry(k.name().to_string()).or_insert(0) += 1;
             m
         }),
         spikes_injected: reports.iter().filter(|r| r.spikes.is_some()).count() as u64,

@@ -4,6 +4,9 @@
 
 pub mod arx;
 pub mod campaign_cmd;
+pub mod compare_cmd;
+pub mod demo_cmd;
+pub mod fault;
 pub mod identify_cmd;
 pub mod log;
 pub mod log2csv_cmd;
@@ -13,5 +16,7 @@ pub mod monitor_cmd;
 pub mod periph;
 pub mod plant;
 pub mod plot;
+pub mod rtd_cmd;
 pub mod scenario;
 pub mod sim;
+pub mod sim_cmd;

@@ -7,10 +7,16 @@
 //! conversion), `supply` (V, NaN when not measured) and `alarm` (the indicator's state) are
 //! kept when present; logs of older firmware without them leave those cells empty.
 //!
+//! The firmware prints the step's mode and the alarm indicator as their variant names
+//! (`mode=LimpHome alarm=OutOfRange`, defmt's `{}` of the enum); the CSV carries the library's
+//! names instead ([`Mode::name`], [`Indication::name`]: `limp_home`, `out_of_range`), as
+//! `hter sim --csv` does, so a simulated and a logged trace spell every mode the same way. A
+//! word that is neither spelling of a known value is an error naming the line.
+//!
 //! Field logs are not clean, and one bad sample must not cost the whole record:
 //! - a sample whose temperature is not finite (`temp=NaN`: a sensor fault before the first
 //!   good reading, when the filter has nothing to hold) is kept as a *fault row*: `temp_c`
-//!   empty, every other cell (the mode, e.g. `SensorFault`) as printed;
+//!   empty, every other cell (the mode, e.g. `sensor_fault`) as for any sample;
 //! - a log that spans resets is split into *boots*. A boot starts at the firmware's
 //!   `reset cause: Watchdog|BrownOut|Other` line, or, when that line was lost, where `t` stops
 //!   increasing. The board's clock restarts at 0 on every boot and the log has no wall clock,
@@ -31,9 +37,11 @@ use std::io::{BufRead, Write};
 use std::path::PathBuf;
 
 use anyhow::{anyhow, bail, Context, Result};
+use hter::alarm::Indication;
 use hter::event::EventKind;
 use hter::failsafe::StopKind;
 use hter::persist::ResetCause;
+use hter::step::Mode;
 
 /// Arguments of `hter log2csv`.
 #[derive(clap::Args, Debug, Clone)]
@@ -62,14 +70,14 @@ pub struct Sample {
     pub temp_c: Option<f64>,
     /// Duty applied.
     pub duty: f64,
-    /// Safety mode.
-    pub mode: String,
+    /// Safety mode (`None`: the line had no `mode=`).
+    pub mode: Option<Mode>,
     /// RTD conversion, counts (newer firmware).
     pub counts: Option<u32>,
     /// The modules' supply, V (newer firmware; `None` also when the board could not measure it).
     pub supply_v: Option<f64>,
     /// The alarm indicator's state (newer firmware).
-    pub alarm: String,
+    pub alarm: Option<Indication>,
 }
 
 /// One row of the CSV: a sample on the log's continuous time axis.
@@ -115,6 +123,26 @@ fn word_after<'a>(line: &'a str, marker: &str) -> Option<&'a str> {
     Some(line.get(at..)?.split_whitespace().next().unwrap_or(""))
 }
 
+/// The value `word` names, in the firmware's spelling (the variant name, as `{:?}` prints it
+/// on the host and defmt's `{}` on the board) or the library's (`name`).
+fn named<T: Copy + std::fmt::Debug>(all: &[T], name: fn(T) -> &'static str, word: &str) -> Option<T> {
+    all.iter().copied().find(|v| format!("{v:?}") == word || name(*v) == word)
+}
+
+/// The value of a `mode=`/`alarm=` field, if the line has one.
+fn named_field<T: Copy + std::fmt::Debug>(
+    line: &str,
+    key: &str,
+    all: &[T],
+    name: fn(T) -> &'static str,
+) -> Result<Option<T>> {
+    let Some(word) = field(line, key) else { return Ok(None) };
+    named(all, name, word).map(Some).ok_or_else(|| {
+        let known: Vec<String> = all.iter().map(|v| format!("{v:?}")).collect();
+        anyhow!("{} '{word}' is none of {}", key.trim_end_matches('='), known.join(", "))
+    })
+}
+
 /// The event name of a `reset cause: …` line (the defmt of [`ResetCause`]); `Err` with the
 /// word when it names no known cause.
 fn reset_line(line: &str) -> Option<Result<&'static str, String>> {
@@ -148,8 +176,6 @@ pub fn parse_line(line: &str) -> Option<Result<Sample>> {
     if t_ms.is_none() && t.is_none() {
         return None;
     }
-    let mode = field(line, "mode=").unwrap_or("").to_string();
-    let alarm = field(line, "alarm=").unwrap_or("").to_string();
     let counts = field(line, "counts=");
     let supply = field(line, "supply=");
     let any =
@@ -172,18 +198,18 @@ pub fn parse_line(line: &str) -> Option<Result<Sample>> {
             (None, None) => bail!("no time"),
         };
         Ok(Sample {
+            mode: named_field(line, "mode=", &Mode::ALL, Mode::name)?,
+            alarm: named_field(line, "alarm=", &Indication::ALL, Indication::name)?,
             t_s,
             // NaN or inf: no reading (the firmware holds the last good value once it has one).
             temp_c: Some(any("temp", temp)?).filter(|c| c.is_finite()),
             setpoint_c: num("sp", sp)?,
             duty: num("duty", duty)?,
-            mode,
             counts: counts
                 .map(|c| c.parse::<u32>().with_context(|| format!("counts '{c}' is not a whole number")))
                 .transpose()?,
             // NaN is how the firmware says "not measured".
             supply_v: supply.map(|v| any("supply", v)).transpose()?.filter(|v| v.is_finite()),
-            alarm,
         })
     })())
 }
@@ -308,10 +334,10 @@ pub fn csv_text(rows: &[Row]) -> String {
             s.setpoint_c,
             opt(s.temp_c.map(|c| c.to_string())),
             s.duty,
-            s.mode,
+            s.mode.map_or("", Mode::name),
             opt(s.counts.map(|c| c.to_string())),
             opt(s.supply_v.map(|v| v.to_string())),
-            s.alarm,
+            s.alarm.map_or("", Indication::name),
             r.boot,
             r.reset_cause.as_deref().unwrap_or("")
         ));
@@ -369,16 +395,16 @@ mod tests {
                 setpoint_c: 4.0,
                 temp_c: Some(4.0123),
                 duty: 0.456,
-                mode: "Normal".into(),
+                mode: Some(Mode::Normal),
                 counts: None,
                 supply_v: None,
-                alarm: String::new()
+                alarm: None
             }
         );
         // Today's firmware line: the conversion, the supply (NaN: not measured) and the alarm.
         let l = "0.000 INFO  t=20 temp=4.01 sp=4 duty=0.45 mode=Normal counts=49918 supply=12.04 alarm=Off";
         let s = parse_line(l).unwrap().unwrap();
-        assert_eq!((s.counts, s.supply_v, s.alarm.as_str()), (Some(49_918), Some(12.04), "Off"));
+        assert_eq!((s.counts, s.supply_v, s.alarm), (Some(49_918), Some(12.04), Some(Indication::Off)));
         let l = "t=30 temp=4.01 sp=4 duty=0.45 mode=Normal counts=49920 supply=NaN alarm=OutOfRange";
         assert_eq!(parse_line(l).unwrap().unwrap().supply_v, None);
         let bad = parse_line("t=30 temp=4.01 sp=4 duty=0.45 mode=Normal counts=4.5 supply=12 alarm=Off").unwrap();
@@ -393,11 +419,32 @@ mod tests {
     }
 
     #[test]
+    fn modes_and_alarms_take_the_library_names() {
+        let line =
+            |mode: &str, alarm: &str| format!("t=0 temp=4 sp=4 duty=0 mode={mode} counts=1 supply=12 alarm={alarm}");
+        for (m, i) in Mode::ALL.into_iter().zip(Indication::ALL.into_iter().cycle()) {
+            // The firmware's spelling and the library's both read as the value.
+            for (mw, iw) in [(format!("{m:?}"), format!("{i:?}")), (m.name().to_string(), i.name().to_string())] {
+                let s = parse_line(&line(&mw, &iw)).unwrap().unwrap();
+                assert_eq!((s.mode, s.alarm), (Some(m), Some(i)), "{mw} {iw}");
+            }
+        }
+        let c = convert(lines(&line("LimpHome", "OutOfRange"))).unwrap();
+        assert_eq!(csv_text(&c.rows).lines().nth(1), Some("0,4,4,0,limp_home,1,12,out_of_range,0,"));
+        let e = parse_line(&line("Limping", "Off")).unwrap().unwrap_err();
+        assert!(e.to_string().contains("mode 'Limping' is none of Normal, SensorFault"), "{e}");
+        let e = parse_line(&line("Normal", "On")).unwrap().unwrap_err();
+        assert!(e.to_string().contains("alarm 'On'"), "{e}");
+    }
+
+    #[test]
     fn a_non_finite_temperature_is_a_fault_row_and_t_ms_wins() {
         for nan in ["NaN", "inf", "-inf"] {
-            let l = format!("0.1 INFO  t=0 temp={nan} sp=4 duty=0 mode=SensorFault counts=65535 supply=12 alarm=On");
+            let l = format!(
+                "0.1 INFO  t=0 temp={nan} sp=4 duty=0 mode=SensorFault counts=65535 supply=12 alarm=NotInControl"
+            );
             let s = parse_line(&l).unwrap().unwrap();
-            assert_eq!((s.temp_c, s.mode.as_str(), s.counts), (None, "SensorFault", Some(65_535)), "{nan}");
+            assert_eq!((s.temp_c, s.mode, s.counts), (None, Some(Mode::SensorFault), Some(65_535)), "{nan}");
         }
         let s = parse_line("t_ms=7776000123 t=7776000 temp=4 sp=4 duty=0.5 mode=Normal").unwrap().unwrap();
         assert_eq!(s.t_s, 7_776_000.123);
@@ -447,8 +494,8 @@ t=10 temp=8 sp=4 duty=0.5 mode=Normal
         assert_eq!(c.joined, Some((3, 10.0, PeriodSource::BootLine)));
         let text = csv_text(&c.rows);
         assert_eq!(text.lines().next(), Some(HEADER));
-        assert_eq!(text.lines().nth(1), Some("0,4,,0,SensorFault,,,,0,restarted_brownout"));
-        assert_eq!(text.lines().nth(2), Some("10,4,5,0.5,Normal,,,,0,"));
+        assert_eq!(text.lines().nth(1), Some("0,4,,0,sensor_fault,,,,0,restarted_brownout"));
+        assert_eq!(text.lines().nth(2), Some("10,4,5,0.5,normal,,,,0,"));
     }
 
     #[test]

@@ -1,4 +1,4 @@
-//! Performance metrics of a simulated run (the `hter sim --json` contract, SPEC §3).
+//! Performance metrics of a simulated run: the `hter sim --json` object.
 //!
 //! All temperatures here are the plant's true load temperature, not the sensor reading.
 //!
@@ -20,9 +20,12 @@
 //! **SSR switches** counts turn-ons of the SSR output (a PWM period at a duty strictly between
 //! 0 and 1 is one turn-on; consecutive periods at full duty are not).
 
+use hter::coldchain::AlarmKind;
+use hter::event::EventKind;
+use serde::ser::SerializeStruct;
 use serde::Serialize;
 
-/// The band that defines "settled", °C (issue 2: hold within ±0.5 °C).
+/// The band that defines "settled", °C (the carrier must hold its setpoint within ±0.5 °C).
 pub const SETTLE_BAND_C: f64 = 0.5;
 
 /// One sample of a run, as the metrics see it.
@@ -36,13 +39,73 @@ pub struct Sample {
     pub true_temp_c: f64,
 }
 
-/// A timestamped item of the `alarms` / `faults_detected` lists.
-#[derive(Clone, Debug, Serialize, PartialEq)]
-pub struct Stamped {
-    /// Kind, snake_case.
-    pub kind: String,
+/// What a `faults_detected` item reports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Detected {
+    /// An event of the step (a hardware fault or a restart that lost minutes of control).
+    Event(EventKind),
+    /// The board's heartbeat monostable expired: the step stopped being called, and the
+    /// board's alarm hardware sounds (the step cannot report its own hang).
+    FirmwareHang,
+}
+
+impl Detected {
+    /// Stable snake_case name, as `faults_detected` spells it: the event's name, or
+    /// `firmware_hang`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Detected::Event(k) => k.name(),
+            Detected::FirmwareHang => "firmware_hang",
+        }
+    }
+}
+
+impl std::fmt::Display for Detected {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl Serialize for Detected {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+/// A kind with a stable name: what a [`Stamped`] item serialises as its `kind`.
+pub trait Named: Copy {
+    /// The name.
+    fn name(self) -> &'static str;
+}
+
+impl Named for Detected {
+    fn name(self) -> &'static str {
+        Detected::name(self)
+    }
+}
+
+impl Named for AlarmKind {
+    fn name(self) -> &'static str {
+        AlarmKind::name(self)
+    }
+}
+
+/// A timestamped item of the `alarms` / `faults_detected` lists: `{"kind": name, "t_s": t}`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stamped<K> {
+    /// What was raised.
+    pub kind: K,
     /// Time, s.
     pub t_s: f64,
+}
+
+impl<K: Named> Serialize for Stamped<K> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut st = s.serialize_struct("Stamped", 2)?;
+        st.serialize_field("kind", self.kind.name())?;
+        st.serialize_field("t_s", &self.t_s)?;
+        st.end()
+    }
 }
 
 /// The `hter sim --json` object.
@@ -50,6 +113,30 @@ pub struct Stamped {
 pub struct SimMetrics {
     /// Controller name.
     pub controller: String,
+    /// The figures computed from the samples alone.
+    #[serde(flatten)]
+    pub tracking: TrackingFigures,
+    /// Electrical energy of the modules, Wh.
+    pub energy_wh: f64,
+    /// SSR turn-ons.
+    pub ssr_switches: u64,
+    /// Cold-chain alarms raised.
+    pub alarms: Vec<Stamped<AlarmKind>>,
+    /// Faults the step detected.
+    pub faults_detected: Vec<Stamped<Detected>>,
+    /// Time the board's alarm indicator was on (`hter::alarm`: out of range, not in control,
+    /// or a fault or alarm nobody acknowledged — the simulation never presses the button), s.
+    pub alarm_indicator_s: f64,
+    /// When the alarm indicator first came on, s (null if never).
+    pub alarm_indicator_first_s: Option<f64>,
+    /// When the board's alarm hardware first sounded (the heartbeat monostable expired: the
+    /// control loop stopped), s (null if never).
+    pub alarm_hw_first_s: Option<f64>,
+}
+
+/// Figures computed from the samples alone (flattened into [`SimMetrics`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct TrackingFigures {
     /// Integral of absolute error, °C·s.
     pub iae: f64,
     /// Worst |T − w| after settling, °C (see the module docs).
@@ -65,43 +152,6 @@ pub struct SimMetrics {
     /// Highest true load temperature, °C.
     pub max_temp_c: f64,
     /// Time with the load outside 2…8 °C, s.
-    pub time_outside_2_8_s: f64,
-    /// Electrical energy of the modules, Wh.
-    pub energy_wh: f64,
-    /// SSR turn-ons.
-    pub ssr_switches: u64,
-    /// Cold-chain alarms raised.
-    pub alarms: Vec<Stamped>,
-    /// Faults the step detected.
-    pub faults_detected: Vec<Stamped>,
-    /// Time the board's alarm indicator was on (`hter::alarm`: out of range, not in control,
-    /// or a fault or alarm nobody acknowledged — the simulation never presses the button), s.
-    pub alarm_indicator_s: f64,
-    /// When the alarm indicator first came on, s (null if never).
-    pub alarm_indicator_first_s: Option<f64>,
-    /// When the board's alarm hardware first sounded (the heartbeat monostable expired: the
-    /// control loop stopped), s (null if never).
-    pub alarm_hw_first_s: Option<f64>,
-}
-
-/// Figures computed from the samples alone.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TrackingFigures {
-    /// See [`SimMetrics::iae`].
-    pub iae: f64,
-    /// See [`SimMetrics::max_abs_error_after_settle_c`].
-    pub max_abs_error_after_settle_c: f64,
-    /// See [`SimMetrics::steady_state_error_c`].
-    pub steady_state_error_c: f64,
-    /// See [`SimMetrics::overshoot_c`].
-    pub overshoot_c: f64,
-    /// See [`SimMetrics::settle_time_s`].
-    pub settle_time_s: Option<f64>,
-    /// See [`SimMetrics::min_temp_c`].
-    pub min_temp_c: f64,
-    /// See [`SimMetrics::max_temp_c`].
-    pub max_temp_c: f64,
-    /// See [`SimMetrics::time_outside_2_8_s`].
     pub time_outside_2_8_s: f64,
 }
 

@@ -1,4 +1,4 @@
-//! Randomized 24 h missions for `hter campaign` (issue 6): each mission is fully determined by
+//! Randomized 24 h missions for `hter campaign`: each mission is fully determined by
 //! its seed, so any mission of a campaign replays alone with `hter sim --mission-seed N`.
 //!
 //! A mission draws, from a ChaCha8 stream seeded with its seed:
@@ -11,13 +11,12 @@
 //! - with probability ½ a supply sag (12 V → 9.5…11 V for 30…120 min);
 //! - with probability 0.3 sensor spikes from a random time on (not a hardware fault: the step
 //!   ignores each spike and reports them);
-//! - with probability 0.2 one hardware fault, uniform over [`HARDWARE_FAULTS`], at a random
-//!   time between 2 h and 22 h;
+//! - with probability 0.2 one hardware fault, uniform over the table's
+//!   [`FaultClass::Hardware`] faults, at a random time between 2 h and 22 h;
 //! - in a mission without one, with probability [`BOARD_FAULT_P`] one fault of the board
-//!   around the step, uniform over [`BOARD_FAULTS`], at a random time between 2 h and 22 h,
-//!   drawn from a second stream (seeded from the seed and [`BOARD_FAULT_STREAM`]) so that the
-//!   draws above, and so every mission without a board fault, stay as they were before the
-//!   board faults existed.
+//!   around the step, uniform over the [`FaultClass::Board`] faults, at a random time between
+//!   2 h and 22 h, drawn from a second stream (seeded from the seed and
+//!   [`BOARD_FAULT_STREAM`]) so that none of the draws above depends on the board-fault draw.
 //!
 //! The setpoint is 4 °C; the run starts at ambient with cooling off (pull-down).
 //!
@@ -27,29 +26,13 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
+use hter::event::EventKind;
+
+use crate::fault::{Fault, FaultClass};
+use crate::metrics::Detected;
 use crate::plant::{Load, PlantParams};
 use crate::scenario::{day_night, Change, Scenario, Start, DAY_S};
-use crate::sim::{ControllerSpec, Fault, PlantChoice, SimOptions, SimOutput};
-
-/// Hardware faults a mission may carry (every `--fault` kind except `sensor-spikes`, which is
-/// a nuisance the step must ride through, not a hardware fault).
-pub const HARDWARE_FAULTS: [Fault; 9] = [
-    Fault::SensorOpen,
-    Fault::SensorShort,
-    Fault::SensorStuck,
-    Fault::SensorOffset,
-    Fault::SsrStuckOn,
-    Fault::SsrStuckOff,
-    Fault::SupplySag,
-    Fault::LidOpen,
-    Fault::Brownout,
-];
-
-/// Faults of the board around the step a mission may carry: a shorted supply switch (found
-/// by the switched-rail check, at the latest at the two-hourly test opening) and a hung control
-/// loop (found by the board's heartbeat monostable, which opens the supply switch and sounds
-/// the alarm hardware).
-pub const BOARD_FAULTS: [Fault; 2] = [Fault::SupplySwitchShort, Fault::FirmwareHang];
+use crate::sim::{ControllerSpec, PlantChoice, SimOptions, SimOutput};
 
 /// Probability of a board fault in a mission without a hardware fault: 0.1, so a 40-mission
 /// campaign carries about three and 1000 missions about 80 (as many of each kind as of the
@@ -152,14 +135,16 @@ impl Mission {
             changes.push((t + d, Change::Supply(params.supply_v)));
         }
         let mut spikes_s = rng.gen_bool(0.3).then(|| rng.gen_range(3600.0..23.0 * 3600.0_f64).round());
+        let hardware = Fault::of_class(FaultClass::Hardware);
         let mut hardware_fault = rng.gen_bool(0.2).then(|| {
-            let kind = HARDWARE_FAULTS[rng.gen_range(0..HARDWARE_FAULTS.len())];
+            let kind = hardware[rng.gen_range(0..hardware.len())];
             (rng.gen_range(2.0 * 3600.0..22.0 * 3600.0_f64).round(), kind)
         });
         if hardware_fault.is_none() {
             let mut board = ChaCha8Rng::seed_from_u64(seed ^ BOARD_FAULT_STREAM);
             if board.gen_bool(BOARD_FAULT_P) {
-                let kind = BOARD_FAULTS[board.gen_range(0..BOARD_FAULTS.len())];
+                let kinds = Fault::of_class(FaultClass::Board);
+                let kind = kinds[board.gen_range(0..kinds.len())];
                 hardware_fault = Some((board.gen_range(2.0 * 3600.0..22.0 * 3600.0_f64).round(), kind));
             }
         }
@@ -189,7 +174,7 @@ impl Mission {
             faults.push(f);
         }
         let fault_text =
-            hardware_fault.map_or("no hardware fault".to_string(), |(t, k)| format!("{} at {:.0} s", fault_name(k), t));
+            hardware_fault.map_or("no hardware fault".to_string(), |(t, k)| format!("{} at {:.0} s", k.name(), t));
         let scenario = Scenario {
             name: format!("mission-{seed}"),
             description: format!(
@@ -221,46 +206,11 @@ impl Mission {
     }
 }
 
-/// The CLI name of a fault kind.
-pub fn fault_name(f: Fault) -> &'static str {
-    Fault::ALL.iter().find(|(_, k)| *k == f).map_or("?", |(n, _)| n)
-}
-
-/// How the library can report a fault kind: the `faults_detected` kinds that count as its
-/// detection, and whether the library has a detector for it at all.
-///
-/// Every kind but `brownout` has a detector in the step's supervisor (`src/step.rs`):
-/// `sensor_offset` (a step of the reading that holds), `supply_sag` (the measured module
-/// supply), `lid_open` (the holding duty jumps; no check for the relay On-Off controller, whose
-/// limit cycle hides it — `ssr_stuck_off` also counts, "the load warms at full duty"),
-/// `restarted_brownout` (the reset flags the firmware reads at boot, handed to the step by
-/// `Carrier::note_reset`, as the simulator does when it restarts the step),
-/// `supply_switch_shorted` (the switched-rail sense with the switch commanded open) and
-/// `firmware_hang` (not the step: the board's heartbeat monostable expiring).
-pub fn detection(f: Fault) -> (fn(&str) -> bool, bool) {
-    match f {
-        Fault::SensorOpen => (|k| k == "sensor_open" || k == "sensor_out_of_range", true),
-        Fault::SensorShort => (|k| k == "sensor_short" || k == "sensor_out_of_range", true),
-        Fault::SensorStuck => (|k| k == "sensor_stuck", true),
-        Fault::SsrStuckOn => (|k| k == "ssr_stuck_on", true),
-        Fault::SsrStuckOff => (|k| k == "ssr_stuck_off", true),
-        Fault::SensorOffset => (|k| k == "sensor_offset", true),
-        Fault::SupplySag => (|k| k == "supply_sag", true),
-        Fault::LidOpen => (|k| k == "lid_open" || k == "ssr_stuck_off", true),
-        Fault::Brownout => (|k| k == "restarted_brownout", true),
-        Fault::SupplySwitchShort => (|k| k == "supply_switch_shorted", true),
-        // The step cannot report its own hang: the board's alarm hardware sounding is the
-        // detection (the simulator lists it at the monostable's expiry).
-        Fault::FirmwareHang => (|k| k == "firmware_hang", true),
-        Fault::SensorSpikes => (|k| k == "sensor_spikes", false),
-    }
-}
-
 /// Reports that are warnings about the mission's own disturbances, not faults: `ssr_stuck_off`
 /// (the load warms at full duty, e.g. a lid opening), `supply_sag` (the mission's scheduled
 /// sag is real) and `lid_open` (its lid openings are real). None changes the control.
-fn is_warning(kind: &str) -> bool {
-    matches!(kind, "ssr_stuck_off" | "supply_sag" | "lid_open")
+fn is_warning(d: Detected) -> bool {
+    matches!(d, Detected::Event(EventKind::SsrStuckOff | EventKind::SupplySag | EventKind::LidOpen))
 }
 
 /// The verdict on one mission.
@@ -269,11 +219,13 @@ fn is_warning(kind: &str) -> bool {
 /// - **Judged window**: from the end of pull-down to the hardware fault (or the end), minus
 ///   cold-ambient samples (ambient below [`COLD_AMBIENT_C`] now or within [`COLD_LAG_S`]).
 /// - **Fails** when the load is ever below 0 °C (anywhere, faults and cold ambient included),
-///   or an injected fault whose kind has a detector is not detected by the end of the run,
-///   or the step reports a hardware fault that was not injected, other than `ssr_stuck_off`
-///   (a false `ssr_stuck_on` latches the modules' supply off for the rest of the mission;
-///   `ssr_stuck_off` without a fault is the step warning that the load warms at full duty,
-///   e.g. during a lid opening, and changes nothing in the control: reported, not a failure),
+///   or an injected fault that showed in the run (`fault_detectable`) is not detected by the
+///   end of the run, or the step reports a hardware fault that was not injected, other than
+///   the warnings about the mission's own disturbances, `ssr_stuck_off`, `supply_sag` and
+///   `lid_open` (a false `ssr_stuck_on` latches the modules' supply off for the rest of the
+///   mission; `ssr_stuck_off` without a fault is the step warning that the load warms at full
+///   duty, e.g. during a lid opening, and changes nothing in the control: reported, not a
+///   failure),
 ///   or the judged window has more than [`OUTSIDE_TOLERANCE_S`] outside 2–8 °C not counting
 ///   time above 8 °C after 30 min of full cooling (the carrier's capacity: a randomized
 ///   carrier at 40 °C may not hold 8 °C with any controller; that time still counts in the
@@ -303,14 +255,15 @@ pub struct MissionReport {
     /// Highest true load temperature in the judged window, °C (None: empty window).
     pub max_judged_c: Option<f64>,
     /// The hardware fault: (kind, injected at s, detected at s).
-    pub fault: Option<(&'static str, f64, Option<f64>)>,
-    /// Whether the library has a detector for that kind.
+    pub fault: Option<(Fault, f64, Option<f64>)>,
+    /// Whether the fault showed in this run, so that its detection was due (see
+    /// [`evaluate`]: a dead SSR in a cold spell that never asks for cooling does not).
     pub fault_detectable: bool,
     /// Sensor spikes: (injected at s, first report at s).
     pub spikes: Option<(f64, Option<f64>)>,
     /// Hardware-fault reports without a fault behind them (before the injected fault, or in a
     /// mission without one): (kind, first report at s), one per kind.
-    pub spurious: Vec<(String, f64)>,
+    pub spurious: Vec<(Detected, f64)>,
     /// Why the mission failed (empty: passed).
     pub reasons: Vec<String>,
 }
@@ -365,35 +318,36 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
     }
     let detected = &out.metrics.faults_detected;
     let fault = m.hardware_fault.map(|(tf, kind)| {
-        let (accept, _) = detection(kind);
-        let at = detected.iter().find(|d| d.t_s >= tf && accept(&d.kind)).map(|d| d.t_s);
-        (fault_name(kind), tf, at)
+        let at = detected.iter().find(|d| d.t_s >= tf && kind.detected_by(d.kind)).map(|d| d.t_s);
+        (kind, tf, at)
     });
     // A dead SSR shows only once cooling is needed: after a fault in a cold spell that never
     // warms the load 1 °C past its setpoint there was nothing to see.
     let fault_detectable = m.hardware_fault.is_some_and(|(tf, k)| {
-        detection(k).1
-            && match k {
-                Fault::SsrStuckOff => out.rows.iter().any(|r| r.t_s >= tf && r.true_temp_c > MISSION_SETPOINT_C + 1.0),
-                // A shorted SSR shows only once less than full cooling is wanted: in a heat that
-                // needs full cooling and still leaves the load above its setpoint it never does.
-                Fault::SsrStuckOn => out.rows.iter().any(|r| r.t_s >= tf && r.true_temp_c < MISSION_SETPOINT_C - 1.0),
-                // A shorted switch shows only once the step commands it open for two samples
-                // (its test opening waits for the load to be at or below the setpoint: a hot
-                // day at full capacity may never give one).
-                Fault::SupplySwitchShort => {
-                    out.rows.windows(2).any(|w| w[0].t_s >= tf && !w[0].supply_enable && !w[1].supply_enable)
-                }
-                _ => true,
+        match k {
+            Fault::SsrStuckOff => out.rows.iter().any(|r| r.t_s >= tf && r.true_temp_c > MISSION_SETPOINT_C + 1.0),
+            // A shorted SSR shows only once less than full cooling is wanted: in a heat that
+            // needs full cooling and still leaves the load above its setpoint it never does.
+            Fault::SsrStuckOn => out.rows.iter().any(|r| r.t_s >= tf && r.true_temp_c < MISSION_SETPOINT_C - 1.0),
+            // A shorted switch shows only once the step commands it open for two samples
+            // (its test opening waits for the load to be at or below the setpoint: a hot
+            // day at full capacity may never give one).
+            Fault::SupplySwitchShort => {
+                out.rows.windows(2).any(|w| w[0].t_s >= tf && !w[0].supply_enable && !w[1].supply_enable)
             }
+            _ => true,
+        }
     });
-    let spikes =
-        m.spikes_s.map(|ts0| (ts0, detected.iter().find(|d| d.t_s >= ts0 && d.kind == "sensor_spikes").map(|d| d.t_s)));
+    let spikes = m.spikes_s.map(|ts0| {
+        (ts0, detected.iter().find(|d| d.t_s >= ts0 && Fault::SensorSpikes.detected_by(d.kind)).map(|d| d.t_s))
+    });
 
-    let mut spurious: Vec<(String, f64)> = Vec::new();
-    for d in detected.iter().filter(|d| d.kind != "sensor_spikes" && d.t_s < t_fault) {
+    // A nuisance's report is expected whenever the nuisance is there: never spurious.
+    let nuisances = Fault::of_class(FaultClass::Nuisance);
+    let mut spurious: Vec<(Detected, f64)> = Vec::new();
+    for d in detected.iter().filter(|d| d.t_s < t_fault && !nuisances.iter().any(|f| f.detected_by(d.kind))) {
         if !spurious.iter().any(|(k, _)| *k == d.kind) {
-            spurious.push((d.kind.clone(), d.t_s));
+            spurious.push((d.kind, d.t_s));
         }
     }
 
@@ -401,15 +355,15 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
     // `ssr_stuck_off` without a fault is the step's own warning that the load warms at full
     // duty (a lid opening or a sag in the heat): it changes nothing in the control, so it is
     // reported, not a failure. Any other spurious report puts the step in a safe state.
-    for (k, t) in spurious.iter().filter(|(k, _)| !is_warning(k)) {
+    for (k, t) in spurious.iter().filter(|(k, _)| !is_warning(*k)) {
         reasons.push(format!("{k} reported at {t:.0} s without a fault"));
     }
     if freeze_s > 0.0 || min_c < 0.0 {
         reasons.push(format!("load below 0 °C for {:.0} min (min {min_c:.2} °C)", freeze_s / 60.0));
     }
-    if let Some((name, tf, None)) = fault {
+    if let Some((kind, tf, None)) = fault {
         if fault_detectable {
-            reasons.push(format!("{name} at {tf:.0} s not detected"));
+            reasons.push(format!("{} at {tf:.0} s not detected", kind.name()));
         }
     }
     if outside_s - capacity_s > OUTSIDE_TOLERANCE_S {
@@ -457,17 +411,19 @@ mod tests {
                 }
             }
             if let Some((t, f)) = m.hardware_fault {
-                assert!((7200.0..=22.0 * 3600.0).contains(&t) && f != Fault::SensorSpikes);
+                assert!((7200.0..=22.0 * 3600.0).contains(&t) && f.spec().class != FaultClass::Nuisance);
             }
         }
         let kinds: Vec<_> = (0..1000).filter_map(|s| Mission::generate(s).hardware_fault.map(|(_, k)| k)).collect();
-        let board = kinds.iter().filter(|k| BOARD_FAULTS.contains(k)).count();
+        let board_faults = Fault::of_class(FaultClass::Board);
+        let board = kinds.iter().filter(|k| board_faults.contains(k)).count();
         let with_fault = kinds.len() - board;
         assert!((150..=250).contains(&with_fault), "{with_fault}");
         // 0.1 of the ≈ 800 missions without a hardware fault.
         assert!((50..=110).contains(&board), "{board}");
         // Every kind is drawn, and seeds give different carriers.
-        assert!(HARDWARE_FAULTS.iter().chain(&BOARD_FAULTS).all(|b| kinds.contains(b)));
+        let hardware = Fault::of_class(FaultClass::Hardware);
+        assert!(hardware.iter().chain(&board_faults).all(|b| kinds.contains(b)));
         let mut carriers: Vec<_> = (0..200).map(|s| Mission::generate(s).params.c_water_j_per_k.to_bits()).collect();
         carriers.sort_unstable();
         carriers.dedup();

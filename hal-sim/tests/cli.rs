@@ -2,6 +2,8 @@
 
 use std::process::{Command, Output};
 
+use hter::event::EventKind;
+
 fn hter(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_hter")).args(args).output().expect("run hter")
 }
@@ -239,7 +241,7 @@ fn a_campaign_mission_replays_with_hter_sim() {
                 .as_array()
                 .unwrap()
                 .iter()
-                .any(|f| f["kind"] == "ssr_stuck_off" && f["t_s"].as_f64().unwrap() >= 61071.0);
+                .any(|f| f["kind"] == EventKind::SsrStuckOff.name() && f["t_s"].as_f64().unwrap() >= 61071.0);
             assert!(found, "{s}");
         }
     }

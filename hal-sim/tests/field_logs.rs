@@ -97,9 +97,12 @@ fn a_field_log_with_faults_and_resets_goes_through_log2csv_and_monitor() {
         rows.iter().filter(|r| r[2].is_empty()).map(|r| (r[0].parse().unwrap(), r[4])).collect();
     assert_eq!(
         faults,
-        vec![(0.0, "SensorFault"), (10.0, "SensorFault"), (20.0, "SensorFault"), (190.0, "SensorFault")]
+        vec![(0.0, "sensor_fault"), (10.0, "sensor_fault"), (20.0, "sensor_fault"), (190.0, "sensor_fault")]
     );
-    assert_eq!(rows[3][2..5], ["5", "0.45", "Normal"]);
+    assert_eq!(rows[3][2..5], ["5", "0.45", "normal"]);
+    // The indicator as the library spells it.
+    let alarms: Vec<&str> = [0, 3, 10, 12].iter().map(|&i| rows[i][7]).collect();
+    assert_eq!(alarms, ["not_in_control", "off", "out_of_range", "out_of_range"]);
     let boots: Vec<&str> = rows.iter().map(|r| r[8]).collect();
     assert_eq!(boots, [["0"; 12].as_slice(), &["1"; 7], &["2"; 5]].concat());
     let causes: Vec<(usize, &str)> =

@@ -11,8 +11,9 @@
 //! Per sample the runner times the real work — `Carrier::step` and the cold-chain monitor's
 //! `push` — and then, on shadow copies that do not touch the real state, the parts of it:
 //! the controller update alone, the counts → °C conversion, a 5- and a 4-parameter RLS update
-//! on the self-tuning controller's regressors, the GPC design, the estimate's projection and a
-//! Diophantine solution.
+//! on the self-tuning controller's regressor (the library's `SecondOrderRegressor`, fed as the
+//! self-tuner feeds its own), the GPC design, the estimate's projection and a Diophantine
+//! solution.
 #![no_std]
 #![no_main]
 
@@ -27,12 +28,12 @@ use cortex_m::peripheral::SYST;
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln, nr, syscall};
 use hter::alarm::Annunciator;
-use hter::control::adaptive::plausible_model;
+use hter::control::adaptive::{plausible_model, SecondOrderRegressor};
 use hter::control::gpc::{GpcConfig, GpcDesign, GpcState};
 use hter::control::{AnyController, ControlInput, Controller};
 use hter::ident::rls::Rls;
 use hter::persist::{HistoryRecord, Recorder};
-use hter::step::StepInput;
+use hter::step::{Carrier, StepInput, StepOutput};
 use nalgebra::SVector;
 
 /// Samples read from the host per semihosting call.
@@ -192,39 +193,6 @@ fn stack_peak() -> u32 {
     (stack_top() - p) as u32
 }
 
-/// The self-tuning controller's regressor history, rebuilt beside it for the shadow RLS.
-struct Regressors {
-    y: [f32; 3],
-    filled: u8,
-    u: [f32; 8],
-}
-
-impl Regressors {
-    fn push_y(&mut self, y: f32) -> bool {
-        if !y.is_finite() {
-            return false;
-        }
-        if self.filled == 0 {
-            self.y = [y; 3];
-        } else {
-            self.y.copy_within(0..2, 1);
-            self.y[0] = y;
-        }
-        self.filled = self.filled.saturating_add(1);
-        self.filled >= 3
-    }
-
-    /// u(t − m), m ≥ 1.
-    fn u(&self, m: usize) -> f32 {
-        self.u[m - 1]
-    }
-
-    fn push_u(&mut self, u: f32) {
-        self.u.copy_within(0..7, 1);
-        self.u[0] = u;
-    }
-}
-
 fn run() -> Result<(), &'static str> {
     let mut cp = cortex_m::Peripherals::take().ok_or("peripherals taken")?;
     cp.SYST.set_clock_source(SystClkSource::Core);
@@ -255,17 +223,18 @@ fn run() -> Result<(), &'static str> {
     }
 
     // Shadows for the profile.
-    let acfg = proto::adaptive_config();
-    let m0 = acfg.initial.unwrap_or(hter::control::model::Model::NEUTRAL);
-    let theta5 = SVector::<f32, 5>::from([m0.a[0], m0.a[1], m0.b[0], m0.b[1], 0.0]);
-    let theta4 = SVector::<f32, 4>::from([m0.a[0], m0.a[1], m0.b[0], m0.b[1]]);
+    let acfg = proto::ADAPTIVE;
+    let m0 = acfg.initial.unwrap_or(hter::model::Model::NEUTRAL);
+    let (a0, b0) = (m0.a(), m0.b());
+    let theta5 = SVector::<f32, 5>::from([a0[0], a0[1], b0[0], b0[1], 0.0]);
+    let theta4 = SVector::<f32, 4>::from([a0[0], a0[1], b0[0], b0[1]]);
     let mut rls5 = Rls::new(&acfg.rls, theta5);
     let mut rls4 = Rls::new(&acfg.rls, theta4);
-    let mut regs = Regressors { y: [0.0; 3], filled: 0, u: [PI_BIAS; 8] };
+    // The self-tuner's own regressor type, fed beside it as the self-tuner feeds its own.
+    let mut reg = SecondOrderRegressor::new(acfg.k, PI_BIAS).map_err(|_| "the profile's delay is refused")?;
     let mut gpc = GpcState::new(PI_BIAS);
     let mut gpc_design = GpcDesign::ZERO; // kept between samples, as `LawState` does
-    let k = acfg.k;
-    // The firmware's record and indicator, timed beside the step as the control task runs them.
+                                          // The firmware's record and indicator, timed beside the step as the control task runs them.
     let mut recorder = Recorder::new(HistoryRecord::EMPTY, proto::HISTORY_SAVE_SAMPLES);
     let mut annunciator = Annunciator::new();
 
@@ -282,7 +251,9 @@ fn run() -> Result<(), &'static str> {
 
             // The measured per-sample work.
             let inp_b = black_box(inp);
-            let (o, t) = timed(|| carrier.step(&inp_b));
+            let t0 = now();
+            let o = step(&mut carrier, &inp_b);
+            let t = since(t0, now());
             ticks[proto::PART_STEP] = t;
             let (raised, t) = timed(|| proto::monitor_push(&mut monitor, &inp_b, &o));
             ticks[proto::PART_MONITOR] = t;
@@ -306,12 +277,11 @@ fn run() -> Result<(), &'static str> {
                 AnyController::SelfTuning(st) => Some(st),
                 _ => None,
             };
-            if regs.push_y(o.temp_c.0) {
-                let y = regs.y;
-                let phi5 = SVector::<f32, 5>::from([-y[1], -y[2], regs.u(k), regs.u(k + 1), 1.0]);
-                let phi4 = SVector::<f32, 4>::from([-y[1], -y[2], regs.u(k), regs.u(k + 1)]);
-                ticks[4] = timed(|| rls5.update(&acfg.rls, &phi5, y[0]).is_ok()).1;
-                ticks[5] = timed(|| rls4.update(&acfg.rls, &phi4, y[0]).is_ok()).1;
+            if reg.push_y(o.temp_c.0) {
+                let phi5 = reg.phi();
+                let phi4 = SVector::<f32, 4>::from([phi5[0], phi5[1], phi5[2], phi5[3]]);
+                ticks[4] = timed(|| rls5.update(&acfg.rls, &phi5, reg.y()).is_ok()).1;
+                ticks[5] = timed(|| rls4.update(&acfg.rls, &phi4, reg.y()).is_ok()).1;
             }
             let model = st.and_then(|s| s.trusted_model()).unwrap_or(m0);
             let gcfg = GpcConfig::DEFAULT;
@@ -326,8 +296,8 @@ fn run() -> Result<(), &'static str> {
             }
             let at = model.atilde();
             ticks[8] =
-                timed(|| hter::control::diophantine::solve(&at[..model.na + 2], &[1.0], model.k).map(|s| s.f[0])).1;
-            regs.push_u(o.duty.get());
+                timed(|| hter::control::diophantine::solve(&at[..model.na() + 2], &[1.0], model.k()).map(|s| s.f[0])).1;
+            reg.push_u(o.duty.get());
 
             out.word(o.duty.get().to_bits())?;
             for t in ticks {
@@ -358,7 +328,16 @@ fn run() -> Result<(), &'static str> {
 }
 
 /// The PI's bias (the holding duty), where the self-tuning controller starts.
-const PI_BIAS: f32 = proto::PI.bias;
+const PI_BIAS: f32 = hter::profile::PI.bias;
+
+/// The measured step, as a call: the firmware calls `Carrier::step` out of line too, and the
+/// count then holds the step and the call, whether or not the compiler would have inlined the
+/// step into this loop (which changes with the size of everything around it, and puts a copy
+/// of the output inside the window when it does not).
+#[inline(never)]
+fn step(carrier: &mut Carrier<AnyController>, input: &StepInput) -> StepOutput {
+    carrier.step(input)
+}
 
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {

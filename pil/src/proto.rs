@@ -1,4 +1,5 @@
-//! What the host (`cargo xtask pil`) and the target runner agree on: the controllers both build,
+//! What the host (`cargo xtask pil`) and the target runner agree on: the controllers both build
+//! (the board profile's, `hter::profile`),
 //! the per-sample work both run, the file formats, and the encoding of events. The runner
 //! compiles this file as its module and xtask includes it with `#[path]`, so the two sides
 //! cannot drift apart.
@@ -12,9 +13,9 @@
 //! word pairs m, and m × `(code, value)` from [`event_words`]; then the runner's peak stack and the size of the carrier + monitor state, bytes.
 
 use hter::coldchain::{ColdChainMonitor, Raised};
-use hter::control::adaptive::{AdaptiveConfig, SelfTuning};
-use hter::control::gpc::GpcConfig;
-use hter::control::{AnyController, Law, Pi, PiConfig};
+use hter::control::adaptive::AdaptiveConfig;
+use hter::control::AnyController;
+use hter::profile::{self, Kind};
 use hter::step::{Carrier, CarrierConfig, StepInput, StepOutput};
 
 /// Input file name in QEMU's working directory (NUL-terminated for semihosting `SYS_OPEN`).
@@ -29,27 +30,28 @@ pub const MAGIC_OUT: u32 = 0x544f_4c50; // "PLOT"
 /// The step's configuration on both sides: the firmware's (`firmware/src/config.rs`).
 pub const CARRIER: CarrierConfig = CarrierConfig::DEFAULT;
 
-/// The fallback and baseline PI at Ts = 10 s, as the firmware builds it.
-pub const PI: PiConfig = PiConfig { ts_s: CARRIER.ts_s, ..PiConfig::HTER1_DEFAULT };
-
 /// Controller kind 0: the PI baseline (the firmware's `pi` feature, and the self-tuners'
 /// fallback).
 pub const KIND_PI: u32 = 0;
 /// Controller kind 1: the firmware's default, self-tuning GPC (N2 = 30, Nu = 3).
 pub const KIND_GPC: u32 = 1;
 
-/// The self-tuning GPC configuration the firmware runs by default (`config::ADAPTIVE_GPC`).
-pub fn adaptive_config() -> AdaptiveConfig {
-    AdaptiveConfig { fallback: PI, ..AdaptiveConfig::default_for(Law::Gpc(GpcConfig::DEFAULT)) }
-}
+/// The self-tuning GPC configuration the firmware runs by default.
+pub const ADAPTIVE: AdaptiveConfig = profile::ADAPTIVE_GPC;
 
-/// The controller of `kind`, exactly as `firmware/src/config.rs` builds it.
-pub fn controller(kind: u32) -> Option<AnyController> {
-    match kind {
-        KIND_PI => Some(AnyController::Pi(Pi::new(PI))),
-        KIND_GPC => Some(AnyController::SelfTuning(SelfTuning::new(adaptive_config(), PI.bias))),
+/// The board-profile controller of a kind code.
+fn kind(code: u32) -> Option<Kind> {
+    match code {
+        KIND_PI => Some(Kind::Pi),
+        KIND_GPC => Some(Kind::Gpc),
         _ => None,
     }
+}
+
+/// The controller of kind `code`, from the board profile as the firmware builds it: at the
+/// step's sample period, a self-tuner starting from the PI's bias.
+pub fn controller(code: u32) -> Option<AnyController> {
+    profile::controller(kind(code)?, CARRIER.ts_s, profile::PI.bias).ok()
 }
 
 /// A fresh carrier and cold-chain record for `kind`.
@@ -109,8 +111,8 @@ pub const PART_MONITOR: usize = 1;
 /// with the monitor inside it, on a copy, and `hter::alarm::Annunciator`), outside the
 /// budgeted figure.
 pub const PART_BOARD: usize = 9;
-/// The firmware's history store cadence (`config::HISTORY_SAVE_SAMPLES`): 1 h at Ts = 10 s.
-pub const HISTORY_SAVE_SAMPLES: u32 = 360;
+/// The firmware's history store cadence in samples: the board profile's, 1 h.
+pub const HISTORY_SAVE_SAMPLES: u32 = profile::samples(profile::HISTORY_SAVE_S, CARRIER.ts_s);
 
 /// Iterations of the short calibration loop (the long one runs twice as many). The output's
 /// calibration words are the SysTick counts of an empty window and of the two loops of two

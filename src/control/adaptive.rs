@@ -1,6 +1,6 @@
 //! Self-tuning control (certainty equivalence; Åström & Wittenmark, *Adaptive Control*, 2nd
-//! ed., ch. 3–4; seed ch. 5–6): every sample the recursive least-squares estimate of a
-//! second-order model is updated and the law (GMVC, IGMVC or GPC) is redesigned from it.
+//! ed., ch. 3–4): every sample the recursive least-squares estimate of a second-order model is
+//! updated and the law (GMVC, IGMVC or GPC) is redesigned from it.
 //!
 //! **What is estimated.** The ARX model with an offset term
 //!
@@ -18,29 +18,60 @@
 //! **When the estimate is trusted** (all must hold, else the law runs on the last trusted
 //! model, and with no trusted model the bumpless fallback PI drives the SSR):
 //! - every θ finite and the estimator healthy;
-//! - parameter projection: A stable (Schur–Cohn), every b_i ≤ 0 (cooling), static gain
+//! - parameter projection: A stable (Jury's conditions), every b_i ≤ 0 (cooling), static gain
 //!   B(1)/A(1) negative and within [`AdaptiveConfig::gain_min_c_per_duty`]…[`AdaptiveConfig::gain_max_c_per_duty`];
 //! - at least [`AdaptiveConfig::warmup_samples`] updates since start or reset.
 //!
-//! Mode changes ([`AdaptiveMode`]) are reported through [`Controller::status`] so the step can
-//! log each one as an event. The fallback PI tracks the applied duty all the time, so switching
-//! in either direction is bumpless; the law's histories also track the applied duty.
+//! **Modes** ([`AdaptiveMode`]), decided at every [`Controller::update`]:
+//!
+//! ```text
+//!                          estimate trusted ¹
+//!            ┌──────────────────────────────────────────┐
+//!            │                                          ▼
+//!       ┌────────┐        estimate not trusted ¹   ┌──────────┐
+//!       │ Frozen │ ◄────────────────────────────── │ Adaptive │
+//!       └────────┘                                 └──────────┘
+//!         │    ▲                                       ▲    │
+//!  law    │    │ estimate not trusted ¹     estimate   │    │  law
+//!  failed │    │ (a trusted model exists)   trusted ¹  │    │  failed
+//!         ▼    │                                       │    ▼
+//!       ┌──────────────────────────────────────────────────────┐
+//!       │                       Fallback                       │
+//!       └──────────────────────────────────────────────────────┘
+//!
+//!  start: Frozen with a plausible start model, else Fallback.
+//!  ¹ on a sample the estimator updated, after warm-up (at least
+//!    `warmup_samples` updates); and the law must succeed on that sample.
+//! ```
+//!
+//! - Frozen: the law runs on the last trusted model (the start model until the first trusted
+//!   estimate).
+//! - Adaptive: the law runs on the current estimate, trusted this sample.
+//! - Fallback: the law failed (a numerical error, a non-finite measurement, or no trusted model
+//!   yet) and the PI drives.
+//!
+//! Warm-up and samples the estimator refused keep the mode, unless the law fails.
+//!
+//! Mode changes are reported through [`Controller::status`] so the step logs each one as an
+//! event (engaged, frozen, fallback). The fallback PI tracks the applied duty all the time, so
+//! switching in either direction is bumpless; the law's histories also track the applied duty.
 
 use super::fixed::{Law, LawState};
-use super::gpc::shift_in;
-use super::model::{second_order_stable, Model, MAX_K};
 use super::pi::{Pi, PiConfig};
-use super::{AdaptiveMode, ControlInput, Controller, ControllerStatus};
+use super::{AdaptiveMode, ControlError, ControlInput, Controller, ControllerStatus};
 use crate::ident::rls::{Rls, RlsConfig};
+use crate::model::{second_order_stable, Model, ModelError, MAX_K};
+use crate::numerics::shift_in;
 use nalgebra::SVector;
 
-/// Self-tuning configuration.
+/// Self-tuning configuration. The board's values are [`crate::profile::adaptive`]; a
+/// configuration is checked when the controller is built ([`AdaptiveConfig::validate`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct AdaptiveConfig {
     /// Control law.
     pub law: Law,
-    /// Delay k of the estimated model, samples.
+    /// Delay k of the estimated model, samples (1 … [`MAX_K`]).
     pub k: usize,
     /// Estimator settings.
     pub rls: RlsConfig,
@@ -57,71 +88,129 @@ pub struct AdaptiveConfig {
     /// Pole τ of the T-filter C = 1 − τ q⁻¹ that GPC designs with on the estimated model
     /// (Clarke, Mohtadi & Tuffs 1987, §4: an observer polynomial against unmodelled dynamics and
     /// noise), 0 ≤ τ < 1; 0 = none. GMVC and IGMVC carry their own (`IgmvcConfig::t_pole`).
-    /// Default 0.8: with λ = 3 it took the half-load steady-state error of self-tuning GPC from
-    /// 0.37 to 0.05 °C (`hter sim --scenario half-load --controller gpc --lambda 3 --t-pole T`).
     pub t_filter: f32,
 }
 
+/// Why a self-tuning configuration was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum AdaptiveError {
+    /// The delay k is outside 1 … [`MAX_K`] samples.
+    Delay,
+    /// The estimator settings are out of range ([`RlsConfig::is_valid`]).
+    Estimator,
+    /// The plausible static-gain range is not finite, not negative, or empty.
+    GainRange,
+    /// The T-filter pole is outside [0, 1).
+    TFilter,
+    /// The fallback PI's gain is not finite and positive, or its integral time not positive.
+    Fallback,
+    /// The law's tuning is out of range, or the law is not built into this image.
+    Law(ControlError),
+}
+
 impl AdaptiveConfig {
-    /// Starting model of the full-load H-TER I carrier at Ts = 10 s: batch LS on the filtered
-    /// temperature of `hter sim --scenario prbs` (`hter identify --method ls --nk 5`, fit 63 %):
-    /// A = 1 − 1.7493 q⁻¹ + 0.7514 q⁻², B = −0.02708 − 0.02987 q⁻¹, k = 5 (the dead time, RTD
-    /// lag and filter add up to ≈ 50 s; with k = 1 the model's fast pole stands in for them
-    /// and GPC designed on it limit-cycles on the real plant). Static gain −27 °C per unit duty.
-    /// (That was the PRBS log before it began at rest. Today's default `hter identify`, output
-    /// error at the best delay, finds −43.7 °C per unit duty, poles 0.9967 and 0.9396, k = 9
-    /// (README); the self-tuner re-estimates B within the first setpoint step, and this start
-    /// model was kept because every controller figure in EXPERIMENTS.md was measured from it.)
-    pub const HTER1_MODEL: Model = Model {
-        a: [-1.749_27, 0.751_376, 0.0, 0.0],
-        b: [-0.027_079_1, -0.029_865, 0.0, 0.0],
-        c: [0.0; super::model::MAX_NC],
-        na: 2,
-        nb: 2,
-        nc: 0,
-        k: 5,
-    };
-
-    /// Starting model of the H-TER II carrier (stainless-steel wall) at Ts = 10 s: instrumental
-    /// variables on `hter sim --scenario prbs --plant hter2` (`hter identify --method iv --nk 5
-    /// --na 2 --nb 2`, fit 92 %) gave A = 1 − 1.904667 q⁻¹ + 0.904945 q⁻², B = 0.00015 −
-    /// 0.0123778 q⁻¹: b0 ≈ 0, so the steel carrier's delay is one sample longer. Shifted to
-    /// k = 6, B = −0.0123778 − 0.0001 q⁻¹ (every b_i ≤ 0, as the plausibility rule wants); with
-    /// k = 5 the minimum-variance laws divide by g0 = b0 ≈ 0 and barely act. Static gain
-    /// ≈ −45 °C per unit duty. The self-tuner estimates with the start model's delay.
-    pub const HTER2_MODEL: Model = Model {
-        a: [-1.904_667, 0.904_945, 0.0, 0.0],
-        b: [-0.012_377_8, -0.000_1, 0.0, 0.0],
-        c: [0.0; super::model::MAX_NC],
-        na: 2,
-        nb: 2,
-        nc: 0,
-        k: 6,
-    };
-
     /// This configuration restarted from a stored model (e.g. [`crate::persist::ModelRecord`]):
     /// the model becomes the starting θ and, if [`plausible_model`], the first trusted model, and
     /// the estimator takes its delay.
     pub const fn restored_from(self, model: Model) -> Self {
-        AdaptiveConfig { initial: Some(model), k: model.k, ..self }
+        AdaptiveConfig { initial: Some(model), k: model.k(), ..self }
     }
 
-    /// Self-tuning `law` with the defaults: λ_f = 0.995 (memory ≈ 200 samples, half an hour),
-    /// P(0) = I (a weak prior around the starting model), trace(P) ≤ 10, 30 samples (5 min) of
-    /// warm-up, plausible static gains −1000…−10 °C per unit duty (the model's −27 and the
-    /// plant's −41 at 4 °C, with a wide margin for load, supply and ambient), fallback PI.
-    pub const fn default_for(law: Law) -> Self {
-        AdaptiveConfig {
-            law,
-            k: 5,
-            rls: RlsConfig { forgetting: 0.995, p0: 1.0, trace_max: 10.0 },
-            initial: Some(Self::HTER1_MODEL),
-            warmup_samples: 30,
-            gain_min_c_per_duty: -1000.0,
-            gain_max_c_per_duty: -10.0,
-            fallback: PiConfig::HTER1_DEFAULT,
-            t_filter: 0.8,
+    /// Checks every range [`SelfTuning::new`] relies on (usable in constants: a board can
+    /// check its configuration when it compiles).
+    pub const fn validate(&self) -> Result<(), AdaptiveError> {
+        if !(self.k >= 1 && self.k <= MAX_K) {
+            return Err(AdaptiveError::Delay);
         }
+        if !self.rls.is_valid() {
+            return Err(AdaptiveError::Estimator);
+        }
+        let (lo, hi) = (self.gain_min_c_per_duty, self.gain_max_c_per_duty);
+        if !(lo.is_finite() && lo < hi && hi < 0.0) {
+            return Err(AdaptiveError::GainRange);
+        }
+        if !(self.t_filter >= 0.0 && self.t_filter < 1.0) {
+            return Err(AdaptiveError::TFilter);
+        }
+        let pi = &self.fallback;
+        if !(pi.kp_per_c.is_finite() && pi.kp_per_c > 0.0 && pi.ti_s > 0.0) {
+            return Err(AdaptiveError::Fallback);
+        }
+        match self.law.validate() {
+            Ok(()) => Ok(()),
+            Err(e) => Err(AdaptiveError::Law(e)),
+        }
+    }
+}
+
+/// The regressor of the self-tuner's model y(t) = −a1 y(t−1) − a2 y(t−2) + b0 u(t−k) +
+/// b1 u(t−k−1) + d: φ(t) = [−y(t−1), −y(t−2), u(t−k), u(t−k−1), 1], target y(t).
+///
+/// The output history starts full of the first measurement (the plant is taken to be at rest),
+/// the input history full of the starting duty; φ is complete from the third measurement on.
+/// The processor-in-the-loop runner builds its shadow estimators on this same type.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SecondOrderRegressor {
+    /// y(t), y(t−1), y(t−2).
+    y: [f32; 3],
+    /// Measurements taken, saturating.
+    filled: u8,
+    /// u(t−1), u(t−2), … (the newest applied duty first).
+    u: [f32; MAX_K + 1],
+    /// Delay, 1 … [`MAX_K`].
+    k: usize,
+}
+
+impl SecondOrderRegressor {
+    /// Empty history for delay `k` (1 … [`MAX_K`]), the input held at `u0`.
+    pub fn new(k: usize, u0: f32) -> Result<Self, ModelError> {
+        if !(1..=MAX_K).contains(&k) {
+            return Err(ModelError::Order);
+        }
+        Ok(Self { y: [0.0; 3], filled: 0, u: [u0; MAX_K + 1], k })
+    }
+
+    /// The delay k, samples.
+    pub fn k(&self) -> usize {
+        self.k
+    }
+
+    /// Takes the measurement y(t); true when φ(t) is complete. A non-finite y is refused (false,
+    /// history unchanged).
+    pub fn push_y(&mut self, y: f32) -> bool {
+        if !y.is_finite() {
+            return false;
+        }
+        if self.filled == 0 {
+            self.y = [y; 3];
+        } else {
+            shift_in(&mut self.y, y);
+        }
+        self.filled = self.filled.saturating_add(1);
+        self.filled >= 3
+    }
+
+    /// The target y(t) of the last measurement.
+    pub fn y(&self) -> f32 {
+        self.y[0]
+    }
+
+    /// u(t − m), m ≥ 1.
+    fn u_past(&self, m: usize) -> f32 {
+        // m ≥ 1 and m − 1 ≤ k ≤ MAX_K: always inside the history.
+        self.u.get(m.wrapping_sub(1)).copied().unwrap_or(0.0)
+    }
+
+    /// φ(t) = [−y(t−1), −y(t−2), u(t−k), u(t−k−1), 1].
+    pub fn phi(&self) -> SVector<f32, 5> {
+        let h = &self.y;
+        SVector::<f32, 5>::from([-h[1], -h[2], self.u_past(self.k), self.u_past(self.k + 1), 1.0])
+    }
+
+    /// Records the duty applied at t (it becomes u(t−1) for the next φ).
+    pub fn push_u(&mut self, applied: f32) {
+        shift_in(&mut self.u, applied);
     }
 }
 
@@ -135,25 +224,25 @@ pub struct SelfTuning {
     trusted: Option<Model>,
     mode: AdaptiveMode,
     updates: u32,
-    y_hist: [f32; 4],
-    filled: u8,
-    u_hist: [f32; MAX_K + 2],
-    u_prev: f32,
+    reg: SecondOrderRegressor,
     last_error: f32,
 }
 
 impl SelfTuning {
-    /// A controller starting from duty `u0`.
-    pub fn new(cfg: AdaptiveConfig, u0: f32) -> Self {
+    /// A controller sampled every `ts_s` (the step's period) starting from duty `u0`, or why
+    /// `cfg` is refused ([`AdaptiveConfig::validate`]).
+    pub fn new(cfg: AdaptiveConfig, ts_s: f32, u0: f32) -> Result<Self, AdaptiveError> {
+        cfg.validate()?;
+        let reg = SecondOrderRegressor::new(cfg.k, u0).map_err(|_| AdaptiveError::Delay)?;
         let theta0 = match cfg.initial {
-            Some(m) => SVector::<f32, 5>::from([m.a[0], m.a[1], m.b[0], m.b[1], 0.0]),
+            Some(m) => SVector::<f32, 5>::from([m.a()[0], m.a()[1], m.b()[0], m.b()[1], 0.0]),
             // A slow stable pole pair and a small cooling gain: a neutral start for RLS.
             None => SVector::<f32, 5>::from([-1.5, 0.5, -0.01, 0.0, 0.0]),
         };
         let trusted = cfg.initial.filter(|m| plausible_model(&cfg, m));
-        let mut fallback = Pi::new(PiConfig { bias: u0, ..cfg.fallback });
+        let mut fallback = Pi::new(PiConfig { bias: u0, ..cfg.fallback }, ts_s);
         fallback.track(&ControlInput { y_c: 0.0, w_c: 0.0 }, u0);
-        Self {
+        Ok(Self {
             cfg,
             rls: Rls::new(&cfg.rls, theta0),
             law_state: LawState::new(u0),
@@ -161,12 +250,14 @@ impl SelfTuning {
             trusted,
             mode: if trusted.is_some() { AdaptiveMode::Frozen } else { AdaptiveMode::Fallback },
             updates: 0,
-            y_hist: [0.0; 4],
-            filled: 0,
-            u_hist: [u0; MAX_K + 2],
-            u_prev: u0,
+            reg,
             last_error: 0.0,
-        }
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &AdaptiveConfig {
+        &self.cfg
     }
 
     /// The current estimate as a model.
@@ -186,7 +277,7 @@ impl SelfTuning {
         self.rls.trace_p()
     }
 
-    /// Last a-priori prediction error of Δy, °C.
+    /// Last a-priori prediction error of y, °C.
     pub fn prediction_error(&self) -> f32 {
         self.last_error
     }
@@ -196,6 +287,11 @@ impl SelfTuning {
         self.mode
     }
 
+    /// Estimator updates since start.
+    pub fn updates(&self) -> u32 {
+        self.updates
+    }
+
     /// The last trusted model (what a board would persist).
     pub fn trusted_model(&self) -> Option<Model> {
         self.trusted
@@ -203,23 +299,10 @@ impl SelfTuning {
 
     /// Updates the estimator with y(t); returns true if an update was made.
     fn estimate_step(&mut self, y: f32) -> bool {
-        if !y.is_finite() {
+        if !self.reg.push_y(y) {
             return false;
         }
-        if self.filled == 0 {
-            self.y_hist = [y; 4];
-        } else {
-            shift_in(&mut self.y_hist, y);
-        }
-        self.filled = self.filled.saturating_add(1);
-        if self.filled < 3 {
-            return false;
-        }
-        let h = &self.y_hist;
-        let k = self.cfg.k;
-        let u = |m: usize| self.u_hist.get(m - 1).copied().unwrap_or(self.u_prev);
-        let phi = SVector::<f32, 5>::from([-h[1], -h[2], u(k), u(k + 1), 1.0]);
-        match self.rls.update(&self.cfg.rls, &phi, h[0]) {
+        match self.rls.update(&self.cfg.rls, &self.reg.phi(), self.reg.y()) {
             Ok(e) => {
                 self.last_error = e;
                 self.updates = self.updates.saturating_add(1);
@@ -245,20 +328,21 @@ pub fn model_from_theta(cfg: &AdaptiveConfig, theta: [f32; 4]) -> Option<Model> 
 /// coefficient cooling (b_i ≤ 0): the step response of a Peltier cooler seen through the RTD
 /// is monotone, so a positive b_i is an artefact of poor excitation — and a positive b0
 /// reverses the sign of the first-step gain g0 that (I)GMVC divides by, so the law would heat
-/// when it should cool (seen on H-TER II, seed 2, before this check: the load drifted to 12 °C
+/// when it should cool (on the simulated H-TER II without this check the load drifted to 12 °C
 /// at a 4 °C setpoint).
 pub fn plausible_model(cfg: &AdaptiveConfig, m: &Model) -> bool {
     // The self-tuner's structure is second order: anything else cannot be its model.
-    let a2 = if m.na == 2 { m.a[1] } else { 0.0 };
-    m.na <= 2
-        && m.nb <= 2
-        && second_order_stable(m.a[0], a2)
-        && m.b[..m.nb].iter().all(|&b| b <= 0.0)
+    let (a, b) = (m.a(), m.b());
+    let a2 = if m.na() == 2 { a[1] } else { 0.0 };
+    m.na() <= 2
+        && m.nb() <= 2
+        && second_order_stable(a[0], a2)
+        && b[..m.nb()].iter().all(|&b| b <= 0.0)
         && m.static_gain().is_some_and(|g| (cfg.gain_min_c_per_duty..=cfg.gain_max_c_per_duty).contains(&g))
 }
 
 impl Controller for SelfTuning {
-    fn update(&mut self, input: &ControlInput) -> f32 {
+    fn update(&mut self, input: &ControlInput) -> Result<f32, ControlError> {
         let healthy = self.estimate_step(input.y_c);
         if healthy && self.updates >= self.cfg.warmup_samples {
             if let Some(m) = self.estimate().filter(|m| plausible_model(&self.cfg, m)) {
@@ -271,7 +355,7 @@ impl Controller for SelfTuning {
         let law_u = self.law_state.update(&self.cfg.law, self.trusted.as_ref(), input.y_c, input.w_c);
         let pi_u = self.fallback.update(input);
         match law_u {
-            Some(u) if self.mode != AdaptiveMode::Fallback => u,
+            Ok(u) if self.mode != AdaptiveMode::Fallback => Ok(u),
             _ => {
                 self.mode = AdaptiveMode::Fallback;
                 pi_u
@@ -285,8 +369,7 @@ impl Controller for SelfTuning {
         }
         self.law_state.track(applied);
         self.fallback.track(input, applied);
-        shift_in(&mut self.u_hist, applied);
-        self.u_prev = applied;
+        self.reg.push_u(applied);
     }
 
     fn name(&self) -> &'static str {
@@ -304,5 +387,255 @@ impl Controller for SelfTuning {
 
     fn trusted_model(&self) -> Option<Model> {
         self.trusted
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::gpc::GpcConfig;
+    use crate::profile::{ADAPTIVE_GPC, START_MODEL_HTER1};
+
+    const TS_S: f32 = 10.0;
+    /// The tests run in deviation variables around a rest at 0 °C and zero duty (no offset d):
+    /// the plant below is exactly the start model there, so its estimate stays the start model
+    /// until the plant changes. The setpoint asks for 1 °C of cooling.
+    const W_C: f32 = -1.0;
+
+    /// y(t) = −a1 y(t−1) − a2 y(t−2) + b0 u(t−k) + b1 u(t−k−1), at rest at y = 0, u = 0.
+    struct Plant {
+        a: [f32; 2],
+        b: [f32; 2],
+        k: usize,
+        y: [f32; 2],
+        u: std::vec::Vec<f32>,
+    }
+
+    impl Plant {
+        /// The start model itself.
+        fn start_model() -> Plant {
+            let m = START_MODEL_HTER1;
+            Plant {
+                a: [m.a()[0], m.a()[1]],
+                b: [m.b()[0], m.b()[1]],
+                k: m.k(),
+                y: [0.0; 2],
+                u: std::vec![0.0; m.k() + 1],
+            }
+        }
+
+        /// Applies u(t) and returns y(t + 1).
+        fn advance(&mut self, u: f32) -> f32 {
+            self.u.rotate_right(1);
+            self.u[0] = u;
+            let y = -self.a[0] * self.y[0] - self.a[1] * self.y[1]
+                + self.b[0] * self.u[self.k - 1]
+                + self.b[1] * self.u[self.k];
+            self.y = [y, self.y[0]];
+            y
+        }
+    }
+
+    /// One closed-loop sample: the controller's request clipped to [0, 1], or `applied` instead
+    /// (what the step's supervisor does when it overrides). Returns the mode after the sample.
+    fn sample(c: &mut SelfTuning, plant: &mut Plant, y: &mut f32, applied: Option<f32>) -> AdaptiveMode {
+        let input = ControlInput { y_c: *y, w_c: W_C };
+        let requested = c.update(&input).unwrap_or(0.0).clamp(0.0, 1.0);
+        let u = applied.unwrap_or(requested);
+        c.track(&input, u);
+        *y = plant.advance(u);
+        c.mode()
+    }
+
+    /// An excitation the estimator can learn from: 0 and 0.4 duty, switched every 7 samples.
+    fn square(t: usize) -> f32 {
+        if (t / 7).is_multiple_of(2) {
+            0.4
+        } else {
+            0.0
+        }
+    }
+
+    fn start(cfg: AdaptiveConfig) -> SelfTuning {
+        SelfTuning::new(cfg, TS_S, 0.0).unwrap()
+    }
+
+    #[test]
+    fn refuses_configurations_it_cannot_run() {
+        // A delay of 0 once reached the regressor and indexed u(t − 0 − 1) with an underflow
+        // (a panic in a debug build, a wrong input in a release one).
+        let refused = |cfg: AdaptiveConfig| SelfTuning::new(cfg, TS_S, 0.4).err();
+        assert_eq!(refused(AdaptiveConfig { k: 0, ..ADAPTIVE_GPC }), Some(AdaptiveError::Delay));
+        assert_eq!(refused(AdaptiveConfig { k: MAX_K + 1, ..ADAPTIVE_GPC }), Some(AdaptiveError::Delay));
+        let rls = RlsConfig { forgetting: 0.0, ..ADAPTIVE_GPC.rls };
+        assert_eq!(refused(AdaptiveConfig { rls, ..ADAPTIVE_GPC }), Some(AdaptiveError::Estimator));
+        for (lo, hi) in [(-10.0, -1000.0), (-1000.0, 10.0), (f32::NAN, -10.0), (f32::NEG_INFINITY, -10.0)] {
+            let cfg = AdaptiveConfig { gain_min_c_per_duty: lo, gain_max_c_per_duty: hi, ..ADAPTIVE_GPC };
+            assert_eq!(refused(cfg), Some(AdaptiveError::GainRange), "{lo} … {hi}");
+        }
+        for tau in [1.0, -0.1, f32::NAN] {
+            assert_eq!(refused(AdaptiveConfig { t_filter: tau, ..ADAPTIVE_GPC }), Some(AdaptiveError::TFilter));
+        }
+        let pi = ADAPTIVE_GPC.fallback;
+        for fallback in
+            [PiConfig { kp_per_c: f32::NAN, ..pi }, PiConfig { kp_per_c: 0.0, ..pi }, PiConfig { ti_s: 0.0, ..pi }]
+        {
+            assert_eq!(refused(AdaptiveConfig { fallback, ..ADAPTIVE_GPC }), Some(AdaptiveError::Fallback));
+        }
+        let law = Law::Gpc(GpcConfig { n1: 0, ..GpcConfig::DEFAULT });
+        assert_eq!(refused(AdaptiveConfig { law, ..ADAPTIVE_GPC }), Some(AdaptiveError::Law(ControlError::Config)));
+        // The longest delay runs: u(t − k − 1) is the oldest input kept.
+        let mut c = SelfTuning::new(AdaptiveConfig { k: MAX_K, ..ADAPTIVE_GPC }, TS_S, 0.4).unwrap();
+        for _ in 0..5 {
+            let input = ControlInput { y_c: 4.1, w_c: 4.0 };
+            assert!(c.update(&input).is_ok());
+            c.track(&input, 0.4);
+        }
+        assert_eq!(c.updates(), 3);
+        assert_eq!(SecondOrderRegressor::new(0, 0.4), Err(ModelError::Order));
+    }
+
+    #[test]
+    fn the_regressor_holds_the_last_outputs_and_the_delayed_inputs() {
+        let mut r = SecondOrderRegressor::new(2, 0.4).unwrap();
+        assert!(!r.push_y(5.0), "φ needs three outputs");
+        assert!(!r.push_y(f32::NAN), "a NaN is refused");
+        r.push_u(0.1); // u(t−1) after the first sample
+        assert!(!r.push_y(6.0));
+        r.push_u(0.2);
+        assert!(r.push_y(7.0));
+        // y(t) = 7, y(t−1) = 6, y(t−2) = 5; u(t−1) = 0.2, u(t−2) = 0.1, u(t−3) = 0.4 (the start).
+        assert_eq!(r.y(), 7.0);
+        assert_eq!(r.phi().as_slice(), &[-6.0, -5.0, 0.1, 0.4, 1.0]);
+        // The first output fills the history: at rest, φ is complete with it.
+        let mut r = SecondOrderRegressor::new(1, 0.4).unwrap();
+        r.push_y(5.0);
+        r.push_y(5.0);
+        assert!(r.push_y(5.5));
+        assert_eq!(r.phi().as_slice(), &[-5.0, -5.0, 0.4, 0.4, 1.0]);
+    }
+
+    #[test]
+    fn warm_up_holds_the_start_model_then_a_trusted_estimate_engages() {
+        let mut c = start(ADAPTIVE_GPC);
+        assert_eq!(c.mode(), AdaptiveMode::Frozen, "a plausible start model is trusted at once");
+        assert_eq!(c.trusted_model(), Some(START_MODEL_HTER1));
+        let (mut plant, mut y) = (Plant::start_model(), 0.0);
+        // The first two samples fill the regressor; the estimator updates from the third on,
+        // and its estimate (plausible all along: the plant is the start model) is trusted once
+        // it has made `warmup_samples` updates.
+        let engaged = (ADAPTIVE_GPC.warmup_samples + 2) as usize;
+        for t in 1..engaged {
+            assert_eq!(sample(&mut c, &mut plant, &mut y, None), AdaptiveMode::Frozen, "sample {t}");
+            assert!(c.estimate().is_some_and(|m| plausible_model(c.config(), &m)), "sample {t}");
+            assert_eq!(c.trusted_model(), Some(START_MODEL_HTER1), "sample {t}");
+        }
+        assert_eq!(sample(&mut c, &mut plant, &mut y, None), AdaptiveMode::Adaptive);
+        assert_eq!(c.updates(), ADAPTIVE_GPC.warmup_samples);
+        assert_eq!(c.trusted_model(), c.estimate(), "the trusted model follows the estimate");
+        for _ in 0..300 {
+            assert_eq!(sample(&mut c, &mut plant, &mut y, None), AdaptiveMode::Adaptive);
+        }
+        assert!((y - W_C).abs() < 0.05, "the law brought the load to the setpoint: {y}");
+    }
+
+    #[test]
+    fn without_a_start_model_the_pi_drives_bumplessly_until_an_estimate_is_trusted() {
+        let cfg = AdaptiveConfig { initial: None, ..ADAPTIVE_GPC };
+        let mut c = start(cfg);
+        assert_eq!((c.mode(), c.trusted_model()), (AdaptiveMode::Fallback, None));
+        // Until then it is the PI, bit for bit (the same inputs and applied duties).
+        let mut pi = Pi::new(PiConfig { bias: 0.0, ..cfg.fallback }, TS_S);
+        let (mut plant, mut y) = (Plant::start_model(), 0.0);
+        let mut engaged = None;
+        for t in 0..5000 {
+            let input = ControlInput { y_c: y, w_c: W_C };
+            let u = c.update(&input).unwrap();
+            if c.mode() != AdaptiveMode::Fallback {
+                engaged = Some(t);
+                break;
+            }
+            assert_eq!(u.to_bits(), pi.update(&input).unwrap().to_bits(), "sample {t}");
+            c.track(&input, square(t));
+            pi.track(&input, square(t));
+            y = plant.advance(square(t));
+        }
+        let t = engaged.expect("the excited estimator converges to a plausible model");
+        assert!(t >= cfg.warmup_samples as usize + 2, "engaged at {t}, inside the warm-up");
+        assert_eq!(c.mode(), AdaptiveMode::Adaptive);
+        assert_eq!(c.trusted_model(), c.estimate());
+    }
+
+    #[test]
+    fn an_implausible_estimate_freezes_and_a_failed_law_falls_back() {
+        let mut c = start(ADAPTIVE_GPC);
+        let (mut plant, mut y) = (Plant::start_model(), 0.0);
+        for _ in 0..40 {
+            sample(&mut c, &mut plant, &mut y, None);
+        }
+        assert_eq!(c.mode(), AdaptiveMode::Adaptive);
+        // A non-finite measurement: the estimator refuses it and the law fails, so the PI
+        // drives; the next good sample re-engages the law on a trusted estimate.
+        let nan = ControlInput { y_c: f32::NAN, w_c: W_C };
+        let _ = c.update(&nan);
+        assert_eq!(c.mode(), AdaptiveMode::Fallback);
+        c.track(&nan, 0.0);
+        assert_eq!(sample(&mut c, &mut plant, &mut y, None), AdaptiveMode::Adaptive);
+
+        // The plant turns into a heater under excitation: the estimate's B turns positive, is
+        // not trusted, and the law runs frozen on the last model that was.
+        plant.b = [0.03, 0.03];
+        let mut frozen_on = None;
+        for t in 0..1000 {
+            let before = c.trusted_model();
+            if sample(&mut c, &mut plant, &mut y, Some(square(t))) == AdaptiveMode::Frozen {
+                frozen_on = before;
+                break;
+            }
+        }
+        let frozen_on = frozen_on.expect("an implausible estimate freezes the law");
+        assert_eq!(c.trusted_model(), Some(frozen_on));
+        assert!(c.estimate().is_none_or(|m| !plausible_model(c.config(), &m)));
+        // Frozen to fallback and back: a failed sample hands over to the PI; the next one, with
+        // the estimate still not trusted, runs frozen on the same model again.
+        let _ = c.update(&nan);
+        assert_eq!(c.mode(), AdaptiveMode::Fallback);
+        c.track(&nan, 0.0);
+        assert_eq!(sample(&mut c, &mut plant, &mut y, Some(0.4)), AdaptiveMode::Frozen);
+        assert_eq!(c.trusted_model(), Some(frozen_on));
+    }
+
+    #[test]
+    fn the_step_reports_each_mode_change_as_an_event() {
+        use crate::event::EventKind;
+        use crate::step::{Carrier, CarrierConfig};
+        use crate::units::Celsius;
+        let mut carrier = Carrier::new(CarrierConfig::DEFAULT, start(ADAPTIVE_GPC));
+        let mut plant = Plant::start_model();
+        let (mut y, mut last) = (0.0, None);
+        let mut seen = std::vec::Vec::new();
+        for t in 0..200u64 {
+            let out = carrier.step_celsius(t * 10_000, Celsius(y), W_C);
+            let mode = out.status.map(|s| s.mode);
+            let events: std::vec::Vec<EventKind> = out
+                .events
+                .iter()
+                .map(|e| e.kind)
+                .filter(|k| {
+                    matches!(k, EventKind::AdaptiveEngaged | EventKind::AdaptiveFrozen | EventKind::FallbackEngaged)
+                })
+                .collect();
+            let want: &[EventKind] = match (mode != last, mode) {
+                (true, Some(AdaptiveMode::Adaptive)) => &[EventKind::AdaptiveEngaged],
+                (true, Some(AdaptiveMode::Frozen)) => &[EventKind::AdaptiveFrozen],
+                (true, Some(AdaptiveMode::Fallback)) => &[EventKind::FallbackEngaged],
+                _ => &[],
+            };
+            assert_eq!(events, want, "sample {t}");
+            seen.extend(events);
+            last = mode;
+            y = plant.advance(out.duty.get());
+        }
+        assert_eq!(seen, [EventKind::AdaptiveFrozen, EventKind::AdaptiveEngaged]);
     }
 }

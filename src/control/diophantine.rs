@@ -10,7 +10,7 @@
 //! PC/A' (long division) and F what remains, shifted by k. Solved by k steps of synthetic
 //! division on fixed-size arrays; the leading coefficient of A' is 1, so no division at all.
 
-use super::model::{MAX_K, MAX_NA, MAX_NC};
+use crate::model::{MAX_K, MAX_NA, MAX_NC};
 
 /// Longest A' handled (Ã of a 4th-order A has 6 coefficients).
 pub const MAX_A: usize = MAX_NA + 2;

@@ -3,7 +3,7 @@
 //! its sensor checks and freeze guard (the firmware's identification mode, `hter sim
 //! --scenario prbs`).
 
-use super::{ControlInput, Controller};
+use super::{ControlError, ControlInput, Controller};
 use crate::ident::prbs::{Prbs, PrbsConfig, PrbsError};
 
 /// A PRBS "controller": ignores the measurement and plays the sequence, optionally after a
@@ -37,12 +37,12 @@ impl PrbsExcitation {
 }
 
 impl Controller for PrbsExcitation {
-    fn update(&mut self, _input: &ControlInput) -> f32 {
+    fn update(&mut self, _input: &ControlInput) -> Result<f32, ControlError> {
         if self.rest_left > 0 {
             self.rest_left -= 1;
-            return self.rest_duty;
+            return Ok(self.rest_duty);
         }
-        self.prbs.next_duty()
+        Ok(self.prbs.next_duty())
     }
 
     fn track(&mut self, _input: &ControlInput, _applied: f32) {}
@@ -62,7 +62,7 @@ mod tests {
         let input = ControlInput { y_c: 4.0, w_c: 4.0 };
         let mut plain = PrbsExcitation::new(cfg).unwrap();
         let mut rested = PrbsExcitation::after_rest(cfg, 0.45, 4).unwrap();
-        let head: std::vec::Vec<f32> = (0..4).map(|_| rested.update(&input)).collect();
+        let head: std::vec::Vec<f32> = (0..4).map(|_| rested.update(&input).unwrap()).collect();
         assert_eq!(head, [0.45; 4]);
         for _ in 0..200 {
             assert_eq!(rested.update(&input), plain.update(&input));

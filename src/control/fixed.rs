@@ -4,9 +4,9 @@
 //! every sample.
 
 use super::gpc::{GpcConfig, GpcDesign, GpcState};
-use super::model::Model;
 use super::mv::{GmvcConfig, IgmvcConfig, MvState};
-use super::{ControlInput, Controller};
+use super::{ControlError, ControlInput, Controller};
+use crate::model::Model;
 
 /// Which law, with its tuning.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -29,6 +29,27 @@ impl Law {
             Law::Gpc(_) => "gpc",
         }
     }
+
+    /// Is the tuning in range and the law built into this image? The range checks are the ones
+    /// every design repeats; a law left out by the library's features (`mv-laws`,
+    /// `igmvc-only`) is [`ControlError::NotBuilt`].
+    pub const fn validate(&self) -> Result<(), ControlError> {
+        let valid = match self {
+            #[cfg(feature = "mv-laws")]
+            Law::Gmvc(c) => c.valid(),
+            #[cfg(feature = "mv-laws")]
+            Law::Igmvc(c) => c.valid(),
+            #[cfg(not(feature = "igmvc-only"))]
+            Law::Gpc(c) => c.validate().is_ok(),
+            #[allow(unreachable_patterns)]
+            _ => return Err(ControlError::NotBuilt),
+        };
+        if valid {
+            Ok(())
+        } else {
+            Err(ControlError::Config)
+        }
+    }
 }
 
 /// The histories of every law, so a law can be evaluated on any model at any sample.
@@ -46,35 +67,49 @@ impl LawState {
         Self { mv: MvState::new(u0), gpc: GpcState::new(u0), gpc_design: GpcDesign::ZERO }
     }
 
-    /// Computes the unclipped u(t) for measurement `y`, setpoint `w`, model `m`; `None` on
-    /// any numerical failure or without a model (the caller falls back to its safe
-    /// behaviour). The histories advance either way. Without the library feature `mv-laws`
-    /// (a board that runs GPC only) GMVC and IGMVC are not linked and give `None`; with
-    /// `igmvc-only` (a board that runs IGMVC only) GPC is not linked and gives `None`.
-    pub fn update(&mut self, law: &Law, m: Option<&Model>, y: f32, w: f32) -> Option<f32> {
+    /// Computes the unclipped u(t) for measurement `y`, setpoint `w`, model `m`, or why not
+    /// (a numerical failure, or no model: the caller falls back to its safe behaviour). The
+    /// histories advance either way. Without the library feature `mv-laws` (a board that runs
+    /// GPC only) GMVC and IGMVC are not linked and give [`ControlError::NotBuilt`]; with
+    /// `igmvc-only` (a board that runs IGMVC only) GPC is not linked and gives it.
+    pub fn update(&mut self, law: &Law, m: Option<&Model>, y: f32, w: f32) -> Result<f32, ControlError> {
         // A reference to the constant (promoted to a static): no 60-byte copy per sample.
         let (m, have_model) = match m {
             Some(m) => (m, true),
             None => (&Model::NEUTRAL, false),
         };
         #[cfg(feature = "mv-laws")]
-        let ok_mv = self.mv.push_y(y, m).is_ok() && have_model;
+        let pushed_mv = self.mv.push_y(y, m);
         #[cfg(not(feature = "igmvc-only"))]
-        let ok_gpc = self.gpc.push_y(y, m).is_ok() && have_model;
+        let pushed_gpc = self.gpc.push_y(y, m);
+        if !have_model {
+            return Err(ControlError::NoModel);
+        }
         let u = match law {
             #[cfg(feature = "mv-laws")]
-            Law::Gmvc(c) if ok_mv => self.mv.gmvc(m, c, w).ok(),
+            Law::Gmvc(c) => {
+                pushed_mv?;
+                self.mv.gmvc(m, c, w)?
+            }
             #[cfg(feature = "mv-laws")]
-            Law::Igmvc(c) if ok_mv => self.mv.igmvc(m, c, w).ok(),
+            Law::Igmvc(c) => {
+                pushed_mv?;
+                self.mv.igmvc(m, c, w)?
+            }
             #[cfg(not(feature = "igmvc-only"))]
-            Law::Gpc(c) if ok_gpc => self
-                .gpc
-                .design_into(m, c, w, &mut self.gpc_design)
-                .ok()
-                .map(|()| self.gpc.u_prev() + self.gpc_design.du),
-            _ => None,
+            Law::Gpc(c) => {
+                pushed_gpc?;
+                self.gpc.design_into(m, c, w, &mut self.gpc_design)?;
+                self.gpc.u_prev() + self.gpc_design.du
+            }
+            #[allow(unreachable_patterns)]
+            _ => return Err(ControlError::NotBuilt),
         };
-        u.filter(|u| u.is_finite())
+        if u.is_finite() {
+            Ok(u)
+        } else {
+            Err(ControlError::NonFinite)
+        }
     }
 
     /// Records the applied u.
@@ -105,9 +140,8 @@ impl FixedModel {
 }
 
 impl Controller for FixedModel {
-    fn update(&mut self, input: &ControlInput) -> f32 {
-        // NaN tells the step the law failed: it applies the safe state and raises an event.
-        self.state.update(&self.law, Some(&self.model), input.y_c, input.w_c).unwrap_or(f32::NAN)
+    fn update(&mut self, input: &ControlInput) -> Result<f32, ControlError> {
+        self.state.update(&self.law, Some(&self.model), input.y_c, input.w_c)
     }
 
     fn track(&mut self, _input: &ControlInput, applied: f32) {

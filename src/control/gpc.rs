@@ -1,5 +1,5 @@
 //! Generalized Predictive Control (Clarke, Mohtadi & Tuffs, "Generalized predictive control —
-//! Part I. The basic algorithm", Automatica 23(2), 1987), SPEC §3.
+//! Part I. The basic algorithm", Automatica 23(2), 1987).
 //!
 //! Model (CARIMA, [`Model`]): `A y(t) = q^−k B u(t) + C e(t)/Δ`, Δ = 1 − q⁻¹. Cost
 //!
@@ -34,7 +34,8 @@
 //! g — step response coefficients; w — setpoint.
 #![allow(non_snake_case)]
 
-use super::model::{Model, MAX_K, MAX_NA, MAX_NB, MAX_NC};
+use crate::model::{Model, MAX_K, MAX_NA, MAX_NB, MAX_NC};
+use crate::numerics::{finite_probe, shift_in, sqrtf};
 
 /// Largest prediction horizon N2.
 pub const MAX_N2: usize = 30;
@@ -70,7 +71,7 @@ pub struct GpcConfig {
 impl GpcConfig {
     /// N1 = 1, N2 = 30 (5 min at Ts = 10 s, the closed-loop settling scale), Nu = 3, λ = 3.
     /// λ weighs Δu² (duty in [0, 1], so Δu ≤ 1) against squared errors in °C summed over 30
-    /// predictions, with step-response coefficients of tens of °C per unit duty: the seed's
+    /// predictions, with step-response coefficients of tens of °C per unit duty: values of
     /// 0.01–1 are negligible at this scale and let GPC bang the SSR between 0 and 1 on the
     /// hal-sim plant (its unmodelled lag). Without a T-filter λ = 10 was best in a sweep of 1, 3,
     /// 10, 30; with the self-tuner's T-filter (τ = 0.8, `AdaptiveConfig::t_filter`) λ = 3 gave
@@ -79,7 +80,7 @@ impl GpcConfig {
     pub const DEFAULT: GpcConfig = GpcConfig { n1: 1, n2: 30, nu: 3, lambda: 3.0 };
 
     /// Checks the ranges of [`GpcError::Config`].
-    pub fn validate(&self) -> Result<(), GpcError> {
+    pub const fn validate(&self) -> Result<(), GpcError> {
         let ok = self.n1 >= 1
             && self.n1 <= self.n2
             && self.n2 <= MAX_N2
@@ -156,15 +157,15 @@ impl GpcState {
         // ê(t) = Ã y(t) − B Δu(t−k) − Σ c_i ê(t−i)
         let at = m.atilde();
         let mut e = 0.0;
-        for (i, ai) in at.iter().enumerate().take(m.na + 2) {
+        for (i, ai) in at.iter().enumerate().take(m.na() + 2) {
             e += ai * self.y[i];
         }
-        for i in 0..m.nb {
-            e -= m.b[i] * self.du_past(m.k + i);
+        for i in 0..m.nb() {
+            e -= m.b()[i] * self.du_past(m.k() + i);
         }
         shift_in(&mut self.e, 0.0);
-        for i in 0..m.nc {
-            e -= m.c[i] * self.e[i + 1];
+        for i in 0..m.nc() {
+            e -= m.c()[i] * self.e[i + 1];
         }
         self.e[0] = if e.is_finite() { e } else { 0.0 };
         Ok(())
@@ -190,19 +191,19 @@ impl GpcState {
         n2: usize,
         d: &mut GpcDesign,
     ) -> f32 {
-        let na = m.na.min(NA);
-        let nb = m.nb.min(NB);
-        let nc = m.nc.min(MAX_NC);
+        let na = m.na().min(NA);
+        let nb = m.nb().min(NB);
+        let nc = m.nc().min(MAX_NC);
         // (Element by element: a run-time-length copy is a memcpy call on the M4.)
-        let a: [f32; NA] = core::array::from_fn(|i| if i < na { m.a[i] } else { 0.0 });
-        let b: [f32; NB] = core::array::from_fn(|i| if i < nb { m.b[i] } else { 0.0 });
+        let a: [f32; NA] = core::array::from_fn(|i| if i < na { m.a()[i] } else { 0.0 });
+        let b: [f32; NB] = core::array::from_fn(|i| if i < nb { m.b()[i] } else { 0.0 });
         let mut probe = 0.0f32;
 
         // Step response of q^−k B/A: y(j) = −Σ a_i y(j−i) + Σ b_i u(j−k−i), u = 1 from j = 0;
         // y(j ≤ 0) = 0. From j = k + nb − 1 on every b_i is in (the padded zeros add +0), so
         // that part needs no comparisons.
         let mut past = [0.0f32; NA]; // y(j−1), y(j−2), …
-        let steady = (m.k + nb).saturating_sub(1).clamp(1, n2 + 1);
+        let steady = (m.k() + nb).saturating_sub(1).clamp(1, n2 + 1);
         let (head, tail) = d.g[..n2].split_at_mut(steady - 1);
         for (idx, gj) in head.iter_mut().enumerate() {
             let j = idx + 1;
@@ -211,7 +212,7 @@ impl GpcState {
                 v -= ai * yp;
             }
             for (i, bi) in b.iter().enumerate() {
-                if j >= m.k + i {
+                if j >= m.k() + i {
                     v += bi;
                 }
             }
@@ -237,7 +238,7 @@ impl GpcState {
         // residuals while j ≤ nc.
         let at = m.atilde();
         let mut past: [f32; NH] = core::array::from_fn(|i| self.y[i]); // ŷ(t+j−1), ŷ(t+j−2), …
-        let known = (m.k + nb).max(nc + 1).min(n2 + 1);
+        let known = (m.k() + nb).max(nc + 1).min(n2 + 1);
         let (head, tail) = d.f[..n2].split_at_mut(known - 1);
         for (idx, fj) in head.iter_mut().enumerate() {
             let j = idx + 1;
@@ -247,12 +248,12 @@ impl GpcState {
             }
             // Δu(t + j − k − i) is known only when j − k − i ≤ −1.
             for (i, bi) in b[..nb].iter().enumerate() {
-                if m.k + i > j {
-                    v += bi * self.du_past(m.k + i - j);
+                if m.k() + i > j {
+                    v += bi * self.du_past(m.k() + i - j);
                 }
             }
             for i in j..=nc {
-                v += m.c[i - 1] * self.e[i - j];
+                v += m.c()[i - 1] * self.e[i - j];
             }
             probe += finite_probe(v);
             shift_in(&mut past, v);
@@ -295,7 +296,7 @@ impl GpcState {
         let n2 = cfg.n2;
         // Second-order models (the self-tuning controller's) get the recursions unrolled for
         // two coefficients; anything larger for the most the model holds.
-        let probe = if m.na <= 2 && m.nb <= 2 {
+        let probe = if m.na() <= 2 && m.nb() <= 2 {
             self.responses::<2, 2, 3>(m, n2, d)
         } else {
             self.responses::<MAX_NA, MAX_NB, { MAX_NA + 1 }>(m, n2, d)
@@ -388,37 +389,6 @@ fn normal_matrix(g: &[f32; MAX_N2], cfg: &GpcConfig, lead: usize) -> [[f32; MAX_
     h
 }
 
-/// √x, correctly rounded: the FPU's `vsqrt.f32` on a hard-float Arm target (the same IEEE
-/// result as `libm::sqrtf`, without its ≈ 90-instruction software loop), `libm` elsewhere.
-#[inline(always)]
-fn sqrtf(x: f32) -> f32 {
-    #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
-    {
-        let r: u32;
-        // SAFETY: FPU register moves and one arithmetic instruction; s15 is saved in a core
-        // register and restored, so no register but the declared outputs changes. (Rust's `sreg`
-        // operands need the double-precision `vfp2` feature, which the M4F does not have.)
-        unsafe {
-            core::arch::asm!(
-                "vmov {save}, s15",
-                "vmov s15, {x}",
-                "vsqrt.f32 s15, s15",
-                "vmov {r}, s15",
-                "vmov s15, {save}",
-                x = in(reg) x.to_bits(),
-                r = lateout(reg) r,
-                save = out(reg) _,
-                options(pure, nomem, nostack),
-            )
-        };
-        f32::from_bits(r)
-    }
-    #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
-    {
-        libm::sqrtf(x)
-    }
-}
-
 /// k1_j = Σ_{c<Nu} z_c G[j][c] for j = N1…N2 (into `d.k1`) and Δu = Σ_j k1_j (w − f_j), both
 /// summed in the textbook order (k1_j from 0.0 over c = 0, 1, …, Δu over increasing j). Nu is
 /// a constant so the sum over c unrolls; G[j][c] = g_{j−c} is zero for c ≥ j, and those terms
@@ -453,24 +423,6 @@ fn gains<const NU: usize>(z: &[f32; MAX_NU], d: &mut GpcDesign, n1: usize, n2: u
         du += kj * (w - d.f[j - 1]);
     }
     du
-}
-
-/// x − x: +0 for a finite x, NaN for ±∞ or NaN. Summed over many values it tells in one
-/// comparison whether all of them are finite.
-#[inline(always)]
-#[allow(clippy::eq_op)]
-pub(crate) fn finite_probe(x: f32) -> f32 {
-    x - x
-}
-
-/// Pushes `x` in at index 0 and drops the last entry: a history shift by register moves
-/// (`copy_within` is a memmove call on the M4).
-#[inline(always)]
-pub(crate) fn shift_in<const N: usize>(a: &mut [f32; N], x: f32) {
-    let mut carry = x;
-    for v in a.iter_mut() {
-        carry = core::mem::replace(v, carry);
-    }
 }
 
 /// Lower Cholesky factor of the leading n×n block, computed in place over the lower triangle
@@ -567,14 +519,14 @@ mod tests {
         let mut ys = [0.0f32; MAX_N2 + 1];
         for j in 1..=n2 {
             let mut v = 0.0;
-            for i in 1..=m.na {
+            for i in 1..=m.na() {
                 if let Some(yp) = j.checked_sub(i).and_then(|x| ys.get(x)) {
-                    v -= m.a[i - 1] * yp;
+                    v -= m.a()[i - 1] * yp;
                 }
             }
-            for i in 0..m.nb {
-                if j >= m.k + i {
-                    v += m.b[i];
+            for i in 0..m.nb() {
+                if j >= m.k() + i {
+                    v += m.b()[i];
                 }
             }
             ys[j] = v;
@@ -587,16 +539,16 @@ mod tests {
         }
         for j in 1..=n2 {
             let mut v = 0.0;
-            for i in 1..=m.na + 1 {
+            for i in 1..=m.na() + 1 {
                 v -= at[i] * yy[HY - 1 + j - i];
             }
-            for i in 0..m.nb {
-                if m.k + i > j {
-                    v += m.b[i] * s.du_past(m.k + i - j);
+            for i in 0..m.nb() {
+                if m.k() + i > j {
+                    v += m.b()[i] * s.du_past(m.k() + i - j);
                 }
             }
-            for i in j..=m.nc {
-                v += m.c[i - 1] * s.e[i - j];
+            for i in j..=m.nc() {
+                v += m.c()[i - 1] * s.e[i - j];
             }
             yy[HY - 1 + j] = v;
             f[j - 1] = v;
@@ -748,15 +700,6 @@ mod tests {
         assert!((c_y + 1.371).abs() < 2e-3, "y(t) coefficient {c_y}");
         assert!((c_y1 - 0.805).abs() < 2e-3, "y(t−1) coefficient {c_y1}");
         assert!((c_du + 0.6042).abs() < 2e-3, "Δu(t−1) coefficient {c_du}");
-    }
-
-    #[test]
-    fn history_shift_and_finiteness_probe() {
-        let mut h = [1.0f32, 2.0, 3.0];
-        shift_in(&mut h, 0.5);
-        assert_eq!(h, [0.5, 1.0, 2.0]);
-        assert_eq!(finite_probe(-3.5).to_bits(), 0.0f32.to_bits());
-        assert!(finite_probe(f32::INFINITY).is_nan() && finite_probe(f32::NAN).is_nan());
     }
 
     #[test]

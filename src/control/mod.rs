@@ -7,14 +7,14 @@
 //! The per-sample step ([`crate::step::Carrier`]) calls [`Controller::update`] with the filtered
 //! measurement, then tells the controller what was really applied with [`Controller::track`]
 //! (after saturation and any supervisor override), so every controller can stay bumpless and
-//! free of integrator wind-up.
+//! free of integrator wind-up. A controller that cannot compute a duty says why
+//! ([`ControlError`]); the step then applies the safe state and reports it.
 
 pub mod adaptive;
 pub mod diophantine;
 pub mod excite;
 pub mod fixed;
 pub mod gpc;
-pub mod model;
 pub mod mv;
 pub mod onoff;
 pub mod pi;
@@ -23,6 +23,8 @@ pub mod zn;
 pub use fixed::{FixedModel, Law};
 pub use onoff::{OnOff, OnOffConfig};
 pub use pi::{Pi, PiConfig};
+
+use crate::model::Model;
 
 /// What a controller sees each sample.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -34,11 +36,49 @@ pub struct ControlInput {
     pub w_c: f32,
 }
 
+/// Why a controller produced no duty this sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ControlError {
+    /// The law's tuning is out of range (GPC horizons, minimum-variance weights).
+    Config,
+    /// The law has no solution on this model: singular normal equations, no Diophantine
+    /// solution, or no gain at the delay.
+    Singular,
+    /// A NaN or an infinity appeared in the measurement, the model or the result.
+    NonFinite,
+    /// No model to design on.
+    NoModel,
+    /// The law is not built into this image (the library's `mv-laws` / `igmvc-only` features).
+    NotBuilt,
+}
+
+impl From<gpc::GpcError> for ControlError {
+    fn from(e: gpc::GpcError) -> Self {
+        match e {
+            gpc::GpcError::Config => ControlError::Config,
+            gpc::GpcError::Singular => ControlError::Singular,
+            gpc::GpcError::NonFinite => ControlError::NonFinite,
+        }
+    }
+}
+
+impl From<mv::MvError> for ControlError {
+    fn from(e: mv::MvError) -> Self {
+        match e {
+            mv::MvError::Config => ControlError::Config,
+            mv::MvError::Diophantine | mv::MvError::Singular => ControlError::Singular,
+            mv::MvError::NonFinite => ControlError::NonFinite,
+        }
+    }
+}
+
 /// A feedback controller for the cooler.
 pub trait Controller {
-    /// Computes the duty request for this sample. The value need not be clipped; the step
-    /// saturates it to [0, 1] and treats a non-finite request as a fault.
-    fn update(&mut self, input: &ControlInput) -> f32;
+    /// Computes the duty request for this sample, or why there is none. The value need not be
+    /// clipped; the step saturates it to [0, 1], and on an error (or a non-finite request)
+    /// applies the safe state and raises an event.
+    fn update(&mut self, input: &ControlInput) -> Result<f32, ControlError>;
 
     /// Informs the controller of the duty actually applied this sample, in [0, 1].
     fn track(&mut self, input: &ControlInput, applied: f32);
@@ -53,7 +93,7 @@ pub trait Controller {
 
     /// The model a self-tuning controller last trusted (what a board persists); `None` for the
     /// controllers that learn none.
-    fn trusted_model(&self) -> Option<model::Model> {
+    fn trusted_model(&self) -> Option<Model> {
         None
     }
 }
@@ -68,6 +108,20 @@ pub enum AdaptiveMode {
     Frozen,
     /// No trusted model at all: the fallback PI drives.
     Fallback,
+}
+
+impl AdaptiveMode {
+    /// Every mode, in declaration order.
+    pub const ALL: [AdaptiveMode; 3] = [AdaptiveMode::Adaptive, AdaptiveMode::Frozen, AdaptiveMode::Fallback];
+
+    /// Stable snake_case name: the `adaptive_mode` column of `hter sim --csv`.
+    pub fn name(self) -> &'static str {
+        match self {
+            AdaptiveMode::Adaptive => "adaptive",
+            AdaptiveMode::Frozen => "frozen",
+            AdaptiveMode::Fallback => "fallback",
+        }
+    }
 }
 
 /// What an adaptive controller exposes for logging.
@@ -104,7 +158,7 @@ pub enum AnyController {
 }
 
 impl Controller for AnyController {
-    fn update(&mut self, input: &ControlInput) -> f32 {
+    fn update(&mut self, input: &ControlInput) -> Result<f32, ControlError> {
         match self {
             AnyController::OnOff(c) => c.update(input),
             AnyController::Pi(c) => c.update(input),
@@ -131,7 +185,7 @@ impl Controller for AnyController {
         }
     }
 
-    fn trusted_model(&self) -> Option<model::Model> {
+    fn trusted_model(&self) -> Option<Model> {
         match self {
             AnyController::SelfTuning(c) => c.trusted_model(),
             _ => None,

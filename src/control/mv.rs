@@ -1,6 +1,6 @@
 //! Generalized minimum-variance control: GMVC (Clarke & Gawthrop, "Self-tuning controller",
 //! Proc. IEE 122(9), 1975; "Self-tuning control", Proc. IEE 126(6), 1979) and its incremental
-//! form IGMVC (seed §5.3.1–5.3.2).
+//! form IGMVC, which weighs Δu instead of u and so has no steady-state offset.
 //!
 //! **GMVC** minimises `J = E{(P y(t+k) − R w(t))² + (S u(t))²}` with scalar weights P, R, S.
 //! With `P = A E + q^−k F` ([`super::diophantine`]) and `G = E B`,
@@ -11,7 +11,8 @@
 //!
 //! where d is the constant offset of the model (`A y = q^−k B u + d`, the ambient's share of
 //! the load temperature), tracked by a slow filter of the equation error. S > 0 trades
-//! control effort for a steady-state offset, as the seed observed.
+//! control effort for a steady-state offset that grows with S (the
+//! `gmvc_offset_is_the_analytic_one_and_vanishes_as_s_goes_to_zero` test derives it).
 //!
 //! **P as a polynomial.** P is `p (1 − α q⁻¹)/(1 − α)` (P(1) = p, so the static tracking is
 //! unchanged). With S = 0 the closed loop of GMVC is `P B = 0`, and IGMVC's is
@@ -34,8 +35,8 @@
 //! fixed-model and the self-tuning controllers.
 
 use super::diophantine::{self, MAX_A, MAX_F};
-use super::gpc::shift_in;
-use super::model::{Model, MAX_K, MAX_NA, MAX_NB};
+use crate::model::{Model, MAX_K, MAX_NA, MAX_NB};
+use crate::numerics::shift_in;
 
 /// Why no control could be computed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -67,19 +68,20 @@ pub struct GmvcConfig {
 
 impl GmvcConfig {
     /// P = R = 1 with α = 0.9, S = 0.05: α moves the closed-loop poles off B's unstable zero
-    /// (module docs); S is a small control weight, because the seed's Fig. 5.14 shows the offset
-    /// growing with S. Best worst-case steady-state error on `piecewise` (full, half load,
+    /// (module docs); S is a small control weight, because the offset grows
+    /// with S. Best worst-case steady-state error on `piecewise` (full, half load,
     /// H-TER II) in a sweep of S ∈ {0, 0.02, 0.05}, α ∈ {0, 0.9, 0.93, 0.95}
     /// (`hter sim --scenario piecewise --controller gmvc --s-weight S --p-pole A --json`).
     pub const DEFAULT: GmvcConfig = GmvcConfig { p: 1.0, r: 1.0, s: 0.05, p_pole: 0.9 };
 
-    fn valid(&self) -> bool {
+    pub(crate) const fn valid(&self) -> bool {
         self.p.is_finite()
             && self.r.is_finite()
             && self.s.is_finite()
             && self.p != 0.0
             && self.s >= 0.0
-            && (0.0..1.0).contains(&self.p_pole)
+            && self.p_pole >= 0.0
+            && self.p_pole < 1.0
     }
 }
 
@@ -104,11 +106,13 @@ impl IgmvcConfig {
     /// Without the T-filter no λ, α held H-TER II and the half load together.
     pub const DEFAULT: IgmvcConfig = IgmvcConfig { lambda: 0.5, p_pole: 0.93, t_pole: 0.9 };
 
-    fn valid(&self) -> bool {
+    pub(crate) const fn valid(&self) -> bool {
         self.lambda.is_finite()
             && self.lambda >= 0.0
-            && (0.0..1.0).contains(&self.p_pole)
-            && (0.0..1.0).contains(&self.t_pole)
+            && self.p_pole >= 0.0
+            && self.p_pole < 1.0
+            && self.t_pole >= 0.0
+            && self.t_pole < 1.0
     }
 }
 
@@ -163,11 +167,11 @@ impl MvState {
         }
         // Equation error of A y(t) = B u(t−k) + d.
         let mut d = self.y[0];
-        for i in 0..m.na {
-            d += m.a[i] * self.y[i + 1];
+        for i in 0..m.na() {
+            d += m.a()[i] * self.y[i + 1];
         }
-        for i in 0..m.nb {
-            d -= m.b[i] * self.u.get(m.k + i - 1).copied().unwrap_or(0.0);
+        for i in 0..m.nb() {
+            d -= m.b()[i] * self.u.get(m.k() + i - 1).copied().unwrap_or(0.0);
         }
         if d.is_finite() {
             self.d_hat = Some(match self.d_hat {
@@ -208,9 +212,9 @@ impl MvState {
         }
         let mut a = [0.0f32; MAX_A];
         a[0] = 1.0;
-        a[1..=m.na].copy_from_slice(&m.a[..m.na]);
-        let sol = diophantine::solve(&a[..=m.na], &p_poly(cfg.p, cfg.p_pole), m.k).ok_or(MvError::Diophantine)?;
-        let g = conv(&sol.e[..sol.ne], &m.b[..m.nb]);
+        a[1..=m.na()].copy_from_slice(&m.a()[..m.na()]);
+        let sol = diophantine::solve(&a[..=m.na()], &p_poly(cfg.p, cfg.p_pole), m.k()).ok_or(MvError::Diophantine)?;
+        let g = conv(&sol.e[..sol.ne], &m.b()[..m.nb()]);
         let e1: f32 = sol.e[..sol.ne].iter().sum();
         let mut rest = cfg.r * w - e1 * self.d_hat.unwrap_or(0.0);
         for i in 0..sol.nf {
@@ -246,8 +250,8 @@ impl MvState {
         let at = m.atilde();
         let [p0, p1] = p_poly(1.0, cfg.p_pole);
         let pt = [p0, p1 - cfg.t_pole * p0, -cfg.t_pole * p1];
-        let sol = diophantine::solve(&at[..m.na + 2], &pt, m.k).ok_or(MvError::Diophantine)?;
-        let g = conv(&sol.e[..sol.ne], &m.b[..m.nb]);
+        let sol = diophantine::solve(&at[..m.na() + 2], &pt, m.k()).ok_or(MvError::Diophantine)?;
+        let g = conv(&sol.e[..sol.ne], &m.b()[..m.nb()]);
         let mut rest = 0.0;
         for i in 0..sol.nf {
             rest += sol.f[i] * self.y[i];
@@ -365,20 +369,20 @@ mod tests {
     fn igmvc_on_model(m: &Model, cfg: &IgmvcConfig, noise: f32) -> (f32, f32, f32) {
         let mut s = MvState::new(0.5);
         let w = -24.0;
-        let (na, nb, k) = (m.na, m.nb, m.k);
+        let (na, nb, k) = (m.na(), m.nb(), m.k());
         let mut y = [w; 8];
         let mut u = [0.5f32; 12];
         let mut seed = 12345u32;
         let (mut umax, mut du2, mut n) = (0.0f32, 0.0f32, 0.0f32);
         for t in 0..2000 {
             // y(t) = −Σ a_i y(t−i) + Σ b_i u(t−k−i) + d, with d holding y = w at u = 0.5.
-            let d = w * (1.0 + m.a[..na].iter().sum::<f32>()) - 0.5 * m.b[..nb].iter().sum::<f32>();
+            let d = w * (1.0 + m.a()[..na].iter().sum::<f32>()) - 0.5 * m.b()[..nb].iter().sum::<f32>();
             let mut yt = d;
             for i in 0..na {
-                yt -= m.a[i] * y[i];
+                yt -= m.a()[i] * y[i];
             }
             for i in 0..nb {
-                yt += m.b[i] * u[k + i - 1];
+                yt += m.b()[i] * u[k + i - 1];
             }
             y.copy_within(0..7, 1);
             y[0] = yt;
@@ -407,8 +411,8 @@ mod tests {
     /// the P weight of the default makes the same loop settle on the setpoint.
     #[test]
     fn p_weight_stabilises_the_nonminimum_phase_loop() {
-        let m = crate::control::adaptive::AdaptiveConfig::HTER1_MODEL;
-        assert!(m.b[1] / m.b[0] > 1.0, "the test needs the non-minimum-phase B");
+        let m = crate::profile::START_MODEL_HTER1;
+        assert!(m.b()[1] / m.b()[0] > 1.0, "the test needs the non-minimum-phase B");
         let classic = IgmvcConfig { lambda: 0.01, p_pole: 0.0, t_pole: 0.0 };
         let (err, umax, _) = igmvc_on_model(&m, &classic, 0.0);
         assert!(!(err < 0.1 && umax < 10.0), "P = 1 should not settle: error {err}, |u| up to {umax}");
@@ -420,7 +424,7 @@ mod tests {
     /// The T-filter is an observer pole: measurement noise moves the duty less.
     #[test]
     fn t_filter_calms_the_duty_under_noise() {
-        let m = crate::control::adaptive::AdaptiveConfig::HTER1_MODEL;
+        let m = crate::profile::START_MODEL_HTER1;
         let with = IgmvcConfig::DEFAULT;
         let without = IgmvcConfig { t_pole: 0.0, ..with };
         let (e_with, _, du_with) = igmvc_on_model(&m, &with, 0.05);

@@ -1,8 +1,8 @@
-//! On-Off control with hysteresis (seed §5.2): full cooling above `w + h`, none below `w − h`,
+//! On-Off control with hysteresis: full cooling above `w + h`, none below `w − h`,
 //! unchanged in between. The hysteresis keeps the SSR and the Peltier modules from chattering
 //! on sensor noise.
 
-use super::{ControlInput, Controller};
+use super::{ControlError, ControlInput, Controller};
 
 /// On-Off configuration.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -35,18 +35,14 @@ impl OnOff {
 }
 
 impl Controller for OnOff {
-    fn update(&mut self, input: &ControlInput) -> f32 {
+    fn update(&mut self, input: &ControlInput) -> Result<f32, ControlError> {
         let e = input.y_c - input.w_c;
         if e > self.cfg.hysteresis_c {
             self.on = true;
         } else if e < -self.cfg.hysteresis_c {
             self.on = false;
         }
-        if self.on {
-            1.0
-        } else {
-            0.0
-        }
+        Ok(if self.on { 1.0 } else { 0.0 })
     }
 
     fn track(&mut self, _input: &ControlInput, applied: f32) {
@@ -69,11 +65,11 @@ mod tests {
     fn switches_only_outside_the_band() {
         let mut c = OnOff::new(OnOffConfig::DEFAULT);
         let at = |y| ControlInput { y_c: y, w_c: 4.0 };
-        assert_eq!(c.update(&at(4.29)), 0.0);
-        assert_eq!(c.update(&at(4.31)), 1.0);
-        assert_eq!(c.update(&at(4.0)), 1.0);
-        assert_eq!(c.update(&at(3.71)), 1.0);
-        assert_eq!(c.update(&at(3.69)), 0.0);
-        assert_eq!(c.update(&at(4.29)), 0.0);
+        assert_eq!(c.update(&at(4.29)), Ok(0.0));
+        assert_eq!(c.update(&at(4.31)), Ok(1.0));
+        assert_eq!(c.update(&at(4.0)), Ok(1.0));
+        assert_eq!(c.update(&at(3.71)), Ok(1.0));
+        assert_eq!(c.update(&at(3.69)), Ok(0.0));
+        assert_eq!(c.update(&at(4.29)), Ok(0.0));
     }
 }

@@ -1,4 +1,4 @@
-//! PI control with anti-windup (seed §5.2), and P control as its special case.
+//! PI control with anti-windup, and P control as its special case.
 //!
 //! Positional form, forward-Euler integral, sample period Ts:
 //!
@@ -19,9 +19,9 @@
 //! With `ti_s = ∞` the integral never moves and the controller is P with the manual reset
 //! `bias` (the steady duty it assumes at zero error).
 
-use super::{ControlInput, Controller};
+use super::{ControlError, ControlInput, Controller};
 
-/// PI configuration.
+/// PI configuration (the board's: [`crate::profile::PI`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct PiConfig {
@@ -29,25 +29,15 @@ pub struct PiConfig {
     pub kp_per_c: f32,
     /// Integral time, s. `f32::INFINITY` gives P control.
     pub ti_s: f32,
-    /// Sample period, s.
-    pub ts_s: f32,
     /// Initial integral (= assumed steady duty), in [0, 1].
     pub bias: f32,
 }
 
 impl PiConfig {
-    /// Gains for the full-load H-TER I carrier at Ts = 10 s: Ziegler–Nichols PI from the
-    /// simulated open-loop step (K = −41 °C/duty, L = 61 s, T = 1700 s ⇒ Kp = 0.60 /°C,
-    /// Ti = 205 s; see [`super::zn`] and `tests/zn_tuning.rs`, which re-derives them), then
-    /// detuned by 2 on Kp and ×2 on Ti, the usual correction for ZN's quarter-decay ratio:
-    /// undetuned, the loop goes into a sustained ±1 °C oscillation on the half load and touches
-    /// 2 °C.
-    pub const HTER1_DEFAULT: PiConfig = PiConfig { kp_per_c: 0.3, ti_s: 410.0, ts_s: 10.0, bias: 0.4 };
-
-    /// Integral gain per sample, duty per °C per sample.
-    fn ki(&self) -> f32 {
+    /// Integral gain per sample at sample period `ts_s`, duty per °C per sample (0 for P).
+    fn ki(&self, ts_s: f32) -> f32 {
         if self.ti_s.is_finite() && self.ti_s > 0.0 {
-            self.kp_per_c * self.ts_s / self.ti_s
+            self.kp_per_c * ts_s / self.ti_s
         } else {
             0.0
         }
@@ -58,6 +48,8 @@ impl PiConfig {
 #[derive(Clone, Debug)]
 pub struct Pi {
     cfg: PiConfig,
+    /// Kp·Ts/Ti, duty per °C per sample.
+    ki: f32,
     integral: f32,
     pending: Pending,
 }
@@ -70,10 +62,11 @@ struct Pending {
 }
 
 impl Pi {
-    /// A controller whose integral starts at `cfg.bias`.
-    pub fn new(cfg: PiConfig) -> Self {
+    /// A controller sampled every `ts_s` (the step's period, `CarrierConfig::ts_s`) whose
+    /// integral starts at `cfg.bias`.
+    pub fn new(cfg: PiConfig, ts_s: f32) -> Self {
         let integral = if cfg.bias.is_finite() { cfg.bias.clamp(0.0, 1.0) } else { 0.0 };
-        Self { cfg, integral, pending: Pending::default() }
+        Self { cfg, ki: cfg.ki(ts_s), integral, pending: Pending::default() }
     }
 
     /// The configuration.
@@ -88,12 +81,12 @@ impl Pi {
 }
 
 impl Controller for Pi {
-    fn update(&mut self, input: &ControlInput) -> f32 {
+    fn update(&mut self, input: &ControlInput) -> Result<f32, ControlError> {
         let e = input.y_c - input.w_c;
-        let integral = self.integral + self.cfg.ki() * e;
+        let integral = self.integral + self.ki * e;
         let u = self.cfg.kp_per_c * e + integral;
         self.pending = Pending { e, integral, u };
-        u
+        Ok(u)
     }
 
     fn track(&mut self, _input: &ControlInput, applied: f32) {
@@ -114,7 +107,7 @@ impl Controller for Pi {
     }
 
     fn name(&self) -> &'static str {
-        if self.cfg.ki() == 0.0 {
+        if self.ki == 0.0 {
             "p"
         } else {
             "pi"
@@ -131,7 +124,7 @@ mod tests {
     }
 
     fn run(c: &mut Pi, y: f32) -> f32 {
-        let u = c.update(&input(y));
+        let u = c.update(&input(y)).unwrap();
         let applied = u.clamp(0.0, 1.0);
         c.track(&input(y), applied);
         applied
@@ -139,7 +132,7 @@ mod tests {
 
     #[test]
     fn integral_action_removes_offset_direction() {
-        let mut c = Pi::new(PiConfig { kp_per_c: 0.5, ti_s: 100.0, ts_s: 10.0, bias: 0.3 });
+        let mut c = Pi::new(PiConfig { kp_per_c: 0.5, ti_s: 100.0, bias: 0.3 }, 10.0);
         let u1 = run(&mut c, 4.2);
         let u2 = run(&mut c, 4.2);
         assert!((u1 - (0.5 * 0.2 + 0.3 + 0.05 * 0.2)).abs() < 1e-6);
@@ -148,8 +141,8 @@ mod tests {
 
     #[test]
     fn anti_windup_freezes_integral_in_saturation() {
-        let cfg = PiConfig { kp_per_c: 0.5, ti_s: 100.0, ts_s: 10.0, bias: 0.4 };
-        let mut c = Pi::new(cfg);
+        let cfg = PiConfig { kp_per_c: 0.5, ti_s: 100.0, bias: 0.4 };
+        let mut c = Pi::new(cfg, 10.0);
         // An hour at 24 °C above the setpoint: the request is saturated the whole time.
         for _ in 0..360 {
             assert_eq!(run(&mut c, 28.0), 1.0);
@@ -163,21 +156,21 @@ mod tests {
 
     #[test]
     fn override_is_bumpless() {
-        let mut c = Pi::new(PiConfig { kp_per_c: 0.5, ti_s: 100.0, ts_s: 10.0, bias: 0.4 });
-        let _ = c.update(&input(4.5));
+        let mut c = Pi::new(PiConfig { kp_per_c: 0.5, ti_s: 100.0, bias: 0.4 }, 10.0);
+        c.update(&input(4.5)).unwrap();
         // The supervisor forced cooling off.
         c.track(&input(4.5), 0.0);
         // The integral restarts from max(0, applied − Kp·e) = 0 instead of the 0.425 it had, so
         // the next request is Kp·e + Ki·e, not the 0.7 a controller unaware of the override
         // would jump to.
-        let u = c.update(&input(4.5));
+        let u = c.update(&input(4.5)).unwrap();
         assert!((u - (0.5 * 0.5 + 0.05 * 0.5)).abs() < 1e-6, "{u}");
         assert_eq!(c.integral(), 0.0);
     }
 
     #[test]
     fn p_only_holds_bias_at_zero_error() {
-        let mut c = Pi::new(PiConfig { kp_per_c: 0.5, ti_s: f32::INFINITY, ts_s: 10.0, bias: 0.35 });
+        let mut c = Pi::new(PiConfig { kp_per_c: 0.5, ti_s: f32::INFINITY, bias: 0.35 }, 10.0);
         assert_eq!(c.name(), "p");
         for _ in 0..10 {
             assert!((run(&mut c, 4.0) - 0.35).abs() < 1e-6);

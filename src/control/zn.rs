@@ -1,5 +1,5 @@
 //! Ziegler–Nichols tuning from a measured open-loop step response (process reaction curve;
-//! Ziegler & Nichols 1942, seed Table 5.1).
+//! Ziegler & Nichols 1942).
 //!
 //! The step response is reduced to a first-order-plus-dead-time model by the tangent at its
 //! steepest point: with the tangent `y = y_i + s·(t − t_i)`,

@@ -8,8 +8,15 @@
 //! measured y. ζ correlates with φ but not with the equation error, so coloured noise — which
 //! biases ARX least squares toward a fast, one-step-ahead fit — does not bias it; the estimate
 //! aims at the simulated output, which is what a controller's predictions need.
+//!
+//! [`least_squares`] and [`instrumental_variables`] run the two on a whole record of an ARX
+//! structure (the `ls` and `iv` methods of `hter identify`, and the first starts of the
+//! output-error search in [`super::oe_search`]). The IV estimate is iterated: the first
+//! instruments are simulated from the least-squares model, each later round's from the model
+//! of the round before, for [`IV_ROUNDS`] rounds.
 
-use super::model::MAX_PARAMS;
+use super::model::{Structure, MAX_PARAMS};
+use super::validate;
 
 /// Why the batch solution failed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -19,6 +26,8 @@ pub enum BatchError {
     Singular,
     /// More parameters than [`MAX_PARAMS`], or a non-finite row.
     Input,
+    /// An ARMAX structure (nc > 0) given to a record estimator, which fits ARX only.
+    Structure,
 }
 
 /// Normal-equation accumulator for up to [`MAX_PARAMS`] parameters.
@@ -189,6 +198,82 @@ impl BatchIv {
     }
 }
 
+/// Rounds of [`instrumental_variables`] after the least-squares start (fewer when a round is
+/// singular or its model's simulation diverges).
+pub const IV_ROUNDS: usize = 3;
+
+/// Simulated outputs beyond this magnitude (in the data's unit) make no instruments: the model
+/// they come from is unstable or nearly so.
+const IV_DIVERGED: f64 = 1e6;
+
+/// Batch least squares of an ARX structure on the whole record (deviation variables y, u of
+/// equal length) into `theta[..n_params]`.
+pub fn least_squares(s: &Structure, y: &[f64], u: &[f64], theta: &mut [f64]) -> Result<(), BatchError> {
+    if s.nc > 0 {
+        return Err(BatchError::Structure);
+    }
+    let n = s.n_params();
+    let mut ls = BatchLs::new(n)?;
+    let mut phi = [0.0f64; MAX_PARAMS];
+    for t in s.first_index()..y.len() {
+        if s.regressor(y, u, &[], t, &mut phi) {
+            ls.add(&phi[..n], y[t])?;
+        }
+    }
+    ls.solve(theta)
+}
+
+/// Iterated instrumental variables of an ARX structure on the whole record, from the start
+/// `theta[..n_params]` (the least-squares estimate), in place. `x` (at least `y.len()` long)
+/// holds the simulated outputs the instruments are built from.
+///
+/// Each round's instruments come from the previous model; the iterate whose simulation fits the
+/// record best is kept, since a round can overshoot into an unstable model, whose simulation is
+/// no instrument and no model. A singular round or a diverging simulation ends the rounds.
+pub fn instrumental_variables(
+    s: &Structure,
+    y: &[f64],
+    u: &[f64],
+    theta: &mut [f64],
+    x: &mut [f64],
+) -> Result<(), BatchError> {
+    if s.nc > 0 {
+        return Err(BatchError::Structure);
+    }
+    let n = s.n_params();
+    if theta.len() < n || x.len() < y.len() || n > MAX_PARAMS {
+        return Err(BatchError::Input);
+    }
+    let x = &mut x[..y.len()];
+    let mut th = [0.0f64; MAX_PARAMS];
+    th[..n].copy_from_slice(&theta[..n]);
+    let (mut zeta, mut phi) = ([0.0f64; MAX_PARAMS], [0.0f64; MAX_PARAMS]);
+    let mut best = (validate::simulate_fit(s, &th[..n], y, u, x), th);
+    for _ in 0..IV_ROUNDS {
+        validate::simulate_fit(s, &th[..n], y, u, x);
+        if x.iter().any(|v| !v.is_finite() || v.abs() >= IV_DIVERGED) {
+            break;
+        }
+        let mut iv = BatchIv::new(n)?;
+        for t in s.first_index()..y.len() {
+            if s.regressor(x, u, &[], t, &mut zeta) && s.regressor(y, u, &[], t, &mut phi) {
+                iv.add(&zeta[..n], &phi[..n], y[t])?;
+            }
+        }
+        let mut next = [0.0f64; MAX_PARAMS];
+        if iv.solve(&mut next).is_err() {
+            break;
+        }
+        th = next;
+        let f = validate::simulate_fit(s, &th[..n], y, u, x);
+        if f.is_finite() && (best.0.is_nan() || f > best.0) {
+            best = (f, th);
+        }
+    }
+    theta[..n].copy_from_slice(&best.1[..n]);
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -207,6 +292,57 @@ mod tests {
         s.add(&[1.0, 1.0], 1.0).unwrap();
         s.add(&[2.0, 2.0], 2.0).unwrap();
         assert_eq!(s.solve(&mut th), Err(BatchError::Singular));
+    }
+
+    /// Output-error plant y = B/A u + v with white v: the equation error A v is coloured, so
+    /// least squares is biased (it pulls the pole toward zero); iterated IV is not, and
+    /// simulates the record better.
+    #[test]
+    fn iv_removes_the_bias_least_squares_has_under_coloured_noise() {
+        let n = 4000;
+        let (mut x1, mut u1) = (0.0f64, 0.0f64);
+        let mut state = 0xACE1u16;
+        let mut seed = 99u32;
+        let (mut y, mut u) = (std::vec::Vec::with_capacity(n), std::vec::Vec::with_capacity(n));
+        for t in 0..n {
+            // Noise-free x(t) = 0.95 x(t−1) + 0.5 u(t−1).
+            let x = 0.95 * x1 + 0.5 * u1;
+            if t % 3 == 0 {
+                let bit = (state ^ (state >> 2) ^ (state >> 3) ^ (state >> 5)) & 1;
+                state = (state >> 1) | (bit << 15);
+            }
+            let ut = if state & 1 == 1 { 1.0 } else { -1.0 };
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let v = (f64::from(seed >> 8) / f64::from(1u32 << 24) - 0.5) * 2.0;
+            y.push(x + v);
+            u.push(ut);
+            (x1, u1) = (x, ut);
+        }
+        let s = Structure::new(1, 1, 0, 1).unwrap();
+        let mut ls = [0.0; 2];
+        least_squares(&s, &y, &u, &mut ls).unwrap();
+        let mut iv = ls;
+        let mut x = std::vec![0.0; n];
+        instrumental_variables(&s, &y, &u, &mut iv, &mut x).unwrap();
+        assert!((ls[0] + 0.95).abs() > 0.03, "LS should be biased here: a1 = {}", ls[0]);
+        assert!((iv[0] + 0.95).abs() < 0.01, "IV a1 = {} (want −0.95)", iv[0]);
+        assert!((iv[1] - 0.5).abs() < 0.05, "IV b0 = {} (want 0.5)", iv[1]);
+        let fit_ls = validate::simulate_fit(&s, &ls, &y, &u, &mut x);
+        let fit_iv = validate::simulate_fit(&s, &iv, &y, &u, &mut x);
+        assert!(fit_iv > fit_ls, "IV fit {fit_iv} vs LS {fit_ls}");
+    }
+
+    #[test]
+    fn record_estimators_refuse_armax_and_short_buffers() {
+        let armax = Structure::new(1, 1, 1, 1).unwrap();
+        let (y, u) = ([0.0, 1.0, 0.5, 0.2], [1.0, 0.0, 1.0, 0.0]);
+        let mut th = [0.0; 3];
+        assert_eq!(least_squares(&armax, &y, &u, &mut th), Err(BatchError::Structure));
+        assert_eq!(instrumental_variables(&armax, &y, &u, &mut th, &mut [0.0; 4]), Err(BatchError::Structure));
+        let s = Structure::new(1, 1, 0, 1).unwrap();
+        assert_eq!(instrumental_variables(&s, &y, &u, &mut th, &mut [0.0; 3]), Err(BatchError::Input));
+        // Constant data leave the normal equations singular.
+        assert_eq!(least_squares(&s, &[1.0; 20], &[0.5; 20], &mut th), Err(BatchError::Singular));
     }
 
     /// With the instruments equal to the regressors IV is least squares.

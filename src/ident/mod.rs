@@ -1,4 +1,4 @@
-//! Black-box identification of the carrier (seed chapter 4): ARX/ARMAX structures, recursive
+//! Black-box identification of the carrier: ARX/ARMAX structures, recursive
 //! least squares with forgetting (f32, U-D factorised, for the MCU), recursive extended least
 //! squares, batch least squares and output-error refinement (f64 reference and offline tool),
 //! PRBS excitation, and
@@ -47,8 +47,9 @@
 //! 1. **Deviation variables and scaling** ([`model::OperatingPoint`], [`model::Regressor`]):
 //!    y and u enter as `(y − y0)/y_s`, `(u − u0)/u_s`, so φ is of order one and has no large
 //!    common offset (an ambient of 28 °C next to a swing of 0.5 °C would otherwise hide the
-//!    information in the last digits). The adaptive controllers use increments Δy, Δu, which
-//!    remove the operating point the same way.
+//!    information in the last digits). The self-tuning controller takes another route to the
+//!    same end: its regressor carries a constant 1, so an offset parameter d absorbs the
+//!    operating point ([`crate::control::adaptive`] says why not increments Δy, Δu).
 //! 2. **U-D factorisation** (Bierman 1977): P = U D Uᵀ is updated in its factors, so P stays
 //!    symmetric by construction and positive definite while every d_i > 0 (checked every
 //!    update).
@@ -75,13 +76,14 @@
 //!
 //! # Modules
 //!
-//! - [`model`]: structures, per-sample [`model::Regressor`], [`model::Armax`]/[`model::Arx`]
-//!   (prediction, simulation), [`model::OperatingPoint`].
+//! - [`model`]: structures, per-sample [`model::Regressor`] (and one-step prediction with a
+//!   [`crate::model::Model`]), [`model::OperatingPoint`].
 //! - [`rls`]: f32 U-D RLS ([`rls::Rls`], [`rls::RlsConfig`], [`rls::EstError`]).
 //! - [`recursive`]: RELS ([`recursive::Rels`]) and a record runner for RLS/RELS.
 //! - [`batch`]: f64 batch least squares and instrumental variables through the normal
-//!   equations.
+//!   equations, and both run on a whole record.
 //! - [`oe`]: f64 output-error refinement (Levenberg–Marquardt on the simulated-output error).
+//! - [`oe_search`]: the multi-start output-error search over [`oe`] (f64, host side).
 //! - [`prbs`]: PRBS generator for the SSR.
 //! - [`validate`]: MSE, fit, roots, autocorrelation, order choice (f64, host side).
 #![allow(non_snake_case)]
@@ -89,6 +91,7 @@
 pub mod batch;
 pub mod model;
 pub mod oe;
+pub mod oe_search;
 pub mod prbs;
 pub mod recursive;
 pub mod rls;

@@ -15,10 +15,13 @@
 //! Two forms of the same thing:
 //! - [`Structure`]: orders as runtime values (bounded by [`MAX_PARAMS`]), regressors built from
 //!   whole records (slices). For the host tool, which compares orders 1, 2 and 4 on one log.
-//! - [`Armax`] / [`Arx`] and [`Regressor`]: orders as const generics, for the per-sample path on
-//!   the MCU. [`Regressor`] keeps the last na outputs, nk + nb − 1 inputs and nc residuals in
-//!   fixed arrays and builds φ(t) every sample; [`Armax`] predicts one step ahead and simulates
-//!   from the input alone. Nothing allocates and nothing indexes out of range.
+//! - [`Regressor`]: orders as const generics, for a per-sample estimator. It keeps the last na
+//!   outputs, nk + nb − 1 inputs and nc residuals in fixed arrays and builds φ(t) every sample;
+//!   [`Regressor::predict`] predicts one step ahead with a [`Model`]. Nothing allocates and
+//!   nothing indexes out of range.
+//!
+//! The estimated model itself is the crate's one [`Model`] (θ splits into it with
+//! [`Model::from_theta`]); the order bounds are that module's.
 //!
 //! **Deviation variables and scaling.** Every model here is linear without a constant term, so
 //! it describes deviations from an operating point: `ỹ = (y − y0) / y_s`, `ũ = (u − u0) / u_s`
@@ -26,29 +29,20 @@
 //! to duties below one would otherwise make the columns of φ differ by two decades, which f32
 //! recursive least squares cannot afford on this plant, see [`crate::ident`]). A model estimated
 //! on scaled data has the same a and c, and `b_physical = b_scaled · y_s / u_s`
-//! ([`Armax::unscaled`]).
+//! ([`OperatingPoint::unscale`]).
 
+use crate::model::{Model, ModelError, MAX_K, MAX_NA, MAX_NB, MAX_NC};
 use nalgebra::SVector;
 
 /// Largest na + nb + nc supported.
 pub const MAX_PARAMS: usize = 12;
+const _: () = assert!(MAX_NA + MAX_NB + MAX_NC <= MAX_PARAMS);
 
-/// Largest delay nk supported, samples.
-pub const MAX_NK: usize = 10;
-
-/// Largest B order supported (number of b coefficients).
-pub const MAX_NB: usize = 4;
+/// Largest delay nk supported, samples: the model's [`MAX_K`].
+pub const MAX_NK: usize = MAX_K;
 
 /// Input history kept by [`Regressor`]: u(t−1) … u(t−nk−nb+1) for the largest nk and nb.
 const U_HIST: usize = MAX_NK + MAX_NB - 1;
-
-/// Why a structure was refused.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum StructureError {
-    /// na must be 1…4, nb 1…4, nc 0…2, nk 1…10.
-    Orders,
-}
 
 /// Orders and delay of an ARX/ARMAX model.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -65,13 +59,19 @@ pub struct Structure {
 }
 
 impl Structure {
-    /// Checked constructor.
-    pub fn new(na: usize, nb: usize, nc: usize, nk: usize) -> Result<Self, StructureError> {
-        if (1..=4).contains(&na) && (1..=4).contains(&nb) && nc <= 2 && (1..=10).contains(&nk) {
+    /// Checked constructor: the bounds of [`Model`] (1 ≤ na ≤ [`MAX_NA`], 1 ≤ nb ≤ [`MAX_NB`],
+    /// nc ≤ [`MAX_NC`], 1 ≤ nk ≤ [`MAX_NK`]).
+    pub fn new(na: usize, nb: usize, nc: usize, nk: usize) -> Result<Self, ModelError> {
+        if (1..=MAX_NA).contains(&na) && (1..=MAX_NB).contains(&nb) && nc <= MAX_NC && (1..=MAX_NK).contains(&nk) {
             Ok(Self { na, nb, nc, nk })
         } else {
-            Err(StructureError::Orders)
+            Err(ModelError::Order)
         }
+    }
+
+    /// The model of θ = [a, b, c] (f32) in this structure.
+    pub fn model(&self, theta: &[f32]) -> Result<Model, ModelError> {
+        Model::from_theta(theta, self.na, self.nb, self.nc, self.nk)
     }
 
     /// Number of parameters na + nb + nc.
@@ -166,6 +166,12 @@ impl OperatingPoint {
     pub fn u_abs(&self, u_dev: f32) -> f32 {
         self.u0 + u_dev * self.u_scale
     }
+
+    /// A model estimated in these scaled deviations, in physical deviation units:
+    /// `b · y_scale / u_scale` (a and c are dimensionless and stay).
+    pub fn unscale(&self, m: &Model) -> Result<Model, ModelError> {
+        m.with_b_scaled(self.y_scale / self.u_scale)
+    }
 }
 
 /// Per-sample regressor builder for an ARMAX(NA, NB, NC) structure with delay nk (ARX: NC = 0).
@@ -194,15 +200,15 @@ impl<const NA: usize, const NB: usize, const NC: usize> Regressor<NA, NB, NC> {
     pub const N_PARAMS: usize = NA + NB + NC;
 
     const SUPPORTED: () = assert!(
-        NA >= 1 && NA <= 4 && NB >= 1 && NB <= MAX_NB && NC <= 2,
+        NA >= 1 && NA <= MAX_NA && NB >= 1 && NB <= MAX_NB && NC <= MAX_NC,
         "supported orders: na 1..=4, nb 1..=4, nc 0..=2"
     );
 
     /// Empty history with delay `nk` (1…[`MAX_NK`]) around the operating point `op`.
-    pub fn new(nk: usize, op: OperatingPoint) -> Result<Self, StructureError> {
+    pub fn new(nk: usize, op: OperatingPoint) -> Result<Self, ModelError> {
         let () = Self::SUPPORTED;
         if !(1..=MAX_NK).contains(&nk) {
-            return Err(StructureError::Orders);
+            return Err(ModelError::Order);
         }
         Ok(Self { op, nk, y: [0.0; NA], u: [0.0; U_HIST], e: [0.0; NC], filled: 0 })
     }
@@ -285,117 +291,27 @@ impl<const NA: usize, const NB: usize, const NC: usize> Regressor<NA, NB, NC> {
         }
         Some(phi)
     }
-}
 
-/// An ARMAX(NA, NB, NC) model with delay nk, in the (scaled) deviation variables it was
-/// estimated in. [`Arx`] is the NC = 0 case.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Armax<const NA: usize, const NB: usize, const NC: usize> {
-    /// a1 … a_na (A without its leading 1).
-    pub a: [f32; NA],
-    /// b0 … b_{nb−1}.
-    pub b: [f32; NB],
-    /// c1 … c_nc (C without its leading 1).
-    pub c: [f32; NC],
-    /// Delay, samples (1…[`MAX_NK`]).
-    pub nk: usize,
-}
-
-/// ARX(NA, NB) model: [`Armax`] without a C polynomial.
-pub type Arx<const NA: usize, const NB: usize> = Armax<NA, NB, 0>;
-
-impl<const NA: usize, const NB: usize, const NC: usize> Armax<NA, NB, NC> {
-    /// Splits θ = [a, b, c] into a model. `N` must be na + nb + nc (checked at compile time).
-    pub fn from_theta<const N: usize>(theta: &SVector<f32, N>, nk: usize) -> Self {
-        const { assert!(N == NA + NB + NC, "from_theta::<N>() needs N = NA + NB + NC") };
-        let mut m = Self { a: [0.0; NA], b: [0.0; NB], c: [0.0; NC], nk };
-        for (dst, v) in m.a.iter_mut().zip(theta.iter()) {
-            *dst = *v;
-        }
-        for (dst, v) in m.b.iter_mut().zip(theta.iter().skip(NA)) {
-            *dst = *v;
-        }
-        for (dst, v) in m.c.iter_mut().zip(theta.iter().skip(NA + NB)) {
-            *dst = *v;
-        }
-        m
-    }
-
-    /// θ = [a, b, c]. `N` must be na + nb + nc.
-    pub fn theta<const N: usize>(&self) -> SVector<f32, N> {
-        const { assert!(N == NA + NB + NC, "theta::<N>() needs N = NA + NB + NC") };
-        let mut th = SVector::<f32, N>::zeros();
-        let all = self.a.iter().chain(self.b.iter()).chain(self.c.iter());
-        for (dst, v) in th.iter_mut().zip(all) {
-            *dst = *v;
-        }
-        th
-    }
-
-    /// One-step-ahead prediction ŷ(t|t−1) = φ(t)ᵀθ in the regressor's deviation units (for
-    /// ARMAX with the residuals the regressor holds: the predictor C ŷ = (C − A) y + q^−nk B u of
-    /// Ljung eq. 4.18). `None` until the regressor is ready.
-    pub fn predict(&self, reg: &Regressor<NA, NB, NC>) -> Option<f32> {
-        if reg.nk() != self.nk || !reg.ready() {
+    /// One-step-ahead prediction ŷ(t|t−1) = φ(t)ᵀθ of model `m` in this regressor's deviation
+    /// units (for ARMAX with the residuals the regressor holds: the predictor
+    /// C ŷ = (C − A) y + q^−nk B u of Ljung eq. 4.18). `None` until the regressor is ready, or
+    /// when `m` has another structure.
+    pub fn predict(&self, m: &Model) -> Option<f32> {
+        if (m.na(), m.nb(), m.nc(), m.k()) != (NA, NB, NC, self.nk) || !self.ready() {
             return None;
         }
         let mut acc = 0.0f32;
-        for (a, y) in self.a.iter().zip(reg.y.iter()) {
+        for (a, y) in m.a().iter().zip(self.y.iter()) {
             acc -= a * y;
         }
-        let us = reg.u.iter().skip(self.nk.saturating_sub(1)).take(NB);
-        for (b, u) in self.b.iter().zip(us) {
+        let us = self.u.iter().skip(self.nk - 1).take(NB);
+        for (b, u) in m.b().iter().zip(us) {
             acc += b * u;
         }
-        for (c, e) in self.c.iter().zip(reg.e.iter()) {
+        for (c, e) in m.c().iter().zip(self.e.iter()) {
             acc += c * e;
         }
         Some(acc)
-    }
-
-    /// Simulates the deterministic part `A y_sim = q^−nk B u` from the input alone (the noise
-    /// and the C polynomial play no part). For t < max(na, nk + nb − 1) the output is taken from
-    /// `y_init` (the measured initial condition; zero where `y_init` is shorter), after that
-    /// only the model's own past outputs are used. Deviation variables throughout. Writes
-    /// `min(u.len(), y_out.len())` samples and returns that count.
-    pub fn simulate(&self, u: &[f32], y_init: &[f32], y_out: &mut [f32]) -> usize {
-        let n = u.len().min(y_out.len());
-        let start = NA.max(self.nk + NB - 1);
-        for t in 0..n {
-            if t < start {
-                y_out[t] = y_init.get(t).copied().unwrap_or(0.0);
-                continue;
-            }
-            let mut v = 0.0f32;
-            for (i, a) in self.a.iter().enumerate() {
-                v -= a * y_out[t - 1 - i];
-            }
-            for (i, b) in self.b.iter().enumerate() {
-                v += b * u[t - self.nk - i];
-            }
-            y_out[t] = v;
-        }
-        n
-    }
-
-    /// Static gain B(1)/A(1), or `None` if A(1) is zero or the result is not finite (an
-    /// integrator, or a broken estimate).
-    pub fn static_gain(&self) -> Option<f32> {
-        let a1 = 1.0 + self.a.iter().sum::<f32>();
-        let g = self.b.iter().sum::<f32>() / a1;
-        (a1 != 0.0 && g.is_finite()).then_some(g)
-    }
-
-    /// The model in physical deviation units: `b · y_scale / u_scale` (a and c are
-    /// dimensionless and stay).
-    pub fn unscaled(&self, op: &OperatingPoint) -> Self {
-        let k = op.y_scale / op.u_scale;
-        let mut m = *self;
-        for b in m.b.iter_mut() {
-            *b *= k;
-        }
-        m
     }
 }
 
@@ -413,8 +329,8 @@ mod tests {
         assert!(s.regressor(&y, &u, &e, 2, &mut phi));
         assert_eq!(phi, [-2.0, -1.0, 20.0, 10.0, 0.2]);
         assert!(!s.regressor(&y, &u, &e, 1, &mut phi));
-        assert_eq!(Structure::new(5, 1, 0, 1), Err(StructureError::Orders));
-        assert_eq!(Structure::new(2, 2, 0, 0), Err(StructureError::Orders));
+        assert_eq!(Structure::new(5, 1, 0, 1), Err(ModelError::Order));
+        assert_eq!(Structure::new(2, 2, 0, 0), Err(ModelError::Order));
     }
 
     #[test]
@@ -439,16 +355,17 @@ mod tests {
             reg.push(raw_y[t], raw_u[t]);
             reg.push_residual(e[t]);
         }
-        assert_eq!(Regressor::<2, 2, 0>::new(0, op), Err(StructureError::Orders));
-        assert_eq!(Regressor::<2, 2, 0>::new(11, op), Err(StructureError::Orders));
+        assert_eq!(Regressor::<2, 2, 0>::new(0, op), Err(ModelError::Order));
+        assert_eq!(Regressor::<2, 2, 0>::new(11, op), Err(ModelError::Order));
         assert!(OperatingPoint::new(0.0, 0.0, 0.0, 1.0).is_none());
         assert!(OperatingPoint::new(f32::NAN, 0.0, 1.0, 1.0).is_none());
     }
 
     #[test]
-    fn prediction_and_simulation_follow_the_difference_equation() {
+    fn prediction_follows_the_difference_equation() {
         // y(t) = 1.5 y(t−1) − 0.56 y(t−2) + 0.5 u(t−1) + 0.25 u(t−2)
-        let m = Arx::<2, 2> { a: [-1.5, 0.56], b: [0.5, 0.25], c: [], nk: 1 };
+        let theta = [-1.5f32, 0.56, 0.5, 0.25];
+        let m = Structure::new(2, 2, 0, 1).unwrap().model(&theta).unwrap();
         let u: std::vec::Vec<f32> = (0..40).map(|t| if (t / 5) % 2 == 0 { 1.0 } else { 0.0 }).collect();
         let mut y = std::vec![0.0f32; 40];
         y[0] = 0.3;
@@ -456,28 +373,21 @@ mod tests {
         for t in 2..40 {
             y[t] = 1.5 * y[t - 1] - 0.56 * y[t - 2] + 0.5 * u[t - 1] + 0.25 * u[t - 2];
         }
-        let mut ys = std::vec![0.0f32; 40];
-        assert_eq!(m.simulate(&u, &y[..2], &mut ys), 40);
-        for t in 0..40 {
-            assert!((ys[t] - y[t]).abs() < 1e-5, "t = {t}");
-        }
         let mut reg = Regressor::<2, 2, 0>::new(1, OperatingPoint::IDENTITY).unwrap();
         for t in 0..40 {
-            if let Some(p) = m.predict(&reg) {
+            if let Some(p) = reg.predict(&m) {
                 assert!((p - y[t]).abs() < 1e-5, "t = {t}");
                 let phi = reg.phi::<4>().unwrap();
-                assert!((phi.dot(&m.theta::<4>()) - p).abs() < 1e-6);
+                assert!((phi.dot(&SVector::from(theta)) - p).abs() < 1e-6);
             } else {
                 assert!(t < 2);
             }
             reg.push(y[t], u[t]);
         }
-        // Steady state: y = (0.75 / 0.06) u.
-        assert!((m.static_gain().unwrap() - 12.5).abs() < 1e-3);
+        // A model of another structure or delay predicts nothing with this regressor.
+        assert_eq!(reg.predict(&m.with_delay(2).unwrap()), None);
+        assert_eq!(reg.predict(&Structure::new(1, 2, 0, 1).unwrap().model(&[-0.9, 0.5, 0.25]).unwrap()), None);
         let op = OperatingPoint::new(0.0, 0.0, 10.0, 0.5).unwrap();
-        assert_eq!(m.unscaled(&op).b, [10.0, 5.0]);
-        assert_eq!(Arx::<2, 2>::from_theta(&m.theta::<4>(), 1), m);
-        let integrator = Arx::<1, 1> { a: [-1.0], b: [1.0], c: [], nk: 1 };
-        assert_eq!(integrator.static_gain(), None);
+        assert_eq!(op.unscale(&m).unwrap().b()[..2], [10.0, 5.0]);
     }
 }

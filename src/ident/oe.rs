@@ -53,9 +53,9 @@
 //! precision), or after `max_iterations`.
 //!
 //! V is not convex in θ (Ljung 1999, §10.5 "local solutions and initial values"): the search
-//! finds the local minimum its start leads to. The caller
-//! supplies starts (`hter identify` tries the IV estimate, least squares and a few 2nd-pole
-//! starts built from the lower-order OE model) and keeps the best.
+//! finds the local minimum its start leads to. [`super::oe_search`] runs it from several starts
+//! (the IV estimate, least squares and a few 2nd-pole starts built from the lower-order OE
+//! model) and keeps the best.
 //!
 //! # Glossary
 //!

@@ -45,6 +45,7 @@
 //! 4-parameter model the adaptive controllers run every sample. No allocation, no square root.
 #![allow(non_snake_case)]
 
+use crate::numerics::finite_probe;
 use nalgebra::{SMatrix, SVector};
 
 /// Why an update was refused (the state is unchanged).
@@ -74,7 +75,7 @@ impl RlsConfig {
     pub const DEFAULT: RlsConfig = RlsConfig { forgetting: 1.0, p0: 1000.0, trace_max: 1e4 };
 
     /// True if λ_f ∈ (0, 1], p0 > 0 and trace_max ≥ p0, all finite.
-    pub fn is_valid(&self) -> bool {
+    pub const fn is_valid(&self) -> bool {
         self.forgetting > 0.0
             && self.forgetting <= 1.0
             && self.p0 > 0.0
@@ -259,13 +260,6 @@ impl<const N: usize> Rls<N> {
         self.eps_post = eps * (lambda / alpha);
         Ok(eps)
     }
-}
-
-/// x − x: +0 for a finite x, NaN for ±∞ or NaN (summed, one comparison checks many values).
-#[inline(always)]
-#[allow(clippy::eq_op)]
-fn finite_probe(x: f32) -> f32 {
-    x - x
 }
 
 #[cfg(test)]

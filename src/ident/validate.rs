@@ -11,7 +11,9 @@
 //! - **order selection** ([`choose_order`]): the lowest order whose model is stable and whose
 //!   simulated fit is within a few points of the best stable fit — parsimony (Ljung 1999, §16.4
 //!   "Comparing model structures"): parameters that buy no simulation accuracy only add
-//!   variance, and on the MCU every extra parameter costs the adaptive controller.
+//!   variance, and on the MCU every extra parameter costs the adaptive controller;
+//! - **delay selection** ([`choose_delay`]): the delay whose model simulates the record best
+//!   among the stable ones.
 //!
 //! ```text
 //! MSE  = 1/M Σ_t (y(t) − φ(t)ᵀθ)²                 one-step-ahead, t = first index … N−1
@@ -223,6 +225,35 @@ pub fn choose_order(candidates: &[OrderCandidate], tolerance_points: f64) -> Opt
         .map(|(i, _)| i)
 }
 
+/// One model in a delay scan.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DelayCandidate {
+    /// Simulated-output fit, %.
+    pub fit_percent: f64,
+    /// All poles strictly inside the unit circle.
+    pub stable: bool,
+}
+
+/// Index of the candidate with the best simulated fit among those that are stable with a
+/// finite fit (the first of equal fits: the shortest delay of a scan in increasing order); the
+/// first candidate if none is, so that a scan still reports a model; `None` for no candidates.
+pub fn choose_delay(candidates: &[DelayCandidate]) -> Option<usize> {
+    let rank = |c: &DelayCandidate| {
+        if c.stable && c.fit_percent.is_finite() {
+            c.fit_percent
+        } else {
+            f64::NEG_INFINITY
+        }
+    };
+    let mut best = None;
+    for (i, c) in candidates.iter().enumerate() {
+        if best.is_none_or(|b: usize| candidates.get(b).is_some_and(|b| rank(c) > rank(b))) {
+            best = Some(i);
+        }
+    }
+    best
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -284,6 +315,17 @@ mod tests {
         let rows = [c(1, 80.0, false), c(2, f64::NAN, true)];
         assert_eq!(choose_order(&rows, 3.0), None);
         assert!((whiteness_band(400) - 0.098).abs() < 1e-12);
+    }
+
+    #[test]
+    fn delay_choice_takes_the_best_stable_fit_and_the_first_of_equals() {
+        let c = |fit_percent, stable| DelayCandidate { fit_percent, stable };
+        // The unstable best and the NaN do not count; of the two 90s the first is kept.
+        let scan = [c(80.0, true), c(90.0, true), c(99.0, false), c(90.0, true), c(f64::NAN, true)];
+        assert_eq!(choose_delay(&scan), Some(1));
+        // None usable: the first still stands for the scan.
+        assert_eq!(choose_delay(&[c(95.0, false), c(f64::INFINITY, true)]), Some(0));
+        assert_eq!(choose_delay(&[]), None);
     }
 
     #[test]

@@ -225,7 +225,7 @@ mod tests {
 /// The supply-switch check as the step runs it.
 #[cfg(test)]
 mod carrier {
-    use crate::control::{AnyController, Pi, PiConfig};
+    use crate::control::AnyController;
     use crate::event::EventKind;
     use crate::step::tests::{counts_at, pi_carrier as carrier};
     use crate::step::{Carrier, CarrierConfig, Mode, StepInput};
@@ -281,7 +281,7 @@ mod carrier {
         // Test openings off (an identification run): the sense alone opens nothing.
         let mut cfg = CarrierConfig::DEFAULT;
         cfg.supervisor.switch.test_interval_s = 0.0;
-        let mut c = Carrier::new(cfg, AnyController::Pi(Pi::new(PiConfig::HTER1_DEFAULT)));
+        let mut c = Carrier::new(cfg, AnyController::Pi(crate::profile::pi(CarrierConfig::DEFAULT.ts_s)));
         for k in 0..1600u32 {
             c.observe_switched_rail_v(11.9);
             let out =

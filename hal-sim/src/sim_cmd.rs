@@ -1,0 +1,315 @@
+//! `hter sim`: one closed-loop scenario, the firmware's per-sample step against the plant
+//! model, with its summary, JSON metrics, CSV trace and plot. [`options`] turns the arguments
+//! into a checked [`SimOptions`]; `hter compare` and the demo reuse it.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+
+use crate::plant::Load;
+use crate::plot;
+use crate::scenario::Scenario;
+use crate::sim::{self, ControllerChoice, ControllerSpec, PlantChoice, SimOptions, SimOutput};
+
+/// Arguments of `hter sim` (and the scenario and controller of `hter compare`).
+#[derive(clap::Args, Debug)]
+pub struct SimArgs {
+    /// Scenario name (step, piecewise, half-load, disturbance, prbs, hot-zone, mission) or a
+    /// JSON scenario file.
+    #[arg(long, default_value = "step")]
+    pub scenario: String,
+    /// Controller.
+    #[arg(long, value_enum, default_value = "pi")]
+    pub controller: ControllerChoice,
+    /// Plant: hter1 (aluminium container), hter2 (stainless steel), or an ideal ARX model
+    /// arx:A;B;K (y = temperature − ambient, u = duty).
+    #[arg(long, default_value = "hter1")]
+    pub plant: String,
+    /// Fixed model for gmvc/igmvc/gpc, arx:A;B;K[;C] (without it they are self-tuning).
+    #[arg(long)]
+    pub model: Option<String>,
+    /// GPC: first predicted sample in the cost.
+    #[arg(long)]
+    pub n1: Option<usize>,
+    /// GPC: last predicted sample in the cost (≤ 30).
+    #[arg(long)]
+    pub n2: Option<usize>,
+    /// GPC: control horizon (≤ 5).
+    #[arg(long)]
+    pub nu: Option<usize>,
+    /// GPC and IGMVC: weight on the control increment (≥ 0).
+    #[arg(long, allow_negative_numbers = true)]
+    pub lambda: Option<f64>,
+    /// GMVC: output weight P.
+    #[arg(long, allow_negative_numbers = true)]
+    pub p_weight: Option<f64>,
+    /// GMVC: reference weight R.
+    #[arg(long, allow_negative_numbers = true)]
+    pub r_weight: Option<f64>,
+    /// GMVC: control weight S (≥ 0).
+    #[arg(long, allow_negative_numbers = true)]
+    pub s_weight: Option<f64>,
+    /// GMVC and IGMVC: pole α of the output weight P = (1 − α q⁻¹)/(1 − α), 0 ≤ α < 1
+    /// (default 0.9 for GMVC, 0.93 for IGMVC; 0 gives the classical P = 1).
+    #[arg(long, allow_negative_numbers = true)]
+    pub p_pole: Option<f64>,
+    /// IGMVC and self-tuning GPC: pole τ of the T-filter T = 1 − τ q⁻¹, 0 ≤ τ < 1 (0: none;
+    /// default 0.9 for IGMVC, 0.8 for self-tuning GPC).
+    #[arg(long, allow_negative_numbers = true)]
+    pub t_pole: Option<f64>,
+    /// Water load: full (100 ml) or half (50 ml).
+    #[arg(long, value_enum, default_value = "full")]
+    pub load: LoadArg,
+    /// Ambient temperature, °C.
+    #[arg(long, default_value_t = 28.0, allow_negative_numbers = true)]
+    pub ambient: f64,
+    /// Duration, s (default: the scenario's own).
+    #[arg(long, allow_negative_numbers = true)]
+    pub duration: Option<f64>,
+    /// Seed of the measurement noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Inject a hardware fault at a time, KIND@T_S (repeatable): sensor-open, sensor-short,
+    /// sensor-stuck, sensor-spikes, sensor-offset, ssr-stuck-on, ssr-stuck-off, supply-sag,
+    /// lid-open, brownout.
+    #[arg(long = "fault")]
+    pub faults: Vec<String>,
+    /// Write the trace as CSV (one row per control sample).
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+    /// Plot temperature, setpoint and duty to a .png or .svg file.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Print the metrics as one JSON object instead of the summary.
+    #[arg(long)]
+    pub json: bool,
+    /// Replay the randomized mission of this seed from `hter campaign` (its carrier, ambient,
+    /// lid openings, supply sag, faults and noise seed); the controller flags still apply.
+    #[arg(long, conflicts_with_all = ["scenario", "plant", "load", "ambient", "duration", "seed", "faults"])]
+    pub mission_seed: Option<u64>,
+}
+
+/// The water load of `--load`: `full` is 100 ml of water, `half` 50 ml.
+// Doc comments on the variants would become clap's help for each value and change
+// `hter sim --help`.
+#[allow(missing_docs)]
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum LoadArg {
+    Full,
+    Half,
+}
+
+/// `x` if it is finite, else a one-line error naming the flag `--name`.
+pub fn finite(name: &str, x: f64) -> Result<f64> {
+    if x.is_finite() {
+        Ok(x)
+    } else {
+        bail!("--{name} must be a finite number, got {x}")
+    }
+}
+
+/// The simulation a `hter sim` command line asks for: its arguments checked and resolved.
+pub fn options(a: &SimArgs) -> Result<SimOptions> {
+    let scenario = Scenario::resolve(&a.scenario)?;
+    let duration_s = match a.duration {
+        Some(d) => finite("duration", d)?,
+        None => scenario.duration_s,
+    };
+    let mut controller = ControllerSpec::new(a.controller);
+    if let Some(m) = &a.model {
+        controller.model = Some(crate::arx::parse(m)?);
+    }
+    if let Some(n) = a.n1 {
+        controller.gpc.n1 = n;
+    }
+    if let Some(n) = a.n2 {
+        controller.gpc.n2 = n;
+    }
+    if let Some(n) = a.nu {
+        controller.gpc.nu = n;
+    }
+    if let Some(l) = a.lambda {
+        let l = finite("lambda", l)?;
+        if l < 0.0 {
+            bail!("--lambda must be ≥ 0, got {l}");
+        }
+        controller.gpc.lambda = l as f32;
+        controller.igmvc.lambda = l as f32;
+    }
+    let g = &controller.gpc;
+    if g.n1 < 1 || g.n2 < g.n1 || g.n2 > hter::control::gpc::MAX_N2 {
+        bail!("GPC horizons need 1 ≤ N1 ≤ N2 ≤ {}, got N1 = {}, N2 = {}", hter::control::gpc::MAX_N2, g.n1, g.n2);
+    }
+    if g.nu < 1 || g.nu > hter::control::gpc::MAX_NU || g.nu > g.n2 {
+        bail!("GPC control horizon needs 1 ≤ Nu ≤ min(N2, {}), got Nu = {}", hter::control::gpc::MAX_NU, g.nu);
+    }
+    if let Some(p) = a.p_weight {
+        controller.gmvc.p = finite("p-weight", p)? as f32;
+        if p == 0.0 {
+            bail!("--p-weight must not be 0");
+        }
+    }
+    if let Some(r) = a.r_weight {
+        controller.gmvc.r = finite("r-weight", r)? as f32;
+    }
+    if let Some(sw) = a.s_weight {
+        let sw = finite("s-weight", sw)?;
+        if sw < 0.0 {
+            bail!("--s-weight must be ≥ 0, got {sw}");
+        }
+        controller.gmvc.s = sw as f32;
+    }
+    if let Some(al) = a.p_pole {
+        let al = finite("p-pole", al)?;
+        if !(0.0..1.0).contains(&al) {
+            bail!("--p-pole must be in [0, 1), got {al}");
+        }
+        controller.gmvc.p_pole = al as f32;
+        controller.igmvc.p_pole = al as f32;
+    }
+    if let Some(tp) = a.t_pole {
+        let tp = finite("t-pole", tp)?;
+        if !(0.0..1.0).contains(&tp) {
+            bail!("--t-pole must be in [0, 1), got {tp}");
+        }
+        controller.igmvc.t_pole = tp as f32;
+        controller.gpc_t_filter = tp as f32;
+    }
+    if let Some(seed) = a.mission_seed {
+        return Ok(crate::mission::Mission::generate(seed).options(controller));
+    }
+    Ok(SimOptions {
+        scenario,
+        controller,
+        plant: PlantChoice::parse(&a.plant)?,
+        load: match a.load {
+            LoadArg::Full => Load::Full,
+            LoadArg::Half => Load::Half,
+        },
+        ambient_c: finite("ambient", a.ambient)?,
+        duration_s,
+        seed: a.seed,
+        faults: a.faults.iter().map(|f| sim::Fault::parse(f)).collect::<Result<_>>()?,
+    })
+}
+
+/// `hter sim`.
+pub fn run(a: &SimArgs) -> Result<()> {
+    let opts = options(a)?;
+    let out = sim::run(&opts)?;
+    if let Some(path) = &a.csv {
+        write_csv(path, &out)?;
+    }
+    if let Some(path) = &a.plot {
+        plot_run(path, &opts, &out)?;
+    }
+    if a.json {
+        println!("{}", serde_json::to_string(&out.metrics)?);
+    } else {
+        print_summary(&opts, &out);
+        if let Some(p) = &a.csv {
+            println!("trace written to {}", p.display());
+        }
+        if let Some(p) = &a.plot {
+            println!("plot written to {}", p.display());
+        }
+    }
+    Ok(())
+}
+
+/// The trace, one row per control sample.
+fn write_csv(path: &std::path::Path, out: &SimOutput) -> Result<()> {
+    let mut w = csv::Writer::from_path(path).with_context(|| format!("cannot write '{}'", path.display()))?;
+    for r in &out.rows {
+        w.serialize(r)?;
+    }
+    w.flush().with_context(|| format!("cannot write '{}'", path.display()))?;
+    Ok(())
+}
+
+/// Temperature, duty and, for self-tuning runs, the estimate, to a .png or .svg file.
+fn plot_run(path: &std::path::Path, opts: &SimOptions, out: &SimOutput) -> Result<()> {
+    let minutes = |t: f64| t / 60.0;
+    let pts = |f: &dyn Fn(&sim::Row) -> f64| out.rows.iter().map(|r| (minutes(r.t_s), f(r))).collect();
+    let temp = plot::Panel {
+        title: "Load temperature".into(),
+        y_label: "°C".into(),
+        series: vec![
+            plot::Series { name: "setpoint".into(), points: pts(&|r| r.setpoint_c) },
+            plot::Series { name: "true load".into(), points: pts(&|r| r.true_temp_c) },
+            plot::Series { name: "measured (filtered)".into(), points: pts(&|r| r.temp_c) },
+            plot::Series { name: "2 °C limit".into(), points: pts(&|_| 2.0) },
+        ],
+        y_range: None,
+    };
+    let duty = plot::Panel {
+        title: "SSR duty".into(),
+        y_label: "duty".into(),
+        series: vec![plot::Series { name: "duty".into(), points: pts(&|r| r.duty) }],
+        y_range: Some((-0.02, 1.02)),
+    };
+    let title = format!(
+        "{} — {} on {}, {:?} load, {} °C ambient",
+        opts.scenario.name,
+        out.metrics.controller,
+        opts.plant.name(),
+        opts.scenario.load.unwrap_or(opts.load),
+        opts.ambient_c
+    );
+    let mut panels = vec![temp, duty];
+    // Self-tuning runs: the estimate over time.
+    let est = |f: &dyn Fn(&sim::Row) -> Option<f32>| -> Vec<(f64, f64)> {
+        out.rows.iter().filter_map(|r| f(r).map(|v| (minutes(r.t_s), f64::from(v)))).collect()
+    };
+    if out.rows.iter().any(|r| r.a1.is_some()) {
+        panels.push(plot::Panel {
+            title: "Estimated A(q⁻¹) = 1 + a1 q⁻¹ + a2 q⁻²".into(),
+            y_label: "coefficient".into(),
+            series: vec![
+                plot::Series { name: "a1".into(), points: est(&|r| r.a1) },
+                plot::Series { name: "a2".into(), points: est(&|r| r.a2) },
+            ],
+            y_range: None,
+        });
+        panels.push(plot::Panel {
+            title: "Estimated B(q⁻¹) = b0 + b1 q⁻¹ (°C per unit duty)".into(),
+            y_label: "coefficient".into(),
+            series: vec![
+                plot::Series { name: "b0".into(), points: est(&|r| r.b0) },
+                plot::Series { name: "b1".into(), points: est(&|r| r.b1) },
+            ],
+            y_range: None,
+        });
+    }
+    plot::panels(path, &title, "time (min)", &panels)
+}
+
+/// The text summary of a run.
+pub fn print_summary(opts: &SimOptions, out: &SimOutput) {
+    let m = &out.metrics;
+    println!("scenario    {} — {}", opts.scenario.name, opts.scenario.description);
+    println!(
+        "plant       {}, {:?} load, ambient {} °C; controller {}; Ts = {} s",
+        opts.plant.name(),
+        opts.scenario.load.unwrap_or(opts.load),
+        opts.ambient_c,
+        m.controller,
+        out.ts_s
+    );
+    println!("IAE                         {:10.1} °C·s", m.tracking.iae);
+    match m.tracking.settle_time_s {
+        Some(s) => println!("settle time (±0.5 °C)       {:10.0} s", s),
+        None => println!("settle time (±0.5 °C)          never"),
+    }
+    println!("max |error| after settling  {:10.2} °C", m.tracking.max_abs_error_after_settle_c);
+    println!("steady-state |error|        {:10.2} °C", m.tracking.steady_state_error_c);
+    println!("overshoot                   {:10.2} °C", m.tracking.overshoot_c);
+    println!("min / max load temperature  {:6.2} / {:.2} °C", m.tracking.min_temp_c, m.tracking.max_temp_c);
+    println!("time outside 2–8 °C         {:10.0} s", m.tracking.time_outside_2_8_s);
+    println!("energy                      {:10.2} Wh", m.energy_wh);
+    println!("SSR switches                {:10}", m.ssr_switches);
+    if !m.faults_detected.is_empty() {
+        let list: Vec<String> = m.faults_detected.iter().map(|f| format!("{}@{}s", f.kind, f.t_s)).collect();
+        println!("faults detected             {}", list.join(", "));
+    }
+}

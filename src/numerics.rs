@@ -1,0 +1,74 @@
+//! Small numerical helpers the per-sample code shares (GPC, the minimum-variance laws, the
+//! self-tuner and the RLS), each written for the Cortex-M4F: no library call, no memmove, no
+//! panic path.
+
+/// x − x: +0 for a finite x, NaN for ±∞ or NaN. Summed over many values it tells in one
+/// comparison whether all of them are finite.
+#[inline(always)]
+#[allow(clippy::eq_op)]
+pub(crate) fn finite_probe(x: f32) -> f32 {
+    x - x
+}
+
+/// Pushes `x` in at index 0 and drops the last entry: a history shift by register moves
+/// (`copy_within` is a memmove call on the M4).
+#[inline(always)]
+pub(crate) fn shift_in<const N: usize>(a: &mut [f32; N], x: f32) {
+    let mut carry = x;
+    for v in a.iter_mut() {
+        carry = core::mem::replace(v, carry);
+    }
+}
+
+/// √x, correctly rounded: the FPU's `vsqrt.f32` on a hard-float Arm target (the same IEEE
+/// result as `libm::sqrtf`, without its ≈ 90-instruction software loop), `libm` elsewhere.
+#[inline(always)]
+pub(crate) fn sqrtf(x: f32) -> f32 {
+    #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+    {
+        let r: u32;
+        // SAFETY: FPU register moves and one arithmetic instruction; s15 is saved in a core
+        // register and restored, so no register but the declared outputs changes. (Rust's `sreg`
+        // operands need the double-precision `vfp2` feature, which the M4F does not have.)
+        unsafe {
+            core::arch::asm!(
+                "vmov {save}, s15",
+                "vmov s15, {x}",
+                "vsqrt.f32 s15, s15",
+                "vmov {r}, s15",
+                "vmov s15, {save}",
+                x = in(reg) x.to_bits(),
+                r = lateout(reg) r,
+                save = out(reg) _,
+                options(pure, nomem, nostack),
+            )
+        };
+        f32::from_bits(r)
+    }
+    #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
+    {
+        libm::sqrtf(x)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn history_shift_and_finiteness_probe() {
+        let mut h = [1.0f32, 2.0, 3.0];
+        shift_in(&mut h, 0.5);
+        assert_eq!(h, [0.5, 1.0, 2.0]);
+        assert_eq!(finite_probe(-3.5).to_bits(), 0.0f32.to_bits());
+        assert!(finite_probe(f32::INFINITY).is_nan() && finite_probe(f32::NAN).is_nan());
+        assert!(finite_probe(f32::NEG_INFINITY).is_nan());
+    }
+
+    #[test]
+    fn square_root_is_correctly_rounded() {
+        assert_eq!(sqrtf(4.0), 2.0);
+        assert_eq!(sqrtf(2.0).to_bits(), 2.0f32.sqrt().to_bits());
+        assert!(sqrtf(-1.0).is_nan());
+    }
+}

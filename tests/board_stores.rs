@@ -1,0 +1,92 @@
+//! The simulated board stores what the firmware stores, when it does: the cold-chain history
+//! through the board's `persist::Recorder` and the self-tuner's model through the board's
+//! `persist::ModelCadence`, both at the cadence of the board profile (`hter::profile`).
+
+use hal_sim::scenario::Scenario;
+use hal_sim::sim::{run, ControllerChoice, ControllerSpec, Fault, SimOptions, SimOutput};
+use hter::control::AdaptiveMode;
+use hter::persist::{ModelRecord, ResetCause, Save};
+use hter::profile::{samples, HISTORY_SAVE_S, MODEL_SAVE_S};
+
+const TS_S: f64 = 10.0;
+const DAY_S: f64 = 86_400.0;
+
+/// A day of self-tuning GPC on the half load, where the estimate is trusted most of the time.
+fn day(faults: &[&str]) -> SimOutput {
+    let mut opts = SimOptions::new(Scenario::resolve("half-load").unwrap(), ControllerSpec::new(ControllerChoice::Gpc));
+    opts.duration_s = DAY_S;
+    opts.faults = faults.iter().map(|f| Fault::parse(f).unwrap()).collect();
+    run(&opts).unwrap()
+}
+
+fn history_times(out: &SimOutput) -> Vec<f64> {
+    out.stores.iter().filter(|(_, s)| matches!(s, Save::History(_))).map(|(t, _)| *t).collect()
+}
+
+fn models(out: &SimOutput) -> Vec<(f64, ModelRecord)> {
+    out.stores.iter().filter_map(|(t, s)| if let Save::Model(m) = s { Some((*t, *m)) } else { None }).collect()
+}
+
+/// Rows in (t0, t1] in which the self-tuner's estimate was trusted.
+fn adaptive_rows(out: &SimOutput, t0: f64, t1: f64) -> usize {
+    out.rows.iter().filter(|r| r.t_s > t0 && r.t_s <= t1 && r.adaptive_mode == Some(AdaptiveMode::Adaptive)).count()
+}
+
+#[test]
+fn a_day_stores_the_history_hourly_and_the_model_after_every_4_h_of_trust() {
+    let out = day(&[]);
+    assert!(out.metrics.alarms.is_empty(), "{:?}", out.metrics.alarms);
+    // Every 360th recorded sample (the hour's last), the first at 3590 s: 24 in a day.
+    let every = f64::from(samples(HISTORY_SAVE_S, TS_S as f32));
+    assert_eq!(every, 360.0);
+    let want: Vec<f64> = (1..=24).map(|h| (h as f64 * every - 1.0) * TS_S).collect();
+    assert_eq!(history_times(&out), want);
+    assert!(out.stores.iter().all(|(_, s)| matches!(s, Save::History(_) | Save::Model(_))));
+    // The last hourly record holds the day.
+    let Some((_, Save::History(last))) = out.stores.iter().rev().find(|(_, s)| matches!(s, Save::History(_))) else {
+        unreachable!()
+    };
+    assert_eq!(last.recorded_s, 86_390);
+
+    // The model: once per 1440 samples of trusted estimate (the count begins in the hour of
+    // pre-roll before the record), each store the estimate the self-tuner trusted that sample.
+    let trust = samples(MODEL_SAVE_S, TS_S as f32) as usize;
+    assert_eq!(trust, 1440);
+    let stored = models(&out);
+    assert!(stored.len() >= 4, "{stored:?}");
+    for pair in stored.windows(2) {
+        assert_eq!(adaptive_rows(&out, pair[0].0, pair[1].0), trust, "between {} and {} s", pair[0].0, pair[1].0);
+    }
+    for (t, rec) in &stored {
+        let row = out.rows.iter().find(|r| r.t_s == *t).unwrap();
+        assert_eq!(row.adaptive_mode, Some(AdaptiveMode::Adaptive), "stored at {t} s");
+        assert_eq!(rec.theta, [row.a1, row.a2, row.b0, row.b1].map(Option::unwrap), "stored at {t} s");
+        assert_eq!(rec.k, 5);
+    }
+}
+
+#[test]
+fn a_brownout_stores_the_reset_and_restarts_both_counts() {
+    const RESET_S: f64 = 20_000.0;
+    let out = day(&["brownout@20000"]);
+    let at = out.stores.iter().find(|(t, _)| *t >= RESET_S).expect("a store at the reset");
+    let Save::History(h) = at.1 else { panic!("{at:?}") };
+    assert_eq!((at.0, h.resets_by(ResetCause::BrownOut)), (RESET_S, 1));
+    // The hourly store counts again from the reset (the reset's own sample is the first of
+    // the 360), as a board's does from its boot.
+    let times = history_times(&out);
+    let next = times.iter().find(|t| **t > RESET_S).unwrap();
+    assert_eq!(*next, RESET_S + 359.0 * TS_S);
+    // So does the model's: the first store after the reset needs 1440 trusted samples of its
+    // own, where the count from before the reset would have been complete sooner.
+    let stored = models(&out);
+    let (before, after): (Vec<f64>, Vec<f64>) = stored.iter().map(|(t, _)| *t).partition(|t| *t < RESET_S);
+    let last_before = *before.last().expect("a model stored before the reset");
+    let carried = adaptive_rows(&out, last_before, RESET_S - TS_S);
+    let trusted_after = |t: f64| adaptive_rows(&out, RESET_S - TS_S, t);
+    match after.first() {
+        Some(&t) => assert_eq!(trusted_after(t), 1440, "first store after the reset at {t} s"),
+        None => assert!(trusted_after(f64::INFINITY) < 1440),
+    }
+    assert!(carried + trusted_after(f64::INFINITY) >= 1440, "the run must tell the two counts apart");
+}
