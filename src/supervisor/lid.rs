@@ -50,7 +50,7 @@ pub struct LidConfig {
     /// A setpoint that moves by more than this is a new one, °C (the load must reach it again).
     pub setpoint_change_c: f32,
     /// A duty strictly between 0 and 1 within this time is a modulating controller, s (an hour:
-    /// longer than On-Off's limit cycle).
+    /// a relay controller is one that has applied only 0 and 1 for that long).
     pub modulated_s: f32,
     /// Overwhelmed: full duty for this long, s (10 min)…
     pub overwhelmed_s: f32,

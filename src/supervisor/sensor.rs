@@ -56,7 +56,7 @@ pub struct SpikeConfig {
     /// re-seated in another load reads its new level from then on).
     pub jump_s: f32,
     /// Three spikes within this window are reported, and reported at most once per window, s
-    /// (one an hour is noise worth ignoring; three an hour is a loose contact or EMI).
+    /// (several within an hour are a loose contact or EMI, not the load).
     pub window_s: f32,
 }
 

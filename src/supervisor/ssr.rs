@@ -69,15 +69,14 @@ impl SsrConfig {
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct StuckOnConfig {
-    /// Paths 1 and 2: no cooling requested for this long before the sample, s (60 s: longer than
-    /// a controller's own pauses while it holds).
+    /// Paths 1 and 2: no cooling requested for this long before the sample, s (a minute).
     pub unrequested_s: f32,
     /// Path 1: a second unrequested trip within this time of the first is a short; path 2 only
     /// looks this long after a trip, s (half an hour: a hot ambient on a shorted SSR trips
     /// every ≈ 15 min).
     pub trip_window_s: f32,
-    /// Paths 1 and 2: the smoothed slope below this is falling fast, °C/s (−0.003 °C/s
-    /// = −0.18 °C/min, faster than the coast of a loaded carrier after cooling stops).
+    /// Paths 1 and 2: the freeze guard's smoothed slope below this is falling fast, °C/s
+    /// (−0.18 °C/min).
     pub falling_c_per_s: f32,
     /// Path 2: a fall over one sample larger than this, °C (0.1 °C in 10 s = 0.6 °C/min).
     pub between_trips_drop_c: f32,
@@ -89,8 +88,8 @@ pub struct StuckOnConfig {
     pub window_s: f32,
     /// …°C…
     pub drop_c: f32,
-    /// …at least this fraction as fast as over the window before (a shorted SSR keeps cooling
-    /// at full rate; the coast slows down by more than 5 % a minute).
+    /// …at least this fraction as fast as over the window before: not slowing down (the coast
+    /// after full cooling stops decelerates; a shorted SSR keeps cooling at full rate).
     pub keep_pace: f32,
 }
 

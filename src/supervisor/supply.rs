@@ -12,7 +12,7 @@ use crate::event::EventKind;
 pub struct SupplyConfig {
     /// A sag is the supply below this, V (12 V nominal − 10 %)…
     pub min_v: f32,
-    /// …for this long, s (30 s = 3 samples: a load step's dip is shorter).
+    /// …for this long in a row, s (30 s = 3 samples).
     pub sag_s: f32,
     /// The report re-arms once the supply is at or above `min_v` plus this, V.
     pub rearm_margin_v: f32,
