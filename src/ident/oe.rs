@@ -291,11 +291,11 @@ pub fn refine(s: &Structure, cfg: &OeConfig, theta: &mut [f64], y: &[f64], u: &[
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// u: a ±1 PRBS-like square sequence held `hold` samples (15-bit LFSR).
-    fn input(n: usize, hold: usize) -> std::vec::Vec<f64> {
+    pub(crate) fn input(n: usize, hold: usize) -> std::vec::Vec<f64> {
         let mut state = 0xACE1u16;
         (0..n)
             .map(|t| {
@@ -313,7 +313,7 @@ mod tests {
     }
 
     /// Simulates `theta` on `u` from rest.
-    fn simulate(s: &Structure, theta: &[f64], u: &[f64]) -> std::vec::Vec<f64> {
+    pub(crate) fn simulate(s: &Structure, theta: &[f64], u: &[f64]) -> std::vec::Vec<f64> {
         let zeros = std::vec![0.0; u.len()];
         let mut y = std::vec![0.0; u.len()];
         validate::simulate_fit(s, theta, &zeros, u, &mut y);
@@ -339,20 +339,16 @@ mod tests {
         assert!(validate::simulate_fit(&s, &th, &y, &u, &mut ys) > 99.9999);
     }
 
-    /// The criterion is the simulation error: data from a 3rd-order plant plus coloured noise,
-    /// fitted with a 2nd-order model. Least squares (equation error) favours the one-step
-    /// detail; OE simulates the record better and finds the static gain.
-    #[test]
-    fn output_error_beats_least_squares_under_mismatch_and_coloured_noise() {
+    /// A 3rd-order plant, (1 − 0.97 q⁻¹)(1 − 0.7 q⁻¹)(1 − 0.5 q⁻¹) with B = 0.0045 (gain
+    /// 0.0045/(0.03·0.3·0.5) = 1), on [`input`], plus noise through 1/(1 − 0.9 q⁻¹): slow and
+    /// coloured. Returns (y, u).
+    pub(crate) fn mismatched_record() -> (std::vec::Vec<f64>, std::vec::Vec<f64>) {
         let s3 = Structure::new(3, 1, 0, 1).unwrap();
-        // (1 − 0.97 q⁻¹)(1 − 0.7 q⁻¹)(1 − 0.5 q⁻¹), B = 0.0045: gain 0.0045/(0.03·0.3·0.5) = 1.
-        let truth = [-2.17, 1.514, -0.3395, 0.0045];
         let u = input(3000, 25);
-        let x = simulate(&s3, &truth, &u);
-        // Noise through 1/(1 − 0.9 q⁻¹): slow, coloured.
+        let x = simulate(&s3, &[-2.17, 1.514, -0.3395, 0.0045], &u);
         let mut seed = 12345u32;
         let mut v = 0.0;
-        let y: std::vec::Vec<f64> = x
+        let y = x
             .iter()
             .map(|xt| {
                 seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
@@ -360,6 +356,15 @@ mod tests {
                 xt + v
             })
             .collect();
+        (y, u)
+    }
+
+    /// The criterion is the simulation error: data from a 3rd-order plant plus coloured noise,
+    /// fitted with a 2nd-order model. Least squares (equation error) favours the one-step
+    /// detail; OE simulates the record better and finds the static gain.
+    #[test]
+    fn output_error_beats_least_squares_under_mismatch_and_coloured_noise() {
+        let (y, u) = mismatched_record();
         let s = Structure::new(2, 2, 0, 1).unwrap();
         let mut ls = super::super::batch::BatchLs::new(4).unwrap();
         let mut phi = [0.0; MAX_PARAMS];

@@ -371,51 +371,8 @@ pub fn search(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ident::oe::tests::{input, mismatched_record, simulate};
     use crate::ident::validate;
-
-    /// u: a ±1 PRBS-like square sequence held `hold` samples (15-bit LFSR).
-    fn input(n: usize, hold: usize) -> std::vec::Vec<f64> {
-        let mut state = 0xACE1u16;
-        (0..n)
-            .map(|t| {
-                if t % hold == 0 {
-                    let bit = (state ^ (state >> 2) ^ (state >> 3) ^ (state >> 5)) & 1;
-                    state = (state >> 1) | (bit << 15);
-                }
-                if state & 1 == 1 {
-                    1.0
-                } else {
-                    -1.0
-                }
-            })
-            .collect()
-    }
-
-    /// `theta` simulated on `u` from rest.
-    fn simulate(s: &Structure, theta: &[f64], u: &[f64]) -> std::vec::Vec<f64> {
-        let zeros = std::vec![0.0; u.len()];
-        let mut y = std::vec![0.0; u.len()];
-        validate::simulate_fit(s, theta, &zeros, u, &mut y);
-        y
-    }
-
-    /// A 3rd-order plant (poles 0.97, 0.7, 0.5, gain 1) plus noise through 1/(1 − 0.9 q⁻¹).
-    fn mismatched_record() -> (std::vec::Vec<f64>, std::vec::Vec<f64>) {
-        let s3 = Structure::new(3, 1, 0, 1).unwrap();
-        let u = input(3000, 25);
-        let x = simulate(&s3, &[-2.17, 1.514, -0.3395, 0.0045], &u);
-        let mut seed = 12345u32;
-        let mut v = 0.0;
-        let y = x
-            .iter()
-            .map(|xt| {
-                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-                v = 0.9 * v + 0.02 * (f64::from(seed >> 8) / f64::from(1u32 << 24) - 0.5);
-                xt + v
-            })
-            .collect();
-        (y, u)
-    }
 
     fn fit(s: &Structure, th: &[f64], y: &[f64], u: &[f64]) -> f64 {
         let mut ys = std::vec![0.0; y.len()];
