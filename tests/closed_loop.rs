@@ -234,3 +234,54 @@ fn self_tuning_laws_survive_a_plant_change_mid_run() {
         assert!(after.abs() < 0.75 * before.abs(), "{c:?}: B(1) {before} → {after} did not follow the sag");
     }
 }
+
+/// The plant's own static gain at `load_c`, °C per unit duty, from the physical model alone:
+/// the steady duties that hold the water 0.25 °C either side, as a finite difference.
+fn plant_gain_c_per_duty(params: hal_sim::plant::PlantParams, ambient_c: f64, load_c: f64) -> f64 {
+    use hal_sim::plant::Plant;
+    let duty = |t: f64| Plant::at_load_temperature(params, ambient_c, t).expect("a duty holds it").1;
+    0.5 / (duty(load_c + 0.25) - duty(load_c - 0.25))
+}
+
+/// What the self-tuner's estimate of the static gain B(1)/A(1) ends at after `piecewise` (three
+/// setpoint steps, the most excitation the scenarios give a regulated load), against the
+/// plant's own gain at 4 °C, on seeds 1–4.
+///
+/// It does not converge to the plant's gain, and this test pins how far off it is. Measured
+/// with `START_MODEL_HTER1`: −17.5 … −17.9 °C per unit duty on seeds 1–8 against the plant's
+/// −42.8 (≈ 0.41 of it). The spread over seeds is under 3 %, so this is a bias of the
+/// estimator (equation-error least squares on the filtered temperature in closed loop), not
+/// noise; the slow pole makes A(1) = 1 + a1 + a2 ≈ 2·10⁻⁴ for the plant, so the gain is a ratio
+/// of two small numbers that a small bias in a1 + a2 moves far. The tolerance is what is
+/// honestly met: within 0.3 … 1.5 of the plant's gain (a sign flip, a drift towards zero or
+/// a gain past the plausible range fails), and the seeds agree within 10 %.
+#[test]
+fn self_tuner_gain_estimate_after_piecewise_against_the_plant() {
+    use hal_sim::plant::PlantParams;
+    let truth = plant_gain_c_per_duty(PlantParams::hter1(Load::Full), 28.0, 4.0);
+    // The physical reference itself: a cooler, colder with more duty, of the size the
+    // identification finds (−43.7 °C per unit duty).
+    assert!((-50.0..-35.0).contains(&truth), "plant gain {truth}");
+    let mut gains = Vec::new();
+    for seed in 1..=4 {
+        let scenario = Scenario::resolve("piecewise").unwrap();
+        let out = run(&SimOptions {
+            duration_s: scenario.duration_s,
+            scenario,
+            controller: spec(ControllerChoice::Gpc),
+            plant: PlantChoice::Hter1,
+            load: Load::Full,
+            ambient_c: 28.0,
+            seed,
+            faults: vec![],
+        })
+        .unwrap();
+        let last = out.rows.last().unwrap();
+        let [a1, a2, b0, b1] = [last.a1, last.a2, last.b0, last.b1].map(|p| f64::from(p.unwrap()));
+        let g = (b0 + b1) / (1.0 + a1 + a2);
+        assert!((0.3..=1.5).contains(&(g / truth)), "seed {seed}: estimate {g} vs plant {truth}");
+        gains.push(g);
+    }
+    let (lo, hi) = gains.iter().fold((f64::MAX, f64::MIN), |(l, h), &g| (l.min(g), h.max(g)));
+    assert!(hi - lo <= 0.1 * lo.abs(), "estimates {gains:?} disagree across seeds");
+}
