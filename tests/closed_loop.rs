@@ -190,11 +190,8 @@ fn seed_conclusions_hold_on_piecewise() {
 /// b0 + b1, is at least a quarter smaller in magnitude at the end than before the sag (less
 /// cooling per unit duty at 9 V). Measured: 80 %, 41 % and 75 % smaller for GMVC, IGMVC, GPC.
 ///
-/// (The estimate does not converge to the plant's static gain in closed loop: on `piecewise`
-/// the final B(1)/A(1) ranges from −15 to −74 °C per unit duty against the plant's −42.8 at
-/// 4 °C, the excitation of a regulated load being weak. The estimator's structure is the
-/// subject of the start-model work; what the laws need, a stable A and a cooling B, is checked
-/// by the projection every sample.)
+/// (What the estimate converges to, and what it does not, is
+/// `self_tuner_learns_the_plants_response_over_the_horizon_from_a_wrong_start`.)
 #[test]
 fn self_tuning_laws_survive_a_plant_change_mid_run() {
     use hal_sim::scenario::{Change, Start};
@@ -235,40 +232,86 @@ fn self_tuning_laws_survive_a_plant_change_mid_run() {
     }
 }
 
-/// The plant's own static gain at `load_c`, °C per unit duty, from the physical model alone:
-/// the steady duties that hold the water 0.25 °C either side, as a finite difference.
-fn plant_gain_c_per_duty(params: hal_sim::plant::PlantParams, ambient_c: f64, load_c: f64) -> f64 {
+/// The physical plant's response to a unit duty step as the step's controller sees it: from the
+/// steady state holding `load_c`, the duty raised by `delta` for `n` samples of 10 s (PWM
+/// periods of 1 s, as the simulator drives it), the RTD's temperature through the step's
+/// first-order filter (F_a = 0.5), as a change from the start per unit duty. Index j − 1 is
+/// the response j samples after the step.
+fn plant_step_response(
+    params: hal_sim::plant::PlantParams,
+    ambient_c: f64,
+    load_c: f64,
+    delta: f64,
+    n: usize,
+) -> Vec<f64> {
     use hal_sim::plant::Plant;
-    let duty = |t: f64| Plant::at_load_temperature(params, ambient_c, t).expect("a duty holds it").1;
-    0.5 / (duty(load_c + 0.25) - duty(load_c - 0.25))
+    let (mut plant, d0) = Plant::at_load_temperature(params, ambient_c, load_c).expect("a duty holds it");
+    let fa = f64::from(hter::step::CarrierConfig::DEFAULT.filter.fa);
+    let y0 = plant.sensed_temp_c();
+    let mut y = y0;
+    (0..n)
+        .map(|_| {
+            for _ in 0..10 {
+                plant.advance_pwm_period(1.0, d0 + delta);
+            }
+            y = fa * y + (1.0 - fa) * plant.sensed_temp_c();
+            (y - y0) / delta
+        })
+        .collect()
 }
 
-/// What the self-tuner's estimate of the static gain B(1)/A(1) ends at after `piecewise` (three
-/// setpoint steps, the most excitation the scenarios give a regulated load), against the
-/// plant's own gain at 4 °C, on seeds 1–4.
+/// The step response of `y(t) = −a1 y(t−1) − a2 y(t−2) + b0 u(t−k) + b1 u(t−k−1)` to a unit
+/// step at t = 0, samples 1 … n (written out here, apart from the library's GPC).
+fn model_step_response(a: [f64; 2], b: [f64; 2], k: usize, n: usize) -> Vec<f64> {
+    let u = |t: i64| if t >= 0 { 1.0 } else { 0.0 };
+    let mut y = vec![0.0f64; n + 1];
+    for t in 1..=n {
+        let past = |m: usize| if t >= m { y[t - m] } else { 0.0 };
+        let t_i = t as i64;
+        y[t] = -a[0] * past(1) - a[1] * past(2) + b[0] * u(t_i - k as i64) + b[1] * u(t_i - k as i64 - 1);
+    }
+    y[1..].to_vec()
+}
+
+/// Closed-loop convergence of the self-tuner, measured where the law uses the model: its
+/// predicted response to the duty over GPC's horizon (30 samples, 5 min) and twice that. Started
+/// from a model whose cooling effect is half the real one (the start model's B halved), after
+/// `piecewise` on the full-load H-TER I, the estimate's step response at 30 and 60 samples is
+/// within 10 % of the physical plant's own (computed from the plant model alone,
+/// [`plant_step_response`]), where the start was 50 % off, on seeds 1–4.
 ///
-/// It does not converge to the plant's gain, and this test pins how far off it is. Measured
-/// with `START_MODEL_HTER1`: −17.5 … −17.9 °C per unit duty on seeds 1–8 against the plant's
-/// −42.8 (≈ 0.41 of it). The spread over seeds is under 3 %, so this is a bias of the
-/// estimator (equation-error least squares on the filtered temperature in closed loop), not
-/// noise; the slow pole makes A(1) = 1 + a1 + a2 ≈ 2·10⁻⁴ for the plant, so the gain is a ratio
-/// of two small numbers that a small bias in a1 + a2 moves far. The tolerance is what is
-/// honestly met: within 0.3 … 1.5 of the plant's gain (a sign flip, a drift towards zero or
-/// a gain past the plausible range fails), and the seeds agree within 10 %.
+/// The static gain B(1)/A(1) does not converge and is not asserted: it ends at −17.5 … −17.9 °C
+/// per unit duty on seeds 1–8 against the plant's −42.8 at 4 °C. The plant's slow mode
+/// (τ ≈ 50 min, the water) is far beyond what an hour of regulated data excites, and A(1) =
+/// 1 + a1 + a2 ≈ 2·10⁻⁴ makes the gain a ratio of two small numbers that a small bias of
+/// equation-error least squares moves far. What GPC predicts over its horizon is what it
+/// learns; the integral action of the incremental law removes the rest.
 #[test]
-fn self_tuner_gain_estimate_after_piecewise_against_the_plant() {
+fn self_tuner_learns_the_plants_response_over_the_horizon_from_a_wrong_start() {
     use hal_sim::plant::PlantParams;
-    let truth = plant_gain_c_per_duty(PlantParams::hter1(Load::Full), 28.0, 4.0);
-    // The physical reference itself: a cooler, colder with more duty, of the size the
-    // identification finds (−43.7 °C per unit duty).
-    assert!((-50.0..-35.0).contains(&truth), "plant gain {truth}");
-    let mut gains = Vec::new();
+    use hter::model::Model;
+    use hter::profile::START_MODEL_HTER1 as M;
+    let truth = plant_step_response(PlantParams::hter1(Load::Full), 28.0, 4.0, 0.05, 60);
+    // The reference is a cooler: colder with more duty, monotonically, after a dead time.
+    assert!(truth[2].abs() < 0.05 * truth[29].abs(), "{truth:?}");
+    assert!(truth.windows(2).all(|w| w[1] <= w[0] + 1e-9), "{truth:?}");
+    let at = |g: &[f64]| [g[29], g[59]];
+    let start = Model::second_order([M.a()[0], M.a()[1]], [0.5 * M.b()[0], 0.5 * M.b()[1]], M.k()).unwrap();
+    let g_start = model_step_response(
+        [M.a()[0], M.a()[1]].map(f64::from),
+        [0.5 * M.b()[0], 0.5 * M.b()[1]].map(f64::from),
+        M.k(),
+        60,
+    );
+    for (g, t) in at(&g_start).iter().zip(at(&truth)) {
+        assert!((g / t - 1.0).abs() > 0.4, "the start is not wrong: {g} vs the plant's {t}");
+    }
     for seed in 1..=4 {
         let scenario = Scenario::resolve("piecewise").unwrap();
         let out = run(&SimOptions {
             duration_s: scenario.duration_s,
             scenario,
-            controller: spec(ControllerChoice::Gpc),
+            controller: ControllerSpec { initial: Some(start), ..spec(ControllerChoice::Gpc) },
             plant: PlantChoice::Hter1,
             load: Load::Full,
             ambient_c: 28.0,
@@ -278,10 +321,12 @@ fn self_tuner_gain_estimate_after_piecewise_against_the_plant() {
         .unwrap();
         let last = out.rows.last().unwrap();
         let [a1, a2, b0, b1] = [last.a1, last.a2, last.b0, last.b1].map(|p| f64::from(p.unwrap()));
-        let g = (b0 + b1) / (1.0 + a1 + a2);
-        assert!((0.3..=1.5).contains(&(g / truth)), "seed {seed}: estimate {g} vs plant {truth}");
-        gains.push(g);
+        let g = model_step_response([a1, a2], [b0, b1], M.k(), 60);
+        for (n, (g, t)) in [30, 60].iter().zip(at(&g).iter().zip(at(&truth))) {
+            assert!(
+                (g / t - 1.0).abs() <= 0.10,
+                "seed {seed}: {n}-sample response {g:.2} vs the plant's {t:.2} °C per unit duty"
+            );
+        }
     }
-    let (lo, hi) = gains.iter().fold((f64::MAX, f64::MIN), |(l, h), &g| (l.min(g), h.max(g)));
-    assert!(hi - lo <= 0.1 * lo.abs(), "estimates {gains:?} disagree across seeds");
 }
