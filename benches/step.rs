@@ -106,7 +106,7 @@ fn parts(c: &mut Criterion) {
     c.bench_function("diophantine_k5", |b| b.iter(|| diophantine::solve(black_box(&at[..m.na() + 2]), &[1.0], 5)));
 
     // Callendar–Van Dusen inversion, ohms → °C (Pt100 near 4 °C).
-    let rtd = proto::CARRIER.rtd;
+    let rtd = proto::CARRIER.get().rtd;
     c.bench_function("cvd_ohms_to_celsius", |b| b.iter(|| rtd.temperature(black_box(Ohms(101.56)))));
 }
 

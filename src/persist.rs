@@ -9,7 +9,7 @@
 //!        kind tag version    payload    CRC-32 (IEEE 802.3, reflected, LE) of bytes 0 … n−5
 //! ```
 //!
-//! The flash layer below ([`flash`], feature `persist-flash`, over `sequential-storage`) has its
+//! The flash layer below (`persist::flash`, feature `persist-flash`, over `sequential-storage`) has its
 //! own CRCs against torn writes; this CRC and the range checks on decode guard what that layer
 //! cannot know: a record written by another firmware version, a bit flip inside a stored value,
 //! or a model that was plausible under different limits. A record that fails any check is

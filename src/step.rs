@@ -29,57 +29,15 @@
 //! samples = 5 minutes, the scale of the closed-loop settling time, and lets open/short faults be
 //! confirmed within two samples = 20 s.
 
-use crate::adc::AdcFrontEnd;
-use crate::calib::TwoPoint;
 use crate::control::{AdaptiveMode, ControlInput, Controller, ControllerStatus};
 use crate::event::{Event, EventKind, Events};
-use crate::filter::{FirstOrder, FirstOrderConfig};
-use crate::rtd::Rtd;
-use crate::supervisor::{sensor, Supervisor, SupervisorConfig};
+use crate::filter::FirstOrder;
+use crate::supervisor::{sensor, Supervisor};
 use crate::units::{max_f32, min_f32, Celsius, Duty};
 
-/// Everything the step needs to know that does not change while it runs.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct CarrierConfig {
-    /// Sample period, s (see the module docs for the choice of 10 s).
-    pub ts_s: f32,
-    /// ADC front end of the RTD channel.
-    pub adc: AdcFrontEnd,
-    /// The RTD (Pt100 on the reference board).
-    pub rtd: Rtd,
-    /// Two-point calibration of the channel.
-    pub cal: TwoPoint,
-    /// Measurement filter.
-    pub filter: FirstOrderConfig,
-    /// Readings below this are implausible for a vaccine carrier (sensor fault), °C.
-    pub plausible_min_c: f32,
-    /// Readings above this are implausible for a vaccine carrier (sensor fault), °C.
-    pub plausible_max_c: f32,
-    /// Lowest setpoint accepted, °C (vaccines freeze below).
-    pub setpoint_min_c: f32,
-    /// Highest setpoint accepted, °C.
-    pub setpoint_max_c: f32,
-    /// The safety supervisor's detectors.
-    pub supervisor: SupervisorConfig,
-}
+pub use config::{CarrierConfig, ConfigError, ValidConfig};
 
-impl CarrierConfig {
-    /// Defaults for the reference board: Pt100 on the default front end, Ts = 10 s, F_a = 0.5.
-    pub const DEFAULT: CarrierConfig = CarrierConfig {
-        ts_s: 10.0,
-        adc: AdcFrontEnd::DEFAULT,
-        rtd: Rtd::PT100,
-        cal: TwoPoint::IDENTITY,
-        filter: FirstOrderConfig { fa: 0.5 },
-        // The carrier lives between a freezer pack (−25 °C) and a car in the sun (+70 °C).
-        plausible_min_c: -30.0,
-        plausible_max_c: 75.0,
-        setpoint_min_c: 2.0,
-        setpoint_max_c: 8.0,
-        supervisor: SupervisorConfig::DEFAULT,
-    };
-}
+mod config;
 
 /// Setpoint used when the requested one is not a number, °C (before clamping): the middle of
 /// the lower half of 2–8 °C.
@@ -169,8 +127,10 @@ pub struct Carrier<C: Controller> {
 }
 
 impl<C: Controller> Carrier<C> {
-    /// A carrier that has not seen a sample yet.
-    pub fn new(cfg: CarrierConfig, controller: C) -> Self {
+    /// A carrier that has not seen a sample yet, on a configuration that passed
+    /// [`CarrierConfig::validate`] (a board's constant one is checked when it is compiled).
+    pub fn new(cfg: ValidConfig, controller: C) -> Self {
+        let cfg = *cfg.get();
         Self {
             cfg,
             controller,
@@ -332,78 +292,4 @@ impl<C: Controller> Carrier<C> {
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
-    use super::*;
-    use crate::control::AnyController;
-    use proptest::prelude::*;
-
-    /// The counts the default front end reads at `t` °C.
-    pub(crate) fn counts_at(t: f32) -> u32 {
-        let cfg = CarrierConfig::DEFAULT;
-        cfg.adc.counts(cfg.rtd.resistance(Celsius(t)).unwrap())
-    }
-
-    /// A default carrier under the profile's PI.
-    pub(crate) fn pi_carrier() -> Carrier<AnyController> {
-        Carrier::new(CarrierConfig::DEFAULT, AnyController::Pi(crate::profile::pi(CarrierConfig::DEFAULT.ts_s)))
-    }
-
-    /// The kinds of a sample's events, in order.
-    pub(crate) fn kinds(out: &StepOutput) -> Vec<EventKind> {
-        out.events.iter().map(|e| e.kind).collect()
-    }
-
-    #[test]
-    fn measures_within_the_resolution() {
-        let mut c = pi_carrier();
-        let out = c.step(&StepInput { t_ms: 0, counts: counts_at(4.0), setpoint_c: 4.0 });
-        assert!((out.temp_c.0 - 4.0).abs() < 0.01, "{:?}", out.temp_c);
-        assert_eq!(out.mode, Mode::Normal);
-        assert!(out.supply_enable);
-    }
-
-    #[test]
-    fn setpoint_below_two_degrees_is_clamped() {
-        let mut c = pi_carrier();
-        let out = c.step(&StepInput { t_ms: 0, counts: counts_at(4.0), setpoint_c: -5.0 });
-        assert_eq!(out.setpoint_c.0, 2.0);
-        assert_eq!(kinds(&out), [EventKind::SetpointClamped]);
-        let again = c.step(&StepInput { t_ms: 10_000, counts: counts_at(4.0), setpoint_c: -5.0 });
-        assert!(again.events.is_empty(), "reported when the clamp begins");
-        let nan = c.step(&StepInput { t_ms: 20_000, counts: counts_at(4.0), setpoint_c: f32::NAN });
-        assert_eq!(nan.setpoint_c.0, 4.0);
-        let high = c.step(&StepInput { t_ms: 30_000, counts: counts_at(4.0), setpoint_c: 9.0 });
-        assert_eq!(high.setpoint_c.0, 8.0);
-    }
-
-    #[test]
-    fn restarts_and_board_faults_are_reported_with_the_next_sample() {
-        let mut c = pi_carrier();
-        c.note_reset(crate::persist::ResetCause::Watchdog);
-        c.note_board_fault(crate::failsafe::StopKind::Panic);
-        let out = c.step(&StepInput { t_ms: 0, counts: counts_at(4.0), setpoint_c: 4.0 });
-        assert_eq!(
-            kinds(&out),
-            [
-                EventKind::Restarted(crate::persist::ResetCause::Watchdog),
-                EventKind::BoardFault(crate::failsafe::StopKind::Panic)
-            ]
-        );
-        assert!(c.step(&StepInput { t_ms: 10_000, counts: counts_at(4.0), setpoint_c: 4.0 }).events.is_empty());
-    }
-
-    proptest! {
-        #![proptest_config(ProptestConfig { cases: 64, .. ProptestConfig::default() })]
-
-        /// Arbitrary conversions (including stuck runs, rails and noise) never panic, never give
-        /// a non-finite or out-of-range duty.
-        #[test]
-        fn arbitrary_counts_give_a_valid_duty(counts in proptest::collection::vec(prop_oneof![any::<u32>(), 0u32..70_000, Just(49_900u32)], 1..400)) {
-            let mut c = pi_carrier();
-            for (k, n) in counts.iter().enumerate() {
-                let out = c.step(&StepInput { t_ms: k as u64 * 10_000, counts: *n, setpoint_c: 4.0 });
-                prop_assert!(out.duty.get().is_finite() && (0.0..=1.0).contains(&out.duty.get()));
-            }
-        }
-    }
-}
+pub(crate) mod tests;

@@ -8,7 +8,7 @@
 
 use hal_sim::sim::{ControllerChoice, ControllerSpec};
 use hter::control::AnyController;
-use hter::step::{Carrier, CarrierConfig, Mode, StepInput};
+use hter::step::{Carrier, Mode, StepInput, ValidConfig};
 
 /// xorshift64*: a fixed, seedable stream.
 struct Rng(u64);
@@ -76,7 +76,7 @@ fn ten_million_arbitrary_samples_through_every_controller() {
         stream.clear();
         counts(&mut rng, per, &mut stream);
         let ctl: AnyController = ControllerSpec::new(choice).build(10.0, 0.45).unwrap();
-        let mut carrier = Carrier::new(CarrierConfig::DEFAULT, ctl);
+        let mut carrier = Carrier::new(ValidConfig::DEFAULT, ctl);
         for (i, &c) in stream.iter().enumerate() {
             // Setpoints too: mostly 4 °C, sometimes anything (NaN, ±∞, out of band).
             let r = rng.next();

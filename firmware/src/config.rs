@@ -31,7 +31,7 @@ use hter::control::adaptive::AdaptiveConfig;
 #[allow(unused_imports)]
 use hter::control::{OnOff, OnOffConfig, Pi};
 use hter::profile;
-use hter::step::CarrierConfig;
+use hter::step::{CarrierConfig, ValidConfig};
 use hter::supervisor::switch::SwitchConfig;
 use hter::supervisor::SupervisorConfig;
 #[allow(unused_imports)]
@@ -57,6 +57,13 @@ pub const CARRIER: CarrierConfig = if cfg!(feature = "identify") {
     }
 } else {
     CarrierConfig::DEFAULT
+};
+
+/// [`CARRIER`], checked when the firmware is compiled: a setting the step cannot honour (a
+/// supervisor window longer than its detector's history, say) fails the build, not the board.
+pub const VALID_CARRIER: ValidConfig = match CARRIER.validated() {
+    Ok(v) => v,
+    Err(_) => panic!("the board's CarrierConfig is refused by CarrierConfig::validate"),
 };
 
 /// Two-point calibration of this board's RTD channel, or `None` to keep the one stored in flash

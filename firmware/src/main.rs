@@ -46,7 +46,7 @@ use hter::event::{Event, EventKind};
 use hter::failsafe::{Heartbeat, StopInfo};
 use hter::hal::apply_duty;
 use hter::persist::{HistoryRecord, ModelCadence, Recorder, ResetCause};
-use hter::step::{Carrier, CarrierConfig, Mode, StepInput};
+use hter::step::{Carrier, Mode, StepInput};
 use hter::units::Duty;
 
 /// One sample of the analog inputs and when it was taken.
@@ -199,12 +199,10 @@ async fn sample(mut analog: board::Analog) {
 /// the watchdog.
 #[embassy_executor::task]
 async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
-    let mut carrier: Carrier<config::Ctl> = Carrier::new(
-        // Built here from the constant profile, so that its derived sample counts fold at
-        // compile time.
-        CarrierConfig { cal: boot.cal, ..config::CARRIER },
-        config::controller(boot.adaptive),
-    );
+    // Built here from the constant profile, so that its derived sample counts fold at compile
+    // time; only the calibration comes from flash.
+    let mut carrier: Carrier<config::Ctl> =
+        Carrier::new(config::VALID_CARRIER.with_calibration(boot.cal), config::controller(boot.adaptive));
     carrier.note_reset(boot.reset);
     let mut recorder = Recorder::new(boot.history, config::HISTORY_SAVE_SAMPLES);
     let mut history = recorder.note_reset(boot.reset);

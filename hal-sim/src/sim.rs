@@ -288,6 +288,11 @@ pub struct SimOutput {
     pub stores: Vec<(f64, Save)>,
 }
 
+/// The one-line error of a refused carrier configuration.
+fn config_refused(e: hter::step::ConfigError) -> anyhow::Error {
+    anyhow!("the carrier configuration is refused: {e}")
+}
+
 /// Runs a scenario on the reference board ([`BoardOptions::DEFAULT`]).
 pub fn run(opts: &SimOptions) -> Result<SimOutput> {
     run_with(opts, &BoardOptions::DEFAULT)
@@ -311,6 +316,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
         // As the identification build: no supply-switch test opening in the record.
         cfg.supervisor.switch.test_interval_s = 0.0;
     }
+    let valid = cfg.validated().map_err(config_refused)?;
     let ts = f64::from(cfg.ts_s);
     let (mut rig, u0) = Rig::new(opts)?;
     rig.set_sample_phase(board.sample_phase);
@@ -367,7 +373,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             spec.build(cfg.ts_s, u0 as f32)?
         })
     };
-    let mut carrier = Carrier::new(cfg, make_controller(None)?);
+    let mut carrier = Carrier::new(valid, make_controller(None)?);
     let faults_pending = &opts.faults;
     let name = carrier.controller().name().to_string();
 
@@ -412,7 +418,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                     // The reset ends a hang too.
                     hung = false;
                     // RAM lost: a fresh step, restarted from what flash holds.
-                    carrier = Carrier::new(cfg, make_controller(persisted.as_ref())?);
+                    carrier = Carrier::new(valid, make_controller(persisted.as_ref())?);
                     // What the firmware reads from RCC_CSR at boot after a brown-out.
                     carrier.note_reset(ResetCause::BrownOut);
                     cadence = model_cadence();

@@ -271,7 +271,7 @@ fn run() -> Result<(), &'static str> {
             let ci = ControlInput { y_c: o.temp_c.0, w_c: o.setpoint_c.0 };
             let mut c2 = ctrl_before;
             ticks[2] = timed(|| c2.update(&ci)).1;
-            let cfg = proto::CARRIER;
+            let cfg = proto::CARRIER.get();
             ticks[3] = timed(|| cfg.adc.ohms(inp.counts).ok().and_then(|r| cfg.rtd.temperature(r).ok())).1;
             let st = match carrier.controller() {
                 AnyController::SelfTuning(st) => Some(st),

@@ -16,7 +16,7 @@ use hter::coldchain::{ColdChainMonitor, Raised};
 use hter::control::adaptive::AdaptiveConfig;
 use hter::control::AnyController;
 use hter::profile::{self, Kind};
-use hter::step::{Carrier, CarrierConfig, StepInput, StepOutput};
+use hter::step::{Carrier, StepInput, StepOutput, ValidConfig};
 
 /// Input file name in QEMU's working directory (NUL-terminated for semihosting `SYS_OPEN`).
 pub const INPUT_FILE: &str = "pil-in.bin\0";
@@ -28,7 +28,7 @@ pub const MAGIC_IN: u32 = 0x4e49_4c50; // "PLIN"
 pub const MAGIC_OUT: u32 = 0x544f_4c50; // "PLOT"
 
 /// The step's configuration on both sides: the firmware's (`firmware/src/config.rs`).
-pub const CARRIER: CarrierConfig = CarrierConfig::DEFAULT;
+pub const CARRIER: ValidConfig = ValidConfig::DEFAULT;
 
 /// Controller kind 0: the PI baseline (the firmware's `pi` feature, and the self-tuners'
 /// fallback).
@@ -51,7 +51,7 @@ fn kind(code: u32) -> Option<Kind> {
 /// The controller of kind `code`, from the board profile as the firmware builds it: at the
 /// step's sample period, a self-tuner starting from the PI's bias.
 pub fn controller(code: u32) -> Option<AnyController> {
-    profile::controller(kind(code)?, CARRIER.ts_s, profile::PI.bias).ok()
+    profile::controller(kind(code)?, CARRIER.get().ts_s, profile::PI.bias).ok()
 }
 
 /// A fresh carrier and cold-chain record for `kind`.
@@ -112,7 +112,7 @@ pub const PART_MONITOR: usize = 1;
 /// budgeted figure.
 pub const PART_BOARD: usize = 9;
 /// The firmware's history store cadence in samples: the board profile's, 1 h.
-pub const HISTORY_SAVE_SAMPLES: u32 = profile::samples(profile::HISTORY_SAVE_S, CARRIER.ts_s);
+pub const HISTORY_SAVE_SAMPLES: u32 = profile::samples(profile::HISTORY_SAVE_S, CARRIER.get().ts_s);
 
 /// Iterations of the short calibration loop (the long one runs twice as many). The output's
 /// calibration words are the SysTick counts of an empty window and of the two loops of two

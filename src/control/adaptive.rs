@@ -608,9 +608,9 @@ mod tests {
     #[test]
     fn the_step_reports_each_mode_change_as_an_event() {
         use crate::event::EventKind;
-        use crate::step::{Carrier, CarrierConfig};
+        use crate::step::Carrier;
         use crate::units::Celsius;
-        let mut carrier = Carrier::new(CarrierConfig::DEFAULT, start(ADAPTIVE_GPC));
+        let mut carrier = Carrier::new(crate::step::ValidConfig::DEFAULT, start(ADAPTIVE_GPC));
         let mut plant = Plant::start_model();
         let (mut y, mut last) = (0.0, None);
         let mut seen = std::vec::Vec::new();

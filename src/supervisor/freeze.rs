@@ -199,14 +199,14 @@ mod carrier {
     use crate::control::{AnyController, OnOff, OnOffConfig};
     use crate::event::EventKind;
     use crate::step::tests::counts_at;
-    use crate::step::{Carrier, CarrierConfig, Mode, StepInput};
+    use crate::step::{Carrier, Mode, StepInput};
     use crate::units::Duty;
 
     /// Feeds a load falling at `rate_c_per_s` from 9 °C under an On-Off controller that keeps
     /// asking for cooling; returns the measured temperature at which the guard cut it.
     fn guard_trip(rate_c_per_s: f32) -> f32 {
         let onoff = OnOff::new(OnOffConfig { hysteresis_c: 0.1 });
-        let mut c = Carrier::new(CarrierConfig::DEFAULT, AnyController::OnOff(onoff));
+        let mut c = Carrier::new(crate::step::ValidConfig::DEFAULT, AnyController::OnOff(onoff));
         let mut temp = 9.0f32;
         let mut t = 0u64;
         while temp > 0.0 {

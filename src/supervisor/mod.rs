@@ -114,6 +114,91 @@ impl SupervisorConfig {
     };
 }
 
+/// A supervisor setting its detectors cannot honour at the sample period: the field, as its
+/// path in [`SupervisorConfig`] spells it (`"ssr.stuck_on.window_s"`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct WindowError(pub &'static str);
+
+impl SupervisorConfig {
+    /// Checks that every duration is a finite, non-negative number of seconds whose sample count
+    /// fits its counter at the sample period `ts_s` (a count that saturated would silently
+    /// shorten the check), and that every window the SSR monitor looks back over is at least one
+    /// sample and shorter than the history it keeps ([`ssr::HISTORY`] samples): a longer window
+    /// never has its sample, and its check would never fire.
+    pub const fn validate(&self, ts_s: f32) -> Result<(), WindowError> {
+        if !(ts_s.is_finite() && ts_s > 0.0) {
+            return Err(WindowError("ts_s"));
+        }
+        let (s, on, off, p) = (&self.sensor, &self.ssr.stuck_on, &self.ssr.stuck_off, &self.ssr.probe);
+        // (seconds, largest count its counter holds, field)
+        let counted: [(f32, u32, &'static str); 12] = [
+            (s.stuck_s, u16::MAX as u32, "sensor.stuck_s"),
+            (s.spike.jump_s, u8::MAX as u32, "sensor.spike.jump_s"),
+            (s.offset.confirm_s, u8::MAX as u32, "sensor.offset.confirm_s"),
+            (on.unrequested_s, u16::MAX as u32, "ssr.stuck_on.unrequested_s"),
+            (on.off_s, u16::MAX as u32, "ssr.stuck_on.off_s"),
+            (off.on_s, u16::MAX as u32, "ssr.stuck_off.on_s"),
+            (off.slow_on_s, u16::MAX as u32, "ssr.stuck_off.slow_on_s"),
+            (p.unrequested_s, u16::MAX as u32, "ssr.probe.unrequested_s"),
+            (self.lid.overwhelmed_s, u16::MAX as u32, "lid.overwhelmed_s"),
+            (self.supply.sag_s, u8::MAX as u32, "supply.sag_s"),
+            (self.switch.settle_s, u8::MAX as u32, "switch.settle_s"),
+            (self.switch.test_interval_s, u32::MAX, "switch.test_interval_s"),
+        ];
+        let mut i = 0;
+        while i < counted.len() {
+            let (secs, max, field) = counted[i];
+            if !counts_within(secs, ts_s, max) {
+                return Err(WindowError(field));
+            }
+            i += 1;
+        }
+        // The millisecond timers ([`ms`]: u32, 49 days).
+        let timed: [(f32, &'static str); 4] = [
+            (s.spike.window_s, "sensor.spike.window_s"),
+            (on.trip_window_s, "ssr.stuck_on.trip_window_s"),
+            (p.open_s, "ssr.probe.open_s"),
+            (p.interval_s, "ssr.probe.interval_s"),
+        ];
+        let mut i = 0;
+        while i < timed.len() {
+            let (secs, field) = timed[i];
+            if !counts_within(secs, 0.001, u32::MAX) {
+                return Err(WindowError(field));
+            }
+            i += 1;
+        }
+        // (seconds, how many of it the ring must hold, field): the stuck-on check compares the
+        // fall over the last window with the window before, so it reads two windows back.
+        let looked_back: [(f32, u32, &'static str); 4] = [
+            (on.window_s, 2, "ssr.stuck_on.window_s"),
+            (off.on_s, 1, "ssr.stuck_off.on_s"),
+            (p.fall_window_s, 1, "ssr.probe.fall_window_s"),
+            (p.turn_up_window_s, 1, "ssr.probe.turn_up_window_s"),
+        ];
+        let mut i = 0;
+        while i < looked_back.len() {
+            let (secs, times, field) = looked_back[i];
+            if !counts_within(secs, ts_s, u16::MAX as u32) {
+                return Err(WindowError(field));
+            }
+            let n = samples_u32(secs, ts_s);
+            if n == 0 || n * times >= ssr::HISTORY as u32 {
+                return Err(WindowError(field));
+            }
+            i += 1;
+        }
+        Ok(())
+    }
+}
+
+/// Whether `s` seconds is a finite, non-negative duration of at most `max` samples of `ts_s`
+/// (rounded to the nearest, as [`samples_u32`] counts them).
+const fn counts_within(s: f32, ts_s: f32, max: u32) -> bool {
+    s.is_finite() && s >= 0.0 && s / ts_s + 0.5 < max as f32 + 1.0
+}
+
 /// The samples in `s` seconds at the sample period `ts_s`, rounded to the nearest (saturating;
 /// 0 for a negative or NaN duration).
 pub(crate) const fn samples_u32(s: f32, ts_s: f32) -> u32 {
@@ -522,6 +607,34 @@ mod tests {
         assert_eq!(after(guarded, State::ssr_shorted).mode(), Mode::FreezeGuard);
         assert_eq!(after(after(guarded, State::ssr_shorted), State::guard_released), limp);
         assert_eq!(after(run, |s| s.limp_switched(true)), run);
+    }
+
+    #[test]
+    fn validation_names_the_setting_its_detector_cannot_honour() {
+        let d = SupervisorConfig::DEFAULT;
+        assert_eq!(d.validate(10.0), Ok(()));
+        let refused = |f: fn(&mut SupervisorConfig), ts_s: f32| {
+            let mut c = d;
+            f(&mut c);
+            c.validate(ts_s).err()
+        };
+        // Two stuck-on windows must fit the 32-sample ring: 15 samples, not 16.
+        assert_eq!(refused(|c| c.ssr.stuck_on.window_s = 150.0, 10.0), None);
+        assert_eq!(refused(|c| c.ssr.stuck_on.window_s = 160.0, 10.0), Some(WindowError("ssr.stuck_on.window_s")));
+        assert_eq!(refused(|c| c.ssr.probe.fall_window_s = 0.0, 10.0), Some(WindowError("ssr.probe.fall_window_s")));
+        assert_eq!(
+            refused(|c| c.ssr.probe.turn_up_window_s = f32::NAN, 10.0),
+            Some(WindowError("ssr.probe.turn_up_window_s"))
+        );
+        // A u8 count: 255 samples at most (2550 s at 10 s), rounded to the nearest.
+        assert_eq!(refused(|c| c.supply.sag_s = 2554.0, 10.0), None);
+        assert_eq!(refused(|c| c.supply.sag_s = 2556.0, 10.0), Some(WindowError("supply.sag_s")));
+        assert_eq!(refused(|c| c.sensor.stuck_s = -1.0, 10.0), Some(WindowError("sensor.stuck_s")));
+        assert_eq!(refused(|c| c.ssr.probe.interval_s = 5.0e6, 10.0), Some(WindowError("ssr.probe.interval_s")));
+        // The same seconds at a faster sample period are more samples than the ring holds.
+        assert_eq!(d.validate(1.0), Err(WindowError("ssr.stuck_on.window_s")));
+        assert_eq!(d.validate(0.0), Err(WindowError("ts_s")));
+        assert_eq!(d.validate(f32::NAN), Err(WindowError("ts_s")));
     }
 
     #[test]

@@ -203,7 +203,7 @@ impl LimpConfig {
 /// Samples of filtered temperature kept for the SSR checks: more than the longest window
 /// ([`StuckOffConfig::on_s`], [`ProbeConfig::fall_window_s`]: 30 samples at 10 s). A window
 /// longer than the ring never has its sample, and its check never fires.
-pub(crate) const HISTORY: usize = 32;
+pub const HISTORY: usize = 32;
 
 /// What the supply probe does this sample.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -542,6 +542,40 @@ mod tests {
         }
         apply(&mut m, 18, Duty::OFF, 0.0, 2.0);
         assert!(!m.still_falling(&CFG.stuck_on, 5.0 - 0.024 * 12.0));
+    }
+
+    /// The sample of full duty at which a load warming 0.02 °C a sample is reported stuck off,
+    /// with the stuck-off window `on_s`.
+    fn stuck_off_found_with_window(on_s: f32) -> Option<usize> {
+        let cfg = SsrConfig { stuck_off: StuckOffConfig { on_s, ..CFG.stuck_off }, ..CFG };
+        let mut m = SsrMonitor::new(&cfg, TS);
+        let mut t = 5.0f32;
+        let mut found = None;
+        for k in 0..80 {
+            m.remember(t);
+            if m.warms_at_full_duty(&cfg.stuck_off, t) && found.is_none() {
+                found = Some(k);
+            }
+            m.applied(&cfg, Duty::FULL, 1.0, t);
+            t += 0.02;
+        }
+        found
+    }
+
+    #[test]
+    fn the_longest_window_validation_accepts_still_fires_and_one_longer_would_not() {
+        let longest = (HISTORY - 1) as f32 * TS;
+        let accepted = |on_s| {
+            let mut c = crate::supervisor::SupervisorConfig::DEFAULT;
+            c.ssr.stuck_off.on_s = on_s;
+            c.validate(TS).is_ok()
+        };
+        assert!(accepted(longest));
+        assert_eq!(stuck_off_found_with_window(longest), Some(HISTORY - 1));
+        // One sample longer: the ring never holds the sample the window starts at, so the
+        // check would be silently off; validation refuses it.
+        assert!(!accepted(longest + TS));
+        assert_eq!(stuck_off_found_with_window(longest + TS), None);
     }
 
     #[test]

@@ -281,7 +281,8 @@ mod carrier {
         // Test openings off (an identification run): the sense alone opens nothing.
         let mut cfg = CarrierConfig::DEFAULT;
         cfg.supervisor.switch.test_interval_s = 0.0;
-        let mut c = Carrier::new(cfg, AnyController::Pi(crate::profile::pi(CarrierConfig::DEFAULT.ts_s)));
+        let mut c =
+            Carrier::new(cfg.validated().unwrap(), AnyController::Pi(crate::profile::pi(CarrierConfig::DEFAULT.ts_s)));
         for k in 0..1600u32 {
             c.observe_switched_rail_v(11.9);
             let out =

@@ -595,7 +595,7 @@ mod tests {
     #[test]
     fn host_replay_records_the_steps_duties_and_events() {
         // 20 samples at 9 °C (cooling wanted), then an open sensor at sample 20 (t = 200 s).
-        let cfg = proto::CARRIER;
+        let cfg = proto::CARRIER.get();
         let warm = cfg.adc.counts(cfg.rtd.resistance(hter::units::Celsius(9.0)).unwrap());
         let inputs: Vec<StepInput> = (0..30u32)
             .map(|k| StepInput {

@@ -1,0 +1,92 @@
+//! The step's own tests; each detector's are beside it in `crate::supervisor`.
+
+use super::*;
+use crate::control::AnyController;
+use proptest::prelude::*;
+
+/// The counts the default front end reads at `t` °C.
+pub(crate) fn counts_at(t: f32) -> u32 {
+    let cfg = CarrierConfig::DEFAULT;
+    cfg.adc.counts(cfg.rtd.resistance(Celsius(t)).unwrap())
+}
+
+/// A default carrier under the profile's PI.
+pub(crate) fn pi_carrier() -> Carrier<AnyController> {
+    Carrier::new(ValidConfig::DEFAULT, AnyController::Pi(crate::profile::pi(CarrierConfig::DEFAULT.ts_s)))
+}
+
+/// The kinds of a sample's events, in order.
+pub(crate) fn kinds(out: &StepOutput) -> Vec<EventKind> {
+    out.events.iter().map(|e| e.kind).collect()
+}
+
+#[test]
+fn a_configuration_the_step_cannot_honour_is_refused_before_it_runs() {
+    let mut cfg = CarrierConfig::DEFAULT;
+    // A stuck-on window the SSR monitor's history cannot hold would switch that check off.
+    cfg.supervisor.ssr.stuck_on.window_s = 600.0;
+    assert_eq!(cfg.validated().err(), Some(ConfigError::Window("ssr.stuck_on.window_s")));
+    let setpoints = CarrierConfig { setpoint_min_c: 8.0, setpoint_max_c: 2.0, ..CarrierConfig::DEFAULT };
+    assert_eq!(setpoints.validated().err(), Some(ConfigError::Setpoints));
+    let nan = CarrierConfig { plausible_max_c: f32::NAN, ..CarrierConfig::DEFAULT };
+    assert_eq!(nan.validated().err(), Some(ConfigError::Setpoints));
+    let filter = CarrierConfig { filter: crate::filter::FirstOrderConfig { fa: 1.0 }, ..CarrierConfig::DEFAULT };
+    assert_eq!(filter.validated().err(), Some(ConfigError::Filter));
+    let ts = CarrierConfig { ts_s: -10.0, ..CarrierConfig::DEFAULT };
+    assert_eq!(ts.validated().err(), Some(ConfigError::SamplePeriod));
+    assert_eq!(CarrierConfig::DEFAULT.validated(), Ok(ValidConfig::DEFAULT));
+}
+
+#[test]
+fn measures_within_the_resolution() {
+    let mut c = pi_carrier();
+    let out = c.step(&StepInput { t_ms: 0, counts: counts_at(4.0), setpoint_c: 4.0 });
+    assert!((out.temp_c.0 - 4.0).abs() < 0.01, "{:?}", out.temp_c);
+    assert_eq!(out.mode, Mode::Normal);
+    assert!(out.supply_enable);
+}
+
+#[test]
+fn setpoint_below_two_degrees_is_clamped() {
+    let mut c = pi_carrier();
+    let out = c.step(&StepInput { t_ms: 0, counts: counts_at(4.0), setpoint_c: -5.0 });
+    assert_eq!(out.setpoint_c.0, 2.0);
+    assert_eq!(kinds(&out), [EventKind::SetpointClamped]);
+    let again = c.step(&StepInput { t_ms: 10_000, counts: counts_at(4.0), setpoint_c: -5.0 });
+    assert!(again.events.is_empty(), "reported when the clamp begins");
+    let nan = c.step(&StepInput { t_ms: 20_000, counts: counts_at(4.0), setpoint_c: f32::NAN });
+    assert_eq!(nan.setpoint_c.0, 4.0);
+    let high = c.step(&StepInput { t_ms: 30_000, counts: counts_at(4.0), setpoint_c: 9.0 });
+    assert_eq!(high.setpoint_c.0, 8.0);
+}
+
+#[test]
+fn restarts_and_board_faults_are_reported_with_the_next_sample() {
+    let mut c = pi_carrier();
+    c.note_reset(crate::persist::ResetCause::Watchdog);
+    c.note_board_fault(crate::failsafe::StopKind::Panic);
+    let out = c.step(&StepInput { t_ms: 0, counts: counts_at(4.0), setpoint_c: 4.0 });
+    assert_eq!(
+        kinds(&out),
+        [
+            EventKind::Restarted(crate::persist::ResetCause::Watchdog),
+            EventKind::BoardFault(crate::failsafe::StopKind::Panic)
+        ]
+    );
+    assert!(c.step(&StepInput { t_ms: 10_000, counts: counts_at(4.0), setpoint_c: 4.0 }).events.is_empty());
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, .. ProptestConfig::default() })]
+
+    /// Arbitrary conversions (including stuck runs, rails and noise) never panic, never give
+    /// a non-finite or out-of-range duty.
+    #[test]
+    fn arbitrary_counts_give_a_valid_duty(counts in proptest::collection::vec(prop_oneof![any::<u32>(), 0u32..70_000, Just(49_900u32)], 1..400)) {
+        let mut c = pi_carrier();
+        for (k, n) in counts.iter().enumerate() {
+            let out = c.step(&StepInput { t_ms: k as u64 * 10_000, counts: *n, setpoint_c: 4.0 });
+            prop_assert!(out.duty.get().is_finite() && (0.0..=1.0).contains(&out.duty.get()));
+        }
+    }
+}
