@@ -1,26 +1,74 @@
 #!/usr/bin/env bash
 # Regenerates the tables and plots of EXPERIMENTS.md (the seed's experiments, one command each).
+# Every table sits in EXPERIMENTS.md between `<!-- table: NAME -->` and `<!-- /table -->`; this
+# rewrites each block in place with the output of its command (the markdown `hter compare`
+# prints: the physical bound first, then each controller with its IAE / bound) and echoes it.
+# The prose around the tables is not touched.
 # Usage: scripts/experiments.sh  (from the repository root; builds hter in release first)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release --bin hter -q
 H="${CARGO_TARGET_DIR:-target}/release/hter"
-
+DOC=EXPERIMENTS.md
 D=docs/experiments
 mkdir -p "$D"
-echo "## step to 4 °C";            $H compare --scenario step --plot "$D/step.png"
-echo "## piecewise, full load";     $H compare --scenario piecewise --plot "$D/piecewise.png"
-echo "## half load";                $H compare --scenario half-load --plot "$D/half-load.png"
-echo "## H-TER II";                 $H compare --scenario piecewise --plant hter2 --plot "$D/hter2.png"
-echo "## step load disturbance";    $H compare --scenario disturbance --plot "$D/disturbance.png"
-echo "## GPC, λ";
-for l in 0.01 0.1 1 3 10 30; do
-  printf 'λ = %s: ' "$l"; $H sim --scenario piecewise --controller gpc --lambda "$l" --json
-done
+
+# put NAME: the table on stdin replaces the block NAME of $DOC.
+put() {
+  local t; t=$(mktemp)
+  cat >"$t"
+  echo "## $1"; cat "$t"; echo
+  grep -q "^<!-- table: $1 -->$" "$DOC" || { echo "error: no '<!-- table: $1 -->' block in $DOC" >&2; exit 1; }
+  awk -v name="$1" -v file="$t" '
+    $0 == "<!-- table: " name " -->" { print; while ((getline l < file) > 0) print l; skip = 1; next }
+    skip && $0 == "<!-- /table -->" { skip = 0 }
+    !skip { print }' "$DOC" >"$DOC.new"
+  mv "$DOC.new" "$DOC"
+  rm -f "$t"
+}
+# The markdown table of a compare run (its header line and the notes below it dropped).
+table() { "$H" compare "$@" | awk '/^\|/ { print } /^$/ && seen { exit } /^\|/ { seen = 1 }'; }
+# The rows of one controller from `hter compare --controllers C`, each labelled $1, under the
+# compare header with its first column named $2 (for a sweep of one parameter).
+sweep_header() { "$H" compare --controllers pi --duration 10 | awk -v h="$1" '/^\| controller/ { sub(/controller/, h); print; getline; print; exit }'; }
+sweep_row() { local label=$1; shift; "$H" compare "$@" | awk -v l="$label" '/^\| (onoff|p|pi|gmvc|igmvc|gpc) \|/ { sub(/^\| [a-z]+ \|/, "| " l " |"); print }'; }
+bound_row() { "$H" compare "$@" --controllers pi | awk '/^\| bound \|/ { print }'; }
+
+table --scenario step --plot "$D/step.png"                           | put step
+table --scenario piecewise --plot "$D/piecewise.png"                 | put piecewise
+table --scenario half-load --plot "$D/half-load.png"                 | put half-load
+table --scenario piecewise --plant hter2 --plot "$D/hter2.png"       | put hter2
+table --scenario disturbance --plot "$D/disturbance.png"             | put disturbance
+
+{
+  sweep_header "λ"
+  bound_row --scenario piecewise
+  for l in 0.01 0.1 1 3 10 30; do
+    label=$l; [[ $l == 3 ]] && label="**3 (default)**"
+    sweep_row "$label" --scenario piecewise --controllers gpc --lambda "$l"
+  done
+} | put gpc-lambda
+
 M2="arx:-1.74927,0.751376;-0.0270791,-0.029865"
-echo "## unmodelled dynamics: fixed 2nd-order model, delay 1 vs 5 samples, on the 5-node plant"
-for k in 1 5; do printf 'k = %s: ' "$k"; $H sim --scenario piecewise --controller gpc --model "$M2;$k" --json; done
-echo "## GPC T-filter: C = 1 vs C = 1 - 0.8 q^-1 (fixed model, k = 1)"
-for c in "" ";-0.8"; do printf 'C%s: ' "$c"; $H sim --scenario piecewise --controller gpc --model "$M2;1$c" --json; done
-echo "## self-tuning GPC with its estimate (the seed's Figs 5.21, 6.9)"
-$H sim --scenario piecewise --controller gpc --plot "$D/gpc-estimate.png" > /dev/null
+{
+  sweep_header "fixed model"
+  bound_row --scenario piecewise
+  for k in 1 5; do sweep_row "delay k = $k" --scenario piecewise --controllers gpc --model "$M2;$k"; done
+} | put unmodelled
+
+{
+  sweep_header "fixed model, k = 1"
+  bound_row --scenario piecewise
+  sweep_row "C = 1" --scenario piecewise --controllers gpc --model "$M2;1"
+  sweep_row "C = 1 − 0.8 q⁻¹" --scenario piecewise --controllers gpc --model "$M2;1;-0.8"
+} | put t-filter
+
+# The best PI on the --kp × --ti grid of each case (scripts/pi-grid.sh).
+{
+  HTER="$H" CASE="piecewise, H-TER I full" scripts/pi-grid.sh --header --scenario piecewise
+  HTER="$H" CASE="half-load, H-TER I" scripts/pi-grid.sh --scenario half-load
+  HTER="$H" CASE="piecewise, H-TER II" scripts/pi-grid.sh --scenario piecewise --plant hter2
+} | put pi-grid
+
+# Self-tuning GPC with its estimate (the seed's Figs 5.21, 6.9): a plot only.
+"$H" sim --scenario piecewise --controller gpc --plot "$D/gpc-estimate.png" >/dev/null

@@ -27,6 +27,15 @@ use crate::model::Model;
 /// what holds the load at 4 °C. The `pi` build's controller and every self-tuner's fallback.
 pub const PI: PiConfig = PiConfig { kp_per_c: 0.3, ti_s: 410.0, bias: 0.4 };
 
+/// The PI of the H-TER II carrier (stainless-steel wall): SIMC with τc = θ (Skogestad 2003)
+/// on the first-order-plus-dead-time model of its simulated open-loop step (K = −40.4 °C/duty,
+/// θ = 103 s, τ = 3650 s by the reaction curve of [`crate::control::zn`]) ⇒ Kp = τ/(2|K|θ)
+/// = 0.44 /°C, Ti = min(τ, 8θ) = 823 s; `tests/simc_tuning.rs` re-derives them. Bias: the
+/// duty that holds 4 °C at 28 °C ambient. On `piecewise` (seed 1, 28 °C) it has IAE 1895 where
+/// [`PI`], tuned on H-TER I, has 2557. SIMC on H-TER I gives Kp 0.335, Ti 492 s, no better
+/// than [`PI`] on both loads (same test), so H-TER I keeps [`PI`].
+pub const PI_HTER2: PiConfig = PiConfig { kp_per_c: 0.44, ti_s: 823.0, bias: 0.47 };
+
 /// P control: the ZN P gain is the PI gain / 0.9, with the same 2× detuning; no integral, so
 /// it holds [`PI`]'s bias at zero error.
 pub const P: PiConfig = PiConfig { kp_per_c: PI.kp_per_c / 0.9, ti_s: f32::INFINITY, ..PI };

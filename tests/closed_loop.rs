@@ -17,9 +17,12 @@ fn pi_pulls_down_from_28_to_4_without_freezing_and_holds() {
     let out = sim("step", ControllerChoice::Pi, PlantChoice::Hter1, Load::Full);
     let m = &out.metrics;
     assert!(m.tracking.min_temp_c >= 2.0, "load went down to {} °C", m.tracking.min_temp_c);
-    let settle = m.tracking.settle_time_s.expect("never reached 4 ± 0.5 °C");
-    assert!(settle < 2.0 * 3600.0, "pull-down took {settle} s");
-    assert!(m.tracking.max_abs_error_after_settle_c <= 0.5, "{m:?}");
+    // The pull-down: the first sample within ±0.5 °C. (`settle_time_s` is the last exit from
+    // ±0.2 °C, which the supervisor's two-hourly supply-switch test can move past 2 h.)
+    let arrived = out.rows.iter().find(|r| (r.true_temp_c - 4.0).abs() <= 0.5).expect("never reached 4 ± 0.5 °C");
+    assert!(arrived.t_s < 2.0 * 3600.0, "pull-down took {} s", arrived.t_s);
+    assert!(m.tracking.settle_time_s.is_some(), "never settled within ±0.2 °C: {m:?}");
+    assert!(out.rows.iter().filter(|r| r.t_s >= arrived.t_s).all(|r| (r.true_temp_c - 4.0).abs() <= 0.5), "{m:?}");
     // It really started warm.
     assert!(out.rows[0].true_temp_c > 27.0);
     // The alarm indicator shows the warm box (out of range) from the first sample and goes

@@ -1,8 +1,10 @@
-//! `hter compare`: one scenario run with several controllers, as a markdown table and an
-//! optional plot of every run.
+//! `hter compare`: one scenario run with several controllers, as a markdown table (the
+//! physical bound of the schedule first, each controller's IAE also as a ratio to it) or as
+//! JSON (`{"bound_iae": X, "controllers": [sim JSON, ...]}`), and an optional plot of every run.
 
 use anyhow::{bail, Result};
 
+use crate::bound::{self, Bound};
 use crate::plot;
 use crate::sim::{self, ControllerChoice};
 use crate::sim_cmd::{self, SimArgs};
@@ -31,6 +33,37 @@ pub fn run(a: &CompareArgs) -> Result<()> {
         let out = sim::run(&opts)?;
         runs.push((c, out));
     }
+    // A plant that cannot hold one of the setpoints has no steady state to start the bound
+    // from: the table says why, the JSON has null.
+    let bound = bound::bound(&base);
+    if a.sim.json {
+        let v = serde_json::json!({
+            "bound_iae": bound.as_ref().ok().map(|b| b.iae),
+            "controllers": runs.iter().map(|(_, out)| &out.metrics).collect::<Vec<_>>(),
+        });
+        println!("{v}");
+    } else {
+        print_table(&base, &bound, &runs);
+    }
+    if let Some(path) = &a.sim.plot {
+        plot_runs(path, &base, &runs)?;
+        if !a.sim.json {
+            println!("\nplot written to {}", path.display());
+        }
+    }
+    Ok(())
+}
+
+/// `iae / bound` to two decimals, or "n/a" where the bound is 0 or unknown.
+pub fn ratio(iae: f64, bound: Option<f64>) -> String {
+    match bound {
+        Some(b) if b > 0.0 => format!("{:.2}", iae / b),
+        _ => "n/a".into(),
+    }
+}
+
+/// The markdown table: the bound as the first row, then each controller.
+fn print_table(base: &sim::SimOptions, bound: &Result<Bound>, runs: &[(ControllerChoice, sim::SimOutput)]) {
     println!(
         "{} on {}, {:?} load, {} °C ambient, seed {}",
         base.scenario.name,
@@ -40,15 +73,21 @@ pub fn run(a: &CompareArgs) -> Result<()> {
         base.seed
     );
     println!();
-    println!("| controller | IAE (°C·s) | steady-state error (°C) | overshoot (°C) | settle (s) | min / max (°C) | time outside 2–8 °C (s) | energy (Wh) | SSR switches |");
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
-    for (_, out) in &runs {
+    println!("| controller | IAE (°C·s) | IAE / bound | steady-state error (°C) | overshoot (°C) | settle ±{} °C (s) | min / max (°C) | time outside 2–8 °C (s) | energy (Wh) | SSR switches |", crate::metrics::SETTLE_BAND_C);
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    let b = bound.as_ref().ok().map(|b| b.iae);
+    match bound {
+        Ok(bd) => println!("| bound | {:.0} | {} | – | – | – | – | – | – | – |", bd.iae, ratio(bd.iae, b)),
+        Err(e) => println!("| bound | n/a ({e}) | – | – | – | – | – | – | – | – |"),
+    }
+    for (_, out) in runs {
         let m = &out.metrics;
         let settle = m.tracking.settle_time_s.map_or("never".to_string(), |s| format!("{s:.0}"));
         println!(
-            "| {} | {:.0} | {:.3} | {:.2} | {} | {:.2} / {:.2} | {:.0} | {:.1} | {} |",
+            "| {} | {:.0} | {} | {:.3} | {:.2} | {} | {:.2} / {:.2} | {:.0} | {:.1} | {} |",
             m.controller,
             m.tracking.iae,
+            ratio(m.tracking.iae, b),
             m.tracking.steady_state_error_c,
             m.tracking.overshoot_c,
             settle,
@@ -59,12 +98,29 @@ pub fn run(a: &CompareArgs) -> Result<()> {
             m.ssr_switches
         );
     }
-    if let Some(path) = &a.sim.plot {
+    if let Ok(bd) = bound {
+        if bd.changes_ignored > 0 {
+            println!();
+            println!(
+                "The bound covers the setpoint changes only: the scenario's {} timed change(s) of ambient, heat or supply are not in it.",
+                bd.changes_ignored
+            );
+        }
+    }
+}
+
+/// Every run's true load temperature and duty in two panels.
+fn plot_runs(
+    path: &std::path::Path,
+    base: &sim::SimOptions,
+    runs: &[(ControllerChoice, sim::SimOutput)],
+) -> Result<()> {
+    {
         let minutes = |t: f64| t / 60.0;
         let first = &runs[0].1;
         let mut temp = Vec::new();
         let mut duty = Vec::new();
-        for (_, out) in &runs {
+        for (_, out) in runs {
             temp.push(plot::Series {
                 name: out.metrics.controller.clone(),
                 points: out.rows.iter().map(|r| (minutes(r.t_s), r.true_temp_c)).collect(),
@@ -88,8 +144,6 @@ pub fn run(a: &CompareArgs) -> Result<()> {
                 y_range: Some((-0.02, 1.02)),
             },
         ];
-        plot::panels(path, &format!("{} — {}", base.scenario.name, base.plant.name()), "time (min)", &panels)?;
-        println!("\nplot written to {}", path.display());
+        plot::panels(path, &format!("{} — {}", base.scenario.name, base.plant.name()), "time (min)", &panels)
     }
-    Ok(())
 }

@@ -2,24 +2,28 @@
 
 use anyhow::Result;
 
+use crate::bound;
 use crate::sim::{self, ControllerChoice};
 use crate::sim_cmd::{self, LoadArg, SimArgs};
 
-/// `hter` without a command: a short PI pull-down and what to try next.
+/// `hter` without a command: a short pull-down by the board's default controller (self-tuning
+/// GPC), how far it is from the physical bound and from PI, and what to try next.
 pub fn run() -> Result<()> {
-    println!("hter demo: the firmware's control step (PI, Ts = 10 s) pulls a full-load H-TER I vaccine");
-    println!("carrier (100 ml water, aluminium container) from 28 °C ambient down to 4 °C and holds it,");
-    println!("against a physical model of the Peltier modules, SSR PWM, RTD and ADC. The vaccines must");
-    println!("stay within +2…+8 °C and never freeze.\n");
+    println!("hter demo: the firmware's control step (self-tuning GPC, Ts = 10 s, the board's default)");
+    println!("pulls a full-load H-TER I vaccine carrier (100 ml water, aluminium container) from 28 °C");
+    println!("ambient down to 4 °C and holds it, against a physical model of the Peltier modules, SSR");
+    println!("PWM, RTD and ADC. The vaccines must stay within +2…+8 °C and never freeze.\n");
     let args = SimArgs {
         scenario: "step".into(),
-        controller: ControllerChoice::Pi,
+        controller: ControllerChoice::Gpc,
         plant: "hter1".into(),
         model: None,
         n1: None,
         n2: None,
         nu: None,
         lambda: None,
+        kp: None,
+        ti: None,
         p_weight: None,
         r_weight: None,
         s_weight: None,
@@ -49,9 +53,23 @@ pub fn run() -> Result<()> {
     }
     println!();
     sim_cmd::print_summary(&opts, &out);
+    // The same pull-down with the PI, and the physical bound of the schedule.
+    let pi = sim::run(&sim::SimOptions {
+        controller: sim::ControllerSpec { choice: ControllerChoice::Pi, ..opts.controller },
+        ..opts.clone()
+    })?;
+    let b = bound::bound(&opts)?.iae;
+    let (gpc_iae, pi_iae) = (out.metrics.tracking.iae, pi.metrics.tracking.iae);
+    println!("\nHow good is that? No controller can beat the bound: the SSR fully on from 28 °C until the");
+    println!("load reaches 4 °C, zero error after (`hter compare` prints it for any scenario).");
+    println!("  bound         IAE {b:8.0} °C·s");
+    println!("  GPC           IAE {gpc_iae:8.0} °C·s  = {:.3} × bound, {:5.0} °C·s above it", gpc_iae / b, gpc_iae - b);
+    println!("  PI (SIMC)     IAE {pi_iae:8.0} °C·s  = {:.3} × bound, {:5.0} °C·s above it", pi_iae / b, pi_iae - b);
+    println!("Most of a pull-down's IAE is the pull-down itself; the setpoint steps of `piecewise` tell");
+    println!("the controllers apart: hter compare --scenario piecewise");
     println!("\nTry next:");
     println!("  hter sim --scenario piecewise --controller onoff --plot piecewise.png");
-    println!("  hter sim --scenario step --controller pi --plot step.png --json");
+    println!("  hter sim --scenario step --controller pi --kp 0.4 --ti 500 --plot step.png --json");
     println!("  hter rtd --celsius 4");
     println!("  hter --help");
     Ok(())

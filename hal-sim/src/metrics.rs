@@ -2,18 +2,26 @@
 //!
 //! All temperatures here are the plant's true load temperature, not the sensor reading.
 //!
-//! **Segments and settling.** The run is cut into segments of constant setpoint. In each
-//! segment the load has *settled* at the first sample whose true temperature is within
-//! ±[`SETTLE_BAND_C`] of the setpoint; `settle_time_s` is that instant minus the segment
-//! start. `max_abs_error_after_settle_c` is the largest |T − w| from the settling instant to
-//! the end of the segment, so overshoot and limit cycles after the first arrival count against
-//! it. A segment that never settles contributes its whole-segment error and makes
-//! `settle_time_s` null. The same rule applies to every controller. `steady_state_error_c` is
-//! the largest |T − w| over the last quarter of each segment (a steady-state figure that
-//! excludes the transient). Overall figures are the worst over all segments.
+//! **Segments and settling.** The run is cut into segments of constant setpoint (a segment
+//! ends at the next setpoint change or at the end of the run). In each segment the load has
+//! *settled* at the first sample after which its true temperature stays within
+//! ±[`SETTLE_BAND_C`] of the setpoint until the segment ends: the sample after the *last exit*
+//! from the band, not the first entry into it, so an overshoot out of the band or a limit
+//! cycle that leaves it again moves the settling instant past it. `settle_time_s` is that
+//! instant minus the segment start (0 if the segment never leaves the band); a segment whose
+//! last sample is outside the band has not settled and makes `settle_time_s` null.
+//! `max_abs_error_after_settle_c` is the largest |T − w| from the settling instant to the end
+//! of the segment, which for a settled segment is within the band by construction; a segment
+//! that has not settled contributes its largest |T − w| from its first entry into the band
+//! (the error it came back to after arriving), or over the whole segment if it never entered
+//! it. The same rule applies to every controller; the overall figures are the worst over the
+//! segments. `steady_state_error_c` is the largest |T − w| over the last quarter of each
+//! segment (a steady-state figure that excludes the transient).
 //!
 //! **Overshoot** is how far the load goes past the setpoint in the direction of travel of a
-//! setpoint change (or, for a run starting at ambient, of the pull-down), in °C, ≥ 0.
+//! setpoint change (or, for a run starting at ambient, of the pull-down), in °C, ≥ 0; a
+//! segment that starts within ±[`TRAVEL_MIN_C`] of its setpoint has no direction and no
+//! overshoot.
 //!
 //! **IAE** is ∫|T − w| dt over the whole run in °C·s (rectangle rule at the sample period).
 //!
@@ -25,8 +33,16 @@ use hter::event::EventKind;
 use serde::ser::SerializeStruct;
 use serde::Serialize;
 
-/// The band that defines "settled", °C (the carrier must hold its setpoint within ±0.5 °C).
-pub const SETTLE_BAND_C: f64 = 0.5;
+/// The band that defines "settled", °C: ±0.2 °C, tight enough to separate controllers that
+/// hold the setpoint (the measurement noise moves the true load by a few hundredths) from
+/// one that limit-cycles or creeps, and well inside the carrier's ±0.5 °C holding
+/// requirement.
+pub const SETTLE_BAND_C: f64 = 0.2;
+
+/// The least move, °C, from the previous setpoint (or the initial temperature) that makes a
+/// segment a setpoint change with a direction of travel for the overshoot: a run that starts
+/// holding its setpoint, even in a ±0.3 °C On-Off limit cycle, has none.
+pub const TRAVEL_MIN_C: f64 = 0.5;
 
 /// One sample of a run, as the metrics see it.
 #[derive(Clone, Copy, Debug)]
@@ -183,23 +199,29 @@ pub fn tracking(samples: &[Sample], ts_s: f64) -> TrackingFigures {
         let seg = &samples[start..end];
         // Direction of travel: from the previous setpoint, or from the initial temperature.
         let from = if start > 0 { samples[start - 1].setpoint_c } else { seg[0].true_temp_c };
-        let dir = if (w - from).abs() <= SETTLE_BAND_C { 0.0 } else { (w - from).signum() };
+        let dir = if (w - from).abs() <= TRAVEL_MIN_C { 0.0 } else { (w - from).signum() };
         if dir != 0.0 {
             let past = seg.iter().map(|s| dir * (s.true_temp_c - w)).fold(0.0f64, f64::max);
             f.overshoot_c = f.overshoot_c.max(past);
         }
         let err = |s: &Sample| (s.true_temp_c - w).abs();
-        match seg.iter().position(|s| err(s) <= SETTLE_BAND_C) {
+        let max_from = |k: usize| seg[k..].iter().map(err).fold(0.0, f64::max);
+        // The first sample of the final stretch inside the band.
+        let settled = match seg.iter().rposition(|s| err(s) > SETTLE_BAND_C) {
+            None => Some(0),
+            Some(j) if j + 1 < seg.len() => Some(j + 1),
+            Some(_) => None,
+        };
+        match settled {
             Some(k) => {
                 let settle = seg[k].t_s - seg[0].t_s;
                 f.settle_time_s = f.settle_time_s.map(|x| x.max(settle));
-                let after = seg[k..].iter().map(err).fold(0.0, f64::max);
-                f.max_abs_error_after_settle_c = f.max_abs_error_after_settle_c.max(after);
+                f.max_abs_error_after_settle_c = f.max_abs_error_after_settle_c.max(max_from(k));
             }
             None => {
                 f.settle_time_s = None;
-                let all = seg.iter().map(err).fold(0.0, f64::max);
-                f.max_abs_error_after_settle_c = f.max_abs_error_after_settle_c.max(all);
+                let arrived = seg.iter().position(|s| err(s) <= SETTLE_BAND_C).unwrap_or(0);
+                f.max_abs_error_after_settle_c = f.max_abs_error_after_settle_c.max(max_from(arrived));
             }
         }
         let tail = &seg[seg.len() * 3 / 4..];
@@ -224,11 +246,13 @@ mod tests {
 
     #[test]
     fn pull_down_with_undershoot() {
-        // From 10 °C to a 4 °C setpoint, undershooting to 3.2 °C, then back to 4.1 °C.
+        // From 10 °C to a 4 °C setpoint, undershooting to 3.2 °C, then back to 4.1 °C. The last
+        // sample outside ±0.2 °C is 3.2 °C at t = 30 s, so the load has settled at t = 40 s
+        // (3.9 °C), and the worst error from there is 0.1 °C.
         let f = run(&[(4.0, 10.0), (4.0, 7.0), (4.0, 4.4), (4.0, 3.2), (4.0, 3.9), (4.0, 4.1), (4.0, 4.0), (4.0, 4.0)]);
-        assert!((f.settle_time_s.unwrap() - 20.0).abs() < 1e-9);
+        assert_eq!(f.settle_time_s, Some(40.0));
         assert!((f.overshoot_c - 0.8).abs() < 1e-9);
-        assert!((f.max_abs_error_after_settle_c - 0.8).abs() < 1e-9);
+        assert!((f.max_abs_error_after_settle_c - 0.1).abs() < 1e-9);
         assert!((f.steady_state_error_c - 0.0).abs() < 1e-9);
         assert!((f.iae - 10.0 * (6.0 + 3.0 + 0.4 + 0.8 + 0.1 + 0.1)).abs() < 1e-9);
         assert_eq!(f.min_temp_c, 3.2);
@@ -236,10 +260,34 @@ mod tests {
     }
 
     #[test]
-    fn a_segment_that_never_settles_has_no_settle_time() {
+    fn settling_is_the_last_exit_from_the_band_not_the_first_entry() {
+        // Setpoint 6 °C from 4 °C: enters the band at t = 20 s (5.9), leaves it at t = 40 s
+        // (6.3), re-enters at t = 50 s (6.1) and stays. First entry would say 20 s; the load
+        // has settled at 50 s, and after that the worst error is 0.1 °C, not the 0.3 °C of the
+        // excursion.
+        let f = run(&[(6.0, 4.0), (6.0, 5.0), (6.0, 5.9), (6.0, 6.1), (6.0, 6.3), (6.0, 6.1), (6.0, 6.0), (6.0, 5.95)]);
+        assert_eq!(f.settle_time_s, Some(50.0));
+        assert!((f.max_abs_error_after_settle_c - 0.1).abs() < 1e-9);
+        assert!((f.overshoot_c - 0.3).abs() < 1e-9);
+        // Each segment is timed from its own start: 4 °C held (settled at once), then a step to
+        // 3 °C at t = 30 s reached at t = 50 s (3.15 after 3.4): 20 s, the worst of the two.
+        let f =
+            run(&[(4.0, 4.0), (4.0, 4.1), (4.0, 3.9), (3.0, 3.9), (3.0, 3.4), (3.0, 3.15), (3.0, 3.0), (3.0, 3.05)]);
+        assert_eq!(f.settle_time_s, Some(20.0));
+        assert!((f.max_abs_error_after_settle_c - 0.15).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_segment_that_ends_outside_the_band_has_not_settled() {
+        // Never arrives: the whole segment's error counts.
         let f = run(&[(4.0, 4.0), (4.0, 4.0), (6.0, 4.0), (6.0, 4.5), (6.0, 5.0), (6.0, 5.2)]);
         assert_eq!(f.settle_time_s, None);
         assert!((f.max_abs_error_after_settle_c - 2.0).abs() < 1e-9);
         assert_eq!(f.overshoot_c, 0.0);
+        // Arrives at t = 20 s, then drifts out at the end (a limit cycle cut by the end of the
+        // run): not settled, and the worst error after the arrival is the 0.35 °C it left by.
+        let f = run(&[(4.0, 5.0), (4.0, 4.5), (4.0, 4.1), (4.0, 3.9), (4.0, 4.15), (4.0, 3.65)]);
+        assert_eq!(f.settle_time_s, None);
+        assert!((f.max_abs_error_after_settle_c - 0.35).abs() < 1e-9);
     }
 }

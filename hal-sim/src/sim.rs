@@ -25,7 +25,7 @@ use hter::control::excite::PrbsExcitation;
 use hter::control::gpc::GpcConfig;
 use hter::control::mv::{GmvcConfig, IgmvcConfig};
 use hter::control::Controller;
-use hter::control::{AnyController, FixedModel, Law};
+use hter::control::{AnyController, FixedModel, Law, Pi, PiConfig};
 use hter::ident::prbs::PrbsConfig;
 use hter::model::Model;
 use hter::persist::{HistoryRecord, ModelCadence, ModelRecord, Recorder, ResetCause, Save};
@@ -63,7 +63,7 @@ pub enum ControllerChoice {
     Onoff,
     /// Proportional only (Ziegler–Nichols P gain).
     P,
-    /// PI with anti-windup (Ziegler–Nichols, detuned).
+    /// PI with anti-windup (SIMC-tuned for each carrier; `--kp`, `--ti`).
     Pi,
     /// Generalized minimum variance (weights P, R, S).
     Gmvc,
@@ -92,6 +92,10 @@ pub struct ControllerSpec {
     /// carrier (`profile::START_MODEL_HTER1`, `START_MODEL_HTER2`), as a board starts from the
     /// model persisted from its own identification run.
     pub initial: Option<Model>,
+    /// PI tuning (`--kp`, `--ti`); `None`: the carrier's own ([`PlantChoice::default_pi`]).
+    /// Its bias is replaced by the plant's steady duty when the run starts holding a
+    /// temperature.
+    pub pi: Option<PiConfig>,
 }
 
 impl ControllerSpec {
@@ -105,6 +109,7 @@ impl ControllerSpec {
             igmvc: IgmvcConfig::DEFAULT,
             gpc_t_filter: profile::GPC_T_FILTER,
             initial: None,
+            pi: None,
         }
     }
 
@@ -123,6 +128,9 @@ impl ControllerSpec {
     pub fn build(&self, ts_s: f32, u0: f32) -> Result<AnyController> {
         let kind = self.choice.kind();
         let refused = |e| anyhow!("{:?}: configuration refused ({e:?})", self.choice);
+        if let (ControllerChoice::Pi, Some(pi)) = (self.choice, self.pi) {
+            return Ok(AnyController::Pi(Pi::new(pi, ts_s)));
+        }
         let (Some(profile_cfg), Some(law)) = (kind.adaptive(), self.law()) else {
             return profile::controller(kind, ts_s, u0).map_err(refused);
         };
@@ -190,6 +198,17 @@ impl PlantChoice {
             "hter2" => Ok(PlantChoice::Hter2),
             _ if s.starts_with("arx:") => Ok(PlantChoice::Arx(arx::parse(s)?)),
             _ => bail!("unknown plant '{s}' (expected hter1, hter2 or arx:A;B;K)"),
+        }
+    }
+
+    /// The PI tuned for this carrier (SIMC, [`profile::PI`] and [`profile::PI_HTER2`]): the
+    /// stainless-steel carrier's for H-TER II and a stainless custom carrier, H-TER I's
+    /// otherwise (an ARX plant has no carrier of its own).
+    pub fn default_pi(&self) -> PiConfig {
+        match self {
+            PlantChoice::Hter2 => profile::PI_HTER2,
+            PlantChoice::Custom(p) if p.container == crate::plant::Container::StainlessSteel => profile::PI_HTER2,
+            _ => profile::PI,
         }
     }
 
@@ -336,6 +355,14 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             if spec.initial.is_none() && stainless {
                 spec.initial = Some(profile::START_MODEL_HTER2);
             }
+            let pi = spec.pi.unwrap_or_else(|| opts.plant.default_pi());
+            // Holding a temperature, the loop starts at the duty that holds it; from ambient
+            // the PI's own bias stands (the SSR saturates through the pull-down anyway).
+            let bias = match sc.start {
+                Start::Holding(_) => u0 as f32,
+                Start::Ambient => pi.bias,
+            };
+            spec.pi = Some(PiConfig { bias, ..pi });
             // After a reset: the stored model, if it decodes and is still plausible for this law
             // (else the built-in start model, as on the board).
             if let (Some(bytes), Some(check)) = (persisted, spec.choice.kind().adaptive()) {

@@ -18,8 +18,8 @@ pub struct SimArgs {
     /// JSON scenario file.
     #[arg(long, default_value = "step")]
     pub scenario: String,
-    /// Controller.
-    #[arg(long, value_enum, default_value = "pi")]
+    /// Controller (default: self-tuning GPC, the board's default build).
+    #[arg(long, value_enum, default_value = "gpc")]
     pub controller: ControllerChoice,
     /// Plant: hter1 (aluminium container), hter2 (stainless steel), or an ideal ARX model
     /// arx:A;B;K (y = temperature − ambient, u = duty).
@@ -57,6 +57,12 @@ pub struct SimArgs {
     /// default 0.9 for IGMVC, 0.8 for self-tuning GPC).
     #[arg(long, allow_negative_numbers = true)]
     pub t_pole: Option<f64>,
+    /// PI: proportional gain, duty per °C (> 0; default: the carrier's SIMC tuning).
+    #[arg(long, allow_negative_numbers = true)]
+    pub kp: Option<f64>,
+    /// PI: integral time, s (> 0; default: the carrier's SIMC tuning).
+    #[arg(long, allow_negative_numbers = true)]
+    pub ti: Option<f64>,
     /// Water load: full (100 ml) or half (50 ml).
     #[arg(long, value_enum, default_value = "full")]
     pub load: LoadArg,
@@ -175,13 +181,32 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
         controller.igmvc.t_pole = tp as f32;
         controller.gpc_t_filter = tp as f32;
     }
+    let plant = PlantChoice::parse(&a.plant)?;
+    if a.kp.is_some() || a.ti.is_some() {
+        let mut pi = plant.default_pi();
+        if let Some(kp) = a.kp {
+            let kp = finite("kp", kp)?;
+            if kp <= 0.0 {
+                bail!("--kp must be > 0 (duty per °C), got {kp}");
+            }
+            pi.kp_per_c = kp as f32;
+        }
+        if let Some(ti) = a.ti {
+            let ti = finite("ti", ti)?;
+            if ti <= 0.0 {
+                bail!("--ti must be > 0 (s), got {ti}");
+            }
+            pi.ti_s = ti as f32;
+        }
+        controller.pi = Some(pi);
+    }
     if let Some(seed) = a.mission_seed {
         return Ok(crate::mission::Mission::generate(seed).options(controller));
     }
     Ok(SimOptions {
         scenario,
         controller,
-        plant: PlantChoice::parse(&a.plant)?,
+        plant,
         load: match a.load {
             LoadArg::Full => Load::Full,
             LoadArg::Half => Load::Half,
@@ -297,9 +322,10 @@ pub fn print_summary(opts: &SimOptions, out: &SimOutput) {
         out.ts_s
     );
     println!("IAE                         {:10.1} °C·s", m.tracking.iae);
+    let band = format!("settle time (±{} °C)", crate::metrics::SETTLE_BAND_C);
     match m.tracking.settle_time_s {
-        Some(s) => println!("settle time (±0.5 °C)       {:10.0} s", s),
-        None => println!("settle time (±0.5 °C)          never"),
+        Some(s) => println!("{band:<28}{s:10.0} s"),
+        None => println!("{band:<28}   never"),
     }
     println!("max |error| after settling  {:10.2} °C", m.tracking.max_abs_error_after_settle_c);
     println!("steady-state |error|        {:10.2} °C", m.tracking.steady_state_error_c);

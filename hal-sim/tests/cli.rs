@@ -305,3 +305,61 @@ fn a_board_identification_log_goes_through_log2csv_and_identify() {
     let gain = v["static_gain_c_per_duty"].as_f64().unwrap();
     assert!((-50.0..=-40.0).contains(&gain), "{gain}");
 }
+
+/// `hter compare --json` is `{"bound_iae": X, "controllers": [sim JSON, ...]}`: each controller
+/// object is exactly what `hter sim --json` prints for it, and none beats the bound.
+#[test]
+fn compare_json_has_the_bound_and_the_sim_objects() {
+    let v = json(&["compare", "--scenario", "piecewise", "--controllers", "pi,gpc", "--json"]);
+    let bound = v["bound_iae"].as_f64().unwrap();
+    // The plant's bound on the seed's piecewise schedule at 28 °C (`hal-sim/src/bound.rs`):
+    // three transients of a few minutes each, 2, 3 and 1 °C deep.
+    assert!((600.0..900.0).contains(&bound), "{v}");
+    let runs = v["controllers"].as_array().unwrap();
+    assert_eq!(runs.len(), 2);
+    for (run, name) in runs.iter().zip(["pi", "gpc"]) {
+        assert_eq!(run["controller"], name);
+        let sim = json(&["sim", "--scenario", "piecewise", "--controller", name, "--json"]);
+        assert_eq!(run, &sim, "{name}: the compare object is the sim object");
+        assert!(run["iae"].as_f64().unwrap() >= bound, "{name}: {run}");
+    }
+    // A heat step at a constant setpoint has no setpoint transient: the bound is 0.
+    let v = json(&["compare", "--scenario", "disturbance", "--controllers", "pi", "--json"]);
+    assert_eq!(v["bound_iae"].as_f64(), Some(0.0), "{v}");
+    // The table has the bound as its first row and the ratio column.
+    let out = hter(&["compare", "--scenario", "piecewise", "--controllers", "pi"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    let rows: Vec<&str> = text.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| ---")).collect();
+    assert!(
+        rows[0].contains("IAE / bound") && rows[1].starts_with("| bound |") && rows[2].starts_with("| pi |"),
+        "{text}"
+    );
+    let ratio: f64 = rows[2].split('|').nth(3).unwrap().trim().parse().unwrap();
+    let pi_iae: f64 = rows[2].split('|').nth(2).unwrap().trim().parse().unwrap();
+    assert!((ratio - pi_iae / bound).abs() < 0.01, "{text}");
+}
+
+#[test]
+fn pi_tuning_flags_are_checked_and_used() {
+    assert_one_line_error(&["sim", "--controller", "pi", "--kp", "0"], "--kp must be > 0");
+    assert_one_line_error(&["sim", "--controller", "pi", "--kp", "-0.3"], "--kp must be > 0");
+    assert_one_line_error(&["sim", "--controller", "pi", "--kp", "nan"], "--kp must be a finite");
+    assert_one_line_error(&["sim", "--controller", "pi", "--ti", "0"], "--ti must be > 0");
+    assert_one_line_error(&["sim", "--controller", "pi", "--ti", "inf"], "--ti must be a finite");
+    assert_one_line_error(&["compare", "--controllers", "pi", "--kp", "x"], "x");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["sim", "--scenario", "piecewise", "--controller", "pi", "--json"];
+        args.extend_from_slice(extra);
+        json(&args)["iae"].as_f64().unwrap()
+    };
+    // The profile's H-TER I PI spelled out is the default; other gains give another run.
+    let (kp, ti) = (hter::profile::PI.kp_per_c.to_string(), hter::profile::PI.ti_s.to_string());
+    assert_eq!(run(&[]), run(&["--kp", &kp, "--ti", &ti]));
+    assert_ne!(run(&[]), run(&["--kp", "0.6"]));
+}
+
+#[test]
+fn the_default_controller_is_self_tuning_gpc() {
+    let v = json(&["sim", "--scenario", "piecewise", "--json"]);
+    assert_eq!(v["controller"], "gpc", "{v}");
+}

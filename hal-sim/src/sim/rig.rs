@@ -47,7 +47,9 @@ impl Rig {
                     Start::Holding(t) => t,
                 };
                 let p = ArxPlant::at_steady_state(m, opts.ambient_c, t0)?;
-                return Ok((Rig::Arx(p), 0.0));
+                // The controller starts where the plant is: at the duty that holds it.
+                let u0 = p.last_duty();
+                return Ok((Rig::Arx(p), u0));
             }
         };
         let (plant, u0) = match sc.start {
