@@ -239,13 +239,11 @@ impl SelfTuning {
             // A slow stable pole pair and a small cooling gain: a neutral start for RLS.
             None => SVector::<f32, 5>::from([-1.5, 0.5, -0.01, 0.0, 0.0]),
         };
-        // The start model is designed on as every estimate is (`model_from_theta`: the
-        // estimator's delay, GPC's T-filter): without the T-filter, GPC on an accurate start
-        // model of H-TER I swings the duty 0…1 every few samples until the first trusted estimate.
-        let trusted = cfg
-            .initial
-            .filter(|m| plausible_model(&cfg, m))
-            .and_then(|_| model_from_theta(&cfg, [theta0[0], theta0[1], theta0[2], theta0[3]]));
+        // The start model is designed on as given, without GPC's T-filter. Designed with it (as
+        // estimates are), the start is smoother on the piecewise steps (2–4 % less IAE) but
+        // GPC, later at 9 V and 36 °C ambient, limit-cycles ±0.3 °C against full duty on 6 of 8
+        // seeds (`self_tuning_laws_survive_a_plant_change_mid_run`), against ±0.02 °C without.
+        let trusted = cfg.initial.filter(|m| plausible_model(&cfg, m));
         let mut fallback = Pi::new(PiConfig { bias: u0, ..cfg.fallback }, ts_s);
         fallback.track(&ControlInput { y_c: 0.0, w_c: 0.0 }, u0);
         Ok(Self {
@@ -400,7 +398,7 @@ impl Controller for SelfTuning {
 mod tests {
     use super::*;
     use crate::control::gpc::GpcConfig;
-    use crate::profile::{ADAPTIVE_GPC, GPC_T_FILTER, START_MODEL_HTER1};
+    use crate::profile::{ADAPTIVE_GPC, START_MODEL_HTER1};
 
     const TS_S: f32 = 10.0;
     /// The tests run in deviation variables around a rest at 0 °C and zero duty (no offset d):
@@ -525,11 +523,7 @@ mod tests {
     fn warm_up_holds_the_start_model_then_a_trusted_estimate_engages() {
         let mut c = start(ADAPTIVE_GPC);
         assert_eq!(c.mode(), AdaptiveMode::Frozen, "a plausible start model is trusted at once");
-        // Designed on as every estimate is: the start model with the estimator's delay and
-        // GPC's T-filter.
-        let m = c.trusted_model().unwrap();
-        assert_eq!((m.a(), m.b(), m.k()), (START_MODEL_HTER1.a(), START_MODEL_HTER1.b(), START_MODEL_HTER1.k()));
-        assert_eq!((m.nc(), m.c()[0]), (1, -GPC_T_FILTER));
+        assert_eq!(c.trusted_model(), Some(START_MODEL_HTER1));
         let (mut plant, mut y) = (Plant::start_model(), 0.0);
         // The first two samples fill the regressor; the estimator updates from the third on,
         // and its estimate (plausible all along: the plant is the start model) is trusted once
@@ -538,7 +532,7 @@ mod tests {
         for t in 1..engaged {
             assert_eq!(sample(&mut c, &mut plant, &mut y, None), AdaptiveMode::Frozen, "sample {t}");
             assert!(c.estimate().is_some_and(|m| plausible_model(c.config(), &m)), "sample {t}");
-            assert_eq!(c.trusted_model(), Some(m), "sample {t}");
+            assert_eq!(c.trusted_model(), Some(START_MODEL_HTER1), "sample {t}");
         }
         assert_eq!(sample(&mut c, &mut plant, &mut y, None), AdaptiveMode::Adaptive);
         assert_eq!(c.updates(), ADAPTIVE_GPC.warmup_samples);
