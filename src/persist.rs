@@ -798,13 +798,13 @@ mod tests {
     #[test]
     fn model_round_trip_and_restore() {
         let rec = ModelRecord::from_model(&START_MODEL_HTER2).unwrap();
-        assert_eq!(rec.k, 8);
+        assert_eq!(rec.k, 6);
         let bytes = rec.encode();
         assert_eq!(bytes.len(), ModelRecord::LEN);
         assert_eq!(&bytes[..2], &[b'M', 1]);
         assert_eq!(ModelRecord::decode(&bytes), Ok(rec));
         let restored = rec.restore(&cfg()).unwrap();
-        assert_eq!(restored.k, 8);
+        assert_eq!(restored.k, 6);
         let m = restored.initial.unwrap();
         assert_eq!(m.a()[..2], START_MODEL_HTER2.a()[..2]);
         assert_eq!(m.b()[..2], START_MODEL_HTER2.b()[..2]);

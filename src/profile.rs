@@ -61,16 +61,22 @@ pub const START_MODEL_HTER1: Model = match Model::second_order([-1.749_27, 0.751
     Err(_) => panic!("START_MODEL_HTER1 is not a model"),
 };
 
-/// Starting model of the H-TER II carrier (stainless-steel wall) at Ts = 10 s: output error on
-/// the PRBS run (`hter sim --scenario prbs --plant hter2 --csv prbs2.csv`, then `hter identify
-/// --input prbs2.csv --nk 8`, fit 92.1 %): A = 1 − 1.859405 q⁻¹ + 0.859802 q⁻², B = −0.014713 −
-/// 0.003021 q⁻¹, k = 8, static gain −44.7 °C per unit duty, poles 0.9972 and 0.862. The delay
-/// scan (`--nk auto`) ranks k = 4 and 6 best (93.1 %), but both give a positive B coefficient
-/// (k = 4: b0 = +0.0074, a heating first step; k = 6: b1 = +0.0059), which the plausibility rule
-/// refuses ([`crate::control::adaptive::plausible_model`]); k = 8 is the best delay whose B
-/// cools throughout, 1 point of fit below. The self-tuner estimates with the start model's
-/// delay.
-pub const START_MODEL_HTER2: Model = match Model::second_order([-1.859_405, 0.859_802], [-0.014_713, -0.003_021], 8) {
+/// Starting model of the H-TER II carrier (stainless-steel wall) at Ts = 10 s: instrumental
+/// variables on `hter sim --scenario prbs --plant hter2` (`hter identify --method iv --nk 5
+/// --na 2 --nb 2`, fit 92 %) gave A = 1 − 1.904667 q⁻¹ + 0.904945 q⁻², B = 0.00015 −
+/// 0.0123778 q⁻¹: b0 ≈ 0, so the steel carrier's delay is one sample longer. Shifted to
+/// k = 6, B = −0.0123778 − 0.0001 q⁻¹ (every b_i ≤ 0, as the plausibility rule wants); with
+/// k = 5 the minimum-variance laws divide by g0 = b0 ≈ 0 and barely act. Static gain
+/// ≈ −45 °C per unit duty. The self-tuner estimates with the start model's delay.
+///
+/// Output error does better open loop (`hter sim --scenario prbs --plant hter2 --csv prbs2.csv`,
+/// then `hter identify --input prbs2.csv --nk 8`, fit 92.1 %: A = 1 − 1.859405 q⁻¹ +
+/// 0.859802 q⁻², B = −0.014713 − 0.003021 q⁻¹, k = 8, −44.7 °C per unit duty; at k = 4 and 6
+/// the fit is 93.1 % but a b_i is positive, which the plausibility rule refuses). Started from
+/// it, IGMVC's steady-state error falls from 0.085 to 0.024 °C, but self-tuning GPC's IAE rises
+/// from 1.06 to 1.13 × the bound (seed 1; 1.05–1.17 over seeds 1–8) and GMVC drifts to 8.3 °C
+/// on seed 7, so this model stays.
+pub const START_MODEL_HTER2: Model = match Model::second_order([-1.904_667, 0.904_945], [-0.012_377_8, -0.000_1], 6) {
     Ok(m) => m,
     Err(_) => panic!("START_MODEL_HTER2 is not a model"),
 };
@@ -257,7 +263,7 @@ mod tests {
             assert_eq!(cfg.k, 5);
             assert_eq!(cfg.fallback, PI);
         }
-        assert_eq!(START_MODEL_HTER2.k(), 8);
+        assert_eq!(START_MODEL_HTER2.k(), 6);
     }
 
     #[test]
