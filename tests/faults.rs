@@ -271,11 +271,11 @@ fn a_brownout_restarts_from_the_persisted_model() {
     let persisted = out
         .stores
         .iter()
-        .filter_map(|(t, s)| match s {
+        .rev()
+        .find_map(|(t, s)| match s {
             hter::persist::Save::Model(r) if *t < 18000.0 => Some(*r),
             _ => None,
         })
-        .last()
         .expect("a model stored before the brownout");
     let start = other.b()[0];
     assert!(
