@@ -64,7 +64,7 @@ pub fn run() -> Result<()> {
     println!("load reaches 4 °C, zero error after (`hter compare` prints it for any scenario).");
     println!("  bound         IAE {b:8.0} °C·s");
     println!("  GPC           IAE {gpc_iae:8.0} °C·s  = {:.3} × bound, {:5.0} °C·s above it", gpc_iae / b, gpc_iae - b);
-    println!("  PI (SIMC)     IAE {pi_iae:8.0} °C·s  = {:.3} × bound, {:5.0} °C·s above it", pi_iae / b, pi_iae - b);
+    println!("  PI            IAE {pi_iae:8.0} °C·s  = {:.3} × bound, {:5.0} °C·s above it", pi_iae / b, pi_iae - b);
     println!("Most of a pull-down's IAE is the pull-down itself; the setpoint steps of `piecewise` tell");
     println!("the controllers apart: hter compare --scenario piecewise");
     println!("\nTry next:");

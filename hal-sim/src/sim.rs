@@ -63,7 +63,8 @@ pub enum ControllerChoice {
     Onoff,
     /// Proportional only (Ziegler–Nichols P gain).
     P,
-    /// PI with anti-windup (SIMC-tuned for each carrier; `--kp`, `--ti`).
+    /// PI with anti-windup, tuned for each carrier (H-TER I: Ziegler–Nichols detuned ×2;
+    /// H-TER II: SIMC; `--kp`, `--ti`).
     Pi,
     /// Generalized minimum variance (weights P, R, S).
     Gmvc,
@@ -201,9 +202,9 @@ impl PlantChoice {
         }
     }
 
-    /// The PI tuned for this carrier (SIMC, [`profile::PI`] and [`profile::PI_HTER2`]): the
-    /// stainless-steel carrier's for H-TER II and a stainless custom carrier, H-TER I's
-    /// otherwise (an ARX plant has no carrier of its own).
+    /// The PI tuned for this carrier ([`profile::PI`], Ziegler–Nichols detuned;
+    /// [`profile::PI_HTER2`], SIMC): the stainless-steel carrier's for H-TER II and a stainless
+    /// custom carrier, H-TER I's otherwise (an ARX plant has no carrier of its own).
     pub fn default_pi(&self) -> PiConfig {
         match self {
             PlantChoice::Hter2 => profile::PI_HTER2,
