@@ -235,11 +235,11 @@ fn self_tuning_laws_survive_a_plant_change_mid_run() {
     }
 }
 
-/// The physical plant's response to a unit duty step as the step's controller sees it: from the
-/// steady state holding `load_c`, the duty raised by `delta` for `n` samples of 10 s (PWM
-/// periods of 1 s, as the simulator drives it), the RTD's temperature through the step's
-/// first-order filter (F_a = 0.5), as a change from the start per unit duty. Index j − 1 is
-/// the response j samples after the step.
+/// The physical plant's response to a unit duty step as the step's controller sees it: the
+/// RTD's temperature of [`Plant::sensed_step`](hal_sim::plant::Plant::sensed_step) (samples of
+/// 10 s from the steady state holding `load_c`, the duty raised by `delta`) through the step's
+/// first-order filter (F_a = 0.5), as a change from the start per unit duty. Index j − 1 is the
+/// response j samples after the step.
 fn plant_step_response(
     params: hal_sim::plant::PlantParams,
     ambient_c: f64,
@@ -247,17 +247,14 @@ fn plant_step_response(
     delta: f64,
     n: usize,
 ) -> Vec<f64> {
-    use hal_sim::plant::Plant;
-    let (mut plant, d0) = Plant::at_load_temperature(params, ambient_c, load_c).expect("a duty holds it");
+    let (sensed, _) = hal_sim::plant::Plant::sensed_step(params, ambient_c, load_c, delta, 10.0, n).unwrap();
     let fa = f64::from(hter::step::CarrierConfig::DEFAULT.filter.fa);
-    let y0 = plant.sensed_temp_c();
+    let y0 = sensed[0];
     let mut y = y0;
-    (0..n)
-        .map(|_| {
-            for _ in 0..10 {
-                plant.advance_pwm_period(1.0, d0 + delta);
-            }
-            y = fa * y + (1.0 - fa) * plant.sensed_temp_c();
+    sensed[1..]
+        .iter()
+        .map(|&t| {
+            y = fa * y + (1.0 - fa) * t;
             (y - y0) / delta
         })
         .collect()

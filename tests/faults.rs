@@ -259,8 +259,7 @@ fn a_brownout_restart_is_safe_and_control_resumes() {
 fn a_brownout_restarts_from_the_persisted_model() {
     let scenario = Scenario::resolve("step").unwrap();
     let mut spec = ControllerSpec::new(ControllerChoice::Gpc);
-    // A model of another carrier: H-TER II's by instrumental variables at k = 6.
-    let other = hter::model::Model::second_order([-1.904_667, 0.904_945], [-0.012_377_8, -0.000_1], 6).unwrap();
+    let other = hter::profile::START_MODEL_HTER2;
     spec.initial = Some(other);
     let mut opts = SimOptions::new(scenario, spec);
     opts.duration_s = 6.0 * 3600.0;

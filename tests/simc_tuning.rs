@@ -16,15 +16,9 @@ use hter::control::zn::ReactionCurve;
 /// The reaction curve of the carrier's RTD for a +0.2 duty step from the steady state holding
 /// 6 °C at 28 °C ambient, as `tests/zn_tuning.rs` measures it (8 h: the slow mode settles).
 fn reaction_curve(params: PlantParams) -> ReactionCurve {
-    let (mut plant, duty0) = Plant::at_load_temperature(params, 28.0, 6.0).unwrap();
     let du = 0.2;
-    let mut y = vec![plant.sensed_temp_c() as f32];
-    for _ in 0..(8 * 3600 / 10) {
-        for _ in 0..10 {
-            plant.advance_pwm_period(1.0, duty0 + du);
-        }
-        y.push(plant.sensed_temp_c() as f32);
-    }
+    let (y, _) = Plant::sensed_step(params, 28.0, 6.0, du, 10.0, 8 * 3600 / 10).unwrap();
+    let y: Vec<f32> = y.iter().map(|&t| t as f32).collect();
     ReactionCurve::from_step(&y, 10.0, du as f32).unwrap()
 }
 

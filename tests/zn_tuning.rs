@@ -9,17 +9,11 @@ use hter::control::zn::ReactionCurve;
 fn default_pi_gains_are_detuned_ziegler_nichols_of_the_plant() {
     // Open-loop step: from the steady state holding 6 °C, the duty steps up by 0.2.
     let params = PlantParams::hter1(Load::Full);
-    let (mut plant, duty0) = Plant::at_load_temperature(params, 28.0, 6.0).unwrap();
     let du = 0.2;
     let ts = 10.0;
-    let mut y = vec![plant.sensed_temp_c() as f32];
-    for _ in 0..(6 * 3600 / 10) {
-        for _ in 0..10 {
-            plant.advance_pwm_period(1.0, duty0 + du);
-        }
-        y.push(plant.sensed_temp_c() as f32);
-    }
-    let rc = ReactionCurve::from_step(&y, ts, du as f32).unwrap();
+    let (y, _) = Plant::sensed_step(params, 28.0, 6.0, du, ts, 6 * 3600 / 10).unwrap();
+    let y: Vec<f32> = y.iter().map(|&t| t as f32).collect();
+    let rc = ReactionCurve::from_step(&y, ts as f32, du as f32).unwrap();
     let (kp, ti) = rc.pi_gains();
     println!("reaction curve {rc:?}: ZN PI Kp = {kp:.3} /°C, Ti = {ti:.0} s");
     assert!(rc.gain_c_per_duty < 0.0, "a cooler has a negative gain");

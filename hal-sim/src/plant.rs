@@ -49,6 +49,8 @@
 //! 0.46 and 0.54 at 25, 28 and 32 °C ambient; fully on, the load would go far below 0 °C
 //! (the freeze guard's job); switched off at 4 °C it warms by 1 °C in ≈ 2 min.
 
+use crate::sim::PWM_PERIOD_S;
+
 /// Container material.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Container {
@@ -402,6 +404,32 @@ impl Plant {
     /// The parameters.
     pub fn params(&self) -> &PlantParams {
         &self.p
+    }
+
+    /// An open-loop step as the RTD sees it: from the steady state holding the water at
+    /// `load_c`, the duty raised by `delta` and held for `n` samples of `ts_s` (switched in PWM
+    /// periods of [`PWM_PERIOD_S`], as `hter sim` drives the SSR). The RTD's temperature at each
+    /// sample, °C, `n + 1` values, the first before the step; with the duty it started from.
+    /// `None` if no duty in [0, 1] holds `load_c`.
+    pub fn sensed_step(
+        params: PlantParams,
+        ambient_c: f64,
+        load_c: f64,
+        delta: f64,
+        ts_s: f64,
+        n: usize,
+    ) -> Option<(Vec<f64>, f64)> {
+        let (mut plant, duty0) = Plant::at_load_temperature(params, ambient_c, load_c)?;
+        let periods = (ts_s / PWM_PERIOD_S).round() as usize;
+        let mut y = Vec::with_capacity(n + 1);
+        y.push(plant.sensed_temp_c());
+        for _ in 0..n {
+            for _ in 0..periods {
+                plant.advance_pwm_period(PWM_PERIOD_S, duty0 + delta);
+            }
+            y.push(plant.sensed_temp_c());
+        }
+        Some((y, duty0))
     }
 }
 

@@ -107,9 +107,7 @@ impl CarrierConfig {
             Err(WindowError(field)) => Err(ConfigError::Window(field)),
         }
     }
-}
 
-impl CarrierConfig {
     /// This configuration, checked ([`Self::validate`]): what [`Carrier::new`](super::Carrier::new)
     /// takes.
     pub const fn validated(self) -> Result<ValidConfig, ConfigError> {
