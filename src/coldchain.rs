@@ -66,7 +66,8 @@ impl AlarmKind {
         }
     }
 
-    const ALL: [AlarmKind; 4] =
+    /// Every kind, in declaration order.
+    pub const ALL: [AlarmKind; 4] =
         [AlarmKind::Heat10h, AlarmKind::Freeze60min, AlarmKind::Ship45c1h, AlarmKind::Ship30c10h];
 
     fn meets(self, t_c: f32) -> bool {

@@ -38,6 +38,7 @@
 
 pub mod adc;
 pub mod alarm;
+pub mod app;
 pub mod calib;
 pub mod coldchain;
 pub mod control;
@@ -46,6 +47,7 @@ pub mod failsafe;
 pub mod filter;
 pub mod hal;
 pub mod ident;
+pub mod iface;
 pub mod model;
 pub(crate) mod numerics;
 pub mod persist;

@@ -29,6 +29,7 @@ use crate::model::{Model, MAX_K};
 #[cfg(feature = "persist-flash")]
 pub mod flash;
 mod gate;
+pub mod log;
 
 pub use gate::{PendingSaves, Save, WriteGate, SUPPLY_FRESH_MS, SUPPLY_HOLD_OFF_MS};
 
@@ -289,6 +290,75 @@ impl CalibrationRecord {
         let gain = r.f32_in(0.9..=1.1)?;
         let offset_c = r.f32_in(-CAL_OFFSET_MAX_C..=CAL_OFFSET_MAX_C)?;
         Ok(CalibrationRecord { cal: TwoPoint { gain, offset_c } })
+    }
+}
+
+/// The settings a person changes over the interface (docs/interface.md): the setpoint, the
+/// law, the two calibration points, and a counter of accepted changes.
+///
+/// Layout v1, 31 bytes: `'S'`, 1, seq (u32), setpoint_c (f32), law (u8, index in
+/// [`crate::iface::Law::ALL`]), ice point (measured, reference) and warm point (f32 each),
+/// CRC-32. On decode every value is range-checked as the interface checks it, and the points
+/// must pass [`TwoPoint::from_points`]: a record that would be refused as a request is refused
+/// as a record.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SettingsRecord {
+    /// Accepted changes since the record began.
+    pub seq: u32,
+    /// Setpoint, °C.
+    pub setpoint_c: f32,
+    /// The law.
+    pub law: crate::iface::Law,
+    /// Ice-bath point (channel reading, reference), °C.
+    pub cal_ice: [f32; 2],
+    /// Second point (channel reading, reference), °C.
+    pub cal_warm: [f32; 2],
+}
+
+impl SettingsRecord {
+    /// Kind tag.
+    pub const TAG: u8 = b'S';
+    /// Layout version written by this firmware.
+    pub const VERSION: u8 = 1;
+    /// Encoded length, bytes.
+    pub const LEN: usize = 2 + 4 + 4 + 1 + 4 * 4 + 4;
+
+    /// The calibration of the two points.
+    pub fn calibration(&self) -> Result<TwoPoint, crate::calib::CalError> {
+        use crate::units::Celsius;
+        let ([mi, ri], [mw, rw]) = (self.cal_ice, self.cal_warm);
+        TwoPoint::from_points(Celsius(mi), Celsius(ri), Celsius(mw), Celsius(rw))
+    }
+
+    /// The bytes to store.
+    pub fn encode(&self) -> [u8; Self::LEN] {
+        let mut buf = [0u8; Self::LEN];
+        let mut w = Writer::new(&mut buf, Self::TAG, Self::VERSION);
+        w.u32(self.seq);
+        w.f32(self.setpoint_c);
+        w.put(&[self.law as u8]);
+        for x in self.cal_ice.into_iter().chain(self.cal_warm) {
+            w.f32(x);
+        }
+        w.finish();
+        buf
+    }
+
+    /// Parses and checks stored bytes.
+    pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
+        let mut r = open_frame(bytes, Self::LEN, Self::TAG, Self::VERSION)?;
+        let seq = r.u32();
+        let (lo, hi) = crate::iface::SETPOINT_RANGE_C;
+        let setpoint_c = r.f32_in(lo..=hi)?;
+        let law = *crate::iface::Law::ALL.get(usize::from(r.u8())).ok_or(DecodeError::OutOfRange)?;
+        let mut p = [0.0f32; 4];
+        for x in p.iter_mut() {
+            *x = r.f32_in(-50.0..=100.0)?;
+        }
+        let rec = SettingsRecord { seq, setpoint_c, law, cal_ice: [p[0], p[1]], cal_warm: [p[2], p[3]] };
+        rec.calibration().map_err(|_| DecodeError::OutOfRange)?;
+        Ok(rec)
     }
 }
 

@@ -191,6 +191,21 @@ impl<C: Controller> Carrier<C> {
         &self.controller
     }
 
+    /// The controller, to switch or reconfigure it at run time (the board's settings
+    /// interface, [`crate::app::App`]); the next sample runs the new one.
+    pub fn controller_mut(&mut self) -> &mut C {
+        &mut self.controller
+    }
+
+    /// Replaces the two-point calibration from the next sample on. A [`TwoPoint`] is checked
+    /// when it is made ([`TwoPoint::from_points`]); nothing else in the configuration changes.
+    ///
+    /// [`TwoPoint`]: crate::calib::TwoPoint
+    /// [`TwoPoint::from_points`]: crate::calib::TwoPoint::from_points
+    pub fn set_calibration(&mut self, cal: crate::calib::TwoPoint) {
+        self.cfg.cal = cal;
+    }
+
     /// Runs one sample from raw ADC counts (the firmware's and the simulator's entry).
     pub fn step(&mut self, input: &StepInput) -> StepOutput {
         let stuck = self.supervisor.counts_stuck(input.counts);

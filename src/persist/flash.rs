@@ -43,8 +43,10 @@ use core::ops::Range;
 use embedded_storage_async::nor_flash::{ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash};
 use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::map::{MapConfig, MapStorage};
+use sequential_storage::queue::{QueueConfig, QueueStorage};
 
-use super::{CalibrationRecord, DecodeError, HistoryRecord, ModelRecord};
+use super::log::{LogEntry, ENTRY_LEN};
+use super::{CalibrationRecord, DecodeError, HistoryRecord, ModelRecord, SettingsRecord};
 use crate::calib::TwoPoint;
 use crate::control::adaptive::AdaptiveConfig;
 
@@ -57,6 +59,8 @@ pub mod key {
     pub const CALIBRATION: u8 = 2;
     /// [`super::HistoryRecord`].
     pub const HISTORY: u8 = 3;
+    /// [`super::SettingsRecord`].
+    pub const SETTINGS: u8 = 4;
 }
 
 /// Repairs one load or store may make before it gives up with [`StoreError::Flash`]: one power
@@ -237,6 +241,93 @@ impl Repairs {
     }
 }
 
+/// Reads every word of the page at `start`: how many fail their ECC check, the first of
+/// them, and whether the page's start marker is one.
+/// A flash word the scratch buffer cannot hold is [`StoreError::Flash`].
+async fn scan_page<F: NorFlash, E: EccErrors>(
+    flash: &mut EccFlash<F, E>,
+    start: u32,
+) -> Result<(usize, Option<u32>, bool), StoreError> {
+    let (page, word) = (F::ERASE_SIZE as u32, F::WRITE_SIZE);
+    if word == 0 || word > MAX_WORD {
+        return Err(StoreError::Flash);
+    }
+    let mut scratch = [0u8; MAX_WORD];
+    let (mut torn, mut first_torn, mut marker_torn) = (0usize, None, false);
+    for at in (start..start + page).step_by(word) {
+        match flash.read(at, scratch.get_mut(..word).unwrap_or(&mut [])).await {
+            Ok(()) => {}
+            Err(EccFlashError::Ecc { .. }) => {
+                torn += 1;
+                first_torn = first_torn.or(Some(at));
+                marker_torn |= at == start;
+            }
+            Err(EccFlashError::Flash(_)) => return Err(StoreError::Flash),
+        }
+    }
+    Ok((torn, first_torn, marker_torn))
+}
+
+/// Repairs the page at `start` given its scan (see the module documentation for the choice
+/// between clearing the word and erasing the page).
+async fn repair_page<F: NorFlash, E: EccErrors>(
+    flash: &mut EccFlash<F, E>,
+    start: u32,
+    scan: (usize, Option<u32>, bool),
+    repairs: &mut Repairs,
+) -> Result<(), StoreError> {
+    let (page, word) = (F::ERASE_SIZE as u32, F::WRITE_SIZE);
+    match scan {
+        // Not torn (any more): nothing to repair, the retry reads it.
+        (_, None, _) => return Ok(()),
+        (1, Some(at), false) => {
+            let zeros = [0u8; MAX_WORD];
+            if flash.write(at, zeros.get(..word).unwrap_or(&[])).await.is_ok() {
+                repairs.words_cleared = repairs.words_cleared.saturating_add(1);
+                return Ok(());
+            }
+            // The flash refused the zeros: the page has to go.
+        }
+        _ => {}
+    }
+    flash.erase(start, start + page).await.map_err(|_| StoreError::Flash)?;
+    repairs.pages_erased = repairs.pages_erased.saturating_add(1);
+    Ok(())
+}
+
+/// Repairs the page of `range` holding the word at `offset` that failed its ECC check.
+async fn repair<F: NorFlash, E: EccErrors>(
+    flash: &mut EccFlash<F, E>,
+    range: &Range<u32>,
+    offset: u32,
+    repairs: &mut Repairs,
+) -> Result<(), StoreError> {
+    let page = F::ERASE_SIZE as u32;
+    if !range.contains(&offset) {
+        return Err(StoreError::Flash);
+    }
+    let start = offset - (offset - range.start) % page;
+    let scan = scan_page(flash, start).await?;
+    repair_page(flash, start, scan, repairs).await
+}
+
+/// Scans every page of `range` and repairs the damaged ones.
+async fn scrub<F: NorFlash, E: EccErrors>(
+    flash: &mut EccFlash<F, E>,
+    range: &Range<u32>,
+    repairs: &mut Repairs,
+) -> Result<(), StoreError> {
+    let page = F::ERASE_SIZE as u32;
+    for start in range.clone().step_by(F::ERASE_SIZE) {
+        if start + page > range.end {
+            break;
+        }
+        let scan = scan_page(flash, start).await?;
+        repair_page(flash, start, scan, repairs).await?;
+    }
+    Ok(())
+}
+
 /// Largest word `sequential-storage` supports (its `MAX_WORD_SIZE`), bytes.
 const MAX_WORD: usize = 32;
 
@@ -288,80 +379,17 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
         Ok(self.map.erase_all().await?)
     }
 
-    /// Reads every word of the page at `start`: how many fail their ECC check, the first of
-    /// them, and whether the page's start marker is one.
-    /// A flash word the scratch buffer cannot hold is [`StoreError::Flash`].
-    async fn scan_page(&mut self, start: u32) -> Result<(usize, Option<u32>, bool), StoreError> {
-        let (page, word) = (F::ERASE_SIZE as u32, F::WRITE_SIZE);
-        if word == 0 || word > MAX_WORD {
-            return Err(StoreError::Flash);
-        }
-        let flash = self.map.flash();
-        let mut scratch = [0u8; MAX_WORD];
-        let (mut torn, mut first_torn, mut marker_torn) = (0usize, None, false);
-        for at in (start..start + page).step_by(word) {
-            match flash.read(at, scratch.get_mut(..word).unwrap_or(&mut [])).await {
-                Ok(()) => {}
-                Err(EccFlashError::Ecc { .. }) => {
-                    torn += 1;
-                    first_torn = first_torn.or(Some(at));
-                    marker_torn |= at == start;
-                }
-                Err(EccFlashError::Flash(_)) => return Err(StoreError::Flash),
-            }
-        }
-        Ok((torn, first_torn, marker_torn))
-    }
-
-    /// Repairs the page at `start` given its scan (see the module documentation for the choice
-    /// between clearing the word and erasing the page).
-    async fn repair_page(&mut self, start: u32, scan: (usize, Option<u32>, bool)) -> Result<(), StoreError> {
-        let (page, word) = (F::ERASE_SIZE as u32, F::WRITE_SIZE);
-        let flash = self.map.flash();
-        match scan {
-            // Not torn (any more): nothing to repair, the retry reads it.
-            (_, None, _) => return Ok(()),
-            (1, Some(at), false) => {
-                let zeros = [0u8; MAX_WORD];
-                if flash.write(at, zeros.get(..word).unwrap_or(&[])).await.is_ok() {
-                    self.repairs.words_cleared = self.repairs.words_cleared.saturating_add(1);
-                    return Ok(());
-                }
-                // The flash refused the zeros: the page has to go.
-            }
-            _ => {}
-        }
-        flash.erase(start, start + page).await.map_err(|_| StoreError::Flash)?;
-        self.repairs.pages_erased = self.repairs.pages_erased.saturating_add(1);
-        Ok(())
-    }
-
-    /// Repairs the page holding the word at `offset` that failed its ECC check.
-    async fn repair(&mut self, offset: u32) -> Result<(), StoreError> {
-        let page = F::ERASE_SIZE as u32;
-        if !self.range.contains(&offset) {
-            return Err(StoreError::Flash);
-        }
-        let start = offset - (offset - self.range.start) % page;
-        let scan = self.scan_page(start).await?;
-        self.repair_page(start, scan).await
-    }
-
     /// Reads the whole region and repairs every page with a word failing its ECC check. The
     /// loads repair what they read, but a load stops at the page it needs (a page torn while
     /// being erased lies past the page being written, which is found first); the boot calls
     /// this before loading, so no damage waits for a later store (≈ 8 KiB read, well under a
     /// millisecond on the L4, plus a repair per damaged page).
     pub async fn scrub(&mut self) -> Result<(), StoreError> {
-        let page = F::ERASE_SIZE as u32;
-        for start in self.range.clone().step_by(F::ERASE_SIZE) {
-            if start + page > self.range.end {
-                break;
-            }
-            let scan = self.scan_page(start).await?;
-            self.repair_page(start, scan).await?;
-        }
-        Ok(())
+        scrub(self.map.flash(), &self.range, &mut self.repairs).await
+    }
+
+    async fn repair(&mut self, offset: u32) -> Result<(), StoreError> {
+        repair(self.map.flash(), &self.range, offset, &mut self.repairs).await
     }
 
     /// Stores already encoded record bytes under `key` (one call site for every record kind
@@ -464,4 +492,114 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
             Err(status) => Loaded { value: HistoryRecord::EMPTY, status },
         }
     }
+
+    /// Stores the settings.
+    pub async fn save_settings(&mut self, rec: &SettingsRecord) -> Result<(), StoreError> {
+        self.store(key::SETTINGS, &rec.encode()).await
+    }
+
+    /// The stored settings, if a valid record is stored.
+    pub async fn load_settings(&mut self) -> Result<SettingsRecord, LoadStatus> {
+        self.load(key::SETTINGS, SettingsRecord::decode).await
+    }
 }
+
+/// The cold-chain log ([`crate::persist::log`]) in its own flash region, as a
+/// `sequential-storage` queue that overwrites its oldest entries when full: 16-byte entries,
+/// 32 bytes each in flash with the item header and the L4's 8-byte words, so a 2 KiB page holds
+/// 63 and 30 days of 5-minute intervals (8 640) fill 138 pages; the firmware gives it 248
+/// (496 KiB), ≈ 50 days with the events. The same ECC repair as [`Store`]'s.
+pub struct LogStore<F: NorFlash, E: EccErrors> {
+    queue: QueueStorage<EccFlash<F, E>, Cache<Uncached, Uncached, Uncached, ()>>,
+    range: Range<u32>,
+    buf: Buffer,
+    repairs: Repairs,
+}
+
+impl<F: NorFlash, E: EccErrors> LogStore<F, E> {
+    /// A log over `range` (flash offsets, page-aligned) of `flash`, whose ECC errors `ecc`
+    /// reports.
+    pub fn new(flash: F, ecc: E, range: Range<u32>) -> Result<Self, StoreError> {
+        let config = QueueConfig::try_new(range.clone()).map_err(|_| StoreError::Config)?;
+        Ok(LogStore {
+            queue: QueueStorage::new(EccFlash::new(flash, ecc), config, Cache::new_uncached()),
+            range,
+            buf: Buffer([0; BUF_LEN]),
+            repairs: Repairs::default(),
+        })
+    }
+
+    /// The flash back.
+    pub fn release(self) -> F {
+        self.queue.destroy().0.into_inner()
+    }
+
+    /// ECC damage repaired since the log was opened.
+    pub fn repairs(&self) -> Repairs {
+        self.repairs
+    }
+
+    /// Scans the region and repairs damaged pages (the boot calls it before reading).
+    pub async fn scrub(&mut self) -> Result<(), StoreError> {
+        scrub(self.queue.flash(), &self.range, &mut self.repairs).await
+    }
+
+    /// Appends `entry`, overwriting the oldest entries when the region is full.
+    pub async fn push(&mut self, entry: &LogEntry) -> Result<(), StoreError> {
+        let bytes = entry.encode();
+        let mut repairs_left = MAX_REPAIRS;
+        loop {
+            let err = match self.queue.push(&bytes, true).await {
+                Ok(()) => return Ok(()),
+                Err(e) => e,
+            };
+            match ecc_offset(&err) {
+                Some(offset) if repairs_left > 0 => {
+                    repairs_left -= 1;
+                    repair(self.queue.flash(), &self.range, offset, &mut self.repairs).await?;
+                }
+                _ => return Err(err.into()),
+            }
+        }
+    }
+
+    /// Calls `each` with every readable entry, oldest first, from record time `since_s` on;
+    /// returns how many entries could not be decoded (skipped). `each` returning `false` stops
+    /// the walk (a host that went away).
+    pub async fn for_each(&mut self, since_s: u32, mut each: impl FnMut(&LogEntry) -> bool) -> Result<u32, StoreError> {
+        let mut skipped = 0u32;
+        let mut iter = match self.queue.iter().await {
+            Ok(it) => it,
+            Err(e) => return Err(e.into()),
+        };
+        loop {
+            match iter.next(&mut self.buf.0).await {
+                Ok(Some(item)) => match LogEntry::decode(&item[..]) {
+                    Ok(e) if e.t_s() >= since_s => {
+                        if !each(&e) {
+                            return Ok(skipped);
+                        }
+                    }
+                    Ok(_) => {}
+                    Err(_) => skipped += 1,
+                },
+                Ok(None) => return Ok(skipped),
+                Err(e) => return Err(e.into()),
+            }
+        }
+    }
+
+    /// The newest entry's record time, s (0 for an empty log): where this boot's record time
+    /// continues.
+    pub async fn last_t_s(&mut self) -> Result<u32, StoreError> {
+        let mut last = 0u32;
+        self.for_each(0, |e| {
+            last = last.max(e.t_s());
+            true
+        })
+        .await?;
+        Ok(last)
+    }
+}
+
+const _: () = assert!(ENTRY_LEN <= BUF_LEN);

@@ -90,14 +90,26 @@ pub enum Save {
     AlarmHistory(HistoryRecord),
     /// The calibration.
     Calibration(TwoPoint),
+    /// The settings (an accepted change over the interface).
+    Settings(super::SettingsRecord),
+    /// An entry of the cold-chain log: every one is kept, in order.
+    Log(super::log::LogEntry),
 }
 
-/// The newest record of each kind waiting for the [`WriteGate`].
-#[derive(Clone, Copy, Debug, PartialEq, Default)]
+/// Log entries that may wait for the [`WriteGate`]: a little over an hour of intervals and
+/// events at a typical rate; beyond it the oldest waiting entry is dropped and counted.
+pub const PENDING_LOG: usize = 16;
+
+/// The newest record of each kind waiting for the [`WriteGate`], and every log entry (in order).
+#[derive(Clone, Debug, PartialEq, Default)]
 pub struct PendingSaves {
     model: Option<ModelRecord>,
     calibration: Option<TwoPoint>,
+    settings: Option<super::SettingsRecord>,
     history: Option<HistoryRecord>,
+    log: heapless::Deque<super::log::LogEntry, PENDING_LOG>,
+    /// Log entries dropped because [`PENDING_LOG`] were waiting.
+    pub log_dropped: u16,
     /// The waiting history holds an alarm not yet stored (stays set when a newer history
     /// replaces it: the newer one counts the alarm too).
     alarm: bool,
@@ -105,13 +117,29 @@ pub struct PendingSaves {
 
 impl PendingSaves {
     /// Nothing waiting.
-    pub const EMPTY: PendingSaves = PendingSaves { model: None, calibration: None, history: None, alarm: false };
+    pub const EMPTY: PendingSaves = PendingSaves {
+        model: None,
+        calibration: None,
+        settings: None,
+        history: None,
+        log: heapless::Deque::new(),
+        log_dropped: 0,
+        alarm: false,
+    };
 
     /// Queues `save`, replacing any waiting record of its kind.
     pub fn put(&mut self, save: Save) {
         match save {
             Save::Model(m) => self.model = Some(m),
             Save::Calibration(c) => self.calibration = Some(c),
+            Save::Settings(s) => self.settings = Some(s),
+            Save::Log(e) => {
+                if self.log.is_full() {
+                    self.log.pop_front();
+                    self.log_dropped = self.log_dropped.saturating_add(1);
+                }
+                let _ = self.log.push_back(e);
+            }
             Save::History(h) => self.history = Some(h),
             Save::AlarmHistory(h) => {
                 self.history = Some(h);
@@ -122,11 +150,15 @@ impl PendingSaves {
 
     /// Whether nothing waits.
     pub fn is_empty(&self) -> bool {
-        self.model.is_none() && self.calibration.is_none() && self.history.is_none()
+        self.model.is_none()
+            && self.calibration.is_none()
+            && self.settings.is_none()
+            && self.history.is_none()
+            && self.log.is_empty()
     }
 
     /// The next record `gate` lets through at `now_ms`, removed from the queue: an alarm history
-    /// first, then history, calibration, model.
+    /// first, then settings (a person waits for them), history, log entries, calibration, model.
     pub fn next(&mut self, gate: &WriteGate, now_ms: u64) -> Option<Save> {
         if self.alarm && gate.allows(now_ms, true) {
             self.alarm = false;
@@ -137,9 +169,15 @@ impl PendingSaves {
         if !gate.allows(now_ms, false) {
             return None;
         }
+        if let Some(s) = self.settings.take() {
+            return Some(Save::Settings(s));
+        }
         if let Some(h) = self.history.take() {
             self.alarm = false;
             return Some(Save::History(h));
+        }
+        if let Some(e) = self.log.pop_front() {
+            return Some(Save::Log(e));
         }
         if let Some(c) = self.calibration.take() {
             return Some(Save::Calibration(c));

@@ -1,0 +1,531 @@
+//! The board application minus the peripherals: the per-sample step, the cold-chain record and
+//! log, the alarm indicator, the settings and the interface's commands, in one object that the
+//! firmware's control task and `hter virtual-board` both own and feed.
+//!
+//! ```text
+//!  sample (counts, supply V) ──► App::sample ──► duty, supply enable, alarm indication
+//!  request line ──────────────► App::handle ──► reply lines (docs/interface.md)
+//!                                    └──► App::next_save ──► the glue's flash writer
+//! ```
+//!
+//! The glue moves data only: it reads the ADC, calls [`App::sample`], drives the outputs, passes
+//! request lines to [`App::handle`] and writes what [`App::next_save`] hands it (the settings,
+//! the model, the history record and the log entries) to flash behind its write gate. For
+//! `history` ([`Handled::History`]) the glue streams the log it owns
+//! ([`crate::persist::log::write_csv_row`]), since only it can read flash.
+//!
+//! Every setting is validated before it is used and before it is stored: [`Command::parse`]
+//! checks what needs no state (a plain decimal, a range), [`App::handle`] the rest (a law this
+//! build links, a calibration pair, a plausible model); a refused request changes nothing and
+//! is not logged, an accepted one is a [`LogEntry::Setting`].
+
+use core::fmt::Write;
+
+use crate::alarm::{Annunciator, Indication};
+use crate::calib::TwoPoint;
+use crate::coldchain::Raised;
+use crate::control::adaptive::{plausible_model, AdaptiveConfig, SelfTuning};
+use crate::control::{ControlError, ControlInput, Controller, ControllerStatus, OnOff, OnOffConfig, Pi};
+use crate::event::EventKind;
+use crate::failsafe::StopInfo;
+use crate::iface::num::Fixed;
+use crate::iface::{Command, Law, Refusal, SetRequest, Why, HELP};
+use crate::model::Model;
+use crate::persist::log::{IntervalLog, LogEntry, SettingKey};
+use crate::persist::{HistoryRecord, ModelCadence, ModelRecord, Recorder, ResetCause, Save, SettingsRecord};
+use crate::profile::SelfTuningOrPi;
+use crate::step::{Carrier, StepInput, StepOutput, ValidConfig};
+
+/// What a build is: its step configuration, its self-tuner and the laws it links.
+#[derive(Clone, Copy, Debug)]
+pub struct AppConfig {
+    /// The step's configuration (its calibration is replaced by the settings').
+    pub carrier: ValidConfig,
+    /// The self-tuner's built-in configuration (a stored model replaces its start model).
+    pub adaptive: AdaptiveConfig,
+    /// The laws this build links, the first the default: the self-tuner's law (`gpc` or
+    /// `igmvc`), `pi` and `onoff`.
+    pub laws: &'static [Law],
+    /// The setpoint before any setting is stored, °C.
+    pub setpoint_c: f32,
+    /// `status`'s `firmware` field.
+    pub firmware: &'static str,
+    /// Samples between stores of the history record.
+    pub history_save_samples: u32,
+    /// Samples of trusted learning between stores of the model.
+    pub model_save_samples: u32,
+}
+
+/// What the boot found in flash and in the reset flags.
+#[derive(Clone, Copy, Debug)]
+pub struct Boot {
+    /// The stored settings, if a valid record was found.
+    pub settings: Option<SettingsRecord>,
+    /// The calibration to use when no settings are stored (a calibration record of an older
+    /// firmware, or identity).
+    pub calibration: TwoPoint,
+    /// The self-tuner's configuration restarted from the stored model, if one was stored.
+    pub adaptive: Option<AdaptiveConfig>,
+    /// The history carried in.
+    pub history: HistoryRecord,
+    /// The newest log entry's record time, s (0 for an empty log).
+    pub log_last_s: u32,
+    /// Why the MCU started.
+    pub reset: ResetCause,
+    /// The fail-safe stop of the previous boot, if any.
+    pub fault: Option<StopInfo>,
+    /// Flash pages the boot found torn and repaired.
+    pub pages_lost: u8,
+}
+
+/// One sample of the board's inputs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SampleIn {
+    /// Board time, ms since boot.
+    pub t_ms: u64,
+    /// RTD conversion, counts.
+    pub counts: u32,
+    /// The reference conversions around it were in their windows.
+    pub reference_ok: bool,
+    /// The modules' supply, V, if measured.
+    pub supply_v: Option<f32>,
+    /// The switched rail after the supply-enable switch, V, if measured.
+    pub switched_v: Option<f32>,
+}
+
+/// What one sample decided.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SampleOut {
+    /// The step's output (duty, supply enable, mode, events).
+    pub step: StepOutput,
+    /// The alarm indicator.
+    pub alarm: Indication,
+    /// Cold-chain alarms this sample raised.
+    pub raised: Raised,
+}
+
+/// How [`App::handle`] ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Handled {
+    /// The reply is complete (its final line written), or the line was empty.
+    Done,
+    /// `history`: the glue streams the log from record time `since_s` (the CSV header, a row
+    /// per entry, then `ok`).
+    History {
+        /// First record time to send, s.
+        since_s: u32,
+    },
+}
+
+/// The laws a board switches between at run time, without a heap: the variant in use.
+// No heap to box into; the enum is as large as the self-tuner, which the board runs anyway.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Debug)]
+pub enum BoardController {
+    /// The self-tuner (or its PI, if its configuration was refused).
+    Adaptive(SelfTuningOrPi),
+    /// PI.
+    Pi(Pi),
+    /// On-Off.
+    OnOff(OnOff),
+}
+
+impl Controller for BoardController {
+    fn update(&mut self, input: &ControlInput) -> Result<f32, ControlError> {
+        match self {
+            BoardController::Adaptive(c) => c.update(input),
+            BoardController::Pi(c) => c.update(input),
+            BoardController::OnOff(c) => c.update(input),
+        }
+    }
+
+    fn track(&mut self, input: &ControlInput, applied: f32) {
+        match self {
+            BoardController::Adaptive(c) => c.track(input, applied),
+            BoardController::Pi(c) => c.track(input, applied),
+            BoardController::OnOff(c) => c.track(input, applied),
+        }
+    }
+
+    fn name(&self) -> &'static str {
+        match self {
+            BoardController::Adaptive(c) => c.name(),
+            BoardController::Pi(c) => c.name(),
+            BoardController::OnOff(c) => c.name(),
+        }
+    }
+
+    fn status(&self) -> Option<ControllerStatus> {
+        match self {
+            BoardController::Adaptive(c) => c.status(),
+            _ => None,
+        }
+    }
+
+    fn trusted_model(&self) -> Option<Model> {
+        match self {
+            BoardController::Adaptive(c) => c.trusted_model(),
+            _ => None,
+        }
+    }
+}
+
+/// Builds `law`'s controller starting bumplessly from the applied duty `u0`.
+fn build(law: Law, adaptive: &AdaptiveConfig, ts_s: f32, u0: f32) -> BoardController {
+    match law {
+        Law::Gpc | Law::Igmvc => BoardController::Adaptive(match SelfTuning::new(*adaptive, ts_s, u0) {
+            Ok(st) => SelfTuningOrPi::SelfTuning(st),
+            Err(_) => SelfTuningOrPi::Pi(Pi::new(crate::control::PiConfig { bias: u0, ..adaptive.fallback }, ts_s)),
+        }),
+        Law::Pi => BoardController::Pi(Pi::new(crate::control::PiConfig { bias: u0, ..adaptive.fallback }, ts_s)),
+        Law::OnOff => BoardController::OnOff(OnOff::new(OnOffConfig::DEFAULT)),
+    }
+}
+
+/// Log entries one sample may add beyond its events: an interval and up to four alarms.
+const OUTBOX: usize = 16;
+
+/// Events that are not written to the flash log: the self-tuner's trust toggling between
+/// adaptive and frozen can happen every few samples for hours (EXPERIMENTS.md, issue 15) and
+/// would push 30 days of intervals out of the log; `status` shows the mode, telemetry logs every
+/// change. Every other event is kept.
+fn logged(kind: EventKind) -> bool {
+    !matches!(kind, EventKind::AdaptiveEngaged | EventKind::AdaptiveFrozen)
+}
+
+/// The board application (see the module documentation).
+pub struct App {
+    cfg: AppConfig,
+    carrier: Carrier<BoardController>,
+    settings: SettingsRecord,
+    adaptive: AdaptiveConfig,
+    recorder: Recorder,
+    annunciator: Annunciator,
+    cadence: ModelCadence,
+    intervals: IntervalLog,
+    /// Record time at board time 0, ms.
+    base_ms: u64,
+    outbox: heapless::Deque<Save, OUTBOX>,
+    /// Saves dropped because the glue did not drain [`OUTBOX`] of them.
+    pub saves_dropped: u16,
+    last: Option<SampleOut>,
+    last_t_ms: u64,
+    ack_pending: bool,
+}
+
+impl App {
+    /// The application after a boot: settings, model, history and record time from flash.
+    pub fn new(cfg: AppConfig, boot: &Boot) -> App {
+        let default_law = cfg.laws.first().copied().unwrap_or(Law::Gpc);
+        let settings = match boot.settings {
+            Some(s) if cfg.laws.contains(&s.law) && s.calibration().is_ok() => s,
+            _ => SettingsRecord {
+                seq: 0,
+                setpoint_c: cfg.setpoint_c,
+                law: default_law,
+                cal_ice: [0.0, 0.0],
+                cal_warm: [25.0, 25.0],
+            },
+        };
+        let cal =
+            if boot.settings.is_some() { settings.calibration().unwrap_or(boot.calibration) } else { boot.calibration };
+        let adaptive = boot.adaptive.unwrap_or(cfg.adaptive);
+        let ts_s = cfg.carrier.get().ts_s;
+        let controller = build(settings.law, &adaptive, ts_s, cfg.adaptive.fallback.bias);
+        let mut carrier = Carrier::new(cfg.carrier.with_calibration(cal), controller);
+        carrier.note_reset(boot.reset);
+        let mut recorder = Recorder::new(boot.history, cfg.history_save_samples);
+        let mut app_saves = heapless::Deque::new();
+        let mut history = recorder.note_reset(boot.reset);
+        if let Some(f) = &boot.fault {
+            carrier.note_board_fault(f.kind);
+            history = recorder.note_board_fault(f);
+        }
+        let base_ms = (u64::from(boot.log_last_s) + 1) * 1000;
+        for _ in 0..boot.pages_lost {
+            history = recorder.note_flash_page_lost();
+            let _ = app_saves
+                .push_back(Save::Log(LogEntry::Event { t_s: (base_ms / 1000) as u32, kind: EventKind::FlashPageLost }));
+        }
+        let _ = app_saves.push_back(Save::History(history));
+        App {
+            cfg,
+            carrier,
+            settings,
+            adaptive,
+            recorder,
+            annunciator: Annunciator::new(),
+            cadence: ModelCadence::new(cfg.model_save_samples),
+            intervals: IntervalLog::new(),
+            base_ms,
+            outbox: app_saves,
+            saves_dropped: 0,
+            last: None,
+            last_t_ms: 0,
+            ack_pending: false,
+        }
+    }
+
+    /// The step (for logging the controller's state).
+    pub fn carrier(&self) -> &Carrier<BoardController> {
+        &self.carrier
+    }
+
+    /// The settings in use.
+    pub fn settings(&self) -> &SettingsRecord {
+        &self.settings
+    }
+
+    /// The next record to write to flash, oldest first; the glue drains it after every
+    /// [`App::sample`] and [`App::handle`].
+    pub fn next_save(&mut self) -> Option<Save> {
+        self.outbox.pop_front()
+    }
+
+    fn save(&mut self, save: Save) {
+        if self.outbox.is_full() {
+            self.outbox.pop_front();
+            self.saves_dropped = self.saves_dropped.saturating_add(1);
+        }
+        let _ = self.outbox.push_back(save);
+    }
+
+    fn record_s(&self, t_ms: u64) -> u32 {
+        ((self.base_ms + t_ms) / 1000) as u32
+    }
+
+    /// The user button (or `ack`): the alarm has been seen; applied with the next sample.
+    pub fn acknowledge(&mut self) {
+        self.ack_pending = true;
+    }
+
+    /// Runs one sample.
+    pub fn sample(&mut self, s: &SampleIn) -> SampleOut {
+        if let Some(v) = s.supply_v {
+            self.carrier.observe_supply_v(v);
+        }
+        if let Some(v) = s.switched_v {
+            self.carrier.observe_switched_rail_v(v);
+        }
+        let input = StepInput { t_ms: s.t_ms, counts: s.counts, setpoint_c: self.settings.setpoint_c };
+        let out =
+            if s.reference_ok { self.carrier.step(&input) } else { self.carrier.step_with_reference_fault(&input) };
+        self.finish_sample(s.t_ms, out)
+    }
+
+    /// Runs one sample from an already converted temperature (an ideal-measurement plant).
+    pub fn sample_celsius(&mut self, t_ms: u64, temp_c: f32) -> SampleOut {
+        let out = self.carrier.step_celsius(t_ms, crate::units::Celsius(temp_c), self.settings.setpoint_c);
+        self.finish_sample(t_ms, out)
+    }
+
+    fn finish_sample(&mut self, t_ms: u64, out: StepOutput) -> SampleOut {
+        let rec = self.recorder.push(t_ms, out.temp_c.0);
+        if core::mem::take(&mut self.ack_pending) {
+            self.annunciator.acknowledge();
+        }
+        let alarm = self.annunciator.update(&out, &rec.raised);
+        let t_s = self.record_s(t_ms);
+        for e in out.events.iter() {
+            if logged(e.kind) {
+                self.save(Save::Log(LogEntry::Event { t_s: self.record_s(e.t_ms), kind: e.kind }));
+            }
+        }
+        for a in rec.raised.iter().flatten() {
+            let start_s = self.record_s(a.start_ms);
+            self.save(Save::Log(LogEntry::Alarm { t_s, kind: a.kind, start_s }));
+        }
+        if let Some(e) = self.intervals.push(self.base_ms + t_ms, out.temp_c.0, out.duty.get(), out.mode) {
+            self.save(Save::Log(e));
+        }
+        if let Some(save) = self.recorder.due_save(&rec) {
+            self.save(save);
+        }
+        if let Some(m) = self.cadence.push(out.status.map(|st| st.mode), self.carrier.controller()) {
+            self.save(Save::Model(m));
+        }
+        let done = SampleOut { step: out, alarm, raised: rec.raised };
+        self.last = Some(done);
+        self.last_t_ms = t_ms;
+        done
+    }
+
+    /// Runs one request line and writes its reply (lines ended by `\r\n`, the last one `ok` or
+    /// `err …`), except for `history`, whose rows the glue streams ([`Handled::History`]).
+    pub fn handle(&mut self, line: &str, out: &mut impl Write) -> Handled {
+        let result = match Command::parse(line) {
+            Ok(None) => return Handled::Done,
+            Ok(Some(Command::History { since_s })) => return Handled::History { since_s },
+            Ok(Some(cmd)) => self.run(cmd, out),
+            Err(r) => Err(r),
+        };
+        let _ = match result {
+            Ok(()) => out.write_str("ok\r\n"),
+            Err(r) => write!(out, "{r}\r\n"),
+        };
+        Handled::Done
+    }
+
+    fn run(&mut self, cmd: Command, out: &mut impl Write) -> Result<(), Refusal> {
+        match cmd {
+            Command::Help => {
+                for l in HELP {
+                    let _ = write!(out, "{l}\r\n");
+                }
+                Ok(())
+            }
+            Command::Status => {
+                let _ = self.write_status(out);
+                Ok(())
+            }
+            Command::Get => {
+                let s = &self.settings;
+                let _ = write!(
+                    out,
+                    "setpoint_c={}\r\ncontroller={}\r\ncal_ice={},{}\r\ncal_warm={},{}\r\n",
+                    Fixed(s.setpoint_c, 2),
+                    s.law.name(),
+                    Fixed(s.cal_ice[0], 2),
+                    Fixed(s.cal_ice[1], 2),
+                    Fixed(s.cal_warm[0], 2),
+                    Fixed(s.cal_warm[1], 2)
+                );
+                Ok(())
+            }
+            Command::Set(req) => self.set(req),
+            Command::Identify | Command::IdentifyAbort => {
+                Err(Refusal { what: "identify", why: Why::NotNow("commissioning is not in this build yet") })
+            }
+            Command::History { .. } => Ok(()),
+        }
+    }
+
+    /// The applied duty of the last sample (a switched law starts from it).
+    fn applied(&self) -> f32 {
+        self.last.map_or(self.cfg.adaptive.fallback.bias, |o| o.step.duty.get())
+    }
+
+    fn set(&mut self, req: SetRequest) -> Result<(), Refusal> {
+        let t_s = self.record_s(self.last_t_ms);
+        let mut next = self.settings;
+        let (key, value) = match req {
+            SetRequest::Setpoint(x) => {
+                next.setpoint_c = x;
+                (SettingKey::Setpoint, [x, 0.0])
+            }
+            SetRequest::Controller(law) => {
+                if !self.cfg.laws.contains(&law) {
+                    return Err(Refusal { what: "controller", why: Why::NotInBuild });
+                }
+                next.law = law;
+                (SettingKey::Controller, [law as u8 as f32, 0.0])
+            }
+            SetRequest::CalIce(p) | SetRequest::CalWarm(p) => {
+                let (what, key) = if matches!(req, SetRequest::CalIce(_)) {
+                    next.cal_ice = p;
+                    ("cal_ice", SettingKey::CalIce)
+                } else {
+                    next.cal_warm = p;
+                    ("cal_warm", SettingKey::CalWarm)
+                };
+                next.calibration().map_err(|e| Refusal { what, why: Why::Calibration(e) })?;
+                (key, p)
+            }
+            SetRequest::Model(m) => return self.set_model(m, t_s),
+            SetRequest::Ack => {
+                self.acknowledge();
+                self.save(Save::Log(LogEntry::Setting { t_s, key: SettingKey::Ack, value: [0.0; 2] }));
+                return Ok(());
+            }
+        };
+        // Accepted: used from the next sample, stored, logged.
+        next.seq = next.seq.wrapping_add(1);
+        if next.law != self.settings.law {
+            let ctl = build(next.law, &self.adaptive, self.cfg.carrier.get().ts_s, self.applied());
+            *self.carrier.controller_mut() = ctl;
+        }
+        if let Ok(cal) = next.calibration() {
+            self.carrier.set_calibration(cal);
+        }
+        self.settings = next;
+        self.save(Save::Settings(next));
+        self.save(Save::Log(LogEntry::Setting { t_s, key, value }));
+        Ok(())
+    }
+
+    fn set_model(&mut self, m: Model, t_s: u32) -> Result<(), Refusal> {
+        let refuse = |why| Err(Refusal { what: "model", why: Why::Model(why) });
+        if !m.a_is_stable() {
+            return refuse("A is not stable (a root on or outside the unit circle)");
+        }
+        if m.b().iter().any(|&b| b > 0.0) || m.b().iter().all(|&b| b == 0.0) {
+            return refuse("B does not cool (every b_i must be <= 0, not all 0)");
+        }
+        if !plausible_model(&self.adaptive, &m) {
+            return refuse("static gain outside the self-tuner's plausible range");
+        }
+        let Some(rec) = ModelRecord::from_model(&m) else { return refuse("not a second-order model") };
+        self.adaptive = self.adaptive.restored_from(m);
+        if matches!(self.settings.law, Law::Gpc | Law::Igmvc) {
+            let ctl = build(self.settings.law, &self.adaptive, self.cfg.carrier.get().ts_s, self.applied());
+            *self.carrier.controller_mut() = ctl;
+        }
+        let gain = m.static_gain().unwrap_or(f32::NAN);
+        self.save(Save::Model(rec));
+        self.save(Save::Log(LogEntry::Setting { t_s, key: SettingKey::Model, value: [gain, m.k() as f32] }));
+        Ok(())
+    }
+
+    fn write_status(&self, out: &mut impl Write) -> core::fmt::Result {
+        let last = self.last;
+        let t_s = self.last_t_ms as f32 / 1000.0;
+        write!(out, "t_s={}\r\n", Fixed(t_s, 1))?;
+        let (temp, sp, duty, mode, alarm) = match last {
+            Some(o) => (o.step.temp_c.0, o.step.setpoint_c.0, o.step.duty.get(), o.step.mode.name(), o.alarm.name()),
+            None => (f32::NAN, self.settings.setpoint_c, f32::NAN, "-", "-"),
+        };
+        write!(out, "temp_c={}\r\nsetpoint_c={}\r\nduty={}\r\n", Fixed(temp, 2), Fixed(sp, 2), Fixed(duty, 3))?;
+        write!(out, "mode={mode}\r\nalarm={alarm}\r\ncontroller={}\r\n", self.carrier.controller().name())?;
+        let status = self.carrier.controller().status();
+        write!(out, "adaptive={}\r\ncontrollers=", status.map_or("-", |s| s.mode.name()))?;
+        for (i, l) in self.cfg.laws.iter().enumerate() {
+            write!(out, "{}{}", if i == 0 { "" } else { "," }, l.name())?;
+        }
+        out.write_str("\r\n")?;
+        let model = self.carrier.controller().trusted_model().or(match self.settings.law {
+            Law::Gpc | Law::Igmvc => self.adaptive.initial,
+            _ => None,
+        });
+        match model {
+            Some(m) if m.na() == 2 && m.nb() == 2 => {
+                let (a, b) = (m.a(), m.b());
+                write!(
+                    out,
+                    "model_a={},{}\r\nmodel_b={},{}\r\nmodel_k={}\r\n",
+                    Fixed(a[0], 6),
+                    Fixed(a[1], 6),
+                    Fixed(b[0], 6),
+                    Fixed(b[1], 6),
+                    m.k()
+                )?;
+            }
+            _ => out.write_str("model_a=-\r\nmodel_b=-\r\nmodel_k=-\r\n")?,
+        }
+        let h = self.recorder.history();
+        let resets: u32 = [ResetCause::Watchdog, ResetCause::BrownOut, ResetCause::Other]
+            .into_iter()
+            .map(|c| u32::from(h.resets_by(c)))
+            .sum();
+        write!(out, "holdover_s=-\r\nresets={resets}\r\nfirmware={}\r\n", self.cfg.firmware)?;
+        write!(out, "commissioning=idle\r\nsettings_version={}\r\n", self.settings.seq)
+    }
+}
+
+/// The name of a commissioning failure code, for the log's CSV.
+pub fn commission_failure_name(code: u8) -> &'static str {
+    let _ = code;
+    "failed"
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,302 @@
+//! The application's own tests: every command against a small thermal plant (first order,
+//! τ = 30 min, −43 °C per unit duty from 28 °C, 60 s dead time, as the carriers' identified
+//! models have), through the same counts the board reads.
+
+use super::*;
+use crate::profile;
+use crate::step::tests::counts_at;
+use std::string::String;
+use std::vec::Vec;
+
+const LAWS: &[Law] = &[Law::Gpc, Law::Pi, Law::OnOff];
+
+fn config() -> AppConfig {
+    AppConfig {
+        carrier: ValidConfig::DEFAULT,
+        adaptive: profile::ADAPTIVE_GPC,
+        laws: LAWS,
+        setpoint_c: 4.0,
+        firmware: "hter test",
+        history_save_samples: 360,
+        model_save_samples: 1440,
+    }
+}
+
+fn boot() -> Boot {
+    Boot {
+        settings: None,
+        calibration: TwoPoint::IDENTITY,
+        adaptive: None,
+        history: HistoryRecord::EMPTY,
+        log_last_s: 0,
+        reset: ResetCause::Other,
+        fault: None,
+        pages_lost: 0,
+    }
+}
+
+/// The app in front of a first-order plant holding 4 °C.
+struct Bench {
+    app: App,
+    t_ms: u64,
+    load_c: f32,
+    /// Duties applied in the last 60 s, oldest first: the plant's dead time.
+    pipe: std::collections::VecDeque<f32>,
+    saves: Vec<Save>,
+}
+
+impl Bench {
+    fn new(boot: &Boot) -> Bench {
+        let hold = 24.0 / 43.0;
+        Bench { app: App::new(config(), boot), t_ms: 0, load_c: 4.0, pipe: [hold; 6].into(), saves: Vec::new() }
+    }
+
+    fn run(&mut self, samples: usize) -> SampleOut {
+        let mut last = None;
+        for _ in 0..samples {
+            let out = self.app.sample(&SampleIn {
+                t_ms: self.t_ms,
+                counts: counts_at(self.load_c),
+                reference_ok: true,
+                supply_v: None,
+                switched_v: None,
+            });
+            // 10 s of a τ = 1800 s plant: equilibrium 28 − 43·duty, the duty of 60 s ago.
+            self.pipe.push_back(out.step.duty.get());
+            let duty = self.pipe.pop_front().unwrap();
+            let eq = 28.0 - 43.0 * duty;
+            self.load_c += (eq - self.load_c) * (10.0 / 1800.0);
+            self.t_ms += 10_000;
+            self.drain();
+            last = Some(out);
+        }
+        last.unwrap()
+    }
+
+    fn drain(&mut self) {
+        while let Some(s) = self.app.next_save() {
+            self.saves.push(s);
+        }
+    }
+
+    fn send(&mut self, line: &str) -> String {
+        let mut out = String::new();
+        assert_eq!(self.app.handle(line, &mut out), Handled::Done, "{line}");
+        self.drain();
+        out
+    }
+
+    fn status(&mut self) -> Vec<(String, String)> {
+        let reply = self.send("status");
+        let mut lines: Vec<&str> = reply.split("\r\n").collect();
+        assert_eq!(lines.pop(), Some(""));
+        assert_eq!(lines.pop(), Some("ok"));
+        lines.iter().map(|l| l.split_once('=').map(|(k, v)| (k.into(), v.into())).expect(l)).collect()
+    }
+
+    fn field(&mut self, key: &str) -> String {
+        self.status().into_iter().find(|(k, _)| k == key).unwrap_or_else(|| panic!("{key}")).1
+    }
+
+    fn settings_saves(&self) -> usize {
+        self.saves.iter().filter(|s| matches!(s, Save::Settings(_))).count()
+    }
+
+    fn setting_logs(&self) -> Vec<SettingKey> {
+        self.saves
+            .iter()
+            .filter_map(|s| match s {
+                Save::Log(LogEntry::Setting { key, .. }) => Some(*key),
+                _ => None,
+            })
+            .collect()
+    }
+}
+
+#[test]
+fn status_has_every_field_of_the_contract_in_order() {
+    let mut b = Bench::new(&boot());
+    b.run(30);
+    let keys: Vec<String> = b.status().into_iter().map(|(k, _)| k).collect();
+    let want = [
+        "t_s",
+        "temp_c",
+        "setpoint_c",
+        "duty",
+        "mode",
+        "alarm",
+        "controller",
+        "adaptive",
+        "controllers",
+        "model_a",
+        "model_b",
+        "model_k",
+        "holdover_s",
+        "resets",
+        "firmware",
+        "commissioning",
+        "settings_version",
+    ];
+    assert_eq!(keys, want);
+    assert_eq!(b.field("controller"), "gpc");
+    assert_eq!(b.field("controllers"), "gpc,pi,onoff");
+    assert_eq!(b.field("mode"), "normal");
+    assert_eq!(b.field("resets"), "1", "the boot counts its own reset");
+    assert_eq!(b.field("t_s"), "290.0");
+    assert_eq!(b.field("model_k"), profile::START_MODEL_HTER1.k().to_string());
+}
+
+#[test]
+fn an_accepted_setpoint_is_used_stored_and_logged_and_the_load_follows() {
+    // Under the PI: the self-tuners follow on the physical plant (tests/virtual_board.rs); this
+    // plant is too crude for their start model.
+    let mut b = Bench::new(&Boot {
+        settings: Some(SettingsRecord { law: Law::Pi, ..App::new(config(), &boot()).settings }),
+        ..boot()
+    });
+    b.run(60);
+    assert_eq!(b.send("set setpoint_c 5"), "ok\r\n");
+    assert_eq!(b.settings_saves(), 1);
+    assert_eq!(b.setting_logs(), [SettingKey::Setpoint]);
+    assert_eq!(b.app.settings().setpoint_c, 5.0);
+    assert_eq!(b.app.settings().seq, 1);
+    let out = b.run(1080);
+    assert_eq!(out.step.setpoint_c.0, 5.0);
+    assert!((b.load_c - 5.0).abs() < 0.3, "the load followed: {}", b.load_c);
+    assert_eq!(b.field("settings_version"), "1");
+}
+
+#[test]
+fn a_refused_value_changes_nothing_stores_nothing_and_says_why_in_one_line() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    let before = *b.app.settings();
+    let saves = b.saves.len();
+    for (line, reply) in [
+        ("set setpoint_c 12", "err setpoint_c: 12.00 is outside 2.5…7.5\r\n"),
+        ("set setpoint_c nan", "err setpoint_c: not a decimal number\r\n"),
+        ("set setpoint_c -inf", "err setpoint_c: not a decimal number\r\n"),
+        ("set controller igmvc", "err controller: not a law this build links (see status: controllers)\r\n"),
+        ("set cal_ice 3.0,0.0", "err cal_ice: the points give a gain outside 0.9…1.1\r\n"),
+        ("set cal_warm 0.5,0.5", "err cal_warm: the two points are less than 1 °C apart\r\n"),
+        ("set model 1.2,0.1;-0.02,-0.01;5", "err model: A is not stable (a root on or outside the unit circle)\r\n"),
+        ("set model -1.8,0.81;0.02,-0.01;5", "err model: B does not cool (every b_i must be <= 0, not all 0)\r\n"),
+        ("set model -1.8,0.81;-0.00001,0;5", "err model: static gain outside the self-tuner's plausible range\r\n"),
+        ("identify now", "err line: usage: too many words\r\n"),
+    ] {
+        assert_eq!(b.send(line), reply, "{line}");
+    }
+    assert_eq!(*b.app.settings(), before);
+    assert_eq!(b.saves.len(), saves, "nothing stored or logged");
+    assert_eq!(b.run(1).step.setpoint_c.0, 4.0);
+}
+
+#[test]
+fn switching_the_law_is_bumpless_and_every_law_of_the_build_runs() {
+    let mut b = Bench::new(&boot());
+    b.run(360);
+    for law in ["pi", "onoff", "gpc"] {
+        let before = b.run(1).step.duty.get();
+        assert_eq!(b.send(&format!("set controller {law}")), "ok\r\n");
+        assert_eq!(b.field("controller"), law);
+        if law != "onoff" {
+            // The new law starts from the applied duty.
+            let after = b.run(1).step.duty.get();
+            assert!((after - before).abs() < 0.15, "{law}: {before} → {after}");
+        }
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for _ in 0..720 {
+            b.run(1);
+            lo = lo.min(b.load_c);
+            hi = hi.max(b.load_c);
+        }
+        assert!(lo >= 2.0 && hi <= 8.0, "{law} keeps 2…8 °C: {lo}…{hi}");
+    }
+    assert_eq!(b.setting_logs(), [SettingKey::Controller; 3]);
+}
+
+#[test]
+fn calibration_points_shift_the_reading_from_the_next_sample() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    let load = b.load_c;
+    let raw = b.run(1).step.raw_c.unwrap().0;
+    assert!((raw - load).abs() < 0.02, "{raw} at {load}");
+    // The channel reads 0.5 °C high at the ice point and at 25 °C: offset −0.5.
+    assert_eq!(b.send("set cal_ice 0.5,0.0"), "ok\r\n");
+    assert_eq!(b.send("set cal_warm 25.5,25.0"), "ok\r\n");
+    let load = b.load_c;
+    let cal = b.run(1).step.raw_c.unwrap().0;
+    assert!((load - cal - 0.5).abs() < 0.02, "{cal} at {load}");
+    let get = b.send("get");
+    assert!(get.contains("cal_ice=0.50,0.00\r\n") && get.contains("cal_warm=25.50,25.00\r\n"), "{get}");
+}
+
+#[test]
+fn a_plausible_model_restarts_the_self_tuner_from_it_and_is_stored() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    assert_eq!(b.send("set model -1.859405,0.859802;-0.014713,-0.003021;8"), "ok\r\n");
+    assert_eq!(b.field("model_k"), "8");
+    assert_eq!(b.field("model_a"), "-1.859405,0.859802");
+    assert!(b.saves.iter().any(|s| matches!(s, Save::Model(r) if r.k == 8)));
+    assert_eq!(b.setting_logs(), [SettingKey::Model]);
+}
+
+#[test]
+fn stored_settings_come_back_at_the_next_boot_and_bad_ones_do_not() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    b.send("set setpoint_c 6.5");
+    b.send("set controller pi");
+    let Some(Save::Settings(rec)) = b.saves.iter().rev().find(|s| matches!(s, Save::Settings(_))).copied() else {
+        panic!()
+    };
+    let back = SettingsRecord::decode(&rec.encode()).unwrap();
+    let mut again = Bench::new(&Boot { settings: Some(back), ..boot() });
+    assert_eq!(again.run(1).step.setpoint_c.0, 6.5);
+    assert_eq!(again.field("controller"), "pi");
+    assert_eq!(again.field("settings_version"), "2");
+    // A record whose value the interface would refuse is refused as a record.
+    let mut bytes = SettingsRecord { setpoint_c: 12.0, ..rec }.encode();
+    assert_eq!(SettingsRecord::decode(&bytes), Err(crate::persist::DecodeError::OutOfRange));
+    bytes[6] ^= 1;
+    assert_eq!(SettingsRecord::decode(&bytes), Err(crate::persist::DecodeError::Crc));
+}
+
+#[test]
+fn the_log_gets_intervals_events_and_continues_its_record_time_after_a_reset() {
+    let mut b = Bench::new(&Boot { log_last_s: 86_400, reset: ResetCause::BrownOut, ..boot() });
+    b.run(91);
+    let log: Vec<LogEntry> = b
+        .saves
+        .iter()
+        .filter_map(|s| match s {
+            Save::Log(e) => Some(*e),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(log.first(), Some(&LogEntry::Event { t_s: 86_401, kind: EventKind::Restarted(ResetCause::BrownOut) }));
+    let intervals: Vec<u32> = log.iter().filter(|e| matches!(e, LogEntry::Interval { .. })).map(|e| e.t_s()).collect();
+    // Record time starts at 86 401 s; intervals end on multiples of 300 s.
+    assert_eq!(intervals, [86_700, 87_000, 87_300]);
+    assert!(log.windows(2).all(|w| w[0].t_s() <= w[1].t_s()), "in time order");
+}
+
+#[test]
+fn help_lists_every_command_and_unknown_ones_point_to_it() {
+    let mut b = Bench::new(&boot());
+    let help = b.send("help");
+    for cmd in ["status", "get", "set setpoint_c", "set controller", "set cal_ice", "ack", "history", "identify"] {
+        assert!(help.contains(cmd), "{cmd}");
+    }
+    assert!(help.ends_with("ok\r\n"));
+    assert_eq!(b.send("reboot"), "err line: unknown command (try help)\r\n");
+    assert_eq!(b.send(""), "");
+    let mut out = String::new();
+    assert_eq!(b.app.handle("history 600", &mut out), Handled::History { since_s: 600 });
+    assert_eq!(out, "", "the glue streams the rows");
+}
+
+use std::format;
+use std::string::ToString;

@@ -1,0 +1,321 @@
+//! The settings and data interface: one line in, a reply out (docs/interface.md is the wire
+//! contract). Transport-agnostic: the firmware feeds it lines from USART2, `hter virtual-board`
+//! from a pseudo-terminal, a future USB CDC port from its endpoint; [`crate::app::App::handle`]
+//! runs the command against the board's state.
+//!
+//! Why a text protocol and not postcard/COBS frames or miniconf's settings tree: a person at a
+//! plain serial terminal must be able to use it (`help`, `status`, `set setpoint_c 5`, readable
+//! refusals), and the host tool reads the same lines, because every reply ends with one final
+//! line, `ok` or `err <key>: <why>`. A settings tree library would bring serde and a JSON or
+//! postcard codec (several KiB) for five keys; the grammar below is a few hundred bytes.
+
+pub mod num;
+
+use crate::model::{Model, MAX_K};
+use num::{parse_decimal, parse_list};
+
+/// Longest request line, bytes (docs/interface.md).
+pub const MAX_LINE: usize = 96;
+
+/// The laws a board can run, by their wire names.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Law {
+    /// Self-tuning GPC.
+    Gpc,
+    /// Self-tuning IGMVC.
+    Igmvc,
+    /// PI.
+    Pi,
+    /// On-Off.
+    OnOff,
+}
+
+impl Law {
+    /// Every law, in the order of their codes.
+    pub const ALL: [Law; 4] = [Law::Gpc, Law::Igmvc, Law::Pi, Law::OnOff];
+
+    /// Wire name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Law::Gpc => "gpc",
+            Law::Igmvc => "igmvc",
+            Law::Pi => "pi",
+            Law::OnOff => "onoff",
+        }
+    }
+
+    /// The law of a wire name.
+    pub fn from_name(s: &str) -> Option<Law> {
+        Law::ALL.into_iter().find(|l| l.name() == s)
+    }
+}
+
+/// A setting as requested, parsed but not yet checked against the board (range checks that
+/// need no state are done here).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SetRequest {
+    /// `setpoint_c`, °C.
+    Setpoint(f32),
+    /// `controller`.
+    Controller(Law),
+    /// `cal_ice`: (channel reading, reference), °C.
+    CalIce([f32; 2]),
+    /// `cal_warm`: (channel reading, reference), °C.
+    CalWarm([f32; 2]),
+    /// `model`: a second-order model to start the self-tuner from.
+    Model(Model),
+    /// `ack`.
+    Ack,
+}
+
+/// One request line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Command {
+    /// `help`.
+    Help,
+    /// `status`.
+    Status,
+    /// `get`.
+    Get,
+    /// `set KEY VALUE` (or `ack`).
+    Set(SetRequest),
+    /// `history [SINCE_S]`.
+    History {
+        /// Only rows at or after this record time, s.
+        since_s: u32,
+    },
+    /// `identify`.
+    Identify,
+    /// `identify abort`.
+    IdentifyAbort,
+}
+
+/// Why a request was refused: the key (or `line`, or the command) and the reason, printed as
+/// the final line `err <what>: <why>`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Refusal {
+    /// What was refused.
+    pub what: &'static str,
+    /// Why.
+    pub why: Why,
+}
+
+/// The reasons a request is refused.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Why {
+    /// Not a command this board knows.
+    UnknownCommand,
+    /// `set` of a key this board does not have.
+    UnknownKey,
+    /// Arguments missing or extra.
+    Usage(&'static str),
+    /// The value is not a plain decimal number (or list of them).
+    NotDecimal,
+    /// A number outside its range: the value and the bounds.
+    OutOfRange(f32, f32, f32),
+    /// A law this build does not link.
+    NotInBuild,
+    /// The calibration points fail [`crate::calib::TwoPoint::from_points`].
+    Calibration(crate::calib::CalError),
+    /// The model is refused: why.
+    Model(&'static str),
+    /// The request is not possible now: why.
+    NotNow(&'static str),
+    /// The line itself: too long, or not printable ASCII.
+    Line(&'static str),
+}
+
+impl core::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        use num::Fixed;
+        write!(f, "err {}: ", self.what)?;
+        match self.why {
+            Why::UnknownCommand => f.write_str("unknown command (try help)"),
+            Why::UnknownKey => f.write_str("unknown setting (setpoint_c, controller, cal_ice, cal_warm, model, ack)"),
+            Why::Usage(u) => write!(f, "usage: {u}"),
+            Why::NotDecimal => f.write_str("not a decimal number"),
+            Why::OutOfRange(x, lo, hi) => write!(f, "{} is outside {}…{}", Fixed(x, 2), Fixed(lo, 1), Fixed(hi, 1)),
+            Why::NotInBuild => f.write_str("not a law this build links (see status: controllers)"),
+            Why::Calibration(e) => f.write_str(match e {
+                crate::calib::CalError::NonFinite => "a point is not finite",
+                crate::calib::CalError::PointsTooClose => "the two points are less than 1 °C apart",
+                crate::calib::CalError::ImplausibleGain => "the points give a gain outside 0.9…1.1",
+            }),
+            Why::Model(w) | Why::NotNow(w) | Why::Line(w) => f.write_str(w),
+        }
+    }
+}
+
+/// The accepted setpoint range of the interface, °C (SPEC §8): inside the vaccine band with
+/// 0.5 °C to either limit.
+pub const SETPOINT_RANGE_C: (f32, f32) = (2.5, 7.5);
+
+fn refuse<T>(what: &'static str, why: Why) -> Result<T, Refusal> {
+    Err(Refusal { what, why })
+}
+
+impl Command {
+    /// Parses one line (without its line end). `Ok(None)` for an empty line, which gets no
+    /// reply.
+    pub fn parse(line: &str) -> Result<Option<Command>, Refusal> {
+        if line.len() > MAX_LINE {
+            return refuse("line", Why::Line("longer than 96 bytes"));
+        }
+        if !line.bytes().all(|b| (0x20..0x7f).contains(&b) || b == b'\t') {
+            return refuse("line", Why::Line("not printable ASCII"));
+        }
+        let mut words = line.split_ascii_whitespace();
+        let Some(cmd) = words.next() else { return Ok(None) };
+        let (a, b, extra) = (words.next(), words.next(), words.next().is_some());
+        let cmd = match (cmd, a, b) {
+            _ if extra => return refuse("line", Why::Usage("too many words")),
+            ("help", None, None) => Command::Help,
+            ("status", None, None) => Command::Status,
+            ("get", None, None) => Command::Get,
+            ("ack", None, None) => Command::Set(SetRequest::Ack),
+            ("identify", None, None) => Command::Identify,
+            ("identify", Some("abort"), None) => Command::IdentifyAbort,
+            ("history", since, None) => Command::History {
+                since_s: match since {
+                    None => 0,
+                    Some(s) => match parse_decimal(s) {
+                        Some(x) if (0.0..4.0e9).contains(&x) => x as u32,
+                        Some(x) => return refuse("history", Why::OutOfRange(x, 0.0, 4.0e9)),
+                        None => return refuse("history", Why::NotDecimal),
+                    },
+                },
+            },
+            ("set", Some(key), Some(value)) => Command::Set(parse_set(key, value)?),
+            ("set", Some("ack"), None) => Command::Set(SetRequest::Ack),
+            ("set", _, _) => return refuse("set", Why::Usage("set KEY VALUE")),
+            ("help" | "status" | "get" | "ack" | "identify" | "history", _, _) => {
+                return refuse("line", Why::Usage("too many words"))
+            }
+            _ => return refuse("line", Why::UnknownCommand),
+        };
+        Ok(Some(cmd))
+    }
+}
+
+fn parse_set(key: &str, value: &str) -> Result<SetRequest, Refusal> {
+    match key {
+        "setpoint_c" => {
+            let x = parse_decimal(value).ok_or(Refusal { what: "setpoint_c", why: Why::NotDecimal })?;
+            let (lo, hi) = SETPOINT_RANGE_C;
+            if (lo..=hi).contains(&x) {
+                Ok(SetRequest::Setpoint(x))
+            } else {
+                refuse("setpoint_c", Why::OutOfRange(x, lo, hi))
+            }
+        }
+        "controller" => match Law::from_name(value) {
+            Some(l) => Ok(SetRequest::Controller(l)),
+            None => refuse("controller", Why::NotInBuild),
+        },
+        "cal_ice" | "cal_warm" => {
+            let what = if key == "cal_ice" { "cal_ice" } else { "cal_warm" };
+            let p = parse_list::<2>(value).ok_or(Refusal { what, why: Why::NotDecimal })?;
+            for x in p {
+                if !(-50.0..=100.0).contains(&x) {
+                    return refuse(what, Why::OutOfRange(x, -50.0, 100.0));
+                }
+            }
+            Ok(if what == "cal_ice" { SetRequest::CalIce(p) } else { SetRequest::CalWarm(p) })
+        }
+        "model" => parse_model(value).map(SetRequest::Model),
+        "ack" => Ok(SetRequest::Ack),
+        _ => refuse("set", Why::UnknownKey),
+    }
+}
+
+/// `A1,A2;B0,B1;K`: the structure of a model; its plausibility is the board's to check.
+fn parse_model(value: &str) -> Result<Model, Refusal> {
+    let bad = Refusal { what: "model", why: Why::Usage("model A1,A2;B0,B1;K") };
+    let mut parts = value.split(';');
+    let (Some(a), Some(b), Some(k), None) = (parts.next(), parts.next(), parts.next(), parts.next()) else {
+        return Err(bad);
+    };
+    let (Some(a), Some(b)) = (parse_list::<2>(a), parse_list::<2>(b)) else {
+        return refuse("model", Why::NotDecimal);
+    };
+    let k = match parse_decimal(k) {
+        Some(k) if k == (k as u32) as f32 && k >= 1.0 && k <= MAX_K as f32 => k as usize,
+        Some(k) => return refuse("model", Why::OutOfRange(k, 1.0, MAX_K as f32)),
+        None => return refuse("model", Why::NotDecimal),
+    };
+    Model::second_order(a, b, k).map_err(|_| Refusal { what: "model", why: Why::Model("not a second-order model") })
+}
+
+/// The `help` text, one line per command.
+pub const HELP: &[&str] = &[
+    "status                   what the carrier is doing now",
+    "get                      every setting",
+    "set setpoint_c V         setpoint, 2.5...7.5 C",
+    "set controller NAME      a law of this build (status: controllers)",
+    "set cal_ice M,R          ice-bath point: channel reading, reference (C)",
+    "set cal_warm M,R         second point: channel reading, reference (C)",
+    "set model A1,A2;B0,B1;K  start model of the self-tuner (checked)",
+    "ack                      acknowledge the alarm",
+    "history [SINCE_S]        the cold-chain record as CSV",
+    "identify [abort]         commission the cabinet (rest, PRBS, fit, store)",
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::string::ToString;
+
+    fn refusal(line: &str) -> std::string::String {
+        Command::parse(line).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn a_person_can_type_every_command() {
+        assert_eq!(Command::parse("status"), Ok(Some(Command::Status)));
+        assert_eq!(Command::parse("  status  "), Ok(Some(Command::Status)));
+        assert_eq!(Command::parse(""), Ok(None));
+        assert_eq!(Command::parse("set setpoint_c 5"), Ok(Some(Command::Set(SetRequest::Setpoint(5.0)))));
+        assert_eq!(Command::parse("set controller pi"), Ok(Some(Command::Set(SetRequest::Controller(Law::Pi)))));
+        assert_eq!(Command::parse("set cal_ice 0.12,0.00"), Ok(Some(Command::Set(SetRequest::CalIce([0.12, 0.0])))));
+        assert_eq!(Command::parse("ack"), Ok(Some(Command::Set(SetRequest::Ack))));
+        assert_eq!(Command::parse("set ack 1"), Ok(Some(Command::Set(SetRequest::Ack))));
+        assert_eq!(Command::parse("history"), Ok(Some(Command::History { since_s: 0 })));
+        assert_eq!(Command::parse("history 3600"), Ok(Some(Command::History { since_s: 3600 })));
+        assert_eq!(Command::parse("identify abort"), Ok(Some(Command::IdentifyAbort)));
+        let Ok(Some(Command::Set(SetRequest::Model(m)))) = Command::parse("set model -1.8,0.81;-0.02,-0.01;9") else {
+            panic!()
+        };
+        assert_eq!((&m.a()[..2], &m.b()[..2], m.k()), (&[-1.8f32, 0.81][..], &[-0.02f32, -0.01][..], 9));
+    }
+
+    #[test]
+    fn a_bad_value_is_refused_in_one_line_that_names_the_key() {
+        assert_eq!(refusal("set setpoint_c 12"), "err setpoint_c: 12.00 is outside 2.5…7.5");
+        assert_eq!(refusal("set setpoint_c nan"), "err setpoint_c: not a decimal number");
+        assert_eq!(refusal("set setpoint_c 1e1"), "err setpoint_c: not a decimal number");
+        assert_eq!(refusal("set setpoint_c 2.4"), "err setpoint_c: 2.40 is outside 2.5…7.5");
+        assert_eq!(
+            refusal("set controller fuzzy"),
+            "err controller: not a law this build links (see status: controllers)"
+        );
+        assert_eq!(
+            refusal("set colour blue"),
+            "err set: unknown setting (setpoint_c, controller, cal_ice, cal_warm, model, ack)"
+        );
+        assert_eq!(refusal("set setpoint_c"), "err set: usage: set KEY VALUE");
+        assert_eq!(refusal("frobnicate"), "err line: unknown command (try help)");
+        assert_eq!(refusal("status now please"), "err line: usage: too many words");
+        assert_eq!(refusal("set model -1.8,0.81;-0.02;9"), "err model: not a decimal number");
+        assert_eq!(
+            refusal("set model -1.8,0.81;-0.02,-0.01;0"),
+            "err model: 0.00 is outside 1.0…16.0".replace("16", &MAX_K.to_string())
+        );
+        assert_eq!(refusal("set cal_ice 0.1"), "err cal_ice: not a decimal number");
+        assert_eq!(refusal("stat\u{7}us"), "err line: not printable ASCII");
+        assert!(refusal(&"x".repeat(97)).starts_with("err line: longer than 96"));
+        for line in ["set setpoint_c 12", "set setpoint_c nan", "frobnicate", "set model 1"] {
+            assert!(!refusal(line).contains('\n'), "{line}");
+        }
+    }
+}

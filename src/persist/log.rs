@@ -1,0 +1,448 @@
+//! The cold-chain log: what a 30-day temperature recorder keeps, as fixed 16-byte entries in a
+//! `sequential-storage` queue ([`crate::persist::flash::LogStore`]) — an interval summary every
+//! [`INTERVAL_S`] seconds, and every event, alarm and accepted setting.
+//!
+//! Time is **record time**, seconds: the board's clock counts from boot, so at boot the record
+//! continues from its newest entry ([`LogEntry::t_s`]); an outage shows as a `restarted` event,
+//! its length is not known (the board has no battery-backed clock: the NUCLEO ties VBAT to VDD).
+//!
+//! Layout (little endian), 16 bytes:
+//!
+//! ```text
+//! 0      1 … 4     5 … 15
+//! tag    t_s u32   payload (zero padded)
+//! 'I'  interval  mean, min, max: i16 centi-°C; duty: u16 /10 000; mode u8
+//! 'E'  event     EventKind::code u32
+//! 'A'  alarm     AlarmKind index u8; start_s u32
+//! 'S'  setting   SettingKey u8; two f32 values
+//! ```
+//!
+//! `sequential-storage` checks each item with its own CRC; an entry this firmware cannot read
+//! (an unknown tag, a value out of range) decodes to an error and is skipped, never shown as data.
+
+use crate::coldchain::AlarmKind;
+use crate::event::EventKind;
+use crate::step::Mode;
+use crate::units::{max_f32, min_f32};
+
+/// Interval length, s: the 5 minutes WHO PQS E006 30-day recorders log at.
+pub const INTERVAL_S: u32 = 300;
+
+/// Encoded size of every entry, bytes.
+pub const ENTRY_LEN: usize = 16;
+
+/// One interval's summary.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Interval {
+    /// Mean load temperature the controller saw, °C.
+    pub mean_c: f32,
+    /// Lowest, °C.
+    pub min_c: f32,
+    /// Highest, °C.
+    pub max_c: f32,
+    /// Mean applied duty.
+    pub duty: f32,
+    /// The worst mode of the interval (the last in [`Mode::ALL`] order that occurred).
+    pub mode: Mode,
+}
+
+/// Which setting an accepted change set.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SettingKey {
+    /// `setpoint_c` (value 0).
+    Setpoint,
+    /// `controller` (value 0: the law's index in [`crate::iface::Law::ALL`]).
+    Controller,
+    /// `cal_ice` (channel reading, reference).
+    CalIce,
+    /// `cal_warm` (channel reading, reference).
+    CalWarm,
+    /// `model` (static gain, delay).
+    Model,
+    /// `ack`.
+    Ack,
+    /// `identify` started (values 0).
+    Identify,
+    /// Commissioning finished: value 0 = 1 done, 0 failed; value 1 = the failure's code.
+    IdentifyEnd,
+}
+
+impl SettingKey {
+    const ALL: [SettingKey; 8] = [
+        SettingKey::Setpoint,
+        SettingKey::Controller,
+        SettingKey::CalIce,
+        SettingKey::CalWarm,
+        SettingKey::Model,
+        SettingKey::Ack,
+        SettingKey::Identify,
+        SettingKey::IdentifyEnd,
+    ];
+
+    /// The key's wire name.
+    pub fn name(self) -> &'static str {
+        match self {
+            SettingKey::Setpoint => "setpoint_c",
+            SettingKey::Controller => "controller",
+            SettingKey::CalIce => "cal_ice",
+            SettingKey::CalWarm => "cal_warm",
+            SettingKey::Model => "model",
+            SettingKey::Ack => "ack",
+            SettingKey::Identify => "identify",
+            SettingKey::IdentifyEnd => "identify_end",
+        }
+    }
+}
+
+/// One entry of the log.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LogEntry {
+    /// The interval ending at `t_s`.
+    Interval {
+        /// End of the interval, record s.
+        t_s: u32,
+        /// Its summary.
+        interval: Interval,
+    },
+    /// An event of the step.
+    Event {
+        /// Record s.
+        t_s: u32,
+        /// What happened.
+        kind: EventKind,
+    },
+    /// A cold-chain alarm.
+    Alarm {
+        /// When it was raised, record s.
+        t_s: u32,
+        /// Which.
+        kind: AlarmKind,
+        /// When its condition began, record s.
+        start_s: u32,
+    },
+    /// An accepted setting, from the serial interface.
+    Setting {
+        /// Record s.
+        t_s: u32,
+        /// Which setting.
+        key: SettingKey,
+        /// Its value(s) (see [`SettingKey`]).
+        value: [f32; 2],
+    },
+}
+
+/// Why 16 bytes are not an entry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum EntryError {
+    /// Not [`ENTRY_LEN`] bytes.
+    Length,
+    /// A tag, mode, kind or key this firmware does not know.
+    Unknown,
+}
+
+fn centi(x: f32) -> i16 {
+    // Saturating: a reading beyond ±327 °C is a fault the events already carry.
+    let c = x * 100.0;
+    let c = if c.is_finite() { min_f32(max_f32(c, -32_767.0), 32_767.0) } else { -32_768.0 };
+    if c < 0.0 {
+        (c - 0.5) as i16
+    } else {
+        (c + 0.5) as i16
+    }
+}
+
+fn from_centi(c: i16) -> f32 {
+    if c == i16::MIN {
+        f32::NAN
+    } else {
+        f32::from(c) / 100.0
+    }
+}
+
+impl LogEntry {
+    /// Record time of the entry, s.
+    pub fn t_s(&self) -> u32 {
+        match *self {
+            LogEntry::Interval { t_s, .. }
+            | LogEntry::Event { t_s, .. }
+            | LogEntry::Alarm { t_s, .. }
+            | LogEntry::Setting { t_s, .. } => t_s,
+        }
+    }
+
+    /// The 16 bytes of the entry.
+    pub fn encode(&self) -> [u8; ENTRY_LEN] {
+        let mut b = [0u8; ENTRY_LEN];
+        let (tag, t_s) = match self {
+            LogEntry::Interval { t_s, .. } => (b'I', *t_s),
+            LogEntry::Event { t_s, .. } => (b'E', *t_s),
+            LogEntry::Alarm { t_s, .. } => (b'A', *t_s),
+            LogEntry::Setting { t_s, .. } => (b'S', *t_s),
+        };
+        b[0] = tag;
+        b[1..5].copy_from_slice(&t_s.to_le_bytes());
+        match self {
+            LogEntry::Interval { interval: i, .. } => {
+                b[5..7].copy_from_slice(&centi(i.mean_c).to_le_bytes());
+                b[7..9].copy_from_slice(&centi(i.min_c).to_le_bytes());
+                b[9..11].copy_from_slice(&centi(i.max_c).to_le_bytes());
+                let duty = min_f32(max_f32(i.duty, 0.0), 1.0) * 10_000.0 + 0.5;
+                b[11..13].copy_from_slice(&(duty as u16).to_le_bytes());
+                b[13] = i.mode as u8;
+            }
+            LogEntry::Event { kind, .. } => b[5..9].copy_from_slice(&kind.code().to_le_bytes()),
+            LogEntry::Alarm { kind, start_s, .. } => {
+                b[5] = *kind as u8;
+                b[6..10].copy_from_slice(&start_s.to_le_bytes());
+            }
+            LogEntry::Setting { key, value, .. } => {
+                b[5] = *key as u8;
+                b[6..10].copy_from_slice(&value[0].to_le_bytes());
+                b[10..14].copy_from_slice(&value[1].to_le_bytes());
+            }
+        }
+        b
+    }
+
+    /// The entry of 16 stored bytes.
+    pub fn decode(bytes: &[u8]) -> Result<LogEntry, EntryError> {
+        let b: &[u8; ENTRY_LEN] = bytes.try_into().map_err(|_| EntryError::Length)?;
+        let t_s = u32::from_le_bytes([b[1], b[2], b[3], b[4]]);
+        let i16_at = |i: usize| i16::from_le_bytes([b[i], b[i + 1]]);
+        let u32_at = |i: usize| u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+        Ok(match b[0] {
+            b'I' => LogEntry::Interval {
+                t_s,
+                interval: Interval {
+                    mean_c: from_centi(i16_at(5)),
+                    min_c: from_centi(i16_at(7)),
+                    max_c: from_centi(i16_at(9)),
+                    duty: f32::from(u16::from_le_bytes([b[11], b[12]])) / 10_000.0,
+                    mode: *Mode::ALL.get(usize::from(b[13])).ok_or(EntryError::Unknown)?,
+                },
+            },
+            b'E' => {
+                let code = u32_at(5);
+                let kind = EventKind::ALL.into_iter().find(|k| k.code() == code).ok_or(EntryError::Unknown)?;
+                LogEntry::Event { t_s, kind }
+            }
+            b'A' => LogEntry::Alarm {
+                t_s,
+                kind: *AlarmKind::ALL.get(usize::from(b[5])).ok_or(EntryError::Unknown)?,
+                start_s: u32_at(6),
+            },
+            b'S' => LogEntry::Setting {
+                t_s,
+                key: *SettingKey::ALL.get(usize::from(b[5])).ok_or(EntryError::Unknown)?,
+                value: [f32::from_bits(u32_at(6)), f32::from_bits(u32_at(10))],
+            },
+            _ => return Err(EntryError::Unknown),
+        })
+    }
+}
+
+/// Builds the interval summaries from the samples: one [`Interval`] every [`INTERVAL_S`] of
+/// record time, aligned to multiples of it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IntervalLog {
+    /// End of the interval being filled, record ms.
+    end_ms: u64,
+    n: u32,
+    sum_c: f32,
+    min_c: f32,
+    max_c: f32,
+    sum_duty: f32,
+    worst: Mode,
+}
+
+impl Default for IntervalLog {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl IntervalLog {
+    /// Nothing recorded yet.
+    pub const fn new() -> Self {
+        IntervalLog {
+            end_ms: 0,
+            n: 0,
+            sum_c: 0.0,
+            min_c: f32::INFINITY,
+            max_c: f32::NEG_INFINITY,
+            sum_duty: 0.0,
+            worst: Mode::Normal,
+        }
+    }
+
+    /// Adds the sample at record time `t_ms`; returns the summary of the interval it closed, if
+    /// it closed one (an interval with no sample, e.g. during an outage, is not logged).
+    pub fn push(&mut self, t_ms: u64, temp_c: f32, duty: f32, mode: Mode) -> Option<LogEntry> {
+        let period_ms = u64::from(INTERVAL_S) * 1000;
+        let mut closed = None;
+        if t_ms >= self.end_ms {
+            if self.n > 0 {
+                let n = self.n as f32;
+                closed = Some(LogEntry::Interval {
+                    t_s: (self.end_ms / 1000) as u32,
+                    interval: Interval {
+                        mean_c: self.sum_c / n,
+                        min_c: self.min_c,
+                        max_c: self.max_c,
+                        duty: self.sum_duty / n,
+                        mode: self.worst,
+                    },
+                });
+            }
+            *self = IntervalLog { end_ms: (t_ms / period_ms + 1) * period_ms, ..IntervalLog::new() };
+        }
+        if temp_c.is_finite() {
+            self.n += 1;
+            self.sum_c += temp_c;
+            self.min_c = min_f32(self.min_c, temp_c);
+            self.max_c = max_f32(self.max_c, temp_c);
+            self.sum_duty += duty;
+        }
+        if (mode as u8) > (self.worst as u8) {
+            self.worst = mode;
+        }
+        closed
+    }
+}
+
+/// The header of `history`'s CSV (docs/interface.md).
+pub const CSV_HEADER: &str = "t_s,temp_c,min_c,max_c,duty,mode,event";
+
+/// Writes `entry` as one CSV row of `history` (no line end). Event rows repeat `last_mean_c`,
+/// the mean of the interval before them, so every row has a temperature (`hter monitor`
+/// reads `t_s, temp_c`); `last_mean_c` is updated by interval rows.
+pub fn write_csv_row(entry: &LogEntry, last_mean_c: &mut f32, out: &mut impl core::fmt::Write) -> core::fmt::Result {
+    use crate::iface::num::Fixed;
+    let t = entry.t_s();
+    match entry {
+        LogEntry::Interval { interval: i, .. } => {
+            *last_mean_c = i.mean_c;
+            write!(
+                out,
+                "{t},{},{},{},{},{},",
+                Fixed(i.mean_c, 2),
+                Fixed(i.min_c, 2),
+                Fixed(i.max_c, 2),
+                Fixed(i.duty, 3),
+                i.mode.name()
+            )
+        }
+        _ => {
+            let mean = Fixed(*last_mean_c, 2);
+            write!(out, "{t},{mean},{mean},{mean},,,")?;
+            match entry {
+                LogEntry::Event { kind, .. } => out.write_str(kind.name()),
+                LogEntry::Alarm { kind, start_s, .. } => write!(out, "alarm:{}@{start_s}", kind.name()),
+                LogEntry::Setting { key, value, .. } => match key {
+                    SettingKey::Setpoint => write!(out, "set:setpoint_c={}", Fixed(value[0], 2)),
+                    SettingKey::Controller => {
+                        let name = crate::iface::Law::ALL.get(value[0] as usize).map_or("?", |l| l.name());
+                        write!(out, "set:controller={name}")
+                    }
+                    SettingKey::CalIce | SettingKey::CalWarm => {
+                        write!(out, "set:{}={};{}", key.name(), Fixed(value[0], 2), Fixed(value[1], 2))
+                    }
+                    SettingKey::Model => write!(out, "set:model=gain {};k {}", Fixed(value[0], 1), Fixed(value[1], 0)),
+                    SettingKey::Ack => out.write_str("ack"),
+                    SettingKey::Identify => out.write_str("commissioning:started"),
+                    SettingKey::IdentifyEnd if value[0] > 0.5 => out.write_str("commissioning:done"),
+                    SettingKey::IdentifyEnd => {
+                        write!(out, "commissioning:failed:{}", crate::app::commission_failure_name(value[1] as u8))
+                    }
+                },
+                LogEntry::Interval { .. } => Ok(()),
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::persist::ResetCause;
+    use std::string::String;
+
+    #[test]
+    fn every_entry_kind_survives_its_bytes() {
+        let entries = [
+            LogEntry::Interval {
+                t_s: 300,
+                interval: Interval { mean_c: 4.02, min_c: 3.87, max_c: -1.5, duty: 0.4567, mode: Mode::FreezeGuard },
+            },
+            LogEntry::Event { t_s: 7, kind: EventKind::Restarted(ResetCause::BrownOut) },
+            LogEntry::Alarm { t_s: 36_000, kind: AlarmKind::Heat10h, start_s: 0 },
+            LogEntry::Setting { t_s: 12, key: SettingKey::CalWarm, value: [25.31, 25.02] },
+        ];
+        for e in entries {
+            let back = LogEntry::decode(&e.encode()).unwrap();
+            match (e, back) {
+                (LogEntry::Interval { interval: a, .. }, LogEntry::Interval { interval: b, .. }) => {
+                    for (x, y) in [(a.mean_c, b.mean_c), (a.min_c, b.min_c), (a.max_c, b.max_c)] {
+                        assert!((x - y).abs() <= 0.005, "{x} {y}");
+                    }
+                    assert!((a.duty - b.duty).abs() <= 0.5e-4);
+                    assert_eq!(a.mode, b.mode);
+                }
+                _ => assert_eq!(e, back),
+            }
+        }
+        for ev in EventKind::ALL {
+            assert_eq!(
+                LogEntry::decode(&LogEntry::Event { t_s: 1, kind: ev }.encode()),
+                Ok(LogEntry::Event { t_s: 1, kind: ev })
+            );
+        }
+        let mut bad = entries[0].encode();
+        bad[0] = b'X';
+        assert_eq!(LogEntry::decode(&bad), Err(EntryError::Unknown));
+        bad[0] = b'I';
+        bad[13] = 9;
+        assert_eq!(LogEntry::decode(&bad), Err(EntryError::Unknown));
+        assert_eq!(LogEntry::decode(&bad[..15]), Err(EntryError::Length));
+    }
+
+    #[test]
+    fn intervals_summarise_five_minutes_of_samples() {
+        let mut log = IntervalLog::new();
+        let mut closed = std::vec::Vec::new();
+        // 10 s samples from t = 5 s for 20 minutes: temperature = minute of the run.
+        for i in 0..120u64 {
+            let t_ms = 5_000 + i * 10_000;
+            let mode = if i == 40 { Mode::SensorFault } else { Mode::Normal };
+            if let Some(e) = log.push(t_ms, (t_ms / 60_000) as f32, 0.5, mode) {
+                closed.push(e);
+            }
+        }
+        assert_eq!(closed.len(), 3, "the 4th interval is still open");
+        let LogEntry::Interval { t_s, interval } = closed[0] else { panic!() };
+        assert_eq!(t_s, 300);
+        // Samples at 5, 15, … 295 s: 30 samples, minutes 0…4, six of each → mean 2.
+        assert!((interval.mean_c - 2.0).abs() < 1e-6, "{}", interval.mean_c);
+        assert_eq!((interval.min_c, interval.max_c), (0.0, 4.0));
+        assert_eq!(interval.mode, Mode::Normal);
+        let LogEntry::Interval { t_s, interval } = closed[1] else { panic!() };
+        assert_eq!((t_s, interval.mode), (600, Mode::SensorFault), "sample 40 is at 405 s");
+    }
+
+    #[test]
+    fn csv_rows_carry_a_temperature_on_every_row() {
+        let mut last = f32::NAN;
+        let mut s = String::new();
+        let i = Interval { mean_c: 4.0, min_c: 3.5, max_c: 4.5, duty: 0.45, mode: Mode::Normal };
+        write_csv_row(&LogEntry::Interval { t_s: 300, interval: i }, &mut last, &mut s).unwrap();
+        s.push('\n');
+        write_csv_row(&LogEntry::Setting { t_s: 310, key: SettingKey::Setpoint, value: [5.0, 0.0] }, &mut last, &mut s)
+            .unwrap();
+        assert_eq!(s, "300,4.00,3.50,4.50,0.450,normal,\n310,4.00,4.00,4.00,,,set:setpoint_c=5.00");
+        assert_eq!(CSV_HEADER.split(',').count(), s.lines().next().unwrap().split(',').count());
+    }
+}
