@@ -13,242 +13,14 @@
 //! the firmware's boot does, and must read, for every key, the last completed record or the one
 //! being written — never a corrupt one, never an error — leaving no ECC damage behind.
 
-use std::cell::Cell;
-use std::rc::Rc;
-
 use embassy_futures::block_on;
-use embedded_storage_async::nor_flash::{ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash};
 use hter::calib::TwoPoint;
 use hter::control::adaptive::{AdaptiveConfig, SelfTuning};
-use hter::persist::flash::{EccErrors, LoadStatus, Repairs, Store, StoreError, MAX_REPAIRS};
+use hter::persist::flash::{LoadStatus, Repairs, Store, StoreError, MAX_REPAIRS};
 use hter::persist::{DecodeError, HistoryRecord, ModelRecord, ResetCause};
 use hter::profile::{ADAPTIVE_GPC, START_MODEL_HTER1, START_MODEL_HTER2};
 
-/// Flash word of the STM32L4 (double-word programming, 8 ECC bits per double word).
-const WORD: usize = 8;
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum MockError {
-    PowerLoss,
-    OutOfBounds,
-    NotAligned,
-    /// Programming a word that is not erased with anything but zeros (the L4 sets PROGERR).
-    NotErased,
-    /// The read covered a double word failing its ECC check, at this offset.
-    Ecc(u32),
-}
-
-impl NorFlashError for MockError {
-    fn kind(&self) -> NorFlashErrorKind {
-        match self {
-            MockError::OutOfBounds => NorFlashErrorKind::OutOfBounds,
-            MockError::NotAligned => NorFlashErrorKind::NotAligned,
-            _ => NorFlashErrorKind::Other,
-        }
-    }
-}
-
-/// What a power cut leaves in the word or page it interrupts.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Tear {
-    /// The L4: the torn words fail their ECC check.
-    Ecc,
-    /// Half written and readable.
-    Readable,
-}
-
-/// Which operation a power cut interrupted.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum CutIn {
-    Program,
-    Erase,
-}
-
-/// The mock's ECC-error note: what the firmware's NMI handler leaves for the flash reader.
-#[derive(Clone, Default)]
-struct MockEcc(Rc<Cell<Option<u32>>>);
-
-impl EccErrors for MockEcc {
-    fn take(&mut self) -> Option<u32> {
-        self.0.take()
-    }
-}
-
-struct MockFlash<const PAGE: usize> {
-    bytes: Vec<u8>,
-    /// Per double word: fails its ECC check.
-    torn: Vec<bool>,
-    tear: Tear,
-    /// A read of a torn word returns its garbage and only notes the error (as the L4 does,
-    /// through the NMI) instead of failing itself.
-    nmi_only: bool,
-    ecc: MockEcc,
-    /// Word programs and page erases left before power is lost; `None` = never.
-    ops_left: Option<usize>,
-    /// Power is off: every operation fails until [`MockFlash::power_on`].
-    dead: bool,
-    cut_in: Option<CutIn>,
-    ops: usize,
-    erases: usize,
-    rewrites: usize,
-}
-
-impl<const PAGE: usize> MockFlash<PAGE> {
-    fn blank(pages: usize) -> Self {
-        Self::with_tear(pages, Tear::Ecc)
-    }
-
-    fn with_tear(pages: usize, tear: Tear) -> Self {
-        Self {
-            bytes: vec![0xFF; pages * PAGE],
-            torn: vec![false; pages * PAGE / WORD],
-            tear,
-            nmi_only: false,
-            ecc: MockEcc::default(),
-            ops_left: None,
-            dead: false,
-            cut_in: None,
-            ops: 0,
-            erases: 0,
-            rewrites: 0,
-        }
-    }
-
-    fn power_on(&mut self) {
-        self.dead = false;
-        self.ops_left = None;
-        self.ecc.0.set(None);
-    }
-
-    fn torn_words(&self) -> usize {
-        self.torn.iter().filter(|&&t| t).count()
-    }
-
-    /// Spends one operation; `false` if power is lost at this one.
-    fn spend(&mut self, what: CutIn) -> bool {
-        self.ops += 1;
-        match &mut self.ops_left {
-            Some(0) => {
-                self.dead = true;
-                self.cut_in = Some(what);
-                false
-            }
-            Some(n) => {
-                *n -= 1;
-                true
-            }
-            None => true,
-        }
-    }
-}
-
-impl<const PAGE: usize> ErrorType for MockFlash<PAGE> {
-    type Error = MockError;
-}
-
-impl<const PAGE: usize> ReadNorFlash for MockFlash<PAGE> {
-    const READ_SIZE: usize = 1;
-
-    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), MockError> {
-        if self.dead {
-            return Err(MockError::PowerLoss);
-        }
-        let from = offset as usize;
-        let src = self.bytes.get(from..from + bytes.len()).ok_or(MockError::OutOfBounds)?;
-        bytes.copy_from_slice(src);
-        let words = from / WORD..(from + bytes.len()).div_ceil(WORD);
-        if let Some(w) = words.clone().find(|&w| self.torn[w]) {
-            let at = (w * WORD) as u32;
-            self.ecc.0.set(Some(at));
-            if !self.nmi_only {
-                return Err(MockError::Ecc(at));
-            }
-        }
-        Ok(())
-    }
-
-    fn capacity(&self) -> usize {
-        self.bytes.len()
-    }
-}
-
-impl<const PAGE: usize> NorFlash for MockFlash<PAGE> {
-    const WRITE_SIZE: usize = WORD;
-    const ERASE_SIZE: usize = PAGE;
-
-    async fn erase(&mut self, from: u32, to: u32) -> Result<(), MockError> {
-        let (from, to) = (from as usize, to as usize);
-        if !from.is_multiple_of(PAGE) || !to.is_multiple_of(PAGE) || from > to {
-            return Err(MockError::NotAligned);
-        }
-        if to > self.bytes.len() {
-            return Err(MockError::OutOfBounds);
-        }
-        for page in (from..to).step_by(PAGE) {
-            if self.dead {
-                return Err(MockError::PowerLoss);
-            }
-            if !self.spend(CutIn::Erase) {
-                match self.tear {
-                    Tear::Ecc => {
-                        for w in page / WORD..(page + PAGE) / WORD {
-                            if self.bytes[w * WORD..(w + 1) * WORD].iter().any(|&b| b != 0xFF) {
-                                self.torn[w] = true;
-                            }
-                        }
-                    }
-                    Tear::Readable => self.bytes[page..page + PAGE / 2].fill(0xFF),
-                }
-                return Err(MockError::PowerLoss);
-            }
-            self.bytes[page..page + PAGE].fill(0xFF);
-            self.torn[page / WORD..(page + PAGE) / WORD].fill(false);
-            self.erases += 1;
-        }
-        Ok(())
-    }
-
-    async fn write(&mut self, offset: u32, data: &[u8]) -> Result<(), MockError> {
-        let from = offset as usize;
-        if !from.is_multiple_of(WORD) || !data.len().is_multiple_of(WORD) {
-            return Err(MockError::NotAligned);
-        }
-        if from + data.len() > self.bytes.len() {
-            return Err(MockError::OutOfBounds);
-        }
-        for (i, word) in data.chunks(WORD).enumerate() {
-            if self.dead {
-                return Err(MockError::PowerLoss);
-            }
-            let at = from + i * WORD;
-            let zeros = word.iter().all(|&b| b == 0);
-            // The L4 programs a non-erased double word only with all zeros (whose ECC is zero:
-            // a torn word so programmed reads again).
-            let torn = self.torn[at / WORD];
-            if torn || self.bytes[at..at + WORD].iter().any(|&b| b != 0xFF) {
-                if !zeros {
-                    return Err(MockError::NotErased);
-                }
-                if !torn {
-                    self.rewrites += 1;
-                }
-            }
-            let powered = self.spend(CutIn::Program);
-            let programmed = if powered { WORD } else { WORD / 2 };
-            for (c, w) in self.bytes[at..at + WORD].iter_mut().zip(word).take(programmed) {
-                *c &= w;
-            }
-            if !powered {
-                if self.tear == Tear::Ecc {
-                    self.torn[at / WORD] = true;
-                }
-                return Err(MockError::PowerLoss);
-            }
-            self.torn[at / WORD] = false;
-        }
-        Ok(())
-    }
-}
+use hal_sim::flash::{CutIn, MockEcc, MockFlash, Tear};
 
 type MockStore<const PAGE: usize> = Store<MockFlash<PAGE>, MockEcc>;
 
@@ -761,4 +533,144 @@ fn wear_at_the_firmware_cadence() {
     let booting = years(BOOTS_PER_DAY);
     assert!(quiet >= 50.0, "{quiet:.0} years");
     assert!(booting >= 25.0 && booting < quiet, "{booting:.0} years with {BOOTS_PER_DAY} boots a day");
+}
+
+// ---- The settings record and the cold-chain log (issue 16) ----
+
+use hter::iface::Law;
+use hter::persist::flash::LogStore;
+use hter::persist::log::{Interval, LogEntry};
+use hter::persist::SettingsRecord;
+use hter::step::Mode;
+
+const L4_PAGE: usize = 2048;
+
+fn settings(seq: u32, setpoint_c: f32, law: Law) -> SettingsRecord {
+    SettingsRecord { seq, setpoint_c, law, cal_ice: [0.1, 0.0], cal_warm: [25.2, 25.0] }
+}
+
+#[test]
+fn a_power_cut_anywhere_in_a_settings_write_leaves_the_old_or_the_new_settings() {
+    let (old, new) = (settings(1, 4.0, Law::Gpc), settings(2, 5.0, Law::Pi));
+    // Fill the region's pages with history first, so the cut also falls in page turns.
+    let mut store = open(MockFlash::<L4_PAGE>::blank(4), 4);
+    let h = HistoryRecord { recorded_s: 1, ..HistoryRecord::EMPTY };
+    for _ in 0..30 {
+        block_on(store.save_history(&h)).unwrap();
+    }
+    block_on(store.save_settings(&old)).unwrap();
+    let image = store.release().bytes;
+    let ops = {
+        let mut f = MockFlash::<L4_PAGE>::blank(4);
+        f.bytes = image.clone();
+        let mut s = open(f, 4);
+        block_on(s.save_settings(&new)).unwrap();
+        s.release().ops
+    };
+    let (mut saw_old, mut saw_new) = (0, 0);
+    for cut in 0..=ops {
+        let mut f = MockFlash::<L4_PAGE>::blank(4);
+        f.bytes = image.clone();
+        f.cut_after(cut);
+        let mut s = open(f, 4);
+        let written = block_on(s.save_settings(&new)).is_ok();
+        let mut s = reboot(s, 4);
+        block_on(s.scrub()).unwrap();
+        match block_on(s.load_settings()) {
+            Ok(r) if r == new => saw_new += 1,
+            Ok(r) if r == old => {
+                assert!(!written, "cut {cut}: a completed write must be read back");
+                saw_old += 1
+            }
+            other => panic!("cut {cut}: {other:?}"),
+        }
+        assert_eq!(block_on(s.load_history()).value.recorded_s, 1, "cut {cut}: the history survives");
+        assert_eq!(s.release().torn_words(), 0, "cut {cut}: no ECC damage left behind");
+    }
+    assert!(saw_old > 0 && saw_new > 0, "the sweep covers both outcomes: {saw_old} / {saw_new}");
+}
+
+fn entry(i: u32) -> LogEntry {
+    let c = 4.0 + (i % 50) as f32 * 0.01;
+    LogEntry::Interval {
+        t_s: 300 * (i + 1),
+        interval: Interval { mean_c: c, min_c: c - 0.1, max_c: c + 0.1, duty: 0.45, mode: Mode::Normal },
+    }
+}
+
+fn log_entries<const PAGE: usize>(log: &mut LogStore<MockFlash<PAGE>, MockEcc>) -> Vec<LogEntry> {
+    let mut out = Vec::new();
+    let skipped = block_on(log.for_each(0, |e| {
+        out.push(*e);
+        true
+    }))
+    .unwrap();
+    assert_eq!(skipped, 0);
+    out
+}
+
+fn open_log<const PAGE: usize>(flash: MockFlash<PAGE>, pages: usize) -> LogStore<MockFlash<PAGE>, MockEcc> {
+    let ecc = flash.ecc.clone();
+    LogStore::new(flash, ecc, 0..(pages * PAGE) as u32).unwrap()
+}
+
+#[test]
+fn the_log_keeps_thirty_days_of_intervals_in_its_region_and_overwrites_the_oldest_after() {
+    // The firmware's log region: 248 pages of 2 KiB.
+    let mut log = open_log(MockFlash::<L4_PAGE>::blank(248), 248);
+    let days = 30 * 288;
+    for i in 0..days {
+        block_on(log.push(&entry(i))).unwrap();
+    }
+    let kept = log_entries(&mut log);
+    assert_eq!(kept.len(), days as usize, "30 days of 5-minute intervals fit");
+    assert_eq!(kept.first(), Some(&entry(0)));
+    assert_eq!(block_on(log.last_t_s()), Ok(300 * days));
+    // Another 30 days: the oldest go, the newest stay, in order.
+    for i in days..2 * days {
+        block_on(log.push(&entry(i))).unwrap();
+    }
+    let kept = log_entries(&mut log);
+    assert!(kept.len() >= days as usize, "at least 30 days kept: {}", kept.len());
+    assert_eq!(kept.last(), Some(&entry(2 * days - 1)));
+    assert!(kept.windows(2).all(|w| w[0].t_s() < w[1].t_s()));
+}
+
+#[test]
+fn a_power_cut_anywhere_in_a_log_append_loses_at_most_the_entry_being_written() {
+    let pages = 4;
+    let mut base = open_log(MockFlash::<L4_PAGE>::blank(pages), pages);
+    // Nearly full: the appends below turn pages and overwrite the oldest.
+    let n0 = 4 * 63 - 3;
+    for i in 0..n0 {
+        block_on(base.push(&entry(i))).unwrap();
+    }
+    let image = base.release().bytes;
+    for cut in 0..60 {
+        let mut f = MockFlash::<L4_PAGE>::blank(pages);
+        f.bytes = image.clone();
+        f.cut_after(cut);
+        let mut log = open_log(f, pages);
+        let mut done = n0;
+        for i in n0..n0 + 8 {
+            if block_on(log.push(&entry(i))).is_err() {
+                break;
+            }
+            done = i + 1;
+        }
+        let mut flash = log.release();
+        flash.power_on();
+        let mut log = open_log(flash, pages);
+        block_on(log.scrub()).unwrap();
+        let kept = log_entries(&mut log);
+        let newest = kept.last().map(|e| e.t_s() / 300 - 1).unwrap();
+        assert!(newest + 1 == done || newest == done, "cut {cut}: newest {newest}, {done} completed");
+        assert!(kept.windows(2).all(|w| w[0].t_s() < w[1].t_s()), "cut {cut}: in order");
+        // Every completed entry that the overwrite did not reclaim is there.
+        let oldest = kept.first().unwrap().t_s() / 300 - 1;
+        assert_eq!(kept.len() as u32, newest - oldest + 1, "cut {cut}: no hole");
+        // And the log takes appends again.
+        block_on(log.push(&entry(1000))).unwrap();
+        assert_eq!(log.release().torn_words(), 0);
+    }
 }

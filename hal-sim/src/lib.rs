@@ -8,6 +8,7 @@ pub mod campaign_cmd;
 pub mod compare_cmd;
 pub mod demo_cmd;
 pub mod fault;
+pub mod flash;
 pub mod identify_cmd;
 pub mod log;
 pub mod log2csv_cmd;

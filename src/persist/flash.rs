@@ -603,3 +603,94 @@ impl<F: NorFlash, E: EccErrors> LogStore<F, E> {
 }
 
 const _: () = assert!(ENTRY_LEN <= BUF_LEN);
+
+/// Writes one [`Save`](super::Save) where it belongs: the log entries to the log, every other
+/// record to the store under its key (encoded here, stored through one call: one copy of the
+/// storage layer's write path in the firmware).
+pub async fn write<F: NorFlash, E: EccErrors, G: NorFlash, H: EccErrors>(
+    store: &mut Store<F, E>,
+    log: &mut LogStore<G, H>,
+    save: &super::Save,
+) -> Result<(), StoreError> {
+    use super::Save;
+    let mut buf = [0u8; HistoryRecord::LEN];
+    let (key, len) = match save {
+        Save::Log(entry) => return log.push(entry).await,
+        Save::Model(rec) => (key::MODEL, put(&mut buf, &rec.encode())),
+        Save::History(h) | Save::AlarmHistory(h) => (key::HISTORY, put(&mut buf, &h.encode())),
+        Save::Calibration(cal) => (key::CALIBRATION, put(&mut buf, &CalibrationRecord { cal: *cal }.encode())),
+        Save::Settings(s) => (key::SETTINGS, put(&mut buf, &s.encode())),
+    };
+    store.store(key, buf.get(..len).unwrap_or(&[])).await
+}
+
+/// Copies `bytes` to the front of `buf`; their length (0 if they do not fit).
+fn put(buf: &mut [u8], bytes: &[u8]) -> usize {
+    match buf.get_mut(..bytes.len()) {
+        Some(dst) => {
+            dst.copy_from_slice(bytes);
+            bytes.len()
+        }
+        None => 0,
+    }
+}
+
+/// What a boot restored from both regions, each record on its own (a torn history does not cost
+/// the settings), with how each was obtained for the boot log.
+#[derive(Clone, Copy, Debug)]
+pub struct Restored {
+    /// The settings, if a valid record is stored.
+    pub settings: Result<SettingsRecord, LoadStatus>,
+    /// The calibration record (an older firmware's, or the build's constant stored at boot).
+    pub calibration: Loaded<TwoPoint>,
+    /// The cold-chain history.
+    pub history: Loaded<HistoryRecord>,
+    /// The self-tuner's configuration restarted from the stored model (`None`: no self-tuner).
+    pub adaptive: Option<Loaded<AdaptiveConfig>>,
+    /// The newest log entry's record time, s.
+    pub log_last_s: Result<u32, StoreError>,
+    /// Power-cut damage repaired in both regions.
+    pub repairs: Repairs,
+}
+
+impl Restored {
+    /// The application's boot from what was restored.
+    pub fn boot(&self, reset: super::ResetCause, fault: Option<crate::failsafe::StopInfo>) -> crate::app::Boot {
+        crate::app::Boot {
+            settings: self.settings.ok(),
+            calibration: self.calibration.value,
+            adaptive: self.adaptive.map(|a| a.value),
+            history: self.history.value,
+            log_last_s: self.log_last_s.unwrap_or(0),
+            reset,
+            fault,
+            pages_lost: u8::try_from(self.repairs.total()).unwrap_or(u8::MAX),
+        }
+    }
+}
+
+/// Scrubs both regions, then loads every record (the boot's sequence, shared by the firmware and
+/// `hter virtual-board`). `adaptive`: the build's self-tuner configuration, if it has one.
+pub async fn restore<F: NorFlash, E: EccErrors, G: NorFlash, H: EccErrors>(
+    store: &mut Store<F, E>,
+    log: &mut LogStore<G, H>,
+    adaptive: Option<AdaptiveConfig>,
+) -> Restored {
+    // A scrub that fails leaves the loads to repair what they read.
+    let _ = store.scrub().await;
+    let _ = log.scrub().await;
+    let settings = store.load_settings().await;
+    let calibration = store.load_calibration().await;
+    let history = store.load_history().await;
+    let adaptive = match adaptive {
+        Some(cfg) => Some(store.load_adaptive(cfg).await),
+        None => None,
+    };
+    let log_last_s = log.last_t_s().await;
+    let (a, b) = (store.repairs(), log.repairs());
+    let repairs = Repairs {
+        words_cleared: a.words_cleared.saturating_add(b.words_cleared),
+        pages_erased: a.pages_erased.saturating_add(b.pages_erased),
+    };
+    Restored { settings, calibration, history, adaptive, log_last_s, repairs }
+}
