@@ -42,6 +42,7 @@ use crate::scenario::{Scenario, Start, PREROLL_S};
 
 mod rig;
 mod row;
+pub mod virtual_board;
 
 use rig::{step_clock_ms, Rig};
 pub use row::{Row, RowMode};

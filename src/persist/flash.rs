@@ -126,6 +126,11 @@ impl<F: NorFlash, E: EccErrors> EccFlash<F, E> {
     pub fn into_inner(self) -> F {
         self.flash
     }
+
+    /// The flash underneath (a test's mock, to arm a power cut).
+    pub fn inner_mut(&mut self) -> &mut F {
+        &mut self.flash
+    }
 }
 
 impl<F: NorFlash, E> ErrorType for EccFlash<F, E> {
@@ -372,6 +377,11 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
     /// ECC damage repaired since the store was opened.
     pub fn repairs(&self) -> Repairs {
         self.repairs
+    }
+
+    /// The flash underneath (a test's mock, to arm a power cut).
+    pub fn flash_mut(&mut self) -> &mut F {
+        self.map.flash().inner_mut()
     }
 
     /// Erases the whole region.

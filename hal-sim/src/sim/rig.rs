@@ -82,6 +82,29 @@ impl Rig {
         }
     }
 
+    /// The board's inputs at board time `t_ms` for [`hter::app::App::sample`] (what
+    /// [`Rig::step`] hands the step, for the glue that owns an `App`); `None` on an ideal
+    /// plant, which has no ADC: its temperature is [`Rig::true_temp_c`].
+    pub(super) fn sample_in(&mut self, t_ms: u64) -> Option<hter::app::SampleIn> {
+        match self {
+            Rig::Physical { plant, adc, ssr, .. } => {
+                adc.set_temperature_c(plant.sensed_temp_c());
+                let counts = match adc.sample() {
+                    Ok(c) => c,
+                    Err(never) => match never {},
+                };
+                Some(hter::app::SampleIn {
+                    t_ms,
+                    counts,
+                    reference_ok: true,
+                    supply_v: Some(plant.supply_v() as f32),
+                    switched_v: Some(ssr.switched_rail_v(plant.supply_v()) as f32),
+                })
+            }
+            Rig::Arx(_) => None,
+        }
+    }
+
     /// Drives the actuator at `t_s`; returns the duty the plant really gets.
     pub(super) fn actuate(&mut self, out: &StepOutput, t_s: f64) -> f64 {
         match self {

@@ -1,0 +1,106 @@
+//! The virtual board in-process: the library's App, its interface and its flash in front of the
+//! simulated carrier (`hter virtual-board` serves exactly this on a pseudo-terminal; the
+//! end-to-end test through the pty and `hter board` is `tests/board_cli.rs`).
+
+use hal_sim::plant::Load;
+use hal_sim::sim::virtual_board::{VirtualBoard, VirtualOptions};
+use hal_sim::sim::PlantChoice;
+
+fn board() -> VirtualBoard {
+    VirtualBoard::new(&VirtualOptions { plant: PlantChoice::Hter1, load: Load::Full, ambient_c: 28.0, seed: 1 }).unwrap()
+}
+
+fn run(b: &mut VirtualBoard, seconds: f64) {
+    for _ in 0..(seconds / 10.0) as usize {
+        b.step().unwrap();
+    }
+}
+
+fn status(b: &mut VirtualBoard) -> Vec<(String, String)> {
+    let reply = b.request("status");
+    assert!(reply.ends_with("ok\r\n"), "{reply}");
+    reply.lines().filter_map(|l| l.split_once('=')).map(|(k, v)| (k.to_string(), v.to_string())).collect()
+}
+
+fn field(b: &mut VirtualBoard, key: &str) -> String {
+    status(b).into_iter().find(|(k, _)| k == key).unwrap_or_else(|| panic!("no {key}")).1
+}
+
+#[test]
+fn the_load_follows_an_accepted_setpoint_and_refused_ones_change_nothing() {
+    let mut b = board();
+    run(&mut b, 1800.0);
+    assert_eq!(field(&mut b, "mode"), "normal");
+    assert!((b.load_c() - 4.0).abs() < 0.3, "holds 4 °C: {}", b.load_c());
+    assert_eq!(b.request("set setpoint_c 12"), "err setpoint_c: 12.00 is outside 2.5…7.5\r\n");
+    assert_eq!(b.request("set setpoint_c nan"), "err setpoint_c: not a decimal number\r\n");
+    assert_eq!(field(&mut b, "setpoint_c"), "4.00");
+    assert_eq!(field(&mut b, "settings_version"), "0");
+    assert_eq!(b.request("set setpoint_c 5"), "ok\r\n");
+    run(&mut b, 3.0 * 3600.0);
+    assert_eq!(field(&mut b, "setpoint_c"), "5.00");
+    assert!((b.load_c() - 5.0).abs() < 0.2, "the load followed: {}", b.load_c());
+    assert_eq!(b.write_errors, 0);
+}
+
+#[test]
+fn history_is_a_csv_of_intervals_and_events_in_time_order() {
+    let mut b = board();
+    run(&mut b, 3600.0);
+    assert_eq!(b.request("set setpoint_c 5"), "ok\r\n");
+    run(&mut b, 3600.0);
+    let reply = b.request("history");
+    let mut lines: Vec<&str> = reply.split("\r\n").collect();
+    assert_eq!(lines.pop(), Some(""));
+    assert_eq!(lines.pop(), Some("ok"));
+    assert_eq!(lines[0], "t_s,temp_c,min_c,max_c,duty,mode,event");
+    let rows: Vec<Vec<&str>> = lines[1..].iter().map(|l| l.split(',').collect()).collect();
+    assert!(rows.iter().all(|r| r.len() == 7), "{rows:?}");
+    let intervals = rows.iter().filter(|r| r[6].is_empty()).count();
+    // 2 h of 5-minute intervals (the one in progress is not closed yet).
+    assert!((23..=24).contains(&intervals), "{intervals}");
+    assert!(rows.iter().any(|r| r[6] == "set:setpoint_c=5.00"), "the setting is an event");
+    assert!(rows.iter().any(|r| r[6] == "restarted"), "the boot is an event");
+    let t: Vec<u32> = rows.iter().map(|r| r[0].parse().unwrap()).collect();
+    assert!(t.windows(2).all(|w| w[0] <= w[1]), "time order");
+    let since = b.request("history 3600");
+    assert!(since.lines().skip(1).filter(|l| *l != "ok").all(|l| l.split(',').next().unwrap().parse::<u32>().unwrap() >= 3600));
+}
+
+#[test]
+fn a_power_cut_inside_a_settings_write_leaves_the_old_or_the_new_setpoint_and_the_board_recovers() {
+    let (mut saw_old, mut saw_new) = (0, 0);
+    // Every cut point of the write, then one past its end.
+    for ops in 0.. {
+        let mut b = board();
+        run(&mut b, 600.0);
+        b.cut_next_settings_write(ops);
+        assert_eq!(b.request("set setpoint_c 6"), "ok\r\n");
+        run(&mut b, 120.0);
+        if b.restarts == 0 {
+            assert!(ops > 0, "the write takes at least one flash operation");
+            assert_eq!(field(&mut b, "setpoint_c"), "6.00", "a completed write");
+            break;
+        }
+        assert_eq!(b.restarts, 1, "cut after {ops} ops: the board restarted once");
+        let s = field(&mut b, "setpoint_c");
+        match s.as_str() {
+            "4.00" => saw_old += 1,
+            "6.00" => saw_new += 1,
+            other => panic!("cut after {ops} ops: setpoint {other}"),
+        }
+        assert_eq!(field(&mut b, "resets"), "2", "cut after {ops}: both boots counted");
+        run(&mut b, 1800.0);
+        assert_eq!(field(&mut b, "mode"), "normal");
+        let want: f64 = s.parse().unwrap();
+        assert!((b.load_c() - want).abs() < 0.5, "cut after {ops}: controls to {want}: {}", b.load_c());
+        // And takes settings again.
+        assert_eq!(b.request("set setpoint_c 5"), "ok\r\n");
+        run(&mut b, 120.0);
+        assert_eq!(field(&mut b, "setpoint_c"), "5.00");
+        assert!(b.request("history").ends_with("ok\r\n"));
+    }
+    // The store's item is only valid once its last word is programmed: every cut keeps the old
+    // value (sequential-storage's CRC over the item), the completed write gives the new one.
+    assert!(saw_old >= 3, "{saw_old} old / {saw_new} new");
+}
