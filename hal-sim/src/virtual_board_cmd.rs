@@ -1,0 +1,94 @@
+//! `hter virtual-board`: a simulated carrier on a pseudo-terminal. The library's
+//! [`hter::app::App`] — the step, the record and the interface handler the firmware runs — in
+//! front of the plant model, its flash the mock L4 flash ([`crate::sim::virtual_board`]),
+//! served on a pty whose slave `--link PATH` names, N× faster than real time, until stopped
+//! (Ctrl-C). `hter board --port PATH …` cannot tell it from a board.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+
+use crate::link::PtyLink;
+use crate::plant::Load;
+use crate::sim::virtual_board::{VirtualBoard, VirtualOptions};
+use crate::sim::PlantChoice;
+use crate::sim_cmd::finite;
+
+/// `hter virtual-board` arguments.
+#[derive(clap::Args, Debug, Clone)]
+pub struct VirtualBoardArgs {
+    /// Where the pseudo-terminal appears (a symlink to its device), e.g. /tmp/carrier.
+    #[arg(long)]
+    pub link: PathBuf,
+    /// The carrier: hter1 (aluminium) or hter2 (stainless steel).
+    #[arg(long, default_value = "hter1")]
+    pub plant: String,
+    /// Load: full or half.
+    #[arg(long, value_enum, default_value = "full")]
+    pub load: Load,
+    /// Ambient, °C.
+    #[arg(long, default_value_t = 28.0, allow_negative_numbers = true)]
+    pub ambient: f64,
+    /// Simulated seconds per real second (1 = real time; at 600 a 10 s sample takes 17 ms).
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// Seed of the ADC noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Test hook: the first settings write loses power after this many flash operations (word
+    /// programs, page erases); the board restarts as after a brown-out and restores its flash.
+    #[arg(long)]
+    pub cut_settings_write: Option<usize>,
+    /// Stop after this many simulated seconds (default: run until stopped).
+    #[arg(long)]
+    pub duration: Option<f64>,
+}
+
+/// Serves the virtual board until stopped (or `--duration`).
+pub fn run(a: &VirtualBoardArgs) -> Result<()> {
+    let speed = finite("--speed", a.speed)?;
+    if !(0.01..=100_000.0).contains(&speed) {
+        bail!("--speed must be within 0.01…100000, got {speed}");
+    }
+    let ambient_c = finite("--ambient", a.ambient)?;
+    let plant = PlantChoice::parse(&a.plant)?;
+    let mut board = VirtualBoard::new(&VirtualOptions { plant, load: a.load, ambient_c, seed: a.seed })?;
+    if let Some(ops) = a.cut_settings_write {
+        board.cut_next_settings_write(ops);
+    }
+    let mut link = PtyLink::open(&a.link).with_context(|| format!("--link {}", a.link.display()))?;
+    eprintln!(
+        "virtual board: {} {:?} load at {ambient_c} °C ambient, {speed}× real time, on {} ({}); Ctrl-C stops it",
+        plant.name(),
+        a.load,
+        a.link.display(),
+        link.device().display()
+    );
+    let ts = f64::from(hter::step::CarrierConfig::DEFAULT.ts_s);
+    let period = Duration::from_secs_f64(ts / speed);
+    let mut next = Instant::now();
+    let mut restarts = board.restarts;
+    loop {
+        let now = Instant::now();
+        if now >= next {
+            if board.step().is_none() {
+                bail!("the virtual board's plant has no sensor to sample");
+            }
+            if board.restarts != restarts {
+                restarts = board.restarts;
+                eprintln!("virtual board: power cut in a settings write at t = {} s; restarted", board.sim_s());
+            }
+            // A slow host does not make the simulation catch up in a burst.
+            next = (next + period).max(now);
+            if a.duration.is_some_and(|d| board.sim_s() >= d) {
+                return Ok(());
+            }
+            continue;
+        }
+        if let Some(line) = link.poll_line(next - now).context("reading the link")? {
+            let reply = board.request(&line);
+            link.send(&reply).context("writing the link")?;
+        }
+    }
+}
