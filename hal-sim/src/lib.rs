@@ -9,6 +9,7 @@ pub mod compare_cmd;
 pub mod demo_cmd;
 pub mod fault;
 pub mod identify_cmd;
+pub mod link;
 pub mod log;
 pub mod log2csv_cmd;
 pub mod metrics;
