@@ -3,6 +3,7 @@
 #![warn(missing_docs)]
 
 pub mod arx;
+pub mod board_cmd;
 pub mod bound;
 pub mod campaign_cmd;
 pub mod compare_cmd;
