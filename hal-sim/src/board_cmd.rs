@@ -22,6 +22,11 @@ pub const BAUD: u32 = 115_200;
 /// device that is not the board.
 const MAX_REPLY_BYTES: usize = 64 << 20;
 
+/// Silence that ends the drain of stale input after opening the port.
+const QUIET: Duration = Duration::from_millis(50);
+/// Longest drain of stale input: a board still streaming an old reply stops at our request.
+const MAX_DRAIN: Duration = Duration::from_secs(2);
+
 /// Arguments of `hter board`.
 #[derive(clap::Args, Debug)]
 pub struct BoardArgs {
@@ -446,7 +451,7 @@ pub fn run(args: &BoardArgs) -> Result<()> {
         bail!("--timeout must be within (0, 3600] s, got {}", args.timeout);
     }
     check_command(&args.command)?;
-    let port = serialport::new(&args.port, BAUD)
+    let mut port = serialport::new(&args.port, BAUD)
         .data_bits(serialport::DataBits::Eight)
         .parity(serialport::Parity::None)
         .stop_bits(serialport::StopBits::One)
@@ -454,9 +459,16 @@ pub fn run(args: &BoardArgs) -> Result<()> {
         .timeout(Duration::from_secs_f64(args.timeout))
         .open()
         .map_err(|e| anyhow!("cannot open '{}': {}", args.port, e.description))?;
-    // Bytes from before this connection (a reply nobody read, a person's typing) are not ours.
-    port.clear(serialport::ClearBuffer::Input)
-        .map_err(|e| anyhow!("cannot open '{}': {}", args.port, e.description))?;
+    let opened = |e: serialport::Error| anyhow!("cannot open '{}': {}", args.port, e.description);
+    // Bytes from before this connection (the rest of a reply a killed client never read, a
+    // person's typing) are not ours: drop what is buffered, then what still arrives until the
+    // line is quiet (a board that is still streaming stops at our request; docs/interface.md).
+    port.clear(serialport::ClearBuffer::Input).map_err(opened)?;
+    port.set_timeout(QUIET).map_err(opened)?;
+    let start = std::time::Instant::now();
+    let mut stale = [0u8; 4096];
+    while start.elapsed() < MAX_DRAIN && port.read(&mut stale).is_ok_and(|n| n > 0) {}
+    port.set_timeout(Duration::from_secs_f64(args.timeout)).map_err(opened)?;
     run_on(&mut Board::new(port, &args.port, args.timeout), &args.command)
 }
 

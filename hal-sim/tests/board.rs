@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 use std::process::{Command, Output};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
@@ -73,16 +73,33 @@ impl Script {
                 }
             }
             ["history"] => format!("{HISTORY}ok"),
+            ["history", "0"] => format!("{}ok", month()),
             ["identify"] => "ok".into(),
             _ => format!("err {}: unknown command", words[0]),
         }
     }
 }
 
+/// 30 days of 5-minute intervals and an event a day: the record's full size, about 0.4 MB.
+fn month() -> String {
+    let mut csv = String::from("t_s,temp_c,min_c,max_c,duty,mode,event\n");
+    for i in 1..=30 * 288 {
+        let t = 300 * i;
+        let c = 5.0 + 0.5 * (f64::from(i) / 40.0).sin();
+        csv += &format!("{t},{c:.2},{:.2},{:.2},0.412,normal,\n", c - 0.3, c + 0.3);
+        if i % 288 == 0 {
+            csv += &format!("{t},{c:.2},{c:.2},{c:.2},,,alarm:heat_10h\n");
+        }
+    }
+    csv
+}
+
 struct Fake {
     path: PathBuf,
     stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<Vec<String>>>,
+    /// The requests it heard, in order.
+    heard: Arc<Mutex<Vec<String>>>,
+    thread: Option<JoinHandle<()>>,
 }
 
 impl Fake {
@@ -90,19 +107,18 @@ impl Fake {
         let path = tmp(name);
         let mut link = PtyLink::open(&path).expect("open the pty");
         let stop = Arc::new(AtomicBool::new(false));
-        let halt = stop.clone();
+        let (halt, heard) = (stop.clone(), Arc::new(Mutex::new(Vec::new())));
+        let log = heard.clone();
         let thread = std::thread::spawn(move || {
             let mut script = Script { setpoint_c: 5.0, commissioning };
-            let mut heard = Vec::new();
             while !halt.load(Ordering::Relaxed) {
                 if let Some(line) = link.poll_line(Duration::from_millis(20)).expect("poll") {
                     link.send(&script.answer(&line)).expect("send");
-                    heard.push(line);
+                    log.lock().unwrap().push(line);
                 }
             }
-            heard
         });
-        Self { path, stop, thread: Some(thread) }
+        Self { path, stop, heard, thread: Some(thread) }
     }
 
     fn port(&self) -> &str {
@@ -112,9 +128,9 @@ impl Fake {
     /// Stops the stand-in; the requests it heard, in order.
     fn finish(mut self) -> Vec<String> {
         self.stop.store(true, Ordering::Relaxed);
-        let heard = self.thread.take().unwrap().join().unwrap();
+        self.thread.take().unwrap().join().unwrap();
         assert!(!self.path.exists(), "the link's symlink outlived it");
-        heard
+        std::mem::take(&mut *self.heard.lock().unwrap())
     }
 }
 
@@ -176,6 +192,23 @@ fn history_goes_verbatim_into_a_csv_monitor_reads() {
     close("max_c", 6.1);
     assert_eq!(v["time_below_2_s"], 0.0);
     assert_eq!(v["time_in_range_s"], 600.0);
+    let _ = std::fs::remove_file(&csv);
+}
+
+#[test]
+fn a_full_30_day_history_arrives_whole() {
+    let fake = Fake::start("month", vec!["idle"]);
+    let csv = tmp("month.csv");
+    let start = std::time::Instant::now();
+    let o = hter(&["board", "--port", fake.port(), "history", "--output", csv.to_str().unwrap(), "--since", "0"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    eprintln!("30-day history over the pty: {:.2} s", start.elapsed().as_secs_f64());
+    assert_eq!(std::fs::read_to_string(&csv).unwrap(), month());
+    assert!(stdout(&o).starts_with("wrote 8670 rows (8640 intervals, 30 events)"), "{}", stdout(&o));
+    fake.finish();
+    let o = hter(&["monitor", "--input", csv.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let _ = std::fs::remove_file(&csv);
 }
 
 #[test]
@@ -196,6 +229,24 @@ fn identify_follows_commissioning_to_its_end() {
     let fake = Fake::start("identify-fail", vec!["excite:10", "failed:no_excitation"]);
     let o = hter(&["board", "--port", fake.port(), "identify"]);
     assert_one_line_error(&o, "commissioning failed: no_excitation");
+    fake.finish();
+}
+
+#[test]
+fn a_killed_clients_unread_reply_does_not_reach_the_next_client() {
+    let fake = Fake::start("stale", vec!["idle"]);
+    {
+        // Asks for the whole record and goes away without reading it.
+        let mut port = serialport::new(fake.port(), 115_200).open_native().unwrap();
+        std::io::Write::write_all(&mut port, b"history 0\n").unwrap();
+    }
+    while !fake.heard.lock().unwrap().iter().any(|l| l == "history 0") {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let o = hter(&["board", "--port", fake.port(), "status", "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(v["t_s"], 86400);
     fake.finish();
 }
 
