@@ -3,6 +3,7 @@
 #![warn(missing_docs)]
 
 pub mod arx;
+pub mod board_cmd;
 pub mod bound;
 pub mod campaign_cmd;
 pub mod compare_cmd;
@@ -10,6 +11,7 @@ pub mod demo_cmd;
 pub mod fault;
 pub mod flash;
 pub mod identify_cmd;
+pub mod link;
 pub mod log;
 pub mod log2csv_cmd;
 pub mod metrics;

@@ -4,7 +4,9 @@
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use hal_sim::{campaign_cmd, compare_cmd, demo_cmd, identify_cmd, log2csv_cmd, monitor_cmd, rtd_cmd, sim_cmd};
+use hal_sim::{
+    board_cmd, campaign_cmd, compare_cmd, demo_cmd, identify_cmd, log2csv_cmd, monitor_cmd, rtd_cmd, sim_cmd,
+};
 
 /// Adaptive control of a thermoelectric (Peltier) vaccine carrier: simulate, identify, convert.
 #[derive(Parser, Debug)]
@@ -33,6 +35,9 @@ enum Command {
     /// Run many randomized 24 h missions (plant ±50 %, ambient 0–43 °C, lid openings, supply
     /// sags, sensor spikes, random hardware faults) in parallel and judge them.
     Campaign(campaign_cmd::CampaignArgs),
+    /// Talk to a carrier (or `hter virtual-board`) over its serial port: status, settings,
+    /// the cold-chain record, on-board commissioning.
+    Board(board_cmd::BoardArgs),
 }
 
 fn main() -> ExitCode {
@@ -60,6 +65,7 @@ fn main() -> ExitCode {
         Some(Command::Compare(a)) => compare_cmd::run(&a),
         Some(Command::Log2csv(a)) => log2csv_cmd::run(&a),
         Some(Command::Campaign(a)) => campaign_cmd::run(&a),
+        Some(Command::Board(a)) => board_cmd::run(&a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -12,7 +12,8 @@ use crate::log;
 /// Arguments of `hter monitor`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct MonitorArgs {
-    /// CSV log with columns t_s and temp_c (an empty temp_c is a sample with no reading).
+    /// CSV log with columns t_s and temp_c (an empty temp_c is a sample with no reading); rows
+    /// with a non-empty `event` column (the board's history) are events, not samples.
     #[arg(long)]
     pub input: PathBuf,
     /// Print one JSON object.
@@ -151,7 +152,15 @@ pub fn run(args: &MonitorArgs) -> Result<()> {
         .enumerate()
         .map(|(i, v)| v.ok_or_else(|| anyhow!("'{shown}' line {}, column 't_s': empty", i + 2)))
         .collect::<Result<_>>()?;
-    log::check_increasing(&args.input, &t)?;
+    // The board's history (`hter board history`, docs/interface.md): a row with an `event` is
+    // an event, not a sample (its temperature repeats the last interval's, its time may equal
+    // an interval's end), so it is left out of the record.
+    let events = log::read_text_column(&args.input, "event")?;
+    let is_sample = |i: usize| events.as_ref().and_then(|e| e.get(i)).is_none_or(|e| e.is_empty());
+    let lines: Vec<usize> = (0..t.len()).filter(|&i| is_sample(i)).map(|i| i + 2).collect();
+    let (t, temp): (Vec<f64>, Vec<Option<f64>>) =
+        t.into_iter().zip(temp).enumerate().filter(|&(i, _)| is_sample(i)).map(|(_, p)| p).unzip();
+    log::check_increasing_lines(&args.input, &t, &lines)?;
     if t.last().is_some_and(|&t| t > 16_000_000.0) {
         bail!("'{shown}': t_s beyond 16e6 s (185 days) is not supported");
     }

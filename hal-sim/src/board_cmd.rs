@@ -1,0 +1,636 @@
+//! `hter board`: the host side of the carrier's settings and data interface (SPEC §8), over a
+//! serial port: the NUCLEO's ST-LINK virtual COM port (`/dev/ttyACM0`) or the pseudo-terminal
+//! of `hter virtual-board` (the symlink it makes). The wire protocol is docs/interface.md: one
+//! request line, then data lines and one final line, `ok` or `err <what>: <why>`.
+//!
+//! [`Board`] speaks the protocol over anything `Read + Write` (tested on scripted bytes);
+//! [`status_json`] maps `status`'s `key=value` lines to typed JSON; [`run`] is the command.
+
+use std::io::{IsTerminal, Read, Write};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use anyhow::{anyhow, bail, Context, Result};
+use serde_json::{Map, Number, Value};
+
+use crate::link::MAX_LINE_BYTES;
+
+/// The interface's line speed, baud (8N1, no flow control).
+pub const BAUD: u32 = 115_200;
+
+/// Largest reply accepted, bytes: a 30-day history is about 0.4 MB; anything far beyond is a
+/// device that is not the board.
+const MAX_REPLY_BYTES: usize = 64 << 20;
+
+/// Silence that ends the drain of stale input after opening the port.
+const QUIET: Duration = Duration::from_millis(50);
+/// Longest drain of stale input: a board still streaming an old reply stops at our request.
+const MAX_DRAIN: Duration = Duration::from_secs(2);
+
+/// Arguments of `hter board`.
+#[derive(clap::Args, Debug)]
+pub struct BoardArgs {
+    /// Serial device: the board's port (e.g. /dev/ttyACM0) or the path of `hter virtual-board --link`.
+    #[arg(long)]
+    pub port: String,
+    /// Longest wait for the board's next byte, s.
+    #[arg(long, default_value_t = 5.0)]
+    pub timeout: f64,
+    /// The request.
+    #[command(subcommand)]
+    pub command: BoardCommand,
+}
+
+/// What to ask the board.
+#[derive(clap::Subcommand, Debug)]
+pub enum BoardCommand {
+    /// Print the board's status (SPEC §8), one key=value per line.
+    Status {
+        /// Print one JSON object: numbers as numbers, `model` as {a, b, k}, `-` as null.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Print every setting, one key=value per line.
+    Get,
+    /// Change a setting (setpoint_c, controller, cal_ice, cal_warm, model, ack); the board
+    /// validates it and refuses a bad value with one line, changing nothing.
+    Set {
+        /// Setting name.
+        key: String,
+        /// New value (e.g. 5, gpc, 0.12,0.00, or a model -1.8,0.81;-0.02,-0.01;1).
+        #[arg(allow_hyphen_values = true)]
+        value: String,
+    },
+    /// Acknowledge the alarm.
+    Ack,
+    /// Save the cold-chain record as a CSV that `hter monitor --input` reads.
+    History {
+        /// CSV file to write (the board's rows verbatim, header included).
+        #[arg(long)]
+        output: PathBuf,
+        /// Only rows from this board time on, s.
+        #[arg(long, allow_negative_numbers = true)]
+        since: Option<f64>,
+    },
+    /// Start on-board commissioning (rest, PRBS, fit, check, store) and follow its progress
+    /// until it ends (Ctrl-C stops watching; the board carries on).
+    Identify {
+        /// Start it and return at once.
+        #[arg(long)]
+        no_wait: bool,
+        /// Abort a commissioning that is running (the previous model stays).
+        #[arg(long, conflicts_with = "no_wait")]
+        abort: bool,
+    },
+}
+
+/// Checks a request before it goes out: one line of printable ASCII within the board's limit
+/// (a value with a line end in it would be a second command).
+pub fn check_request(line: &str) -> Result<()> {
+    if let Some(c) = line.chars().find(|c| !(' '..='~').contains(c)) {
+        bail!("{:?} is not allowed in a request (printable ASCII only)", c);
+    }
+    if line.len() > MAX_LINE_BYTES {
+        bail!("the request is {} bytes, the board takes at most {MAX_LINE_BYTES}", line.len());
+    }
+    Ok(())
+}
+
+/// One conversation with a board over `port`.
+pub struct Board<P> {
+    port: P,
+    name: String,
+    timeout_s: f64,
+    buf: Vec<u8>,
+}
+
+impl<P: Read + Write> Board<P> {
+    /// `name` and `timeout_s` only go into error messages; the port's own timeout applies.
+    pub fn new(port: P, name: &str, timeout_s: f64) -> Self {
+        Self { port, name: name.to_string(), timeout_s, buf: Vec::new() }
+    }
+
+    /// Sends `line` and reads the reply: its data lines if it ends in `ok`; an error whose
+    /// message is the board's `err …` line, verbatim, if it ends in `err`.
+    pub fn request(&mut self, line: &str) -> Result<Vec<String>> {
+        check_request(line)?;
+        self.port
+            .write_all(format!("{line}\n").as_bytes())
+            .and_then(|()| self.port.flush())
+            .with_context(|| format!("cannot write to '{}'", self.name))?;
+        let mut data = Vec::new();
+        let mut bytes = 0usize;
+        loop {
+            let l = self.next_line(line)?;
+            bytes += l.len();
+            if bytes > MAX_REPLY_BYTES {
+                bail!(
+                    "'{}': reply to '{line}' longer than {} MiB; is this the board?",
+                    self.name,
+                    MAX_REPLY_BYTES >> 20
+                );
+            }
+            match l.as_str() {
+                "" => {}
+                "ok" => return Ok(data),
+                _ if l == "err" || l.starts_with("err ") => bail!("{l}"),
+                _ => data.push(l),
+            }
+        }
+    }
+
+    /// The next line the board sends, without its line end and trailing spaces.
+    fn next_line(&mut self, request: &str) -> Result<String> {
+        loop {
+            if let Some(i) = self.buf.iter().position(|&b| b == b'\n') {
+                let raw: Vec<u8> = self.buf.drain(..=i).collect();
+                let text = String::from_utf8_lossy(raw.get(..i).unwrap_or_default());
+                return Ok(text.trim_end().to_string());
+            }
+            let mut chunk = [0u8; 4096];
+            match self.port.read(&mut chunk) {
+                Ok(0) => bail!("'{}' closed the connection in the middle of the reply to '{request}'", self.name),
+                Ok(n) => self.buf.extend_from_slice(chunk.get(..n).unwrap_or_default()),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => bail!(
+                    "no reply from '{}' to '{request}' within {} s (is it the board, and is nothing else using the port?)",
+                    self.name,
+                    self.timeout_s
+                ),
+                Err(e) => bail!("cannot read '{}': {e}", self.name),
+            }
+        }
+    }
+}
+
+/// Splits `key=value` lines, in order; a line without `=` or a repeated key is an error.
+pub fn parse_kv(lines: &[String]) -> Result<Vec<(String, String)>> {
+    let mut out: Vec<(String, String)> = Vec::with_capacity(lines.len());
+    for l in lines {
+        let (k, v) = l.split_once('=').ok_or_else(|| anyhow!("the board sent '{l}', not key=value"))?;
+        if out.iter().any(|(seen, _)| seen == k) {
+            bail!("the board sent '{k}' twice");
+        }
+        out.push((k.to_string(), v.to_string()));
+    }
+    Ok(out)
+}
+
+/// `status` keys whose values are numbers (docs/interface.md § status fields).
+const NUMERIC: [&str; 7] = ["t_s", "temp_c", "setpoint_c", "duty", "holdover_s", "resets", "settings_version"];
+
+/// The SPEC §8 fields `status --json` must have.
+const REQUIRED: [&str; 13] = [
+    "t_s",
+    "temp_c",
+    "setpoint_c",
+    "duty",
+    "mode",
+    "alarm",
+    "controller",
+    "model_a",
+    "model_b",
+    "model_k",
+    "holdover_s",
+    "resets",
+    "firmware",
+];
+
+/// A number as the board wrote it: an integer stays an integer in JSON; `-` is null.
+fn number(key: &str, v: &str) -> Result<Value> {
+    if v == "-" {
+        return Ok(Value::Null);
+    }
+    if let Ok(i) = v.parse::<i64>() {
+        return Ok(Value::Number(i.into()));
+    }
+    v.parse::<f64>()
+        .ok()
+        .and_then(Number::from_f64)
+        .map(Value::Number)
+        .ok_or_else(|| anyhow!("the board sent {key}={v}, not a finite number"))
+}
+
+fn numbers(key: &str, v: &str) -> Result<Value> {
+    v.split(',').map(|x| number(key, x)).collect::<Result<Vec<_>>>().map(Value::Array)
+}
+
+/// The `status` reply as one JSON object: [`NUMERIC`] keys as numbers, `model_a`/`model_b`/
+/// `model_k` as `model: {a: [a1, a2], b: [b0, b1], k}` (null when the board trusts no model),
+/// every other key as a string, `-` as null anywhere.
+pub fn status_json(kv: &[(String, String)]) -> Result<Value> {
+    if let Some(missing) = REQUIRED.iter().find(|r| !kv.iter().any(|(k, _)| k == *r)) {
+        bail!("the board's status has no '{missing}'");
+    }
+    let get = |key: &str| kv.iter().find(|(k, _)| k == key).map_or("-", |(_, v)| v.as_str());
+    let mut obj = Map::new();
+    for (k, v) in kv {
+        let value = match k.as_str() {
+            "model_a" | "model_b" | "model_k" => continue,
+            _ if NUMERIC.contains(&k.as_str()) => number(k, v)?,
+            _ if v == "-" => Value::Null,
+            _ => Value::String(v.clone()),
+        };
+        obj.insert(k.clone(), value);
+    }
+    let (a, b, k) = (get("model_a"), get("model_b"), get("model_k"));
+    let model = if [a, b, k].contains(&"-") {
+        Value::Null
+    } else {
+        let k = k.parse::<u32>().map_err(|_| anyhow!("the board sent model_k={k}, not a delay in samples"))?;
+        serde_json::json!({ "a": numbers("model_a", a)?, "b": numbers("model_b", b)?, "k": k })
+    };
+    obj.insert("model".into(), model);
+    Ok(Value::Object(obj))
+}
+
+/// Where a commissioning is (the `commissioning=` field of `status`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Commissioning {
+    /// None ran since boot, or one was aborted.
+    Idle,
+    /// Running: the phase (`rest`, `excite`, `fit`) and its percent.
+    Running(String, u8),
+    /// Finished; the new model is in use.
+    Done,
+    /// Failed; the previous model stays. The board's reason.
+    Failed(String),
+}
+
+impl Commissioning {
+    /// Reads the field's value.
+    pub fn parse(v: &str) -> Result<Self> {
+        Ok(match v {
+            "idle" => Self::Idle,
+            "done" => Self::Done,
+            _ if v.starts_with("failed") => {
+                Self::Failed(v.strip_prefix("failed").unwrap_or_default().trim_start_matches(':').to_string())
+            }
+            _ => {
+                let (phase, pct) = v
+                    .split_once(':')
+                    .and_then(|(ph, p)| Some((ph, p.parse::<u8>().ok().filter(|&p| p <= 100)?)))
+                    .ok_or_else(|| anyhow!("the board sent commissioning={v}, not a known state"))?;
+                Self::Running(phase.to_string(), pct)
+            }
+        })
+    }
+}
+
+/// Polls of `status` showing `idle` after `identify` was accepted before the watch gives up.
+const IDLE_POLLS: u32 = 5;
+
+fn status_kv<P: Read + Write>(b: &mut Board<P>) -> Result<Vec<(String, String)>> {
+    parse_kv(&b.request("status")?)
+}
+
+fn field<'a>(kv: &'a [(String, String)], key: &str) -> Result<&'a str> {
+    kv.iter()
+        .find(|(k, _)| k == key)
+        .map(|(_, v)| v.as_str())
+        .ok_or_else(|| anyhow!("the board's status has no '{key}'"))
+}
+
+fn identify<P: Read + Write>(b: &mut Board<P>, no_wait: bool) -> Result<()> {
+    for l in b.request("identify")? {
+        println!("{l}");
+    }
+    if no_wait {
+        println!("commissioning started; follow it with 'hter board --port {} status'", b.name);
+        return Ok(());
+    }
+    let bar = if std::io::stderr().is_terminal() {
+        let pb = indicatif::ProgressBar::new(100);
+        pb.set_style(
+            indicatif::ProgressStyle::with_template("commissioning {msg:7} [{bar:30}] {pos:>3} %")
+                .map_err(|e| anyhow!("{e}"))?,
+        );
+        Some(pb)
+    } else {
+        None
+    };
+    let (mut last, mut idle) = (String::new(), 0u32);
+    let kv = loop {
+        std::thread::sleep(Duration::from_secs(1));
+        let kv = status_kv(b)?;
+        let value = field(&kv, "commissioning")?.to_string();
+        let state = Commissioning::parse(&value)?;
+        match (&state, &bar) {
+            (Commissioning::Running(phase, pct), Some(pb)) => {
+                pb.set_message(phase.clone());
+                pb.set_position(u64::from(*pct));
+            }
+            (Commissioning::Running(..), None) if value != last => println!("commissioning={value}"),
+            _ => {}
+        }
+        last = value;
+        match state {
+            Commissioning::Running(..) => idle = 0,
+            Commissioning::Idle => {
+                idle += 1;
+                if idle >= IDLE_POLLS {
+                    bar.as_ref().map(indicatif::ProgressBar::abandon);
+                    bail!("commissioning is not running (the board says idle)");
+                }
+            }
+            Commissioning::Done => break kv,
+            Commissioning::Failed(why) => {
+                bar.as_ref().map(indicatif::ProgressBar::abandon);
+                bail!("commissioning failed: {why} (the previous model stays)");
+            }
+        }
+    };
+    if let Some(pb) = bar {
+        pb.finish_and_clear();
+    }
+    let show = |k: &str| field(&kv, k).unwrap_or("?").to_string();
+    println!(
+        "commissioning done: model a={} b={} k={}; controller {} ({})",
+        show("model_a"),
+        show("model_b"),
+        show("model_k"),
+        show("controller"),
+        show("adaptive")
+    );
+    Ok(())
+}
+
+/// Checks the history CSV (what `hter monitor` needs of it) and counts interval and event rows.
+pub fn check_history(text: &str) -> Result<(usize, usize)> {
+    let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(false).from_reader(text.as_bytes());
+    let headers = rdr.headers().map_err(|e| anyhow!("line 1: {e}"))?.clone();
+    for need in ["t_s", "temp_c"] {
+        if !headers.iter().any(|h| h == need) {
+            bail!("line 1: no '{need}' column (header: {})", headers.iter().collect::<Vec<_>>().join(","));
+        }
+    }
+    let event = headers.iter().position(|h| h == "event");
+    let (mut intervals, mut events) = (0, 0);
+    for (i, rec) in rdr.records().enumerate() {
+        let rec = rec.map_err(|e| anyhow!("line {}: {}", i + 2, e.to_string().lines().next().unwrap_or("bad row")))?;
+        if event.and_then(|j| rec.get(j)).is_some_and(|e| !e.is_empty()) {
+            events += 1;
+        } else {
+            intervals += 1;
+        }
+    }
+    Ok((intervals, events))
+}
+
+fn history<P: Read + Write>(b: &mut Board<P>, output: &Path, since: Option<f64>) -> Result<()> {
+    let request = since.map_or_else(|| "history".to_string(), |s| format!("history {s}"));
+    let rows = b.request(&request)?;
+    if rows.is_empty() {
+        bail!("the board sent no CSV header for '{request}'");
+    }
+    let mut text = rows.join("\n");
+    text.push('\n');
+    std::fs::write(output, &text).with_context(|| format!("cannot write '{}'", output.display()))?;
+    let (intervals, events) = check_history(&text)
+        .with_context(|| format!("wrote '{}' as the board sent it, but it is not the history CSV", output.display()))?;
+    println!("wrote {} rows ({intervals} intervals, {events} events) to {}", rows.len() - 1, output.display());
+    Ok(())
+}
+
+/// Checks what can be checked before the port is opened.
+pub fn check_command(cmd: &BoardCommand) -> Result<()> {
+    match cmd {
+        BoardCommand::Set { key, value } => {
+            check_request(&format!("set {key} {value}"))?;
+            if key.is_empty() || value.is_empty() || key.contains(' ') || value.contains(' ') {
+                bail!("set takes a KEY and a VALUE without spaces, got '{key}' '{value}'");
+            }
+            Ok(())
+        }
+        BoardCommand::History { since: Some(s), .. } if !s.is_finite() || *s < 0.0 => {
+            bail!("--since must be a finite time ≥ 0 s, got {s}")
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Runs one `hter board` command on an open connection.
+pub fn run_on<P: Read + Write>(b: &mut Board<P>, cmd: &BoardCommand) -> Result<()> {
+    match cmd {
+        BoardCommand::Status { json: true } => {
+            println!("{}", status_json(&status_kv(b)?)?);
+        }
+        BoardCommand::Status { json: false } | BoardCommand::Get => {
+            let request = if matches!(cmd, BoardCommand::Get) { "get" } else { "status" };
+            for l in b.request(request)? {
+                println!("{l}");
+            }
+        }
+        BoardCommand::Set { key, value } => {
+            let data = b.request(&format!("set {key} {value}"))?;
+            data.iter().for_each(|l| println!("{l}"));
+            if data.is_empty() {
+                println!("ok: {key} = {value}");
+            }
+        }
+        BoardCommand::Ack => {
+            let data = b.request("ack")?;
+            data.iter().for_each(|l| println!("{l}"));
+            if data.is_empty() {
+                println!("ok: alarm acknowledged");
+            }
+        }
+        BoardCommand::History { output, since } => history(b, output, *since)?,
+        BoardCommand::Identify { abort: true, .. } => {
+            b.request("identify abort")?.iter().for_each(|l| println!("{l}"));
+            println!("ok: commissioning aborted; the previous model stays");
+        }
+        BoardCommand::Identify { no_wait, .. } => identify(b, *no_wait)?,
+    }
+    Ok(())
+}
+
+/// `hter board`.
+pub fn run(args: &BoardArgs) -> Result<()> {
+    if !args.timeout.is_finite() || args.timeout <= 0.0 || args.timeout > 3600.0 {
+        bail!("--timeout must be within (0, 3600] s, got {}", args.timeout);
+    }
+    check_command(&args.command)?;
+    let mut port = serialport::new(&args.port, BAUD)
+        .data_bits(serialport::DataBits::Eight)
+        .parity(serialport::Parity::None)
+        .stop_bits(serialport::StopBits::One)
+        .flow_control(serialport::FlowControl::None)
+        .timeout(Duration::from_secs_f64(args.timeout))
+        .open()
+        .map_err(|e| anyhow!("cannot open '{}': {}", args.port, e.description))?;
+    let opened = |e: serialport::Error| anyhow!("cannot open '{}': {}", args.port, e.description);
+    // Bytes from before this connection (the rest of a reply a killed client never read, a
+    // person's typing) are not ours: drop what is buffered, then what still arrives until the
+    // line is quiet (a board that is still streaming stops at our request; docs/interface.md).
+    port.clear(serialport::ClearBuffer::Input).map_err(opened)?;
+    port.set_timeout(QUIET).map_err(opened)?;
+    let start = std::time::Instant::now();
+    let mut stale = [0u8; 4096];
+    while start.elapsed() < MAX_DRAIN && port.read(&mut stale).is_ok_and(|n| n > 0) {}
+    port.set_timeout(Duration::from_secs_f64(args.timeout)).map_err(opened)?;
+    run_on(&mut Board::new(port, &args.port, args.timeout), &args.command)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A port that plays back scripted chunks, then times out, and records what is written.
+    struct Scripted {
+        chunks: std::collections::VecDeque<Vec<u8>>,
+        written: Vec<u8>,
+    }
+
+    impl Scripted {
+        fn new(chunks: &[&[u8]]) -> Self {
+            Self { chunks: chunks.iter().map(|c| c.to_vec()).collect(), written: Vec::new() }
+        }
+    }
+
+    impl Read for Scripted {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            let Some(mut c) = self.chunks.pop_front() else {
+                return Err(std::io::ErrorKind::TimedOut.into());
+            };
+            let n = c.len().min(buf.len());
+            buf[..n].copy_from_slice(&c[..n]);
+            if n < c.len() {
+                self.chunks.push_front(c.split_off(n));
+            }
+            Ok(n)
+        }
+    }
+
+    impl Write for Scripted {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            self.written.extend_from_slice(buf);
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    fn board(chunks: &[&[u8]]) -> Board<Scripted> {
+        Board::new(Scripted::new(chunks), "/dev/test", 5.0)
+    }
+
+    #[test]
+    fn a_reply_ends_at_its_final_line_however_it_is_split() {
+        let mut b = board(&[b"t_s=1", b"2\r\nmode=nor", b"mal\r", b"\nok\r\nstray"]);
+        assert_eq!(b.request("status").unwrap(), vec!["t_s=12", "mode=normal"]);
+        assert_eq!(b.port.written, b"status\n");
+        // The stray bytes after `ok` are the start of what comes next, not lost.
+        b.port.chunks.push_back(b"=1\nok\n".to_vec());
+        assert_eq!(b.request("get").unwrap(), vec!["stray=1"]);
+        // Data only, no final line yet: a timeout that names the request.
+        let e = board(&[b"t_s=1\r\n"]).request("status").unwrap_err().to_string();
+        assert!(e.contains("no reply") && e.contains("'status'"), "{e}");
+    }
+
+    #[test]
+    fn a_refusal_is_the_boards_line_verbatim() {
+        let line = "err setpoint_c: 12 is outside 2.5…7.5 °C";
+        let mut b = board(&[format!("{line}\r\n").as_bytes()]);
+        let e = b.request("set setpoint_c 12").unwrap_err();
+        assert_eq!(format!("{e:#}"), line);
+        // A data line that merely starts with "ok" or "err" is data.
+        let mut b = board(&[b"okay=1\r\nerrors=0\r\nok\r\n"]);
+        assert_eq!(b.request("status").unwrap(), vec!["okay=1", "errors=0"]);
+    }
+
+    #[test]
+    fn requests_are_one_printable_line_within_the_limit() {
+        assert!(check_request("set setpoint_c 5").is_ok());
+        assert!(check_request("set setpoint_c 5\nset controller pi").unwrap_err().to_string().contains("\\n"));
+        assert!(check_request("set setpoint_c 5 °C").is_err());
+        let e = check_request(&format!("set model {}", "1".repeat(90))).unwrap_err().to_string();
+        assert!(e.contains("at most 96"), "{e}");
+        // Refused before anything is written.
+        let mut b = board(&[]);
+        assert!(b.request("get\r").is_err());
+        assert!(b.port.written.is_empty());
+    }
+
+    fn kv(lines: &[&str]) -> Vec<(String, String)> {
+        parse_kv(&lines.iter().map(|s| s.to_string()).collect::<Vec<_>>()).unwrap()
+    }
+
+    const STATUS: [&str; 17] = [
+        "t_s=86400",
+        "temp_c=4.93",
+        "setpoint_c=5.00",
+        "duty=0.412",
+        "mode=normal",
+        "alarm=off",
+        "controller=gpc",
+        "adaptive=adaptive",
+        "controllers=gpc,pi,onoff",
+        "model_a=-1.7900,0.8000",
+        "model_b=-0.0150,-0.0080",
+        "model_k=1",
+        "holdover_s=-",
+        "resets=2",
+        "firmware=hter 0.1.0",
+        "commissioning=idle",
+        "settings_version=7",
+    ];
+
+    #[test]
+    fn status_json_types_the_spec_fields() {
+        let v = status_json(&kv(&STATUS)).unwrap();
+        let want = serde_json::json!({
+            "t_s": 86400, "temp_c": 4.93, "setpoint_c": 5.0, "duty": 0.412, "mode": "normal",
+            "alarm": "off", "controller": "gpc", "adaptive": "adaptive", "controllers": "gpc,pi,onoff",
+            "model": {"a": [-1.79, 0.8], "b": [-0.015, -0.008], "k": 1},
+            "holdover_s": null, "resets": 2, "firmware": "hter 0.1.0", "commissioning": "idle",
+            "settings_version": 7
+        });
+        assert_eq!(v, want);
+        assert!(v["resets"].is_u64() && v["temp_c"].is_f64());
+    }
+
+    #[test]
+    fn status_json_refuses_what_is_not_the_boards_status() {
+        let mut s = STATUS.to_vec();
+        s[1] = "temp_c=nan";
+        assert!(status_json(&kv(&s)).unwrap_err().to_string().contains("temp_c=nan"));
+        s[1] = "temp_c=-";
+        assert_eq!(status_json(&kv(&s)).unwrap()["temp_c"], Value::Null);
+        s[10] = "model_b=-";
+        assert_eq!(status_json(&kv(&s)).unwrap()["model"], Value::Null);
+        s[10] = "model_b=-0.01,x";
+        assert!(status_json(&kv(&s)).unwrap_err().to_string().contains("model_b=x"));
+        let e = status_json(&kv(&STATUS[1..])).unwrap_err().to_string();
+        assert!(e.contains("no 't_s'"), "{e}");
+        assert!(parse_kv(&["t_s=1".into(), "t_s=2".into()]).unwrap_err().to_string().contains("twice"));
+        assert!(parse_kv(&["hello".into()]).unwrap_err().to_string().contains("not key=value"));
+    }
+
+    #[test]
+    fn commissioning_states() {
+        assert_eq!(Commissioning::parse("idle").unwrap(), Commissioning::Idle);
+        assert_eq!(Commissioning::parse("excite:42").unwrap(), Commissioning::Running("excite".into(), 42));
+        assert_eq!(Commissioning::parse("done").unwrap(), Commissioning::Done);
+        assert_eq!(
+            Commissioning::parse("failed:no_excitation").unwrap(),
+            Commissioning::Failed("no_excitation".into())
+        );
+        assert!(Commissioning::parse("fit:101").is_err());
+        assert!(Commissioning::parse("dancing").is_err());
+    }
+
+    #[test]
+    fn history_csv_counts_intervals_and_events() {
+        let text = "t_s,temp_c,min_c,max_c,duty,mode,event\n\
+                    300,5.10,4.90,5.30,0.400,normal,\n\
+                    300,5.10,5.10,5.10,,,set:setpoint_c=4.00\n\
+                    600,4.20,4.00,4.60,0.520,normal,\n";
+        assert_eq!(check_history(text).unwrap(), (2, 1));
+        // An unquoted model value has commas: the row has too many fields.
+        let bad = format!("{text}900,4.0,4.0,4.0,,,set:model=-1.8,0.81;-0.02,-0.01;1\n");
+        assert!(check_history(&bad).unwrap_err().to_string().contains("line 5"));
+        assert!(check_history("time,temp\n1,2\n").unwrap_err().to_string().contains("no 't_s'"));
+    }
+}

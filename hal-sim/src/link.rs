@@ -1,0 +1,511 @@
+//! The virtual board's serial line: a pseudo-terminal whose slave side a host tool opens like
+//! a real serial port (`hter board --port PATH`, `picocom`, `screen`), and whose master side
+//! the virtual board's loop polls between simulated samples.
+//!
+//! [`PtyLink::open`] creates the pty pair (raw mode, so no echo and no line editing: the
+//! board's framing applies, as on the NUCLEO's UART) and makes `PATH` a symlink to the slave
+//! device (`/dev/pts/N`). The link does the framing of docs/interface.md (§ Framing) and
+//! nothing else: [`PtyLink::poll_line`] gives complete request lines, answers malformed lines
+//! itself with `err line: …`, and [`PtyLink::send`] queues a reply with `\r\n` line ends.
+//!
+//! Between clients. The link keeps its own descriptor of the slave open for its whole life.
+//! Without it, the master would read EIO and poll as hung up whenever no client has the port
+//! open. With it, two facts about Linux ptys need handling:
+//! - A client that sets `TIOCEXCL` (serialport does, for exclusive access) and dies without
+//!   closing cleanly (killed, Ctrl-C) leaves the flag on the slave, because a pty's slave tty
+//!   lives as long as its master: every later open by a non-root user would fail with EBUSY.
+//!   The link clears the flag on its own descriptor at every poll. Exclusive access between
+//!   clients is still enforced by serialport's `flock`, which the kernel drops with the process.
+//! - Output written while no client reads stays in the pty's buffer. `hter board` discards its
+//!   input buffer after opening the port (as it must on a real board too); the link's own
+//!   queue of unsent output is dropped when the next request line arrives (one reply at a time:
+//!   a new request supersedes the rest of an unread reply).
+//!
+//! Output never blocks the caller: the master is non-blocking, what the pty does not take now
+//! waits in a queue (at most [`MAX_PENDING_BYTES`]) that every `poll_line`/`send` call
+//! advances; beyond that bound output is dropped and counted, as the board's transmit side
+//! drops output nobody reads.
+
+use std::collections::VecDeque;
+use std::fs::File;
+use std::io::{self, Read, Write};
+use std::os::fd::{AsRawFd, FromRawFd, IntoRawFd, OwnedFd};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use serialport::{SerialPort, TTYPort};
+
+/// Longest request line, bytes without its line end (docs/interface.md § Framing).
+pub const MAX_LINE_BYTES: usize = 96;
+
+/// Unsent output the link keeps, bytes: ten times a 30-day history (8 640 five-minute
+/// interval rows of about 45 bytes, plus events), so only a client that stopped reading loses
+/// output.
+pub const MAX_PENDING_BYTES: usize = 4 << 20;
+
+/// The reply to a line longer than [`MAX_LINE_BYTES`].
+pub const ERR_TOO_LONG: &str = "err line: too long (at most 96 bytes)";
+/// The reply to a line with a byte outside printable ASCII.
+pub const ERR_NOT_PRINTABLE: &str = "err line: a byte outside printable ASCII";
+
+/// What one line of input came to.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Frame {
+    /// A request, trimmed of leading and trailing spaces, never empty.
+    Line(String),
+    /// The line was longer than [`MAX_LINE_BYTES`] (its rest was dropped).
+    TooLong,
+    /// The line had a byte outside printable ASCII (0x20–0x7e).
+    NotPrintable,
+}
+
+/// Splits a byte stream into request lines: `\n`, `\r\n` or a bare `\r` end a line; an empty
+/// (or all-space) line is nothing. Pure, no I/O, so it is tested byte by byte.
+#[derive(Debug, Default)]
+pub struct LineFramer {
+    buf: Vec<u8>,
+    too_long: bool,
+    not_printable: bool,
+    after_cr: bool,
+}
+
+impl LineFramer {
+    /// A framer at the start of a line.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Takes one byte; gives a frame when it ends a non-empty line.
+    pub fn push(&mut self, b: u8) -> Option<Frame> {
+        let after_cr = std::mem::replace(&mut self.after_cr, b == b'\r');
+        if b == b'\n' && after_cr {
+            return None; // the `\n` of a `\r\n`
+        }
+        if b == b'\r' || b == b'\n' {
+            return self.end_line();
+        }
+        if !(0x20..=0x7e).contains(&b) {
+            self.not_printable = true;
+        }
+        if self.buf.len() < MAX_LINE_BYTES {
+            self.buf.push(b);
+        } else {
+            self.too_long = true;
+        }
+        None
+    }
+
+    /// Forgets a partial line (a client went away in the middle of one).
+    pub fn reset(&mut self) {
+        *self = Self::default();
+    }
+
+    fn end_line(&mut self) -> Option<Frame> {
+        let (buf, too_long, not_printable) = (std::mem::take(&mut self.buf), self.too_long, self.not_printable);
+        (self.too_long, self.not_printable) = (false, false);
+        if too_long {
+            return Some(Frame::TooLong);
+        }
+        if not_printable {
+            return Some(Frame::NotPrintable);
+        }
+        // Printable ASCII is UTF-8.
+        let line = String::from_utf8_lossy(&buf).trim_matches(' ').to_string();
+        (!line.is_empty()).then_some(Frame::Line(line))
+    }
+}
+
+/// A pseudo-terminal serving the board's interface at a path (see the module docs).
+pub struct PtyLink {
+    /// Master side, non-blocking.
+    master: File,
+    /// The link's own descriptor of the slave (see the module docs).
+    slave: File,
+    device: PathBuf,
+    path: PathBuf,
+    framer: LineFramer,
+    lines: VecDeque<String>,
+    out: VecDeque<u8>,
+    dropped_bytes: u64,
+}
+
+impl std::fmt::Debug for PtyLink {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PtyLink").field("path", &self.path).field("device", &self.device).finish_non_exhaustive()
+    }
+}
+
+impl PtyLink {
+    /// Creates a pty pair in raw mode and makes `path` a symlink to its slave device. An
+    /// existing symlink at `path` is replaced (a virtual board that was not stopped cleanly
+    /// leaves one); any other file there is refused.
+    pub fn open(path: &Path) -> io::Result<Self> {
+        match std::fs::symlink_metadata(path) {
+            Ok(m) if !m.file_type().is_symlink() => {
+                return Err(io::Error::new(
+                    io::ErrorKind::AlreadyExists,
+                    format!("'{}' exists and is not a symlink; not replacing it", path.display()),
+                ));
+            }
+            Ok(_) | Err(_) => {}
+        }
+        let (master, slave) = TTYPort::pair().map_err(io::Error::from)?;
+        let device =
+            slave.name().map(PathBuf::from).ok_or_else(|| io::Error::other("the pty's slave device has no name"))?;
+        let (master, slave) = (into_file(master), into_file(slave));
+        set_nonblocking(&master)?;
+        // Create the symlink beside `path` and rename it over: a client never sees the path
+        // missing or half made.
+        let file_name = path.file_name().ok_or_else(|| {
+            io::Error::new(io::ErrorKind::InvalidInput, format!("'{}' is not a file path", path.display()))
+        })?;
+        let mut tmp_name = std::ffi::OsString::from(".");
+        tmp_name.push(file_name);
+        tmp_name.push(format!(".{}.tmp", std::process::id()));
+        let tmp = path.with_file_name(tmp_name);
+        let _ = std::fs::remove_file(&tmp);
+        std::os::unix::fs::symlink(&device, &tmp)?;
+        if let Err(e) = std::fs::rename(&tmp, path) {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(e);
+        }
+        Ok(Self {
+            master,
+            slave,
+            device,
+            path: path.to_path_buf(),
+            framer: LineFramer::new(),
+            lines: VecDeque::new(),
+            out: VecDeque::new(),
+            dropped_bytes: 0,
+        })
+    }
+
+    /// The symlink clients open.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The slave device the symlink points to (`/dev/pts/N`).
+    pub fn device(&self) -> &Path {
+        &self.device
+    }
+
+    /// Output queued but not yet taken by the pty, bytes.
+    pub fn pending_bytes(&self) -> usize {
+        self.out.len()
+    }
+
+    /// Output dropped since the link opened (queue full, or superseded by a new request), bytes.
+    pub fn dropped_bytes(&self) -> u64 {
+        self.dropped_bytes
+    }
+
+    /// Waits up to `timeout` for a complete request line and returns it (trimmed, never
+    /// empty), or `None` if none came. Meanwhile it sends queued output and answers malformed
+    /// lines (`err line: …`) itself. `Duration::ZERO` only looks.
+    pub fn poll_line(&mut self, timeout: Duration) -> io::Result<Option<String>> {
+        // A crashed client's TIOCEXCL (module docs); harmless when not set. Not serialport's
+        // `set_exclusive(false)`: that also takes a shared flock, which would lock clients out.
+        // SAFETY: TIOCNXCL takes no argument; the descriptor is this link's own.
+        let _ = unsafe { libc::ioctl(self.slave.as_raw_fd(), libc::TIOCNXCL) };
+        self.flush_out()?;
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(line) = self.lines.pop_front() {
+                return Ok(Some(line));
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            let ready = wait(&self.master, !self.out.is_empty(), left)?;
+            if ready.hangup && !ready.readable {
+                // Nobody on the slave side (cannot happen while the link holds it): do not spin.
+                std::thread::sleep(left);
+                return Ok(None);
+            }
+            if ready.writable {
+                self.flush_out()?;
+            }
+            if ready.readable {
+                self.read_in()?;
+            }
+            if self.lines.is_empty() && Instant::now() >= deadline {
+                return Ok(None);
+            }
+        }
+    }
+
+    /// Queues a reply and sends what the pty takes now. `reply` is one or more lines ended by
+    /// `\n` or `\r\n` (the last line end may be left out); each goes out ended by `\r\n`.
+    pub fn send(&mut self, reply: &str) -> io::Result<()> {
+        for line in reply.lines() {
+            self.queue(line.as_bytes());
+            self.queue(b"\r\n");
+        }
+        self.flush_out()
+    }
+
+    fn queue(&mut self, bytes: &[u8]) {
+        let room = MAX_PENDING_BYTES.saturating_sub(self.out.len());
+        let take = bytes.len().min(room);
+        self.out.extend(bytes.iter().take(take));
+        self.dropped_bytes += (bytes.len() - take) as u64;
+    }
+
+    fn flush_out(&mut self) -> io::Result<()> {
+        while !self.out.is_empty() {
+            let (front, _) = self.out.as_slices();
+            match self.master.write(front) {
+                Ok(0) => break,
+                Ok(n) => drop(self.out.drain(..n)),
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                // EIO: no slave open (cannot happen while the link holds it); the output has
+                // nobody to go to.
+                Err(e) if e.raw_os_error() == Some(libc::EIO) => {
+                    self.dropped_bytes += self.out.len() as u64;
+                    self.out.clear();
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+
+    fn read_in(&mut self) -> io::Result<()> {
+        let mut buf = [0u8; 512];
+        loop {
+            let n = match self.master.read(&mut buf) {
+                Ok(0) => return Ok(()),
+                Ok(n) => n,
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => return Ok(()),
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                Err(e) if e.raw_os_error() == Some(libc::EIO) => {
+                    self.framer.reset();
+                    return Ok(());
+                }
+                Err(e) => return Err(e),
+            };
+            for &b in buf.iter().take(n) {
+                match self.framer.push(b) {
+                    None => {}
+                    Some(Frame::Line(l)) => {
+                        // A new request supersedes what is left of the previous reply.
+                        self.dropped_bytes += self.out.len() as u64;
+                        self.out.clear();
+                        self.lines.push_back(l);
+                    }
+                    Some(Frame::TooLong) => self.send(ERR_TOO_LONG)?,
+                    Some(Frame::NotPrintable) => self.send(ERR_NOT_PRINTABLE)?,
+                }
+            }
+        }
+    }
+}
+
+impl Drop for PtyLink {
+    /// Removes the symlink if it still points to this link's device (another virtual board
+    /// may have taken the path since).
+    fn drop(&mut self) {
+        if std::fs::read_link(&self.path).is_ok_and(|t| t == self.device) {
+            let _ = std::fs::remove_file(&self.path);
+        }
+    }
+}
+
+fn into_file(port: TTYPort) -> File {
+    // SAFETY: `into_raw_fd` hands over the descriptor without closing it; nothing else owns it.
+    File::from(unsafe { OwnedFd::from_raw_fd(port.into_raw_fd()) })
+}
+
+fn set_nonblocking(f: &File) -> io::Result<()> {
+    let fd = f.as_raw_fd();
+    // SAFETY: fcntl on a descriptor this function borrows; no memory is passed.
+    let flags = unsafe { libc::fcntl(fd, libc::F_GETFL) };
+    // SAFETY: as above.
+    if flags < 0 || unsafe { libc::fcntl(fd, libc::F_SETFL, flags | libc::O_NONBLOCK) } < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    Ok(())
+}
+
+struct Ready {
+    readable: bool,
+    writable: bool,
+    hangup: bool,
+}
+
+/// poll(2) on one descriptor: readable, and writable if `want_write`, for up to `timeout`.
+fn wait(f: &File, want_write: bool, timeout: Duration) -> io::Result<Ready> {
+    let mut events = libc::POLLIN;
+    if want_write {
+        events |= libc::POLLOUT;
+    }
+    let mut pfd = libc::pollfd { fd: f.as_raw_fd(), events, revents: 0 };
+    // Round up: a 0.3 ms timeout must not become a busy 0 ms loop.
+    let ms = timeout.as_micros().div_ceil(1000).min(i32::MAX as u128) as i32;
+    // SAFETY: one valid pollfd, count 1.
+    let r = unsafe { libc::poll(&mut pfd, 1, ms) };
+    if r < 0 {
+        let e = io::Error::last_os_error();
+        if e.kind() == io::ErrorKind::Interrupted {
+            return Ok(Ready { readable: false, writable: false, hangup: false });
+        }
+        return Err(e);
+    }
+    Ok(Ready {
+        readable: pfd.revents & libc::POLLIN != 0,
+        writable: pfd.revents & libc::POLLOUT != 0,
+        hangup: pfd.revents & (libc::POLLHUP | libc::POLLERR) != 0,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frames(input: &[u8]) -> Vec<Frame> {
+        let mut f = LineFramer::new();
+        input.iter().filter_map(|&b| f.push(b)).collect()
+    }
+
+    fn line(s: &str) -> Frame {
+        Frame::Line(s.to_string())
+    }
+
+    #[test]
+    fn every_line_end_ends_a_line_once() {
+        assert_eq!(frames(b"status\nget\r\nhelp\rack\n"), vec![line("status"), line("get"), line("help"), line("ack")]);
+        // `\r\n` is one line end, a bare `\r` then `\r\n` is an empty line (nothing).
+        assert_eq!(frames(b"a\r\r\nb\n\n\n"), vec![line("a"), line("b")]);
+        assert_eq!(frames(b"   \n  set setpoint_c 5  \r\n"), vec![line("set setpoint_c 5")]);
+        assert_eq!(frames(b"no end yet"), vec![]);
+    }
+
+    #[test]
+    fn over_long_and_unprintable_lines_are_refused_whole() {
+        let max = "x".repeat(MAX_LINE_BYTES);
+        assert_eq!(frames(format!("{max}\n").as_bytes()), vec![line(&max)]);
+        let over = "y".repeat(MAX_LINE_BYTES + 1);
+        // Refused once, at its end; the next line is read as usual.
+        assert_eq!(frames(format!("{over}{over}\nget\n").as_bytes()), vec![Frame::TooLong, line("get")]);
+        assert_eq!(frames(b"set\tsetpoint_c 5\nget\n"), vec![Frame::NotPrintable, line("get")]);
+        assert_eq!(frames("set setpoint_c 5 °C\n".as_bytes()), vec![Frame::NotPrintable]);
+        assert_eq!(frames(b"st\x7fatus\n"), vec![Frame::NotPrintable]);
+    }
+
+    fn tmp_path(name: &str) -> PathBuf {
+        std::env::temp_dir().join(format!("hter-link-{}-{name}", std::process::id()))
+    }
+
+    /// A client as `hter board` opens the port: send `request`, the board answers `reply`, the
+    /// client reads until `ok`; gives the line the board got and the text the client got.
+    fn client_request(path: &Path, link: &mut PtyLink, request: &str, reply: &str) -> (String, String) {
+        let mut port = serialport::new(path.to_string_lossy(), 115_200)
+            .timeout(Duration::from_secs(5))
+            .open_native()
+            .expect("open the link");
+        port.write_all(request.as_bytes()).unwrap();
+        let got = loop {
+            if let Some(l) = link.poll_line(Duration::from_millis(50)).unwrap() {
+                break l;
+            }
+        };
+        link.send(reply).unwrap();
+        let mut text = String::new();
+        let mut buf = [0u8; 256];
+        while !text.ends_with("ok\r\n") {
+            let n = port.read(&mut buf).expect("reply");
+            text.push_str(std::str::from_utf8(&buf[..n]).unwrap());
+        }
+        (got, text)
+    }
+
+    #[test]
+    fn serves_successive_clients_and_cleans_up() {
+        let path = tmp_path("clients");
+        std::fs::write(&path, "precious").unwrap();
+        let e = PtyLink::open(&path).unwrap_err();
+        assert!(e.to_string().contains("not a symlink"), "{e}");
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "precious");
+        std::fs::remove_file(&path).unwrap();
+        // A stale symlink (a board killed earlier) is replaced.
+        std::os::unix::fs::symlink("/dev/pts/no-such", &path).unwrap();
+        let mut link = PtyLink::open(&path).unwrap();
+        assert_eq!(std::fs::read_link(&path).unwrap(), link.device());
+        assert_eq!(link.poll_line(Duration::ZERO).unwrap(), None);
+        let got = |l: &str, t: &str| (l.to_string(), t.to_string());
+        assert_eq!(client_request(&path, &mut link, "status\r\n", "t_s=1\nok"), got("status", "t_s=1\r\nok\r\n"));
+        assert_eq!(
+            client_request(&path, &mut link, "get\n", "setpoint_c=5.00\r\nok\r\n"),
+            got("get", "setpoint_c=5.00\r\nok\r\n")
+        );
+        assert_eq!(
+            client_request(&path, &mut link, "x\x01\nack\r", "ok"),
+            got("ack", &format!("{ERR_NOT_PRINTABLE}\r\nok\r\n"))
+        );
+        drop(link);
+        assert!(std::fs::symlink_metadata(&path).is_err(), "symlink left behind");
+    }
+
+    #[test]
+    fn answers_framing_errors_itself() {
+        let path = tmp_path("framing");
+        let mut link = PtyLink::open(&path).unwrap();
+        let mut port =
+            serialport::new(path.to_string_lossy(), 115_200).timeout(Duration::from_secs(5)).open_native().unwrap();
+        port.write_all(format!("{}\nget\n", "z".repeat(200)).as_bytes()).unwrap();
+        let got = loop {
+            if let Some(l) = link.poll_line(Duration::from_millis(50)).unwrap() {
+                break l;
+            }
+        };
+        assert_eq!(got, "get");
+        let mut text = String::new();
+        let mut buf = [0u8; 256];
+        while !text.ends_with("\r\n") {
+            let n = port.read(&mut buf).unwrap();
+            text.push_str(std::str::from_utf8(&buf[..n]).unwrap());
+        }
+        assert_eq!(text, format!("{ERR_TOO_LONG}\r\n"));
+    }
+
+    #[test]
+    fn a_crashed_clients_exclusive_flag_is_cleared() {
+        let path = tmp_path("excl");
+        let mut link = PtyLink::open(&path).unwrap();
+        let excl = |f: &File| {
+            let mut on: libc::c_int = 0;
+            // SAFETY: TIOCGEXCL writes one c_int.
+            assert_eq!(unsafe { libc::ioctl(f.as_raw_fd(), libc::TIOCGEXCL, &mut on) }, 0);
+            on != 0
+        };
+        let f = File::options().read(true).write(true).open(&path).unwrap();
+        // SAFETY: TIOCEXCL takes no argument.
+        assert_eq!(unsafe { libc::ioctl(f.as_raw_fd(), libc::TIOCEXCL) }, 0);
+        drop(f); // closed without TIOCNXCL, as a killed process's descriptor is
+        let probe = File::options().read(true).write(true).open(&path).unwrap(); // root may
+        assert!(excl(&probe), "the flag outlives the client on a pty");
+        link.poll_line(Duration::ZERO).unwrap();
+        assert!(!excl(&probe));
+    }
+
+    #[test]
+    fn output_nobody_reads_is_queued_then_superseded() {
+        let path = tmp_path("queue");
+        let mut link = PtyLink::open(&path).unwrap();
+        let row = format!("{}\n", "1,4.00,3.90,4.10,0.500,normal,".repeat(2));
+        let big: String = row.repeat(20_000); // ~1.2 MB, more than a pty holds
+        link.send(&big).unwrap();
+        assert!(link.pending_bytes() > 0, "the pty took everything");
+        let mut port =
+            serialport::new(path.to_string_lossy(), 115_200).timeout(Duration::from_secs(5)).open_native().unwrap();
+        port.write_all(b"status\n").unwrap();
+        let got = loop {
+            if let Some(l) = link.poll_line(Duration::from_millis(50)).unwrap() {
+                break l;
+            }
+        };
+        assert_eq!((got.as_str(), link.pending_bytes()), ("status", 0));
+        assert!(link.dropped_bytes() > 0);
+    }
+}
