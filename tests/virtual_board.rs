@@ -7,7 +7,8 @@ use hal_sim::sim::virtual_board::{VirtualBoard, VirtualOptions};
 use hal_sim::sim::PlantChoice;
 
 fn board() -> VirtualBoard {
-    VirtualBoard::new(&VirtualOptions { plant: PlantChoice::Hter1, load: Load::Full, ambient_c: 28.0, seed: 1 }).unwrap()
+    VirtualBoard::new(&VirtualOptions { plant: PlantChoice::Hter1, load: Load::Full, ambient_c: 28.0, seed: 1 })
+        .unwrap()
 }
 
 fn run(b: &mut VirtualBoard, seconds: f64) {
@@ -64,7 +65,11 @@ fn history_is_a_csv_of_intervals_and_events_in_time_order() {
     let t: Vec<u32> = rows.iter().map(|r| r[0].parse().unwrap()).collect();
     assert!(t.windows(2).all(|w| w[0] <= w[1]), "time order");
     let since = b.request("history 3600");
-    assert!(since.lines().skip(1).filter(|l| *l != "ok").all(|l| l.split(',').next().unwrap().parse::<u32>().unwrap() >= 3600));
+    assert!(since
+        .lines()
+        .skip(1)
+        .filter(|l| *l != "ok")
+        .all(|l| l.split(',').next().unwrap().parse::<u32>().unwrap() >= 3600));
 }
 
 #[test]

@@ -24,3 +24,4 @@ pub mod rtd_cmd;
 pub mod scenario;
 pub mod sim;
 pub mod sim_cmd;
+pub mod virtual_board_cmd;

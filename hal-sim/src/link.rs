@@ -36,84 +36,14 @@ use std::time::{Duration, Instant};
 use serialport::{SerialPort, TTYPort};
 
 /// Longest request line, bytes without its line end (docs/interface.md § Framing).
-pub const MAX_LINE_BYTES: usize = 96;
+pub const MAX_LINE_BYTES: usize = hter::iface::MAX_LINE;
 
 /// Unsent output the link keeps, bytes: ten times a 30-day history (8 640 five-minute
 /// interval rows of about 45 bytes, plus events), so only a client that stopped reading loses
 /// output.
 pub const MAX_PENDING_BYTES: usize = 4 << 20;
 
-/// The reply to a line longer than [`MAX_LINE_BYTES`].
-pub const ERR_TOO_LONG: &str = "err line: too long (at most 96 bytes)";
-/// The reply to a line with a byte outside printable ASCII.
-pub const ERR_NOT_PRINTABLE: &str = "err line: a byte outside printable ASCII";
-
-/// What one line of input came to.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Frame {
-    /// A request, trimmed of leading and trailing spaces, never empty.
-    Line(String),
-    /// The line was longer than [`MAX_LINE_BYTES`] (its rest was dropped).
-    TooLong,
-    /// The line had a byte outside printable ASCII (0x20–0x7e).
-    NotPrintable,
-}
-
-/// Splits a byte stream into request lines: `\n`, `\r\n` or a bare `\r` end a line; an empty
-/// (or all-space) line is nothing. Pure, no I/O, so it is tested byte by byte.
-#[derive(Debug, Default)]
-pub struct LineFramer {
-    buf: Vec<u8>,
-    too_long: bool,
-    not_printable: bool,
-    after_cr: bool,
-}
-
-impl LineFramer {
-    /// A framer at the start of a line.
-    pub fn new() -> Self {
-        Self::default()
-    }
-
-    /// Takes one byte; gives a frame when it ends a non-empty line.
-    pub fn push(&mut self, b: u8) -> Option<Frame> {
-        let after_cr = std::mem::replace(&mut self.after_cr, b == b'\r');
-        if b == b'\n' && after_cr {
-            return None; // the `\n` of a `\r\n`
-        }
-        if b == b'\r' || b == b'\n' {
-            return self.end_line();
-        }
-        if !(0x20..=0x7e).contains(&b) {
-            self.not_printable = true;
-        }
-        if self.buf.len() < MAX_LINE_BYTES {
-            self.buf.push(b);
-        } else {
-            self.too_long = true;
-        }
-        None
-    }
-
-    /// Forgets a partial line (a client went away in the middle of one).
-    pub fn reset(&mut self) {
-        *self = Self::default();
-    }
-
-    fn end_line(&mut self) -> Option<Frame> {
-        let (buf, too_long, not_printable) = (std::mem::take(&mut self.buf), self.too_long, self.not_printable);
-        (self.too_long, self.not_printable) = (false, false);
-        if too_long {
-            return Some(Frame::TooLong);
-        }
-        if not_printable {
-            return Some(Frame::NotPrintable);
-        }
-        // Printable ASCII is UTF-8.
-        let line = String::from_utf8_lossy(&buf).trim_matches(' ').to_string();
-        (!line.is_empty()).then_some(Frame::Line(line))
-    }
-}
+pub use hter::iface::line::{Frame, LineFramer};
 
 /// A pseudo-terminal serving the board's interface at a path (see the module docs).
 pub struct PtyLink {
@@ -286,16 +216,19 @@ impl PtyLink {
                 Err(e) => return Err(e),
             };
             for &b in buf.iter().take(n) {
-                match self.framer.push(b) {
-                    None => {}
-                    Some(Frame::Line(l)) => {
-                        // A new request supersedes what is left of the previous reply.
-                        self.dropped_bytes += self.out.len() as u64;
-                        self.out.clear();
-                        self.lines.push_back(l);
-                    }
-                    Some(Frame::TooLong) => self.send(ERR_TOO_LONG)?,
-                    Some(Frame::NotPrintable) => self.send(ERR_NOT_PRINTABLE)?,
+                let (line, error) = match self.framer.push(b) {
+                    None => continue,
+                    Some(Frame::Line(l)) => (Some(l.to_string()), None),
+                    Some(f) => (None, f.error()),
+                };
+                if let Some(l) = line {
+                    // A new request supersedes what is left of the previous reply.
+                    self.dropped_bytes += self.out.len() as u64;
+                    self.out.clear();
+                    self.lines.push_back(l);
+                }
+                if let Some(e) = error {
+                    self.send(e)?;
                 }
             }
         }
@@ -363,36 +296,6 @@ fn wait(f: &File, want_write: bool, timeout: Duration) -> io::Result<Ready> {
 mod tests {
     use super::*;
 
-    fn frames(input: &[u8]) -> Vec<Frame> {
-        let mut f = LineFramer::new();
-        input.iter().filter_map(|&b| f.push(b)).collect()
-    }
-
-    fn line(s: &str) -> Frame {
-        Frame::Line(s.to_string())
-    }
-
-    #[test]
-    fn every_line_end_ends_a_line_once() {
-        assert_eq!(frames(b"status\nget\r\nhelp\rack\n"), vec![line("status"), line("get"), line("help"), line("ack")]);
-        // `\r\n` is one line end, a bare `\r` then `\r\n` is an empty line (nothing).
-        assert_eq!(frames(b"a\r\r\nb\n\n\n"), vec![line("a"), line("b")]);
-        assert_eq!(frames(b"   \n  set setpoint_c 5  \r\n"), vec![line("set setpoint_c 5")]);
-        assert_eq!(frames(b"no end yet"), vec![]);
-    }
-
-    #[test]
-    fn over_long_and_unprintable_lines_are_refused_whole() {
-        let max = "x".repeat(MAX_LINE_BYTES);
-        assert_eq!(frames(format!("{max}\n").as_bytes()), vec![line(&max)]);
-        let over = "y".repeat(MAX_LINE_BYTES + 1);
-        // Refused once, at its end; the next line is read as usual.
-        assert_eq!(frames(format!("{over}{over}\nget\n").as_bytes()), vec![Frame::TooLong, line("get")]);
-        assert_eq!(frames(b"set\tsetpoint_c 5\nget\n"), vec![Frame::NotPrintable, line("get")]);
-        assert_eq!(frames("set setpoint_c 5 °C\n".as_bytes()), vec![Frame::NotPrintable]);
-        assert_eq!(frames(b"st\x7fatus\n"), vec![Frame::NotPrintable]);
-    }
-
     fn tmp_path(name: &str) -> PathBuf {
         std::env::temp_dir().join(format!("hter-link-{}-{name}", std::process::id()))
     }
@@ -441,7 +344,7 @@ mod tests {
         );
         assert_eq!(
             client_request(&path, &mut link, "x\x01\nack\r", "ok"),
-            got("ack", &format!("{ERR_NOT_PRINTABLE}\r\nok\r\n"))
+            got("ack", &format!("{}\r\nok\r\n", Frame::NotPrintable.error().unwrap()))
         );
         drop(link);
         assert!(std::fs::symlink_metadata(&path).is_err(), "symlink left behind");
@@ -466,7 +369,7 @@ mod tests {
             let n = port.read(&mut buf).unwrap();
             text.push_str(std::str::from_utf8(&buf[..n]).unwrap());
         }
-        assert_eq!(text, format!("{ERR_TOO_LONG}\r\n"));
+        assert_eq!(text, format!("{}\r\n", Frame::TooLong.error().unwrap()));
     }
 
     #[test]

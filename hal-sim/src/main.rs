@@ -6,6 +6,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use hal_sim::{
     board_cmd, campaign_cmd, compare_cmd, demo_cmd, identify_cmd, log2csv_cmd, monitor_cmd, rtd_cmd, sim_cmd,
+    virtual_board_cmd,
 };
 
 /// Adaptive control of a thermoelectric (Peltier) vaccine carrier: simulate, identify, convert.
@@ -38,6 +39,9 @@ enum Command {
     /// Talk to a carrier (or `hter virtual-board`) over its serial port: status, settings,
     /// the cold-chain record, on-board commissioning.
     Board(board_cmd::BoardArgs),
+    /// A simulated carrier on a pseudo-terminal: the board's step, record and interface in front
+    /// of the plant model, N× faster than real time, for `hter board` to talk to.
+    VirtualBoard(virtual_board_cmd::VirtualBoardArgs),
 }
 
 fn main() -> ExitCode {
@@ -66,6 +70,7 @@ fn main() -> ExitCode {
         Some(Command::Log2csv(a)) => log2csv_cmd::run(&a),
         Some(Command::Campaign(a)) => campaign_cmd::run(&a),
         Some(Command::Board(a)) => board_cmd::run(&a),
+        Some(Command::VirtualBoard(a)) => virtual_board_cmd::run(&a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

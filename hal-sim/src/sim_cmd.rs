@@ -105,6 +105,15 @@ pub enum LoadArg {
     Half,
 }
 
+impl From<LoadArg> for Load {
+    fn from(l: LoadArg) -> Load {
+        match l {
+            LoadArg::Full => Load::Full,
+            LoadArg::Half => Load::Half,
+        }
+    }
+}
+
 /// `x` if it is finite, else a one-line error naming the flag `--name`.
 pub fn finite(name: &str, x: f64) -> Result<f64> {
     if x.is_finite() {
@@ -207,10 +216,7 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
         scenario,
         controller,
         plant,
-        load: match a.load {
-            LoadArg::Full => Load::Full,
-            LoadArg::Half => Load::Half,
-        },
+        load: a.load.into(),
         ambient_c: finite("ambient", a.ambient)?,
         duration_s,
         seed: a.seed,

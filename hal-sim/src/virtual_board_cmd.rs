@@ -10,10 +10,9 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 
 use crate::link::PtyLink;
-use crate::plant::Load;
 use crate::sim::virtual_board::{VirtualBoard, VirtualOptions};
 use crate::sim::PlantChoice;
-use crate::sim_cmd::finite;
+use crate::sim_cmd::{finite, LoadArg};
 
 /// `hter virtual-board` arguments.
 #[derive(clap::Args, Debug, Clone)]
@@ -26,7 +25,7 @@ pub struct VirtualBoardArgs {
     pub plant: String,
     /// Load: full or half.
     #[arg(long, value_enum, default_value = "full")]
-    pub load: Load,
+    pub load: LoadArg,
     /// Ambient, °C.
     #[arg(long, default_value_t = 28.0, allow_negative_numbers = true)]
     pub ambient: f64,
@@ -53,7 +52,7 @@ pub fn run(a: &VirtualBoardArgs) -> Result<()> {
     }
     let ambient_c = finite("--ambient", a.ambient)?;
     let plant = PlantChoice::parse(&a.plant)?;
-    let mut board = VirtualBoard::new(&VirtualOptions { plant, load: a.load, ambient_c, seed: a.seed })?;
+    let mut board = VirtualBoard::new(&VirtualOptions { plant, load: a.load.into(), ambient_c, seed: a.seed })?;
     if let Some(ops) = a.cut_settings_write {
         board.cut_next_settings_write(ops);
     }

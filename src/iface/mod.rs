@@ -9,6 +9,7 @@
 //! line, `ok` or `err <key>: <why>`. A settings tree library would bring serde and a JSON or
 //! postcard codec (several KiB) for five keys; the grammar below is a few hundred bytes.
 
+pub mod line;
 pub mod num;
 
 use crate::model::{Model, MAX_K};

@@ -317,15 +317,13 @@ impl IntervalLog {
 /// The header of `history`'s CSV (docs/interface.md).
 pub const CSV_HEADER: &str = "t_s,temp_c,min_c,max_c,duty,mode,event";
 
-/// Writes `entry` as one CSV row of `history` (no line end). Event rows repeat `last_mean_c`,
-/// the mean of the interval before them, so every row has a temperature (`hter monitor`
-/// reads `t_s, temp_c`); `last_mean_c` is updated by interval rows.
-pub fn write_csv_row(entry: &LogEntry, last_mean_c: &mut f32, out: &mut impl core::fmt::Write) -> core::fmt::Result {
+/// Writes `entry` as one CSV row of `history` (no line end). Event rows leave the measurement
+/// columns empty (`hter monitor` and `hter report` take them as events, not samples).
+pub fn write_csv_row(entry: &LogEntry, out: &mut impl core::fmt::Write) -> core::fmt::Result {
     use crate::iface::num::Fixed;
     let t = entry.t_s();
     match entry {
         LogEntry::Interval { interval: i, .. } => {
-            *last_mean_c = i.mean_c;
             write!(
                 out,
                 "{t},{},{},{},{},{},",
@@ -337,8 +335,7 @@ pub fn write_csv_row(entry: &LogEntry, last_mean_c: &mut f32, out: &mut impl cor
             )
         }
         _ => {
-            let mean = Fixed(*last_mean_c, 2);
-            write!(out, "{t},{mean},{mean},{mean},,,")?;
+            write!(out, "{t},,,,,,")?;
             match entry {
                 LogEntry::Event { kind, .. } => out.write_str(kind.name()),
                 LogEntry::Alarm { kind, start_s, .. } => write!(out, "alarm:{}@{start_s}", kind.name()),
@@ -434,15 +431,13 @@ mod tests {
     }
 
     #[test]
-    fn csv_rows_carry_a_temperature_on_every_row() {
-        let mut last = f32::NAN;
+    fn csv_rows_of_events_leave_the_measurements_empty() {
         let mut s = String::new();
         let i = Interval { mean_c: 4.0, min_c: 3.5, max_c: 4.5, duty: 0.45, mode: Mode::Normal };
-        write_csv_row(&LogEntry::Interval { t_s: 300, interval: i }, &mut last, &mut s).unwrap();
+        write_csv_row(&LogEntry::Interval { t_s: 300, interval: i }, &mut s).unwrap();
         s.push('\n');
-        write_csv_row(&LogEntry::Setting { t_s: 310, key: SettingKey::Setpoint, value: [5.0, 0.0] }, &mut last, &mut s)
-            .unwrap();
-        assert_eq!(s, "300,4.00,3.50,4.50,0.450,normal,\n310,4.00,4.00,4.00,,,set:setpoint_c=5.00");
+        write_csv_row(&LogEntry::Setting { t_s: 310, key: SettingKey::Setpoint, value: [5.0, 0.0] }, &mut s).unwrap();
+        assert_eq!(s, "300,4.00,3.50,4.50,0.450,normal,\n310,,,,,,set:setpoint_c=5.00");
         assert_eq!(CSV_HEADER.split(',').count(), s.lines().next().unwrap().split(',').count());
     }
 }

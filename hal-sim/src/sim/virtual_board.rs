@@ -126,16 +126,19 @@ impl VirtualBoard {
         let (store, log) = (open_store(MockFlash::blank(STORE_PAGES)), open_log(MockFlash::blank(LOG_PAGES)));
         let mut vb = VirtualBoard {
             rig,
-            app: App::new(app_config(adaptive), &hter::app::Boot {
-                settings: None,
-                calibration: hter::calib::TwoPoint::IDENTITY,
-                adaptive: None,
-                history: hter::persist::HistoryRecord::EMPTY,
-                log_last_s: 0,
-                reset: ResetCause::Other,
-                fault: None,
-                pages_lost: 0,
-            }),
+            app: App::new(
+                app_config(adaptive),
+                &hter::app::Boot {
+                    settings: None,
+                    calibration: hter::calib::TwoPoint::IDENTITY,
+                    adaptive: None,
+                    history: hter::persist::HistoryRecord::EMPTY,
+                    log_last_s: 0,
+                    reset: ResetCause::Other,
+                    fault: None,
+                    pages_lost: 0,
+                },
+            ),
             adaptive,
             store: Some(store),
             log: Some(log),
@@ -250,10 +253,9 @@ impl VirtualBoard {
                 self.flush();
                 out.push_str(CSV_HEADER);
                 out.push_str("\r\n");
-                let mut last_mean = f32::NAN;
                 let walked = match self.log.as_mut() {
                     Some(log) => block_on(log.for_each(since_s, |e| {
-                        let _ = write_csv_row(e, &mut last_mean, &mut out);
+                        let _ = write_csv_row(e, &mut out);
                         out.push_str("\r\n");
                         true
                     })),

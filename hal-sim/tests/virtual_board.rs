@@ -1,0 +1,161 @@
+//! The README's workflow end to end: `hter virtual-board --link PATH --speed 600` in one process,
+//! `hter board --port PATH …` in others, as a user runs them from two shells.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn hter(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hter")).args(args).output().expect("run hter")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("hter-vb-{}-{name}", std::process::id()))
+}
+
+/// A running `hter virtual-board`, stopped on drop.
+struct Board {
+    child: Child,
+    link: PathBuf,
+}
+
+impl Board {
+    fn start(name: &str, extra: &[&str]) -> Board {
+        let link = tmp(name);
+        let mut args = vec!["virtual-board", "--link", link.to_str().unwrap(), "--speed", "600"];
+        args.extend_from_slice(extra);
+        let child = Command::new(env!("CARGO_BIN_EXE_hter")).args(&args).stderr(Stdio::null()).spawn().unwrap();
+        let t0 = Instant::now();
+        while !link.exists() {
+            assert!(t0.elapsed() < Duration::from_secs(20), "the link did not appear");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        Board { child, link }
+    }
+
+    fn port(&self) -> &str {
+        self.link.to_str().unwrap()
+    }
+
+    fn board(&self, args: &[&str]) -> Output {
+        let mut a = vec!["board", "--port", self.port()];
+        a.extend_from_slice(args);
+        hter(&a)
+    }
+
+    fn status(&self) -> serde_json::Value {
+        let o = self.board(&["status", "--json"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice(&o.stdout).unwrap()
+    }
+
+    /// Polls `status` until `ok` holds (wall time limit).
+    fn wait_for(&self, what: &str, limit_s: u64, ok: impl Fn(&serde_json::Value) -> bool) -> serde_json::Value {
+        let t0 = Instant::now();
+        loop {
+            let s = self.status();
+            if ok(&s) {
+                return s;
+            }
+            assert!(t0.elapsed() < Duration::from_secs(limit_s), "{what}: {s}");
+            std::thread::sleep(Duration::from_millis(500));
+        }
+    }
+}
+
+impl Drop for Board {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn one_line_error(o: &Output) -> String {
+    assert!(!o.status.success(), "must fail: {}", String::from_utf8_lossy(&o.stdout));
+    let e = String::from_utf8_lossy(&o.stderr).trim_end().to_string();
+    assert_eq!(e.lines().count(), 1, "one line: {e}");
+    e
+}
+
+#[test]
+fn status_settings_and_history_work_from_the_host_tool_as_the_readme_shows() {
+    let b = Board::start("readme", &[]);
+    let s = b.status();
+    for key in [
+        "t_s",
+        "temp_c",
+        "setpoint_c",
+        "duty",
+        "mode",
+        "alarm",
+        "controller",
+        "model",
+        "holdover_s",
+        "resets",
+        "firmware",
+    ] {
+        assert!(s.get(key).is_some(), "status --json has {key}: {s}");
+    }
+    assert_eq!(s["controller"], "gpc");
+    assert_eq!(s["model"]["k"], 5);
+    // Refused values: non-zero exit, one line, nothing changed.
+    for v in ["12", "nan"] {
+        let e = one_line_error(&b.board(&["set", "setpoint_c", v]));
+        assert!(e.contains("setpoint_c"), "{e}");
+    }
+    let s = b.status();
+    assert_eq!((s["setpoint_c"].as_f64(), s["settings_version"].as_u64()), (Some(4.0), Some(0)));
+    // An accepted one: the load follows (≈ 2 h of carrier time at 600×).
+    let o = b.board(&["set", "setpoint_c", "5"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = b.wait_for("the load reaches 5 °C", 60, |s| s["temp_c"].as_f64().is_some_and(|t| (t - 5.0).abs() < 0.1));
+    assert_eq!(s["settings_version"], 1);
+    // Every law of the build, and one it does not link.
+    assert!(b.board(&["set", "controller", "pi"]).status.success());
+    assert_eq!(b.status()["controller"], "pi");
+    one_line_error(&b.board(&["set", "controller", "igmvc"]));
+    assert!(b.board(&["set", "controller", "gpc"]).status.success());
+    one_line_error(&b.board(&["set", "cal_ice", "3.0,0.0"]));
+    assert!(b.board(&["set", "cal_ice", "0.05,0.00"]).status.success());
+    one_line_error(&b.board(&["set", "model", "1.2,0.1;-0.02,-0.01;5"]));
+    assert!(b.board(&["ack"]).status.success());
+    // The record into `hter monitor`.
+    let csv = tmp("h.csv");
+    let o = b.board(&["history", "--output", csv.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert!(text.contains("set:setpoint_c=5.00") && text.contains("set:controller=pi"), "{text}");
+    let m = hter(&["monitor", "--input", csv.to_str().unwrap(), "--json"]);
+    assert!(m.status.success(), "{}", String::from_utf8_lossy(&m.stderr));
+    let m: serde_json::Value = serde_json::from_slice(&m.stdout).unwrap();
+    assert_eq!(m["alarms"], serde_json::json!([]));
+    assert!(m["min_c"].as_f64().unwrap() > 3.0 && m["max_c"].as_f64().unwrap() < 6.0, "{m}");
+    let _ = std::fs::remove_file(&csv);
+}
+
+#[test]
+fn a_power_cut_in_the_middle_of_a_settings_write_keeps_the_old_setting_and_the_board_comes_back() {
+    let b = Board::start("cut", &["--cut-settings-write", "2"]);
+    // Past the write gate's minute after boot, so the boot's own record is stored first (a cut
+    // before it would lose that record too, as on the board).
+    b.wait_for("the write gate opened", 30, |s| s["t_s"].as_f64().is_some_and(|t| t > 120.0));
+    let o = b.board(&["set", "setpoint_c", "6"]);
+    assert!(o.status.success());
+    let s = b.wait_for("the board restarted", 30, |s| s["resets"] == 2);
+    assert_eq!(s["setpoint_c"], 4.0, "the torn write is not used: {s}");
+    assert_eq!(s["mode"], "normal");
+    // It takes settings again, and they persist.
+    assert!(b.board(&["set", "setpoint_c", "5"]).status.success());
+    assert_eq!(b.status()["setpoint_c"], 5.0);
+    let csv = tmp("cut.csv");
+    assert!(b.board(&["history", "--output", csv.to_str().unwrap()]).status.success());
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert!(text.contains("restarted_brownout"), "the cut is on record: {text}");
+    let _ = std::fs::remove_file(&csv);
+}
+
+#[test]
+fn a_missing_port_is_one_line_and_non_zero() {
+    let e = one_line_error(&hter(&["board", "--port", Path::new("/nonexistent/tty").to_str().unwrap(), "status"]));
+    assert!(e.contains("/nonexistent/tty"), "{e}");
+}

@@ -1,0 +1,158 @@
+//! Request framing: bytes from a serial port into request lines (docs/interface.md), the same
+//! for the board's USART2, the virtual board's pty and a future USB CDC port. No heap.
+//!
+//! `\n`, `\r\n` or a bare `\r` end a line (a terminal's Enter sends `\r`); backspace (0x08) and
+//! DEL (0x7f, what most terminals send for Backspace) erase the last byte, so a person can
+//! correct a typo; an empty or all-space line is nothing. A line longer than [`MAX_LINE`] or
+//! with another byte outside printable ASCII is answered by its [`Frame`] error and dropped
+//! whole.
+
+use super::MAX_LINE;
+
+/// What one line of input came to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Frame<'a> {
+    /// A request, without its line end and surrounding spaces; never empty.
+    Line(&'a str),
+    /// Longer than [`MAX_LINE`] bytes (the rest was dropped).
+    TooLong,
+    /// A byte outside printable ASCII (other than the line ends and the erase keys).
+    NotPrintable,
+}
+
+impl Frame<'_> {
+    /// The reply to a framing error (`None` for a line, which the handler answers).
+    pub fn error(&self) -> Option<&'static str> {
+        match self {
+            Frame::Line(_) => None,
+            Frame::TooLong => Some("err line: too long (at most 96 bytes)"),
+            Frame::NotPrintable => Some("err line: a byte outside printable ASCII"),
+        }
+    }
+}
+
+/// Splits a byte stream into [`Frame`]s.
+#[derive(Clone, Debug, Default)]
+pub struct LineFramer {
+    buf: heapless::Vec<u8, MAX_LINE>,
+    too_long: bool,
+    not_printable: bool,
+    after_cr: bool,
+    /// `buf` holds the line last returned: cleared by the next byte.
+    returned: bool,
+}
+
+impl LineFramer {
+    /// A framer at the start of a line.
+    pub const fn new() -> Self {
+        LineFramer {
+            buf: heapless::Vec::new(),
+            too_long: false,
+            not_printable: false,
+            after_cr: false,
+            returned: false,
+        }
+    }
+
+    /// Forgets a partial line (a client went away in the middle of one).
+    pub fn reset(&mut self) {
+        *self = Self::new();
+    }
+
+    /// Takes one byte; gives a frame when it ends a non-empty line.
+    pub fn push(&mut self, b: u8) -> Option<Frame<'_>> {
+        if core::mem::take(&mut self.returned) {
+            self.buf.clear();
+        }
+        let after_cr = core::mem::replace(&mut self.after_cr, b == b'\r');
+        match b {
+            // The `\n` of a `\r\n`.
+            b'\n' if after_cr => None,
+            b'\r' | b'\n' => self.end_line(),
+            0x08 | 0x7f => {
+                self.buf.pop();
+                None
+            }
+            0x20..=0x7e => {
+                if self.buf.push(b).is_err() {
+                    self.too_long = true;
+                }
+                None
+            }
+            _ => {
+                self.not_printable = true;
+                None
+            }
+        }
+    }
+
+    fn end_line(&mut self) -> Option<Frame<'_>> {
+        let (too_long, not_printable) = (self.too_long, self.not_printable);
+        (self.too_long, self.not_printable) = (false, false);
+        self.returned = true;
+        if too_long {
+            return Some(Frame::TooLong);
+        }
+        if not_printable {
+            return Some(Frame::NotPrintable);
+        }
+        // Printable ASCII is UTF-8.
+        let line = core::str::from_utf8(&self.buf).unwrap_or("").trim_matches(' ');
+        (!line.is_empty()).then_some(Frame::Line(line))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::string::{String, ToString};
+    use std::vec::Vec;
+
+    #[derive(Debug, PartialEq)]
+    enum Owned {
+        Line(String),
+        TooLong,
+        NotPrintable,
+    }
+
+    fn frames(bytes: &[u8]) -> Vec<Owned> {
+        let mut f = LineFramer::new();
+        bytes
+            .iter()
+            .filter_map(|&b| {
+                f.push(b).map(|fr| match fr {
+                    Frame::Line(l) => Owned::Line(l.to_string()),
+                    Frame::TooLong => Owned::TooLong,
+                    Frame::NotPrintable => Owned::NotPrintable,
+                })
+            })
+            .collect()
+    }
+
+    fn line(s: &str) -> Owned {
+        Owned::Line(s.into())
+    }
+
+    #[test]
+    fn every_line_end_a_terminal_sends_ends_a_line() {
+        assert_eq!(frames(b"status\nget\r\nhelp\rack\r\n"), [line("status"), line("get"), line("help"), line("ack")]);
+        assert_eq!(frames(b"\r\n\r\n  \n"), []);
+        assert_eq!(frames(b"  set setpoint_c 5  \n"), [line("set setpoint_c 5")]);
+    }
+
+    #[test]
+    fn backspace_and_del_erase_so_a_typo_can_be_fixed() {
+        assert_eq!(frames(b"statsu\x08\x08us\n"), [line("status")]);
+        assert_eq!(frames(b"st\x7f\x7f\x7fstatus\n"), [line("status")]);
+    }
+
+    #[test]
+    fn over_long_or_unprintable_lines_are_dropped_whole_and_the_next_one_works() {
+        let max = "x".repeat(MAX_LINE);
+        assert_eq!(frames(format!("{max}\n").as_bytes()), [line(&max)]);
+        let over = "y".repeat(MAX_LINE + 1);
+        assert_eq!(frames(format!("{over}{over}\nget\n").as_bytes()), [Owned::TooLong, line("get")]);
+        assert_eq!(frames(b"set\tsetpoint_c 5\nget\n"), [Owned::NotPrintable, line("get")]);
+        assert_eq!(frames("set setpoint_c 5 °C\n".as_bytes()), [Owned::NotPrintable]);
+    }
+}
