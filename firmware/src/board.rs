@@ -130,7 +130,7 @@ pub fn serial_config() -> embassy_stm32::usart::Config {
 }
 
 /// USART2's interrupt below TIM7's (P0): a burst of received bytes never delays the stall check.
-/// Call after the UART is created (embassy enables the interrupt at the reset priority).
+/// Call before the UART is created (embassy enables the interrupt and keeps its priority).
 #[cfg(feature = "serial")]
 pub fn serial_interrupt_priority() {
     interrupt::USART2.set_priority(interrupt::Priority::P2);

@@ -15,7 +15,9 @@
 //! of it is dropped, with a warning in the defmt log. A reply longer than [`REPLY_CAP`] is not
 //! sent: the host gets `err reply: too long` instead, so the final line stays true.
 //!
-//! Costs (`cargo xtask size`, default build): see the commit that added this file.
+//! Costs (feature `serial` on the default build, `llvm-size -A`): +4 016 B of flash (the
+//! driver and its interrupt handler ≈ 1.6 KB, this task ≈ 1.2 KB, framing, waits) and +1 824 B
+//! of static RAM (the rings, the reply buffer and the line buffer live in the task's future).
 
 use core::fmt::Write;
 
@@ -146,6 +148,8 @@ async fn send(tx: &mut BufferedUartTx<'_>, bytes: &[u8]) -> bool {
 /// configured (the board then runs without the interface, and the log says so).
 #[embassy_executor::task]
 pub async fn serial(pins: board::SerialPins) {
+    // Before the driver enables the interrupt: never a moment at TIM7's urgency.
+    board::serial_interrupt_priority();
     let mut tx_buf = [0u8; TX_BUF];
     let mut rx_buf = [0u8; RX_BUF];
     let uart = match BufferedUart::new(
@@ -163,7 +167,6 @@ pub async fn serial(pins: board::SerialPins) {
             return;
         }
     };
-    board::serial_interrupt_priority();
     let (mut tx, mut rx) = uart.split();
     let mut lines = LineAssembler::new();
     let mut reply = Reply::new();
