@@ -13,6 +13,9 @@ fn main() {
     println!("cargo:rerun-if-changed=../memory.x");
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rustc-link-arg-bins=--nmagic");
+    // Fold byte-identical functions (memcpy4/memcpy8, memclr4/memclr8, …): ≈ 400 B of flash.
+    // Nothing here compares function addresses; the audit checks the handlers stay distinct.
+    println!("cargo:rustc-link-arg-bins=--icf=all");
     println!("cargo:rustc-link-arg-bins=-Tlink.x");
     println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
 }

@@ -15,6 +15,8 @@
 //! | alarm output | PC7 | D9 (CN5-2) | a buzzer or red lamp through a low-side NPN/N-MOSFET driver; high = alarm (`hter::alarm`); the second path to the buzzer beside the heartbeat |
 //! | heartbeat | PB5 | D4 (CN9-5) | toggled once per healthy control step (`hter::failsafe::Heartbeat`) into a retriggerable monostable (74HC123, timeout ≈ 15 s = 1.5·Ts): its output silences the buzzer only while edges arrive, and is ANDed into the supply-enable gate drive, so a reset, hung or dead MCU (pins Hi-Z) sounds the buzzer and opens the supply within 2·Ts without software (README, wiring) |
 //! | acknowledge button | PC13 | B1 (on board, blue) | pressed pulls low (the Nucleo's pull-up); clears a latched alarm |
+//! | settings interface TX | PA2 (USART2_TX, AF7) | ST-LINK VCP (on board) | the ST-LINK's virtual COM port (UM1724: SB13/SB14 closed and SB62/SB63 open, as shipped; then PA2/PA3 are not on CN9 D1/D0); 115200 8N1 ([`serial_config`]) |
+//! | settings interface RX | PA3 (USART2_RX, AF7) | ST-LINK VCP (on board) | as TX |
 //!
 //! The supply-enable switch is the independent second cut-off: SSRs usually fail shorted, and
 //! the supervisor must be able to stop cooling regardless.
@@ -23,6 +25,9 @@
 //! MSI PLL mode (MSIPLLEN; ± the crystal's 20 ppm instead of the ±1 % of HSI16), → PLL → 80 MHz.
 //! TIM2 (embassy's time driver) and so the millisecond clock run from it. A board without
 //! the crystal hangs in the LSE start-up until the watchdog resets it: fit one.
+//!
+//! Interrupts: USART2 (the settings interface, `crate::serial`, feature `serial`) is bound to embassy's buffered
+//! UART handler ([`SerialIrqs`]) at a lower urgency than TIM7's stall check.
 //!
 //! Timers: TIM2 is the time driver, TIM3 the SSR PWM, TIM7 the control-stall check (its
 //! interrupt at the highest priority, so it preempts the executor).
@@ -49,6 +54,8 @@ use embassy_stm32::interrupt::InterruptExt;
 use embassy_stm32::pac;
 use embassy_stm32::pac::adc::vals::{OversamplingRatio, OversamplingShift, Rovsm, Trovs};
 use embassy_stm32::peripherals::{ADC1, TIM3};
+#[cfg(feature = "serial")]
+use embassy_stm32::peripherals::{PA2, PA3, USART2};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
@@ -85,6 +92,48 @@ pub struct Board {
     pub button: Input<'static>,
     /// Flash controller (persisted records, `config::PERSIST_RANGE`).
     pub flash: Peri<'static, embassy_stm32::peripherals::FLASH>,
+    /// The settings interface's UART and pins (`crate::serial` configures them).
+    #[cfg(feature = "serial")]
+    pub serial: SerialPins,
+}
+
+/// USART2 and its pins on the ST-LINK's virtual COM port.
+#[cfg(feature = "serial")]
+pub struct SerialPins {
+    /// The UART.
+    pub usart: Peri<'static, USART2>,
+    /// PA2, USART2_TX (AF7).
+    pub tx: Peri<'static, PA2>,
+    /// PA3, USART2_RX (AF7).
+    pub rx: Peri<'static, PA3>,
+}
+
+// Binding puts the handler in the vector table: only in builds that serve the interface.
+#[cfg(feature = "serial")]
+embassy_stm32::bind_interrupts!(
+    /// USART2's interrupt drives the settings interface's ring buffers.
+    pub struct SerialIrqs {
+        USART2 => embassy_stm32::usart::BufferedInterruptHandler<USART2>;
+    }
+);
+
+/// The settings interface's line: 115200 baud, 8 data bits, no parity, 1 stop bit, no flow
+/// control (docs/interface.md).
+#[cfg(feature = "serial")]
+pub fn serial_config() -> embassy_stm32::usart::Config {
+    let mut c = embassy_stm32::usart::Config::default();
+    c.baudrate = 115_200;
+    c.data_bits = embassy_stm32::usart::DataBits::DataBits8;
+    c.parity = embassy_stm32::usart::Parity::ParityNone;
+    c.stop_bits = embassy_stm32::usart::StopBits::STOP1;
+    c
+}
+
+/// USART2's interrupt below TIM7's (P0): a burst of received bytes never delays the stall check.
+/// Call before the UART is created (embassy enables the interrupt and keeps its priority).
+#[cfg(feature = "serial")]
+pub fn serial_interrupt_priority() {
+    interrupt::USART2.set_priority(interrupt::Priority::P2);
 }
 
 /// Starts the independent watchdog at [`config::IWDG_RELOAD`]: the first thing `main` does,
@@ -205,6 +254,8 @@ pub fn init() -> Board {
         heartbeat: Output::new(p.PB5, Level::Low, Speed::Low),
         button: Input::new(p.PC13, Pull::None),
         flash: p.FLASH,
+        #[cfg(feature = "serial")]
+        serial: SerialPins { usart: p.USART2, tx: p.PA2, rx: p.PA3 },
     }
 }
 

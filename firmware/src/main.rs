@@ -9,6 +9,7 @@
 //!   every Ts                         Carrier::step, cold-chain Recorder, Annunciator
 //!                                     ├──(telemetry record)──► telemetry ──► defmt over RTT
 //!                                     └──(model every 4 h of trust, history hourly and at alarms)──► persist ──► flash
+//! serial (feature `serial`): USART2 request lines ──► serial::handle ──► reply (its own task; never blocks control)
 //! ```
 //!
 //! `main` starts the watchdog before anything else, then the clocks; a stop recorded by the
@@ -28,7 +29,11 @@ mod board;
 mod config;
 mod ecc;
 mod failsafe;
+#[cfg(feature = "serial")]
+mod line;
 mod persist;
+#[cfg(feature = "serial")]
+mod serial;
 
 use defmt::{error, info, warn};
 use defmt_rtt as _;
@@ -163,6 +168,8 @@ async fn main(spawner: Spawner) {
     spawner.spawn(actuate(b.ssr, b.supply_enable, b.led, b.alarm).unwrap());
     spawner.spawn(acknowledge(b.button).unwrap());
     spawner.spawn(telemetry().unwrap());
+    #[cfg(feature = "serial")]
+    spawner.spawn(serial::serial(b.serial).unwrap());
 }
 
 /// Takes one oversampled conversion of each analog input every Ts, at a fixed phase of the SSR

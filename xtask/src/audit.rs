@@ -36,14 +36,21 @@ pub struct Finding {
     pub line: String,
 }
 
-pub fn audit() -> Result<()> {
+/// USART2's entry in the STM32L476's vector table: the 16 core exceptions, then IRQ 38
+/// (RM0351 table 58; stm32-metapac's `Interrupt::USART2 = 38`).
+pub const USART2_VECTOR: usize = 16 + 38;
+
+/// Audits the release firmware built with `features` (cargo's `--features` list, empty for the
+/// default build). A build with `serial` must also have USART2's handler bound.
+pub fn audit(features: &str) -> Result<()> {
     let root = super::root();
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(&cargo)
-        .current_dir(&root)
-        .args(["build", "--release", "-p", "firmware", "--target", TARGET])
-        .status()
-        .context("running cargo")?;
+    let mut cmd = Command::new(&cargo);
+    cmd.current_dir(&root).args(["build", "--release", "-p", "firmware", "--target", TARGET]);
+    if !features.is_empty() {
+        cmd.args(["--features", features]);
+    }
+    let status = cmd.status().context("running cargo")?;
     if !status.success() {
         bail!("building the release firmware failed");
     }
@@ -54,6 +61,9 @@ pub fn audit() -> Result<()> {
     findings.push(rtt_finding(&elf, &cargo, &root)?);
     findings.push(image_finding(&elf));
     findings.push(region_finding(&root.join("memory.x"))?);
+    if features.split([',', ' ']).any(|f| f == "serial") {
+        findings.push(usart2_finding(&elf)?);
+    }
     println!("audit of {}", path.display());
     for f in &findings {
         println!("  {:<22} {:<4} {}", f.key, if f.ok { "ok" } else { "FAIL" }, f.line);
@@ -314,6 +324,26 @@ pub fn handler_findings(elf: &Elf) -> Result<Vec<Finding>> {
     Ok(out)
 }
 
+/// The settings interface's UART interrupt: USART2's vector entry is the bound handler (the
+/// `USART2` symbol `bind_interrupts!` defines), not `DefaultHandler`, and does more than spin.
+pub fn usart2_finding(elf: &Elf) -> Result<Finding> {
+    let v = elf.vectors()?;
+    let entry = *v.get(USART2_VECTOR).context("the vector table has no USART2 entry")?;
+    let at = entry & !1;
+    let handler = elf.symbol("USART2").map(|a| a & !1);
+    let default = elf.symbol("DefaultHandler").map(|a| a & !1);
+    let (ok, line) = if entry == 0 || Some(at) == default {
+        (false, format!("vector {USART2_VECTOR} (USART2) is DefaultHandler: received bytes are never read"))
+    } else if handler != Some(at) {
+        (false, format!("vector {USART2_VECTOR} (USART2) at {at:#010x} is not the bound USART2 handler"))
+    } else if is_spin(elf, entry) {
+        (false, format!("vector {USART2_VECTOR} (USART2) at {at:#010x} is a bare spin loop"))
+    } else {
+        (true, format!("vector {USART2_VECTOR} (USART2) at {at:#010x} is the bound buffered-UART handler"))
+    };
+    Ok(Finding { key: "usart2_handler", ok, line })
+}
+
 /// Whether `cargo tree -e features -i defmt-rtt` output shows the non-blocking feature.
 pub fn rtt_nonblocking(tree: &str) -> bool {
     tree.lines().any(|l| l.contains("defmt-rtt feature \"disable-blocking-mode\""))
@@ -546,6 +576,34 @@ mod tests {
         assert!(!handler_findings(&Elf::parse(&one).unwrap()).unwrap()[2].ok);
         assert!(Elf::parse(b"\x7fELF\x02\x01").is_err(), "ELF64 refused");
         assert!(Elf::parse(&bad[..60]).is_err(), "truncated");
+    }
+
+    #[test]
+    fn usart2_must_be_the_bound_handler() {
+        // T: a spin; T + 6: DefaultHandler (real); T + 14: the bound USART2 handler (real).
+        let code = halfwords(&[0xb580, 0x466f, 0xe7fe, 0xb580, 0x466f, 0x6001, 0xdefe, 0xb580, 0x466f, 0x6001, 0xdefe]);
+        let (spin, default, usart2) = (T, T + 6, T + 14);
+        let image = |entry: u32, symbols: &[(&str, u32)]| {
+            let mut v = table(default, default, default);
+            v.resize(USART2_VECTOR + 1, default | 1);
+            v[USART2_VECTOR] = entry;
+            elf(&v, T, &code, symbols)
+        };
+        let both = [("DefaultHandler", default | 1), ("USART2", usart2 | 1)];
+        let f = |bytes: Vec<u8>| usart2_finding(&Elf::parse(&bytes).unwrap()).unwrap();
+        let bound = f(image(usart2 | 1, &both));
+        assert!(bound.ok, "{}", bound.line);
+        assert_eq!(bound.key, "usart2_handler");
+        let unbound = f(image(default | 1, &both[..1]));
+        assert!(!unbound.ok && unbound.line.contains("DefaultHandler"), "{}", unbound.line);
+        let other = f(image(default | 1, &[("DefaultHandler", usart2 | 1), ("USART2", usart2 | 1)]));
+        assert!(!other.ok, "an entry that is not the USART2 symbol: {}", other.line);
+        let spins = f(image(spin | 1, &[("DefaultHandler", default | 1), ("USART2", spin | 1)]));
+        assert!(!spins.ok && spins.line.contains("spin"), "{}", spins.line);
+        assert!(!f(image(0, &both)).ok, "an empty entry");
+        // A table too short for USART2 is an error, not a pass.
+        let short = elf(&table(default, default, default), T, &code, &both);
+        assert!(usart2_finding(&Elf::parse(&short).unwrap()).is_err());
     }
 
     #[test]

@@ -20,7 +20,8 @@
 //! a build exceeds [`FLASH_BUDGET`] or [`RAM_BUDGET`].
 //!
 //! `cargo xtask audit` — the release firmware image's fail-safe properties ([`audit`]): fault
-//! handlers that do more than spin, defmt-rtt that cannot block, the program in flash bank 1.
+//! handlers that do more than spin, defmt-rtt that cannot block, the program in flash bank 1;
+//! `cargo xtask audit --features serial` audits that build and checks USART2's handler is bound.
 
 #[path = "../../pil/src/proto.rs"]
 #[allow(dead_code)]
@@ -28,6 +29,13 @@ mod proto;
 
 mod audit;
 mod failsafe;
+
+// The firmware's request framing is plain `core` code: tested here, on the host.
+#[cfg(test)]
+#[path = "../../firmware/src/line.rs"]
+mod line;
+#[cfg(test)]
+mod line_tests;
 
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -106,9 +114,16 @@ fn main() -> Result<()> {
     match args.first().map(String::as_str) {
         Some("pil") => pil(),
         Some("size") => size(),
-        Some("audit") => audit::audit(),
+        Some("audit") => match (args.get(1).map(String::as_str), args.get(2)) {
+            (None, _) => audit::audit(""),
+            (Some("--features"), Some(f)) => audit::audit(f),
+            _ => {
+                eprintln!("usage: cargo xtask audit [--features FEATURES]");
+                std::process::exit(2)
+            }
+        },
         _ => {
-            eprintln!("usage: cargo xtask pil | cargo xtask size | cargo xtask audit");
+            eprintln!("usage: cargo xtask pil | cargo xtask size | cargo xtask audit [--features FEATURES]");
             std::process::exit(2)
         }
     }
