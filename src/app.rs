@@ -266,6 +266,11 @@ impl App {
         }
     }
 
+    /// The cold-chain record (this boot's monitor: MKT, extremes, excursions).
+    pub fn recorder(&self) -> &Recorder {
+        &self.recorder
+    }
+
     /// The step (for logging the controller's state).
     pub fn carrier(&self) -> &Carrier<BoardController> {
         &self.carrier

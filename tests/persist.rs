@@ -600,7 +600,7 @@ fn entry(i: u32) -> LogEntry {
 
 fn log_entries<const PAGE: usize>(log: &mut LogStore<MockFlash<PAGE>, MockEcc>) -> Vec<LogEntry> {
     let mut out = Vec::new();
-    let skipped = block_on(log.for_each(0, |e| {
+    let skipped = block_on(log.for_each(0, async |e: &LogEntry| {
         out.push(*e);
         true
     }))

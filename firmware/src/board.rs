@@ -65,10 +65,12 @@ use hter::adc::SupplySense;
 
 use crate::config;
 
-/// The persistence region as absolute addresses (`config::PERSIST_RANGE` is relative to the
-/// flash base), for the NMI handler's ECC check.
+/// The persistence regions (the log, then the records: `config::LOG_RANGE` and
+/// `config::PERSIST_RANGE`, relative to the flash base) as absolute addresses, for the NMI
+/// handler's ECC check.
 pub const PERSIST_ADDRESSES: core::ops::Range<u32> =
-    FLASH_BASE + config::PERSIST_RANGE.start..FLASH_BASE + config::PERSIST_RANGE.end;
+    FLASH_BASE + config::LOG_RANGE.start..FLASH_BASE + config::PERSIST_RANGE.end;
+const _: () = assert!(config::LOG_RANGE.end <= config::PERSIST_RANGE.start);
 
 /// The flash's base address (0x0800_0000): `config::PERSIST_RANGE` and embassy's `Flash` count
 /// from it, the NMI's FLASH_ECCR address and the ECC note are absolute.

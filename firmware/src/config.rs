@@ -301,6 +301,41 @@ impl hter::control::Controller for Identify {
 /// embassy's `Flash` takes): the last 4 pages of 2 KiB, `PERSIST` in `memory.x`.
 pub const PERSIST_RANGE: core::ops::Range<u32> = 0x000F_E000..0x0010_0000;
 
+/// Flash region of the cold-chain log (`hter::persist::log`, a sequential-storage queue of
+/// 16-byte entries), offsets from the flash base: bank 2 from its start, 248 pages of 2 KiB
+/// (496 KiB, ≈ 50 days of 5-minute intervals and events), `LOG` in `memory.x`; two pages are
+/// left free before [`PERSIST_RANGE`].
+pub const LOG_RANGE: core::ops::Range<u32> = 0x0008_0000..0x000F_C000;
+
+/// The laws this build links, its default first (`set controller`, `status`'s `controllers`).
+pub const LAWS: &[hter::iface::Law] = {
+    use hter::iface::Law;
+    if cfg!(feature = "igmvc") {
+        &[Law::Igmvc, Law::Pi, Law::OnOff]
+    } else if cfg!(feature = "pi") {
+        &[Law::Pi, Law::Gpc, Law::OnOff]
+    } else if cfg!(feature = "onoff") {
+        &[Law::OnOff, Law::Gpc, Law::Pi]
+    } else {
+        &[Law::Gpc, Law::Pi, Law::OnOff]
+    }
+};
+
+/// The board application's build: this file's step configuration, self-tuner, laws, setpoint
+/// and save cadences (`hter::app::App`, which the control task owns).
+pub const APP: hter::app::AppConfig = hter::app::AppConfig {
+    carrier: VALID_CARRIER,
+    adaptive: match ADAPTIVE {
+        Some(a) => a,
+        None => profile::ADAPTIVE_GPC,
+    },
+    laws: LAWS,
+    setpoint_c: SETPOINT_C,
+    firmware: concat!("hter ", env!("CARGO_PKG_VERSION")),
+    history_save_samples: HISTORY_SAVE_SAMPLES,
+    model_save_samples: MODEL_SAVE_SAMPLES,
+};
+
 /// Samples with a trusted, freshly updated estimate (mode `Adaptive`) between model saves:
 /// the board profile's `MODEL_SAVE_S` (4 h).
 pub const MODEL_SAVE_SAMPLES: u32 = profile::samples(profile::MODEL_SAVE_S, CARRIER.ts_s);

@@ -29,8 +29,6 @@ mod board;
 mod config;
 mod ecc;
 mod failsafe;
-#[cfg(feature = "serial")]
-mod line;
 mod persist;
 #[cfg(feature = "serial")]
 mod serial;
@@ -43,15 +41,18 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant, Ticker};
-use hter::alarm::{Annunciator, Indication};
-use hter::calib::TwoPoint;
-use hter::control::adaptive::AdaptiveConfig;
+#[cfg(feature = "serial")]
+use embassy_futures::select::{select, Either};
+use hter::alarm::Indication;
+#[cfg(feature = "serial")]
+use hter::app::Handled;
+use hter::app::{App, Boot, SampleIn};
 use hter::control::{Controller, ControllerStatus};
-use hter::event::{Event, EventKind};
-use hter::failsafe::{Heartbeat, StopInfo};
+use hter::event::Event;
+use hter::failsafe::Heartbeat;
 use hter::hal::apply_duty;
-use hter::persist::{HistoryRecord, ModelCadence, Recorder, ResetCause};
-use hter::step::{Carrier, Mode, StepInput};
+use hter::persist::ResetCause;
+use hter::step::Mode;
 use hter::units::Duty;
 
 /// One sample of the analog inputs and when it was taken.
@@ -93,19 +94,6 @@ struct Telemetry {
     alarm: Indication,
     /// Estimator state of a self-tuning controller (θ, trace P, prediction error, mode).
     status: Option<ControllerStatus>,
-}
-
-/// Everything the boot hands the control task.
-struct Boot {
-    /// The RTD channel's calibration (stored, or identity).
-    cal: TwoPoint,
-    adaptive: Option<AdaptiveConfig>,
-    history: HistoryRecord,
-    reset: ResetCause,
-    /// The stop recorded before the last reset, if any.
-    fault: Option<StopInfo>,
-    /// Flash pages the boot found unreadable (ECC) and treated as lost.
-    pages_lost: u8,
 }
 
 static SAMPLES: Channel<CriticalSectionRawMutex, Sample, 2> = Channel::new();
@@ -150,19 +138,16 @@ async fn main(spawner: Spawner) {
         b.ssr.get_frequency().0,
         b.ssr.max_duty_cycle()
     );
-    let mut store = persist::open(b.flash);
-    let restored = persist::restore(store.as_mut()).await;
-    if let Some(store) = store {
-        spawner.spawn(persist::persist(store).unwrap());
+    // The persist task owns the flash: it restores both regions, then serves the writes.
+    spawner.spawn(persist::persist(b.flash).unwrap());
+    let restored = persist::BOOTED.wait().await;
+    let mut boot = restored.boot(reset, fault);
+    if restored.settings.is_err() {
+        // No settings stored: this build's calibration constant, if it has one.
+        if let Some(cal) = config::CALIBRATION {
+            boot.calibration = cal;
+        }
     }
-    let boot = Boot {
-        cal: restored.cal,
-        adaptive: restored.adaptive,
-        history: restored.history,
-        reset,
-        fault,
-        pages_lost: restored.pages_lost,
-    };
     spawner.spawn(sample(b.analog).unwrap());
     spawner.spawn(control(boot, b.heartbeat).unwrap());
     spawner.spawn(actuate(b.ssr, b.supply_enable, b.led, b.alarm).unwrap());
@@ -201,89 +186,89 @@ async fn sample(mut analog: board::Analog) {
     }
 }
 
-/// Runs the library's per-sample step on each sample, records it, decides the alarm
-/// indicator; after each completed step beats the heartbeat, tells the stall check and feeds
-/// the watchdog.
+/// Runs the board application ([`hter::app::App`]: the step, the record and log, the
+/// settings) on each sample and each interface request; after each completed step beats the
+/// heartbeat, tells the stall check and feeds the watchdog.
 #[embassy_executor::task]
 async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
-    // Built here from the constant profile, so that its derived sample counts fold at compile
-    // time; only the calibration comes from flash.
-    let mut carrier: Carrier<config::Ctl> =
-        Carrier::new(config::VALID_CARRIER.with_calibration(boot.cal), config::controller(boot.adaptive));
-    carrier.note_reset(boot.reset);
-    let mut recorder = Recorder::new(boot.history, config::HISTORY_SAVE_SAMPLES);
-    let mut history = recorder.note_reset(boot.reset);
-    if let Some(f) = &boot.fault {
-        carrier.note_board_fault(f.kind);
-        history = recorder.note_board_fault(f);
+    let mut app = App::new(config::APP, &boot);
+    if boot.pages_lost > 0 {
+        warn!("{} flash pages were torn by a power cut and repaired", boot.pages_lost);
     }
-    for _ in 0..boot.pages_lost {
-        history = recorder.note_flash_page_lost();
-        if EVENTS.try_send(Event { t_ms: 0, kind: EventKind::FlashPageLost }).is_err() {
-            warn!("event queue full, dropped FlashPageLost");
-        }
-    }
-    // Waits for the write gate: a power-bounce loop does not write at every boot.
-    persist::request(persist::Save::History(history));
-    let mut annunciator = Annunciator::new();
+    info!("controller: {}", app.carrier().controller().name());
     let mut heartbeat = Heartbeat::new();
-    info!("controller: {}", carrier.controller().name());
-    let mut model_cadence = ModelCadence::new(config::MODEL_SAVE_SAMPLES);
     let mut samples = 0u32;
     board::start_stall_check();
     loop {
+        #[cfg(feature = "serial")]
+        let s = match select(SAMPLES.receive(), serial::REQUESTS.receive()).await {
+            Either::First(s) => s,
+            Either::Second(line) => {
+                let handled = serial::REPLY.lock(|r| {
+                    let mut r = r.borrow_mut();
+                    r.clear();
+                    app.handle(&line, &mut *r)
+                });
+                while let Some(save) = app.next_save() {
+                    persist::request(save);
+                }
+                if let Handled::History { since_s } = handled {
+                    persist::HISTORY.signal(since_s);
+                }
+                serial::REPLIED.signal(handled);
+                continue;
+            }
+        };
+        #[cfg(not(feature = "serial"))]
         let s = SAMPLES.receive().await;
         // Flash writes wait while VDD is under the PVD level.
         persist::note_supply(s.supply_ok);
-        if let Some(v) = s.supply_v {
-            carrier.observe_supply_v(v);
-        }
-        if let Some(v) = s.switched_v {
-            carrier.observe_switched_rail_v(v);
-        }
-        let input = StepInput { t_ms: s.t_ms, counts: s.counts, setpoint_c: config::SETPOINT_C };
-        let out = if s.reference_ok { carrier.step(&input) } else { carrier.step_with_reference_fault(&input) };
-        let rec = recorder.push(s.t_ms, out.temp_c.0);
         if ACKNOWLEDGE.try_take().is_some() {
             info!("alarm acknowledged t={=u64:ms}", s.t_ms);
-            annunciator.acknowledge();
+            app.acknowledge();
         }
-        let alarm = annunciator.update(&out, &rec.raised);
-        ACTUATION.signal(Actuation { duty: out.duty, supply_enable: out.supply_enable, alarm: alarm.is_on() });
-        for e in out.events.iter() {
+        let out = app.sample(&SampleIn {
+            t_ms: s.t_ms,
+            counts: s.counts,
+            reference_ok: s.reference_ok,
+            supply_v: s.supply_v,
+            switched_v: s.switched_v,
+        });
+        let step = &out.step;
+        ACTUATION.signal(Actuation { duty: step.duty, supply_enable: step.supply_enable, alarm: out.alarm.is_on() });
+        for e in step.events.iter() {
             // Never block the loop on logging: a full queue drops the event, and says so.
             if EVENTS.try_send(e).is_err() {
                 warn!("event queue full, dropped {}", e);
             }
         }
-        if out.events.dropped() > 0 {
-            warn!("{} events of this step did not fit the step's list", out.events.dropped());
+        if step.events.dropped() > 0 {
+            warn!("{} events of this step did not fit the step's list", step.events.dropped());
         }
-        for a in rec.raised.iter().flatten() {
+        for a in out.raised.iter().flatten() {
             error!("ALARM {} t={=u64:ms} (condition since t={=u64:ms})", a.kind.name(), a.trigger_ms, a.start_ms);
         }
-        // An alarm's history is stored as soon as the supply allows, without the boot's hold-off.
-        if let Some(save) = recorder.due_save(&rec) {
+        while let Some(save) = app.next_save() {
             persist::request(save);
         }
         let record = Telemetry {
             t_ms: s.t_ms,
-            temp_c: out.temp_c.0,
-            setpoint_c: out.setpoint_c.0,
-            duty: out.duty.get(),
-            mode: out.mode,
+            temp_c: step.temp_c.0,
+            setpoint_c: step.setpoint_c.0,
+            duty: step.duty.get(),
+            mode: step.mode,
             counts: s.counts,
             supply_v: s.supply_v,
             switched_v: s.switched_v,
-            alarm,
-            status: out.status,
+            alarm: out.alarm,
+            status: step.status,
         };
         if TELEMETRY.try_send(record).is_err() {
             warn!("telemetry queue full, dropped t={=u64:ms}", s.t_ms);
         }
         samples = samples.wrapping_add(1);
         if samples.is_multiple_of(config::SUMMARY_SAMPLES) {
-            let m = recorder.monitor();
+            let m = app.recorder().monitor();
             info!(
                 "coldchain t={=u64:ms} mkt={} min={} max={} below2_s={} above8_s={} excursions={}",
                 s.t_ms,
@@ -294,9 +279,6 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
                 m.time_above_8_s(),
                 m.excursion_count()
             );
-        }
-        if let Some(rec) = model_cadence.push(out.status.map(|st| st.mode), carrier.controller()) {
-            persist::request(persist::Save::Model(rec));
         }
         // Healthy = the step completed: the monostable also gates the modules' supply, so a beat
         // that stopped at every alarm would stop cooling at a heat alarm. The alarm pin sounds

@@ -1,93 +1,146 @@
-//! Glue between the carrier and `hter::persist::flash::Store` over the STM32L4's flash: what is
-//! restored at boot (calibration, cold-chain history, the self-tuner's model) and a task that
-//! stores what the control task hands it.
+//! Glue between the carrier and the library's flash stores over the STM32L4's flash: the boot's
+//! restore, a task that stores what the control task hands it, and the `history` stream.
+//!
+//! Bank 2 holds two regions (`memory.x`): the records (`PERSIST`: settings, model, calibration,
+//! history; `hter::persist::flash::Store`) and the cold-chain log (`LOG`: intervals and events;
+//! `hter::persist::flash::LogStore`). One flash driver serves both, through embassy's flash
+//! [`Partition`]s, all inside the [`persist`] task: it restores at boot
+//! (`hter::persist::flash::restore`, then [`BOOTED`]), writes every save
+//! (`hter::persist::flash::write`) and streams the log for `history` ([`HISTORY`] →
+//! [`HISTORY_PIPE`]).
 //!
 //! Writes wait for [`hter::persist::WriteGate`]: the supply (the control task's [`note_supply`]
 //! every sample) good for 60 s since boot and good now, or good now for an alarm record. Until
-//! then requests wait in [`hter::persist::PendingSaves`], the newest of each kind, so a board in
-//! a power-bounce loop never writes (and never tears a word). Reads go through the store's ECC
-//! repair: the NMI handler notes a double ECC error in the region ([`crate::ecc`]), the reader
-//! fails, the store clears the torn word or erases the torn page and retries; the boot reports
-//! how many pages it repaired ([`Restored::pages_lost`]).
+//! then requests wait in [`hter::persist::PendingSaves`] (the newest record of each kind, every
+//! log entry), so a board in a power-bounce loop never writes (and never tears a word). Reads
+//! go through the stores' ECC repair: the NMI handler notes a double ECC error in either region
+//! ([`crate::ecc`]), the reader fails, the store clears the torn word or erases the torn page
+//! and retries; the boot reports how many pages it repaired.
 //!
 //! The flash driver is blocking (embassy's `Flash` in blocking mode behind `BlockingAsync`): a
 //! store stalls the executor for at most one page erase (≈ 22 ms on the L4, RM0351 table 50
-//! "tERASE") plus a few double-word writes, about once an hour; the 10 s control loop and the
-//! 30 s watchdog do not notice.
+//! "tERASE") plus a few double-word writes; the log appends one 32-byte item every 5 minutes
+//! and erases a page every ≈ 5 h; the 10 s control loop and the 30 s watchdog do not notice.
 
 use core::cell::RefCell;
+#[cfg(feature = "interface")]
+use core::fmt::Write as _;
+
 use defmt::{info, warn};
-use embassy_embedded_hal::adapter::BlockingAsync;
+#[cfg(feature = "interface")]
+use embassy_futures::select::{select, Either};
 use embassy_stm32::flash::{Blocking, Flash};
+use embedded_storage_async::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use embassy_stm32::peripherals::FLASH;
 use embassy_stm32::Peri;
-
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
+#[cfg(feature = "interface")]
+use embassy_sync::pipe::Pipe;
 use embassy_sync::signal::Signal;
 use embassy_time::Instant;
-use hter::calib::TwoPoint;
-use hter::control::adaptive::AdaptiveConfig;
-use hter::persist::flash::{key, EccErrors, LoadStatus, Store, StoreError};
+#[cfg(feature = "interface")]
+use embassy_time::{with_timeout, Duration};
+#[cfg(feature = "interface")]
+use hter::persist::flash::LogStore;
+use hter::persist::flash::{self, EccErrors, LoadStatus, Restored, Store};
+#[cfg(feature = "interface")]
+use hter::persist::log::{write_csv_row, LogEntry, CSV_HEADER};
 pub use hter::persist::Save;
-use hter::persist::{CalibrationRecord, HistoryRecord, PendingSaves, WriteGate};
+use hter::persist::{PendingSaves, WriteGate};
 
 use crate::config;
 
-/// ECC errors of the STM32L4's flash, as the NMI handler notes them ([`crate::ecc`], absolute
-/// addresses), as offsets from the flash base (what embassy's `Flash` and the store address).
-pub struct L4Ecc;
+/// One region of the flash, for one store: the blocking driver shared by both regions (only the
+/// persist task uses it, one operation at a time). Not embassy's async `Partition`: its mutex
+/// gives every flash operation a real suspension point, and sequential-storage's state
+/// machines grow with each (measured: several KiB); a blocking operation completes inside its
+/// `async fn`, as `BlockingAsync` does.
+pub struct Region<'a> {
+    flash: &'a RefCell<Flash<'static, Blocking>>,
+    offset: u32,
+    size: u32,
+}
 
-impl EccErrors for L4Ecc {
-    fn take(&mut self) -> Option<u32> {
-        crate::ecc::take().map(|addr| addr.wrapping_sub(crate::board::FLASH_BASE))
+impl ErrorType for Region<'_> {
+    type Error = embassy_stm32::flash::Error;
+}
+
+impl ReadNorFlash for Region<'_> {
+    const READ_SIZE: usize = <Flash<'static, Blocking> as embedded_storage::nor_flash::ReadNorFlash>::READ_SIZE;
+
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        self.flash.borrow_mut().blocking_read(self.offset + offset, bytes)
+    }
+
+    fn capacity(&self) -> usize {
+        self.size as usize
     }
 }
 
-/// The record store over the `PERSIST` region.
-pub type FlashStore = Store<BlockingAsync<Flash<'static, Blocking>>, L4Ecc>;
+impl NorFlash for Region<'_> {
+    const WRITE_SIZE: usize = <Flash<'static, Blocking> as embedded_storage::nor_flash::NorFlash>::WRITE_SIZE;
+    const ERASE_SIZE: usize = <Flash<'static, Blocking> as embedded_storage::nor_flash::NorFlash>::ERASE_SIZE;
 
-/// The records waiting for the write gate, and the gate.
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        self.flash.borrow_mut().blocking_erase(self.offset + from, self.offset + to)
+    }
+
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        self.flash.borrow_mut().blocking_write(self.offset + offset, bytes)
+    }
+}
+
+/// ECC errors of the STM32L4's flash, as the NMI handler notes them ([`crate::ecc`], absolute
+/// addresses), as offsets within the partition that starts `base` bytes past the flash base.
+pub struct L4Ecc {
+    base: u32,
+}
+
+impl EccErrors for L4Ecc {
+    fn take(&mut self) -> Option<u32> {
+        crate::ecc::take().map(|addr| addr.wrapping_sub(crate::board::FLASH_BASE + self.base))
+    }
+}
+
 static PENDING: Mutex<CriticalSectionRawMutex, RefCell<(PendingSaves, WriteGate)>> =
     Mutex::new(RefCell::new((PendingSaves::EMPTY, WriteGate::firmware())));
 
-/// Wakes the `persist` task: a new request, or a supply sample that may open the gate.
 static WAKE: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+
+/// What the boot restored: the persist task signals it once, `main` waits for it.
+pub static BOOTED: Signal<CriticalSectionRawMutex, Restored> = Signal::new();
+
+/// A `history` request: stream the log from this record time, s.
+#[cfg(feature = "interface")]
+pub static HISTORY: Signal<CriticalSectionRawMutex, u32> = Signal::new();
+
+/// The `history` reply on its way to the serial task: the CSV header, a row per entry, then
+/// the final line (`ok` or `err history: …`).
+#[cfg(feature = "interface")]
+pub static HISTORY_PIPE: Pipe<CriticalSectionRawMutex, 256> = Pipe::new();
+
+/// A row that waits this long for the serial task is dropped with the rest of the stream (a
+/// host that stopped reading must not hold the flash writes back).
+#[cfg(feature = "interface")]
+const HISTORY_STALL_MS: u64 = 2_000;
 
 fn now_ms() -> u64 {
     Instant::now().as_millis()
 }
 
-/// One supply sample for the write gate: `ok` when the supply is above what a flash write needs
-/// (the control task calls this every sample).
+/// Tells the write gate how the supply is (every sample).
 pub fn note_supply(ok: bool) {
     let now = now_ms();
     PENDING.lock(|p| p.borrow_mut().1.note_supply(now, ok));
     WAKE.signal(());
 }
 
-/// What the boot restored.
-pub struct Restored {
-    /// The calibration to run with.
-    pub cal: TwoPoint,
-    /// The history carried in from earlier boots.
-    pub history: HistoryRecord,
-    /// The self-tuner's configuration, restarted from the stored model if a good one is stored.
-    pub adaptive: Option<AdaptiveConfig>,
-    /// Flash pages the boot found torn by a power cut (ECC errors) and repaired: one
-    /// `FlashPageLost` event and one count in the history each.
-    pub pages_lost: u8,
-}
-
-/// Opens the store; `None` (and says so) if the configured region is unusable.
-pub fn open(flash: Peri<'static, FLASH>) -> Option<FlashStore> {
-    match Store::new(BlockingAsync::new(Flash::new_blocking(flash)), L4Ecc, config::PERSIST_RANGE) {
-        Ok(store) => Some(store),
-        Err(e) => {
-            warn!("persist: flash region unusable ({}): nothing is restored or saved", e);
-            None
-        }
-    }
+/// Queues a record for the [`persist`] task (a waiting one of its kind is replaced; log entries
+/// queue in order); it is written once the write gate opens.
+pub fn request(save: Save) {
+    PENDING.lock(|p| p.borrow_mut().0.put(save));
+    WAKE.signal(());
 }
 
 fn log_status(what: &str, status: LoadStatus) {
@@ -99,136 +152,136 @@ fn log_status(what: &str, status: LoadStatus) {
     }
 }
 
-/// Everything the boot restores, each record falling back to its default on its own (a torn
-/// history does not cost the calibration). `None` store: the defaults.
-pub async fn restore(store: Option<&mut FlashStore>) -> Restored {
-    let Some(store) = store else {
-        return Restored {
-            cal: config::CALIBRATION.unwrap_or(TwoPoint::IDENTITY),
-            history: HistoryRecord::EMPTY,
-            adaptive: config::ADAPTIVE,
-            pages_lost: 0,
-        };
-    };
-    if let Err(e) = store.scrub().await {
-        warn!("persist: scrubbing the region failed ({})", e);
+/// The boot log of what was restored.
+fn report(r: &Restored) {
+    log_status("settings", r.settings.err().unwrap_or(LoadStatus::Restored));
+    log_status("calibration", r.calibration.status);
+    log_status("cold-chain history", r.history.status);
+    if let Some(a) = r.adaptive {
+        log_status("model", a.status);
     }
-    let stored_cal = store.load_calibration().await;
-    let cal = match config::CALIBRATION {
-        Some(cal) => {
-            if stored_cal.status != LoadStatus::Restored || stored_cal.value != cal {
-                info!("persist: calibration from config.rs (gain {} offset {} °C), storing it", cal.gain, cal.offset_c);
-                request(Save::Calibration(cal));
-            }
-            cal
-        }
-        None => {
-            log_status("calibration", stored_cal.status);
-            if stored_cal.status != LoadStatus::Restored {
-                warn!("uncalibrated: readings use the nominal Pt100 and front end (README, Calibrating a board)");
-            }
-            stored_cal.value
-        }
-    };
-    info!("calibration: gain {} offset {} °C", cal.gain, cal.offset_c);
-    let history = store.load_history().await;
-    log_status("cold-chain history", history.status);
-    let h = history.value;
-    info!(
-        "history: {} h recorded, alarms heat_10h {} freeze_60min {} ship_45c_1h {} ship_30c_10h {}, {} excursions, resets watchdog {} brown-out {} other {}",
-        h.recorded_s / 3600,
-        h.alarms[0],
-        h.alarms[1],
-        h.alarms[2],
-        h.alarms[3],
-        h.excursions,
-        h.resets[0],
-        h.resets[1],
-        h.resets[2]
-    );
-    let adaptive = match config::ADAPTIVE {
-        Some(cfg) => {
-            let loaded = store.load_adaptive(cfg).await;
-            match (loaded.status, loaded.value.initial) {
-                (LoadStatus::Restored, Some(m)) => {
-                    info!("persist: model restored: a={} b={} k={}", m.a(), m.b(), m.k())
-                }
-                (status, _) => log_status("model", status),
-            }
-            Some(loaded.value)
-        }
-        None => None,
-    };
-    let repairs = store.repairs();
-    if repairs.total() > 0 {
+    match r.log_last_s {
+        Ok(t) => info!("persist: the log continues at record time {} s", t),
+        Err(e) => warn!("persist: the log could not be read ({})", e),
+    }
+    if r.repairs.total() > 0 {
         warn!(
             "persist: power-cut damage repaired: {} torn words cleared, {} torn pages erased",
-            repairs.words_cleared, repairs.pages_erased
+            r.repairs.words_cleared, r.repairs.pages_erased
         );
     }
-    let pages_lost = u8::try_from(repairs.total()).unwrap_or(u8::MAX);
-    Restored { cal, history: history.value, adaptive, pages_lost }
 }
 
-/// Queues a record for the `persist` task (replacing a waiting one of its kind); it is written
-/// once the write gate opens.
-pub fn request(save: Save) {
-    PENDING.lock(|p| p.borrow_mut().0.put(save));
-    WAKE.signal(());
-}
-
-/// Stores each requested record the write gate lets through. A region the storage layer finds
-/// corrupt is erased once and written again (what it held is lost either way; the next requests
-/// rewrite the rest).
+/// Restores, then stores each requested record the write gate lets through (and, with the
+/// interface, streams the log for `history`). A region the storage layer finds corrupt is
+/// erased once and written again (what it held is lost either way; the next requests rewrite
+/// the rest).
 #[embassy_executor::task]
-pub async fn persist(mut store: FlashStore) {
-    loop {
-        let next = PENDING.lock(|p| {
-            let (pending, gate) = &mut *p.borrow_mut();
-            pending.next(gate, now_ms())
-        });
-        let Some(save) = next else {
-            WAKE.wait().await;
-            continue;
-        };
-        let mut result = write(&mut store, &save).await;
-        if result == Err(StoreError::Corrupted) {
-            warn!("persist: region corrupt, erasing it");
-            result = match store.erase_all().await {
-                Ok(()) => write(&mut store, &save).await,
-                Err(e) => Err(e),
-            };
-        }
-        match (result, save) {
-            (Ok(()), Save::Model(rec)) => info!("persist: model stored: theta={} k={}", rec.theta, rec.k),
-            (Ok(()), Save::History(h)) => info!("persist: history stored ({} h recorded)", h.recorded_s / 3600),
-            (Ok(()), Save::AlarmHistory(h)) => {
-                info!("persist: history stored at an alarm ({} h recorded)", h.recorded_s / 3600)
-            }
-            (Ok(()), Save::Calibration(_)) => info!("persist: calibration stored"),
-            (Err(e), _) => warn!("persist: store failed ({})", e),
-        }
-    }
-}
-
-async fn write(store: &mut FlashStore, save: &Save) -> Result<(), StoreError> {
-    // Encoded here, stored through one call: one copy of the storage layer's write path.
-    let mut buf = [0u8; HistoryRecord::LEN];
-    let (key, len) = match save {
-        Save::Model(rec) => (key::MODEL, put(&mut buf, &rec.encode())),
-        Save::History(h) | Save::AlarmHistory(h) => (key::HISTORY, put(&mut buf, &h.encode())),
-        Save::Calibration(cal) => (key::CALIBRATION, put(&mut buf, &CalibrationRecord { cal: *cal }.encode())),
+pub async fn persist(flash: Peri<'static, FLASH>) {
+    let flash = RefCell::new(Flash::new_blocking(flash));
+    let region = |r: core::ops::Range<u32>| Region { flash: &flash, offset: r.start, size: r.end - r.start };
+    let p = config::PERSIST_RANGE;
+    let store = Store::new(region(p.clone()), L4Ecc { base: p.start }, 0..p.end - p.start);
+    #[cfg(feature = "interface")]
+    let log = {
+        let l = config::LOG_RANGE;
+        LogStore::new(region(l.clone()), L4Ecc { base: l.start }, 0..l.end - l.start)
     };
-    store.store(key, buf.get(..len).unwrap_or(&[])).await
+    #[cfg(feature = "interface")]
+    let (Ok(mut store), Ok(mut log)) = (store, log) else {
+        warn!("persist: flash regions unusable: nothing is restored or saved");
+        BOOTED.signal(Restored::NOTHING);
+        loop {
+            HISTORY.wait().await;
+            HISTORY_PIPE.write_all(b"err history: no flash\r\n").await;
+        }
+    };
+    #[cfg(not(feature = "interface"))]
+    let Ok(mut store) = store else {
+        warn!("persist: flash region unusable: nothing is restored or saved");
+        BOOTED.signal(Restored::NOTHING);
+        return;
+    };
+    #[cfg(feature = "interface")]
+    let restored = flash::restore(&mut store, &mut log, config::ADAPTIVE).await;
+    #[cfg(not(feature = "interface"))]
+    let restored = flash::restore_records(&mut store, config::ADAPTIVE).await;
+    report(&restored);
+    BOOTED.signal(restored);
+    loop {
+        #[cfg(feature = "interface")]
+        if let Either::Second(since_s) = select(WAKE.wait(), HISTORY.wait()).await {
+            stream_history(&mut log, since_s).await;
+        }
+        #[cfg(not(feature = "interface"))]
+        WAKE.wait().await;
+        loop {
+            let next = PENDING.lock(|p| {
+                let (pending, gate) = &mut *p.borrow_mut();
+                pending.next(gate, now_ms())
+            });
+            let Some(save) = next else { break };
+            #[cfg(feature = "interface")]
+            let mut result = flash::write(&mut store, &mut log, &save).await;
+            #[cfg(not(feature = "interface"))]
+            let mut result = flash::write_record(&mut store, &save).await;
+            if result == Err(flash::StoreError::Corrupted) {
+                warn!("persist: region corrupt, erasing it");
+                result = match save {
+                    #[cfg(feature = "interface")]
+                    Save::Log(_) => log.erase_all().await,
+                    _ => store.erase_all().await,
+                };
+                if result.is_ok() {
+                    #[cfg(feature = "interface")]
+                    {
+                        result = flash::write(&mut store, &mut log, &save).await;
+                    }
+                    #[cfg(not(feature = "interface"))]
+                    {
+                        result = flash::write_record(&mut store, &save).await;
+                    }
+                }
+            }
+            match (result, save) {
+                (Ok(()), Save::Log(_)) => {}
+                (Ok(()), Save::Model(rec)) => info!("persist: model stored: theta={} k={}", rec.theta, rec.k),
+                (Ok(()), Save::History(_) | Save::AlarmHistory(_)) => info!("persist: history stored"),
+                (Ok(()), Save::Settings(s)) => info!("persist: settings v{} stored", s.seq),
+                (Ok(()), Save::Calibration(_)) => info!("persist: calibration stored"),
+                (Err(e), _) => warn!("persist: store failed ({})", e),
+            }
+        }
+    }
 }
 
-/// Copies `bytes` to the front of `buf`; their length (0 if they do not fit).
-fn put(buf: &mut [u8], bytes: &[u8]) -> usize {
-    match buf.get_mut(..bytes.len()) {
-        Some(dst) => {
-            dst.copy_from_slice(bytes);
-            bytes.len()
-        }
-        None => 0,
+#[cfg(feature = "interface")]
+/// Streams the log from record time `since_s` into [`HISTORY_PIPE`], then the final line.
+async fn stream_history<F: NorFlash>(log: &mut LogStore<F, L4Ecc>, since_s: u32) {
+    let send = async |bytes: &[u8]| {
+        with_timeout(Duration::from_millis(HISTORY_STALL_MS), HISTORY_PIPE.write_all(bytes)).await.is_ok()
+    };
+    if !send(CSV_HEADER.as_bytes()).await || !send(b"\r\n").await {
+        return;
     }
+    let mut row = heapless::String::<80>::new();
+    let mut stalled = false;
+    let walked = log
+        .for_each(since_s, async |e: &LogEntry| {
+            row.clear();
+            let _ = write_csv_row(e, &mut row);
+            let _ = row.write_str("\r\n");
+            stalled = !send(row.as_bytes()).await;
+            !stalled
+        })
+        .await;
+    if stalled {
+        warn!("history: the host stopped reading; stream dropped");
+        return;
+    }
+    let end: &[u8] = match walked {
+        Ok(_) => b"ok\r\n",
+        Err(_) => b"err history: the log could not be read\r\n",
+    };
+    send(end).await;
 }

@@ -4,11 +4,14 @@
 //!
 //! The [`serial`] task owns the UART: an interrupt-driven driver (embassy's `BufferedUart`)
 //! moves bytes between the pins and two ring buffers ([`RX_BUF`], [`TX_BUF`] bytes); the task
-//! assembles received bytes into lines ([`crate::line`]), hands each complete request to
-//! [`handle`], which writes its reply into a [`REPLY_CAP`]-byte buffer, and sends the reply.
+//! frames received bytes into lines (`hter::iface::line::LineFramer`, the virtual board's too),
+//! hands each request to the control task ([`REQUESTS`]), whose `hter::app::App::handle`
+//! writes the reply into [`REPLY`] and signals [`REPLIED`], and sends the reply; for `history`
+//! it then relays the rows the persist task streams ([`crate::persist::HISTORY_PIPE`]).
 //!
 //! It never holds up the control loop: it is its own task, awaiting while it waits for bytes or
-//! for room in the transmit ring, and [`handle`] runs to completion between two awaits. The
+//! for room in the transmit ring; the control task handles a request between two samples in
+//! microseconds and never waits for this task. The
 //! UART has no flow control, so the transmit ring drains at the line rate (≈ 11.5 kB/s) whether
 //! or not a host reads the port (the ST-LINK drops what its USB host does not take); should it
 //! still not drain (a clock or driver fault), a reply gets at most [`TX_TIMEOUT_MS`] and the rest
@@ -26,8 +29,27 @@ use embassy_stm32::usart::{BufferedUart, BufferedUartTx};
 use embassy_time::{with_timeout, Duration, Instant};
 use embedded_io_async::{Read, Write as _};
 
+use core::cell::RefCell;
+
+use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, ThreadModeRawMutex};
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::channel::Channel;
+use embassy_sync::signal::Signal;
+use hter::app::Handled;
+use hter::iface::line::{Frame, LineFramer};
+use hter::iface::MAX_LINE;
+
 use crate::board;
-use crate::line::LineAssembler;
+
+/// Request lines for the control task (one at a time: the next waits for its reply).
+pub static REQUESTS: Channel<CriticalSectionRawMutex, heapless::String<MAX_LINE>, 1> = Channel::new();
+/// The reply the control task wrote (thread mode only: no critical section while it formats).
+pub static REPLY: Mutex<ThreadModeRawMutex, RefCell<Reply>> = Mutex::new(RefCell::new(Reply::new()));
+/// The control task handled the request in [`REQUESTS`]: how ([`Handled::History`]: the rows
+/// follow through the persist task's pipe).
+pub static REPLIED: Signal<CriticalSectionRawMutex, Handled> = Signal::new();
+/// A `history` stream that sends nothing for this long is ended (the persist task gave up).
+const HISTORY_QUIET_MS: u64 = 3_000;
 
 /// Receive ring, bytes: more than a request, so one line typed or pasted at 115200 waits whole
 /// while the task handles the one before.
@@ -43,16 +65,6 @@ pub const TX_TIMEOUT_MS: u64 = 250;
 /// does not always register for the wake-up when the ring lacks room: poll it).
 const TX_RETRY_MS: u64 = 2;
 
-/// Answers one request line (printable ASCII, ≤ 96 bytes, terminator removed, not empty after
-/// trimming spaces): zero or more data lines, then exactly one final line, `ok` or
-/// `err <what>: <why>`. Lines end in `\n` (the transport sends `\r\n`).
-///
-/// Placeholder until the library's handler is wired in (issue 16).
-pub fn handle(line: &str, reply: &mut impl Write) {
-    let _ = line;
-    let _ = writeln!(reply, "err line: interface not wired yet");
-}
-
 /// A reply being written: at most [`REPLY_CAP`] bytes, `\n` sent as `\r\n`. A reply that does not
 /// fit is marked too long (the writer returns `fmt::Error` from then on).
 pub struct Reply {
@@ -66,7 +78,8 @@ impl Reply {
         Reply { buf: [0; REPLY_CAP], len: 0, overflow: false }
     }
 
-    fn clear(&mut self) {
+    /// Empty, for the next reply.
+    pub fn clear(&mut self) {
         self.len = 0;
         self.overflow = false;
     }
@@ -108,16 +121,6 @@ impl Write for Reply {
         }
         Ok(())
     }
-}
-
-/// `line` without its leading and trailing spaces. By hand, on bytes (the line is printable
-/// ASCII): `str::trim` brings a Unicode table and `trim_matches` a pattern matcher, 0.25–0.6
-/// KiB of flash each.
-fn trim_spaces(line: &str) -> &str {
-    let b = line.as_bytes();
-    let start = b.iter().position(|&c| c != b' ').unwrap_or(b.len());
-    let end = b.iter().rposition(|&c| c != b' ').map_or(start, |i| i + 1);
-    line.get(start..end).unwrap_or("")
 }
 
 /// Sends `bytes` within [`TX_TIMEOUT_MS`]; false (and the rest dropped) when the ring did not take
@@ -168,8 +171,7 @@ pub async fn serial(pins: board::SerialPins) {
         }
     };
     let (mut tx, mut rx) = uart.split();
-    let mut lines = LineAssembler::new();
-    let mut reply = Reply::new();
+    let mut framer = LineFramer::new();
     let mut chunk = [0u8; 32];
     loop {
         let n = match rx.read(&mut chunk).await {
@@ -180,19 +182,81 @@ pub async fn serial(pins: board::SerialPins) {
             }
         };
         for &b in chunk.get(..n).unwrap_or(&[]) {
-            reply.clear();
-            match lines.push(b) {
+            let request = match framer.push(b) {
                 None => continue,
-                Some(Ok(line)) => match trim_spaces(line) {
-                    "" => continue,
-                    line => handle(line, &mut reply),
-                },
-                Some(Err(e)) => {
-                    let _ = reply.write_str(e.reply());
+                Some(Frame::Line(line)) => heapless::String::try_from(line).ok(),
+                Some(f) => {
+                    let e = f.error().unwrap_or("err line");
+                    let _ = send(&mut tx, e.as_bytes()).await && send(&mut tx, b"\r\n").await;
+                    continue;
                 }
-            }
-            if !send(&mut tx, reply.finish()).await {
+            };
+            let Some(request) = request else { continue };
+            REQUESTS.send(request).await;
+            let handled = REPLIED.wait().await;
+            if !send_reply(&mut tx).await {
                 warn!("serial: transmit ring full for {} ms, reply dropped", TX_TIMEOUT_MS);
+            }
+            if handled != Handled::Done {
+                relay_history(&mut tx).await;
+            }
+        }
+    }
+}
+
+/// Sends [`REPLY`] in chunks copied out of it (the control task may write the next one only
+/// after the next request).
+async fn send_reply(tx: &mut BufferedUartTx<'_>) -> bool {
+    let mut at = 0;
+    let mut part = [0u8; TX_BUF / 2];
+    loop {
+        let n = REPLY.lock(|r| {
+            let mut r = r.borrow_mut();
+            let bytes = r.finish();
+            let rest = bytes.get(at..).unwrap_or(&[]);
+            let n = rest.len().min(part.len());
+            part[..n].copy_from_slice(&rest[..n]);
+            n
+        });
+        if n == 0 {
+            return true;
+        }
+        if !send(tx, &part[..n]).await {
+            return false;
+        }
+        at += n;
+    }
+}
+
+/// Relays the `history` rows from the persist task until their final line (`ok` or `err …`,
+/// which no CSV row starts with), or until the stream goes quiet.
+async fn relay_history(tx: &mut BufferedUartTx<'_>) {
+    let mut buf = [0u8; 64];
+    // The first bytes of the current line, to recognise the final one.
+    let mut head = [0u8; 4];
+    let mut col = 0usize;
+    loop {
+        let n = match with_timeout(Duration::from_millis(HISTORY_QUIET_MS), crate::persist::HISTORY_PIPE.read(&mut buf)).await {
+            Ok(n) => n,
+            Err(_) => {
+                let _ = send(tx, b"err history: the log stream stopped\r\n").await;
+                return;
+            }
+        };
+        let bytes = buf.get(..n).unwrap_or(&[]);
+        // A host that stopped reading loses the rest; the stream keeps draining the pipe.
+        let _ = send(tx, bytes).await;
+        for &b in bytes {
+            if b == b'\n' {
+                if head.starts_with(b"ok\r") || head.starts_with(b"err ") {
+                    return;
+                }
+                (col, head) = (0, [0; 4]);
+            } else {
+                if let Some(h) = head.get_mut(col) {
+                    *h = b;
+                }
+                col += 1;
             }
         }
     }

@@ -554,6 +554,11 @@ impl<F: NorFlash, E: EccErrors> LogStore<F, E> {
         scrub(self.queue.flash(), &self.range, &mut self.repairs).await
     }
 
+    /// Erases the whole log.
+    pub async fn erase_all(&mut self) -> Result<(), StoreError> {
+        Ok(self.queue.erase_all().await?)
+    }
+
     /// Appends `entry`, overwriting the oldest entries when the region is full.
     pub async fn push(&mut self, entry: &LogEntry) -> Result<(), StoreError> {
         let bytes = entry.encode();
@@ -574,9 +579,13 @@ impl<F: NorFlash, E: EccErrors> LogStore<F, E> {
     }
 
     /// Calls `each` with every readable entry, oldest first, from record time `since_s` on;
-    /// returns how many entries could not be decoded (skipped). `each` returning `false` stops
-    /// the walk (a host that went away).
-    pub async fn for_each(&mut self, since_s: u32, mut each: impl FnMut(&LogEntry) -> bool) -> Result<u32, StoreError> {
+    /// returns how many entries could not be decoded (skipped). `each` may await (the firmware
+    /// streams each row to the UART); returning `false` stops the walk (a host that went away).
+    pub async fn for_each(
+        &mut self,
+        since_s: u32,
+        mut each: impl AsyncFnMut(&LogEntry) -> bool,
+    ) -> Result<u32, StoreError> {
         let mut skipped = 0u32;
         let mut iter = match self.queue.iter().await {
             Ok(it) => it,
@@ -586,7 +595,7 @@ impl<F: NorFlash, E: EccErrors> LogStore<F, E> {
             match iter.next(&mut self.buf.0).await {
                 Ok(Some(item)) => match LogEntry::decode(&item[..]) {
                     Ok(e) if e.t_s() >= since_s => {
-                        if !each(&e) {
+                        if !each(&e).await {
                             return Ok(skipped);
                         }
                     }
@@ -603,7 +612,7 @@ impl<F: NorFlash, E: EccErrors> LogStore<F, E> {
     /// continues.
     pub async fn last_t_s(&mut self) -> Result<u32, StoreError> {
         let mut last = 0u32;
-        self.for_each(0, |e| {
+        self.for_each(0, async |e: &LogEntry| {
             last = last.max(e.t_s());
             true
         })
@@ -622,10 +631,18 @@ pub async fn write<F: NorFlash, E: EccErrors, G: NorFlash, H: EccErrors>(
     log: &mut LogStore<G, H>,
     save: &super::Save,
 ) -> Result<(), StoreError> {
+    match save {
+        super::Save::Log(entry) => log.push(entry).await,
+        _ => write_record(store, save).await,
+    }
+}
+
+/// Writes a record to the store (a board without the log: a log entry is [`StoreError::Other`]).
+pub async fn write_record<F: NorFlash, E: EccErrors>(store: &mut Store<F, E>, save: &super::Save) -> Result<(), StoreError> {
     use super::Save;
     let mut buf = [0u8; HistoryRecord::LEN];
     let (key, len) = match save {
-        Save::Log(entry) => return log.push(entry).await,
+        Save::Log(_) => return Err(StoreError::Other),
         Save::Model(rec) => (key::MODEL, put(&mut buf, &rec.encode())),
         Save::History(h) | Save::AlarmHistory(h) => (key::HISTORY, put(&mut buf, &h.encode())),
         Save::Calibration(cal) => (key::CALIBRATION, put(&mut buf, &CalibrationRecord { cal: *cal }.encode())),
@@ -664,6 +681,16 @@ pub struct Restored {
 }
 
 impl Restored {
+    /// Nothing restored (no usable flash): every record its default.
+    pub const NOTHING: Restored = Restored {
+        settings: Err(LoadStatus::Missing),
+        calibration: Loaded { value: TwoPoint::IDENTITY, status: LoadStatus::Missing },
+        history: Loaded { value: HistoryRecord::EMPTY, status: LoadStatus::Missing },
+        adaptive: None,
+        log_last_s: Ok(0),
+        repairs: Repairs { words_cleared: 0, pages_erased: 0 },
+    };
+
     /// The application's boot from what was restored.
     pub fn boot(&self, reset: super::ResetCause, fault: Option<crate::failsafe::StopInfo>) -> crate::app::Boot {
         crate::app::Boot {
@@ -686,9 +713,21 @@ pub async fn restore<F: NorFlash, E: EccErrors, G: NorFlash, H: EccErrors>(
     log: &mut LogStore<G, H>,
     adaptive: Option<AdaptiveConfig>,
 ) -> Restored {
+    let _ = log.scrub().await;
+    let mut r = restore_records(store, adaptive).await;
+    r.log_last_s = log.last_t_s().await;
+    let b = log.repairs();
+    r.repairs = Repairs {
+        words_cleared: r.repairs.words_cleared.saturating_add(b.words_cleared),
+        pages_erased: r.repairs.pages_erased.saturating_add(b.pages_erased),
+    };
+    r
+}
+
+/// [`restore`] of the store alone (a board without the log; `log_last_s` is 0).
+pub async fn restore_records<F: NorFlash, E: EccErrors>(store: &mut Store<F, E>, adaptive: Option<AdaptiveConfig>) -> Restored {
     // A scrub that fails leaves the loads to repair what they read.
     let _ = store.scrub().await;
-    let _ = log.scrub().await;
     let settings = store.load_settings().await;
     let calibration = store.load_calibration().await;
     let history = store.load_history().await;
@@ -696,11 +735,5 @@ pub async fn restore<F: NorFlash, E: EccErrors, G: NorFlash, H: EccErrors>(
         Some(cfg) => Some(store.load_adaptive(cfg).await),
         None => None,
     };
-    let log_last_s = log.last_t_s().await;
-    let (a, b) = (store.repairs(), log.repairs());
-    let repairs = Repairs {
-        words_cleared: a.words_cleared.saturating_add(b.words_cleared),
-        pages_erased: a.pages_erased.saturating_add(b.pages_erased),
-    };
-    Restored { settings, calibration, history, adaptive, log_last_s, repairs }
+    Restored { settings, calibration, history, adaptive, log_last_s: Ok(0), repairs: store.repairs() }
 }

@@ -30,13 +30,6 @@ mod proto;
 mod audit;
 mod failsafe;
 
-// The firmware's request framing is plain `core` code: tested here, on the host.
-#[cfg(test)]
-#[path = "../../firmware/src/line.rs"]
-mod line;
-#[cfg(test)]
-mod line_tests;
-
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};

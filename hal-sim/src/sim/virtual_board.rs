@@ -254,7 +254,7 @@ impl VirtualBoard {
                 out.push_str(CSV_HEADER);
                 out.push_str("\r\n");
                 let walked = match self.log.as_mut() {
-                    Some(log) => block_on(log.for_each(since_s, |e| {
+                    Some(log) => block_on(log.for_each(since_s, async |e: &hter::persist::log::LogEntry| {
                         let _ = write_csv_row(e, &mut out);
                         out.push_str("\r\n");
                         true
