@@ -191,6 +191,12 @@ impl<C: Controller> Carrier<C> {
         &self.controller
     }
 
+    /// The controller, mutably: for the glue to act on it between samples (e.g. abort an
+    /// on-board commissioning when the mode leaves normal, [`crate::ident::commission`]).
+    pub fn controller_mut(&mut self) -> &mut C {
+        &mut self.controller
+    }
+
     /// Runs one sample from raw ADC counts (the firmware's and the simulator's entry).
     pub fn step(&mut self, input: &StepInput) -> StepOutput {
         let stuck = self.supervisor.counts_stuck(input.counts);
