@@ -296,7 +296,11 @@ fn gpc_piecewise(initial: Option<Model>, seed: u64) -> (f64, f64, f64) {
 }
 
 /// How self-tuning GPC does from the commissioned model against the profile's start model
-/// (measurement, printed): the ratio of IAE to the physical bound, seeds 1–3.
+/// (measurement, printed): the ratio of IAE to the physical bound, seeds 1–3. Measured: from the
+/// default rule's model (k 5) 2.47×, from START_MODEL_HTER1 1.21×; from the monotone-step model
+/// (k 9, b1 > 0) 1.40×, which is the fallback PI's run (IAE 1027, as `hter sim --scenario
+/// piecewise --controller pi`): `plausible_model` refuses that model, so the self-tuner never
+/// trusts it (as a fixed model, `--model arx:…;9`, GPC reaches 3.5×).
 #[test]
 fn gpc_from_the_commissioned_model() {
     let commissioned = |sign| {
@@ -324,5 +328,40 @@ fn gpc_from_the_commissioned_model() {
         }
         ratios.sort_by(f64::total_cmp);
         println!("GPC piecewise from {name}: median {:.2}x bound", ratios[1]);
+    }
+}
+
+/// Self-tuning GPC on `piecewise` from the model commissioned at each delay whose host-metric
+/// fit is within 3 points of the best (measurement, printed): does one delay serve GPC better?
+/// Measured (default rule, H-TER I full load): k 5 (the best fit, 86.1 %) 2.42–2.48× the bound,
+/// k 7 1.29–1.43×, k 8 (85.2 %) 1.28–1.31×, k 9 1.51–1.60×.
+#[test]
+fn gpc_by_delay() {
+    for sign in [SignRule::EveryCoefficient, SignRule::Monotone] {
+        let mut rows = Vec::new();
+        for k in 1..=10u8 {
+            let cfg = CommissionConfig { sign, delay: Some(k), ..CommissionConfig::DEFAULT };
+            let mut bench = Bench::holding(PlantParams::hter1(Load::Full), 28.0, 4.0, cfg);
+            let (log, _) = bench.run(cfg.max_total_samples() + 10);
+            match bench.commissioning().outcome() {
+                Some(Ok(m)) => {
+                    let j = judge("by-delay", &log, &m);
+                    rows.push((k, j.board_fit, j.host_fit, m));
+                }
+                other => {
+                    println!("{sign:?} k {k}: {other:?} (fit on its record {:?})", bench.commissioning().fit_percent())
+                }
+            }
+        }
+        let best = rows.iter().map(|r| r.1).fold(f64::NEG_INFINITY, f64::max);
+        for (k, fit, host, m) in rows.iter().filter(|r| r.1 >= best - 3.0) {
+            let ratios: Vec<f64> = (1..=3)
+                .map(|seed| {
+                    let (iae, b, _) = gpc_piecewise(Some(*m), seed);
+                    iae / b
+                })
+                .collect();
+            println!("{sign:?} k {k}: fit {fit:.2} % (host best {host:.2} %): GPC piecewise IAE/bound seeds 1-3 {ratios:.2?}");
+        }
     }
 }

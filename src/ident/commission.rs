@@ -193,6 +193,8 @@ pub enum ConfigProblem {
     Plausibility,
     /// The sample period is not positive and finite.
     SamplePeriod,
+    /// A given delay is outside 1…[`MAX_DELAY`] samples.
+    Delay,
 }
 
 /// Why a model fails the plausibility rule ([`plausible_model`]).
@@ -254,6 +256,7 @@ impl CommissionError {
                 ConfigProblem::Threshold => "config_threshold",
                 ConfigProblem::Plausibility => "config_plausibility",
                 ConfigProblem::SamplePeriod => "config_sample_period",
+                ConfigProblem::Delay => "config_delay",
             },
             CommissionError::NoExcitation => "no_excitation",
             CommissionError::Implausible(i) => match i {
@@ -289,6 +292,7 @@ impl CommissionError {
                     "configuration refused: plausible gain range not finite, negative, non-empty"
                 }
                 ConfigProblem::SamplePeriod => "configuration refused: sample period not positive",
+                ConfigProblem::Delay => "configuration refused: delay not in 1..=10 samples",
             },
             CommissionError::NoExcitation => "no excitation: the temperature did not follow the PRBS",
             CommissionError::Implausible(i) => match i {
@@ -337,6 +341,9 @@ pub struct CommissionConfig {
     pub plausible: AdaptiveConfig,
     /// The sign the fit imposes on B (and the final check).
     pub sign: SignRule,
+    /// Fit this delay only, samples (1…[`MAX_DELAY`], as `hter identify --nk N`); `None`: the
+    /// delay with the least V (`--nk auto`).
+    pub delay: Option<u8>,
 }
 
 /// Which models with a cooling sign the fit may choose from.
@@ -375,6 +382,7 @@ impl CommissionConfig {
         min_fit_percent: 70.0,
         plausible: crate::profile::ADAPTIVE_GPC,
         sign: SignRule::EveryCoefficient,
+        delay: None,
     };
 
     /// One PRBS period, samples.
@@ -415,6 +423,9 @@ impl CommissionConfig {
         let (lo, hi) = (self.plausible.gain_min_c_per_duty, self.plausible.gain_max_c_per_duty);
         if !(lo.is_finite() && lo < hi && hi < 0.0) {
             return bad(ConfigProblem::Plausibility);
+        }
+        if self.delay.is_some_and(|k| !(1..=MAX_DELAY as u8).contains(&k)) {
+            return bad(ConfigProblem::Delay);
         }
         Ok(())
     }
@@ -870,8 +881,18 @@ impl Commissioning {
         });
         let mut out = [Candidate { s, ..Candidate::NONE }; MAX_DELAY];
         for (k, (n, c)) in normal.iter().zip(out.iter_mut()).enumerate() {
+            if self.cfg.delay.is_some_and(|d| usize::from(d) != k + 1) {
+                continue;
+            }
             let (gains, v) = constrained_k(n, rows);
-            *c = Candidate { s, v, k: (k + 1) as u8, b: b_of_modes(gains, p1, p2) };
+            // On a boundary ray the constrained coefficient is 0 up to rounding, which may
+            // leave it at +1e-9: the rule holds it at 0 exactly (plausible_model refuses b > 0).
+            let [b0, b1] = b_of_modes(gains, p1, p2);
+            let b = match self.cfg.sign {
+                SignRule::EveryCoefficient => [crate::units::min_f32(b0, 0.0), crate::units::min_f32(b1, 0.0)],
+                SignRule::Monotone => [crate::units::min_f32(b0, 0.0), b1],
+            };
+            *c = Candidate { s, v, k: (k + 1) as u8, b };
         }
         out
     }
@@ -1215,6 +1236,8 @@ mod tests {
             (CommissionConfig { prbs_bits: 8, ..d }, ConfigProblem::Capacity),
             (CommissionConfig { min_fit_percent: 100.0, ..d }, ConfigProblem::Threshold),
             (CommissionConfig { min_response_c: 0.0, ..d }, ConfigProblem::Threshold),
+            (CommissionConfig { delay: Some(0), ..d }, ConfigProblem::Delay),
+            (CommissionConfig { delay: Some(11), ..d }, ConfigProblem::Delay),
         ];
         for (cfg, want) in cases {
             assert_eq!(cfg.validate(), Err(CommissionError::Config(want)), "{cfg:?}");
