@@ -71,7 +71,7 @@
 //!
 //! Measured (`tests/commission.rs`, the host's fit of the board's model on the same log, vs
 //! `hter identify`'s): with [`SignRule::Monotone`] H-TER I full load 96.37 vs 96.39 %, half load
-//! 95.11 vs 95.12 %, H-TER II 95.92 vs 95.94 %; with the default [`SignRule::EveryCoefficient`]
+//! 95.10 vs 95.12 %, H-TER II 95.93 vs 95.94 %; with the default [`SignRule::EveryCoefficient`]
 //! 86.13, 77.88 and 95.65 % (the host's models all have b1 > 0, which that rule refuses).
 //!
 //! # Cost
@@ -79,13 +79,15 @@
 //! - RAM: the record is ỹ as i16 milli-°C (2 bytes/sample) and the PRBS level as one bit per
 //!   sample; samples where the step applied something else (the freeze guard) go to a table of
 //!   [`MAX_OVERRIDES`]. [`CAPACITY`] = 1600 samples covers the default 60 + 1524.
-//!   `size_of::<Commissioning>()` is 4 048 bytes (a test checks it); the fit's pass keeps
-//!   ≈ 0.6 KiB of sums on the stack.
-//! - Per sample in Rest and Excite: a few dozen instructions.
+//!   `size_of::<Commissioning>()` is 3 984 bytes on the Cortex-M4F (4 048 on a 64-bit host, which
+//!   a test checks); a pass keeps ≈ 0.6 KiB of sums on the stack.
+//! - Per sample in Rest and Excite: at most 303 instructions.
 //! - Per sample in Fit: **one pass** over the N stored samples: per sample the two lags (4
 //!   flops), then for each of the 10 delays the free response (3), the error (1) and six
-//!   multiply-adds (12): ≈ 165 flops, ≈ 2.6·10⁵ flops per pass for N = 1584 (an estimate of
-//!   3–8 ms on the 80 MHz Cortex-M4F, not measured on the target), against Ts = 10 s. The fit
+//!   multiply-adds (12): ≈ 165 flops, ≈ 2.6·10⁵ flops per pass for N = 1584. Measured on the
+//!   emulated Cortex-M4F (`pil/src/bin/commission.rs`, QEMU mps2-an386 `-icount`, the firmware's
+//!   build profile): 633 293 instructions per pass at most (mean 631 375), ≈ 8 ms at 80 MHz,
+//!   against Ts = 10 s (the GPC step is ≈ 4 800). The fit
 //!   takes at most [`MAX_FIT_PASSES`] samples (28 grid + 3 × 120 + 1 = 389, 65 min at Ts = 10 s);
 //!   on the simulated carriers 286–333.
 //! - Whole run, default settings: 60 + 1524 + (286…333) ≈ 1870–1917 samples (≈ 5.3 h at
