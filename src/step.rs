@@ -192,7 +192,8 @@ impl<C: Controller> Carrier<C> {
     }
 
     /// The controller, to switch or reconfigure it at run time (the board's settings
-    /// interface, [`crate::app::App`]); the next sample runs the new one.
+    /// interface, [`crate::app::App`]; an on-board commissioning aborted when the mode leaves
+    /// normal, [`crate::ident::commission`]); the next sample runs the new one.
     pub fn controller_mut(&mut self) -> &mut C {
         &mut self.controller
     }

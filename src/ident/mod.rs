@@ -89,6 +89,7 @@
 #![allow(non_snake_case)]
 
 pub mod batch;
+pub mod commission;
 pub mod model;
 pub mod oe;
 pub mod oe_search;

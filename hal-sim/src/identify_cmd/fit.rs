@@ -350,7 +350,7 @@ pub struct Comparison {
     /// Why, in words.
     pub reason: String,
     /// The fitted models and their delay scans, by order.
-    pub(super) fits: Vec<(usize, Fit, Vec<DelayRow>)>,
+    pub fits: Vec<(usize, Fit, Vec<DelayRow>)>,
 }
 
 /// Compares orders 1, 2, 4 (na = nb, same nc; the given delay, or each order at its best delay
