@@ -28,6 +28,7 @@ use crate::control::adaptive::{plausible_model, AdaptiveConfig, SelfTuning};
 use crate::control::{ControlError, ControlInput, Controller, ControllerStatus, OnOff, OnOffConfig, Pi};
 use crate::event::EventKind;
 use crate::failsafe::StopInfo;
+use crate::ident::commission::{CommissionConfig, CommissionError, Commissioning, Phase};
 use crate::iface::num::Fixed;
 use crate::iface::{Command, Law, Refusal, SetRequest, Why, HELP};
 use crate::model::Model;
@@ -128,6 +129,8 @@ pub enum BoardController {
     Pi(Pi),
     /// On-Off.
     OnOff(OnOff),
+    /// On-board commissioning (rest, PRBS, fit), under the step's supervisor like any law.
+    Commission(Commissioning),
 }
 
 impl Controller for BoardController {
@@ -136,6 +139,7 @@ impl Controller for BoardController {
             BoardController::Adaptive(c) => c.update(input),
             BoardController::Pi(c) => c.update(input),
             BoardController::OnOff(c) => c.update(input),
+            BoardController::Commission(c) => c.update(input),
         }
     }
 
@@ -144,6 +148,7 @@ impl Controller for BoardController {
             BoardController::Adaptive(c) => c.track(input, applied),
             BoardController::Pi(c) => c.track(input, applied),
             BoardController::OnOff(c) => c.track(input, applied),
+            BoardController::Commission(c) => c.track(input, applied),
         }
     }
 
@@ -152,6 +157,7 @@ impl Controller for BoardController {
             BoardController::Adaptive(c) => c.name(),
             BoardController::Pi(c) => c.name(),
             BoardController::OnOff(c) => c.name(),
+            BoardController::Commission(c) => c.name(),
         }
     }
 
@@ -211,7 +217,14 @@ pub struct App {
     last: Option<SampleOut>,
     last_t_ms: u64,
     ack_pending: bool,
+    /// The applied duty averaged over ≈ 5 minutes: where a commissioning rests.
+    duty_avg: f32,
+    /// The last commissioning's end, for `status` until the next one starts.
+    commissioned: Option<Result<(), CommissionError>>,
 }
+
+/// Weight of one sample in [`App`]'s duty average: a 5-minute time constant at Ts = 10 s.
+const DUTY_AVG_WEIGHT: f32 = 10.0 / 300.0;
 
 impl App {
     /// The application after a boot: settings, model, history and record time from flash.
@@ -263,6 +276,8 @@ impl App {
             last: None,
             last_t_ms: 0,
             ack_pending: false,
+            duty_avg: cfg.adaptive.fallback.bias,
+            commissioned: None,
         }
     }
 
@@ -325,6 +340,9 @@ impl App {
     }
 
     fn finish_sample(&mut self, t_ms: u64, out: StepOutput) -> SampleOut {
+        self.duty_avg += DUTY_AVG_WEIGHT * (out.duty.get() - self.duty_avg);
+        self.last_t_ms = t_ms;
+        self.commission_step(out.mode);
         let rec = self.recorder.push(t_ms, out.temp_c.0);
         if core::mem::take(&mut self.ack_pending) {
             self.annunciator.acknowledge();
@@ -351,7 +369,6 @@ impl App {
         }
         let done = SampleOut { step: out, alarm, raised: rec.raised };
         self.last = Some(done);
-        self.last_t_ms = t_ms;
         done
     }
 
@@ -398,9 +415,15 @@ impl App {
                 Ok(())
             }
             Command::Set(req) => self.set(req),
-            Command::Identify | Command::IdentifyAbort => {
-                Err(Refusal { what: "identify", why: Why::NotNow("commissioning is not in this build yet") })
-            }
+            Command::Identify => self.start_commissioning(),
+            Command::IdentifyAbort => match self.carrier.controller_mut() {
+                BoardController::Commission(c) => {
+                    c.abort(CommissionError::Aborted);
+                    self.commission_step(crate::step::Mode::Normal);
+                    Ok(())
+                }
+                _ => Err(Refusal { what: "identify", why: Why::NotNow("no commissioning is running") }),
+            },
             Command::History { .. } => Ok(()),
         }
     }
@@ -421,6 +444,12 @@ impl App {
             SetRequest::Controller(law) => {
                 if !self.cfg.laws.contains(&law) {
                     return Err(Refusal { what: "controller", why: Why::NotInBuild });
+                }
+                if self.commissioning() {
+                    return Err(Refusal {
+                        what: "controller",
+                        why: Why::NotNow("commissioning is running (identify abort)"),
+                    });
                 }
                 next.law = law;
                 (SettingKey::Controller, [law as u8 as f32, 0.0])
@@ -471,7 +500,7 @@ impl App {
         }
         let Some(rec) = ModelRecord::from_model(&m) else { return refuse("not a second-order model") };
         self.adaptive = self.adaptive.restored_from(m);
-        if matches!(self.settings.law, Law::Gpc | Law::Igmvc) {
+        if matches!(self.settings.law, Law::Gpc | Law::Igmvc) && !self.commissioning() {
             let ctl = build(self.settings.law, &self.adaptive, self.cfg.carrier.get().ts_s, self.applied());
             *self.carrier.controller_mut() = ctl;
         }
@@ -479,6 +508,81 @@ impl App {
         self.save(Save::Model(rec));
         self.save(Save::Log(LogEntry::Setting { t_s, key: SettingKey::Model, value: [gain, m.k() as f32] }));
         Ok(())
+    }
+
+    fn commissioning(&self) -> bool {
+        matches!(self.carrier.controller(), BoardController::Commission(_))
+    }
+
+    /// `identify`: the law hands over to a commissioning that rests at the recent mean duty.
+    fn start_commissioning(&mut self) -> Result<(), Refusal> {
+        let refuse = |why| Err(Refusal { what: "identify", why: Why::NotNow(why) });
+        if self.commissioning() {
+            return refuse("a commissioning is already running (identify abort stops it)");
+        }
+        match self.last {
+            Some(o) if o.step.mode == crate::step::Mode::Normal => {}
+            Some(_) => {
+                return refuse("the carrier is not in normal mode (a sensor fault, the freeze guard, limp home)")
+            }
+            None => return refuse("no sample yet"),
+        }
+        let cfg = CommissionConfig { plausible: self.adaptive, ..CommissionConfig::DEFAULT };
+        let c = Commissioning::new(cfg, self.cfg.carrier.get().ts_s, self.duty_avg)
+            .map_err(|e| Refusal { what: "identify", why: Why::NotNow(e.reason()) })?;
+        *self.carrier.controller_mut() = BoardController::Commission(c);
+        self.commissioned = None;
+        let t_s = self.record_s(self.last_t_ms);
+        self.save(Save::Log(LogEntry::Setting { t_s, key: SettingKey::Identify, value: [self.duty_avg, 0.0] }));
+        Ok(())
+    }
+
+    /// After each sample: a commissioning is aborted when the mode leaves normal; a finished
+    /// one stores its model and hands over to the self-tuner from it, or (failed) back to the
+    /// law that ran before, keeping the previous model.
+    fn commission_step(&mut self, mode: crate::step::Mode) {
+        let BoardController::Commission(c) = self.carrier.controller_mut() else { return };
+        c.abort_on_mode(mode);
+        let Some(outcome) = c.outcome() else { return };
+        let t_s = self.record_s(self.last_t_ms);
+        let ts_s = self.cfg.carrier.get().ts_s;
+        let law = match outcome {
+            Ok(m) => match ModelRecord::from_model(&m) {
+                Some(rec) if plausible_model(&self.adaptive, &m) => {
+                    self.adaptive = self.adaptive.restored_from(m);
+                    self.save(Save::Model(rec));
+                    self.commissioned = Some(Ok(()));
+                    // The build's self-tuner continues from the new model.
+                    self.cfg
+                        .laws
+                        .iter()
+                        .copied()
+                        .find(|l| matches!(l, Law::Gpc | Law::Igmvc))
+                        .unwrap_or(self.settings.law)
+                }
+                _ => {
+                    self.commissioned =
+                        Some(Err(CommissionError::Implausible(crate::ident::commission::Implausibility::Gain)));
+                    self.settings.law
+                }
+            },
+            Err(e) => {
+                self.commissioned = Some(Err(e));
+                self.settings.law
+            }
+        };
+        let code = match self.commissioned {
+            Some(Err(e)) => [0.0, f32::from(e.code())],
+            _ => [1.0, 0.0],
+        };
+        self.save(Save::Log(LogEntry::Setting { t_s, key: SettingKey::IdentifyEnd, value: code }));
+        *self.carrier.controller_mut() = build(law, &self.adaptive, ts_s, self.duty_avg);
+        if law != self.settings.law {
+            self.settings.law = law;
+            self.settings.seq = self.settings.seq.wrapping_add(1);
+            let s = self.settings;
+            self.save(Save::Settings(s));
+        }
     }
 
     fn write_status(&self, out: &mut impl Write) -> core::fmt::Result {
@@ -522,14 +626,24 @@ impl App {
             .map(|c| u32::from(h.resets_by(c)))
             .sum();
         write!(out, "holdover_s=-\r\nresets={resets}\r\nfirmware={}\r\n", self.cfg.firmware)?;
-        write!(out, "commissioning=idle\r\nsettings_version={}\r\n", self.settings.seq)
+        out.write_str("commissioning=")?;
+        match (self.carrier.controller(), self.commissioned) {
+            (BoardController::Commission(c), _) => match c.phase() {
+                Phase::Done(_) => out.write_str("done")?,
+                Phase::Failed(e) => write!(out, "failed:{}", e.name())?,
+                p => write!(out, "{}:{}", p.name(), p.percent())?,
+            },
+            (_, Some(Ok(()))) => out.write_str("done")?,
+            (_, Some(Err(e))) => write!(out, "failed:{}", e.name())?,
+            (_, None) => out.write_str("idle")?,
+        }
+        write!(out, "\r\nsettings_version={}\r\n", self.settings.seq)
     }
 }
 
-/// The name of a commissioning failure code, for the log's CSV.
+/// The name of a commissioning failure code ([`CommissionError::code`]), for the log's CSV.
 pub fn commission_failure_name(code: u8) -> &'static str {
-    let _ = code;
-    "failed"
+    CommissionError::ALL.get(usize::from(code)).map_or("unknown", |e| e.name())
 }
 
 #[cfg(test)]

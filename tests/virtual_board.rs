@@ -109,3 +109,41 @@ fn a_power_cut_inside_a_settings_write_leaves_the_old_or_the_new_setpoint_and_th
     // value (sequential-storage's CRC over the item), the completed write gives the new one.
     assert!(saw_old >= 3, "{saw_old} old / {saw_new} new");
 }
+
+#[test]
+fn identify_commissions_the_cabinet_on_the_board_and_continues_with_the_self_tuner() {
+    let mut b = board();
+    run(&mut b, 1800.0);
+    assert_eq!(b.request("identify"), "ok\r\n");
+    assert_eq!(field(&mut b, "commissioning"), "rest:0");
+    assert_eq!(field(&mut b, "controller"), "commission");
+    assert!(b.request("identify").starts_with("err identify: a commissioning is already running"));
+    assert!(b.request("set controller pi").starts_with("err controller: commissioning is running"));
+    let mut phases = Vec::new();
+    for _ in 0..2100 {
+        b.step().unwrap();
+        let c = field(&mut b, "commissioning");
+        let name = c.split(':').next().unwrap().to_string();
+        if phases.last() != Some(&name) {
+            phases.push(name);
+        }
+        if c == "done" || c.starts_with("failed") {
+            break;
+        }
+        assert!((2.0..=8.0).contains(&b.load_c()), "the load stays in 2…8 °C: {}", b.load_c());
+    }
+    assert_eq!(phases, ["rest", "excite", "fit", "done"]);
+    assert_eq!(field(&mut b, "controller"), "gpc");
+    let k: usize = field(&mut b, "model_k").parse().unwrap();
+    assert!((1..=10).contains(&k));
+    // Under the self-tuner from the commissioned model the load stays in the band; it holds
+    // 3.5 °C rather than 4 after an hour (the k = 5 model this fit picks on H-TER I gives GPC a
+    // 0.5–0.7 °C offset: issue 16's note; EXPERIMENTS.md's start-model section).
+    for _ in 0..360 {
+        b.step().unwrap();
+        assert!((2.0..=8.0).contains(&b.load_c()), "{}", b.load_c());
+    }
+    assert!((b.load_c() - 4.0).abs() < 0.8, "near 4 °C under the self-tuner: {}", b.load_c());
+    let h = b.request("history");
+    assert!(h.contains("commissioning:started") && h.contains("commissioning:done"), "{h}");
+}

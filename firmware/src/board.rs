@@ -54,7 +54,7 @@ use embassy_stm32::interrupt::InterruptExt;
 use embassy_stm32::pac;
 use embassy_stm32::pac::adc::vals::{OversamplingRatio, OversamplingShift, Rovsm, Trovs};
 use embassy_stm32::peripherals::{ADC1, TIM3};
-#[cfg(feature = "serial")]
+#[cfg(feature = "interface")]
 use embassy_stm32::peripherals::{PA2, PA3, USART2};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::CountingMode;
@@ -95,12 +95,12 @@ pub struct Board {
     /// Flash controller (persisted records, `config::PERSIST_RANGE`).
     pub flash: Peri<'static, embassy_stm32::peripherals::FLASH>,
     /// The settings interface's UART and pins (`crate::serial` configures them).
-    #[cfg(feature = "serial")]
+    #[cfg(feature = "interface")]
     pub serial: SerialPins,
 }
 
 /// USART2 and its pins on the ST-LINK's virtual COM port.
-#[cfg(feature = "serial")]
+#[cfg(feature = "interface")]
 pub struct SerialPins {
     /// The UART.
     pub usart: Peri<'static, USART2>,
@@ -111,7 +111,7 @@ pub struct SerialPins {
 }
 
 // Binding puts the handler in the vector table: only in builds that serve the interface.
-#[cfg(feature = "serial")]
+#[cfg(feature = "interface")]
 embassy_stm32::bind_interrupts!(
     /// USART2's interrupt drives the settings interface's ring buffers.
     pub struct SerialIrqs {
@@ -121,7 +121,7 @@ embassy_stm32::bind_interrupts!(
 
 /// The settings interface's line: 115200 baud, 8 data bits, no parity, 1 stop bit, no flow
 /// control (docs/interface.md).
-#[cfg(feature = "serial")]
+#[cfg(feature = "interface")]
 pub fn serial_config() -> embassy_stm32::usart::Config {
     let mut c = embassy_stm32::usart::Config::default();
     c.baudrate = 115_200;
@@ -133,7 +133,7 @@ pub fn serial_config() -> embassy_stm32::usart::Config {
 
 /// USART2's interrupt below TIM7's (P0): a burst of received bytes never delays the stall check.
 /// Call before the UART is created (embassy enables the interrupt and keeps its priority).
-#[cfg(feature = "serial")]
+#[cfg(feature = "interface")]
 pub fn serial_interrupt_priority() {
     interrupt::USART2.set_priority(interrupt::Priority::P2);
 }
@@ -256,7 +256,7 @@ pub fn init() -> Board {
         heartbeat: Output::new(p.PB5, Level::Low, Speed::Low),
         button: Input::new(p.PC13, Pull::None),
         flash: p.FLASH,
-        #[cfg(feature = "serial")]
+        #[cfg(feature = "interface")]
         serial: SerialPins { usart: p.USART2, tx: p.PA2, rx: p.PA3 },
     }
 }

@@ -307,6 +307,7 @@ pub const PERSIST_RANGE: core::ops::Range<u32> = 0x000F_E000..0x0010_0000;
 /// left free before [`PERSIST_RANGE`].
 pub const LOG_RANGE: core::ops::Range<u32> = 0x0008_0000..0x000F_C000;
 
+#[cfg(feature = "interface")]
 /// The laws this build links, its default first (`set controller`, `status`'s `controllers`).
 pub const LAWS: &[hter::iface::Law] = {
     use hter::iface::Law;
@@ -321,6 +322,7 @@ pub const LAWS: &[hter::iface::Law] = {
     }
 };
 
+#[cfg(feature = "interface")]
 /// The board application's build: this file's step configuration, self-tuner, laws, setpoint
 /// and save cadences (`hter::app::App`, which the control task owns).
 pub const APP: hter::app::AppConfig = hter::app::AppConfig {

@@ -26,27 +26,31 @@
 #![no_main]
 
 mod board;
+// The interface build's App builds its own laws: the fixed-law constructors go unused there.
+#[cfg_attr(feature = "interface", allow(dead_code))]
 mod config;
 mod ecc;
 mod failsafe;
 mod persist;
-#[cfg(feature = "serial")]
+#[cfg(feature = "interface")]
 mod serial;
 
 use defmt::{error, info, warn};
 use defmt_rtt as _;
 use embassy_executor::Spawner;
+#[cfg(feature = "interface")]
+use embassy_futures::select::{select, Either};
 use embassy_stm32::gpio::{Input, Output};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant, Ticker};
-#[cfg(feature = "serial")]
-use embassy_futures::select::{select, Either};
 use hter::alarm::Indication;
-#[cfg(feature = "serial")]
+use hter::app::Boot;
+#[cfg(feature = "interface")]
 use hter::app::Handled;
-use hter::app::{App, Boot, SampleIn};
+#[cfg(feature = "interface")]
+use hter::app::{App, SampleIn};
 use hter::control::{Controller, ControllerStatus};
 use hter::event::Event;
 use hter::failsafe::Heartbeat;
@@ -153,7 +157,7 @@ async fn main(spawner: Spawner) {
     spawner.spawn(actuate(b.ssr, b.supply_enable, b.led, b.alarm).unwrap());
     spawner.spawn(acknowledge(b.button).unwrap());
     spawner.spawn(telemetry().unwrap());
-    #[cfg(feature = "serial")]
+    #[cfg(feature = "interface")]
     spawner.spawn(serial::serial(b.serial).unwrap());
 }
 
@@ -186,9 +190,119 @@ async fn sample(mut analog: board::Analog) {
     }
 }
 
+/// Runs the library's per-sample step on each sample, records it, decides the alarm
+/// indicator; after each completed step beats the heartbeat, tells the stall check and feeds
+/// the watchdog.
+#[cfg(not(feature = "interface"))]
+#[embassy_executor::task]
+async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
+    // Built here from the constant profile, so that its derived sample counts fold at compile
+    // time; only the calibration comes from flash.
+    let mut carrier: hter::step::Carrier<config::Ctl> = hter::step::Carrier::new(
+        config::VALID_CARRIER.with_calibration(boot.calibration),
+        config::controller(boot.adaptive),
+    );
+    carrier.note_reset(boot.reset);
+    let mut recorder = hter::persist::Recorder::new(boot.history, config::HISTORY_SAVE_SAMPLES);
+    let mut history = recorder.note_reset(boot.reset);
+    if let Some(f) = &boot.fault {
+        carrier.note_board_fault(f.kind);
+        history = recorder.note_board_fault(f);
+    }
+    for _ in 0..boot.pages_lost {
+        history = recorder.note_flash_page_lost();
+        if EVENTS.try_send(Event { t_ms: 0, kind: hter::event::EventKind::FlashPageLost }).is_err() {
+            warn!("event queue full, dropped FlashPageLost");
+        }
+    }
+    // Waits for the write gate: a power-bounce loop does not write at every boot.
+    persist::request(persist::Save::History(history));
+    let mut annunciator = hter::alarm::Annunciator::new();
+    let mut heartbeat = Heartbeat::new();
+    info!("controller: {}", carrier.controller().name());
+    let mut model_cadence = hter::persist::ModelCadence::new(config::MODEL_SAVE_SAMPLES);
+    let mut samples = 0u32;
+    board::start_stall_check();
+    loop {
+        let s = SAMPLES.receive().await;
+        // Flash writes wait while VDD is under the PVD level.
+        persist::note_supply(s.supply_ok);
+        if let Some(v) = s.supply_v {
+            carrier.observe_supply_v(v);
+        }
+        if let Some(v) = s.switched_v {
+            carrier.observe_switched_rail_v(v);
+        }
+        let input = hter::step::StepInput { t_ms: s.t_ms, counts: s.counts, setpoint_c: config::SETPOINT_C };
+        let out = if s.reference_ok { carrier.step(&input) } else { carrier.step_with_reference_fault(&input) };
+        let rec = recorder.push(s.t_ms, out.temp_c.0);
+        if ACKNOWLEDGE.try_take().is_some() {
+            info!("alarm acknowledged t={=u64:ms}", s.t_ms);
+            annunciator.acknowledge();
+        }
+        let alarm = annunciator.update(&out, &rec.raised);
+        ACTUATION.signal(Actuation { duty: out.duty, supply_enable: out.supply_enable, alarm: alarm.is_on() });
+        for e in out.events.iter() {
+            // Never block the loop on logging: a full queue drops the event, and says so.
+            if EVENTS.try_send(e).is_err() {
+                warn!("event queue full, dropped {}", e);
+            }
+        }
+        if out.events.dropped() > 0 {
+            warn!("{} events of this step did not fit the step's list", out.events.dropped());
+        }
+        for a in rec.raised.iter().flatten() {
+            error!("ALARM {} t={=u64:ms} (condition since t={=u64:ms})", a.kind.name(), a.trigger_ms, a.start_ms);
+        }
+        // An alarm's history is stored as soon as the supply allows, without the boot's hold-off.
+        if let Some(save) = recorder.due_save(&rec) {
+            persist::request(save);
+        }
+        let record = Telemetry {
+            t_ms: s.t_ms,
+            temp_c: out.temp_c.0,
+            setpoint_c: out.setpoint_c.0,
+            duty: out.duty.get(),
+            mode: out.mode,
+            counts: s.counts,
+            supply_v: s.supply_v,
+            switched_v: s.switched_v,
+            alarm,
+            status: out.status,
+        };
+        if TELEMETRY.try_send(record).is_err() {
+            warn!("telemetry queue full, dropped t={=u64:ms}", s.t_ms);
+        }
+        samples = samples.wrapping_add(1);
+        if samples.is_multiple_of(config::SUMMARY_SAMPLES) {
+            let m = recorder.monitor();
+            info!(
+                "coldchain t={=u64:ms} mkt={} min={} max={} below2_s={} above8_s={} excursions={}",
+                s.t_ms,
+                m.mkt_c().unwrap_or(f32::NAN),
+                m.min_c().unwrap_or(f32::NAN),
+                m.max_c().unwrap_or(f32::NAN),
+                m.time_below_2_s(),
+                m.time_above_8_s(),
+                m.excursion_count()
+            );
+        }
+        if let Some(rec) = model_cadence.push(out.status.map(|st| st.mode), carrier.controller()) {
+            persist::request(persist::Save::Model(rec));
+        }
+        // Healthy = the step completed: the monostable also gates the modules' supply, so a beat
+        // that stopped at every alarm would stop cooling at a heat alarm. The alarm pin sounds
+        // the buzzer through the OR in the wiring (README) instead.
+        heartbeat_pin.set_level(heartbeat.beat(true).into());
+        board::note_step();
+        board::pet_watchdog();
+    }
+}
+
 /// Runs the board application ([`hter::app::App`]: the step, the record and log, the
 /// settings) on each sample and each interface request; after each completed step beats the
 /// heartbeat, tells the stall check and feeds the watchdog.
+#[cfg(feature = "interface")]
 #[embassy_executor::task]
 async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
     let mut app = App::new(config::APP, &boot);
@@ -200,7 +314,6 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
     let mut samples = 0u32;
     board::start_stall_check();
     loop {
-        #[cfg(feature = "serial")]
         let s = match select(SAMPLES.receive(), serial::REQUESTS.receive()).await {
             Either::First(s) => s,
             Either::Second(line) => {
@@ -219,8 +332,6 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
                 continue;
             }
         };
-        #[cfg(not(feature = "serial"))]
-        let s = SAMPLES.receive().await;
         // Flash writes wait while VDD is under the PVD level.
         persist::note_supply(s.supply_ok);
         if ACKNOWLEDGE.try_take().is_some() {

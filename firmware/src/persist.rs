@@ -30,7 +30,6 @@ use defmt::{info, warn};
 #[cfg(feature = "interface")]
 use embassy_futures::select::{select, Either};
 use embassy_stm32::flash::{Blocking, Flash};
-use embedded_storage_async::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use embassy_stm32::peripherals::FLASH;
 use embassy_stm32::Peri;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
@@ -41,6 +40,7 @@ use embassy_sync::signal::Signal;
 use embassy_time::Instant;
 #[cfg(feature = "interface")]
 use embassy_time::{with_timeout, Duration};
+use embedded_storage_async::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 #[cfg(feature = "interface")]
 use hter::persist::flash::LogStore;
 use hter::persist::flash::{self, EccErrors, LoadStatus, Restored, Store};
@@ -197,7 +197,8 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
         }
     };
     #[cfg(not(feature = "interface"))]
-    let Ok(mut store) = store else {
+    let Ok(mut store) = store
+    else {
         warn!("persist: flash region unusable: nothing is restored or saved");
         BOOTED.signal(Restored::NOTHING);
         return;

@@ -236,7 +236,9 @@ async fn relay_history(tx: &mut BufferedUartTx<'_>) {
     let mut head = [0u8; 4];
     let mut col = 0usize;
     loop {
-        let n = match with_timeout(Duration::from_millis(HISTORY_QUIET_MS), crate::persist::HISTORY_PIPE.read(&mut buf)).await {
+        let n = match with_timeout(Duration::from_millis(HISTORY_QUIET_MS), crate::persist::HISTORY_PIPE.read(&mut buf))
+            .await
+        {
             Ok(n) => n,
             Err(_) => {
                 let _ = send(tx, b"err history: the log stream stopped\r\n").await;

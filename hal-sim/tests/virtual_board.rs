@@ -22,7 +22,10 @@ struct Board {
 impl Board {
     fn start(name: &str, extra: &[&str]) -> Board {
         let link = tmp(name);
-        let mut args = vec!["virtual-board", "--link", link.to_str().unwrap(), "--speed", "600"];
+        let mut args = vec!["virtual-board", "--link", link.to_str().unwrap()];
+        if !extra.contains(&"--speed") {
+            args.extend(["--speed", "600"]);
+        }
         args.extend_from_slice(extra);
         let child = Command::new(env!("CARGO_BIN_EXE_hter")).args(&args).stderr(Stdio::null()).spawn().unwrap();
         let t0 = Instant::now();
@@ -158,4 +161,21 @@ fn a_power_cut_in_the_middle_of_a_settings_write_keeps_the_old_setting_and_the_b
 fn a_missing_port_is_one_line_and_non_zero() {
     let e = one_line_error(&hter(&["board", "--port", Path::new("/nonexistent/tty").to_str().unwrap(), "status"]));
     assert!(e.contains("/nonexistent/tty"), "{e}");
+}
+
+#[test]
+fn identify_runs_to_completion_and_the_status_shows_the_new_model_and_adaptive_mode() {
+    // 3000×: the ≈ 5.3 h commissioning in well under a minute.
+    let b = Board::start("identify", &["--speed", "3000"]);
+    b.wait_for("an hour at 4 °C", 30, |s| s["t_s"].as_f64().is_some_and(|t| t > 3600.0));
+    let before = b.status()["model"].clone();
+    let o = b.board(&["identify"]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "identify: {out} / {}", String::from_utf8_lossy(&o.stderr));
+    let s = b.status();
+    assert_eq!(s["commissioning"], "done");
+    assert_eq!(s["controller"], "gpc");
+    assert_ne!(s["model"], before, "the new model is in use");
+    // The self-tuner trusts it (adaptive) within a few samples of warm-up.
+    b.wait_for("the self-tuner adapts", 30, |s| s["adaptive"] == "adaptive");
 }

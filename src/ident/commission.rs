@@ -246,6 +246,35 @@ pub enum CommissionError {
 }
 
 impl CommissionError {
+    /// Every failure, in the order of their codes ([`CommissionError::code`]).
+    pub const ALL: [CommissionError; 20] = [
+        CommissionError::Config(ConfigProblem::Rest),
+        CommissionError::Config(ConfigProblem::Prbs),
+        CommissionError::Config(ConfigProblem::Amplitude),
+        CommissionError::Config(ConfigProblem::Capacity),
+        CommissionError::Config(ConfigProblem::RestDuty),
+        CommissionError::Config(ConfigProblem::Threshold),
+        CommissionError::Config(ConfigProblem::Plausibility),
+        CommissionError::Config(ConfigProblem::SamplePeriod),
+        CommissionError::Config(ConfigProblem::Delay),
+        CommissionError::NoExcitation,
+        CommissionError::Implausible(Implausibility::Unstable),
+        CommissionError::Implausible(Implausibility::Heating),
+        CommissionError::Implausible(Implausibility::Gain),
+        CommissionError::PoorFit,
+        CommissionError::Fault(FaultKind::SensorFault),
+        CommissionError::Fault(FaultKind::FreezeGuard),
+        CommissionError::Fault(FaultKind::LimpHome),
+        CommissionError::Fault(FaultKind::Overridden),
+        CommissionError::Fault(FaultKind::OutputRange),
+        CommissionError::Aborted,
+    ];
+
+    /// A stable number for the failure (the cold-chain log's entry): its index in [`Self::ALL`].
+    pub fn code(self) -> u8 {
+        Self::ALL.iter().position(|&e| e == self).unwrap_or(0) as u8
+    }
+
     /// Stable snake_case name (the interface's `reason` field).
     pub fn name(self) -> &'static str {
         match self {

@@ -638,7 +638,10 @@ pub async fn write<F: NorFlash, E: EccErrors, G: NorFlash, H: EccErrors>(
 }
 
 /// Writes a record to the store (a board without the log: a log entry is [`StoreError::Other`]).
-pub async fn write_record<F: NorFlash, E: EccErrors>(store: &mut Store<F, E>, save: &super::Save) -> Result<(), StoreError> {
+pub async fn write_record<F: NorFlash, E: EccErrors>(
+    store: &mut Store<F, E>,
+    save: &super::Save,
+) -> Result<(), StoreError> {
     use super::Save;
     let mut buf = [0u8; HistoryRecord::LEN];
     let (key, len) = match save {
@@ -715,6 +718,7 @@ pub async fn restore<F: NorFlash, E: EccErrors, G: NorFlash, H: EccErrors>(
 ) -> Restored {
     let _ = log.scrub().await;
     let mut r = restore_records(store, adaptive).await;
+    r.settings = store.load_settings().await;
     r.log_last_s = log.last_t_s().await;
     let b = log.repairs();
     r.repairs = Repairs {
@@ -724,11 +728,15 @@ pub async fn restore<F: NorFlash, E: EccErrors, G: NorFlash, H: EccErrors>(
     r
 }
 
-/// [`restore`] of the store alone (a board without the log; `log_last_s` is 0).
-pub async fn restore_records<F: NorFlash, E: EccErrors>(store: &mut Store<F, E>, adaptive: Option<AdaptiveConfig>) -> Restored {
+/// [`restore`] of the store alone, for a board without the interface: no log (`log_last_s` is
+/// 0) and no settings (`settings` is [`LoadStatus::Missing`]; the build's constants apply).
+pub async fn restore_records<F: NorFlash, E: EccErrors>(
+    store: &mut Store<F, E>,
+    adaptive: Option<AdaptiveConfig>,
+) -> Restored {
     // A scrub that fails leaves the loads to repair what they read.
     let _ = store.scrub().await;
-    let settings = store.load_settings().await;
+    let settings = Err(LoadStatus::Missing);
     let calibration = store.load_calibration().await;
     let history = store.load_history().await;
     let adaptive = match adaptive {

@@ -41,7 +41,7 @@ pub struct Finding {
 pub const USART2_VECTOR: usize = 16 + 38;
 
 /// Audits the release firmware built with `features` (cargo's `--features` list, empty for the
-/// default build). A build with `serial` must also have USART2's handler bound.
+/// default build). A build with `interface` must also have USART2's handler bound.
 pub fn audit(features: &str) -> Result<()> {
     let root = super::root();
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
@@ -61,7 +61,7 @@ pub fn audit(features: &str) -> Result<()> {
     findings.push(rtt_finding(&elf, &cargo, &root)?);
     findings.push(image_finding(&elf));
     findings.push(region_finding(&root.join("memory.x"))?);
-    if features.split([',', ' ']).any(|f| f == "serial") {
+    if features.split([',', ' ']).any(|f| f == "interface" || f == "serial") {
         findings.push(usart2_finding(&elf)?);
     }
     println!("audit of {}", path.display());

@@ -21,7 +21,7 @@
 //!
 //! `cargo xtask audit` — the release firmware image's fail-safe properties ([`audit`]): fault
 //! handlers that do more than spin, defmt-rtt that cannot block, the program in flash bank 1;
-//! `cargo xtask audit --features serial` audits that build and checks USART2's handler is bound.
+//! `cargo xtask audit --features interface` audits that build and checks USART2's handler is bound.
 
 #[path = "../../pil/src/proto.rs"]
 #[allow(dead_code)]
@@ -47,14 +47,22 @@ const BUDGET_INSN: f64 = 5000.0;
 const FLASH_BUDGET: u64 = 64 * 1024;
 /// Release firmware static RAM budget, bytes: the product's 16 KiB (the L476RG's SRAM1 has 96).
 const RAM_BUDGET: u64 = 16 * 1024;
-/// The firmware builds `size` reports: (cargo features, what they run).
-const FIRMWARE_BUILDS: [(&str, &str); 5] = [
-    ("", "self-tuning GPC (default)"),
-    ("igmvc", "self-tuning IGMVC"),
-    ("pi", "PI"),
-    ("onoff", "On-Off"),
-    ("identify", "identification PRBS"),
+/// The firmware builds `size` reports: (cargo features, what they run, flash budget, static RAM
+/// budget).
+const FIRMWARE_BUILDS: [(&str, &str, u64, u64); 6] = [
+    ("", "self-tuning GPC (default)", FLASH_BUDGET, RAM_BUDGET),
+    ("igmvc", "self-tuning IGMVC", FLASH_BUDGET, RAM_BUDGET),
+    ("pi", "PI", FLASH_BUDGET, RAM_BUDGET),
+    ("onoff", "On-Off", FLASH_BUDGET, RAM_BUDGET),
+    ("identify", "identification PRBS", FLASH_BUDGET, RAM_BUDGET),
+    ("interface", "GPC + interface (issue 16)", INTERFACE_FLASH_BUDGET, INTERFACE_RAM_BUDGET),
 ];
+/// The interface build's flash budget, bytes: it does not fit the product's 64 KiB (README,
+/// "Flash budget": the board application, the log, commissioning and USART2 cost ≈ 55 KiB), so
+/// it is held to the next STM32L4 part size, 128 KiB (e.g. the L412/L422).
+const INTERFACE_FLASH_BUDGET: u64 = 128 * 1024;
+/// The interface build's static RAM budget, bytes: 32 KiB (those parts have 40 KiB).
+const INTERFACE_RAM_BUDGET: u64 = 32 * 1024;
 /// SysTick counts per instruction expected under `-icount shift=6` at 25 MHz (64 ns / 40 ns).
 const TICKS_PER_INSN: f64 = 1.6;
 /// Longest a QEMU run may take before it is killed.
@@ -143,7 +151,7 @@ fn size() -> Result<()> {
     let elf = target_dir().join(TARGET).join("release").join("firmware");
     let mut rows = Vec::new();
     println!("firmware release builds for {TARGET} (budget: flash {FLASH_BUDGET} B, static RAM {RAM_BUDGET} B)");
-    for (features, what) in FIRMWARE_BUILDS {
+    for (features, what, flash_budget, ram_budget) in FIRMWARE_BUILDS {
         let mut cmd = Command::new(&cargo);
         cmd.current_dir(root()).args(["build", "--release", "-p", "firmware", "--target", TARGET]);
         if !features.is_empty() {
@@ -153,20 +161,22 @@ fn size() -> Result<()> {
             bail!("building the firmware ({what}) failed");
         }
         let (flash, ram) = elf_sizes(&std::fs::read(&elf).with_context(|| format!("reading {}", elf.display()))?)?;
-        let ok = flash <= FLASH_BUDGET && ram <= RAM_BUDGET;
+        let ok = flash <= flash_budget && ram <= ram_budget;
         println!(
-            "  {what:<28} features {:<10} flash {flash:>6} B ({:>5.1} %)  static RAM {ram:>6} B ({:>5.1} %){}",
+            "  {what:<28} features {:<10} flash {flash:>6} B ({:>5.1} % of {flash_budget})  static RAM {ram:>6} B ({:>5.1} % of {ram_budget}){}",
             if features.is_empty() { "(none)" } else { features },
-            100.0 * flash as f64 / FLASH_BUDGET as f64,
-            100.0 * ram as f64 / RAM_BUDGET as f64,
+            100.0 * flash as f64 / flash_budget as f64,
+            100.0 * ram as f64 / ram_budget as f64,
             if ok { "" } else { "  OVER BUDGET" }
         );
-        rows.push((features, flash, ram, ok));
+        rows.push((features, flash, ram, ok, flash_budget, ram_budget));
     }
     let within = rows.iter().all(|r| r.3);
     let builds: Vec<String> = rows
         .iter()
-        .map(|(f, flash, ram, _)| format!("{{\"features\": \"{f}\", \"flash_bytes\": {flash}, \"ram_bytes\": {ram}}}"))
+        .map(|(f, flash, ram, _, fb, rb)| {
+            format!("{{\"features\": \"{f}\", \"flash_bytes\": {flash}, \"ram_bytes\": {ram}, \"flash_budget\": {fb}, \"ram_budget\": {rb}}}")
+        })
         .collect();
     println!(
         "{{\"builds\": [{}], \"flash_budget\": {FLASH_BUDGET}, \"ram_budget\": {RAM_BUDGET}, \"within_budget\": {within}}}",
