@@ -212,7 +212,7 @@ pub struct App {
     /// Record time at board time 0, ms.
     base_ms: u64,
     outbox: heapless::Deque<Save, OUTBOX>,
-    /// Saves dropped because the glue did not drain [`OUTBOX`] of them.
+    /// Saves dropped because the glue did not drain the outbox (16 saves) in time.
     pub saves_dropped: u16,
     last: Option<SampleOut>,
     last_t_ms: u64,

@@ -31,7 +31,7 @@ pub mod flash;
 mod gate;
 pub mod log;
 
-pub use gate::{PendingSaves, Save, WriteGate, SUPPLY_FRESH_MS, SUPPLY_HOLD_OFF_MS};
+pub use gate::{PendingSaves, Save, WriteGate, PENDING_LOG, SUPPLY_FRESH_MS, SUPPLY_HOLD_OFF_MS};
 
 /// Why stored bytes were not accepted as a record.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
