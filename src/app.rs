@@ -531,6 +531,7 @@ impl App {
         let c = Commissioning::new(cfg, self.cfg.carrier.get().ts_s, self.duty_avg)
             .map_err(|e| Refusal { what: "identify", why: Why::NotNow(e.reason()) })?;
         *self.carrier.controller_mut() = BoardController::Commission(c);
+        self.carrier.hold_switch_tests(true);
         self.commissioned = None;
         let t_s = self.record_s(self.last_t_ms);
         self.save(Save::Log(LogEntry::Setting { t_s, key: SettingKey::Identify, value: [self.duty_avg, 0.0] }));
@@ -577,6 +578,7 @@ impl App {
         };
         self.save(Save::Log(LogEntry::Setting { t_s, key: SettingKey::IdentifyEnd, value: code }));
         *self.carrier.controller_mut() = build(law, &self.adaptive, ts_s, self.duty_avg);
+        self.carrier.hold_switch_tests(false);
         if law != self.settings.law {
             self.settings.law = law;
             self.settings.seq = self.settings.seq.wrapping_add(1);

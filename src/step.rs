@@ -172,6 +172,14 @@ impl<C: Controller> Carrier<C> {
         self.supervisor.observe_switched_rail_v(v);
     }
 
+    /// Holds the supply switch's periodic test openings off (`true`) while an identification run
+    /// records the plant: a 20 s opening in the excitation the applied duty does not show would
+    /// spoil the fit (the identify build turns them off for the same reason). The switch is
+    /// still checked whenever the freeze guard or a sensor fault opens it.
+    pub fn hold_switch_tests(&mut self, held: bool) {
+        self.supervisor.hold_switch_tests(held);
+    }
+
     /// Runs one sample whose RTD conversion is not valid because the reference conversions
     /// around it failed [`crate::adc::ReferenceWindow::check`]: a sensor fault
     /// ([`EventKind::ReferenceOutOfRange`]) with cooling off, exactly as an open sensor would

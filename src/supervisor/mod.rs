@@ -425,6 +425,11 @@ impl Supervisor {
         self.switch.observe(v);
     }
 
+    /// Holds the supply switch's periodic test openings off, or lets them resume.
+    pub(crate) fn hold_switch_tests(&mut self, held: bool) {
+        self.switch.hold_tests(held);
+    }
+
     /// The stuck-converter check on this sample's raw counts: whether they are stuck.
     pub(crate) fn counts_stuck(&mut self, counts: u32) -> bool {
         self.sensor.stuck.run(counts)

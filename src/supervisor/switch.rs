@@ -73,6 +73,8 @@ pub(crate) struct SwitchCheck {
     since_check: u32,
     /// Samples of the test opening still to go.
     test_left: u8,
+    /// No test openings for now (an identification run: an opening would spoil its record).
+    held: bool,
 }
 
 impl SwitchCheck {
@@ -86,7 +88,14 @@ impl SwitchCheck {
             reported: false,
             since_check: 0,
             test_left: 0,
+            held: false,
         }
+    }
+
+    /// Holds the periodic test openings off (`true`) or lets them resume; the switch is still
+    /// checked whenever another mode opens it.
+    pub(crate) fn hold_tests(&mut self, held: bool) {
+        self.held = held;
     }
 
     /// Takes the switched rail measured for the next sample, V.
@@ -119,7 +128,7 @@ impl SwitchCheck {
     /// the sense present, never once a short has been found (the test can tell nothing more),
     /// and only starting with the filtered load `temp_c` at or below the setpoint `w`.
     pub(crate) fn test_due(&mut self, normal: bool, temp_c: f32, w: f32) -> bool {
-        if self.interval_n == 0 || self.rail_v.is_none() || self.reported || !normal {
+        if self.interval_n == 0 || self.rail_v.is_none() || self.reported || !normal || self.held {
             self.test_left = 0;
             return false;
         }
@@ -208,6 +217,12 @@ mod tests {
         // Not above the setpoint, not outside normal control.
         assert_eq!(openings(&mut check(), 1500, true, 5.2, 5.1), [] as [u32; 0]);
         assert_eq!(openings(&mut check(), 1500, false, 5.0, 5.1), [] as [u32; 0]);
+        // Not while held (an identification run), and again once released.
+        let mut c = check();
+        c.hold_tests(true);
+        assert_eq!(openings(&mut c, 1500, true, 5.0, 5.1), [] as [u32; 0]);
+        c.hold_tests(false);
+        assert_eq!(openings(&mut c, 1500, true, 5.0, 5.1), [719, 720, 1440, 1441], "a full interval after");
         // Not with test openings off.
         let mut c = SwitchCheck::new(&SwitchConfig { test_interval_s: 0.0, ..SwitchConfig::DEFAULT }, 10.0);
         assert_eq!(openings(&mut c, 1500, true, 5.0, 5.1), [] as [u32; 0]);
