@@ -129,7 +129,12 @@ pub const GRID_PASSES: usize = TAU_GRID.len() * (TAU_GRID.len() - 1) / 2;
 /// fitted its record at 23 % once stored as a `Model`.
 pub const MIN_LN_TAU_RATIO: f32 = 1.0986;
 
-/// Delays the compass search refines: the best of the grid, in order of its V.
+/// Relative RMS error within which a longer delay is preferred to the best-fitting one
+/// ([`Commissioning::preferred`]): 7 %, about 1 fit point at the carriers' 86 % and 0.35 at 95 %.
+pub const DELAY_TOLERANCE: f32 = 0.07;
+
+/// Delays the compass search refines: the delay the fit would keep after the grid, then the
+/// best of the grid in order of its V.
 pub const SEARCHED_DELAYS: usize = 3;
 
 /// First step of the compass search in s = ln τ: half the grid's spacing.
@@ -942,6 +947,19 @@ impl Commissioning {
         self.best.iter().fold(Candidate::NONE, |acc, c| if c.v < acc.v { *c } else { acc })
     }
 
+    /// The candidate the fit keeps: of the delays whose RMS error is within
+    /// [`DELAY_TOLERANCE`] of the best delay's, the longest. On the carriers the fit is nearly
+    /// flat over the delay (H-TER I: 85.0–86.1 % for k = 1…8) because the two poles can mimic
+    /// dead time; the longest delay that fits as well leaves the poles to the thermal lags,
+    /// which is what a predictive law needs (self-tuning GPC from H-TER I's k = 8 model:
+    /// 1.28–1.31 × the bound on `piecewise`; from the k = 5 the best fit picks: 2.42–2.48 ×,
+    /// `tests/commission.rs::gpc_by_delay`).
+    fn preferred(&self) -> Candidate {
+        let best = self.overall_best();
+        let limit = libm::sqrtf(best.v) * (1.0 + DELAY_TOLERANCE);
+        self.best.iter().rev().find(|c| c.v.is_finite() && libm::sqrtf(c.v) <= limit).copied().unwrap_or(best)
+    }
+
     /// The best candidate of delay `k`.
     fn best_of(&self, k: u8) -> Candidate {
         self.best.get(usize::from(k).wrapping_sub(1)).copied().unwrap_or(Candidate::NONE)
@@ -1046,11 +1064,17 @@ impl Commissioning {
         }
     }
 
-    /// The delays with the lowest V after the grid, best first.
+    /// The delay the fit would keep after the grid ([`Self::preferred`]), then the others with
+    /// the lowest V, best first.
     fn delay_order(&self) -> [u8; SEARCHED_DELAYS] {
         let mut order = [0u8; SEARCHED_DELAYS];
         let mut taken = [false; MAX_DELAY];
-        for o in order.iter_mut() {
+        let keep = self.preferred().k;
+        if let (Some(o), Some(t)) = (order.first_mut(), taken.get_mut(usize::from(keep).wrapping_sub(1))) {
+            *o = keep;
+            *t = true;
+        }
+        for o in order.iter_mut().skip(1) {
             let mut pick: Option<(usize, f32)> = None;
             for (i, c) in self.best.iter().enumerate() {
                 let free = !taken.get(i).copied().unwrap_or(true);
@@ -1069,7 +1093,7 @@ impl Commissioning {
     }
 
     fn finish(&mut self) {
-        let c = self.overall_best();
+        let c = self.preferred();
         if c.b == [0.0, 0.0] || !c.v.is_finite() {
             return self.fail(CommissionError::Implausible(Implausibility::Heating));
         }
