@@ -130,7 +130,7 @@ pub const GRID_PASSES: usize = TAU_GRID.len() * (TAU_GRID.len() - 1) / 2;
 pub const MIN_LN_TAU_RATIO: f32 = 1.0986;
 
 /// Relative RMS error within which a longer delay is preferred to the best-fitting one
-/// ([`Commissioning::preferred`]): 7 %, about 1 fit point at the carriers' 86 % and 0.35 at 95 %.
+/// (the delay choice at the end of the fit): 7 %, about 1 fit point at the carriers' 86 % and 0.35 at 95 %.
 pub const DELAY_TOLERANCE: f32 = 0.07;
 
 /// Delays the compass search refines: the delay the fit would keep after the grid, then the
