@@ -70,6 +70,26 @@ pub fn read_cells(path: &Path, names: &[&str]) -> Result<Vec<Vec<Option<f64>>>> 
     Ok(cols)
 }
 
+/// The text of an optional column, one cell per row (trimmed, `""` when empty), or `None` when
+/// the header has no such column. Rows line up with [`read_cells`] of the same file.
+pub fn read_text(path: &Path, name: &str) -> Result<Option<Vec<String>>> {
+    let shown = path.display();
+    let file = std::fs::File::open(path).with_context(|| format!("cannot read '{shown}'"))?;
+    let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(false).trim(csv::Trim::All).from_reader(file);
+    let headers = rdr.headers().map_err(|e| anyhow!("'{shown}' line 1: {e}"))?.clone();
+    let Some(j) = headers.iter().position(|h| h == name) else {
+        return Ok(None);
+    };
+    rdr.records()
+        .enumerate()
+        .map(|(i, rec)| {
+            let rec = rec.map_err(|e| anyhow!("'{shown}' line {}: {}", i + 2, first_line(&e.to_string())))?;
+            Ok(rec.get(j).unwrap_or("").to_owned())
+        })
+        .collect::<Result<Vec<_>>>()
+        .map(Some)
+}
+
 /// Checks that times strictly increase; names the first offending line.
 pub fn check_increasing(path: &Path, t: &[f64]) -> Result<()> {
     if let Some(i) = t.windows(2).position(|w| w[1] <= w[0]) {
