@@ -194,7 +194,9 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
         if let Some(p) = last.filter(|&p| t < p) {
             bail!("'{shown}' line {line}: t_s = {t} goes back in time (previous {p})");
         }
-        if let Some(name) = cell(&reset_col, i) {
+        if let Some(cause) = cell(&reset_col, i) {
+            // `hter log2csv` names the cause (`restarted_brownout`, …, or `unknown`).
+            let name = if cause.starts_with("restarted") { cause } else { format!("restarted: {cause}") };
             input.events.push(Event { t_s: t, name });
         }
         input.t_s.push(t);

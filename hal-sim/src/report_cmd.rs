@@ -197,10 +197,24 @@ pub fn verdict(r: &monitor_cmd::Report) -> (&'static str, &'static str) {
     }
 }
 
-/// Whether an event is a reset or a fault (what the header lists).
+/// Whether an event is a reset or a fault (what the header lists), by the library's event names
+/// (`hter::event::EventKind::name`; a board history may add `:detail`): restarts, board faults,
+/// sensor, SSR, supply, reference and flash faults. Settings, alarms (listed on their own) and
+/// recoveries are not.
 fn is_reset_or_fault(e: &Event) -> bool {
     let n = e.name.to_ascii_lowercase();
-    n.starts_with("restart") || n.starts_with("board_fault") || n.starts_with("sensor") || n.contains("fault")
+    const PREFIXES: [&str; 9] = [
+        "restart",
+        "board_fault",
+        "sensor_",
+        "ssr_stuck",
+        "supply_",
+        "reference_out_of_range",
+        "flash_page_lost",
+        "controller_non_finite",
+        "freeze_guard_tripped",
+    ];
+    PREFIXES.iter().any(|p| n.starts_with(p)) && !n.starts_with("sensor_recovered")
 }
 
 /// HTML-escapes text.

@@ -219,3 +219,29 @@ fn bad_input_is_a_one_line_error() {
     assert!(!out.exists(), "no report written for bad input");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+#[test]
+fn a_log2csv_output_lists_its_resets() {
+    let d = dir("log2csv");
+    let csv = d.join("carrier.csv");
+    let mut text = String::from("t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,boot,reset_cause\n");
+    for i in 0..=60 {
+        let cause = match i {
+            0 => "restarted",
+            30 => "restarted_watchdog",
+            45 => "unknown",
+            _ => "",
+        };
+        let boot = u32::from(i >= 30) + u32::from(i >= 45);
+        // The sensor is out for one sample in boot 1.
+        let temp = if i == 40 { String::new() } else { "4.0".to_owned() };
+        text.push_str(&format!("{},4.0,{temp},0.4,normal,,,off,{boot},{cause}\n", 10 * i));
+    }
+    std::fs::write(&csv, text).unwrap();
+    let page = report_agreeing_with_monitor(&csv, &d.join("c.html"));
+    assert!(page.contains("<li>restarted_watchdog") && page.contains("<li>restarted: unknown"), "resets listed");
+    assert!(page.contains("Resets and faults</th><td>3:"), "three boots, three resets");
+    assert!(page.contains("No reading (sensor fault)"));
+    assert_eq!(day_rows(&page), 1);
+    let _ = std::fs::remove_dir_all(&d);
+}
