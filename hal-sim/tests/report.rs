@@ -178,8 +178,12 @@ fn a_board_history_gives_a_report_with_its_resets_and_faults() {
     assert_eq!(alarms, [("heat_10h".to_owned(), 7200.0, 43200.0)]);
     assert!(page.contains("restarted:brownout") && page.contains("sensor_open"), "resets and faults listed");
     assert!(!page.contains("<li>set:"), "a settings change is not a fault");
-    // The event rows are not samples: 312 interval rows.
+    // The event rows are not samples: 312 interval rows, and the one with empty temperatures is
+    // no sensor fault to the monitor either.
     assert!(page.contains("312 samples"), "event rows counted as samples");
+    let out = hter(&["monitor", "--input", s(&csv), "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!((v["fault_samples"].as_u64(), v["time_above_8_s"].as_f64()), (Some(0), Some(11.0 * 3600.0)), "{v}");
     let _ = std::fs::remove_dir_all(&d);
 }
 
