@@ -66,11 +66,13 @@ impl AlarmKind {
         }
     }
 
-    /// Every kind, in declaration order.
+    /// Every kind, in the order [`Raised`] reports them.
     pub const ALL: [AlarmKind; 4] =
         [AlarmKind::Heat10h, AlarmKind::Freeze60min, AlarmKind::Ship45c1h, AlarmKind::Ship30c10h];
 
-    fn meets(self, t_c: f32) -> bool {
+    /// Whether a sample at `t_c`, °C, meets this kind's condition (`hter report` reads it to
+    /// give each alarm's duration with the same thresholds the monitor uses).
+    pub fn meets(self, t_c: f32) -> bool {
         match self {
             AlarmKind::Heat10h => t_c > 8.0,
             AlarmKind::Freeze60min => t_c <= -0.5,
@@ -88,7 +90,8 @@ impl AlarmKind {
         }
     }
 
-    fn cumulative(self) -> bool {
+    /// Whether the duration is a total over the record (`ship_30c_10h`) rather than one run.
+    pub fn cumulative(self) -> bool {
         matches!(self, AlarmKind::Ship30c10h)
     }
 }

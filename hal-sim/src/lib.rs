@@ -20,6 +20,7 @@ pub mod monitor_cmd;
 pub mod periph;
 pub mod plant;
 pub mod plot;
+pub mod report_cmd;
 pub mod rtd_cmd;
 pub mod scenario;
 pub mod sim;

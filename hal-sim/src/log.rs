@@ -70,8 +70,9 @@ pub fn read_cells(path: &Path, names: &[&str]) -> Result<Vec<Vec<Option<f64>>>> 
     Ok(cols)
 }
 
-/// The cells of a text column, if the log has it (`None` when the header lacks it).
-pub fn read_text_column(path: &Path, name: &str) -> Result<Option<Vec<String>>> {
+/// The text of an optional column, one cell per row (trimmed, `""` when empty), or `None` when
+/// the header has no such column. Rows line up with [`read_cells`] of the same file.
+pub fn read_text(path: &Path, name: &str) -> Result<Option<Vec<String>>> {
     let shown = path.display();
     let file = std::fs::File::open(path).with_context(|| format!("cannot read '{shown}'"))?;
     let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(false).trim(csv::Trim::All).from_reader(file);
@@ -82,24 +83,17 @@ pub fn read_text_column(path: &Path, name: &str) -> Result<Option<Vec<String>>> 
     rdr.records()
         .enumerate()
         .map(|(i, rec)| {
-            rec.map(|r| r.get(j).unwrap_or("").to_string())
-                .map_err(|e| anyhow!("'{shown}' line {}: {}", i + 2, first_line(&e.to_string())))
+            let rec = rec.map_err(|e| anyhow!("'{shown}' line {}: {}", i + 2, first_line(&e.to_string())))?;
+            Ok(rec.get(j).unwrap_or("").to_owned())
         })
-        .collect::<Result<_>>()
+        .collect::<Result<Vec<_>>>()
         .map(Some)
 }
 
 /// Checks that times strictly increase; names the first offending line.
 pub fn check_increasing(path: &Path, t: &[f64]) -> Result<()> {
-    let lines: Vec<usize> = (2..t.len() + 2).collect();
-    check_increasing_lines(path, t, &lines)
-}
-
-/// [`check_increasing`] for rows picked out of a log: `lines[i]` is the file line of `t[i]`.
-pub fn check_increasing_lines(path: &Path, t: &[f64], lines: &[usize]) -> Result<()> {
     if let Some(i) = t.windows(2).position(|w| w[1] <= w[0]) {
-        let line = lines.get(i + 1).copied().unwrap_or(i + 3);
-        bail!("'{}' line {line}: t_s = {} does not increase (previous {})", path.display(), t[i + 1], t[i]);
+        bail!("'{}' line {}: t_s = {} does not increase (previous {})", path.display(), i + 3, t[i + 1], t[i]);
     }
     Ok(())
 }
@@ -146,10 +140,8 @@ mod tests {
     fn text_columns_are_optional() {
         let p = write("text", "t_s,temp_c,event\n0,4.0,\n0,4.0,\"set:model=-1.8,0.81;-0.02,-0.01;1\"\n");
         let want = vec![String::new(), "set:model=-1.8,0.81;-0.02,-0.01;1".to_string()];
-        assert_eq!(read_text_column(&p, "event").unwrap(), Some(want));
-        assert_eq!(read_text_column(&p, "mode").unwrap(), None);
-        let e = check_increasing_lines(&p, &[0.0, 5.0, 5.0], &[2, 4, 7]).unwrap_err().to_string();
-        assert!(e.contains("line 7"), "{e}");
+        assert_eq!(read_text(&p, "event").unwrap(), Some(want));
+        assert_eq!(read_text(&p, "mode").unwrap(), None);
     }
 
     #[test]

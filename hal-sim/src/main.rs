@@ -5,8 +5,8 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use hal_sim::{
-    board_cmd, campaign_cmd, compare_cmd, demo_cmd, identify_cmd, log2csv_cmd, monitor_cmd, rtd_cmd, sim_cmd,
-    virtual_board_cmd,
+    board_cmd, campaign_cmd, compare_cmd, demo_cmd, identify_cmd, log2csv_cmd, monitor_cmd, report_cmd, rtd_cmd,
+    sim_cmd, virtual_board_cmd,
 };
 
 /// Adaptive control of a thermoelectric (Peltier) vaccine carrier: simulate, identify, convert.
@@ -29,6 +29,9 @@ enum Command {
     Rtd(rtd_cmd::RtdArgs),
     /// Cold-chain record of a CSV log: WHO-style alarms, mean kinetic temperature, excursions.
     Monitor(monitor_cmd::MonitorArgs),
+    /// Cold-chain report of a CSV log as one HTML page (or PDF): verdict, per-day table, alarms,
+    /// MKT, plots.
+    Report(report_cmd::ReportArgs),
     /// Run one scenario with several controllers and print a markdown comparison table.
     Compare(compare_cmd::CompareArgs),
     /// Turn the firmware's defmt telemetry log into the CSV `identify` and `monitor` read.
@@ -66,6 +69,7 @@ fn main() -> ExitCode {
         Some(Command::Identify(a)) => identify_cmd::run(&a),
         Some(Command::Rtd(a)) => rtd_cmd::run(&a),
         Some(Command::Monitor(a)) => monitor_cmd::run(&a),
+        Some(Command::Report(a)) => report_cmd::run(&a),
         Some(Command::Compare(a)) => compare_cmd::run(&a),
         Some(Command::Log2csv(a)) => log2csv_cmd::run(&a),
         Some(Command::Campaign(a)) => campaign_cmd::run(&a),

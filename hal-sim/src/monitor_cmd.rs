@@ -22,7 +22,7 @@ pub struct MonitorArgs {
 }
 
 /// One alarm of the report.
-#[derive(Debug, Serialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct AlarmOut {
     /// Kind (`heat_10h`, `freeze_60min`, `ship_45c_1h`, `ship_30c_10h`).
     pub kind: &'static str,
@@ -142,28 +142,78 @@ pub fn report(t: &[f64], temp: &[Option<f64>]) -> Result<Report> {
     })
 }
 
+/// One event of a board history (`event` column) or a reset of a `hter log2csv` output
+/// (`reset_cause` column).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Event {
+    /// Time on the log's axis, s.
+    pub t_s: f64,
+    /// The event's name as the file spells it (`restarted:brownout`, `alarm:heat_10h`, …).
+    pub name: String,
+}
+
+/// A cold-chain log as `hter monitor` and `hter report` read it.
+#[derive(Debug, Clone)]
+pub struct Input {
+    /// Sample times, s, strictly increasing.
+    pub t_s: Vec<f64>,
+    /// Sample temperatures, °C (`None`: no reading).
+    pub temp_c: Vec<Option<f64>>,
+    /// Events, in time order (empty when the file has neither column).
+    pub events: Vec<Event>,
+}
+
+/// Reads a simulator CSV, a `hter log2csv` output or a board history (docs/interface.md): the
+/// `t_s` and `temp_c` columns; when an `event` column exists, a row with a non-empty `event` is
+/// an event, not a sample (its temperature cells only repeat the last interval's mean, or are
+/// empty); a non-empty `reset_cause` is a reset event at that (sample) row. Sample times must
+/// strictly increase and no row may go back in time.
+pub fn read_input(path: &std::path::Path) -> Result<Input> {
+    let shown = path.display();
+    let mut cols = log::read_cells(path, &["t_s", "temp_c"])?.into_iter();
+    let (t_all, temp_all) = (cols.next().unwrap_or_default(), cols.next().unwrap_or_default());
+    let event_col = log::read_text(path, "event")?;
+    let reset_col = log::read_text(path, "reset_cause")?;
+    let cell =
+        |col: &Option<Vec<String>>, i: usize| col.as_ref().and_then(|c| c.get(i)).filter(|s| !s.is_empty()).cloned();
+    let mut input = Input { t_s: Vec::new(), temp_c: Vec::new(), events: Vec::new() };
+    let mut last: Option<f64> = None;
+    for (i, (t, c)) in t_all.into_iter().zip(temp_all).enumerate() {
+        let line = i + 2;
+        let t = t.ok_or_else(|| anyhow!("'{shown}' line {line}, column 't_s': empty"))?;
+        if let Some(name) = cell(&event_col, i) {
+            if let Some(p) = last.filter(|&p| t < p) {
+                bail!("'{shown}' line {line}: t_s = {t} goes back in time (previous {p})");
+            }
+            input.events.push(Event { t_s: t, name });
+            last = Some(t);
+            continue;
+        }
+        if let Some(&p) = input.t_s.last().filter(|&&p| t <= p) {
+            bail!("'{shown}' line {line}: t_s = {t} does not increase (previous {p})");
+        }
+        if let Some(p) = last.filter(|&p| t < p) {
+            bail!("'{shown}' line {line}: t_s = {t} goes back in time (previous {p})");
+        }
+        if let Some(cause) = cell(&reset_col, i) {
+            // `hter log2csv` names the cause (`restarted_brownout`, …, or `unknown`).
+            let name = if cause.starts_with("restarted") { cause } else { format!("restarted: {cause}") };
+            input.events.push(Event { t_s: t, name });
+        }
+        input.t_s.push(t);
+        input.temp_c.push(c);
+        last = Some(t);
+    }
+    if last.is_some_and(|t| t > 16_000_000.0) {
+        bail!("'{shown}': t_s beyond 16e6 s (185 days) is not supported");
+    }
+    Ok(input)
+}
+
 /// `hter monitor`.
 pub fn run(args: &MonitorArgs) -> Result<()> {
     let shown = args.input.display();
-    let mut cols = log::read_cells(&args.input, &["t_s", "temp_c"])?.into_iter();
-    let (t, temp) = (cols.next().unwrap_or_default(), cols.next().unwrap_or_default());
-    let t: Vec<f64> = t
-        .into_iter()
-        .enumerate()
-        .map(|(i, v)| v.ok_or_else(|| anyhow!("'{shown}' line {}, column 't_s': empty", i + 2)))
-        .collect::<Result<_>>()?;
-    // The board's history (`hter board history`, docs/interface.md): a row with an `event` is
-    // an event, not a sample (its temperature repeats the last interval's, its time may equal
-    // an interval's end), so it is left out of the record.
-    let events = log::read_text_column(&args.input, "event")?;
-    let is_sample = |i: usize| events.as_ref().and_then(|e| e.get(i)).is_none_or(|e| e.is_empty());
-    let lines: Vec<usize> = (0..t.len()).filter(|&i| is_sample(i)).map(|i| i + 2).collect();
-    let (t, temp): (Vec<f64>, Vec<Option<f64>>) =
-        t.into_iter().zip(temp).enumerate().filter(|&(i, _)| is_sample(i)).map(|(_, p)| p).unzip();
-    log::check_increasing_lines(&args.input, &t, &lines)?;
-    if t.last().is_some_and(|&t| t > 16_000_000.0) {
-        bail!("'{shown}': t_s beyond 16e6 s (185 days) is not supported");
-    }
+    let Input { t_s: t, temp_c: temp, .. } = read_input(&args.input)?;
     let r = report(&t, &temp).with_context(|| format!("'{shown}'"))?;
     if args.json {
         println!("{}", serde_json::to_string(&r)?);

@@ -67,6 +67,20 @@ pub fn panels(path: &Path, title: &str, x_label: &str, panels: &[Panel]) -> Resu
     }
 }
 
+/// Draws `panels` stacked vertically, `width` px wide, into an SVG document returned as text
+/// (for inlining in an HTML report).
+pub fn panels_svg(width: u32, title: &str, x_label: &str, panels: &[Panel]) -> Result<String> {
+    register_font();
+    let height = 300 * panels.len() as u32 + 60;
+    let mut out = String::new();
+    {
+        let root = SVGBackend::with_string(&mut out, (width, height)).into_drawing_area();
+        draw(&root, title, x_label, panels)?;
+        root.present().map_err(|e| anyhow!("plot: {e:?}"))?;
+    }
+    Ok(out)
+}
+
 fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, title: &str, x_label: &str, panels: &[Panel]) -> Result<()>
 where
     DB::ErrorType: 'static,

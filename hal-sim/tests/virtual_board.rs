@@ -133,6 +133,13 @@ fn status_settings_and_history_work_from_the_host_tool_as_the_readme_shows() {
     let m: serde_json::Value = serde_json::from_slice(&m.stdout).unwrap();
     assert_eq!(m["alarms"], serde_json::json!([]));
     assert!(m["min_c"].as_f64().unwrap() > 3.0 && m["max_c"].as_f64().unwrap() < 6.0, "{m}");
+    // And into the supervisor's report (issue 17).
+    let html = tmp("r.html");
+    let r = hter(&["report", "--input", csv.to_str().unwrap(), "--output", html.to_str().unwrap()]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let page = std::fs::read_to_string(&html).unwrap();
+    assert!(page.contains("<svg") && page.contains("IN RANGE"), "the report of the board's history");
+    let _ = std::fs::remove_file(&html);
     let _ = std::fs::remove_file(&csv);
 }
 

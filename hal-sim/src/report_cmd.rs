@@ -1,0 +1,558 @@
+//! `hter report`: the cold-chain record of a CSV log as one self-contained HTML page a
+//! supervisor reads at a glance, in the spirit of the download of a WHO PQS E006 30-day
+//! temperature recorder: a verdict line, a header (source, carrier and firmware when the file
+//! names them, period, resets and faults), a per-day table (min, max, time-weighted mean, time
+//! below +2 °C and above +8 °C, alarms), the alarms by kind with start, trigger and duration,
+//! the mean kinetic temperature (MKT) against 2–8 °C, and plots (SVG inline) of the whole
+//! period and of each day with an alarm.
+//!
+//! The numbers are `hter monitor`'s: the same reader ([`monitor_cmd::read_input`]) and the
+//! same library monitor ([`monitor_cmd::report`], `hter::coldchain`), so the two commands agree
+//! on every alarm and on MKT. The per-day figures use the monitor's rule: a sample holds over
+//! the interval to the next one, and the interval after a sample with no reading counts neither
+//! in nor out of range.
+//!
+//! Days are 24 h blocks of the record's own time axis from its first sample: the logs carry
+//! no calendar date (the board has no real-time clock), and the report says so.
+//!
+//! `--output FILE.pdf` prints the HTML with headless Chromium (`chromium --headless
+//! --print-to-pdf`); no PDF crate is needed for a page a browser already lays out.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use hter::coldchain::AlarmKind;
+
+use crate::monitor_cmd::{self, AlarmOut, Event, Input};
+use crate::{log, plot};
+
+/// Length of a report day, s.
+const DAY_S: f64 = 86_400.0;
+/// Most points drawn per line: longer records are drawn as a min/max envelope per bucket, which
+/// keeps every extreme visible and the page small (a 30-day record at 10 s has 259 200 samples).
+const MAX_PLOT_POINTS: usize = 4_000;
+
+/// Arguments of `hter report`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ReportArgs {
+    /// CSV log with columns t_s and temp_c: `hter sim --csv`, `hter log2csv` or a board
+    /// history (`hter board … history`).
+    #[arg(long)]
+    pub input: PathBuf,
+    /// The report to write: FILE.html, or FILE.pdf (printed from the HTML by headless Chromium).
+    #[arg(long)]
+    pub output: PathBuf,
+}
+
+/// One report day.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Day {
+    /// Day number from 1.
+    pub number: usize,
+    /// Start on the log's axis, s.
+    pub start_s: f64,
+    /// Lowest reading, °C (`None`: no reading that day).
+    pub min_c: Option<f64>,
+    /// Highest reading, °C.
+    pub max_c: Option<f64>,
+    /// Time-weighted mean, °C.
+    pub mean_c: Option<f64>,
+    /// Time below +2 °C, s.
+    pub below_2_s: f64,
+    /// Time above +8 °C, s.
+    pub above_8_s: f64,
+    /// Kinds of the alarms under way that day.
+    pub alarms: Vec<&'static str>,
+}
+
+/// An alarm with how long its condition held.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AlarmSpan {
+    /// The alarm as `hter monitor` reports it.
+    pub alarm: AlarmOut,
+    /// Until when the condition held, s (the first reading that no longer met it, or the end of
+    /// the record); for the cumulative `ship_30c_10h`, the last interval that met it.
+    pub end_s: f64,
+    /// Time with a reading that met the condition, s (for a continuous alarm, within its run;
+    /// for the cumulative one, over the record).
+    pub duration_s: f64,
+    /// Whether the condition still held at the end of the record.
+    pub ongoing: bool,
+}
+
+/// The sample-and-hold intervals of a log with a reading: (from, to, °C).
+fn intervals(t: &[f64], temp: &[Option<f64>]) -> Vec<(f64, f64, f64)> {
+    t.windows(2).zip(temp).filter_map(|(w, c)| c.map(|c| (w[0], w[1], c))).collect()
+}
+
+/// How long each alarm's condition held, with the library's thresholds.
+pub fn alarm_spans(t: &[f64], temp: &[Option<f64>], alarms: Vec<AlarmOut>) -> Vec<AlarmSpan> {
+    let iv = intervals(t, temp);
+    let end_of_record = t.last().copied().unwrap_or(0.0);
+    alarms
+        .into_iter()
+        .map(|alarm| {
+            let kind = AlarmKind::ALL.into_iter().find(|k| k.name() == alarm.kind);
+            let meets = |c: f64| kind.is_some_and(|k| k.meets(c as f32));
+            if kind.is_some_and(AlarmKind::cumulative) {
+                let hits: Vec<_> = iv.iter().filter(|x| meets(x.2)).collect();
+                let duration_s = hits.iter().map(|x| x.1 - x.0).sum();
+                let end_s = hits.last().map_or(alarm.trigger_s, |x| x.1);
+                let ongoing = temp.iter().rev().flatten().next().is_some_and(|&c| meets(c));
+                return AlarmSpan { alarm, end_s, duration_s, ongoing };
+            }
+            let mut duration_s = 0.0;
+            let mut end = None;
+            for x in iv.iter().filter(|x| x.0 >= alarm.start_s) {
+                if !meets(x.2) {
+                    end = Some(x.0);
+                    break;
+                }
+                duration_s += x.1 - x.0;
+            }
+            // A last reading after the run's intervals that no longer meets ends it there.
+            let last_reading = t.iter().zip(temp).rev().find_map(|(&t, c)| c.map(|c| (t, c)));
+            if end.is_none() {
+                end = last_reading.filter(|&(lt, c)| lt >= alarm.start_s && !meets(c)).map(|x| x.0);
+            }
+            AlarmSpan { alarm, end_s: end.unwrap_or(end_of_record), duration_s, ongoing: end.is_none() }
+        })
+        .collect()
+}
+
+/// The 24 h blocks of the record from its first sample, with the alarms under way in each.
+pub fn days(t: &[f64], temp: &[Option<f64>], alarms: &[AlarmSpan]) -> Vec<Day> {
+    let (Some(&t0), Some(&t1)) = (t.first(), t.last()) else {
+        return Vec::new();
+    };
+    let n = (((t1 - t0) / DAY_S).ceil() as usize).max(1);
+    let mut days: Vec<Day> = (0..n)
+        .map(|i| Day {
+            number: i + 1,
+            start_s: t0 + i as f64 * DAY_S,
+            min_c: None,
+            max_c: None,
+            mean_c: None,
+            below_2_s: 0.0,
+            above_8_s: 0.0,
+            alarms: Vec::new(),
+        })
+        .collect();
+    let index = |ts: f64| (((ts - t0) / DAY_S).floor().max(0.0) as usize).min(n - 1);
+    for (&ts, c) in t.iter().zip(temp) {
+        if let (Some(c), Some(d)) = (c, days.get_mut(index(ts))) {
+            d.min_c = Some(d.min_c.map_or(*c, |m| m.min(*c)));
+            d.max_c = Some(d.max_c.map_or(*c, |m| m.max(*c)));
+        }
+    }
+    let mut weighted = vec![(0.0, 0.0); n];
+    for (a, b, c) in intervals(t, temp) {
+        // Split the interval at day boundaries.
+        let mut from = a;
+        while from < b {
+            let i = index(from);
+            let to = b.min(t0 + (i + 1) as f64 * DAY_S);
+            let to = if i + 1 == n { b } else { to };
+            let dt = to - from;
+            if let (Some(d), Some(w)) = (days.get_mut(i), weighted.get_mut(i)) {
+                w.0 += c * dt;
+                w.1 += dt;
+                if c < 2.0 {
+                    d.below_2_s += dt;
+                }
+                if c > 8.0 {
+                    d.above_8_s += dt;
+                }
+            }
+            from = to;
+        }
+    }
+    for (d, (sum, dt)) in days.iter_mut().zip(weighted) {
+        d.mean_c = (dt > 0.0).then(|| sum / dt).or(d.min_c);
+        let (lo, hi) = (d.start_s, d.start_s + DAY_S);
+        for a in alarms {
+            let in_day = a.alarm.start_s < hi && a.end_s.max(a.alarm.trigger_s) >= lo;
+            if in_day && !d.alarms.contains(&a.alarm.kind) {
+                d.alarms.push(a.alarm.kind);
+            }
+        }
+    }
+    days
+}
+
+/// The one-line verdict: freeze risk (a freeze alarm or a reading at or below −0.5 °C),
+/// excursions (any alarm, any time outside 2–8 °C, or MKT outside 2–8 °C), or in range.
+pub fn verdict(r: &monitor_cmd::Report) -> (&'static str, &'static str) {
+    if r.alarms.iter().any(|a| a.kind == "freeze_60min") || r.min_c <= -0.5 {
+        ("freeze", "FREEZE RISK — the vaccines may have frozen: check them (shake test) before use")
+    } else if !r.alarms.is_empty()
+        || r.time_below_2_s > 0.0
+        || r.time_above_8_s > 0.0
+        || !(2.0..=8.0).contains(&r.mkt_c)
+    {
+        ("excursion", "EXCURSIONS — the load left 2–8 °C: see the alarms and the days below")
+    } else {
+        ("ok", "IN RANGE — the load stayed within 2–8 °C for the whole period")
+    }
+}
+
+/// Whether an event is a reset or a fault (what the header lists), by the library's event names
+/// (`hter::event::EventKind::name`; a board history may add `:detail`): restarts, board faults,
+/// sensor, SSR, supply, reference and flash faults. Settings, alarms (listed on their own) and
+/// recoveries are not.
+fn is_reset_or_fault(e: &Event) -> bool {
+    let n = e.name.to_ascii_lowercase();
+    const PREFIXES: [&str; 9] = [
+        "restart",
+        "board_fault",
+        "sensor_",
+        "ssr_stuck",
+        "supply_",
+        "reference_out_of_range",
+        "flash_page_lost",
+        "controller_non_finite",
+        "freeze_guard_tripped",
+    ];
+    PREFIXES.iter().any(|p| n.starts_with(p)) && !n.starts_with("sensor_recovered")
+}
+
+/// HTML-escapes text.
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+}
+
+/// A duration as `12 h 05 min` (or `45 s` below a minute).
+fn dur(s: f64) -> String {
+    if s < 60.0 {
+        return format!("{s:.0} s");
+    }
+    let m = (s / 60.0).round() as u64;
+    if m < 60 {
+        format!("{m} min")
+    } else {
+        format!("{} h {:02} min", m / 60, m % 60)
+    }
+}
+
+/// A time on the log's axis as `day 2, 14:05` from the first sample (and the raw seconds).
+fn when(t: f64, t0: f64) -> String {
+    let rel = (t - t0).max(0.0);
+    let day = (rel / DAY_S).floor() as u64 + 1;
+    let m = ((rel % DAY_S) / 60.0).floor() as u64;
+    format!("day {day}, {:02}:{:02} <span class=\"raw\">(t = {t:.0} s)</span>", m / 60, m % 60)
+}
+
+fn opt_c(c: Option<f64>) -> String {
+    c.map_or_else(|| "—".to_owned(), |c| format!("{c:.1}"))
+}
+
+/// At most [`MAX_PLOT_POINTS`] points: the min and max of each bucket, in time order.
+fn envelope(points: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
+    if points.len() <= MAX_PLOT_POINTS {
+        return points;
+    }
+    let per = points.len().div_ceil(MAX_PLOT_POINTS / 2);
+    points
+        .chunks(per)
+        .flat_map(|c| {
+            let lo = c.iter().copied().min_by(|a, b| a.1.total_cmp(&b.1));
+            let hi = c.iter().copied().max_by(|a, b| a.1.total_cmp(&b.1));
+            let mut v: Vec<_> = lo.into_iter().chain(hi).collect();
+            v.sort_by(|a, b| a.0.total_cmp(&b.0));
+            v
+        })
+        .collect()
+}
+
+/// The temperature against the 2 and 8 °C limits over `[from, to)` of the log, x in hours
+/// from `x0`.
+fn temp_plot(title: &str, t: &[f64], temp: &[Option<f64>], from: f64, to: f64, x0: f64) -> Result<String> {
+    let h = |ts: f64| (ts - x0) / 3600.0;
+    let pts: Vec<(f64, f64)> = t
+        .iter()
+        .zip(temp)
+        .filter(|(&ts, _)| ts >= from && ts <= to)
+        .filter_map(|(&ts, c)| c.map(|c| (h(ts), c)))
+        .collect();
+    let (a, b) = (pts.first().map_or(h(from), |p| p.0), pts.last().map_or(h(to), |p| p.0));
+    let limit = |v: f64| vec![(a, v), (b, v)];
+    let panel = plot::Panel {
+        title: "Load temperature".into(),
+        y_label: "°C".into(),
+        series: vec![
+            plot::Series { name: "temperature".into(), points: envelope(pts) },
+            plot::Series { name: "8 °C limit".into(), points: limit(8.0) },
+            plot::Series { name: "2 °C limit".into(), points: limit(2.0) },
+        ],
+        y_range: None,
+    };
+    plot::panels_svg(1000, title, "hours from the first sample", &[panel])
+}
+
+/// The first non-empty cell of an optional text column.
+fn first_text(path: &Path, name: &str) -> Result<Option<String>> {
+    Ok(log::read_text(path, name)?.and_then(|c| c.into_iter().find(|s| !s.is_empty())))
+}
+
+/// Builds the report page of a log.
+pub fn html(path: &Path) -> Result<String> {
+    let shown = path.display().to_string();
+    let Input { t_s: t, temp_c: temp, events } = monitor_cmd::read_input(path)?;
+    let r = monitor_cmd::report(&t, &temp).with_context(|| format!("'{shown}'"))?;
+    let carrier = first_text(path, "carrier")?;
+    let firmware = first_text(path, "firmware")?;
+    let (t0, t1) = (t.first().copied().unwrap_or(0.0), t.last().copied().unwrap_or(0.0));
+    let spans = alarm_spans(&t, &temp, r.alarms.clone());
+    let days = days(&t, &temp, &spans);
+    let (class, line) = verdict(&r);
+
+    let mut h = String::new();
+    let w = &mut h;
+    writeln!(w, "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">")?;
+    writeln!(w, "<title>Cold-chain report — {}</title>", esc(&shown))?;
+    w.push_str(STYLE);
+    writeln!(w, "</head><body>")?;
+    writeln!(w, "<div class=\"verdict {class}\" id=\"verdict\">{}</div>", esc(line))?;
+    writeln!(w, "<h1>Cold-chain report</h1>")?;
+    writeln!(w, "<table class=\"head\">")?;
+    let row = |w: &mut String, k: &str, v: &str| writeln!(w, "<tr><th>{k}</th><td>{v}</td></tr>");
+    row(w, "Source file", &esc(&shown))?;
+    row(w, "Carrier", &carrier.as_deref().map_or("not stated in the file".into(), esc))?;
+    row(w, "Firmware", &firmware.as_deref().map_or("not stated in the file".into(), esc))?;
+    row(
+        w,
+        "Period covered",
+        &format!(
+            "{} ({} samples, t = {t0:.0} … {t1:.0} s). The file has no calendar date: days are 24 h blocks \
+             from the first sample.",
+            dur(t1 - t0),
+            t.len()
+        ),
+    )?;
+    let mkt_ok = (2.0..=8.0).contains(&r.mkt_c);
+    row(
+        w,
+        "Mean kinetic temperature",
+        &format!(
+            "<b id=\"mkt\">{:.2} °C</b> — {} the WHO limits of 2–8 °C",
+            r.mkt_c,
+            if mkt_ok { "within" } else { "<b>outside</b>" }
+        ),
+    )?;
+    row(w, "Min / max", &format!("{:.2} / {:.2} °C", r.min_c, r.max_c))?;
+    row(
+        w,
+        "Time below 2 °C / above 8 °C",
+        &format!(
+            "{} / {} ({} excursion{} outside 2–8 °C)",
+            dur(r.time_below_2_s),
+            dur(r.time_above_8_s),
+            r.excursions,
+            if r.excursions == 1 { "" } else { "s" }
+        ),
+    )?;
+    if r.fault_samples > 0 {
+        row(
+            w,
+            "No reading (sensor fault)",
+            &format!("{} ({} samples; counted neither in nor out of range)", dur(r.time_no_reading_s), r.fault_samples),
+        )?;
+    }
+    let faults: Vec<&Event> = events.iter().filter(|e| is_reset_or_fault(e)).collect();
+    let listed = if faults.is_empty() {
+        if events.is_empty() {
+            "none recorded (the file has no event column)".to_owned()
+        } else {
+            "none".to_owned()
+        }
+    } else {
+        let mut s = format!("{}:<ul class=\"events\">", faults.len());
+        for e in &faults {
+            let _ = write!(s, "<li>{} — {}</li>", esc(&e.name), when(e.t_s, t0));
+        }
+        s.push_str("</ul>");
+        s
+    };
+    row(w, "Resets and faults", &listed)?;
+    writeln!(w, "</table>")?;
+
+    writeln!(w, "<h2>Alarms</h2>")?;
+    if spans.is_empty() {
+        writeln!(w, "<p id=\"alarms\">No alarm was raised.</p>")?;
+    } else {
+        writeln!(w, "<table id=\"alarms\"><tr><th>Alarm</th><th>Meaning</th><th>Started</th><th>Triggered</th><th>Duration</th></tr>")?;
+        let mut sorted: Vec<&AlarmSpan> = spans.iter().collect();
+        sorted.sort_by_key(|a| AlarmKind::ALL.iter().position(|k| k.name() == a.alarm.kind));
+        for a in sorted {
+            let held =
+                if a.ongoing { "still on at the end".to_owned() } else { format!("until {}", when(a.end_s, t0)) };
+            writeln!(
+                w,
+                "<tr class=\"alarm\" data-kind=\"{}\" data-start-s=\"{}\" data-trigger-s=\"{}\"><td><b>{}</b></td><td>{}</td><td>{}</td><td>{}</td><td>{} ({held})</td></tr>",
+                a.alarm.kind,
+                a.alarm.start_s,
+                a.alarm.trigger_s,
+                a.alarm.kind,
+                meaning(a.alarm.kind),
+                when(a.alarm.start_s, t0),
+                when(a.alarm.trigger_s, t0),
+                dur(a.duration_s),
+            )?;
+        }
+        writeln!(w, "</table>")?;
+    }
+
+    writeln!(w, "<h2>Day by day</h2>")?;
+    writeln!(w, "<table id=\"days\"><tr><th>Day</th><th>Min °C</th><th>Max °C</th><th>Mean °C</th><th>Below 2 °C</th><th>Above 8 °C</th><th>Alarms</th></tr>")?;
+    for d in &days {
+        let bad = !d.alarms.is_empty() || d.below_2_s > 0.0 || d.above_8_s > 0.0;
+        writeln!(
+            w,
+            "<tr class=\"day{}\"><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            if bad { " bad" } else { "" },
+            d.number,
+            opt_c(d.min_c),
+            opt_c(d.max_c),
+            opt_c(d.mean_c),
+            dur(d.below_2_s),
+            dur(d.above_8_s),
+            if d.alarms.is_empty() { "—".to_owned() } else { d.alarms.join(", ") },
+        )?;
+    }
+    writeln!(w, "</table>")?;
+
+    writeln!(w, "<h2>Plots</h2>")?;
+    writeln!(w, "<div class=\"plot\">{}</div>", temp_plot("The whole period", &t, &temp, t0, t1, t0)?)?;
+    for d in days.iter().filter(|d| !d.alarms.is_empty()) {
+        let title = format!("Day {} (alarms: {})", d.number, d.alarms.join(", "));
+        writeln!(w, "<div class=\"plot\">{}</div>", temp_plot(&title, &t, &temp, d.start_s, d.start_s + DAY_S, t0)?)?;
+    }
+    writeln!(
+        w,
+        "<p class=\"foot\">Made by <code>hter report</code> (hter {}) with the cold-chain monitor the firmware runs; \
+         alarms after WHO PQS E006 (heat: above 8 °C for 10 h; freeze: at or below −0.5 °C for 60 min; \
+         shipping: 45 °C for 1 h, 30 °C for 10 h in total).</p>",
+        env!("CARGO_PKG_VERSION")
+    )?;
+    writeln!(w, "</body></html>")?;
+    Ok(h)
+}
+
+/// What an alarm kind means, for the table.
+fn meaning(kind: &str) -> &'static str {
+    match kind {
+        "heat_10h" => "above +8 °C for 10 h without a break",
+        "freeze_60min" => "at or below −0.5 °C for 60 min without a break",
+        "ship_45c_1h" => "at or above +45 °C for 1 h without a break",
+        "ship_30c_10h" => "at or above +30 °C for 10 h in total",
+        _ => "",
+    }
+}
+
+const STYLE: &str = "<style>
+body{font-family:'DejaVu Sans',Arial,sans-serif;margin:24px;max-width:1040px;color:#222}
+h1{margin:.3em 0}h2{margin-top:1.2em;border-bottom:1px solid #ccc}
+.verdict{font-size:1.5em;font-weight:bold;padding:12px 16px;border-radius:6px;color:#fff}
+.verdict.ok{background:#2e7d32}.verdict.excursion{background:#e65100}.verdict.freeze{background:#1565c0}
+table{border-collapse:collapse;margin:8px 0}th,td{border:1px solid #bbb;padding:4px 8px;text-align:left;vertical-align:top}
+table.head th{background:#f3f3f3;width:220px}tr.bad td{background:#fff3e0}.raw{color:#888;font-size:.85em}
+ul.events{margin:4px 0;padding-left:20px}.plot svg{max-width:100%;height:auto}.foot{color:#666;font-size:.85em}
+</style>
+";
+
+/// Prints an HTML file to PDF with headless Chromium.
+fn print_pdf(html_path: &Path, pdf: &Path) -> Result<()> {
+    let browser = ["chromium", "chromium-browser", "google-chrome"]
+        .into_iter()
+        .find(|b| std::process::Command::new(b).arg("--version").output().is_ok_and(|o| o.status.success()));
+    let Some(browser) = browser else {
+        bail!("a PDF needs headless Chromium ('chromium' not found); write --output FILE.html instead");
+    };
+    let abs = std::fs::canonicalize(html_path)?;
+    let out = std::process::Command::new(browser)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--no-pdf-header-footer"])
+        .arg(format!("--print-to-pdf={}", pdf.display()))
+        .arg(format!("file://{}", abs.display()))
+        .output()
+        .with_context(|| format!("cannot run {browser}"))?;
+    if !out.status.success() || !pdf.exists() {
+        bail!("{browser} could not print '{}' to PDF", pdf.display());
+    }
+    Ok(())
+}
+
+/// `hter report`.
+pub fn run(args: &ReportArgs) -> Result<()> {
+    let ext = args.output.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let page = html(&args.input)?;
+    let out = args.output.display();
+    match ext.as_deref() {
+        Some("html" | "htm") => {
+            std::fs::write(&args.output, page).with_context(|| format!("cannot write '{out}'"))?;
+            println!("report written to {out}");
+        }
+        Some("pdf") => {
+            let tmp = args.output.with_extension("pdf.html");
+            std::fs::write(&tmp, page).with_context(|| format!("cannot write '{}'", tmp.display()))?;
+            let printed = print_pdf(&tmp, &args.output);
+            let _ = std::fs::remove_file(&tmp);
+            printed?;
+            println!("report written to {out} (the HTML report printed by headless Chromium)");
+        }
+        _ => bail!("--output '{out}' must end in .html (or .pdf, printed by headless Chromium)"),
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Hourly samples for 48 h at 4 °C, 10 °C from hour 20 to hour 31 (the sample at 31 is back
+    /// at 4 °C), the sensor out at hour 40.
+    fn log() -> (Vec<f64>, Vec<Option<f64>>) {
+        let t: Vec<f64> = (0..=48).map(|h| 3600.0 * f64::from(h)).collect();
+        let temp = (0..=48).map(|h| if h == 40 { None } else { Some(if (20..31).contains(&h) { 10.0 } else { 4.0 }) });
+        (t, temp.collect())
+    }
+
+    #[test]
+    fn days_split_intervals_at_midnight_of_the_record() {
+        let (t, temp) = log();
+        let r = monitor_cmd::report(&t, &temp).unwrap();
+        assert_eq!(r.alarms, vec![AlarmOut { kind: "heat_10h", start_s: 72_000.0, trigger_s: 108_000.0 }]);
+        let spans = alarm_spans(&t, &temp, r.alarms.clone());
+        // Eleven hourly intervals at 10 °C; the reading at hour 31 ends the run.
+        assert_eq!((spans[0].end_s, spans[0].duration_s, spans[0].ongoing), (111_600.0, 39_600.0, false));
+        let d = days(&t, &temp, &spans);
+        assert_eq!(d.len(), 2);
+        // Hours 20–24 on day 1, 24–31 on day 2: the split adds up to the monitor's total.
+        assert_eq!((d[0].above_8_s, d[1].above_8_s), (4.0 * 3600.0, 7.0 * 3600.0));
+        assert_eq!(d[0].above_8_s + d[1].above_8_s, r.time_above_8_s);
+        assert_eq!((d[0].min_c, d[0].max_c, d[1].max_c), (Some(4.0), Some(10.0), Some(10.0)));
+        // Day 1: 20 h at 4, 4 h at 10; day 2: 7 h at 10, 16 h at 4 (hour 40–41 has no reading).
+        assert!((d[0].mean_c.unwrap() - (20.0 * 4.0 + 4.0 * 10.0) / 24.0).abs() < 1e-12);
+        assert!((d[1].mean_c.unwrap() - (7.0 * 10.0 + 16.0 * 4.0) / 23.0).abs() < 1e-12);
+        assert_eq!((d[0].alarms.clone(), d[1].alarms.clone()), (vec!["heat_10h"], vec!["heat_10h"]));
+        assert_eq!(verdict(&r).0, "excursion");
+    }
+
+    #[test]
+    fn a_freeze_reading_is_a_freeze_risk_and_a_clean_log_is_in_range() {
+        let t = [0.0, 60.0, 120.0];
+        let r = monitor_cmd::report(&t, &[Some(4.0), Some(-0.6), Some(4.0)]).unwrap();
+        assert_eq!(verdict(&r).0, "freeze");
+        let r = monitor_cmd::report(&t, &[Some(4.0), Some(5.0), Some(4.0)]).unwrap();
+        assert_eq!(verdict(&r).0, "ok");
+    }
+
+    #[test]
+    fn the_envelope_keeps_the_extremes() {
+        let pts: Vec<(f64, f64)> = (0..100_000).map(|i| (f64::from(i), if i == 54_321 { 99.0 } else { 4.0 })).collect();
+        let e = envelope(pts);
+        assert!(e.len() <= MAX_PLOT_POINTS + 2, "{}", e.len());
+        assert!(e.contains(&(54_321.0, 99.0)));
+        assert!(e.windows(2).all(|w| w[0].0 < w[1].0));
+    }
+}

@@ -1,0 +1,251 @@
+//! `hter report` as a user runs it: from a simulator run and from a board history to one HTML
+//! page that agrees with `hter monitor` on every alarm and on MKT, that a real headless browser
+//! renders, and bad input as a one-line error.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn hter(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hter")).args(args).output().expect("run hter")
+}
+
+fn dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("hter-report-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn ok(out: &Output) {
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// `(kind, start_s, trigger_s)` of each alarm row of the report, in page order.
+fn page_alarms(html: &str) -> Vec<(String, f64, f64)> {
+    let attr = |row: &str, name: &str| -> String {
+        let from = row.find(&format!("{name}=\"")).unwrap() + name.len() + 2;
+        row[from..].split('"').next().unwrap().to_owned()
+    };
+    html.split("<tr class=\"alarm\"")
+        .skip(1)
+        .map(|row| {
+            (
+                attr(row, "data-kind"),
+                attr(row, "data-start-s").parse().unwrap(),
+                attr(row, "data-trigger-s").parse().unwrap(),
+            )
+        })
+        .collect()
+}
+
+/// The monitor's alarms in the same form, sorted like the page (by kind, library order).
+fn monitor_alarms(v: &serde_json::Value) -> Vec<(String, f64, f64)> {
+    let order = ["heat_10h", "freeze_60min", "ship_45c_1h", "ship_30c_10h"];
+    let mut a: Vec<(String, f64, f64)> = v["alarms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| {
+            (a["kind"].as_str().unwrap().to_owned(), a["start_s"].as_f64().unwrap(), a["trigger_s"].as_f64().unwrap())
+        })
+        .collect();
+    a.sort_by_key(|x| order.iter().position(|k| *k == x.0));
+    a
+}
+
+/// Runs `hter report` and `hter monitor --json` on `csv`; checks they agree on the alarms and
+/// MKT; returns the page.
+fn report_agreeing_with_monitor(csv: &Path, html: &Path) -> String {
+    ok(&hter(&["report", "--input", s(csv), "--output", s(html)]));
+    let page = std::fs::read_to_string(html).unwrap();
+    let out = hter(&["monitor", "--input", s(csv), "--json"]);
+    ok(&out);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(page_alarms(&page), monitor_alarms(&v));
+    let mkt = format!("id=\"mkt\">{:.2} °C<", v["mkt_c"].as_f64().unwrap());
+    assert!(page.contains(&mkt), "{mkt} not in the page");
+    assert!(page.contains("<svg"), "no inline SVG");
+    page
+}
+
+fn day_rows(page: &str) -> usize {
+    page.matches("<tr class=\"day").count()
+}
+
+/// A screenshot of the page in headless Chromium, when it is installed (CI installs it).
+fn render_check(html: &Path, png: &Path) {
+    let chromium = Path::new("/usr/bin/chromium");
+    if !chromium.exists() {
+        println!("note: /usr/bin/chromium is absent, the render check is skipped");
+        return;
+    }
+    let out = Command::new(chromium)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--window-size=1200,1600"])
+        .arg(format!("--screenshot={}", png.display()))
+        .arg(format!("file://{}", std::fs::canonicalize(html).unwrap().display()))
+        .output()
+        .expect("run chromium");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let size = std::fs::metadata(png).unwrap().len();
+    assert!(size > 30_000, "screenshot only {size} bytes");
+    let img = image::open(png).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (1200, 1600));
+    // The page drew: the verdict banner's colour, dark text and the white page all appear.
+    let (mut white, mut dark, mut banner) = (0u32, 0u32, 0u32);
+    for p in img.pixels() {
+        let [r, g, b] = p.0;
+        if r > 245 && g > 245 && b > 245 {
+            white += 1;
+        } else if r < 80 && g < 80 && b < 80 {
+            dark += 1;
+        } else if (r, g, b) == (0x2e, 0x7d, 0x32) || (r, g, b) == (0xe6, 0x51, 0x00) {
+            banner += 1;
+        }
+    }
+    let n = 1200 * 1600;
+    assert!(white > n / 4 && dark > 2_000 && banner > 10_000, "white {white}, dark {dark}, banner {banner}");
+}
+
+#[test]
+fn a_hot_zone_run_gives_a_report_of_three_days_that_agrees_with_monitor_and_renders() {
+    let d = dir("hot-zone");
+    let csv = d.join("h.csv");
+    ok(&hter(&["sim", "--scenario", "hot-zone", "--csv", s(&csv)]));
+    let html = d.join("r.html");
+    let page = report_agreeing_with_monitor(&csv, &html);
+    // hot-zone runs 72 h: three days, no alarm (the controller holds 4 °C at 43 °C ambient).
+    assert_eq!(day_rows(&page), 3);
+    assert!(page.contains("No alarm was raised") && page.contains("IN RANGE"));
+    assert!(page.contains("no calendar date"));
+    render_check(&html, &d.join("r.png"));
+
+    // The same run with the SSR failing open on day 2: the load warms to ambient.
+    let csv = d.join("hf.csv");
+    ok(&hter(&["sim", "--scenario", "hot-zone", "--fault", "ssr-stuck-off@100000", "--csv", s(&csv)]));
+    let html = d.join("rf.html");
+    let page = report_agreeing_with_monitor(&csv, &html);
+    let kinds: Vec<String> = page_alarms(&page).into_iter().map(|a| a.0).collect();
+    assert_eq!(kinds, ["heat_10h", "ship_30c_10h"]);
+    assert_eq!(day_rows(&page), 3);
+    assert!(page.contains("EXCURSIONS"));
+    // The whole period and days 2 and 3 (alarms under way) are plotted.
+    assert_eq!(page.matches("<svg").count(), 3);
+    assert!(page.contains("Day 2 (alarms") && page.contains("Day 3 (alarms") && !page.contains("Day 1 (alarms"));
+    render_check(&html, &d.join("rf.png"));
+    if Path::new("/usr/bin/chromium").exists() {
+        let pdf = d.join("rf.pdf");
+        ok(&hter(&["report", "--input", s(&csv), "--output", s(&pdf)]));
+        let bytes = std::fs::read(&pdf).unwrap();
+        assert!(bytes.starts_with(b"%PDF") && bytes.len() > 10_000, "{} bytes", bytes.len());
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// A board history (docs/interface.md): 5-min interval rows for 26 h, 4 °C but 12 °C for 11 h
+/// from hour 2, and event rows (the settings change, a brownout restart, the alarm, a sensor
+/// fault), some at the same time as an interval row, with the temperatures repeated or empty.
+fn history() -> String {
+    let mut s = String::from("t_s,temp_c,min_c,max_c,duty,mode,event\n");
+    for i in 1..=(26 * 12) {
+        let t = 300 * i;
+        let c = if (2 * 3600..13 * 3600).contains(&t) { 12.0 } else { 4.0 };
+        s.push_str(&format!("{t},{c:.2},{:.2},{:.2},0.40,normal,\n", c - 0.1, c + 0.1));
+        match t {
+            600 => s.push_str("600,4.00,3.90,4.10,,,set:setpoint_c=4.00\n"),
+            7500 => s.push_str("7600,12.00,11.90,12.10,,,restarted:brownout\n"),
+            // 10 h above 8 °C from 7200 s.
+            43200 => s.push_str("43200,,,,,,alarm:heat_10h\n"),
+            60000 => s.push_str("60100,4.00,3.90,4.10,,,sensor_open\n"),
+            _ => {}
+        }
+    }
+    s
+}
+
+#[test]
+fn a_board_history_gives_a_report_with_its_resets_and_faults() {
+    let d = dir("history");
+    let csv = d.join("history.csv");
+    std::fs::write(&csv, history()).unwrap();
+    let html = d.join("h.html");
+    let page = report_agreeing_with_monitor(&csv, &html);
+    // 300 … 93 600 s: 26 h less 5 min, two report days.
+    assert_eq!(day_rows(&page), 2);
+    let alarms = page_alarms(&page);
+    assert_eq!(alarms, [("heat_10h".to_owned(), 7200.0, 43200.0)]);
+    assert!(page.contains("restarted:brownout") && page.contains("sensor_open"), "resets and faults listed");
+    assert!(!page.contains("<li>set:"), "a settings change is not a fault");
+    // The event rows are not samples: 312 interval rows, and the one with empty temperatures is
+    // no sensor fault to the monitor either.
+    assert!(page.contains("312 samples"), "event rows counted as samples");
+    let out = hter(&["monitor", "--input", s(&csv), "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!((v["fault_samples"].as_u64(), v["time_above_8_s"].as_f64()), (Some(0), Some(11.0 * 3600.0)), "{v}");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+fn assert_one_line_error(args: &[&str], needle: &str) {
+    let out = hter(args);
+    assert!(!out.status.success(), "{args:?} should fail");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: not one line: {err}");
+    assert!(err.starts_with("error: ") && err.contains(needle) && !err.contains("panicked"), "{args:?}: {err}");
+}
+
+#[test]
+fn bad_input_is_a_one_line_error() {
+    let d = dir("bad");
+    let out = d.join("out.html");
+    let o = s(&out);
+    let write = |name: &str, text: &str| {
+        let p = d.join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    };
+    assert_one_line_error(&["report", "--input", "/no/such/log.csv", "--output", o], "/no/such/log.csv");
+    let p = write("empty.csv", "");
+    assert_one_line_error(&["report", "--input", s(&p), "--output", o], "missing column 't_s'");
+    let p = write("header-only.csv", "t_s,temp_c\n");
+    assert_one_line_error(&["report", "--input", s(&p), "--output", o], "it has 0");
+    let p = write("no-temp.csv", "t_s,duty\n0,0.5\n10,0.5\n");
+    assert_one_line_error(&["report", "--input", s(&p), "--output", o], "missing column 'temp_c'");
+    let p = write("back.csv", "t_s,temp_c\n0,4\n10,4\n5,4\n");
+    assert_one_line_error(&["report", "--input", s(&p), "--output", o], "line 4");
+    let p = write("event-back.csv", "t_s,temp_c,event\n0,4,\n10,4,\n5,,restarted:watchdog\n");
+    assert_one_line_error(&["report", "--input", s(&p), "--output", o], "goes back in time");
+    let p = write("nan.csv", "t_s,temp_c\n0,4\n10,inf\n");
+    assert_one_line_error(&["report", "--input", s(&p), "--output", o], "finite");
+    let p = write("good.csv", "t_s,temp_c\n0,4\n10,4\n");
+    assert_one_line_error(&["report", "--input", s(&p), "--output", s(&d.join("r.docx"))], ".html");
+    assert!(!out.exists(), "no report written for bad input");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn a_log2csv_output_lists_its_resets() {
+    let d = dir("log2csv");
+    let csv = d.join("carrier.csv");
+    let mut text = String::from("t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,boot,reset_cause\n");
+    for i in 0..=60 {
+        let cause = match i {
+            0 => "restarted",
+            30 => "restarted_watchdog",
+            45 => "unknown",
+            _ => "",
+        };
+        let boot = u32::from(i >= 30) + u32::from(i >= 45);
+        // The sensor is out for one sample in boot 1.
+        let temp = if i == 40 { String::new() } else { "4.0".to_owned() };
+        text.push_str(&format!("{},4.0,{temp},0.4,normal,,,off,{boot},{cause}\n", 10 * i));
+    }
+    std::fs::write(&csv, text).unwrap();
+    let page = report_agreeing_with_monitor(&csv, &d.join("c.html"));
+    assert!(page.contains("<li>restarted_watchdog") && page.contains("<li>restarted: unknown"), "resets listed");
+    assert!(page.contains("Resets and faults</th><td>3:"), "three boots, three resets");
+    assert!(page.contains("No reading (sensor fault)"));
+    assert_eq!(day_rows(&page), 1);
+    let _ = std::fs::remove_dir_all(&d);
+}
