@@ -178,12 +178,14 @@ impl Controller for BoardController {
 
 /// Builds `law`'s controller starting bumplessly from the applied duty `u0`.
 fn build(law: Law, adaptive: &AdaptiveConfig, ts_s: f32, u0: f32) -> BoardController {
+    // The build's PI (the self-tuner's fallback), from the applied duty.
+    let pi = || Pi::new(crate::control::PiConfig { bias: u0, ..adaptive.fallback }, ts_s);
     match law {
         Law::Gpc | Law::Igmvc => BoardController::Adaptive(match SelfTuning::new(*adaptive, ts_s, u0) {
             Ok(st) => SelfTuningOrPi::SelfTuning(st),
-            Err(_) => SelfTuningOrPi::Pi(Pi::new(crate::control::PiConfig { bias: u0, ..adaptive.fallback }, ts_s)),
+            Err(_) => SelfTuningOrPi::Pi(pi()),
         }),
-        Law::Pi => BoardController::Pi(Pi::new(crate::control::PiConfig { bias: u0, ..adaptive.fallback }, ts_s)),
+        Law::Pi => BoardController::Pi(pi()),
         Law::OnOff => BoardController::OnOff(OnOff::new(OnOffConfig::DEFAULT)),
     }
 }

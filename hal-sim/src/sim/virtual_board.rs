@@ -13,6 +13,7 @@
 use anyhow::{bail, Result};
 use embassy_futures::block_on;
 use hter::app::{App, AppConfig, Handled, SampleOut};
+use hter::control::adaptive::AdaptiveConfig;
 use hter::iface::Law;
 use hter::persist::flash::{self, LogStore, Store};
 use hter::persist::log::{write_csv_row, CSV_HEADER};
@@ -41,7 +42,7 @@ pub const LAWS: &[Law] = &[Law::Gpc, Law::Pi, Law::OnOff];
 
 /// The virtual board's build: the default firmware's (self-tuning GPC, its PI and On-Off; the
 /// board profile's cadences) starting from `adaptive`.
-pub fn app_config(adaptive: hter::control::adaptive::AdaptiveConfig) -> AppConfig {
+pub fn app_config(adaptive: AdaptiveConfig) -> AppConfig {
     let ts_s = hter::step::CarrierConfig::DEFAULT.ts_s;
     AppConfig {
         carrier: ValidConfig::DEFAULT,
@@ -71,7 +72,7 @@ pub struct VirtualOptions {
 pub struct VirtualBoard {
     rig: Rig,
     app: App,
-    adaptive: hter::control::adaptive::AdaptiveConfig,
+    adaptive: AdaptiveConfig,
     store: Option<MockStore>,
     log: Option<MockLog>,
     pending: PendingSaves,
@@ -117,28 +118,17 @@ impl VirtualBoard {
             PlantChoice::Hter2 => profile::START_MODEL_HTER2,
             _ => profile::START_MODEL_HTER1,
         };
-        let adaptive = hter::control::adaptive::AdaptiveConfig {
+        let adaptive = AdaptiveConfig {
             initial: Some(initial),
             k: initial.k(),
             fallback: opts.plant.default_pi(),
             ..profile::ADAPTIVE_GPC
         };
-        let (store, log) = (open_store(MockFlash::blank(STORE_PAGES)), open_log(MockFlash::blank(LOG_PAGES)));
-        let mut vb = VirtualBoard {
+        let (mut store, mut log) = (open_store(MockFlash::blank(STORE_PAGES)), open_log(MockFlash::blank(LOG_PAGES)));
+        let app = booted(adaptive, &mut store, &mut log, ResetCause::Other);
+        Ok(VirtualBoard {
             rig,
-            app: App::new(
-                app_config(adaptive),
-                &hter::app::Boot {
-                    settings: None,
-                    calibration: hter::calib::TwoPoint::IDENTITY,
-                    adaptive: None,
-                    history: hter::persist::HistoryRecord::EMPTY,
-                    log_last_s: 0,
-                    reset: ResetCause::Other,
-                    fault: None,
-                    pages_lost: 0,
-                },
-            ),
+            app,
             adaptive,
             store: Some(store),
             log: Some(log),
@@ -150,9 +140,7 @@ impl VirtualBoard {
             cut_settings: None,
             restarts: 0,
             write_errors: 0,
-        };
-        vb.boot(ResetCause::Other);
-        Ok(vb)
+        })
     }
 
     /// The application (for tests).
@@ -178,11 +166,8 @@ impl VirtualBoard {
 
     /// Powers the board up from what its flash holds: scrub, restore, a new [`App`].
     fn boot(&mut self, reset: ResetCause) {
-        let (Some(mut store), Some(mut log)) = (self.store.take(), self.log.take()) else { return };
-        let restored = block_on(flash::restore(&mut store, &mut log, Some(self.adaptive)));
-        self.app = App::new(app_config(self.adaptive), &restored.boot(reset, None));
-        self.store = Some(store);
-        self.log = Some(log);
+        let (Some(store), Some(log)) = (self.store.as_mut(), self.log.as_mut()) else { return };
+        self.app = booted(self.adaptive, store, log, reset);
         self.pending = PendingSaves::EMPTY;
         self.gate = WriteGate::firmware();
         self.t_ms = 0;
@@ -225,16 +210,16 @@ impl VirtualBoard {
             let (Some(store), Some(log)) = (self.store.as_mut(), self.log.as_mut()) else { return };
             let cut = matches!(save, Save::Settings(_)).then(|| self.cut_settings.take()).flatten();
             if let Some(ops) = cut {
-                store_flash(store).cut_after(ops);
+                store.flash_mut().cut_after(ops);
             }
             let result = block_on(flash::write(store, log, &save));
             if cut.is_some() {
-                if store_flash(store).is_dead() {
+                if store.flash_mut().is_dead() {
                     self.power_cycle();
                     return;
                 }
                 // The write completed before the cut: nothing is armed any more.
-                store_flash(store).ops_left = None;
+                store.flash_mut().ops_left = None;
             }
             if result.is_err() {
                 self.write_errors += 1;
@@ -273,9 +258,11 @@ impl VirtualBoard {
     }
 }
 
-/// The mock flash under a store (to arm a power cut).
-fn store_flash(store: &mut MockStore) -> &mut MockFlash<PAGE> {
-    store.flash_mut()
+/// An [`App`] booted from what the flash holds: scrub, restore, a new application (the
+/// firmware's boot sequence).
+fn booted(adaptive: AdaptiveConfig, store: &mut MockStore, log: &mut MockLog, reset: ResetCause) -> App {
+    let restored = block_on(flash::restore(store, log, Some(adaptive)));
+    App::new(app_config(adaptive), &restored.boot(reset, None))
 }
 
 fn open_store(flash: MockFlash<PAGE>) -> MockStore {
