@@ -51,13 +51,12 @@ use hter::app::Boot;
 use hter::app::Handled;
 #[cfg(feature = "interface")]
 use hter::app::{App, SampleIn};
-use hter::coldchain::{ColdChainMonitor, Raised};
 use hter::control::{Controller, ControllerStatus};
 use hter::event::Event;
 use hter::failsafe::Heartbeat;
 use hter::hal::apply_duty;
 use hter::persist::ResetCause;
-use hter::step::{Mode, StepOutput};
+use hter::step::Mode;
 use hter::units::Duty;
 
 /// One sample of the analog inputs and when it was taken.
@@ -242,15 +241,61 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             annunciator.acknowledge();
         }
         let alarm = annunciator.update(&out, &rec.raised);
-        report(&s, &out, &rec.raised, alarm, recorder.monitor(), &mut samples);
+        ACTUATION.signal(Actuation { duty: out.duty, supply_enable: out.supply_enable, alarm: alarm.is_on() });
+        for e in out.events.iter() {
+            // Never block the loop on logging: a full queue drops the event, and says so.
+            if EVENTS.try_send(e).is_err() {
+                warn!("event queue full, dropped {}", e);
+            }
+        }
+        if out.events.dropped() > 0 {
+            warn!("{} events of this step did not fit the step's list", out.events.dropped());
+        }
+        for a in rec.raised.iter().flatten() {
+            error!("ALARM {} t={=u64:ms} (condition since t={=u64:ms})", a.kind.name(), a.trigger_ms, a.start_ms);
+        }
         // An alarm's history is stored as soon as the supply allows, without the boot's hold-off.
         if let Some(save) = recorder.due_save(&rec) {
             persist::request(save);
         }
+        let record = Telemetry {
+            t_ms: s.t_ms,
+            temp_c: out.temp_c.0,
+            setpoint_c: out.setpoint_c.0,
+            duty: out.duty.get(),
+            mode: out.mode,
+            counts: s.counts,
+            supply_v: s.supply_v,
+            switched_v: s.switched_v,
+            alarm,
+            status: out.status,
+        };
+        if TELEMETRY.try_send(record).is_err() {
+            warn!("telemetry queue full, dropped t={=u64:ms}", s.t_ms);
+        }
+        samples = samples.wrapping_add(1);
+        if samples.is_multiple_of(config::SUMMARY_SAMPLES) {
+            let m = recorder.monitor();
+            info!(
+                "coldchain t={=u64:ms} mkt={} min={} max={} below2_s={} above8_s={} excursions={}",
+                s.t_ms,
+                m.mkt_c().unwrap_or(f32::NAN),
+                m.min_c().unwrap_or(f32::NAN),
+                m.max_c().unwrap_or(f32::NAN),
+                m.time_below_2_s(),
+                m.time_above_8_s(),
+                m.excursion_count()
+            );
+        }
         if let Some(rec) = model_cadence.push(out.status.map(|st| st.mode), carrier.controller()) {
             persist::request(persist::Save::Model(rec));
         }
-        healthy(&mut heartbeat, &mut heartbeat_pin);
+        // Healthy = the step completed: the monostable also gates the modules' supply, so a beat
+        // that stopped at every alarm would stop cooling at a heat alarm. The alarm pin sounds
+        // the buzzer through the OR in the wiring (README) instead.
+        heartbeat_pin.set_level(heartbeat.beat(true).into());
+        board::note_step();
+        board::pet_watchdog();
     }
 }
 
@@ -300,75 +345,59 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             supply_v: s.supply_v,
             switched_v: s.switched_v,
         });
-        report(&s, &out.step, &out.raised, out.alarm, app.recorder().monitor(), &mut samples);
+        let step = &out.step;
+        ACTUATION.signal(Actuation { duty: step.duty, supply_enable: step.supply_enable, alarm: out.alarm.is_on() });
+        for e in step.events.iter() {
+            // Never block the loop on logging: a full queue drops the event, and says so.
+            if EVENTS.try_send(e).is_err() {
+                warn!("event queue full, dropped {}", e);
+            }
+        }
+        if step.events.dropped() > 0 {
+            warn!("{} events of this step did not fit the step's list", step.events.dropped());
+        }
+        for a in out.raised.iter().flatten() {
+            error!("ALARM {} t={=u64:ms} (condition since t={=u64:ms})", a.kind.name(), a.trigger_ms, a.start_ms);
+        }
         while let Some(save) = app.next_save() {
             persist::request(save);
         }
-        healthy(&mut heartbeat, &mut heartbeat_pin);
-    }
-}
-
-/// What both control loops do with a completed step: the actuation, the events and alarms into
-/// the log, the telemetry record, and the hourly cold-chain summary (`samples` counts steps).
-fn report(
-    s: &Sample,
-    out: &StepOutput,
-    raised: &Raised,
-    alarm: Indication,
-    monitor: &ColdChainMonitor,
-    samples: &mut u32,
-) {
-    ACTUATION.signal(Actuation { duty: out.duty, supply_enable: out.supply_enable, alarm: alarm.is_on() });
-    for e in out.events.iter() {
-        // Never block the loop on logging: a full queue drops the event, and says so.
-        if EVENTS.try_send(e).is_err() {
-            warn!("event queue full, dropped {}", e);
+        let record = Telemetry {
+            t_ms: s.t_ms,
+            temp_c: step.temp_c.0,
+            setpoint_c: step.setpoint_c.0,
+            duty: step.duty.get(),
+            mode: step.mode,
+            counts: s.counts,
+            supply_v: s.supply_v,
+            switched_v: s.switched_v,
+            alarm: out.alarm,
+            status: step.status,
+        };
+        if TELEMETRY.try_send(record).is_err() {
+            warn!("telemetry queue full, dropped t={=u64:ms}", s.t_ms);
         }
+        samples = samples.wrapping_add(1);
+        if samples.is_multiple_of(config::SUMMARY_SAMPLES) {
+            let m = app.recorder().monitor();
+            info!(
+                "coldchain t={=u64:ms} mkt={} min={} max={} below2_s={} above8_s={} excursions={}",
+                s.t_ms,
+                m.mkt_c().unwrap_or(f32::NAN),
+                m.min_c().unwrap_or(f32::NAN),
+                m.max_c().unwrap_or(f32::NAN),
+                m.time_below_2_s(),
+                m.time_above_8_s(),
+                m.excursion_count()
+            );
+        }
+        // Healthy = the step completed: the monostable also gates the modules' supply, so a beat
+        // that stopped at every alarm would stop cooling at a heat alarm. The alarm pin sounds
+        // the buzzer through the OR in the wiring (README) instead.
+        heartbeat_pin.set_level(heartbeat.beat(true).into());
+        board::note_step();
+        board::pet_watchdog();
     }
-    if out.events.dropped() > 0 {
-        warn!("{} events of this step did not fit the step's list", out.events.dropped());
-    }
-    for a in raised.iter().flatten() {
-        error!("ALARM {} t={=u64:ms} (condition since t={=u64:ms})", a.kind.name(), a.trigger_ms, a.start_ms);
-    }
-    let record = Telemetry {
-        t_ms: s.t_ms,
-        temp_c: out.temp_c.0,
-        setpoint_c: out.setpoint_c.0,
-        duty: out.duty.get(),
-        mode: out.mode,
-        counts: s.counts,
-        supply_v: s.supply_v,
-        switched_v: s.switched_v,
-        alarm,
-        status: out.status,
-    };
-    if TELEMETRY.try_send(record).is_err() {
-        warn!("telemetry queue full, dropped t={=u64:ms}", s.t_ms);
-    }
-    *samples = samples.wrapping_add(1);
-    if samples.is_multiple_of(config::SUMMARY_SAMPLES) {
-        info!(
-            "coldchain t={=u64:ms} mkt={} min={} max={} below2_s={} above8_s={} excursions={}",
-            s.t_ms,
-            monitor.mkt_c().unwrap_or(f32::NAN),
-            monitor.min_c().unwrap_or(f32::NAN),
-            monitor.max_c().unwrap_or(f32::NAN),
-            monitor.time_below_2_s(),
-            monitor.time_above_8_s(),
-            monitor.excursion_count()
-        );
-    }
-}
-
-/// After a completed step: the heartbeat toggles, the stall check hears of it, the watchdog is
-/// fed. Healthy = the step completed: the monostable also gates the modules' supply, so a beat
-/// that stopped at every alarm would stop cooling at a heat alarm. The alarm pin sounds the
-/// buzzer through the OR in the wiring (README) instead.
-fn healthy(heartbeat: &mut Heartbeat, pin: &mut Output<'static>) {
-    pin.set_level(heartbeat.beat(true).into());
-    board::note_step();
-    board::pet_watchdog();
 }
 
 /// Applies each actuation to the SSR timer, the supply-enable switch and the indicators.

@@ -172,40 +172,6 @@ fn report(r: &Restored) {
     }
 }
 
-/// The build's flash stores: the records, and (interface build) the cold-chain log.
-struct Stores<F: NorFlash> {
-    store: Store<F, L4Ecc>,
-    #[cfg(feature = "interface")]
-    log: LogStore<F, L4Ecc>,
-}
-
-impl<F: NorFlash> Stores<F> {
-    /// The boot's restore of every region this build has.
-    async fn restore(&mut self) -> Restored {
-        #[cfg(feature = "interface")]
-        return flash::restore(&mut self.store, &mut self.log, config::ADAPTIVE).await;
-        #[cfg(not(feature = "interface"))]
-        return flash::restore_records(&mut self.store, config::ADAPTIVE).await;
-    }
-
-    /// Writes one save where it belongs.
-    async fn write(&mut self, save: &Save) -> Result<(), flash::StoreError> {
-        #[cfg(feature = "interface")]
-        return flash::write(&mut self.store, &mut self.log, save).await;
-        #[cfg(not(feature = "interface"))]
-        return flash::write_record(&mut self.store, save).await;
-    }
-
-    /// Erases the region `save` goes to (after the storage layer found it corrupt).
-    async fn erase_region_of(&mut self, save: &Save) -> Result<(), flash::StoreError> {
-        match save {
-            #[cfg(feature = "interface")]
-            Save::Log(_) => self.log.erase_all().await,
-            _ => self.store.erase_all().await,
-        }
-    }
-}
-
 /// Restores, then stores each requested record the write gate lets through (and, with the
 /// interface, streams the log for `history`). A region the storage layer finds corrupt is
 /// erased once and written again (what it held is lost either way; the next requests rewrite
@@ -222,7 +188,7 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
         LogStore::new(region(l.clone()), L4Ecc { base: l.start }, 0..l.end - l.start)
     };
     #[cfg(feature = "interface")]
-    let (Ok(store), Ok(log)) = (store, log) else {
+    let (Ok(mut store), Ok(mut log)) = (store, log) else {
         warn!("persist: flash regions unusable: nothing is restored or saved");
         BOOTED.signal(Restored::NOTHING);
         loop {
@@ -231,23 +197,22 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
         }
     };
     #[cfg(not(feature = "interface"))]
-    let Ok(store) = store
+    let Ok(mut store) = store
     else {
         warn!("persist: flash region unusable: nothing is restored or saved");
         BOOTED.signal(Restored::NOTHING);
         return;
     };
     #[cfg(feature = "interface")]
-    let mut stores = Stores { store, log };
+    let restored = flash::restore(&mut store, &mut log, config::ADAPTIVE).await;
     #[cfg(not(feature = "interface"))]
-    let mut stores = Stores { store };
-    let restored = stores.restore().await;
+    let restored = flash::restore_records(&mut store, config::ADAPTIVE).await;
     report(&restored);
     BOOTED.signal(restored);
     loop {
         #[cfg(feature = "interface")]
         if let Either::Second(since_s) = select(WAKE.wait(), HISTORY.wait()).await {
-            stream_history(&mut stores.log, since_s).await;
+            stream_history(&mut log, since_s).await;
         }
         #[cfg(not(feature = "interface"))]
         WAKE.wait().await;
@@ -257,12 +222,26 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
                 pending.next(gate, now_ms())
             });
             let Some(save) = next else { break };
-            let mut result = stores.write(&save).await;
+            #[cfg(feature = "interface")]
+            let mut result = flash::write(&mut store, &mut log, &save).await;
+            #[cfg(not(feature = "interface"))]
+            let mut result = flash::write_record(&mut store, &save).await;
             if result == Err(flash::StoreError::Corrupted) {
                 warn!("persist: region corrupt, erasing it");
-                result = stores.erase_region_of(&save).await;
+                result = match save {
+                    #[cfg(feature = "interface")]
+                    Save::Log(_) => log.erase_all().await,
+                    _ => store.erase_all().await,
+                };
                 if result.is_ok() {
-                    result = stores.write(&save).await;
+                    #[cfg(feature = "interface")]
+                    {
+                        result = flash::write(&mut store, &mut log, &save).await;
+                    }
+                    #[cfg(not(feature = "interface"))]
+                    {
+                        result = flash::write_record(&mut store, &save).await;
+                    }
                 }
             }
             match (result, save) {
