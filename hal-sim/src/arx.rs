@@ -54,6 +54,27 @@ pub fn parse(spec: &str) -> Result<Model> {
     Model::new(&a, &b, &c, k).map_err(|e| anyhow!("model '{spec}': {e:?}"))
 }
 
+/// Parses a controller's fixed design model (`--model`): [`parse`], and the model must be one a
+/// cooler can have, as the board requires of any model it accepts (SPEC §8): a stable A and a
+/// cooling static gain. Anything else is refused here, with why, rather than run into a loop
+/// that saturates the drive for the whole scenario.
+pub fn design_model(spec: &str) -> Result<Model> {
+    let m = parse(spec)?;
+    if !m.a_is_stable() {
+        let hint = if m.a().first().is_some_and(|a1| (*a1 - 1.0).abs() < 1e-6) {
+            " (A lists a1,…,an without the leading 1: arx:-1.8,0.81;… is A = 1 − 1.8 q⁻¹ + 0.81 q⁻²)"
+        } else {
+            ""
+        };
+        bail!("model '{spec}': A is not stable (a pole on or outside the unit circle){hint}");
+    }
+    match m.static_gain() {
+        Some(g) if g < 0.0 => Ok(m),
+        Some(g) => bail!("model '{spec}': static gain {g:.3} °C per unit duty does not cool (it must be < 0)"),
+        None => bail!("model '{spec}': the static gain is not finite"),
+    }
+}
+
 /// The ideal ARX plant: y = temperature − ambient, exact measurement, duty applied as is.
 #[derive(Clone, Debug)]
 pub struct ArxPlant {
@@ -122,6 +143,25 @@ mod tests {
         assert_eq!(&m.b()[..2], &[-0.02, -0.01]);
         let m = parse("arx:-0.9;0.1;2;0.5").unwrap();
         assert_eq!((m.k(), m.nc(), m.c()[0]), (2, 1, 0.5));
+    }
+
+    #[test]
+    fn a_design_model_must_be_stable_and_cooling() {
+        // The documented example: stable, static gain −0.03 / 0.01 = −3 °C per unit duty.
+        assert!(design_model("arx:-1.8,0.81;-0.02,-0.01;1").is_ok());
+        // A written with its leading 1 is a third-order A with a1 = 1 (roots 1 ± …): refused,
+        // and the message says how A is written.
+        let e = design_model("arx:1,-1.936244,0.936443;-0.286523,0.277790;9").unwrap_err().to_string();
+        assert!(e.contains("not stable") && e.contains("without the leading 1"), "{e}");
+        // y(t) = 1.1 y(t−1) …: a pole at 1.1.
+        let e = design_model("arx:-1.1;-0.1;1").unwrap_err().to_string();
+        assert!(e.contains("not stable") && !e.contains("leading"), "{e}");
+        // b0 = +0.1 with a1 = −0.9: gain +1 °C per unit duty heats.
+        let e = design_model("arx:-0.9;0.1;2").unwrap_err().to_string();
+        assert!(e.contains("does not cool"), "{e}");
+        for e in [e] {
+            assert!(!e.contains('\n'), "{e}");
+        }
     }
 
     #[test]

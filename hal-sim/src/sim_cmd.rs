@@ -25,7 +25,7 @@ pub struct SimArgs {
     /// arx:A;B;K (y = temperature − ambient, u = duty).
     #[arg(long, default_value = "hter1")]
     pub plant: String,
-    /// Fixed model for gmvc/igmvc/gpc, arx:A;B;K[;C] (without it they are self-tuning).
+    /// Fixed model for gmvc/igmvc/gpc, arx:A;B;K[;C] (without it they are self-tuning); refused unless A is stable and the static gain cools.
     #[arg(long)]
     pub model: Option<String>,
     /// GPC: first predicted sample in the cost.
@@ -132,7 +132,7 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
     };
     let mut controller = ControllerSpec::new(a.controller);
     if let Some(m) = &a.model {
-        controller.model = Some(crate::arx::parse(m)?);
+        controller.model = Some(crate::arx::design_model(m)?);
     }
     if let Some(n) = a.n1 {
         controller.gpc.n1 = n;
