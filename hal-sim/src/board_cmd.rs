@@ -215,7 +215,7 @@ fn numbers(key: &str, v: &str) -> Result<Value> {
     v.split(',').map(|x| number(key, x)).collect::<Result<Vec<_>>>().map(Value::Array)
 }
 
-/// The `status` reply as one JSON object: [`NUMERIC`] keys as numbers, `model_a`/`model_b`/
+/// The `status` reply as one JSON object: `NUMERIC` keys as numbers, `model_a`/`model_b`/
 /// `model_k` as `model: {a: [a1, a2], b: [b0, b1], k}` (null when the board trusts no model),
 /// every other key as a string, `-` as null anywhere.
 pub fn status_json(kv: &[(String, String)]) -> Result<Value> {

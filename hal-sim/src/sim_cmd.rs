@@ -25,7 +25,7 @@ pub struct SimArgs {
     /// arx:A;B;K (y = temperature − ambient, u = duty).
     #[arg(long, default_value = "hter1")]
     pub plant: String,
-    /// Fixed model for gmvc/igmvc/gpc, arx:A;B;K[;C] (without it they are self-tuning); refused unless A is stable and the static gain cools.
+    /// Fixed model for gmvc/igmvc/gpc, arx:A;B;K or arx:A;B;K;C (without it they are self-tuning); refused unless A is stable and the static gain cools.
     #[arg(long)]
     pub model: Option<String>,
     /// GPC: first predicted sample in the cost.
