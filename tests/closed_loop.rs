@@ -79,6 +79,7 @@ fn gpc_on_its_own_arx_model_tracks_piecewise_without_offset() {
     // With an exact model nothing argues for caution: a light increment weight.
     controller.gpc.lambda = 0.1;
     let out = run(&SimOptions {
+        drive: Default::default(),
         duration_s: scenario.duration_s,
         scenario,
         controller,
@@ -126,6 +127,7 @@ fn self_tuning_gpc_stays_in_range_and_trusts_its_own_estimate() {
     let mut scenario = Scenario::resolve("disturbance").unwrap();
     scenario.changes = vec![(1800.0, hal_sim::scenario::Change::Supply(10.0))];
     let out = run(&SimOptions {
+        drive: Default::default(),
         duration_s: scenario.duration_s,
         scenario,
         controller: spec(ControllerChoice::Gpc),
@@ -145,8 +147,18 @@ fn self_tuning_gpc_stays_in_range_and_trusts_its_own_estimate() {
 fn sim_spec(scenario: &str, controller: ControllerSpec, plant: PlantChoice, load: Load) -> SimOutput {
     let scenario = Scenario::resolve(scenario).unwrap();
     let duration_s = scenario.duration_s;
-    run(&SimOptions { scenario, controller, plant, load, ambient_c: 28.0, duration_s, seed: 7, faults: vec![] })
-        .unwrap()
+    run(&SimOptions {
+        drive: Default::default(),
+        scenario,
+        controller,
+        plant,
+        load,
+        ambient_c: 28.0,
+        duration_s,
+        seed: 7,
+        faults: vec![],
+    })
+    .unwrap()
 }
 
 /// The method's conclusions on `piecewise`, with the self-tuning laws at their
@@ -210,6 +222,7 @@ fn self_tuning_laws_survive_a_plant_change_mid_run() {
             excitation: false,
         };
         let out = run(&SimOptions {
+            drive: Default::default(),
             duration_s: scenario.duration_s,
             scenario,
             controller: spec(c),
@@ -309,6 +322,7 @@ fn self_tuner_learns_the_plants_response_over_the_horizon_from_a_wrong_start() {
     for seed in 1..=4 {
         let scenario = Scenario::resolve("piecewise").unwrap();
         let out = run(&SimOptions {
+            drive: Default::default(),
             duration_s: scenario.duration_s,
             scenario,
             controller: ControllerSpec { initial: Some(start), ..spec(ControllerChoice::Gpc) },

@@ -19,6 +19,7 @@ const AT_S: f64 = 3600.0;
 fn with_fault(kind: Fault, controller: ControllerChoice) -> SimOutput {
     let scenario = Scenario::resolve("disturbance").unwrap();
     run(&SimOptions {
+        drive: Default::default(),
         duration_s: scenario.duration_s,
         scenario,
         controller: ControllerSpec::new(controller),
@@ -96,6 +97,7 @@ fn a_shorted_ssr_limps_home_within_2_to_8() {
         for c in [ControllerChoice::Pi, ControllerChoice::Gpc, ControllerChoice::Onoff] {
             let scenario = Scenario::resolve("disturbance").unwrap();
             let out = run(&SimOptions {
+                drive: Default::default(),
                 duration_s: scenario.duration_s,
                 scenario,
                 controller: ControllerSpec::new(c),
@@ -202,6 +204,7 @@ fn no_false_detections_without_faults() {
                 for ambient_c in [20.0, 28.0, 35.0] {
                     let sc = Scenario::resolve(scenario).unwrap();
                     let out = run(&SimOptions {
+                        drive: Default::default(),
                         duration_s: sc.duration_s,
                         scenario: sc,
                         controller: ControllerSpec::new(c),

@@ -72,6 +72,7 @@ fn replay(kind: u32, rows: &[(f32, u32, f32)]) -> Vec<(u32, String)> {
 fn bless(g: &Golden) {
     let scenario = Scenario::resolve("step").unwrap();
     let opts = SimOptions {
+        drive: Default::default(),
         duration_s: scenario.duration_s,
         scenario,
         controller: ControllerSpec::new(g.choice),

@@ -34,6 +34,9 @@ pub struct CampaignArgs {
     /// Exit non-zero (after the report) when any mission fails (for CI).
     #[arg(long)]
     pub strict: bool,
+    /// How the modules are driven: ssr (the default) or buck.
+    #[arg(long, value_enum, default_value = "ssr")]
+    pub drive: sim::Drive,
 }
 
 /// Detection figures of one injected fault kind.
@@ -130,8 +133,13 @@ pub fn replay_command(seed: u64, controller: ControllerChoice) -> String {
 
 /// Runs one mission and judges it.
 pub fn run_mission(seed: u64, controller: ControllerChoice) -> Result<MissionReport> {
+    run_mission_on(seed, controller, sim::Drive::Ssr)
+}
+
+/// Runs one mission with the modules on `drive` and judges it.
+pub fn run_mission_on(seed: u64, controller: ControllerChoice, drive: sim::Drive) -> Result<MissionReport> {
     let m = Mission::generate(seed);
-    let out = sim::run(&m.options(ControllerSpec::new(controller)))?;
+    let out = sim::run(&sim::SimOptions { drive, ..m.options(ControllerSpec::new(controller)) })?;
     Ok(mission::evaluate(&m, &out))
 }
 
@@ -231,7 +239,7 @@ pub fn run(a: &CampaignArgs) -> Result<()> {
     let reports: Vec<MissionReport> = (0..a.missions)
         .into_par_iter()
         .map(|i| {
-            let r = run_mission(a.seed + i, controller);
+            let r = run_mission_on(a.seed + i, controller, a.drive);
             pb.inc(1);
             r
         })

@@ -33,6 +33,7 @@ pub fn run() -> Result<()> {
         ambient: 28.0,
         duration: None,
         seed: 1,
+        drive: crate::sim::Drive::Ssr,
         faults: Vec::new(),
         csv: None,
         plot: None,

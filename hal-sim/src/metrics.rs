@@ -132,8 +132,11 @@ pub struct SimMetrics {
     /// The figures computed from the samples alone.
     #[serde(flatten)]
     pub tracking: TrackingFigures,
-    /// Electrical energy of the modules, Wh.
+    /// Electrical energy of the modules, Wh (with the buck drive, what the drive takes from
+    /// the supply: the modules and the drive's own losses).
     pub energy_wh: f64,
+    /// Mean electrical power over the run, W: `energy_wh` over the run's duration.
+    pub mean_power_w: f64,
     /// SSR turn-ons.
     pub ssr_switches: u64,
     /// Cold-chain alarms raised.
@@ -169,6 +172,15 @@ pub struct TrackingFigures {
     pub max_temp_c: f64,
     /// Time with the load outside 2…8 °C, s.
     pub time_outside_2_8_s: f64,
+}
+
+/// Mean power, W, of `energy_wh` spent over `duration_s` (0 for an empty run).
+pub fn mean_power_w(energy_wh: f64, duration_s: f64) -> f64 {
+    if duration_s > 0.0 {
+        energy_wh * 3600.0 / duration_s
+    } else {
+        0.0
+    }
 }
 
 /// Computes the tracking figures of a run sampled every `ts_s`.

@@ -69,11 +69,56 @@ pub enum Load {
     Half,
 }
 
+/// How the modules are driven from the supply (SPEC §10, "The drive").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Drive {
+    /// The DC SSR switches the full supply on and off once per PWM period (the design card's
+    /// drive, the default): duty = the fraction of the period on.
+    #[default]
+    Ssr,
+    /// A synchronous buck with an LC filter at ≥ 20 kHz: the modules see a smooth voltage,
+    /// duty × supply, and carry a continuous current.
+    Buck,
+}
+
+impl Drive {
+    /// The name `--drive` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Drive::Ssr => "ssr",
+            Drive::Buck => "buck",
+        }
+    }
+}
+
+/// The buck drive's averaged model (see the module docs, "The buck drive").
+pub mod buck {
+    /// Peak-to-peak ripple of the module current as a fraction of its mean: the §10 bound
+    /// (≤ 10 %), taken whole so the extra I²R is not understated (the LC filter of the README's
+    /// wiring section gives ≈ 1 %).
+    pub const RIPPLE: f64 = 0.10;
+    /// Series resistance of the drive, Ω: one MOSFET conducting at a time (R_DS(on) ≈ 10 mΩ,
+    /// e.g. a 30 V logic-level part at 4.5 V gate drive, hot) plus the inductor's DCR (≈ 30 mΩ)
+    /// and the traces, rounded up.
+    pub const R_SERIES_OHM: f64 = 0.05;
+    /// Power the drive takes while it switches, W: gate charge (2 × 20 nC × 12 V × 40 kHz ≈ 0.02 W),
+    /// the switching transitions (≈ ½ V I (t_r + t_f) f ≈ 0.02 W at 2 A), the gate driver's
+    /// quiescent current (≈ 5 mA at 12 V = 0.06 W): 0.1 W.
+    pub const SWITCHING_W: f64 = 0.1;
+    /// Mean square over mean squared of a triangular ripple of peak-to-peak `r` × mean:
+    /// I_rms² = I² (1 + r²/12).
+    pub fn rms_factor(r: f64) -> f64 {
+        1.0 + r * r / 12.0
+    }
+}
+
 /// Every physical parameter of the model (see the table in the module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlantParams {
     /// Container material.
     pub container: Container,
+    /// How the modules are driven.
+    pub drive: Drive,
     /// Water load.
     pub load: Load,
     /// Number of modules in parallel.
@@ -118,6 +163,7 @@ impl PlantParams {
     fn common(load: Load) -> Self {
         PlantParams {
             container: Container::Aluminium,
+            drive: Drive::Ssr,
             load,
             modules: 1.0,
             alpha_v_per_k: 0.053,
@@ -178,6 +224,17 @@ pub struct HeatFlows {
     pub extra_w: f64,
     /// Net heat into each node: water, wall, air, cold side, hot sink.
     pub net_w: [f64; 5],
+}
+
+/// What the modules are driven with during an integration step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Excitation {
+    /// No current: the module is a plain thermal conductance.
+    Off,
+    /// The full supply across the modules (the SSR on).
+    Full,
+    /// The buck's filtered output at this duty, (0, 1].
+    Buck(f64),
 }
 
 const W: usize = 0;
@@ -258,30 +315,50 @@ impl Plant {
         Some((Self::with_state(params, ambient_c, s.t), d))
     }
 
-    fn current_a(&self, on: bool) -> f64 {
-        if !on {
-            return 0.0;
+    /// The module current, A, and its mean square over its mean squared, for excitation `x`.
+    fn current_a(&self, x: Excitation) -> (f64, f64) {
+        let p = &self.p;
+        let back_emf = p.alpha_v_per_k * (self.t[HOT] - self.t[COLD]);
+        match x {
+            Excitation::Off => (0.0, 1.0),
+            Excitation::Full => (((self.supply_v - back_emf) / p.r_ohm).max(0.0), 1.0),
+            // The averaged buck: the filtered output d·V behind the drive's series resistance,
+            // which carries the current of all N modules. The current never reverses: the
+            // driver runs in diode emulation (the low-side MOSFET turns off at zero current).
+            Excitation::Buck(d) => {
+                let i = (d * self.supply_v - back_emf) / (p.r_ohm + p.modules * buck::R_SERIES_OHM);
+                (i.max(0.0), buck::rms_factor(buck::RIPPLE))
+            }
         }
-        let dt = self.t[HOT] - self.t[COLD];
-        ((self.supply_v - self.p.alpha_v_per_k * dt) / self.p.r_ohm).max(0.0)
     }
 
-    /// Heat flows with the modules on or off.
+    /// Heat flows with the modules on or off (fully on: the supply across them).
     pub fn heat_flows(&self, on: bool) -> HeatFlows {
+        self.flows(if on { Excitation::Full } else { Excitation::Off }).0
+    }
+
+    /// Heat flows under excitation `x`, with the power the drive itself dissipates, W.
+    fn flows(&self, x: Excitation) -> (HeatFlows, f64) {
         let p = &self.p;
-        let i = self.current_a(on);
+        let (i, rms) = self.current_a(x);
+        // Joule heat follows the mean square of the current, Peltier heat its mean.
+        let i2 = i * i * rms;
         let t = &self.t;
         let dt = t[HOT] - t[COLD];
         let (tc_k, th_k) = (t[COLD] + 273.15, t[HOT] + 273.15);
-        let qc = p.modules * (p.alpha_v_per_k * i * tc_k - 0.5 * i * i * p.r_ohm - p.k_w_per_k * dt);
-        let qh = p.modules * (p.alpha_v_per_k * i * th_k + 0.5 * i * i * p.r_ohm - p.k_w_per_k * dt);
+        let qc = p.modules * (p.alpha_v_per_k * i * tc_k - 0.5 * i2 * p.r_ohm - p.k_w_per_k * dt);
+        let qh = p.modules * (p.alpha_v_per_k * i * th_k + 0.5 * i2 * p.r_ohm - p.k_w_per_k * dt);
         let ww = p.g_wall_water_w_per_k * (t[WALL] - t[W]);
         let aw = p.g_air_wall_w_per_k * (t[AIR] - t[WALL]);
         let cw = p.g_cold_wall_w_per_k * (t[WALL] - t[COLD]);
         let ca = p.g_cold_air_w_per_k * (t[AIR] - t[COLD]);
         let leak = p.g_leak_w_per_k * (self.ambient_c - t[AIR]);
         let hs = p.g_hot_w_per_k * (t[HOT] - self.ambient_c);
-        HeatFlows {
+        let drive_loss_w = match x {
+            Excitation::Buck(d) if d > 0.0 => p.modules * p.modules * i2 * buck::R_SERIES_OHM + buck::SWITCHING_W,
+            _ => 0.0,
+        };
+        let f = HeatFlows {
             pumped_from_cold_w: qc,
             into_hot_sink_w: qh,
             electrical_w: qh - qc,
@@ -289,25 +366,33 @@ impl Plant {
             leak_in_w: leak,
             extra_w: self.extra_w,
             net_w: [ww, -ww + aw - cw, leak + self.extra_w - aw - ca, cw + ca - qc, qh - hs],
-        }
+        };
+        (f, drive_loss_w)
     }
 
-    fn euler(&mut self, h: f64, on: bool) {
-        let f = self.heat_flows(on);
+    fn euler(&mut self, h: f64, x: Excitation) {
+        let (f, loss_w) = self.flows(x);
         self.step_nodes(h, &f.net_w);
-        self.energy_j += f.electrical_w * h;
+        self.energy_j += (f.electrical_w + loss_w) * h;
         self.time_s += h;
         self.advance_sensor(h);
     }
 
-    /// One step of the duty-averaged model (for steady states only).
+    /// One step of the duty-averaged model (for steady states only): the SSR's on and off
+    /// flows weighted by the duty; the buck's flows at that duty (already an average).
     fn euler_averaged(&mut self, h: f64, d: f64) {
-        let on = self.heat_flows(true).net_w;
-        let off = self.heat_flows(false).net_w;
-        let mut net = [0.0; 5];
-        for i in 0..5 {
-            net[i] = d * on[i] + (1.0 - d) * off[i];
-        }
+        let net = match self.p.drive {
+            Drive::Ssr => {
+                let on = self.heat_flows(true).net_w;
+                let off = self.heat_flows(false).net_w;
+                let mut net = [0.0; 5];
+                for i in 0..5 {
+                    net[i] = d * on[i] + (1.0 - d) * off[i];
+                }
+                net
+            }
+            Drive::Buck => self.flows(Excitation::Buck(d)).0.net_w,
+        };
         self.step_nodes(h, &net);
         self.rtd_c = self.t[W];
     }
@@ -332,23 +417,36 @@ impl Plant {
         self.rtd_c += h * (delayed - self.rtd_c) / self.p.rtd_tau_s;
     }
 
-    /// Advances by `dt_s` with the modules on or off.
+    /// Advances by `dt_s` with the modules on (the full supply across them) or off.
     pub fn advance(&mut self, dt_s: f64, on: bool) {
+        self.advance_with(dt_s, if on { Excitation::Full } else { Excitation::Off });
+    }
+
+    fn advance_with(&mut self, dt_s: f64, x: Excitation) {
         if dt_s.is_nan() || dt_s <= 0.0 {
             return;
         }
         let n = (dt_s / MAX_DT_S).ceil().max(1.0);
         let h = dt_s / n;
         for _ in 0..n as usize {
-            self.euler(h, on);
+            self.euler(h, x);
         }
     }
 
-    /// One SSR PWM period: on for `duty · period_s`, then off for the rest.
+    /// One PWM period of the control timer at `duty`: with the SSR, on for `duty · period_s`
+    /// then off for the rest; with the buck, the filtered voltage `duty · V` throughout (its
+    /// own switching, ≥ 20 kHz, is averaged; see the module docs). Duty 0 is off for both
+    /// (the buck's outputs disabled: no switching, no current).
     pub fn advance_pwm_period(&mut self, period_s: f64, duty: f64) {
         let d = if duty.is_finite() { duty.clamp(0.0, 1.0) } else { 0.0 };
-        self.advance(d * period_s, true);
-        self.advance((1.0 - d) * period_s, false);
+        match self.p.drive {
+            Drive::Ssr => {
+                self.advance(d * period_s, true);
+                self.advance((1.0 - d) * period_s, false);
+            }
+            Drive::Buck if d > 0.0 => self.advance_with(period_s, Excitation::Buck(d)),
+            Drive::Buck => self.advance_with(period_s, Excitation::Off),
+        }
     }
 
     /// True water temperature, °C.

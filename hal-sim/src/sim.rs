@@ -37,6 +37,7 @@ use crate::fault;
 pub use crate::fault::Fault;
 use crate::metrics::{self, Detected, Sample, SimMetrics, Stamped};
 pub use crate::periph::SamplePhase;
+pub use crate::plant::Drive;
 use crate::plant::{Load, PlantParams};
 use crate::scenario::{Scenario, Start, PREROLL_S};
 
@@ -244,6 +245,9 @@ pub struct SimOptions {
     pub seed: u64,
     /// Injected hardware faults (time s, kind), any order.
     pub faults: Vec<(f64, Fault)>,
+    /// How the modules are driven (`--drive`; the SSR by default); ignored by an ideal ARX
+    /// plant, which takes the duty as is.
+    pub drive: Drive,
 }
 
 impl SimOptions {
@@ -259,6 +263,7 @@ impl SimOptions {
             ambient_c: 28.0,
             seed: 1,
             faults: Vec::new(),
+            drive: Drive::Ssr,
         }
     }
 }
@@ -487,6 +492,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
         controller: name,
         tracking: metrics::tracking(&samples, ts),
         energy_wh: rig.energy_wh() - energy0_wh,
+        mean_power_w: metrics::mean_power_w(rig.energy_wh() - energy0_wh, n as f64 * ts),
         ssr_switches: switches,
         alarms,
         faults_detected: faults,

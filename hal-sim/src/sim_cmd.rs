@@ -9,7 +9,7 @@ use anyhow::{bail, Context, Result};
 use crate::plant::Load;
 use crate::plot;
 use crate::scenario::Scenario;
-use crate::sim::{self, ControllerChoice, ControllerSpec, PlantChoice, SimOptions, SimOutput};
+use crate::sim::{self, ControllerChoice, ControllerSpec, Drive, PlantChoice, SimOptions, SimOutput};
 
 /// Arguments of `hter sim` (and the scenario and controller of `hter compare`).
 #[derive(clap::Args, Debug)]
@@ -75,6 +75,10 @@ pub struct SimArgs {
     /// Seed of the measurement noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// How the modules are driven: ssr (switched fully on and off at 1 Hz, the default) or buck
+    /// (a synchronous buck with an LC filter: a smooth voltage, duty × supply).
+    #[arg(long, value_enum, default_value = "ssr")]
+    pub drive: Drive,
     /// Inject a hardware fault at a time, KIND@T_S (repeatable): sensor-open, sensor-short,
     /// sensor-stuck, sensor-spikes, sensor-offset, ssr-stuck-on, ssr-stuck-off, supply-sag,
     /// lid-open, brownout.
@@ -210,7 +214,7 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
         controller.pi = Some(pi);
     }
     if let Some(seed) = a.mission_seed {
-        return Ok(crate::mission::Mission::generate(seed).options(controller));
+        return Ok(SimOptions { drive: a.drive, ..crate::mission::Mission::generate(seed).options(controller) });
     }
     Ok(SimOptions {
         scenario,
@@ -221,6 +225,7 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
         duration_s,
         seed: a.seed,
         faults: a.faults.iter().map(|f| sim::Fault::parse(f)).collect::<Result<_>>()?,
+        drive: a.drive,
     })
 }
 
@@ -280,10 +285,11 @@ fn plot_run(path: &std::path::Path, opts: &SimOptions, out: &SimOutput) -> Resul
         y_range: Some((-0.02, 1.02)),
     };
     let title = format!(
-        "{} — {} on {}, {:?} load, {} °C ambient",
+        "{} — {} on {} ({}), {:?} load, {} °C ambient",
         opts.scenario.name,
         out.metrics.controller,
         opts.plant.name(),
+        opts.drive.name(),
         opts.scenario.load.unwrap_or(opts.load),
         opts.ambient_c
     );
@@ -320,8 +326,9 @@ pub fn print_summary(opts: &SimOptions, out: &SimOutput) {
     let m = &out.metrics;
     println!("scenario    {} — {}", opts.scenario.name, opts.scenario.description);
     println!(
-        "plant       {}, {:?} load, ambient {} °C; controller {}; Ts = {} s",
+        "plant       {} ({} drive), {:?} load, ambient {} °C; controller {}; Ts = {} s",
         opts.plant.name(),
+        opts.drive.name(),
         opts.scenario.load.unwrap_or(opts.load),
         opts.ambient_c,
         m.controller,
@@ -339,6 +346,7 @@ pub fn print_summary(opts: &SimOptions, out: &SimOutput) {
     println!("min / max load temperature  {:6.2} / {:.2} °C", m.tracking.min_temp_c, m.tracking.max_temp_c);
     println!("time outside 2–8 °C         {:10.0} s", m.tracking.time_outside_2_8_s);
     println!("energy                      {:10.2} Wh", m.energy_wh);
+    println!("mean power                  {:10.2} W", m.mean_power_w);
     println!("SSR switches                {:10}", m.ssr_switches);
     if !m.faults_detected.is_empty() {
         let list: Vec<String> = m.faults_detected.iter().map(|f| format!("{}@{}s", f.kind, f.t_s)).collect();

@@ -14,7 +14,7 @@ use super::{PlantChoice, SimOptions, PWM_PERIOD_S};
 use crate::arx::ArxPlant;
 use crate::fault::Fault;
 use crate::periph::{Monostable, SamplePhase, SensorFault, SimAdc, SimSsr, SsrFault};
-use crate::plant::{Plant, PlantParams};
+use crate::plant::{Drive, Plant, PlantParams};
 use crate::scenario::{Change, Start, PREROLL_S};
 
 /// The step's clock for sim time `t_s`, ms: the board's monotonic millisecond clock, which
@@ -38,9 +38,9 @@ impl Rig {
         let sc = &opts.scenario;
         let load = sc.load.unwrap_or(opts.load);
         let params = match opts.plant {
-            PlantChoice::Hter1 => PlantParams::hter1(load),
-            PlantChoice::Hter2 => PlantParams::hter2(load),
-            PlantChoice::Custom(p) => p,
+            PlantChoice::Hter1 => PlantParams { drive: opts.drive, ..PlantParams::hter1(load) },
+            PlantChoice::Hter2 => PlantParams { drive: opts.drive, ..PlantParams::hter2(load) },
+            PlantChoice::Custom(p) => PlantParams { drive: opts.drive, ..p },
             PlantChoice::Arx(m) => {
                 let t0 = match sc.start {
                     Start::Ambient => opts.ambient_c,
@@ -108,10 +108,12 @@ impl Rig {
     /// Drives the actuator at `t_s`; returns the duty the plant really gets.
     pub(super) fn actuate(&mut self, out: &StepOutput, t_s: f64) -> f64 {
         match self {
-            Rig::Physical { ssr, adc, board, .. } => {
-                let duty = match adc.phase {
-                    SamplePhase::Synchronised => adc.window.clear_duty(out.duty),
-                    SamplePhase::EdgeAligned => out.duty,
+            Rig::Physical { plant, ssr, adc, board } => {
+                // The SSR's edges must keep off the conversion window; the buck's output is
+                // filtered and has none to keep off (the firmware's buck build does not clear).
+                let duty = match (plant.params().drive, adc.phase) {
+                    (Drive::Ssr, SamplePhase::Synchronised) => adc.window.clear_duty(out.duty),
+                    _ => out.duty,
                 };
                 // SimSsr's error type is Infallible.
                 let _ = apply_duty(ssr, duty);
@@ -152,10 +154,19 @@ impl Rig {
             if count && d > 0.0 && !*last_on {
                 switches += 1;
             }
-            *last_on = d >= 1.0;
+            // The SSR turns on again every period below full duty; the buck's output stays
+            // on while the duty is above 0.
+            *last_on = match self {
+                Rig::Physical { plant, .. } if plant.params().drive == Drive::Buck => d > 0.0,
+                _ => d >= 1.0,
+            };
             if let Rig::Physical { plant, adc, .. } = self {
                 plant.advance_pwm_period(PWM_PERIOD_S, d);
-                adc.set_ssr_duty(d);
+                // The buck switches in its own LC-filtered loop: no edge in the module leads.
+                adc.set_ssr_duty(match plant.params().drive {
+                    Drive::Ssr => d,
+                    Drive::Buck => 0.0,
+                });
             }
         }
         if let Rig::Arx(p) = self {
