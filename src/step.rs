@@ -32,6 +32,7 @@
 use crate::control::{AdaptiveMode, ControlInput, Controller, ControllerStatus};
 use crate::event::{Event, EventKind, Events};
 use crate::filter::FirstOrder;
+use crate::holdover::Holdover;
 use crate::supervisor::{sensor, Supervisor};
 use crate::units::{max_f32, min_f32, Celsius, Duty};
 
@@ -109,6 +110,9 @@ pub struct StepOutput {
     pub events: Events,
     /// Estimator and mode of an adaptive controller (θ, trace P, prediction error).
     pub status: Option<ControllerStatus>,
+    /// How long the load would stay at or below 8 °C if cooling stopped now, s
+    /// ([`crate::holdover`]); `None` without a model or before the first estimate.
+    pub holdover_s: Option<f32>,
 }
 
 /// The per-sample application step.
@@ -124,6 +128,10 @@ pub struct Carrier<C: Controller> {
     pending_reset: Option<crate::persist::ResetCause>,
     /// A fail-safe stop of the previous boot to report with the next sample.
     pending_stop: Option<crate::failsafe::StopKind>,
+    holdover: Holdover,
+    /// The model the holdover runs on (the commissioned one); without it, the controller's
+    /// trusted model.
+    holdover_model: Option<crate::model::Model>,
 }
 
 impl<C: Controller> Carrier<C> {
@@ -140,6 +148,8 @@ impl<C: Controller> Carrier<C> {
             adaptive_mode: None,
             pending_reset: None,
             pending_stop: None,
+            holdover: Holdover::new(0.0),
+            holdover_model: None,
         }
     }
 
@@ -187,6 +197,15 @@ impl<C: Controller> Carrier<C> {
     /// check).
     pub fn step_with_reference_fault(&mut self, input: &StepInput) -> StepOutput {
         self.run(input.t_ms, Err(EventKind::ReferenceOutOfRange), input.setpoint_c, true)
+    }
+
+    /// The model the holdover estimate runs on from the next sweep ([`crate::holdover`]): the
+    /// model commissioning measured and the board stored. `None`: the controller's trusted
+    /// model (none for PI and On-Off). The self-tuner's running estimate is not used by
+    /// default because, holding a constant setpoint with little excitation, it drifts in its
+    /// fast mode, which is the one a power cut's first minutes follow (EXPERIMENTS.md, issue 17).
+    pub fn set_holdover_model(&mut self, model: Option<crate::model::Model>) {
+        self.holdover_model = model;
     }
 
     /// The configuration.
@@ -266,9 +285,17 @@ impl<C: Controller> Carrier<C> {
         let verdict = self.supervisor.guard(&self.cfg.supervisor, t_ms, &ci, requested, duty, &mut emit);
 
         // Tell the controller what was really applied.
-        if self.supervisor.trusts_reading() {
+        let trusted = self.supervisor.trusts_reading();
+        if trusted {
             self.controller.track(&ci, verdict.duty.get());
         }
+        // What the modules got: nothing with the supply switch open.
+        let applied = if verdict.supply_enable { verdict.duty.get() } else { 0.0 };
+        let start = match self.holdover.sweeping() {
+            false if trusted => self.holdover_model.or_else(|| self.controller.trusted_model()).map(|m| (m, temp_c)),
+            _ => None,
+        };
+        let holdover_s = self.holdover.update(applied, start, self.cfg.ts_s);
         StepOutput {
             raw_c: reading.raw_c,
             temp_c: Celsius(temp_c),
@@ -279,6 +306,7 @@ impl<C: Controller> Carrier<C> {
             mode: verdict.mode,
             events,
             status,
+            holdover_s,
         }
     }
 
