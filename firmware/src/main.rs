@@ -98,6 +98,8 @@ struct Telemetry {
     alarm: Indication,
     /// Estimator state of a self-tuning controller (θ, trace P, prediction error, mode).
     status: Option<ControllerStatus>,
+    /// The step's holdover estimate, s (NaN: none).
+    holdover_s: f32,
 }
 
 static SAMPLES: Channel<CriticalSectionRawMutex, Sample, 2> = Channel::new();
@@ -269,6 +271,7 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             switched_v: s.switched_v,
             alarm,
             status: out.status,
+            holdover_s: out.holdover_s.unwrap_or(f32::NAN),
         };
         if TELEMETRY.try_send(record).is_err() {
             warn!("telemetry queue full, dropped t={=u64:ms}", s.t_ms);
@@ -373,6 +376,7 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             switched_v: s.switched_v,
             alarm: out.alarm,
             status: step.status,
+            holdover_s: step.holdover_s.unwrap_or(f32::NAN),
         };
         if TELEMETRY.try_send(record).is_err() {
             warn!("telemetry queue full, dropped t={=u64:ms}", s.t_ms);
@@ -462,7 +466,7 @@ async fn telemetry() {
         let r = TELEMETRY.receive().await;
         // `hter log2csv` parses this line: keep its `key=value` fields.
         info!(
-            "t={=u64:ms} temp={} sp={} duty={} mode={} counts={} supply={} rail={} alarm={}",
+            "t={=u64:ms} temp={} sp={} duty={} mode={} counts={} supply={} rail={} alarm={} holdover={}",
             r.t_ms,
             r.temp_c,
             r.setpoint_c,
@@ -471,7 +475,8 @@ async fn telemetry() {
             r.counts,
             r.supply_v.unwrap_or(f32::NAN),
             r.switched_v.unwrap_or(f32::NAN),
-            r.alarm
+            r.alarm,
+            r.holdover_s
         );
         if let Some(st) = r.status {
             info!(
