@@ -128,9 +128,9 @@ pub struct Carrier<C: Controller> {
     pending_reset: Option<crate::persist::ResetCause>,
     /// A fail-safe stop of the previous boot to report with the next sample.
     pending_stop: Option<crate::failsafe::StopKind>,
+    #[cfg_attr(not(feature = "holdover"), allow(dead_code))]
     holdover: Holdover,
-    /// The model the holdover runs on (the commissioned one); without it, the controller's
-    /// trusted model.
+    /// The model the holdover runs on (the commissioned one); without it, no estimate.
     holdover_model: Option<crate::model::Model>,
 }
 
@@ -200,9 +200,8 @@ impl<C: Controller> Carrier<C> {
     }
 
     /// The model the holdover estimate runs on from the next sweep ([`crate::holdover`]): the
-    /// model commissioning measured and the board stored. `None`: the controller's trusted
-    /// model (none for PI and On-Off). The self-tuner's running estimate is not used by
-    /// default because, holding a constant setpoint with little excitation, it drifts in its
+    /// model commissioning measured and the board stored, whatever law drives (`None`: no
+    /// estimate). Not the self-tuner's running estimate:  holding a constant setpoint with little excitation, it drifts in its
     /// fast mode, which is the one a power cut's first minutes follow (EXPERIMENTS.md, issue 17).
     pub fn set_holdover_model(&mut self, model: Option<crate::model::Model>) {
         self.holdover_model = model;
@@ -289,13 +288,7 @@ impl<C: Controller> Carrier<C> {
         if trusted {
             self.controller.track(&ci, verdict.duty.get());
         }
-        // What the modules got: nothing with the supply switch open.
-        let applied = if verdict.supply_enable { verdict.duty.get() } else { 0.0 };
-        let start = match self.holdover.sweeping() {
-            false if trusted => self.holdover_model.or_else(|| self.controller.trusted_model()).map(|m| (m, temp_c)),
-            _ => None,
-        };
-        let holdover_s = self.holdover.update(applied, start, self.cfg.ts_s);
+        let holdover_s = self.holdover(verdict.duty.get(), verdict.supply_enable, trusted, temp_c);
         StepOutput {
             raw_c: reading.raw_c,
             temp_c: Celsius(temp_c),
@@ -308,6 +301,24 @@ impl<C: Controller> Carrier<C> {
             status,
             holdover_s,
         }
+    }
+
+    /// The holdover estimate after this sample's actuation ([`crate::holdover`]).
+    #[cfg(feature = "holdover")]
+    fn holdover(&mut self, duty: f32, supply_enable: bool, trusted: bool, temp_c: f32) -> Option<f32> {
+        // What the modules got: nothing with the supply switch open.
+        let applied = if supply_enable { duty } else { 0.0 };
+        let start = match self.holdover.sweeping() {
+            false if trusted => self.holdover_model.as_ref().map(|m| (m, temp_c)),
+            _ => None,
+        };
+        self.holdover.update(applied, start, self.cfg.ts_s)
+    }
+
+    /// Without the `holdover` feature: no estimate.
+    #[cfg(not(feature = "holdover"))]
+    fn holdover(&mut self, _duty: f32, _supply_enable: bool, _trusted: bool, _temp_c: f32) -> Option<f32> {
+        None
     }
 
     /// The setpoint clamped to the accepted range; a clamp is reported when it begins.

@@ -500,8 +500,7 @@ impl Supervisor {
             temp_c,
             w,
             slope_c_per_s: self.freeze.slope_c_per_s(),
-            // Without a supply the load warms whatever the lid does.
-            normal: mode == Mode::Normal && !self.supply.lost(),
+            normal: mode == Mode::Normal,
             full_duty_run: self.ssr.full_duty_run(),
         };
         self.lid.run(&cfg.lid, self.ts_s, &lid, emit);
@@ -536,8 +535,7 @@ impl Supervisor {
         if !self.state.shorted() && self.ssr.still_falling(&cfg.stuck_on, temp_c) {
             self.ssr_shorted(emit);
         }
-        // A lost supply warms the load at full duty too: that is the supply sag, not the SSR.
-        if self.ssr.warms_at_full_duty(&cfg.stuck_off, temp_c) && !self.supply.lost() {
+        if self.ssr.warms_at_full_duty(&cfg.stuck_off, temp_c) {
             emit(EventKind::SsrStuckOff);
         }
         if let Drive::Controller { probe } = self.state.drive {

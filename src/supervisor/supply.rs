@@ -23,10 +23,6 @@ impl SupplyConfig {
     pub const DEFAULT: SupplyConfig = SupplyConfig { min_v: 10.8, sag_s: 30.0, rearm_margin_v: 0.5 };
 }
 
-/// Below this the supply is lost (a power cut), V: with 3 V across the module the Seebeck
-/// back-EMF of a 20–40 K difference (1–2 V) leaves almost no current.
-pub const LOST_V: f32 = 3.0;
-
 /// The supply monitor's state.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SupplyMonitor {
@@ -52,12 +48,6 @@ impl SupplyMonitor {
     /// The last measured supply, V.
     pub(crate) fn v(&self) -> Option<f32> {
         self.v
-    }
-
-    /// The supply is gone (measured below [`LOST_V`]): the modules cannot cool whatever the SSR
-    /// does, so the checks that read a warming load as an SSR or lid fault stand down.
-    pub(crate) fn lost(&self) -> bool {
-        matches!(self.v, Some(v) if v < LOST_V)
     }
 
     /// The check, once a sample, on the last measured supply (none: no check).
