@@ -126,6 +126,7 @@ mod tests {
             mode,
             events: ev,
             status: None,
+            holdover_s: None,
         }
     }
 

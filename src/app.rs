@@ -248,6 +248,8 @@ impl App {
         let ts_s = cfg.carrier.get().ts_s;
         let controller = build(settings.law, &adaptive, ts_s, cfg.adaptive.fallback.bias);
         let mut carrier = Carrier::new(cfg.carrier.with_calibration(cal), controller);
+        // The holdover runs on the stored (commissioned) model, whatever law drives.
+        carrier.set_holdover_model(adaptive.initial);
         carrier.note_reset(boot.reset);
         let mut recorder = Recorder::new(boot.history, cfg.history_save_samples);
         let mut app_saves = heapless::Deque::new();
@@ -502,6 +504,7 @@ impl App {
         }
         let Some(rec) = ModelRecord::from_model(&m) else { return refuse("not a second-order model") };
         self.adaptive = self.adaptive.restored_from(m);
+        self.carrier.set_holdover_model(Some(m));
         if matches!(self.settings.law, Law::Gpc | Law::Igmvc) && !self.commissioning() {
             let ctl = build(self.settings.law, &self.adaptive, self.cfg.carrier.get().ts_s, self.applied());
             *self.carrier.controller_mut() = ctl;
@@ -553,6 +556,7 @@ impl App {
             Ok(m) => match ModelRecord::from_model(&m) {
                 Some(rec) if plausible_model(&self.adaptive, &m) => {
                     self.adaptive = self.adaptive.restored_from(m);
+                    self.carrier.set_holdover_model(Some(m));
                     self.save(Save::Model(rec));
                     self.commissioned = Some(Ok(()));
                     // The build's self-tuner continues from the new model.
@@ -629,7 +633,8 @@ impl App {
             .into_iter()
             .map(|c| u32::from(h.resets_by(c)))
             .sum();
-        write!(out, "holdover_s=-\r\nresets={resets}\r\nfirmware={}\r\n", self.cfg.firmware)?;
+        let holdover = last.and_then(|o| o.step.holdover_s).unwrap_or(f32::NAN);
+        write!(out, "holdover_s={}\r\nresets={resets}\r\nfirmware={}\r\n", Fixed(holdover, 0), self.cfg.firmware)?;
         out.write_str("commissioning=")?;
         match (self.carrier.controller(), self.commissioned) {
             (BoardController::Commission(c), _) => match c.phase() {

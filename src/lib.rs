@@ -46,6 +46,7 @@ pub mod event;
 pub mod failsafe;
 pub mod filter;
 pub mod hal;
+pub mod holdover;
 pub mod ident;
 pub mod iface;
 pub mod model;

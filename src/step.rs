@@ -32,6 +32,7 @@
 use crate::control::{AdaptiveMode, ControlInput, Controller, ControllerStatus};
 use crate::event::{Event, EventKind, Events};
 use crate::filter::FirstOrder;
+use crate::holdover::Holdover;
 use crate::supervisor::{sensor, Supervisor};
 use crate::units::{max_f32, min_f32, Celsius, Duty};
 
@@ -109,6 +110,9 @@ pub struct StepOutput {
     pub events: Events,
     /// Estimator and mode of an adaptive controller (θ, trace P, prediction error).
     pub status: Option<ControllerStatus>,
+    /// How long the load would stay at or below 8 °C if cooling stopped now, s
+    /// ([`crate::holdover`]); `None` without a model or before the first estimate.
+    pub holdover_s: Option<f32>,
 }
 
 /// The per-sample application step.
@@ -124,6 +128,10 @@ pub struct Carrier<C: Controller> {
     pending_reset: Option<crate::persist::ResetCause>,
     /// A fail-safe stop of the previous boot to report with the next sample.
     pending_stop: Option<crate::failsafe::StopKind>,
+    #[cfg_attr(not(feature = "holdover"), allow(dead_code))]
+    holdover: Holdover,
+    /// The model the holdover runs on (the commissioned one); without it, no estimate.
+    holdover_model: Option<crate::model::Model>,
 }
 
 impl<C: Controller> Carrier<C> {
@@ -140,6 +148,8 @@ impl<C: Controller> Carrier<C> {
             adaptive_mode: None,
             pending_reset: None,
             pending_stop: None,
+            holdover: Holdover::new(0.0),
+            holdover_model: None,
         }
     }
 
@@ -187,6 +197,14 @@ impl<C: Controller> Carrier<C> {
     /// check).
     pub fn step_with_reference_fault(&mut self, input: &StepInput) -> StepOutput {
         self.run(input.t_ms, Err(EventKind::ReferenceOutOfRange), input.setpoint_c, true)
+    }
+
+    /// The model the holdover estimate runs on from the next sweep ([`crate::holdover`]): the
+    /// model commissioning measured and the board stored, whatever law drives (`None`: no
+    /// estimate). Not the self-tuner's running estimate:  holding a constant setpoint with little excitation, it drifts in its
+    /// fast mode, which is the one a power cut's first minutes follow (EXPERIMENTS.md, issue 17).
+    pub fn set_holdover_model(&mut self, model: Option<crate::model::Model>) {
+        self.holdover_model = model;
     }
 
     /// The configuration.
@@ -266,9 +284,11 @@ impl<C: Controller> Carrier<C> {
         let verdict = self.supervisor.guard(&self.cfg.supervisor, t_ms, &ci, requested, duty, &mut emit);
 
         // Tell the controller what was really applied.
-        if self.supervisor.trusts_reading() {
+        let trusted = self.supervisor.trusts_reading();
+        if trusted {
             self.controller.track(&ci, verdict.duty.get());
         }
+        let holdover_s = self.holdover(verdict.duty.get(), verdict.supply_enable, trusted, temp_c);
         StepOutput {
             raw_c: reading.raw_c,
             temp_c: Celsius(temp_c),
@@ -279,7 +299,26 @@ impl<C: Controller> Carrier<C> {
             mode: verdict.mode,
             events,
             status,
+            holdover_s,
         }
+    }
+
+    /// The holdover estimate after this sample's actuation ([`crate::holdover`]).
+    #[cfg(feature = "holdover")]
+    fn holdover(&mut self, duty: f32, supply_enable: bool, trusted: bool, temp_c: f32) -> Option<f32> {
+        // What the modules got: nothing with the supply switch open.
+        let applied = if supply_enable { duty } else { 0.0 };
+        let start = match self.holdover.sweeping() {
+            false if trusted => self.holdover_model.as_ref().map(|m| (m, temp_c)),
+            _ => None,
+        };
+        self.holdover.update(applied, start, self.cfg.ts_s)
+    }
+
+    /// Without the `holdover` feature: no estimate.
+    #[cfg(not(feature = "holdover"))]
+    fn holdover(&mut self, _duty: f32, _supply_enable: bool, _trusted: bool, _temp_c: f32) -> Option<f32> {
+        None
     }
 
     /// The setpoint clamped to the accepted range; a clamp is reported when it begins.

@@ -98,6 +98,10 @@ struct Telemetry {
     alarm: Indication,
     /// Estimator state of a self-tuning controller (θ, trace P, prediction error, mode).
     status: Option<ControllerStatus>,
+    /// The step's holdover estimate, s (NaN: none); the interface build only (the default build
+    /// leaves the estimate out for flash, README "Flash budget").
+    #[cfg(feature = "interface")]
+    holdover_s: f32,
 }
 
 static SAMPLES: Channel<CriticalSectionRawMutex, Sample, 2> = Channel::new();
@@ -373,6 +377,7 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             switched_v: s.switched_v,
             alarm: out.alarm,
             status: step.status,
+            holdover_s: step.holdover_s.unwrap_or(f32::NAN),
         };
         if TELEMETRY.try_send(record).is_err() {
             warn!("telemetry queue full, dropped t={=u64:ms}", s.t_ms);
@@ -461,6 +466,21 @@ async fn telemetry() {
     loop {
         let r = TELEMETRY.receive().await;
         // `hter log2csv` parses this line: keep its `key=value` fields.
+        #[cfg(feature = "interface")]
+        info!(
+            "t={=u64:ms} temp={} sp={} duty={} mode={} counts={} supply={} rail={} alarm={} holdover={}",
+            r.t_ms,
+            r.temp_c,
+            r.setpoint_c,
+            r.duty,
+            r.mode,
+            r.counts,
+            r.supply_v.unwrap_or(f32::NAN),
+            r.switched_v.unwrap_or(f32::NAN),
+            r.alarm,
+            r.holdover_s
+        );
+        #[cfg(not(feature = "interface"))]
         info!(
             "t={=u64:ms} temp={} sp={} duty={} mode={} counts={} supply={} rail={} alarm={}",
             r.t_ms,

@@ -151,6 +151,22 @@ pub struct SimMetrics {
     /// When the board's alarm hardware first sounded (the heartbeat monostable expired: the
     /// control loop stopped), s (null if never).
     pub alarm_hw_first_s: Option<f64>,
+    /// A power-cut run's holdover (`holdover_predicted_s`, `holdover_actual_s`); absent from
+    /// the JSON of other scenarios.
+    #[serde(flatten)]
+    pub holdover: Option<Holdover>,
+}
+
+/// The holdover of a power-cut run (`hter sim --scenario power-cut`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Holdover {
+    /// The step's estimate at the last sample before the cut, s (null if it had none).
+    #[serde(rename = "holdover_predicted_s")]
+    pub predicted_s: Option<f64>,
+    /// From the cut to the first sample with the true load temperature above 8 °C, s (null if
+    /// the run ended first).
+    #[serde(rename = "holdover_actual_s")]
+    pub actual_s: Option<f64>,
 }
 
 /// Figures computed from the samples alone (flattened into [`SimMetrics`]).

@@ -190,6 +190,7 @@ impl Mission {
             duration_s: DAY_S,
             load: None,
             excitation: false,
+            cut: None,
         };
         Mission { seed, params, factors, ambient0_c, scenario, faults, hardware_fault, spikes_s }
     }

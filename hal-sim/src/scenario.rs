@@ -56,10 +56,27 @@ pub struct Scenario {
     /// with [`crate::sim::PRBS_REST_S`] more of that rest, then a PRBS on the SSR around the
     /// holding duty instead of the controller (`prbs`).
     pub excitation: bool,
+    /// A power cut (`power-cut`): the run ends at the first sample after it whose true load
+    /// temperature is above the limit, and reports the holdover.
+    pub cut: Option<PowerCut>,
 }
 
+/// A power cut that ends the run once the load has warmed past a limit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PowerCut {
+    /// When the supply goes to 0 V, s.
+    pub at_s: f64,
+    /// The run ends at the first sample after the cut with the true load temperature above
+    /// this, °C.
+    pub limit_c: f64,
+}
+
+/// When `power-cut` cuts the supply, s.
+pub const POWER_CUT_AT_S: f64 = 7200.0;
+
 /// Names of the built-in scenarios.
-pub const BUILT_IN: &[&str] = &["step", "piecewise", "half-load", "disturbance", "prbs", "hot-zone", "mission"];
+pub const BUILT_IN: &[&str] =
+    &["step", "piecewise", "half-load", "disturbance", "prbs", "hot-zone", "mission", "power-cut"];
 
 /// One day, s.
 pub const DAY_S: f64 = 86400.0;
@@ -116,6 +133,7 @@ impl Scenario {
                 duration_s: 3.0 * 3600.0,
                 load: None,
                 excitation: false,
+                cut: None,
             },
             "piecewise" => Scenario {
                 name: name.into(),
@@ -126,6 +144,7 @@ impl Scenario {
                 duration_s: 3600.0,
                 load: None,
                 excitation: false,
+                cut: None,
             },
             "half-load" => Scenario {
                 name: name.into(),
@@ -136,6 +155,7 @@ impl Scenario {
                 duration_s: 3600.0,
                 load: Some(Load::Half),
                 excitation: false,
+                cut: None,
             },
             "disturbance" => Scenario {
                 name: name.into(),
@@ -146,6 +166,7 @@ impl Scenario {
                 duration_s: 3.0 * 3600.0,
                 load: None,
                 excitation: false,
+                cut: None,
             },
             "prbs" => Scenario {
                 name: name.into(),
@@ -156,6 +177,7 @@ impl Scenario {
                 duration_s: 6.5 * 3600.0,
                 load: None,
                 excitation: true,
+                cut: None,
             },
             "hot-zone" => {
                 // 24 h at 43 °C, then two days of 43/25 °C day/night (peak at 14:00, the
@@ -171,6 +193,7 @@ impl Scenario {
                     duration_s: 3.0 * DAY_S,
                     load: None,
                     excitation: false,
+                cut: None,
                 }
             }
             "mission" => {
@@ -194,8 +217,20 @@ impl Scenario {
                     duration_s: DAY_S,
                     load: None,
                     excitation: false,
+                cut: None,
                 }
             }
+            "power-cut" => Scenario {
+                name: name.into(),
+                description: "holding 4 °C; the supply goes to 0 V at 2 h; ends when the load passes 8 °C (at most 48 h after the cut)".into(),
+                start: Start::Holding(4.0),
+                setpoints: vec![(0.0, 4.0)],
+                changes: vec![(POWER_CUT_AT_S, Change::Supply(0.0))],
+                duration_s: POWER_CUT_AT_S + 2.0 * DAY_S,
+                load: None,
+                excitation: false,
+                cut: Some(PowerCut { at_s: POWER_CUT_AT_S, limit_c: hter::holdover::LIMIT_C as f64 }),
+            },
             _ => return None,
         };
         Some(s)
@@ -273,6 +308,7 @@ impl ScenarioFile {
             duration_s: self.duration_s,
             load: None,
             excitation: false,
+            cut: None,
         })
     }
 }

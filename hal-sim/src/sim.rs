@@ -35,11 +35,11 @@ use hter::step::{Carrier, CarrierConfig, StepOutput};
 use crate::arx;
 use crate::fault;
 pub use crate::fault::Fault;
-use crate::metrics::{self, Detected, Sample, SimMetrics, Stamped};
+use crate::metrics::{self, Detected, Holdover, Sample, SimMetrics, Stamped};
 pub use crate::periph::SamplePhase;
 pub use crate::plant::Drive;
 use crate::plant::{Load, PlantParams};
-use crate::scenario::{Scenario, Start, PREROLL_S};
+use crate::scenario::{PowerCut, Scenario, Start, PREROLL_S};
 
 mod rig;
 mod row;
@@ -342,6 +342,11 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
     let mut cadence = model_cadence();
     let mut persisted: Option<[u8; ModelRecord::LEN]> = None;
     let mut stores = Vec::new();
+    let stainless = match opts.plant {
+        PlantChoice::Hter2 => true,
+        PlantChoice::Custom(p) => p.container == crate::plant::Container::StainlessSteel,
+        _ => false,
+    };
     let make_controller = |persisted: Option<&[u8; ModelRecord::LEN]>| -> Result<AnyController> {
         Ok(if sc.excitation {
             let prbs =
@@ -354,11 +359,6 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             )
         } else {
             let mut spec = opts.controller;
-            let stainless = match opts.plant {
-                PlantChoice::Hter2 => true,
-                PlantChoice::Custom(p) => p.container == crate::plant::Container::StainlessSteel,
-                _ => false,
-            };
             if spec.initial.is_none() && stainless {
                 spec.initial = Some(profile::START_MODEL_HTER2);
             }
@@ -380,7 +380,19 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             spec.build(cfg.ts_s, u0 as f32)?
         })
     };
-    let mut carrier = Carrier::new(valid, make_controller(None)?);
+    // The holdover runs on the model the carrier was commissioned with: the start model of its
+    // container, as the board's stored model.
+    let holdover_model = Some(match opts.controller.initial {
+        Some(m) => m,
+        None if stainless => profile::START_MODEL_HTER2,
+        None => profile::START_MODEL_HTER1,
+    });
+    let new_carrier = |c: AnyController| {
+        let mut carrier = Carrier::new(valid, c);
+        carrier.set_holdover_model(holdover_model);
+        carrier
+    };
+    let mut carrier = new_carrier(make_controller(None)?);
     let faults_pending = &opts.faults;
     let name = carrier.controller().name().to_string();
 
@@ -425,7 +437,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                     // The reset ends a hang too.
                     hung = false;
                     // RAM lost: a fresh step, restarted from what flash holds.
-                    carrier = Carrier::new(valid, make_controller(persisted.as_ref())?);
+                    carrier = new_carrier(make_controller(persisted.as_ref())?);
                     // What the firmware reads from RCC_CSR at boot after a brown-out.
                     carrier.note_reset(ResetCause::BrownOut);
                     cadence = model_cadence();
@@ -480,6 +492,9 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             }
             rows.push(Row::stepped(t_s, w, &out, counts, d, indication, rig.view(t_s, opts.ambient_c)));
             held = Some((out, counts, indication));
+            if sc.cut.is_some_and(|c| t_s >= c.at_s && rig.true_temp_c() > c.limit_c) {
+                break;
+            }
         }
         if k == 0 {
             energy0_wh = rig.energy_wh();
@@ -499,6 +514,16 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
         alarm_indicator_s: alarm_on_s,
         alarm_indicator_first_s: alarm_first_s,
         alarm_hw_first_s,
+        holdover: sc.cut.map(|c| holdover(&rows, c)),
     };
     Ok(SimOutput { rows, metrics, ts_s: ts, stores })
+}
+
+/// The holdover of a power-cut run: the step's estimate at the last sample before the cut, and
+/// the time from the cut to the first sample whose true load temperature is above the limit
+/// (`None` if the run ended first).
+fn holdover(rows: &[Row], cut: PowerCut) -> Holdover {
+    let predicted_s = rows.iter().take_while(|r| r.t_s < cut.at_s).last().and_then(|r| r.holdover_s);
+    let actual_s = rows.iter().find(|r| r.t_s >= cut.at_s && r.true_temp_c > cut.limit_c).map(|r| r.t_s - cut.at_s);
+    Holdover { predicted_s, actual_s }
 }

@@ -56,7 +56,11 @@ pub fn controller(code: u32) -> Option<AnyController> {
 
 /// A fresh carrier and cold-chain record for `kind`.
 pub fn carrier(kind: u32) -> Option<(Carrier<AnyController>, ColdChainMonitor)> {
-    Some((Carrier::new(CARRIER, controller(kind)?), ColdChainMonitor::new()))
+    let mut carrier = Carrier::new(CARRIER, controller(kind)?);
+    // The holdover estimate on the built-in model, as the board's (its per-sample sweep is
+    // part of the step's budget).
+    carrier.set_holdover_model(Some(profile::START_MODEL_HTER1));
+    Some((carrier, ColdChainMonitor::new()))
 }
 
 /// The cold-chain record's share of a sample: it is fed what the controller saw.

@@ -86,6 +86,9 @@ pub struct Row {
     /// The board's alarm hardware: true while the heartbeat monostable has expired (the MCU
     /// stopped stepping), whatever the MCU's own alarm pin says.
     pub alarm_hw: bool,
+    /// The step's holdover estimate: how long the load would stay at or below 8 °C if cooling
+    /// stopped now, s (empty without a model or before the first estimate; [`hter::holdover`]).
+    pub holdover_s: Option<f64>,
     /// The conversion an ideal ADC would have made of this sample, counts (no noise, no SSR
     /// switching disturbance, not rounded); not in the CSV.
     #[serde(skip)]
@@ -136,6 +139,7 @@ impl Row {
             alarm,
             supply_enable: out.supply_enable,
             alarm_hw: rig.alarm_hw,
+            holdover_s: out.holdover_s.map(f64::from),
             ideal_counts: rig.ideal_counts,
         }
     }
@@ -169,6 +173,7 @@ impl Row {
             alarm,
             supply_enable: out.is_some_and(|o| o.supply_enable),
             alarm_hw: rig.alarm_hw,
+            holdover_s: None,
             ideal_counts: rig.ideal_counts,
         }
     }

@@ -104,6 +104,7 @@ impl VirtualBoard {
             duration_s: f64::INFINITY,
             load: None,
             excitation: false,
+            cut: None,
         };
         let sim = SimOptions {
             plant: opts.plant,

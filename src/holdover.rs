@@ -1,0 +1,271 @@
+//! Holdover: how long the load would stay at or below +8 °C if cooling stopped now.
+//!
+//! The estimate comes from the step's own model, the linear ARX model the self-tuner trusts
+//! (`A(q⁻¹) y(t) = q^−k B(q⁻¹) u(t)`, [`crate::model`]), and the duty that is holding the load.
+//! A power cut takes the duty from its mean ū to 0: to the linear model that is a step of −ū
+//! from the present operating point, so the load would follow
+//!
+//! ```text
+//! T(n) = T₀ − ū · h(n),     h = the model's response to a unit duty step (negative: cooling)
+//! ```
+//!
+//! and the holdover is the first n with `T(n) > 8 °C`, i.e. `−h(n) ≥ r = (8 − T₀)/ū`. The
+//! model's implied ambient is its final value `T₀ − ū·G` (G the static gain, < 0): when that is
+//! at or below 8 °C the load never passes 8 °C and the estimate is [`HORIZON_S`] ("at least").
+//!
+//! The crossing is found by running the model's recursion, not by a closed form: a
+//! second-order model with its dead time has no closed-form inverse, and a dominant-pole
+//! approximation `τ·ln((T∞ − T₀)/(T∞ − 8))` misses the fast mode that dominates the first
+//! minutes (after a power cut the hot sink's heat flows back through the module at once). To
+//! keep the per-sample cost bounded, the recursion advances [`STEPS_PER_SAMPLE`] model steps per
+//! sample (a *sweep* started from the model, T₀ and ū of the sample it began on); the estimate
+//! is published when the sweep crosses and the next sweep starts on the next sample. A
+//! 10-minute holdover at Ts = 10 s refreshes every 8 samples.
+//!
+//! The model's delay k is the time the probe takes to show a change of the water (transport,
+//! the probe's lag): the water itself passes 8 °C about k samples before the probe reads it, so
+//! the estimate is the crossing minus k samples (the pessimistic side).
+//!
+//! The same f32 operations in the same order on host and board: the estimate is bit-equal.
+
+use crate::model::Model;
+
+/// The vaccine limit, °C.
+pub const LIMIT_C: f32 = 8.0;
+
+/// The longest holdover estimated, s (48 h): a model whose ambient is at or below
+/// [`LIMIT_C`], or a sweep that reaches this far, reports it ("at least 48 h").
+pub const HORIZON_S: f32 = 48.0 * 3600.0;
+
+/// Model steps advanced per sample.
+pub const STEPS_PER_SAMPLE: u32 = 8;
+
+/// Weight of one sample in the mean holding duty ū: a 5-minute time constant at Ts = 10 s.
+const DUTY_WEIGHT: f32 = 10.0 / 300.0;
+
+/// A sweep of the model's unit-step response under way.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Sweep {
+    a: [f32; 2],
+    b: [f32; 2],
+    /// Delay, samples.
+    k: u32,
+    /// Target of −h: (8 − T₀)/ū.
+    r: f32,
+    /// Steps done.
+    n: u32,
+    /// h(n), h(n − 1).
+    h: [f32; 2],
+}
+
+/// The holdover estimator (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Holdover {
+    /// [`STEPS_PER_SAMPLE`], as a field: a constant trip count is unrolled eight times at the
+    /// library's opt-level 3, 1.2 KiB of the firmware's flash.
+    steps: u32,
+    duty_avg: f32,
+    sweep: Option<Sweep>,
+    estimate_s: Option<f32>,
+}
+
+impl Holdover {
+    /// No estimate yet; the mean duty starts at `u0`.
+    pub const fn new(u0: f32) -> Self {
+        Holdover { steps: STEPS_PER_SAMPLE, duty_avg: u0, sweep: None, estimate_s: None }
+    }
+
+    /// The last estimate, s (at most [`HORIZON_S`]); `None` until a sweep has finished, or
+    /// when the step has no usable model.
+    pub fn estimate_s(&self) -> Option<f32> {
+        self.estimate_s
+    }
+
+    /// A sweep is under way (the next [`Holdover::update`] does not read its `start`).
+    pub fn sweeping(&self) -> bool {
+        self.sweep.is_some()
+    }
+
+    /// The mean holding duty ū.
+    pub fn mean_duty(&self) -> f32 {
+        self.duty_avg
+    }
+
+    /// One sample: the duty the modules got this sample `duty`; `start`, when no sweep is
+    /// under way: the model and the temperature T₀ to start the next one from (`None` for a
+    /// controller without a model, or an untrusted reading: no sweep starts). Returns the
+    /// estimate.
+    #[inline(never)]
+    pub fn update(&mut self, duty: f32, start: Option<(&Model, f32)>, ts_s: f32) -> Option<f32> {
+        self.duty_avg += DUTY_WEIGHT * (duty - self.duty_avg);
+        let horizon = (HORIZON_S / ts_s) as u32;
+        let mut sweep = match self.sweep {
+            Some(s) => s,
+            None => match start {
+                Some((m, t0)) => match self.begin(m, t0) {
+                    Ok(s) => s,
+                    Err(e) => {
+                        self.estimate_s = e;
+                        return e;
+                    }
+                },
+                None => return self.estimate_s,
+            },
+        };
+        let r = sweep.r;
+        let [a1, a2] = sweep.a;
+        let [b0, b1] = sweep.b;
+        let mut i = 0;
+        while i < self.steps {
+            let n = sweep.n + 1;
+            // Unit step at t = 0: u(t − k) = 1 from n = k on, u(t − k − 1) from n = k + 1.
+            let mut y = -a1 * sweep.h[0] - a2 * sweep.h[1];
+            if n >= sweep.k {
+                y += b0;
+            }
+            if n > sweep.k {
+                y += b1;
+            }
+            let prev = -sweep.h[0];
+            sweep.h = [y, sweep.h[0]];
+            sweep.n = n;
+            if -y >= r || n >= horizon {
+                let at = if -y >= r {
+                    // Linear interpolation between the two steps around the crossing.
+                    let frac = (r - prev) / (-y - prev);
+                    (n as f32 - 1.0 + frac - sweep.k as f32) * ts_s
+                } else {
+                    HORIZON_S
+                };
+                let at = if at > 0.0 { at } else { 0.0 };
+                self.sweep = None;
+                self.estimate_s = Some(if at < HORIZON_S { at } else { HORIZON_S });
+                return self.estimate_s;
+            }
+            i += 1;
+        }
+        self.sweep = Some(sweep);
+        self.estimate_s
+    }
+
+    /// A sweep from `m` at T₀, or the estimate at once (`Err`): 0 at or above the limit, the
+    /// horizon when the model never passes it, `None` for a model this estimator cannot run
+    /// (not second order, not cooling).
+    fn begin(&self, m: &Model, t0: f32) -> Result<Sweep, Option<f32>> {
+        if m.na() > 2 || m.nb() > 2 {
+            return Err(None);
+        }
+        let (a, b) = (m.a(), m.b());
+        let gain = (b[0] + b[1]) / (1.0 + a[0] + a[1]);
+        if !(gain < 0.0) {
+            return Err(None);
+        }
+        if !(t0 < LIMIT_C) {
+            return Err(Some(0.0));
+        }
+        let rise = LIMIT_C - t0;
+        // The model's ambient −ū·G above T₀ must exceed the rise (NaN: no estimate).
+        let final_rise = -self.duty_avg * gain;
+        if !(final_rise > rise) {
+            return if final_rise.is_finite() { Err(Some(HORIZON_S)) } else { Err(None) };
+        }
+        Ok(Sweep { a: [a[0], a[1]], b: [b[0], b[1]], k: m.k() as u32, r: rise / self.duty_avg, n: 0, h: [0.0; 2] })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    extern crate std;
+
+    /// Runs samples at a constant duty and temperature until a sweep publishes.
+    fn settle(model: Model, u: f32, t0: f32, ts: f32) -> f32 {
+        let mut h = Holdover::new(u);
+        for _ in 0..100_000 {
+            let e = h.update(u, Some((&model, t0)), ts);
+            if h.sweep.is_none() {
+                return e.expect("a finished sweep publishes");
+            }
+        }
+        panic!("no estimate");
+    }
+
+    #[test]
+    fn first_order_model_matches_the_closed_form_warm_up() {
+        // y(t) = p y(t−1) + g(1−p) u(t−1): a first-order lag of gain g, time constant τ.
+        let (ts, tau, g) = (10.0f32, 1800.0f32, -50.0f32);
+        let p = (-ts / tau).exp();
+        let m = Model::new(&[-p], &[g * (1.0 - p)], &[], 1).unwrap();
+        for (u, t0) in [(0.4f32, 4.0f32), (0.78, 4.0), (0.5, 6.0), (0.2, 2.5)] {
+            let t_inf = t0 - u * g;
+            // Continuous warm-up t = τ ln((T∞ − T0)/(T∞ − 8)); the discrete model (the lag
+            // sampled with a zero-order hold) is exact at the samples, and its one-sample delay
+            // counts as dead time, which the estimate takes off.
+            let exact = (f64::from(tau) * ((f64::from(t_inf - t0)) / f64::from(t_inf - 8.0)).ln()) as f32 - ts;
+            let est = settle(m, u, t0, ts);
+            assert!((est - exact).abs() <= 1.0, "u {u} T0 {t0}: estimate {est} s, closed form {exact} s");
+        }
+    }
+
+    #[test]
+    fn second_order_model_matches_its_modal_step_response() {
+        // Two real poles: h(n) = G (1 − c1 p1^n − c2 p2^n), from the partial fractions of
+        // B/(A) with delay k; the crossing found by bisection on the closed form.
+        let (p1, p2, g, k, ts) = (0.99f64, 0.8f64, -45.0f64, 3usize, 10.0f32);
+        // All the gain in b0: B/A = b0 q^−k / ((1 − p1 q⁻¹)(1 − p2 q⁻¹)).
+        let b0 = g * (1.0 - p1) * (1.0 - p2);
+        let m = Model::new(&[-(p1 + p2) as f32, (p1 * p2) as f32], &[b0 as f32, 0.0], &[], k).unwrap();
+        // Its step response m = n − k ≥ 0 steps after the delay (partial fractions):
+        // h = G (1 − c1 p1^(m+1) − c2 p2^(m+1)), c1 = p1 (1 − p2)/(p1 − p2),
+        // c2 = −p2 (1 − p1)/(p1 − p2); h(k) = G (1 − p1)(1 − p2) = b0.
+        let h = |n: f64| {
+            let m = n - k as f64;
+            if m < 0.0 {
+                return 0.0;
+            }
+            let c1 = p1 * (1.0 - p2) / (p1 - p2);
+            let c2 = -p2 * (1.0 - p1) / (p1 - p2);
+            g * (1.0 - c1 * p1.powf(m + 1.0) - c2 * p2.powf(m + 1.0))
+        };
+        let (u, t0) = (0.5f64, 4.0f64);
+        let r = (8.0 - t0) / u;
+        let (mut lo, mut hi) = (0.0f64, 1e5);
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if -h(mid) >= r {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        let exact_s = (hi - k as f64) * f64::from(ts);
+        let est = settle(m, u as f32, t0 as f32, ts);
+        assert!((f64::from(est) - exact_s).abs() <= 1.0, "estimate {est} s, closed form {exact_s} s");
+    }
+
+    #[test]
+    fn limits_horizon_and_unusable_models() {
+        let m = Model::second_order([-1.9, 0.905], [-0.05, -0.05], 2).unwrap();
+        // Already above the limit: no holdover.
+        assert_eq!(settle(m, 0.5, 8.5, 10.0), 0.0);
+        // The model's ambient (T0 − ū G) is below 8 °C: the load never passes it.
+        let g = m.static_gain().unwrap();
+        let u = 3.0 / -g;
+        assert_eq!(settle(m, u, 4.0, 10.0), HORIZON_S);
+        // A heating model, or none, gives no estimate.
+        let heat = Model::second_order([-1.9, 0.905], [0.05, 0.05], 2).unwrap();
+        let mut h = Holdover::new(0.5);
+        assert_eq!(h.update(0.5, Some((&heat, 4.0)), 10.0), None);
+        assert_eq!(h.update(0.5, None, 10.0), None);
+    }
+
+    #[test]
+    fn each_sample_runs_a_bounded_number_of_steps() {
+        let m = Model::second_order([-1.9, 0.905], [-0.05, -0.05], 2).unwrap();
+        let mut h = Holdover::new(0.5);
+        h.update(0.5, Some((&m, 4.0)), 10.0);
+        assert_eq!(h.sweep.map(|s| s.n), Some(STEPS_PER_SAMPLE));
+        h.update(0.5, Some((&m, 4.0)), 10.0);
+        assert_eq!(h.sweep.map(|s| s.n), Some(2 * STEPS_PER_SAMPLE));
+    }
+}
