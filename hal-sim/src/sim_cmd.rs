@@ -14,7 +14,7 @@ use crate::sim::{self, ControllerChoice, ControllerSpec, Drive, PlantChoice, Sim
 /// Arguments of `hter sim` (and the scenario and controller of `hter compare`).
 #[derive(clap::Args, Debug)]
 pub struct SimArgs {
-    /// Scenario name (step, piecewise, half-load, disturbance, prbs, hot-zone, mission) or a
+    /// Scenario name (step, piecewise, half-load, disturbance, prbs, hot-zone, mission, power-cut) or a
     /// JSON scenario file.
     #[arg(long, default_value = "step")]
     pub scenario: String,
