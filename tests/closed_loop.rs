@@ -220,6 +220,7 @@ fn self_tuning_laws_survive_a_plant_change_mid_run() {
             duration_s: 4.0 * 3600.0,
             load: None,
             excitation: false,
+            cut: None,
         };
         let out = run(&SimOptions {
             drive: Default::default(),
