@@ -306,6 +306,13 @@ impl App {
         self.outbox.pop_front()
     }
 
+    /// `m` (checked by the caller) becomes the model the self-tuner starts from and the one the
+    /// holdover estimate runs on.
+    fn adopt_model(&mut self, m: Model) {
+        self.adaptive = self.adaptive.restored_from(m);
+        self.carrier.set_holdover_model(Some(m));
+    }
+
     fn save(&mut self, save: Save) {
         if self.outbox.is_full() {
             self.outbox.pop_front();
@@ -503,8 +510,7 @@ impl App {
             return refuse("static gain outside the self-tuner's plausible range");
         }
         let Some(rec) = ModelRecord::from_model(&m) else { return refuse("not a second-order model") };
-        self.adaptive = self.adaptive.restored_from(m);
-        self.carrier.set_holdover_model(Some(m));
+        self.adopt_model(m);
         if matches!(self.settings.law, Law::Gpc | Law::Igmvc) && !self.commissioning() {
             let ctl = build(self.settings.law, &self.adaptive, self.cfg.carrier.get().ts_s, self.applied());
             *self.carrier.controller_mut() = ctl;
@@ -555,8 +561,7 @@ impl App {
         let law = match outcome {
             Ok(m) => match ModelRecord::from_model(&m) {
                 Some(rec) if plausible_model(&self.adaptive, &m) => {
-                    self.adaptive = self.adaptive.restored_from(m);
-                    self.carrier.set_holdover_model(Some(m));
+                    self.adopt_model(m);
                     self.save(Save::Model(rec));
                     self.commissioned = Some(Ok(()));
                     // The build's self-tuner continues from the new model.
