@@ -71,6 +71,14 @@ pub struct PowerCut {
     pub limit_c: f64,
 }
 
+impl PowerCut {
+    /// Whether a sample at `t_s` with the true load at `true_temp_c` is past the cut and the
+    /// limit: the run's last sample, and the end of the holdover.
+    pub fn passed(&self, t_s: f64, true_temp_c: f64) -> bool {
+        t_s >= self.at_s && true_temp_c > self.limit_c
+    }
+}
+
 /// When `power-cut` cuts the supply, s.
 pub const POWER_CUT_AT_S: f64 = 7200.0;
 
@@ -193,7 +201,7 @@ impl Scenario {
                     duration_s: 3.0 * DAY_S,
                     load: None,
                     excitation: false,
-                cut: None,
+                    cut: None,
                 }
             }
             "mission" => {
@@ -217,7 +225,7 @@ impl Scenario {
                     duration_s: DAY_S,
                     load: None,
                     excitation: false,
-                cut: None,
+                    cut: None,
                 }
             }
             "power-cut" => Scenario {

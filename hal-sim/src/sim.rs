@@ -492,7 +492,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             }
             rows.push(Row::stepped(t_s, w, &out, counts, d, indication, rig.view(t_s, opts.ambient_c)));
             held = Some((out, counts, indication));
-            if sc.cut.is_some_and(|c| t_s >= c.at_s && rig.true_temp_c() > c.limit_c) {
+            if sc.cut.is_some_and(|c| c.passed(t_s, rig.true_temp_c())) {
                 break;
             }
         }
@@ -524,6 +524,6 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
 /// (`None` if the run ended first).
 fn holdover(rows: &[Row], cut: PowerCut) -> Holdover {
     let predicted_s = rows.iter().take_while(|r| r.t_s < cut.at_s).last().and_then(|r| r.holdover_s);
-    let actual_s = rows.iter().find(|r| r.t_s >= cut.at_s && r.true_temp_c > cut.limit_c).map(|r| r.t_s - cut.at_s);
+    let actual_s = rows.iter().find(|r| cut.passed(r.t_s, r.true_temp_c)).map(|r| r.t_s - cut.at_s);
     Holdover { predicted_s, actual_s }
 }
