@@ -38,6 +38,7 @@ pub fn run() -> Result<()> {
         csv: None,
         plot: None,
         json: false,
+        commission: None,
         mission_seed: None,
     };
     let opts = sim_cmd::options(&args)?;
