@@ -461,7 +461,7 @@ mod tests {
             }
         }
         let c = convert(lines(&line("LimpHome", "OutOfRange"))).unwrap();
-        assert_eq!(csv_text(&c.rows).lines().nth(1), Some("0,4,4,0,limp_home,1,12,out_of_range,0,"));
+        assert_eq!(csv_text(&c.rows).lines().nth(1), Some("0,4,4,0,limp_home,1,12,out_of_range,0,,"));
         let e = parse_line(&line("Limping", "Off")).unwrap().unwrap_err();
         assert!(e.to_string().contains("mode 'Limping' is none of Normal, SensorFault"), "{e}");
         let e = parse_line(&line("Normal", "On")).unwrap().unwrap_err();
@@ -525,8 +525,8 @@ t=10 temp=8 sp=4 duty=0.5 mode=Normal
         assert_eq!(c.joined, Some((3, 10.0, PeriodSource::BootLine)));
         let text = csv_text(&c.rows);
         assert_eq!(text.lines().next(), Some(HEADER));
-        assert_eq!(text.lines().nth(1), Some("0,4,,0,sensor_fault,,,,0,restarted_brownout"));
-        assert_eq!(text.lines().nth(2), Some("10,4,5,0.5,normal,,,,0,"));
+        assert_eq!(text.lines().nth(1), Some("0,4,,0,sensor_fault,,,,0,restarted_brownout,"));
+        assert_eq!(text.lines().nth(2), Some("10,4,5,0.5,normal,,,,0,,"));
     }
 
     #[test]

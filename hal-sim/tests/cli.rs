@@ -44,6 +44,10 @@ fn bad_input_is_a_one_line_error() {
     assert_one_line_error(&["sim", "--model", "arx:-0.9;0.1;0"], "delay");
     assert_one_line_error(&["sim", "--plant", "hter3"], "unknown plant");
     assert_one_line_error(&["sim", "--model", "arx:1,-1.936,0.936;-0.28,0.27;9"], "without the leading 1");
+    assert_one_line_error(
+        &["sim", "--plant", "arx:-0.99;-0.5;1", "--commission", "monotone"],
+        "--commission needs a physical plant",
+    );
     assert_one_line_error(&["sim", "--model", "arx:-0.9;0.1;2"], "does not cool");
     assert_one_line_error(&["identify", "--input", "/dev/null", "--forgetting", "0"], "--forgetting");
     assert_one_line_error(&["identify", "--input", "/dev/null", "--nk", "x"], "'x' is not a delay");
