@@ -39,6 +39,7 @@ pub fn run() -> Result<()> {
         plot: None,
         json: false,
         commission: None,
+        commission_ambient: None,
         mission_seed: None,
     };
     let opts = sim_cmd::options(&args)?;

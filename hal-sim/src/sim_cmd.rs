@@ -100,6 +100,10 @@ pub struct SimArgs {
     /// response), which fits the carriers' fast mode but the board's App does not store yet.
     #[arg(long, value_enum)]
     pub commission: Option<CommissionRule>,
+    /// Ambient of the `--commission` run, °C (default: the run's `--ambient`): a carrier
+    /// commissioned once and then carried elsewhere.
+    #[arg(long, allow_negative_numbers = true, requires = "commission")]
+    pub commission_ambient: Option<f64>,
     /// Replay the randomized mission of this seed from `hter campaign` (its carrier, ambient,
     /// lid openings, supply sag, faults and noise seed); the controller flags still apply.
     #[arg(long, conflicts_with_all = ["scenario", "plant", "load", "ambient", "duration", "seed", "faults"])]
@@ -249,7 +253,11 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
             CommissionRule::EveryCoefficient => hter::ident::commission::SignRule::EveryCoefficient,
             CommissionRule::Monotone => hter::ident::commission::SignRule::Monotone,
         };
-        let m = crate::commission::commission(params, opts.ambient_c, opts.seed, sign)?;
+        let ambient = match a.commission_ambient {
+            Some(c) => finite("commission-ambient", c)?,
+            None => opts.ambient_c,
+        };
+        let m = crate::commission::commission(params, ambient, opts.seed, sign)?;
         eprintln!(
             "commissioned: A = 1 {:+} q^-1 {:+} q^-2, B = {} {:+} q^-1, k = {}, static gain {:.1} °C per unit duty",
             m.a()[0],
