@@ -38,6 +38,8 @@ pub fn run() -> Result<()> {
         csv: None,
         plot: None,
         json: false,
+        commission: None,
+        commission_ambient: None,
         mission_seed: None,
     };
     let opts = sim_cmd::options(&args)?;

@@ -6,6 +6,7 @@ pub mod arx;
 pub mod board_cmd;
 pub mod bound;
 pub mod campaign_cmd;
+pub mod commission;
 pub mod compare_cmd;
 pub mod demo_cmd;
 pub mod fault;

@@ -2,10 +2,12 @@
 //! into the CSV that `hter identify` and `hter monitor` read.
 //!
 //! The firmware prints one line per sample, `t=… temp=… sp=… duty=… mode=… counts=… supply=…
-//! alarm=…`, possibly behind a timestamp, a level and a location; a `t_ms=` field (a
-//! millisecond clock) is preferred over `t=` when both are there. `counts` (the RTD
-//! conversion), `supply` (V, NaN when not measured) and `alarm` (the indicator's state) are
-//! kept when present; logs of older firmware without them leave those cells empty.
+//! alarm=…` (the `interface` build adds `rail=…` and `holdover=…`), possibly behind a timestamp,
+//! a level and a location; a `t_ms=` field (a millisecond clock) is preferred over `t=` when both
+//! are there. `counts` (the RTD conversion), `supply` (V, NaN when not measured), `alarm` (the
+//! indicator's state) and `holdover` (the step's holdover estimate, s, NaN when it has none:
+//! [`hter::holdover`]; the column `holdover_s`, as in `hter sim --csv`) are kept when present;
+//! logs of older firmware, or of a build without the field, leave those cells empty.
 //!
 //! The firmware prints the step's mode and the alarm indicator as their variant names
 //! (`mode=LimpHome alarm=OutOfRange`, defmt's `{}` of the enum); the CSV carries the library's
@@ -50,13 +52,13 @@ pub struct Log2CsvArgs {
     #[arg(long)]
     pub input: PathBuf,
     /// Where to write the CSV (columns t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,
-    /// boot,reset_cause).
+    /// boot,reset_cause,holdover_s).
     #[arg(long)]
     pub output: PathBuf,
 }
 
 /// The CSV header `hter log2csv` writes.
-pub const HEADER: &str = "t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,boot,reset_cause";
+pub const HEADER: &str = "t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,boot,reset_cause,holdover_s";
 
 /// One telemetry sample.
 #[derive(Clone, Debug, PartialEq)]
@@ -78,6 +80,9 @@ pub struct Sample {
     pub supply_v: Option<f64>,
     /// The alarm indicator's state (newer firmware).
     pub alarm: Option<Indication>,
+    /// The step's holdover estimate, s (the `interface` build; `None` also when the step had
+    /// none: the firmware prints NaN).
+    pub holdover_s: Option<f64>,
 }
 
 /// One row of the CSV: a sample on the log's continuous time axis.
@@ -178,6 +183,7 @@ pub fn parse_line(line: &str) -> Option<Result<Sample>> {
     }
     let counts = field(line, "counts=");
     let supply = field(line, "supply=");
+    let holdover = field(line, "holdover=");
     let any =
         |name: &str, v: &str| -> Result<f64> { v.parse().with_context(|| format!("{name} '{v}' is not a number")) };
     let num = |name: &str, v: &str| -> Result<f64> {
@@ -210,6 +216,8 @@ pub fn parse_line(line: &str) -> Option<Result<Sample>> {
                 .transpose()?,
             // NaN is how the firmware says "not measured".
             supply_v: supply.map(|v| any("supply", v)).transpose()?.filter(|v| v.is_finite()),
+            // NaN: no estimate (no model, or none finished yet).
+            holdover_s: holdover.map(|v| any("holdover", v)).transpose()?.filter(|v| v.is_finite()),
         })
     })())
 }
@@ -329,7 +337,7 @@ pub fn csv_text(rows: &[Row]) -> String {
     for r in rows {
         let s = &r.sample;
         text.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{}\n",
             s.t_s,
             s.setpoint_c,
             opt(s.temp_c.map(|c| c.to_string())),
@@ -339,7 +347,8 @@ pub fn csv_text(rows: &[Row]) -> String {
             opt(s.supply_v.map(|v| v.to_string())),
             s.alarm.map_or("", Indication::name),
             r.boot,
-            r.reset_cause.as_deref().unwrap_or("")
+            r.reset_cause.as_deref().unwrap_or(""),
+            opt(s.holdover_s.map(|v| v.to_string())),
         ));
     }
     text
@@ -398,7 +407,8 @@ mod tests {
                 mode: Some(Mode::Normal),
                 counts: None,
                 supply_v: None,
-                alarm: None
+                alarm: None,
+                holdover_s: None,
             }
         );
         // Today's firmware line: the conversion, the supply (NaN: not measured) and the alarm.
@@ -419,6 +429,27 @@ mod tests {
     }
 
     #[test]
+    fn the_interface_builds_holdover_is_a_number_or_empty() {
+        // The interface build's line (firmware/src/main.rs, `telemetry`).
+        let l = "1.0 INFO  t=30 temp=4.01 sp=4 duty=0.45 mode=Normal counts=49920 supply=12.01 rail=11.9 \
+                 alarm=Off holdover=412.5";
+        let s = parse_line(l).unwrap().unwrap();
+        assert_eq!((s.supply_v, s.holdover_s), (Some(12.01), Some(412.5)));
+        // NaN: the step has no estimate yet.
+        let nan = l.replace("holdover=412.5", "holdover=NaN");
+        assert_eq!(parse_line(&nan).unwrap().unwrap().holdover_s, None);
+        let bad = parse_line(&l.replace("holdover=412.5", "holdover=long")).unwrap();
+        assert!(bad.unwrap_err().to_string().contains("holdover 'long' is not a number"));
+        // In the CSV: the last column, empty without an estimate.
+        let c = convert(lines(&format!("{l}\n{}", nan.replace("t=30 ", "t=40 ")))).unwrap();
+        let text = csv_text(&c.rows);
+        let cells: Vec<Vec<&str>> = text.lines().map(|r| r.split(',').collect()).collect();
+        assert_eq!(cells[0].last(), Some(&"holdover_s"));
+        assert_eq!(cells[1].last(), Some(&"412.5"));
+        assert_eq!(cells[2].last(), Some(&""));
+    }
+
+    #[test]
     fn modes_and_alarms_take_the_library_names() {
         let line =
             |mode: &str, alarm: &str| format!("t=0 temp=4 sp=4 duty=0 mode={mode} counts=1 supply=12 alarm={alarm}");
@@ -430,7 +461,7 @@ mod tests {
             }
         }
         let c = convert(lines(&line("LimpHome", "OutOfRange"))).unwrap();
-        assert_eq!(csv_text(&c.rows).lines().nth(1), Some("0,4,4,0,limp_home,1,12,out_of_range,0,"));
+        assert_eq!(csv_text(&c.rows).lines().nth(1), Some("0,4,4,0,limp_home,1,12,out_of_range,0,,"));
         let e = parse_line(&line("Limping", "Off")).unwrap().unwrap_err();
         assert!(e.to_string().contains("mode 'Limping' is none of Normal, SensorFault"), "{e}");
         let e = parse_line(&line("Normal", "On")).unwrap().unwrap_err();
@@ -494,8 +525,8 @@ t=10 temp=8 sp=4 duty=0.5 mode=Normal
         assert_eq!(c.joined, Some((3, 10.0, PeriodSource::BootLine)));
         let text = csv_text(&c.rows);
         assert_eq!(text.lines().next(), Some(HEADER));
-        assert_eq!(text.lines().nth(1), Some("0,4,,0,sensor_fault,,,,0,restarted_brownout"));
-        assert_eq!(text.lines().nth(2), Some("10,4,5,0.5,normal,,,,0,"));
+        assert_eq!(text.lines().nth(1), Some("0,4,,0,sensor_fault,,,,0,restarted_brownout,"));
+        assert_eq!(text.lines().nth(2), Some("10,4,5,0.5,normal,,,,0,,"));
     }
 
     #[test]

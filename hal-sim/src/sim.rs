@@ -99,6 +99,10 @@ pub struct ControllerSpec {
     /// Its bias is replaced by the plant's steady duty when the run starts holding a
     /// temperature.
     pub pi: Option<PiConfig>,
+    /// Model the holdover estimate runs on ([`hter::holdover`]); `None`: [`Self::initial`], or
+    /// the carrier's start model. Set apart from `initial` for a model the self-tuner would not
+    /// trust (`hter sim --commission monotone`).
+    pub holdover: Option<Model>,
 }
 
 impl ControllerSpec {
@@ -113,6 +117,7 @@ impl ControllerSpec {
             gpc_t_filter: profile::GPC_T_FILTER,
             initial: None,
             pi: None,
+            holdover: None,
         }
     }
 
@@ -268,6 +273,20 @@ impl SimOptions {
     }
 }
 
+impl SimOptions {
+    /// The physical carrier this run drives, with the scenario's load and the run's drive;
+    /// `None` for an ideal ARX plant.
+    pub fn plant_params(&self) -> Option<PlantParams> {
+        let load = self.scenario.load.unwrap_or(self.load);
+        match self.plant {
+            PlantChoice::Hter1 => Some(PlantParams { drive: self.drive, ..PlantParams::hter1(load) }),
+            PlantChoice::Hter2 => Some(PlantParams { drive: self.drive, ..PlantParams::hter2(load) }),
+            PlantChoice::Custom(p) => Some(PlantParams { drive: self.drive, ..p }),
+            PlantChoice::Arx(_) => None,
+        }
+    }
+}
+
 /// How the simulated board around the step is built (what `run` uses by default).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BoardOptions {
@@ -382,7 +401,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
     };
     // The holdover runs on the model the carrier was commissioned with: the start model of its
     // container, as the board's stored model.
-    let holdover_model = Some(match opts.controller.initial {
+    let holdover_model = Some(match opts.controller.holdover.or(opts.controller.initial) {
         Some(m) => m,
         None if stainless => profile::START_MODEL_HTER2,
         None => profile::START_MODEL_HTER1,

@@ -93,10 +93,30 @@ pub struct SimArgs {
     /// Print the metrics as one JSON object instead of the summary.
     #[arg(long)]
     pub json: bool,
+    /// Commission the carrier first, as a board told `identify` does (rest, PRBS and the board's
+    /// fit, holding 4 °C at this plant, load and ambient): the model it gives becomes the stored
+    /// model, the self-tuner's start and the holdover estimate's model. `every-coefficient` is
+    /// the board's sign rule (every b_i ≤ 0); `monotone` allows b1 > 0 (a monotone step
+    /// response), which fits the carriers' fast mode but the board's App does not store yet.
+    #[arg(long, value_enum)]
+    pub commission: Option<CommissionRule>,
+    /// Ambient of the `--commission` run, °C (default: the run's `--ambient`): a carrier
+    /// commissioned once and then carried elsewhere.
+    #[arg(long, allow_negative_numbers = true, requires = "commission")]
+    pub commission_ambient: Option<f64>,
     /// Replay the randomized mission of this seed from `hter campaign` (its carrier, ambient,
     /// lid openings, supply sag, faults and noise seed); the controller flags still apply.
     #[arg(long, conflicts_with_all = ["scenario", "plant", "load", "ambient", "duration", "seed", "faults"])]
     pub mission_seed: Option<u64>,
+}
+
+/// The sign rule of `--commission` ([`hter::ident::commission::SignRule`]).
+// Doc comments on the variants would become clap's help for each value.
+#[allow(missing_docs)]
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum CommissionRule {
+    EveryCoefficient,
+    Monotone,
 }
 
 /// The water load of `--load`: `full` is 100 ml of water, `half` 50 ml.
@@ -213,20 +233,48 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
         }
         controller.pi = Some(pi);
     }
-    if let Some(seed) = a.mission_seed {
-        return Ok(SimOptions { drive: a.drive, ..crate::mission::Mission::generate(seed).options(controller) });
+    let mut opts = match a.mission_seed {
+        Some(seed) => SimOptions { drive: a.drive, ..crate::mission::Mission::generate(seed).options(controller) },
+        None => SimOptions {
+            scenario,
+            controller,
+            plant,
+            load: a.load.into(),
+            ambient_c: finite("ambient", a.ambient)?,
+            duration_s,
+            seed: a.seed,
+            faults: a.faults.iter().map(|f| sim::Fault::parse(f)).collect::<Result<_>>()?,
+            drive: a.drive,
+        },
+    };
+    if let Some(rule) = a.commission {
+        let Some(params) = opts.plant_params() else { bail!("--commission needs a physical plant (hter1 or hter2)") };
+        let sign = match rule {
+            CommissionRule::EveryCoefficient => hter::ident::commission::SignRule::EveryCoefficient,
+            CommissionRule::Monotone => hter::ident::commission::SignRule::Monotone,
+        };
+        let ambient = match a.commission_ambient {
+            Some(c) => finite("commission-ambient", c)?,
+            None => opts.ambient_c,
+        };
+        let m = crate::commission::commission(params, ambient, opts.seed, sign)?;
+        eprintln!(
+            "commissioned: A = 1 {:+} q^-1 {:+} q^-2, B = {} {:+} q^-1, k = {}, static gain {:.1} °C per unit duty",
+            m.a()[0],
+            m.a()[1],
+            m.b()[0],
+            m.b()[1],
+            m.k(),
+            m.static_gain().unwrap_or(f32::NAN)
+        );
+        // As a board adopts a commissioned model: the self-tuner's start and the holdover's
+        // model; one the self-tuner would not trust (b1 > 0) serves the holdover only.
+        if hter::control::adaptive::plausible_model(&hter::profile::ADAPTIVE_GPC, &m) {
+            opts.controller.initial = Some(m);
+        }
+        opts.controller.holdover = Some(m);
     }
-    Ok(SimOptions {
-        scenario,
-        controller,
-        plant,
-        load: a.load.into(),
-        ambient_c: finite("ambient", a.ambient)?,
-        duration_s,
-        seed: a.seed,
-        faults: a.faults.iter().map(|f| sim::Fault::parse(f)).collect::<Result<_>>()?,
-        drive: a.drive,
-    })
+    Ok(opts)
 }
 
 /// `hter sim`.

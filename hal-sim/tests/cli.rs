@@ -44,6 +44,10 @@ fn bad_input_is_a_one_line_error() {
     assert_one_line_error(&["sim", "--model", "arx:-0.9;0.1;0"], "delay");
     assert_one_line_error(&["sim", "--plant", "hter3"], "unknown plant");
     assert_one_line_error(&["sim", "--model", "arx:1,-1.936,0.936;-0.28,0.27;9"], "without the leading 1");
+    assert_one_line_error(
+        &["sim", "--plant", "arx:-0.99;-0.5;1", "--commission", "monotone"],
+        "--commission needs a physical plant",
+    );
     assert_one_line_error(&["sim", "--model", "arx:-0.9;0.1;2"], "does not cool");
     assert_one_line_error(&["identify", "--input", "/dev/null", "--forgetting", "0"], "--forgetting");
     assert_one_line_error(&["identify", "--input", "/dev/null", "--nk", "x"], "'x' is not a delay");
@@ -298,7 +302,9 @@ fn a_board_identification_log_goes_through_log2csv_and_identify() {
     let out = hter(&["log2csv", "--input", log.to_str().unwrap(), "--output", csv.to_str().unwrap()]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let converted = std::fs::read_to_string(&csv).unwrap();
-    assert!(converted.starts_with("t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,boot,reset_cause\n"));
+    assert!(
+        converted.starts_with("t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,boot,reset_cause,holdover_s\n")
+    );
     assert_eq!(converted.lines().count(), text.lines().count(), "one row per sample line");
     let v = json(&["identify", "--input", csv.to_str().unwrap(), "--json"]);
     let _ = std::fs::remove_dir_all(&dir);
@@ -364,4 +370,33 @@ fn pi_tuning_flags_are_checked_and_used() {
 fn the_default_controller_is_self_tuning_gpc() {
     let v = json(&["sim", "--scenario", "piecewise", "--json"]);
     assert_eq!(v["controller"], "gpc", "{v}");
+}
+
+/// `hter sim --csv` carries the step's holdover estimate as a number in `holdover_s`, and the
+/// `--json` prediction of a power cut is that column's last value before the cut.
+#[test]
+fn the_sim_csv_has_holdover_s_as_numbers_and_json_predicts_from_it() {
+    let csv = std::env::temp_dir().join(format!("hter-cli-power-cut-{}.csv", std::process::id()));
+    let out = hter(&["sim", "--scenario", "power-cut", "--json", "--csv", csv.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let _ = std::fs::remove_file(&csv);
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no {name} column"));
+    let (t_col, h_col) = (col("t_s"), col("holdover_s"));
+    let rows: Vec<(f64, f64)> = lines
+        .map(|l| {
+            let cells: Vec<&str> = l.split(',').collect();
+            let h = cells[h_col].parse::<f64>().unwrap_or_else(|_| panic!("holdover_s '{}' in: {l}", cells[h_col]));
+            (cells[t_col].parse().unwrap(), h)
+        })
+        .collect();
+    // Holding 4 °C: minutes of holdover on every sample before the cut at 2 h.
+    let before: Vec<f64> = rows.iter().filter(|(t, _)| *t < 7200.0).map(|&(_, h)| h).collect();
+    assert_eq!(before.len(), 720);
+    assert!(before.iter().all(|h| (60.0..3600.0).contains(h)), "{before:?}");
+    let predicted = v["holdover_predicted_s"].as_f64().expect("a prediction");
+    assert!((predicted - before[before.len() - 1]).abs() < 1e-3, "{predicted} vs {:?}", before.last());
 }

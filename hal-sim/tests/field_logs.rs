@@ -85,9 +85,9 @@ fn a_field_log_with_faults_and_resets_goes_through_log2csv_and_monitor() {
 
     let text = std::fs::read_to_string(&csv).unwrap();
     let mut lines = text.lines();
-    assert_eq!(lines.next(), Some("t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,boot,reset_cause"));
+    assert_eq!(lines.next(), Some("t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,boot,reset_cause,holdover_s"));
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
-    assert!(rows.iter().all(|r| r.len() == 10), "{text}");
+    assert!(rows.iter().all(|r| r.len() == 11), "{text}");
     // Each boot's t = 0 one sample period after the previous boot's last sample.
     let t: Vec<f64> = rows.iter().map(|r| r[0].parse().unwrap()).collect();
     let expected: Vec<f64> =

@@ -147,6 +147,32 @@ fn status_has_every_field_of_the_contract_in_order() {
 }
 
 #[test]
+#[cfg(feature = "holdover")]
+fn status_shows_the_holdover_estimate_as_a_number_that_follows_the_stored_model() {
+    // Under the PI, which holds this crude plant steadily (the estimate runs on the stored
+    // model whatever law drives).
+    let mut b = Bench::new(&Boot {
+        settings: Some(SettingsRecord { law: Law::Pi, ..App::new(config(), &boot()).settings }),
+        ..boot()
+    });
+    // Holding 4 °C for 30 min: the mean duty has settled, many sweeps have finished.
+    let out = b.run(180);
+    let step = out.step.holdover_s.expect("the step has an estimate");
+    let shown: f32 = b.field("holdover_s").parse().expect("holdover_s is a number");
+    assert_eq!(shown, (step + 0.5).floor(), "status shows the step's estimate in whole seconds");
+    // Minutes, not zero nor the 48 h horizon: the stored model passes 8 °C from 4 °C at the
+    // holding duty.
+    assert!((60.0..3600.0).contains(&shown), "{shown}");
+    // A model that warms more slowly in its first minutes (H-TER II's start model: fast lag
+    // τ ≈ 105 s against ≈ 36 s, one more sample of delay) is the holdover's model from its first
+    // sweep: the estimate grows (measured 470 → 576 s).
+    assert_eq!(b.send("set model -1.904667,0.904945;-0.012378,-0.0001;6"), "ok\r\n");
+    b.run(180);
+    let slower: f32 = b.field("holdover_s").parse().expect("holdover_s is a number");
+    assert!(slower > 1.1 * shown, "{slower} s on H-TER II's model vs {shown} s");
+}
+
+#[test]
 fn an_accepted_setpoint_is_used_stored_and_logged_and_the_load_follows() {
     // Under the PI: the self-tuners follow on the physical plant (tests/virtual_board.rs); this
     // plant is too crude for their start model.

@@ -14,7 +14,7 @@ use super::{PlantChoice, SimOptions, PWM_PERIOD_S};
 use crate::arx::ArxPlant;
 use crate::fault::Fault;
 use crate::periph::{Monostable, SamplePhase, SensorFault, SimAdc, SimSsr, SsrFault};
-use crate::plant::{Drive, Plant, PlantParams};
+use crate::plant::{Drive, Plant};
 use crate::scenario::{Change, Start, PREROLL_S};
 
 /// The step's clock for sim time `t_s`, ms: the board's monotonic millisecond clock, which
@@ -36,12 +36,9 @@ pub(super) enum Rig {
 impl Rig {
     pub(super) fn new(opts: &SimOptions) -> Result<(Rig, f64)> {
         let sc = &opts.scenario;
-        let load = sc.load.unwrap_or(opts.load);
-        let params = match opts.plant {
-            PlantChoice::Hter1 => PlantParams { drive: opts.drive, ..PlantParams::hter1(load) },
-            PlantChoice::Hter2 => PlantParams { drive: opts.drive, ..PlantParams::hter2(load) },
-            PlantChoice::Custom(p) => PlantParams { drive: opts.drive, ..p },
-            PlantChoice::Arx(m) => {
+        let params = match (opts.plant_params(), opts.plant) {
+            (Some(p), _) => p,
+            (None, PlantChoice::Arx(m)) => {
                 let t0 = match sc.start {
                     Start::Ambient => opts.ambient_c,
                     Start::Holding(t) => t,
@@ -51,6 +48,7 @@ impl Rig {
                 let u0 = p.last_duty();
                 return Ok((Rig::Arx(p), u0));
             }
+            (None, _) => unreachable!("only an ARX plant has no physical parameters"),
         };
         let (plant, u0) = match sc.start {
             Start::Ambient => (Plant::at_ambient(params, opts.ambient_c), 0.0),

@@ -1,0 +1,129 @@
+//! Holdover accuracy on the `power-cut` scenario (SPEC §9; issue 17): holding 4 °C, the supply
+//! goes to 0 V at 2 h; the step's estimate just before the cut (`holdover_predicted_s`) against
+//! the time the true load takes to pass 8 °C (`holdover_actual_s`). Target: within 15 % of the
+//! actual, on H-TER I and II, full and half load, at 25, 32 and 43 °C.
+//!
+//! - On the stored start model (identified at full load), the six full-load cases meet it; the
+//!   half-load ones do not (24–41 % optimistic: half the water warms faster) and are not tested
+//!   here.
+//! - With the carrier commissioned at the load it carries (the board's on-board
+//!   commissioning, [`hal_sim::commission`]) all twelve meet it when the fit may keep the
+//!   carriers' fast mode (`SignRule::Monotone`, b1 > 0). With the board's default rule (every
+//!   b_i ≤ 0) H-TER II meets it at both loads; H-TER I does not (its fit comes out first order
+//!   plus delay, too slow in the first minutes) and is not tested here.
+//!
+//! The runs print their table (`--nocapture`).
+
+use hal_sim::commission::commission;
+use hal_sim::plant::Load;
+use hal_sim::scenario::Scenario;
+use hal_sim::sim::{run, ControllerChoice, ControllerSpec, PlantChoice, SimOptions};
+use hter::ident::commission::SignRule;
+use hter::model::Model;
+
+/// The largest error allowed, as a fraction of the actual holdover.
+const TOLERANCE: f64 = 0.15;
+
+/// (predicted, actual) holdover, s, of `power-cut` on `plant` at `load` and `ambient_c`, the
+/// holdover running on `stored` (the start model of the carrier when `None`).
+fn power_cut(plant: PlantChoice, load: Load, ambient_c: f64, stored: Option<Model>) -> (f64, f64) {
+    let mut spec = ControllerSpec::new(ControllerChoice::Gpc);
+    // As `hter sim --commission`: a model the self-tuner trusts is also its start.
+    spec.initial = stored.filter(|m| hter::control::adaptive::plausible_model(&hter::profile::ADAPTIVE_GPC, m));
+    spec.holdover = stored;
+    let opts = SimOptions { plant, load, ambient_c, ..SimOptions::new(Scenario::resolve("power-cut").unwrap(), spec) };
+    let h = run(&opts).unwrap().metrics.holdover.expect("a power-cut run reports its holdover");
+    (h.predicted_s.expect("an estimate before the cut"), h.actual_s.expect("the load passed 8 °C"))
+}
+
+fn name(plant: PlantChoice) -> &'static str {
+    match plant {
+        PlantChoice::Hter1 => "hter1",
+        _ => "hter2",
+    }
+}
+
+/// Runs every case in parallel (each is independent) and checks each against [`TOLERANCE`].
+fn check(
+    what: &str,
+    cases: &[(PlantChoice, Load, f64)],
+    stored: impl Fn(PlantChoice, Load, f64) -> Option<Model> + Sync,
+) {
+    let results: Vec<(f64, f64)> = std::thread::scope(|s| {
+        let handles: Vec<_> = cases
+            .iter()
+            .map(|&(p, l, a)| {
+                let stored = &stored;
+                s.spawn(move || power_cut(p, l, a, stored(p, l, a)))
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    let mut misses = Vec::new();
+    for (&(p, l, a), &(predicted, actual)) in cases.iter().zip(&results) {
+        let err = (predicted - actual) / actual;
+        println!(
+            "{what}: {} {} {a} °C: predicted {predicted:.0} s, actual {actual:.0} s, {:+.1} %",
+            name(p),
+            format!("{l:?}").to_lowercase(),
+            100.0 * err
+        );
+        if err.abs() > TOLERANCE {
+            misses.push(format!(
+                "{} {} {a} °C: {predicted:.0} vs {actual:.0} s",
+                name(p),
+                format!("{l:?}").to_lowercase()
+            ));
+        }
+    }
+    assert!(misses.is_empty(), "{what}: outside ±15 %: {misses:?}");
+}
+
+fn cases(plants: &[PlantChoice], loads: &[Load]) -> Vec<(PlantChoice, Load, f64)> {
+    let mut v = Vec::new();
+    for &p in plants {
+        for &l in loads {
+            for a in [25.0, 32.0, 43.0] {
+                v.push((p, l, a));
+            }
+        }
+    }
+    v
+}
+
+#[test]
+fn the_stored_full_load_model_is_within_15_percent_at_full_load() {
+    check("start model", &cases(&[PlantChoice::Hter1, PlantChoice::Hter2], &[Load::Full]), |_, _, _| None);
+}
+
+/// The carrier commissioned where it runs (its load and ambient), then cut.
+fn commissioned(sign: SignRule) -> impl Fn(PlantChoice, Load, f64) -> Option<Model> + Sync {
+    move |p, l, a| {
+        let params = SimOptions {
+            plant: p,
+            load: l,
+            ..SimOptions::new(Scenario::resolve("power-cut").unwrap(), ControllerSpec::new(ControllerChoice::Gpc))
+        }
+        .plant_params()
+        .unwrap();
+        Some(commission(params, a, 1, sign).expect("commissioning succeeds"))
+    }
+}
+
+#[test]
+fn commissioned_at_its_load_every_case_is_within_15_percent() {
+    check(
+        "commissioned (monotone)",
+        &cases(&[PlantChoice::Hter1, PlantChoice::Hter2], &[Load::Full, Load::Half]),
+        commissioned(SignRule::Monotone),
+    );
+}
+
+#[test]
+fn commissioned_with_the_boards_rule_h_ter_ii_is_within_15_percent_at_both_loads() {
+    check(
+        "commissioned (every coefficient)",
+        &cases(&[PlantChoice::Hter2], &[Load::Full, Load::Half]),
+        commissioned(SignRule::EveryCoefficient),
+    );
+}
