@@ -126,7 +126,7 @@ pub const BUCK_DEAD_TIME_TICKS: u16 = 20;
 /// voltage αΔT reaches 0.053 V/K × 55 K ≈ 2.9 V at 43 °C ambient, 24 % of 12 V and 29 % of a
 /// 10 V sag, and with the low side on, a duty × supply below it would drive the current
 /// backwards (the module then heats the load). 0.30 covers both; the hold duties at 25–43 °C
-/// are 0.32–0.70 (hal-sim, buck), synchronous.
+/// are 0.32–0.72 (hal-sim, buck), synchronous.
 #[cfg(feature = "buck")]
 pub const BUCK_SYNC_MIN_DUTY: f32 = 0.30;
 
