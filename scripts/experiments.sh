@@ -70,5 +70,45 @@ M2="arx:-1.74927,0.751376;-0.0270791,-0.029865"
   HTER="$H" CASE="piecewise, H-TER II" scripts/pi-grid.sh --scenario piecewise --plant hter2
 } | put pi-grid
 
+# Energy (issue 18): the modules on the SSR against the buck drive. One JSON field of a
+# `hter sim --json` object on stdin.
+field() { sed -E "s/.*\"$1\":(-?[0-9.eE+]+).*/\1/"; }
+# Wh per day (mean_power_w × 24 h, the pre-roll excluded as in every metric) and the time outside
+# 2–8 °C, min, of scenario $1 with controller $2 on drive $3: "WH OUT".
+day() {
+  local j; j=$("$H" sim --scenario "$1" --controller "$2" --drive "$3" --json)
+  echo "$(field mean_power_w <<<"$j") $(field time_outside_2_8_s <<<"$j")"
+}
+{
+  echo "| controller | mission SSR (Wh/day) | mission buck | buck / SSR | mission outside 2–8 °C, SSR / buck (min) | hot-zone SSR (Wh/day) | hot-zone buck | buck / SSR | hot-zone outside 2–8 °C, SSR / buck (min) |"
+  echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+  for c in onoff pi igmvc gpc; do
+    row="| $c"
+    for s in mission hot-zone; do
+      read -r ps os < <(day "$s" "$c" ssr)
+      read -r pb ob < <(day "$s" "$c" buck)
+      row+=$(awk -v ps="$ps" -v pb="$pb" -v os="$os" -v ob="$ob" \
+        'BEGIN { printf " | %.0f | %.0f | %.2f | %.0f / %.0f", 24 * ps, 24 * pb, pb / ps, os / 60, ob / 60 }')
+    done
+    echo "$row |"
+  done
+} | put energy-day
+
+# Holding 4 °C for 6 h (scenarios/hold-4c-6h.json), self-tuning GPC, both carriers, four ambients.
+{
+  echo "| plant | ambient (°C) | SSR (W) | buck (W) | buck / SSR | steady-state error, SSR / buck (°C) | min, SSR / buck (°C) |"
+  echo "| --- | --- | --- | --- | --- | --- | --- |"
+  for p in hter1 hter2; do
+    for a in 25 28 32 43; do
+      js=$("$H" sim --scenario scenarios/hold-4c-6h.json --plant "$p" --ambient "$a" --drive ssr --json)
+      jb=$("$H" sim --scenario scenarios/hold-4c-6h.json --plant "$p" --ambient "$a" --drive buck --json)
+      awk -v p="$p" -v a="$a" -v ps="$(field mean_power_w <<<"$js")" -v pb="$(field mean_power_w <<<"$jb")" \
+        -v es="$(field steady_state_error_c <<<"$js")" -v eb="$(field steady_state_error_c <<<"$jb")" \
+        -v ms="$(field min_temp_c <<<"$js")" -v mb="$(field min_temp_c <<<"$jb")" \
+        'BEGIN { printf "| %s | %s | %.1f | %.2f | %.3f | %.3f / %.3f | %.2f / %.2f |\n", p, a, ps, pb, pb / ps, es, eb, ms, mb }'
+    done
+  done
+} | put energy-hold
+
 # Self-tuning GPC with its estimate (the seed's Figs 5.21, 6.9): a plot only.
 "$H" sim --scenario piecewise --controller gpc --plot "$D/gpc-estimate.png" >/dev/null

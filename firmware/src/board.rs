@@ -8,7 +8,9 @@
 //! | RTD amplifier output | PA0 (ADC1_IN5) | A0 (CN8-1) | Pt100, 4-wire, in series with a 2 kΩ 0.1 % reference resistor, both carrying a 1 mA excitation (a current source from VDDA, e.g. an op-amp Howland or a REF200 pair); an instrumentation amplifier (gain 15) across the RTD's sense leads drives PA0 |
 //! | reference-resistor voltage | PA1 (ADC1_IN6) | A1 (CN8-2) | the top of the 2 kΩ reference resistor (its bottom at AGND), through a 1 kΩ / 100 nF RC; ≈ 2.0 V at 1 mA |
 //! | modules' supply | PA4 (ADC1_IN9) | A2 (CN8-3) | 47 kΩ from the 12 V input (ahead of the supply-enable switch, so an open switch does not read as a sag) to PA4, 10 kΩ to AGND, 100 nF across the 10 kΩ: 12 V reads 2.1 V |
-//! | SSR input | PA6 (TIM3_CH1) | D12 (CN5-5) | Crydom CMX60D10 (or any DC SSR) input, 3–32 V, through 330 Ω; the SSR switches the Peltier modules' 12 V |
+//! | SSR input (SSR build) | PA6 (TIM3_CH1) | D12 (CN5-5) | Crydom CMX60D10 (or any DC SSR) input, 3–32 V, through 330 Ω; the SSR switches the Peltier modules' 12 V |
+//! | buck high-side gate (`buck` build) | PA8 (TIM1_CH1, AF1) | D7 (CN9-8) | HI input of a half-bridge gate driver (UCC27211-class, independent HI/LI inputs, bootstrap high side), 10 kΩ pull-down; the driver switches the synchronous buck's high-side N-MOSFET (README, "The buck drive") |
+//! | buck low-side gate (`buck` build) | PA7 (TIM1_CH1N, AF1) | D11 (CN5-4) | LI input of the same driver, 10 kΩ pull-down; PB13 (TIM1_CH1N, CN10-30) is the other pin TIM1_CH1N reaches |
 //! | supply enable | PB0 | A3 (CN8-4) | gate driver of a high-side P-MOSFET switch in series with the SSR and the modules; high = power allowed; pulled down, so a reset or a dead MCU removes power |
 //! | status LED | PA5 | LD2 (on board) | on while cooling is enabled |
 //! | switched rail | PC0 (ADC1_IN1) | A5 (CN8-6) | 47 kΩ from the modules' side of the supply-enable switch (after the P-MOSFET) to PC0, 10 kΩ to AGND, 100 nF across the 10 kΩ: reads the rail the modules really see, so a shorted switch shows as voltage while the switch is open |
@@ -30,7 +32,11 @@
 //! UART handler ([`SerialIrqs`]) at a lower urgency than TIM7's stall check.
 //!
 //! Timers: TIM2 is the time driver, TIM3 the SSR PWM, TIM7 the control-stall check (its
-//! interrupt at the highest priority, so it preempts the executor).
+//! interrupt at the highest priority, so it preempts the executor). The `buck` build drives the
+//! modules through a synchronous buck from TIM1, the advanced timer (CH1 and CH1N, complementary,
+//! `config::BUCK_PWM_HZ` with `config::BUCK_DEAD_TIME_TICKS` of dead time, `Buck`), and
+//! keeps TIM3 running at 1 Hz without a pin as the sample clock: the RTD is still converted at
+//! a fixed phase of TIM3's period ([`Analog::sample`]), so both builds sample alike.
 //!
 //! **Measurement.** In the LQFP64 package VREF+ is bonded to VDDA (3.3 V on the Nucleo), so the
 //! reference resistor cannot be the converter's reference: both the amplified RTD voltage and
@@ -53,12 +59,20 @@ use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::InterruptExt;
 use embassy_stm32::pac;
 use embassy_stm32::pac::adc::vals::{OversamplingRatio, OversamplingShift, Rovsm, Trovs};
-use embassy_stm32::peripherals::{ADC1, TIM3};
+use embassy_stm32::peripherals::ADC1;
+#[cfg(feature = "buck")]
+use embassy_stm32::peripherals::TIM1;
+#[cfg(not(feature = "buck"))]
+use embassy_stm32::peripherals::TIM3;
 #[cfg(feature = "interface")]
 use embassy_stm32::peripherals::{PA2, PA3, USART2};
 use embassy_stm32::time::Hertz;
+#[cfg(feature = "buck")]
+use embassy_stm32::timer::complementary_pwm::{ComplementaryPwm, ComplementaryPwmPin, Ossi, Ossr};
 use embassy_stm32::timer::low_level::CountingMode;
-use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
+use embassy_stm32::timer::simple_pwm::PwmPin;
+#[cfg(not(feature = "buck"))]
+use embassy_stm32::timer::simple_pwm::SimplePwm;
 use embassy_stm32::Peri;
 use embassy_time::Timer;
 use hter::adc::SupplySense;
@@ -81,7 +95,11 @@ pub struct Board {
     /// The analog inputs: RTD, reference resistor, supply, switched rail, VREFINT.
     pub analog: Analog,
     /// SSR PWM timer.
+    #[cfg(not(feature = "buck"))]
     pub ssr: SimplePwm<'static, TIM3>,
+    /// The buck's half bridge (TIM1; TIM3 stays the sample clock, owned by [`Analog`]).
+    #[cfg(feature = "buck")]
+    pub buck: Buck,
     /// Supply-enable output.
     pub supply_enable: Output<'static>,
     /// Status LED.
@@ -171,8 +189,9 @@ pub fn watchdog_is_hardware() -> bool {
 }
 
 /// Drives the outputs safe from any context, through the registers alone: the SSR pin to a
-/// plain output at low with TIM3's channel 1 disabled, the supply enable low, the alarm on.
-/// Works before `init` too (it turns the GPIO clocks on).
+/// plain output at low with TIM3's channel 1 disabled (the `buck` build: both gate pins to plain
+/// outputs at low, TIM1's main output and both channel-1 outputs disabled), the supply enable
+/// low, the alarm on. Works before `init` too (it turns the GPIO clocks on).
 pub fn force_safe() {
     use pac::gpio::vals::Moder;
     pac::RCC.ahb2enr().modify(|w| {
@@ -181,10 +200,36 @@ pub fn force_safe() {
         w.set_gpiocen(true);
     });
     // Low first, then output mode: the pin never drives the old level as a plain output.
-    pac::GPIOA.bsrr().write(|w| w.set_br(6, true));
-    pac::GPIOA.moder().modify(|w| w.set_moder(6, Moder::OUTPUT));
-    // A write to a timer whose clock is off is ignored: harmless before `init`.
-    pac::TIM3.ccer().modify(|w| w.set_cce(0, false));
+    #[cfg(not(feature = "buck"))]
+    {
+        pac::GPIOA.bsrr().write(|w| w.set_br(6, true));
+        pac::GPIOA.moder().modify(|w| w.set_moder(6, Moder::OUTPUT));
+        // A write to a timer whose clock is off is ignored: harmless before `init`.
+        pac::TIM3.ccer().modify(|w| w.set_cce(0, false));
+    }
+    // Both gates low: the high side off cuts the module's supply, the low side off leaves no
+    // path for the module's Seebeck voltage to drive a reverse current (the inductor's current
+    // decays through the low side's body diode). Gates first, timer after: the pins stop
+    // following TIM1 at once, whatever state the timer is in.
+    #[cfg(feature = "buck")]
+    {
+        pac::GPIOA.bsrr().write(|w| {
+            w.set_br(BUCK_HIGH_PIN, true);
+            w.set_br(BUCK_LOW_PIN, true);
+        });
+        pac::GPIOA.moder().modify(|w| {
+            w.set_moder(BUCK_HIGH_PIN, Moder::OUTPUT);
+            w.set_moder(BUCK_LOW_PIN, Moder::OUTPUT);
+        });
+        // MOE off sends both outputs to their idle level (OSSI = 1, OIS1 = OIS1N = 0: low); the
+        // channel enables off as well, so a later MOE (the timer's automatic output enable is
+        // off) changes nothing. Ignored while TIM1's clock is off: harmless before `init`.
+        pac::TIM1.bdtr().modify(|w| w.set_moe(false));
+        pac::TIM1.ccer().modify(|w| {
+            w.set_cce(0, false);
+            w.set_ccne(0, false);
+        });
+    }
     pac::GPIOB.bsrr().write(|w| w.set_br(0, true));
     pac::GPIOB.moder().modify(|w| w.set_moder(0, Moder::OUTPUT));
     pac::GPIOC.bsrr().write(|w| w.set_bs(7, true));
@@ -227,6 +272,26 @@ pub fn init() -> Board {
     };
     let adc = Adc::new_with_config(p.ADC1, adc_config);
     let vrefint = adc.enable_vrefint();
+    #[cfg(feature = "buck")]
+    let buck = Buck::new(p.TIM1, p.PA8, p.PA7);
+
+    #[cfg(not(feature = "buck"))]
+    let ssr_pin = PwmPin::new(p.PA6, OutputType::PushPull);
+    // TIM3 is 16-bit and clocked at 80 MHz (APB1 ÷ 1): embassy picks the smallest prescaler that
+    // fits, PSC + 1 = 1221, ARR = 65520, a period of 1.000014 s and 65521 duty ticks.
+    #[cfg(not(feature = "buck"))]
+    let ssr =
+        SimplePwm::new(p.TIM3, Some(ssr_pin), None, None, None, Hertz(config::SSR_PWM_HZ), CountingMode::EdgeAlignedUp);
+    // embedded-hal's `SetDutyCycle` (behind `hter::hal::apply_duty`) counts duty in u16 and
+    // embassy unwraps ARR + 1 into it on every write: a clock change that gave ARR = 65535 would
+    // panic in the control path, so refuse it here, at boot.
+    #[cfg(not(feature = "buck"))]
+    defmt::assert!(ssr.max_duty_cycle() <= u32::from(u16::MAX), "SSR PWM: ARR + 1 must fit in u16");
+    // The buck build has no SSR: TIM3 counts the same 1 s period without a pin, as the sample
+    // clock.
+    #[cfg(feature = "buck")]
+    start_sample_clock();
+
     let analog = Analog {
         adc,
         rtd: p.PA0.degrade_adc(),
@@ -236,19 +301,12 @@ pub fn init() -> Board {
         vrefint,
     };
 
-    let ssr_pin = PwmPin::new(p.PA6, OutputType::PushPull);
-    // TIM3 is 16-bit and clocked at 80 MHz (APB1 ÷ 1): embassy picks the smallest prescaler that
-    // fits, PSC + 1 = 1221, ARR = 65520, a period of 1.000014 s and 65521 duty ticks.
-    let ssr =
-        SimplePwm::new(p.TIM3, Some(ssr_pin), None, None, None, Hertz(config::SSR_PWM_HZ), CountingMode::EdgeAlignedUp);
-    // embedded-hal's `SetDutyCycle` (behind `hter::hal::apply_duty`) counts duty in u16 and
-    // embassy unwraps ARR + 1 into it on every write: a clock change that gave ARR = 65535 would
-    // panic in the control path, so refuse it here, at boot.
-    defmt::assert!(ssr.max_duty_cycle() <= u32::from(u16::MAX), "SSR PWM: ARR + 1 must fit in u16");
-
     Board {
         analog,
+        #[cfg(not(feature = "buck"))]
         ssr,
+        #[cfg(feature = "buck")]
+        buck,
         // Low until the first good control step: no cooling before the loop runs.
         supply_enable: Output::new(p.PB0, Level::Low, Speed::Low),
         led: Output::new(p.PA5, Level::Low, Speed::Low),
@@ -498,4 +556,120 @@ enum Ain {
     Reference,
     Supply,
     Switched,
+}
+
+/// Starts TIM3 as the `buck` build's sample clock: the SSR build's period (PSC + 1 = 1221,
+/// ARR + 1 = 65521 at 80 MHz: 1.000014 s, what embassy's `SimplePwm` picks for
+/// `config::SSR_PWM_HZ`) with no channel and no pin, through the registers (a second embassy
+/// timer driver beside TIM1's costs ≈ 0.5 KB the 64 KiB budget does not have). [`Analog::sample`]
+/// waits on its update flag as in the SSR build.
+#[cfg(feature = "buck")]
+fn start_sample_clock() {
+    pac::RCC.apb1enr1().modify(|w| w.set_tim3en(true));
+    let tim = pac::TIM3;
+    tim.psc().write_value(1221 - 1);
+    tim.arr().write(|w| w.set_arr(65521 - 1));
+    // Load PSC and ARR now, then count.
+    tim.egr().write(|w| w.set_ug(true));
+    tim.cr1().write(|w| w.set_cen(true));
+}
+
+/// GPIOA pin of the buck's high-side gate (TIM1_CH1, AF1): [`force_safe`] drives it low.
+#[cfg(feature = "buck")]
+const BUCK_HIGH_PIN: usize = 8;
+/// GPIOA pin of the buck's low-side gate (TIM1_CH1N, AF1): [`force_safe`] drives it low.
+#[cfg(feature = "buck")]
+const BUCK_LOW_PIN: usize = 7;
+
+/// The synchronous buck's half bridge on TIM1 channel 1: CH1 (PA8) gates the high-side MOSFET,
+/// CH1N (PA7) the low-side one, complementary, with [`config::BUCK_DEAD_TIME_TICKS`] of dead time
+/// on each edge. Duty = the high side's on-time fraction = module voltage / supply, the
+/// controller's output as it is ([`hter::hal::apply_duty`] through `SetDutyCycle`).
+///
+/// Off states: duty 0 disables both outputs (driven at their inactive level, low: OSSR = 1);
+/// below [`config::BUCK_SYNC_MIN_DUTY`] the low side stays off and the inductor freewheels
+/// through its body diode (diode emulation: the module's Seebeck voltage can exceed duty ×
+/// supply there, and a conducting low side would let it drive the current backwards, heating
+/// the load); the high side is held below [`config::BUCK_MAX_DUTY`] so the bootstrap capacitor
+/// of the high-side driver recharges every period. With the main output off (MOE = 0, what
+/// [`force_safe`] sets) both gates sit at their idle level, low (OSSI = 1).
+#[cfg(feature = "buck")]
+pub struct Buck {
+    /// Never dropped (its drop would stop TIM1's clock with the gates wherever they were; the
+    /// actuation task owns it for good), so no drop code is linked.
+    _pwm: core::mem::ManuallyDrop<ComplementaryPwm<'static, TIM1>>,
+    /// The compare value of full duty (ARR + 1).
+    max: u16,
+    /// [`config::BUCK_MAX_DUTY`] in compare ticks.
+    ceiling: u16,
+    /// [`config::BUCK_SYNC_MIN_DUTY`] in compare ticks.
+    sync_min: u16,
+}
+
+#[cfg(feature = "buck")]
+impl Buck {
+    fn new(
+        tim: Peri<'static, TIM1>,
+        high: Peri<'static, embassy_stm32::peripherals::PA8>,
+        low: Peri<'static, embassy_stm32::peripherals::PA7>,
+    ) -> Self {
+        let high = PwmPin::new(high, OutputType::PushPull);
+        let low = ComplementaryPwmPin::new(low, OutputType::PushPull);
+        // TIM1 is clocked at 80 MHz (APB2 ÷ 1): 40 kHz is ARR = 1999, 2000 duty ticks of 12.5 ns.
+        let mut pwm = ComplementaryPwm::new(
+            tim,
+            Some(high),
+            Some(low),
+            None,
+            None,
+            None,
+            None,
+            None,
+            None,
+            Hertz(config::BUCK_PWM_HZ),
+            CountingMode::EdgeAlignedUp,
+        );
+        // Dead time in timer-clock ticks (embassy's `set_dead_time` picks CKD and DTG for it).
+        pwm.set_dead_time(config::BUCK_DEAD_TIME_TICKS);
+        pwm.set_off_state_selection_run(Ossr::IDLE_LEVEL);
+        pwm.set_off_state_selection_idle(Ossi::IDLE_LEVEL);
+        // Both gates off until the first actuation: embassy leaves CCER at its reset value (both
+        // outputs of every channel disabled, inactive level under OSSR = 1) and CCR1 at 0; the
+        // automatic output enable (AOE) stays at its reset value, off.
+        // Full duty is ARR + 1 compare ticks (2000 at 40 kHz); the duty's u16 (embedded-hal) holds
+        // it for any frequency above the 1.2 kHz where ARR would reach 65535.
+        let max = (u32::from(pac::TIM1.arr().read().arr()) + 1).min(u32::from(u16::MAX)) as u16;
+        let f = f32::from(max);
+        Buck {
+            _pwm: core::mem::ManuallyDrop::new(pwm),
+            max,
+            ceiling: (config::BUCK_MAX_DUTY * f) as u16,
+            sync_min: (config::BUCK_SYNC_MIN_DUTY * f) as u16,
+        }
+    }
+}
+
+#[cfg(feature = "buck")]
+impl embedded_hal::pwm::ErrorType for Buck {
+    type Error = core::convert::Infallible;
+}
+
+#[cfg(feature = "buck")]
+impl embedded_hal::pwm::SetDutyCycle for Buck {
+    fn max_duty_cycle(&self) -> u16 {
+        self.max
+    }
+
+    fn set_duty_cycle(&mut self, duty: u16) -> Result<(), Self::Error> {
+        // CCR1 and CCER through the registers: the compare value is clamped here (embassy's
+        // `set_duty` would re-read the period and assert on every write), and embassy's
+        // `enable` sets CC1E and CC1NE only together.
+        let tim = pac::TIM1;
+        tim.ccr(0).write(|w| w.set_ccr(duty.min(self.ceiling)));
+        tim.ccer().modify(|w| {
+            w.set_cce(0, duty > 0);
+            w.set_ccne(0, duty >= self.sync_min);
+        });
+        Ok(())
+    }
 }

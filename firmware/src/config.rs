@@ -107,6 +107,36 @@ pub const SAMPLE_PERIOD_MS: u64 = (CARRIER.ts_s * 1000.0) as u64;
 /// TIM3 at 80 MHz reaches it with prescaler 1221 and ARR 65520 (`board::init`).
 pub const SSR_PWM_HZ: u32 = 1;
 
+/// The `buck` build's switching frequency, Hz: ≥ 20 kHz (SPEC §10: above hearing, and a
+/// small inductor for ≤ 10 % ripple, README "The buck drive"); TIM1 at 80 MHz gives ARR = 1999,
+/// 2000 duty ticks (0.05 % of duty, 6 mV of module voltage at 12 V). At 40 kHz the gate charge
+/// and the edges cost ≈ 0.04 W (`hal-sim`'s `plant::buck::SWITCHING_W` budgets 0.1 W in all).
+#[cfg(feature = "buck")]
+pub const BUCK_PWM_HZ: u32 = 40_000;
+
+/// Dead time between one MOSFET turning off and the other turning on, TIM1 clock ticks of
+/// 12.5 ns: 20 = 250 ns, inserted by TIM1's dead-time generator on both edges. It covers a
+/// UCC27211-class driver's delay mismatch (≤ 10 ns) and the turn-off of a ≈ 20 nC MOSFET at a
+/// few amperes of gate current (≈ 50 ns) several times over; the body diode carries the 2 ×
+/// 250 ns per period (2 % at 40 kHz, ≈ 0.7 V × 1.5 A × 2 % ≈ 0.02 W).
+#[cfg(feature = "buck")]
+pub const BUCK_DEAD_TIME_TICKS: u16 = 20;
+
+/// Below this duty the buck runs without its low side (diode emulation): the module's Seebeck
+/// voltage αΔT reaches 0.053 V/K × 55 K ≈ 2.9 V at 43 °C ambient, 24 % of 12 V and 29 % of a
+/// 10 V sag, and with the low side on, a duty × supply below it would drive the current
+/// backwards (the module then heats the load). 0.30 covers both; the hold duties at 25–43 °C
+/// are 0.32–0.72 (hal-sim, buck), synchronous.
+#[cfg(feature = "buck")]
+pub const BUCK_SYNC_MIN_DUTY: f32 = 0.30;
+
+/// Highest high-side duty: the bootstrap capacitor of the high-side gate driver recharges only
+/// while the low side (or its body diode) conducts, so at least 2 % of each period (0.5 µs at
+/// 40 kHz, ≫ the capacitor's recharge time constant of ≈ 20 ns) stays with it; full cooling is
+/// then 0.98 × supply, a 2 % loss of top speed in a pull-down.
+#[cfg(feature = "buck")]
+pub const BUCK_MAX_DUTY: f32 = 0.98;
+
 /// Independent watchdog prescaler: LSI ÷ 256 (IWDG_PR = 6), the slowest, so the 12-bit reload
 /// reaches tens of seconds.
 pub const IWDG_PR: u8 = 6;

@@ -5,7 +5,7 @@
 //! initialises, restores what flash holds and spawns:
 //!
 //! ```text
-//! sample ──(t, counts, supply V)──► control ──(duty, supply, alarm)──► actuate ──► SSR PWM, supply enable, LEDs
+//! sample ──(t, counts, supply V)──► control ──(duty, supply, alarm)──► actuate ──► SSR PWM (or buck: TIM1 CH1/CH1N), supply enable, LEDs
 //!   every Ts                         Carrier::step, cold-chain Recorder, Annunciator
 //!                                     ├──(telemetry record)──► telemetry ──► defmt over RTT
 //!                                     └──(model every 4 h of trust, history hourly and at alarms)──► persist ──► flash
@@ -138,6 +138,7 @@ async fn main(spawner: Spawner) {
         config::BOR_LEVEL,
         power.supply_ok
     );
+    #[cfg(not(feature = "buck"))]
     info!(
         "hter firmware {}: Ts = {} s, setpoint {} °C, SSR PWM {} Hz ({} ticks)",
         env!("CARGO_PKG_VERSION"),
@@ -145,6 +146,15 @@ async fn main(spawner: Spawner) {
         config::SETPOINT_C,
         b.ssr.get_frequency().0,
         b.ssr.max_duty_cycle()
+    );
+    #[cfg(feature = "buck")]
+    info!(
+        "hter firmware {}: Ts = {} s, setpoint {} °C, buck PWM {} Hz ({} ticks)",
+        env!("CARGO_PKG_VERSION"),
+        config::CARRIER.ts_s,
+        config::SETPOINT_C,
+        config::BUCK_PWM_HZ,
+        embedded_hal::pwm::SetDutyCycle::max_duty_cycle(&b.buck)
     );
     // The persist task owns the flash: it restores both regions, then serves the writes.
     spawner.spawn(persist::persist(b.flash).unwrap());
@@ -158,7 +168,10 @@ async fn main(spawner: Spawner) {
     }
     spawner.spawn(sample(b.analog).unwrap());
     spawner.spawn(control(boot, b.heartbeat).unwrap());
+    #[cfg(not(feature = "buck"))]
     spawner.spawn(actuate(b.ssr, b.supply_enable, b.led, b.alarm).unwrap());
+    #[cfg(feature = "buck")]
+    spawner.spawn(actuate(b.buck, b.supply_enable, b.led, b.alarm).unwrap());
     spawner.spawn(acknowledge(b.button).unwrap());
     spawner.spawn(telemetry().unwrap());
     #[cfg(feature = "interface")]
@@ -406,6 +419,7 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
 }
 
 /// Applies each actuation to the SSR timer, the supply-enable switch and the indicators.
+#[cfg(not(feature = "buck"))]
 #[embassy_executor::task]
 async fn actuate(
     mut ssr: embassy_stm32::timer::simple_pwm::SimplePwm<'static, embassy_stm32::peripherals::TIM3>,
@@ -442,6 +456,44 @@ async fn actuate(
         }
     }
 }
+/// Applies each actuation to the buck's half bridge (TIM1), the supply-enable switch and the
+/// indicators: the SSR build's order, without the SSR's sampling-window quantisation (the buck
+/// switches at 40 kHz whatever the duty, and the 2.1 ms oversampled conversion averages 84 of
+/// its periods).
+#[cfg(feature = "buck")]
+#[embassy_executor::task]
+async fn actuate(
+    mut buck: board::Buck,
+    mut supply_enable: Output<'static>,
+    mut led: Output<'static>,
+    mut alarm: Output<'static>,
+) {
+    loop {
+        let a = ACTUATION.wait().await;
+        // Switch the supply first when cutting, last when enabling: the modules never see a
+        // duty the supervisor did not allow.
+        if !a.supply_enable {
+            supply_enable.set_low();
+        }
+        if apply_duty(&mut buck, a.duty).is_err() {
+            warn!("buck duty write failed");
+        }
+        if a.supply_enable {
+            supply_enable.set_high();
+        }
+        if a.supply_enable && a.duty.get() > 0.0 {
+            led.set_high();
+        } else {
+            led.set_low();
+        }
+        if a.alarm {
+            alarm.set_high();
+        } else {
+            alarm.set_low();
+        }
+    }
+}
+
 /// The user button acknowledges the alarm indicator (debounced by a 50 ms re-check).
 #[embassy_executor::task]
 async fn acknowledge(button: Input<'static>) {

@@ -74,6 +74,8 @@ pub struct CampaignSummary {
     pub missions: u64,
     /// Controller.
     pub controller: String,
+    /// How the modules were driven (`ssr` or `buck`).
+    pub drive: String,
     /// Seed of the first mission.
     pub seed: u64,
     /// Total time with the load below 0 °C over all missions, min.
@@ -125,10 +127,15 @@ pub struct CampaignSummary {
     pub wall_s: f64,
 }
 
-/// The replay command of one mission.
-pub fn replay_command(seed: u64, controller: ControllerChoice) -> String {
+/// The replay command of one mission: the same seed, controller and drive (`--drive` is named
+/// only when it is not the default SSR, so the SSR lines read as they always did).
+pub fn replay_command(seed: u64, controller: ControllerChoice, drive: sim::Drive) -> String {
     let c = clap::ValueEnum::to_possible_value(&controller).map_or("gpc".to_string(), |v| v.get_name().to_string());
-    format!("hter sim --mission-seed {seed} --controller {c} --json")
+    let d = match drive {
+        sim::Drive::Ssr => String::new(),
+        other => format!(" --drive {}", other.name()),
+    };
+    format!("hter sim --mission-seed {seed} --controller {c}{d} --json")
 }
 
 /// Runs one mission and judges it.
@@ -143,8 +150,14 @@ pub fn run_mission_on(seed: u64, controller: ControllerChoice, drive: sim::Drive
     Ok(mission::evaluate(&m, &out))
 }
 
-/// Summarizes judged missions.
-pub fn summarize(reports: &[MissionReport], controller: ControllerChoice, seed: u64, wall_s: f64) -> CampaignSummary {
+/// Summarizes judged missions run with `controller` on `drive`.
+pub fn summarize(
+    reports: &[MissionReport],
+    controller: ControllerChoice,
+    drive: sim::Drive,
+    seed: u64,
+    wall_s: f64,
+) -> CampaignSummary {
     let mut by_kind: BTreeMap<String, KindFigures> = Fault::ALL
         .into_iter()
         .filter(|f| f.spec().class != FaultClass::Nuisance)
@@ -173,7 +186,7 @@ pub fn summarize(reports: &[MissionReport], controller: ControllerChoice, seed: 
             details.push(FailureDetail {
                 seed: r.seed,
                 reasons: r.reasons.clone(),
-                replay: replay_command(r.seed, controller),
+                replay: replay_command(r.seed, controller, drive),
             });
         }
     }
@@ -184,6 +197,7 @@ pub fn summarize(reports: &[MissionReport], controller: ControllerChoice, seed: 
     CampaignSummary {
         missions: reports.len() as u64,
         controller: format!("{controller:?}").to_lowercase(),
+        drive: drive.name().to_string(),
         seed,
         freeze_minutes: sum(&|r| r.freeze_s) / 60.0,
         freeze_missions: reports.iter().filter(|r| r.freeze_s > 0.0).count() as u64,
@@ -245,7 +259,7 @@ pub fn run(a: &CampaignArgs) -> Result<()> {
         })
         .collect::<Result<_>>()?;
     pb.finish_and_clear();
-    let s = summarize(&reports, controller, a.seed, start.elapsed().as_secs_f64());
+    let s = summarize(&reports, controller, a.drive, a.seed, start.elapsed().as_secs_f64());
     if a.json {
         println!("{}", serde_json::to_string(&s)?);
         for f in &s.failure_details {
@@ -262,11 +276,12 @@ pub fn run(a: &CampaignArgs) -> Result<()> {
 
 fn print_table(s: &CampaignSummary) {
     println!(
-        "campaign: {} randomized 24 h missions (seeds {}…{}), controller {}, {:.1} s wall",
+        "campaign: {} randomized 24 h missions (seeds {}…{}), controller {}, {} drive, {:.1} s wall",
         s.missions,
         s.seed,
         s.seed + s.missions - 1,
         s.controller,
+        s.drive,
         s.wall_s
     );
     println!();
@@ -321,5 +336,22 @@ fn print_table(s: &CampaignSummary) {
         println!();
         println!("FAILED mission {}: {}", f.seed, f.reasons.join("; "));
         println!("  replay: {}", f.replay);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_replay_command_names_the_drive_it_ran_on() {
+        assert_eq!(
+            replay_command(116, ControllerChoice::Pi, sim::Drive::Ssr),
+            "hter sim --mission-seed 116 --controller pi --json"
+        );
+        assert_eq!(
+            replay_command(7, ControllerChoice::Gpc, sim::Drive::Buck),
+            "hter sim --mission-seed 7 --controller gpc --drive buck --json"
+        );
     }
 }

@@ -94,8 +94,8 @@ impl Drive {
 /// The buck drive's averaged model (see the module docs, "The buck drive").
 pub mod buck {
     /// Peak-to-peak ripple of the module current as a fraction of its mean: the §10 bound
-    /// (≤ 10 %), taken whole so the extra I²R is not understated (the LC filter of the README's
-    /// wiring section gives ≈ 1 %).
+    /// (≤ 10 %), taken whole so the extra I²R is not understated (the README's buck parts, 560 µH
+    /// and 220 µF at 40 kHz, leave the inductor 3.6–8.4 % at the hold points and the module ≈ 0.2 %).
     pub const RIPPLE: f64 = 0.10;
     /// Series resistance of the drive, Ω: one MOSFET conducting at a time (R_DS(on) ≈ 10 mΩ,
     /// e.g. a 30 V logic-level part at 4.5 V gate drive, hot) plus the inductor's DCR (≈ 30 mΩ)

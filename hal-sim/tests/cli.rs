@@ -254,6 +254,22 @@ fn a_campaign_mission_replays_with_hter_sim() {
 }
 
 #[test]
+fn a_buck_campaign_mission_replays_with_its_drive() {
+    // Mission 116 with PI fails on the buck drive too (≈ 18 min outside 2–8 °C); its replay line
+    // must name the drive, and running that line must show what the campaign judged.
+    let c = json(&["campaign", "--missions", "1", "--seed", "116", "--controller", "pi", "--drive", "buck", "--json"]);
+    assert_eq!(c["drive"], "buck", "{c}");
+    assert_eq!(c["failures"], serde_json::json!([116]), "{c}");
+    let replay = c["failure_details"][0]["replay"].as_str().unwrap();
+    assert_eq!(replay, "hter sim --mission-seed 116 --controller pi --drive buck --json");
+    let args: Vec<&str> = replay.split_whitespace().skip(1).collect();
+    let s = json(&args);
+    assert_eq!(c["worst_min_c"].as_f64(), s["min_temp_c"].as_f64(), "{c}\n{s}");
+    let ssr = json(&["sim", "--mission-seed", "116", "--controller", "pi", "--json"]);
+    assert_ne!(s["energy_wh"], ssr["energy_wh"], "the replay ran on the SSR: {s}\n{ssr}");
+}
+
+#[test]
 fn mission_and_hot_zone_scenarios_hold_2_to_8_after_pull_down() {
     let v = json(&["sim", "--scenario", "mission", "--controller", "gpc", "--json"]);
     assert!(v["min_temp_c"].as_f64().unwrap() >= 2.0, "{v}");

@@ -64,6 +64,9 @@ pub fn audit(features: &str) -> Result<()> {
     if features.split([',', ' ']).any(|f| f == "interface" || f == "serial") {
         findings.push(usart2_finding(&elf)?);
     }
+    if features.split([',', ' ']).any(|f| f == "buck") {
+        findings.push(buck_safe_finding(&elf));
+    }
     println!("audit of {}", path.display());
     for f in &findings {
         println!("  {:<22} {:<4} {}", f.key, if f.ok { "ok" } else { "FAIL" }, f.line);
@@ -82,7 +85,8 @@ pub struct Elf<'a> {
     bytes: &'a [u8],
     sections: Vec<Section>,
     segments: Vec<Segment>,
-    symbols: Vec<(String, u64)>,
+    /// (name, value, size).
+    symbols: Vec<(String, u64, u64)>,
 }
 
 #[derive(Debug, Clone)]
@@ -148,9 +152,9 @@ impl<'a> Elf<'a> {
             if ty == SHT_SYMTAB {
                 for k in 0..size / 16 {
                     let sym = offset + 16 * k;
-                    let (st_name, value) = (u32_at(sym)?, u32_at(sym + 4)?);
+                    let (st_name, value, size) = (u32_at(sym)?, u32_at(sym + 4)?, u32_at(sym + 8)?);
                     if st_name != 0 {
-                        symbols.push((name_at(link, st_name)?, value));
+                        symbols.push((name_at(link, st_name)?, value, size));
                     }
                 }
             }
@@ -179,7 +183,12 @@ impl<'a> Elf<'a> {
     }
 
     pub fn symbol(&self, name: &str) -> Option<u64> {
-        self.symbols.iter().find(|(n, _)| n == name).map(|s| s.1)
+        self.symbols.iter().find(|(n, _, _)| n == name).map(|s| s.1)
+    }
+
+    /// Address and size of the first symbol whose name contains every one of `parts`.
+    pub fn symbol_containing(&self, parts: &[&str]) -> Option<(u64, u64)> {
+        self.symbols.iter().find(|(n, _, _)| parts.iter().all(|p| n.contains(p))).map(|s| (s.1, s.2))
     }
 
     /// The vector table: the initial SP then one handler address per exception number.
@@ -344,6 +353,45 @@ pub fn usart2_finding(elf: &Elf) -> Result<Finding> {
     Ok(Finding { key: "usart2_handler", ok, line })
 }
 
+/// TIM1's register block on the STM32L476 (RM0351 memory map): the buck's half bridge.
+pub const TIM1_BLOCK: std::ops::Range<u64> = 0x4001_2C00..0x4001_3000;
+
+/// The `buck` build's safe outputs reach its gates: the routine every stop path calls first
+/// (`BoardOutputs::force_safe`, behind the library's `SafeOutputs`) holds an address inside
+/// TIM1's register block in its literal pool (the firmware clears TIM1's MOE and CC1E/CC1NE
+/// there, beside driving PA8/PA7 low). A build whose stop path forgot the half bridge would leave
+/// it switching at its last duty through a panic, a HardFault or a stall, with only the supply
+/// switch to stop the modules.
+pub fn buck_safe_finding(elf: &Elf) -> Finding {
+    let key = "buck_safe_outputs";
+    let Some((addr, size)) = elf.symbol_containing(&["BoardOutputs", "force_safe"]) else {
+        return Finding { key, ok: false, line: "no BoardOutputs::force_safe symbol in the image".into() };
+    };
+    let start = addr & !1;
+    let hit = elf.read(start, size).and_then(|code| {
+        // Literal-pool words are 4-byte aligned.
+        let skip = ((4 - start % 4) % 4) as usize;
+        code.get(skip..)?
+            .chunks_exact(4)
+            .map(|w| u64::from(u32::from_le_bytes([w[0], w[1], w[2], w[3]])))
+            .find(|w| TIM1_BLOCK.contains(w))
+    });
+    match hit {
+        Some(w) => Finding {
+            key,
+            ok: true,
+            line: format!("force_safe at {start:#010x} addresses TIM1 ({w:#010x}): the stop paths turn both gates off"),
+        },
+        None => Finding {
+            key,
+            ok: false,
+            line: format!(
+                "force_safe at {start:#010x} ({size} B) has no TIM1 address: a stop leaves the buck's half bridge switching"
+            ),
+        },
+    }
+}
+
 /// Whether `cargo tree -e features -i defmt-rtt` output shows the non-blocking feature.
 pub fn rtt_nonblocking(tree: &str) -> bool {
     tree.lines().any(|l| l.contains("defmt-rtt feature \"disable-blocking-mode\""))
@@ -441,18 +489,24 @@ mod tests {
     /// A minimal ELF32: a `.vector_table` and a `.text` section at the given addresses, one
     /// loaded segment per section, and a symbol table.
     fn elf(vectors: &[u32], text_addr: u32, text: &[u8], symbols: &[(&str, u32)]) -> Vec<u8> {
+        let sized: Vec<(&str, u32, u32)> = symbols.iter().map(|&(n, v)| (n, v, 0)).collect();
+        elf_sized(vectors, text_addr, text, &sized)
+    }
+
+    fn elf_sized(vectors: &[u32], text_addr: u32, text: &[u8], symbols: &[(&str, u32, u32)]) -> Vec<u8> {
         let vt: Vec<u8> = vectors.iter().flat_map(|w| w.to_le_bytes()).collect();
         let mut shstr = b"\0.vector_table\0.text\0.symtab\0.strtab\0.shstrtab\0".to_vec();
         shstr.push(0);
         let mut strtab = vec![0u8];
         let mut symtab = vec![0u8; 16];
-        for (name, value) in symbols {
+        for (name, value, size) in symbols {
             let at = strtab.len() as u32;
             strtab.extend_from_slice(name.as_bytes());
             strtab.push(0);
             let mut s = [0u8; 16];
             s[..4].copy_from_slice(&at.to_le_bytes());
             s[4..8].copy_from_slice(&value.to_le_bytes());
+            s[8..12].copy_from_slice(&size.to_le_bytes());
             symtab.extend_from_slice(&s);
         }
         let mut out = vec![0u8; 52];
@@ -604,6 +658,29 @@ mod tests {
         // A table too short for USART2 is an error, not a pass.
         let short = elf(&table(default, default, default), T, &code, &both);
         assert!(usart2_finding(&Elf::parse(&short).unwrap()).is_err());
+    }
+
+    #[test]
+    fn the_buck_stop_path_must_reach_tim1() {
+        // force_safe as the buck build links it, shortened: push; ldr r1, [pc, #4]; bic …; pop;
+        // then its literal pool (aligned), which holds TIM1_CCER (0x4001_2C20).
+        let mut code = halfwords(&[0xb580, 0x4901, 0xbd80, 0xbf00]);
+        code.extend_from_slice(&0x4001_2c20u32.to_le_bytes());
+        let name = "_ZN80_$LT$firmware..failsafe..BoardOutputs$u20$as$u20$hter..failsafe..SafeOutputs$GT$10force_safe17h0c63d009b50055fdE";
+        let f = |code: &[u8], symbols: &[(&str, u32, u32)]| {
+            buck_safe_finding(&Elf::parse(&elf_sized(&table(T, T, T), T, code, symbols)).unwrap())
+        };
+        let ok = f(&code, &[(name, T | 1, code.len() as u32)]);
+        assert!(ok.ok && ok.line.contains("0x40012c20"), "{}", ok.line);
+        // The SSR build's routine: TIM3 (0x4000_0400) only.
+        let mut ssr = halfwords(&[0xb580, 0x4901, 0xbd80, 0xbf00]);
+        ssr.extend_from_slice(&0x4000_0420u32.to_le_bytes());
+        let bad = f(&ssr, &[(name, T | 1, ssr.len() as u32)]);
+        assert!(!bad.ok && bad.line.contains("no TIM1 address"), "{}", bad.line);
+        // The literal past the symbol's end is not the routine's.
+        let short = f(&code, &[(name, T | 1, 8)]);
+        assert!(!short.ok, "{}", short.line);
+        assert!(!f(&code, &[("DefaultHandler", T | 1, 8)]).ok, "no force_safe symbol");
     }
 
     #[test]

@@ -14,14 +14,17 @@
 //! says which passed, and any `false` fails the command.
 //!
 //! `cargo xtask size` — the firmware's footprint: builds the release firmware once per
-//! controller (the default self-tuning GPC, then each controller feature), prints flash
+//! controller (the default self-tuning GPC, the same on the buck drive, then each controller
+//! feature), prints flash
 //! (allocated sections with contents: what is programmed) and static RAM (allocated sections
 //! in SRAM: .data, .bss, .uninit) for each, and ends with one JSON line. It exits non-zero when
 //! a build exceeds [`FLASH_BUDGET`] or [`RAM_BUDGET`].
 //!
 //! `cargo xtask audit` — the release firmware image's fail-safe properties ([`audit`]): fault
 //! handlers that do more than spin, defmt-rtt that cannot block, the program in flash bank 1;
-//! `cargo xtask audit --features interface` audits that build and checks USART2's handler is bound.
+//! `cargo xtask audit --features interface` audits that build and checks USART2's handler is bound;
+//! `cargo xtask audit --features buck` audits the buck build and checks that its safe-output
+//! routine writes TIM1's main-output and channel-enable registers.
 
 #[path = "../../pil/src/proto.rs"]
 #[allow(dead_code)]
@@ -49,8 +52,9 @@ const FLASH_BUDGET: u64 = 64 * 1024;
 const RAM_BUDGET: u64 = 16 * 1024;
 /// The firmware builds `size` reports: (cargo features, what they run, flash budget, static RAM
 /// budget).
-const FIRMWARE_BUILDS: [(&str, &str, u64, u64); 6] = [
+const FIRMWARE_BUILDS: [(&str, &str, u64, u64); 7] = [
     ("", "self-tuning GPC (default)", FLASH_BUDGET, RAM_BUDGET),
+    ("buck", "self-tuning GPC, buck drive", FLASH_BUDGET, RAM_BUDGET),
     ("igmvc", "self-tuning IGMVC", FLASH_BUDGET, RAM_BUDGET),
     ("pi", "PI", FLASH_BUDGET, RAM_BUDGET),
     ("onoff", "On-Off", FLASH_BUDGET, RAM_BUDGET),
