@@ -132,7 +132,8 @@ fn main() {
     println!("oracle on {plant} {load:?} at {ambient} °C (piecewise's steps, each from steady state)");
     let mut total = 0.0;
     for (from, to, samples) in [(4.0, 6.0, 112usize), (6.0, 3.0, 112), (3.0, 4.0, 116)] {
-        let segment_bound = the_bound.segments.iter().find(|g| g.from_c == from && g.to_c == to).map_or(f64::NAN, |g| g.iae);
+        let segment_bound =
+            the_bound.segments.iter().find(|g| g.from_c == from && g.to_c == to).map_or(f64::NAN, |g| g.iae);
         let (Some((mut p, _)), Some((_, u_w))) =
             (Plant::at_load_temperature(params, ambient, from), Plant::at_load_temperature(params, ambient, to))
         else {
@@ -146,7 +147,13 @@ fn main() {
         let mut crossed = false;
         for _ in 0..samples {
             crossed |= if down { q.load_temp_c() <= to } else { q.load_temp_c() >= to };
-            let d = if crossed { u_w } else if down { 1.0 } else { 0.0 };
+            let d = if crossed {
+                u_w
+            } else if down {
+                1.0
+            } else {
+                0.0
+            };
             u.push(d);
             run_sample(&mut q, d);
         }

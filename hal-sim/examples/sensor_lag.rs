@@ -7,12 +7,15 @@ use hal_sim::scenario::Scenario;
 use hal_sim::sim::{run, ControllerChoice, ControllerSpec, PlantChoice, SimOptions};
 
 fn main() -> anyhow::Result<()> {
-    for (name, params) in [("hter1 full", PlantParams::hter1(Load::Full)), ("hter1 half", PlantParams::hter1(Load::Half))] {
+    for (name, params) in
+        [("hter1 full", PlantParams::hter1(Load::Full)), ("hter1 half", PlantParams::hter1(Load::Half))]
+    {
         for (dead, tau) in [(20.0, 20.0), (10.0, 10.0), (0.0, 1.0)] {
             let mut p = params;
             p.dead_time_s = dead;
             p.rtd_tau_s = tau;
-            let mut opts = SimOptions::new(Scenario::built_in("piecewise").unwrap(), ControllerSpec::new(ControllerChoice::Gpc));
+            let mut opts =
+                SimOptions::new(Scenario::built_in("piecewise").unwrap(), ControllerSpec::new(ControllerChoice::Gpc));
             opts.plant = PlantChoice::Custom(p);
             let b = bound(&opts)?.iae;
             let mut ratios = Vec::new();
