@@ -24,7 +24,11 @@
 //!   guard (a hot day: full cooling barely wins) never trips the guard. Nothing asked for
 //!   10 min, 1 °C below the setpoint and still falling: the supply switch opens for 5 min
 //!   (harmless, no cooling is wanted). A shorted SSR stops cooling and the load turns up; a load
-//!   falling toward a cold ambient does not notice. One probe an hour at most.
+//!   falling toward a cold ambient does not notice. One probe an hour at most. A turn-up is a
+//!   short only when it comes again: the first closes the supply and lets a confirming probe
+//!   start 5 min later, once the load has fallen again with nothing asked; a turn-up at that
+//!   probe or the next is the verdict. A lid opened during a probe warms a light load as fast
+//!   as a short does, but not on cue twice.
 //! - **Stuck off** (`SsrMonitor::warms_at_full_duty`): full duty for 5 min and the load
 //!   warmed (fast), or for 15 min and it is warmer than when full duty began and still rising
 //!   (slow, a cool day).
@@ -153,7 +157,8 @@ pub struct ProbeConfig {
     /// 0.2–0.4 °C in 30 s once it stops (the hot side's heat flows back); a lid opening or a
     /// warmer ambient that happens to coincide warms it by ≤ 0.1 °C in 30 s.
     pub turn_up_c: f32,
-    /// At most one probe in this time, s (an hour).
+    /// At most one probe in this time, s (an hour), except the one that confirms a first
+    /// turn-up: it may start [`Self::open_s`] after it.
     pub interval_s: f32,
 }
 
@@ -234,6 +239,9 @@ struct Limits {
     probe_turn_up: usize,
     probe_open_ms: u32,
     probe_interval_ms: u32,
+    /// The confirming probe may start this long less than a probe interval after a first
+    /// turn-up ([`ProbeConfig::open_s`] after it).
+    probe_again_ms: u32,
 }
 
 /// The SSR monitor's state.
@@ -264,6 +272,8 @@ pub(crate) struct SsrMonitor {
     last_drop_c: f32,
     /// When the last supply probe began, ms.
     probe_ms: Option<u64>,
+    /// Probe starts left during which a turn-up confirms a first one (0: none to confirm).
+    confirm_left: u8,
 }
 
 impl SsrMonitor {
@@ -281,6 +291,7 @@ impl SsrMonitor {
             probe_turn_up: samples_u16(p.turn_up_window_s, ts_s) as usize,
             probe_open_ms: ms(p.open_s),
             probe_interval_ms: ms(p.interval_s),
+            probe_again_ms: ms(p.interval_s).saturating_sub(ms(p.open_s)),
         };
         SsrMonitor {
             n,
@@ -296,6 +307,7 @@ impl SsrMonitor {
             unrequested_trip_ms: None,
             last_drop_c: 0.0,
             probe_ms: None,
+            confirm_left: 0,
         }
     }
 
@@ -401,7 +413,15 @@ impl SsrMonitor {
         match under_way {
             Some(t0) => {
                 if self.ago(self.n.probe_turn_up).is_some_and(|past| temp_c - past > p.turn_up_c) {
-                    Probe::Shorted
+                    if self.confirm_left > 0 {
+                        return Probe::Shorted;
+                    }
+                    // The first: close the supply; the confirming probe and the next one
+                    // (counted down at their starts) may confirm it. The confirming one starts
+                    // once the supply has been closed as long as a probe opens it.
+                    self.confirm_left = 3;
+                    self.probe_ms = Some(t_ms.saturating_sub(u64::from(self.n.probe_again_ms)));
+                    Probe::End
                 } else if self.req_off_run == 0 || since(t_ms, t0) >= u64::from(self.n.probe_open_ms) {
                     Probe::End
                 } else {
@@ -414,6 +434,7 @@ impl SsrMonitor {
                     if let Some(past) = self.ago(self.n.probe_fall) {
                         if past - temp_c > p.fall_c {
                             self.probe_ms = Some(t_ms);
+                            self.confirm_left = self.confirm_left.saturating_sub(1);
                             return Probe::Start;
                         }
                     }
@@ -632,15 +653,58 @@ mod tests {
         assert_eq!(m.probe(&CFG.probe, 10_000, None, 3.0, 4.1), Probe::Keep, "one an hour");
         assert_eq!(m.probe(&CFG.probe, 10_000, Some(0), 3.0, 4.1), Probe::Keep);
         assert_eq!(m.probe(&CFG.probe, 300_000, Some(0), 3.0, 4.1), Probe::End, "five minutes");
-        // 0.2 °C up in 30 s: the supply was cooling.
+        // 0.2 °C up in 30 s: the supply was cooling, or a lid opened. A first turn-up ends the
+        // probe (what confirms it: the next test).
         m.remember(3.2);
-        assert_eq!(m.probe(&CFG.probe, 20_000, Some(0), 3.2, 4.1), Probe::Shorted);
+        assert_eq!(m.probe(&CFG.probe, 20_000, Some(0), 3.2, 4.1), Probe::End);
         // Cooling requested again ends it.
         m.applied(&CFG, Duty::OFF, 0.5, 3.0);
         m.remember(3.0);
         m.remember(3.0);
         m.remember(3.0);
         assert_eq!(m.probe(&CFG.probe, 30_000, Some(0), 3.0, 4.1), Probe::End);
+    }
+
+    /// A probe at `t_ms` (the load at 3 °C, setpoint 4.1 °C, falling 0.002 °C a sample, nothing
+    /// asked for 10 min): its start, and its verdict 5 min later with the load up 0.2 °C in
+    /// 30 s (`up`) or not.
+    fn probe_at(m: &mut SsrMonitor, t_ms: u64, up: bool) -> (Probe, Probe) {
+        for k in 0..31 {
+            m.remember(3.06 - 0.002 * k as f32);
+        }
+        apply(m, 60, Duty::OFF, 0.0, 3.0);
+        let start = m.probe(&CFG.probe, t_ms, None, 3.0, 4.1);
+        let t = if up { 3.2 } else { 3.0 };
+        m.remember(t);
+        (start, m.probe(&CFG.probe, t_ms + 300_000, Some(t_ms), t, 4.1))
+    }
+
+    /// Mission 20465 (`hter campaign --seed 20001`): a lid opened 49 s into a probe warmed a
+    /// light load 0.157 °C in 30 s. A turn-up is a short only when it comes again, at the
+    /// confirming probe (5 min after the first turn-up at the earliest) or at the next one.
+    #[test]
+    fn a_turn_up_is_a_short_when_the_confirming_probe_or_the_next_turns_up_too() {
+        const H: u64 = 3_600_000;
+        let (keep, start, end, shorted) = (Probe::Keep, Probe::Start, Probe::End, Probe::Shorted);
+        // Confirmed by the confirming probe.
+        let mut m = monitor();
+        assert_eq!(probe_at(&mut m, 2 * H, true), (start, end), "a first turn-up");
+        let again = 2 * H + 600_000;
+        assert_eq!(m.probe(&CFG.probe, again - 1, None, 3.0, 4.1), keep, "closed less than 5 min");
+        assert_eq!(probe_at(&mut m, again, true), (start, shorted));
+        // By the next one, an hour later.
+        let mut m = monitor();
+        assert_eq!(probe_at(&mut m, 2 * H, true), (start, end));
+        assert_eq!(probe_at(&mut m, again, false), (start, end));
+        assert_eq!(m.probe(&CFG.probe, again + H - 1, None, 3.0, 4.1), keep, "one an hour");
+        assert_eq!(probe_at(&mut m, again + H, true), (start, shorted));
+        // Not by the one after: that turn-up is a first again.
+        let mut m = monitor();
+        assert_eq!(probe_at(&mut m, 2 * H, true), (start, end));
+        assert_eq!(probe_at(&mut m, again, false), (start, end));
+        assert_eq!(probe_at(&mut m, again + H, false), (start, end));
+        assert_eq!(probe_at(&mut m, again + 2 * H, true), (start, end));
+        assert_eq!(probe_at(&mut m, again + 2 * H + 600_000, true), (start, shorted));
     }
 
     #[test]
