@@ -616,7 +616,7 @@ impl Buck {
         let high = PwmPin::new(high, OutputType::PushPull);
         let low = ComplementaryPwmPin::new(low, OutputType::PushPull);
         // TIM1 is clocked at 80 MHz (APB2 ÷ 1): 40 kHz is ARR = 1999, 2000 duty ticks of 12.5 ns.
-        let mut pwm = ComplementaryPwm::new(
+        let pwm = ComplementaryPwm::new(
             tim,
             Some(high),
             Some(low),
@@ -629,10 +629,17 @@ impl Buck {
             Hertz(config::BUCK_PWM_HZ),
             CountingMode::EdgeAlignedUp,
         );
-        // Dead time in timer-clock ticks (embassy's `set_dead_time` picks CKD and DTG for it).
-        pwm.set_dead_time(config::BUCK_DEAD_TIME_TICKS);
-        pwm.set_off_state_selection_run(Ossr::IDLE_LEVEL);
-        pwm.set_off_state_selection_idle(Ossi::IDLE_LEVEL);
+        // Dead time and the off states in one BDTR write (embassy's `set_dead_time` and the two
+        // `set_off_state_selection_*` are three read-modify-writes and a CKD/DTG search: flash the
+        // buck build does not have). CKD stays at its reset value, t_DTS = t_CK_INT, and a DTG
+        // below 128 is that many t_DTS ticks (RM0351, TIMx_BDTR.DTG[7:5] = 0xx), so DTG is the
+        // dead time in timer ticks.
+        const _: () = assert!(config::BUCK_DEAD_TIME_TICKS < 128, "DTG < 128 is the dead time in ticks");
+        pac::TIM1.bdtr().modify(|w| {
+            w.set_dtg(config::BUCK_DEAD_TIME_TICKS as u8);
+            w.set_ossr(Ossr::IDLE_LEVEL);
+            w.set_ossi(Ossi::IDLE_LEVEL);
+        });
         // Both gates off until the first actuation: embassy leaves CCER at its reset value (both
         // outputs of every channel disabled, inactive level under OSSR = 1) and CCR1 at 0; the
         // automatic output enable (AOE) stays at its reset value, off.

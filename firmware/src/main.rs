@@ -126,22 +126,22 @@ async fn main(spawner: Spawner) {
     };
     let fault = failsafe::take_reason();
     let b = board::init();
-    info!("reset cause: {}", reset);
     if let Some(f) = &fault {
         error!("board fault: {}", f);
     }
-    info!("watchdog: {}", if board::watchdog_is_hardware() { "hardware (option byte)" } else { "software" });
     let power = board::power_check();
-    info!(
-        "power: brown-out level {} (need {}), VDD above PVD: {}",
-        power.bor_level,
-        config::BOR_LEVEL,
-        power.supply_ok
-    );
+    let watchdog = if board::watchdog_is_hardware() { "hardware (option byte)" } else { "software" };
+    // One boot line (the reset, the watchdog, the power check, the firmware's settings): each
+    // defmt call costs flash, and the 64 KiB builds have none to spare.
     #[cfg(not(feature = "buck"))]
     info!(
-        "hter firmware {}: Ts = {} s, setpoint {} °C, SSR PWM {} Hz ({} ticks)",
+        "hter firmware {}: reset cause {}; watchdog {}; brown-out level {} (need {}), VDD above PVD: {}; Ts = {} s, setpoint {} °C, SSR PWM {} Hz ({} ticks)",
         env!("CARGO_PKG_VERSION"),
+        reset,
+        watchdog,
+        power.bor_level,
+        config::BOR_LEVEL,
+        power.supply_ok,
         config::CARRIER.ts_s,
         config::SETPOINT_C,
         b.ssr.get_frequency().0,
@@ -149,12 +149,16 @@ async fn main(spawner: Spawner) {
     );
     #[cfg(feature = "buck")]
     info!(
-        "hter firmware {}: Ts = {} s, setpoint {} °C, buck PWM {} Hz ({} ticks)",
+        "hter firmware {}: reset cause {}; watchdog {}; brown-out level {} (need {}), VDD above PVD: {}; Ts = {} s, setpoint {} °C, buck PWM {} Hz",
         env!("CARGO_PKG_VERSION"),
+        reset,
+        watchdog,
+        power.bor_level,
+        config::BOR_LEVEL,
+        power.supply_ok,
         config::CARRIER.ts_s,
         config::SETPOINT_C,
-        config::BUCK_PWM_HZ,
-        embedded_hal::pwm::SetDutyCycle::max_duty_cycle(&b.buck)
+        config::BUCK_PWM_HZ
     );
     // The persist task owns the flash: it restores both regions, then serves the writes.
     spawner.spawn(persist::persist(b.flash).unwrap());
