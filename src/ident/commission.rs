@@ -430,9 +430,9 @@ pub enum SignRule {
     /// ("the step response of a Peltier cooler seen through the RTD is monotone"); every b_i ≤ 0
     /// implies it but is stricter: two cooling lags in parallel have b1 > 0, and so have the
     /// output-error models of both carriers. A model of this rule passes the final check by
-    /// its own test (stable, b0 ≤ 0, slow mode cooling, gain in range), not by
-    /// [`plausible_model`], which refuses it while b1 > 0: the self-tuner would not trust it
-    /// and a board would not restore it as the code stands.
+    /// [`cabinet_plausible`] (two real stable lags, b0 ≤ 0, slow mode cooling, gain in range),
+    /// not by [`plausible_model`], which refuses it while b1 > 0: the self-tuner would not
+    /// trust it; a board keeps it as its cabinet model (the holdover's, its own record).
     Monotone,
 }
 
