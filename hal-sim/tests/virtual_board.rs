@@ -172,7 +172,7 @@ fn a_missing_port_is_one_line_and_non_zero() {
 
 #[test]
 fn identify_runs_to_completion_and_the_status_shows_the_new_model_and_adaptive_mode() {
-    // 3000×: the ≈ 5.3 h commissioning in well under a minute.
+    // 3000×: the ≈ 6.2 h commissioning (both models) in well under a minute.
     let b = Board::start("identify", &["--speed", "3000"]);
     b.wait_for("an hour at 4 °C", 30, |s| s["t_s"].as_f64().is_some_and(|t| t > 3600.0));
     let before = b.status()["model"].clone();
