@@ -61,7 +61,7 @@ pub mod key {
     pub const HISTORY: u8 = 3;
     /// [`super::SettingsRecord`].
     pub const SETTINGS: u8 = 4;
-    /// [`super::CabinetRecord`].
+    /// [`crate::persist::CabinetRecord`].
     pub const CABINET: u8 = 5;
 }
 
