@@ -94,19 +94,19 @@
 //! - RAM: the record is ỹ as i16 milli-°C (2 bytes/sample) and the PRBS level as one bit per
 //!   sample; samples where the step applied something else (the freeze guard) go to a table of
 //!   [`MAX_OVERRIDES`]. [`CAPACITY`] = 1600 samples covers the default 60 + 1524.
-//!   `size_of::<Commissioning>()` is 4 296 bytes on a 64-bit host (which a test checks; 3 984 on
-//!   the Cortex-M4F and 4 048 on the host before the cabinet model's candidates, +248 bytes); a
-//!   pass keeps ≈ 0.6 KiB of sums on the stack.
+//!   `size_of::<Commissioning>()` is 4 232 bytes on the Cortex-M4F (4 296 on a 64-bit host, which
+//!   a test checks; the cabinet model's candidates added 248); a pass keeps ≈ 0.6 KiB of sums on
+//!   the stack.
 //! - Per sample in Rest and Excite: at most 303 instructions.
 //! - Per sample in Fit: **one pass** over the N stored samples: per sample the two lags (4
 //!   flops), then for each of the 10 delays the free response (3), the error (1) and six
 //!   multiply-adds (12): ≈ 165 flops, ≈ 2.6·10⁵ flops per pass for N = 1584. Measured on the
 //!   emulated Cortex-M4F (`pil/src/bin/commission.rs`, QEMU mps2-an386 `-icount`, the firmware's
-//!   build profile): 633 293 instructions per pass at most (mean 631 375), ≈ 8 ms at 80 MHz,
-//!   against Ts = 10 s (the GPC step is ≈ 4 800); the second cone adds ten 2×2 solutions per
-//!   pass. The fit takes at most [`MAX_FIT_PASSES`] samples (28 grid + 2 × (3 × 120 + 1) = 750,
-//!   125 min at Ts = 10 s; 389 for one model); on the simulated carriers 595–683 for both
-//!   models (286–333 for the control model alone).
+//!   build profile): 632 088 instructions per pass at most (mean 629 733) with both cones (ten
+//!   more 2×2 solutions per pass; 633 293 / 631 375 measured with one), ≈ 8 ms at 80 MHz,
+//!   against Ts = 10 s (the GPC step is ≈ 4 800). The fit takes at most [`MAX_FIT_PASSES`]
+//!   samples (28 grid + 2 × (3 × 120 + 1) = 750, 125 min at Ts = 10 s; 389 for one model); on
+//!   the simulated carriers 595–683 for both models (286–333 for the control model alone).
 //! - Whole run, default settings: 60 + 1524 + (595…683) ≈ 2179–2267 samples (≈ 6.1–6.3 h at
 //!   Ts = 10 s), at most 1584 + 750 = 2334.
 //!
