@@ -28,7 +28,9 @@ use crate::control::adaptive::{plausible_model, AdaptiveConfig, SelfTuning};
 use crate::control::{ControlError, ControlInput, Controller, ControllerStatus, OnOff, OnOffConfig, Pi};
 use crate::event::EventKind;
 use crate::failsafe::StopInfo;
-use crate::ident::commission::{CommissionConfig, CommissionError, Commissioning, Phase};
+use crate::ident::commission::{
+    cabinet_plausible, CommissionConfig, CommissionError, Commissioning, Implausibility, Phase,
+};
 use crate::iface::num::Fixed;
 use crate::iface::{Command, Law, Refusal, SetRequest, Why, HELP};
 use crate::model::Model;
@@ -67,6 +69,10 @@ pub struct Boot {
     pub calibration: TwoPoint,
     /// The self-tuner's configuration restarted from the stored model, if one was stored.
     pub adaptive: Option<AdaptiveConfig>,
+    /// The stored cabinet model (the holdover's), if a valid record was found. Only builds with
+    /// the holdover estimate keep one.
+    #[cfg(feature = "holdover")]
+    pub cabinet: Option<Model>,
     /// The history carried in.
     pub history: HistoryRecord,
     /// The newest log entry's record time, s (0 for an empty log).
@@ -223,6 +229,8 @@ pub struct App {
     duty_avg: f32,
     /// The last commissioning's end, for `status` until the next one starts.
     commissioned: Option<Result<(), CommissionError>>,
+    /// The cabinet model (commissioned or uploaded; the holdover's), if the carrier has one.
+    cabinet: Option<Model>,
 }
 
 /// Weight of one sample in [`App`]'s duty average: a 5-minute time constant at Ts = 10 s.
@@ -248,8 +256,14 @@ impl App {
         let ts_s = cfg.carrier.get().ts_s;
         let controller = build(settings.law, &adaptive, ts_s, cfg.adaptive.fallback.bias);
         let mut carrier = Carrier::new(cfg.carrier.with_calibration(cal), controller);
-        // The holdover runs on the stored (commissioned) model, whatever law drives.
-        carrier.set_holdover_model(adaptive.initial);
+        #[cfg(feature = "holdover")]
+        let cabinet = boot.cabinet;
+        #[cfg(not(feature = "holdover"))]
+        let cabinet = None;
+        // The holdover runs on the cabinet model, whatever law drives; without one on the build's
+        // start model, never on the self-tuner's saved estimate (README "Holdover": its slow
+        // mode drifts while it holds a constant setpoint).
+        carrier.set_holdover_model(cabinet.or(cfg.adaptive.initial));
         carrier.note_reset(boot.reset);
         let mut recorder = Recorder::new(boot.history, cfg.history_save_samples);
         let mut app_saves = heapless::Deque::new();
@@ -282,6 +296,7 @@ impl App {
             ack_pending: false,
             duty_avg: cfg.adaptive.fallback.bias,
             commissioned: None,
+            cabinet,
         }
     }
 
@@ -306,11 +321,26 @@ impl App {
         self.outbox.pop_front()
     }
 
-    /// `m` (checked by the caller) becomes the model the self-tuner starts from and the one the
-    /// holdover estimate runs on.
-    fn adopt_model(&mut self, m: Model) {
+    /// `m` (checked by the caller with [`plausible_model`]) becomes the model the self-tuner
+    /// starts from (the caller stores it in the model record).
+    fn adopt_control(&mut self, m: Model) {
         self.adaptive = self.adaptive.restored_from(m);
+    }
+
+    /// `m` (checked by the caller with [`cabinet_plausible`]) becomes the cabinet model: the
+    /// holdover estimate's, stored in its own record.
+    fn adopt_cabinet(&mut self, m: Model) {
+        self.cabinet = Some(m);
         self.carrier.set_holdover_model(Some(m));
+        #[cfg(feature = "holdover")]
+        if let Some(rec) = crate::persist::CabinetRecord::from_model(&m) {
+            self.save(Save::Cabinet(rec));
+        }
+    }
+
+    /// The cabinet model, if the carrier has one.
+    pub fn cabinet(&self) -> Option<Model> {
+        self.cabinet
     }
 
     fn save(&mut self, save: Save) {
@@ -498,25 +528,36 @@ impl App {
         Ok(())
     }
 
+    /// `set model`: the carrier's cabinet model (the holdover's, its own record), checked as a
+    /// commissioned one is ([`cabinet_plausible`]); if the self-tuner would trust it too (every
+    /// b_i ≤ 0, [`plausible_model`]) the self-tuner restarts from it and it is stored as the
+    /// model record as well.
     fn set_model(&mut self, m: Model, t_s: u32) -> Result<(), Refusal> {
         let refuse = |why| Err(Refusal { what: "model", why: Why::Model(why) });
         if !m.a_is_stable() {
             return refuse("A is not stable (a root on or outside the unit circle)");
         }
-        if m.b().iter().any(|&b| b > 0.0) || m.b().iter().all(|&b| b == 0.0) {
-            return refuse("B does not cool (every b_i must be <= 0, not all 0)");
-        }
-        if !plausible_model(&self.adaptive, &m) {
-            return refuse("static gain outside the self-tuner's plausible range");
+        match cabinet_plausible(&self.adaptive, &m) {
+            Ok(()) => {}
+            Err(Implausibility::Gain) => return refuse("static gain outside the self-tuner's plausible range"),
+            Err(Implausibility::Unstable) => return refuse("not a second-order model with a stable A"),
+            Err(_) => {
+                return refuse(
+                    "not a monotone cooling (A two real lags, b0 <= 0, the slow lag cooling: b0*p1 + b1 <= 0)",
+                )
+            }
         }
         let Some(rec) = ModelRecord::from_model(&m) else { return refuse("not a second-order model") };
-        self.adopt_model(m);
-        if matches!(self.settings.law, Law::Gpc | Law::Igmvc) && !self.commissioning() {
-            let ctl = build(self.settings.law, &self.adaptive, self.cfg.carrier.get().ts_s, self.applied());
-            *self.carrier.controller_mut() = ctl;
+        self.adopt_cabinet(m);
+        if plausible_model(&self.adaptive, &m) {
+            self.adopt_control(m);
+            if matches!(self.settings.law, Law::Gpc | Law::Igmvc) && !self.commissioning() {
+                let ctl = build(self.settings.law, &self.adaptive, self.cfg.carrier.get().ts_s, self.applied());
+                *self.carrier.controller_mut() = ctl;
+            }
+            self.save(Save::Model(rec));
         }
         let gain = m.static_gain().unwrap_or(f32::NAN);
-        self.save(Save::Model(rec));
         self.save(Save::Log(LogEntry::Setting { t_s, key: SettingKey::Model, value: [gain, m.k() as f32] }));
         Ok(())
     }
@@ -556,13 +597,18 @@ impl App {
         let BoardController::Commission(c) = self.carrier.controller_mut() else { return };
         c.abort_on_mode(mode);
         let Some(outcome) = c.outcome() else { return };
+        let cabinet = c.cabinet();
         let t_s = self.record_s(self.last_t_ms);
         let ts_s = self.cfg.carrier.get().ts_s;
         let law = match outcome {
             Ok(m) => match ModelRecord::from_model(&m) {
                 Some(rec) if plausible_model(&self.adaptive, &m) => {
-                    self.adopt_model(m);
+                    // The control model for the self-tuner, the cabinet model for the holdover.
+                    self.adopt_control(m);
                     self.save(Save::Model(rec));
+                    if let Some(cab) = cabinet {
+                        self.adopt_cabinet(cab);
+                    }
                     self.commissioned = Some(Ok(()));
                     // The build's self-tuner continues from the new model.
                     self.cfg
@@ -632,6 +678,21 @@ impl App {
                 )?;
             }
             _ => out.write_str("model_a=-\r\nmodel_b=-\r\nmodel_k=-\r\n")?,
+        }
+        match self.cabinet {
+            Some(m) => {
+                let (a, b) = (m.a(), m.b());
+                write!(
+                    out,
+                    "cabinet_a={},{}\r\ncabinet_b={},{}\r\ncabinet_k={}\r\n",
+                    Fixed(a[0], 6),
+                    Fixed(a[1], 6),
+                    Fixed(b[0], 6),
+                    Fixed(b[1], 6),
+                    m.k()
+                )?;
+            }
+            None => out.write_str("cabinet_a=-\r\ncabinet_b=-\r\ncabinet_k=-\r\n")?,
         }
         let h = self.recorder.history();
         let resets: u32 = [ResetCause::Watchdog, ResetCause::BrownOut, ResetCause::Other]

@@ -24,6 +24,7 @@ use crate::coldchain::{AlarmKind, ColdChainMonitor, Excursion, Raised, Side};
 use crate::control::adaptive::{model_from_theta, plausible_model, AdaptiveConfig};
 use crate::control::{AdaptiveMode, Controller};
 use crate::failsafe::{StopInfo, StopKind};
+use crate::ident::commission::cabinet_plausible;
 use crate::model::{Model, MAX_K};
 
 #[cfg(feature = "persist-flash")]
@@ -247,6 +248,71 @@ impl ModelRecord {
     /// `cfg` restarted from this record ([`AdaptiveConfig::restored_from`]), or why not.
     pub fn restore(&self, cfg: &AdaptiveConfig) -> Result<AdaptiveConfig, DecodeError> {
         self.to_model(cfg).map(|m| cfg.restored_from(m))
+    }
+}
+
+/// The carrier's cabinet model: the best-fitting model of its own commissioning run (the
+/// monotone-step rule), or one uploaded with `set model`; what the holdover estimate runs on
+/// (README "Holdover"). A record of its own: the self-tuner's periodic save
+/// ([`ModelCadence`], [`ModelRecord`]) never overwrites it.
+///
+/// Layout v1, 23 bytes: `'K'`, 1, a1 a2 b0 b1 (f32 LE), k (u8), CRC-32. On decode the model
+/// must pass exactly what it passed when accepted: finite, 1 ≤ k ≤ [`MAX_K`] and
+/// [`cabinet_plausible`] (two real stable lags, a monotone cooling step response, a static
+/// gain in the configured range).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct CabinetRecord {
+    /// θ = [a1 a2 b0 b1].
+    pub theta: [f32; 4],
+    /// Delay, samples (1 … [`MAX_K`]).
+    pub k: u8,
+}
+
+impl CabinetRecord {
+    /// Kind tag.
+    pub const TAG: u8 = b'K';
+    /// Layout version written by this firmware.
+    pub const VERSION: u8 = 1;
+    /// Encoded length, bytes.
+    pub const LEN: usize = 2 + 4 * 4 + 1 + 4;
+
+    /// The record of a second-order model; `None` for other orders.
+    pub fn from_model(m: &Model) -> Option<Self> {
+        ModelRecord::from_model(m).map(|r| CabinetRecord { theta: r.theta, k: r.k })
+    }
+
+    /// The bytes to store.
+    pub fn encode(&self) -> [u8; Self::LEN] {
+        let mut buf = [0u8; Self::LEN];
+        let mut w = Writer::new(&mut buf, Self::TAG, Self::VERSION);
+        for x in self.theta {
+            w.f32(x);
+        }
+        w.put(&[self.k]);
+        w.finish();
+        buf
+    }
+
+    /// Parses stored bytes and checks the model as an upload is checked, with the gain range of
+    /// `cfg` (the build's self-tuner configuration).
+    pub fn decode(bytes: &[u8], cfg: &AdaptiveConfig) -> Result<Model, DecodeError> {
+        let mut r = open_frame(bytes, Self::LEN, Self::TAG, Self::VERSION)?;
+        let mut theta = [0.0f32; 4];
+        for x in theta.iter_mut() {
+            *x = r.f32();
+            if !x.is_finite() {
+                return Err(DecodeError::NonFinite);
+            }
+        }
+        let k = r.u8();
+        if k == 0 || usize::from(k) > MAX_K {
+            return Err(DecodeError::OutOfRange);
+        }
+        let m = Model::second_order([theta[0], theta[1]], [theta[2], theta[3]], usize::from(k))
+            .map_err(|_| DecodeError::OutOfRange)?;
+        cabinet_plausible(cfg, &m).map_err(|_| DecodeError::Implausible)?;
+        Ok(m)
     }
 }
 

@@ -207,6 +207,11 @@ impl<C: Controller> Carrier<C> {
         self.holdover_model = model;
     }
 
+    /// The model the holdover estimate runs on.
+    pub fn holdover_model(&self) -> Option<crate::model::Model> {
+        self.holdover_model
+    }
+
     /// The configuration.
     pub fn config(&self) -> &CarrierConfig {
         &self.cfg

@@ -11,10 +11,13 @@
 //!   carriers' fast mode (`SignRule::Monotone`, b1 > 0). With the board's default rule (every
 //!   b_i ≤ 0) H-TER II meets it at both loads; H-TER I does not (its fit comes out first order
 //!   plus delay, too slow in the first minutes) and is not tested here.
+//! - As the board does it (one run, two models: the self-tuner starts from the every-b_i ≤ 0
+//!   control model, the holdover runs on the monotone cabinet model,
+//!   [`hal_sim::commission::commission_board`]): all twelve meet it.
 //!
 //! The runs print their table (`--nocapture`).
 
-use hal_sim::commission::commission;
+use hal_sim::commission::{commission, commission_board};
 use hal_sim::plant::Load;
 use hal_sim::scenario::Scenario;
 use hal_sim::sim::{run, ControllerChoice, ControllerSpec, PlantChoice, SimOptions};
@@ -24,13 +27,20 @@ use hter::model::Model;
 /// The largest error allowed, as a fraction of the actual holdover.
 const TOLERANCE: f64 = 0.15;
 
+/// The self-tuner's start and the holdover's model (the carrier's start model when `None`).
+type Stored = (Option<Model>, Option<Model>);
+
+/// One model for both, as `hter sim --commission RULE`: the self-tuner's start if it trusts it.
+fn one(m: Option<Model>) -> Stored {
+    (m.filter(|m| hter::control::adaptive::plausible_model(&hter::profile::ADAPTIVE_GPC, m)), m)
+}
+
 /// (predicted, actual) holdover, s, of `power-cut` on `plant` at `load` and `ambient_c`, the
-/// holdover running on `stored` (the start model of the carrier when `None`).
-fn power_cut(plant: PlantChoice, load: Load, ambient_c: f64, stored: Option<Model>) -> (f64, f64) {
+/// self-tuner starting from and the holdover running on `stored`.
+fn power_cut(plant: PlantChoice, load: Load, ambient_c: f64, (initial, holdover): Stored) -> (f64, f64) {
     let mut spec = ControllerSpec::new(ControllerChoice::Gpc);
-    // As `hter sim --commission`: a model the self-tuner trusts is also its start.
-    spec.initial = stored.filter(|m| hter::control::adaptive::plausible_model(&hter::profile::ADAPTIVE_GPC, m));
-    spec.holdover = stored;
+    spec.initial = initial;
+    spec.holdover = holdover;
     let opts = SimOptions { plant, load, ambient_c, ..SimOptions::new(Scenario::resolve("power-cut").unwrap(), spec) };
     let h = run(&opts).unwrap().metrics.holdover.expect("a power-cut run reports its holdover");
     (h.predicted_s.expect("an estimate before the cut"), h.actual_s.expect("the load passed 8 °C"))
@@ -44,11 +54,7 @@ fn name(plant: PlantChoice) -> &'static str {
 }
 
 /// Runs every case in parallel (each is independent) and checks each against [`TOLERANCE`].
-fn check(
-    what: &str,
-    cases: &[(PlantChoice, Load, f64)],
-    stored: impl Fn(PlantChoice, Load, f64) -> Option<Model> + Sync,
-) {
+fn check(what: &str, cases: &[(PlantChoice, Load, f64)], stored: impl Fn(PlantChoice, Load, f64) -> Stored + Sync) {
     let results: Vec<(f64, f64)> = std::thread::scope(|s| {
         let handles: Vec<_> = cases
             .iter()
@@ -93,21 +99,36 @@ fn cases(plants: &[PlantChoice], loads: &[Load]) -> Vec<(PlantChoice, Load, f64)
 
 #[test]
 fn the_stored_full_load_model_is_within_15_percent_at_full_load() {
-    check("start model", &cases(&[PlantChoice::Hter1, PlantChoice::Hter2], &[Load::Full]), |_, _, _| None);
+    check("start model", &cases(&[PlantChoice::Hter1, PlantChoice::Hter2], &[Load::Full]), |_, _, _| (None, None));
 }
 
-/// The carrier commissioned where it runs (its load and ambient), then cut.
-fn commissioned(sign: SignRule) -> impl Fn(PlantChoice, Load, f64) -> Option<Model> + Sync {
-    move |p, l, a| {
-        let params = SimOptions {
-            plant: p,
-            load: l,
-            ..SimOptions::new(Scenario::resolve("power-cut").unwrap(), ControllerSpec::new(ControllerChoice::Gpc))
-        }
-        .plant_params()
-        .unwrap();
-        Some(commission(params, a, 1, sign).expect("commissioning succeeds"))
+fn params(p: PlantChoice, l: Load) -> hal_sim::plant::PlantParams {
+    SimOptions {
+        plant: p,
+        load: l,
+        ..SimOptions::new(Scenario::resolve("power-cut").unwrap(), ControllerSpec::new(ControllerChoice::Gpc))
     }
+    .plant_params()
+    .unwrap()
+}
+
+/// The carrier commissioned where it runs (its load and ambient) with one sign rule, then cut.
+fn commissioned(sign: SignRule) -> impl Fn(PlantChoice, Load, f64) -> Stored + Sync {
+    move |p, l, a| one(Some(commission(params(p, l), a, 1, sign).expect("commissioning succeeds")))
+}
+
+/// The carrier commissioned where it runs as the board's App does: the control model for the
+/// self-tuner, the cabinet model for the holdover (`hter sim --commission board`).
+#[test]
+fn commissioned_by_the_board_every_case_is_within_15_percent() {
+    check(
+        "commissioned (board: control + cabinet model)",
+        &cases(&[PlantChoice::Hter1, PlantChoice::Hter2], &[Load::Full, Load::Half]),
+        |p, l, a| {
+            let c = commission_board(params(p, l), a, 1).expect("commissioning succeeds");
+            (Some(c.control), Some(c.cabinet))
+        },
+    );
 }
 
 #[test]

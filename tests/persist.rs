@@ -590,6 +590,80 @@ fn a_power_cut_anywhere_in_a_settings_write_leaves_the_old_or_the_new_settings()
     assert!(saw_old > 0 && saw_new > 0, "the sweep covers both outcomes: {saw_old} / {saw_new}");
 }
 
+/// The cabinet model (the holdover's, its own record, issue 16): H-TER I's monotone model with
+/// b1 > 0, which the self-tuner's model record would refuse.
+fn cabinet(a1: f32, b1: f32) -> hter::model::Model {
+    hter::model::Model::second_order([a1, 0.939_181], [-0.279_814, b1], 9).unwrap()
+}
+
+#[test]
+fn a_power_cut_anywhere_in_a_cabinet_model_write_leaves_the_old_or_the_new_one() {
+    use hter::persist::CabinetRecord;
+    let (old, new) = (cabinet(-1.938_996, 0.271_719), cabinet(-1.938_5, 0.271_2));
+    let rec = |m| CabinetRecord::from_model(&m).unwrap();
+    let model = ModelRecord::from_model(&START_MODEL_HTER1).unwrap();
+    let mut store = open(MockFlash::<L4_PAGE>::blank(4), 4);
+    let h = HistoryRecord { recorded_s: 1, ..HistoryRecord::EMPTY };
+    for _ in 0..30 {
+        block_on(store.save_history(&h)).unwrap();
+        // The self-tuner's periodic save has its own key: it never replaces the cabinet model.
+        block_on(store.save_model(&model)).unwrap();
+    }
+    block_on(store.save_cabinet(&rec(old))).unwrap();
+    block_on(store.save_model(&model)).unwrap();
+    let image = store.release().bytes;
+    let ops = {
+        let mut f = MockFlash::<L4_PAGE>::blank(4);
+        f.bytes = image.clone();
+        let mut s = open(f, 4);
+        assert_eq!(block_on(s.load_cabinet(&gpc())), Ok(old), "the model save left the cabinet model");
+        block_on(s.save_cabinet(&rec(new))).unwrap();
+        s.release().ops
+    };
+    let (mut saw_old, mut saw_new) = (0, 0);
+    for tear in [Tear::Ecc, Tear::Readable] {
+        for cut in 0..=ops {
+            let mut f = MockFlash::<L4_PAGE>::blank(4);
+            f.bytes = image.clone();
+            f.tear = tear;
+            f.cut_after(cut);
+            let mut s = open(f, 4);
+            let written = block_on(s.save_cabinet(&rec(new))).is_ok();
+            let mut s = reboot(s, 4);
+            block_on(s.scrub()).unwrap();
+            match block_on(s.load_cabinet(&gpc())) {
+                Ok(m) if m == new => saw_new += 1,
+                Ok(m) if m == old => {
+                    assert!(!written, "{tear:?} cut {cut}: a completed write must be read back");
+                    saw_old += 1
+                }
+                other => panic!("{tear:?} cut {cut}: {other:?}"),
+            }
+            assert_eq!(block_on(s.load_model_record()), Ok(model), "{tear:?} cut {cut}: the model record survives");
+            assert_eq!(block_on(s.load_history()).value.recorded_s, 1, "{tear:?} cut {cut}: the history survives");
+            assert_eq!(s.release().torn_words(), 0, "{tear:?} cut {cut}: no ECC damage left behind");
+        }
+    }
+    assert!(saw_old > 0 && saw_new > 0, "the sweep covers both outcomes: {saw_old} / {saw_new}");
+}
+
+#[test]
+fn a_stored_cabinet_model_is_checked_on_restore_as_an_upload_is() {
+    use hter::persist::CabinetRecord;
+    let mut store = open(MockFlash::<L4_PAGE>::blank(4), 4);
+    assert_eq!(block_on(store.load_cabinet(&gpc())), Err(LoadStatus::Missing));
+    // The slow lag heats (b0·p1 + b1 > 0): refused as `set model` refuses it.
+    let heating = CabinetRecord { theta: [-1.94, 0.9401, -0.02, 0.0201], k: 9 };
+    block_on(store.save_cabinet(&heating)).unwrap();
+    assert_eq!(block_on(store.load_cabinet(&gpc())), Err(LoadStatus::Invalid(DecodeError::Implausible)));
+    let good = cabinet(-1.938_996, 0.271_719);
+    block_on(store.save_cabinet(&CabinetRecord::from_model(&good).unwrap())).unwrap();
+    let mut store = reboot(store, 4);
+    let restored = block_on(hter::persist::flash::restore_records(&mut store, Some(gpc())));
+    assert_eq!(restored.cabinet, Err(LoadStatus::Missing), "the build without the interface keeps none");
+    assert_eq!(block_on(store.load_cabinet(&gpc())), Ok(good));
+}
+
 fn entry(i: u32) -> LogEntry {
     let c = 4.0 + (i % 50) as f32 * 0.01;
     LogEntry::Interval {

@@ -155,6 +155,8 @@ fn log_status(what: &str, status: LoadStatus) {
 /// The boot log of what was restored.
 fn report(r: &Restored) {
     log_status("settings", r.settings.err().unwrap_or(LoadStatus::Restored));
+    #[cfg(feature = "interface")]
+    log_status("cabinet model", r.cabinet.err().unwrap_or(LoadStatus::Restored));
     log_status("calibration", r.calibration.status);
     log_status("cold-chain history", r.history.status);
     if let Some(a) = r.adaptive {
@@ -250,6 +252,8 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
                 (Ok(()), Save::History(_) | Save::AlarmHistory(_)) => info!("persist: history stored"),
                 (Ok(()), Save::Settings(s)) => info!("persist: settings v{} stored", s.seq),
                 (Ok(()), Save::Calibration(_)) => info!("persist: calibration stored"),
+                #[cfg(feature = "interface")]
+                (Ok(()), Save::Cabinet(rec)) => info!("persist: cabinet model stored: theta={} k={}", rec.theta, rec.k),
                 (Err(e), _) => warn!("persist: store failed ({})", e),
             }
         }

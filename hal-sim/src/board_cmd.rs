@@ -217,7 +217,8 @@ fn numbers(key: &str, v: &str) -> Result<Value> {
 
 /// The `status` reply as one JSON object: `NUMERIC` keys as numbers, `model_a`/`model_b`/
 /// `model_k` as `model: {a: [a1, a2], b: [b0, b1], k}` (null when the board trusts no model),
-/// every other key as a string, `-` as null anywhere.
+/// `cabinet_a`/`cabinet_b`/`cabinet_k` likewise as `cabinet` (null without one, or from a board
+/// that does not send them), every other key as a string, `-` as null anywhere.
 pub fn status_json(kv: &[(String, String)]) -> Result<Value> {
     if let Some(missing) = REQUIRED.iter().find(|r| !kv.iter().any(|(k, _)| k == *r)) {
         bail!("the board's status has no '{missing}'");
@@ -226,21 +227,24 @@ pub fn status_json(kv: &[(String, String)]) -> Result<Value> {
     let mut obj = Map::new();
     for (k, v) in kv {
         let value = match k.as_str() {
-            "model_a" | "model_b" | "model_k" => continue,
+            "model_a" | "model_b" | "model_k" | "cabinet_a" | "cabinet_b" | "cabinet_k" => continue,
             _ if NUMERIC.contains(&k.as_str()) => number(k, v)?,
             _ if v == "-" => Value::Null,
             _ => Value::String(v.clone()),
         };
         obj.insert(k.clone(), value);
     }
-    let (a, b, k) = (get("model_a"), get("model_b"), get("model_k"));
-    let model = if [a, b, k].contains(&"-") {
-        Value::Null
-    } else {
-        let k = k.parse::<u32>().map_err(|_| anyhow!("the board sent model_k={k}, not a delay in samples"))?;
-        serde_json::json!({ "a": numbers("model_a", a)?, "b": numbers("model_b", b)?, "k": k })
-    };
-    obj.insert("model".into(), model);
+    for name in ["model", "cabinet"] {
+        let key = |part: &str| format!("{name}_{part}");
+        let (a, b, k) = (get(&key("a")), get(&key("b")), get(&key("k")));
+        let model = if [a, b, k].contains(&"-") {
+            Value::Null
+        } else {
+            let k = k.parse::<u32>().map_err(|_| anyhow!("the board sent {name}_k={k}, not a delay in samples"))?;
+            serde_json::json!({ "a": numbers(&key("a"), a)?, "b": numbers(&key("b"), b)?, "k": k })
+        };
+        obj.insert(name.into(), model);
+    }
     Ok(Value::Object(obj))
 }
 
@@ -345,10 +349,13 @@ fn identify<P: Read + Write>(b: &mut Board<P>, no_wait: bool) -> Result<()> {
     }
     let show = |k: &str| field(&kv, k).unwrap_or("?").to_string();
     println!(
-        "commissioning done: model a={} b={} k={}; controller {} ({})",
+        "commissioning done: control model a={} b={} k={}; cabinet model a={} b={} k={}; controller {} ({})",
         show("model_a"),
         show("model_b"),
         show("model_k"),
+        show("cabinet_a"),
+        show("cabinet_b"),
+        show("cabinet_k"),
         show("controller"),
         show("adaptive")
     );
@@ -557,7 +564,7 @@ mod tests {
         parse_kv(&lines.iter().map(|s| s.to_string()).collect::<Vec<_>>()).unwrap()
     }
 
-    const STATUS: [&str; 17] = [
+    const STATUS: [&str; 20] = [
         "t_s=86400",
         "temp_c=4.93",
         "setpoint_c=5.00",
@@ -570,6 +577,9 @@ mod tests {
         "model_a=-1.7900,0.8000",
         "model_b=-0.0150,-0.0080",
         "model_k=1",
+        "cabinet_a=-1.9390,0.9392",
+        "cabinet_b=-0.2798,0.2717",
+        "cabinet_k=9",
         "holdover_s=-",
         "resets=2",
         "firmware=hter 0.1.0",
@@ -584,6 +594,7 @@ mod tests {
             "t_s": 86400, "temp_c": 4.93, "setpoint_c": 5.0, "duty": 0.412, "mode": "normal",
             "alarm": "off", "controller": "gpc", "adaptive": "adaptive", "controllers": "gpc,pi,onoff",
             "model": {"a": [-1.79, 0.8], "b": [-0.015, -0.008], "k": 1},
+            "cabinet": {"a": [-1.939, 0.9392], "b": [-0.2798, 0.2717], "k": 9},
             "holdover_s": null, "resets": 2, "firmware": "hter 0.1.0", "commissioning": "idle",
             "settings_version": 7
         });

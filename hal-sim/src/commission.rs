@@ -3,12 +3,13 @@
 //! library's [`Commissioning`] (rest, one PRBS period, the board's output-error fit) through the
 //! simulated ADC and SSR, with the supply-switch test openings held off (a 20 s gap in the input
 //! would spoil the record) and the run aborted if the step's mode leaves normal, exactly as the
-//! App's glue does. The model it gives is what the board would store and adopt
-//! (`App::adopt_model`): the self-tuner's start and the holdover's model.
+//! App's glue does. [`commission_board`] gives what the board stores and adopts from one run:
+//! the control model (every b_i ≤ 0: the self-tuner's start) and the cabinet model (the
+//! monotone rule's best fit: the holdover's). [`commission`] runs one sign rule alone.
 //!
 //! `hter sim --commission RULE` runs this on the run's own plant, load and ambient first and
-//! gives the step the model it found ([`crate::sim::ControllerSpec::initial`]): the carrier
-//! commissioned at the load it carries.
+//! gives the step the model(s) it found ([`crate::sim::ControllerSpec::initial`],
+//! [`crate::sim::ControllerSpec::holdover`]): the carrier commissioned at the load it carries.
 
 use anyhow::{anyhow, bail, Result};
 use hter::control::adaptive::AdaptiveConfig;
@@ -31,10 +32,43 @@ pub const HOLD_C: f64 = 4.0;
 /// self-tuner) and the sign rule `sign` (the board's is [`SignRule::EveryCoefficient`]): the
 /// model the fit gives, or why it gave none.
 ///
-/// With [`SignRule::Monotone`] the model may have b1 > 0, which the board's App refuses to
-/// store today ([`hter::control::adaptive::plausible_model`]); the simulator takes it as an
-/// uploaded model would be taken.
+/// With [`SignRule::Monotone`] the model may have b1 > 0, which the self-tuner does not trust
+/// ([`hter::control::adaptive::plausible_model`]); the board keeps such a model as its cabinet
+/// model only.
 pub fn commission(params: PlantParams, ambient_c: f64, seed: u64, sign: SignRule) -> Result<Model> {
+    let c = run(params, ambient_c, seed, |cfg| CommissionConfig { sign, cabinet: false, ..cfg })?;
+    c.outcome()
+        .ok_or_else(|| anyhow!("commissioning did not finish"))?
+        .map_err(|e| anyhow!("commissioning failed: {}", e.name()))
+}
+
+/// The two models of one board commissioning ([`commission_board`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Commissioned {
+    /// Every b_i ≤ 0: what the self-tuner starts from (`App`: the model record).
+    pub control: Model,
+    /// The monotone rule's best fit: what the holdover runs on (`App`: the cabinet record).
+    pub cabinet: Model,
+}
+
+/// Commissions the carrier as the board's App does ([`CommissionConfig::DEFAULT`]: one run, the
+/// control model and the cabinet model).
+pub fn commission_board(params: PlantParams, ambient_c: f64, seed: u64) -> Result<Commissioned> {
+    let c = run(params, ambient_c, seed, |cfg| cfg)?;
+    match (c.outcome(), c.cabinet()) {
+        (Some(Ok(control)), Some(cabinet)) => Ok(Commissioned { control, cabinet }),
+        (Some(Err(e)), _) => bail!("commissioning failed: {}", e.name()),
+        _ => bail!("commissioning gave no cabinet model"),
+    }
+}
+
+/// Runs a commissioning of `configure(the board's configuration)` to its end.
+fn run(
+    params: PlantParams,
+    ambient_c: f64,
+    seed: u64,
+    configure: impl FnOnce(CommissionConfig) -> CommissionConfig,
+) -> Result<Commissioning> {
     let plausible: AdaptiveConfig = match params.container {
         Container::Aluminium => profile::ADAPTIVE_GPC,
         // The App's H-TER II profile starts from its own model; the plausibility rule (the
@@ -43,7 +77,7 @@ pub fn commission(params: PlantParams, ambient_c: f64, seed: u64, sign: SignRule
             AdaptiveConfig { initial: Some(profile::START_MODEL_HTER2), ..profile::ADAPTIVE_GPC }
         }
     };
-    let cfg = CommissionConfig { plausible, sign, ..CommissionConfig::DEFAULT };
+    let cfg = configure(CommissionConfig { plausible, ..CommissionConfig::DEFAULT });
     let Some((mut plant, u0)) = Plant::at_load_temperature(params, ambient_c, HOLD_C) else {
         bail!("the plant cannot hold {HOLD_C} °C at {ambient_c} °C ambient to be commissioned");
     };
@@ -68,8 +102,8 @@ pub fn commission(params: PlantParams, ambient_c: f64, seed: u64, sign: SignRule
         };
         let out = carrier.step(&StepInput { t_ms: n * (ts_s * 1000.0) as u64, counts, setpoint_c: HOLD_C as f32 });
         carrier.controller_mut().abort_on_mode(out.mode);
-        if let Some(done) = carrier.controller().outcome() {
-            return done.map_err(|e| anyhow!("commissioning failed: {}", e.name()));
+        if carrier.controller().outcome().is_some() {
+            return Ok(carrier.controller().clone());
         }
         let duty = adc.window.clear_duty(out.duty);
         let _ = apply_duty(&mut ssr, duty);

@@ -94,10 +94,11 @@ pub struct SimArgs {
     #[arg(long)]
     pub json: bool,
     /// Commission the carrier first, as a board told `identify` does (rest, PRBS and the board's
-    /// fit, holding 4 °C at this plant, load and ambient): the model it gives becomes the stored
-    /// model, the self-tuner's start and the holdover estimate's model. `every-coefficient` is
-    /// the board's sign rule (every b_i ≤ 0); `monotone` allows b1 > 0 (a monotone step
-    /// response), which fits the carriers' fast mode but the board's App does not store yet.
+    /// fit, holding 4 °C at this plant, load and ambient). `board`: what the board's App does,
+    /// one run giving the control model (every b_i ≤ 0) as the self-tuner's start and the
+    /// cabinet model (the monotone rule's best fit) as the holdover's. `every-coefficient` or
+    /// `monotone`: one rule alone, its model both (the self-tuner's start only if it trusts
+    /// it: every b_i ≤ 0).
     #[arg(long, value_enum)]
     pub commission: Option<CommissionRule>,
     /// Ambient of the `--commission` run, °C (default: the run's `--ambient`): a carrier
@@ -115,6 +116,7 @@ pub struct SimArgs {
 #[allow(missing_docs)]
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
 pub enum CommissionRule {
+    Board,
     EveryCoefficient,
     Monotone,
 }
@@ -249,26 +251,39 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
     };
     if let Some(rule) = a.commission {
         let Some(params) = opts.plant_params() else { bail!("--commission needs a physical plant (hter1 or hter2)") };
-        let sign = match rule {
-            CommissionRule::EveryCoefficient => hter::ident::commission::SignRule::EveryCoefficient,
-            CommissionRule::Monotone => hter::ident::commission::SignRule::Monotone,
-        };
         let ambient = match a.commission_ambient {
             Some(c) => finite("commission-ambient", c)?,
             None => opts.ambient_c,
         };
+        let show = |what: &str, m: &hter::model::Model| {
+            eprintln!(
+                "commissioned {what}: A = 1 {:+} q^-1 {:+} q^-2, B = {} {:+} q^-1, k = {}, static gain {:.1} °C per unit duty",
+                m.a()[0],
+                m.a()[1],
+                m.b()[0],
+                m.b()[1],
+                m.k(),
+                m.static_gain().unwrap_or(f32::NAN)
+            )
+        };
+        let sign = match rule {
+            CommissionRule::Board => {
+                // As the board's App: the control model for the self-tuner, the cabinet model
+                // for the holdover.
+                let c = crate::commission::commission_board(params, ambient, opts.seed)?;
+                show("control model", &c.control);
+                show("cabinet model", &c.cabinet);
+                opts.controller.initial = Some(c.control);
+                opts.controller.holdover = Some(c.cabinet);
+                return Ok(opts);
+            }
+            CommissionRule::EveryCoefficient => hter::ident::commission::SignRule::EveryCoefficient,
+            CommissionRule::Monotone => hter::ident::commission::SignRule::Monotone,
+        };
         let m = crate::commission::commission(params, ambient, opts.seed, sign)?;
-        eprintln!(
-            "commissioned: A = 1 {:+} q^-1 {:+} q^-2, B = {} {:+} q^-1, k = {}, static gain {:.1} °C per unit duty",
-            m.a()[0],
-            m.a()[1],
-            m.b()[0],
-            m.b()[1],
-            m.k(),
-            m.static_gain().unwrap_or(f32::NAN)
-        );
-        // As a board adopts a commissioned model: the self-tuner's start and the holdover's
-        // model; one the self-tuner would not trust (b1 > 0) serves the holdover only.
+        show("model", &m);
+        // One rule's model is both: the self-tuner's start if it trusts it (every b_i ≤ 0), and
+        // the holdover's.
         if hter::control::adaptive::plausible_model(&hter::profile::ADAPTIVE_GPC, &m) {
             opts.controller.initial = Some(m);
         }

@@ -51,7 +51,7 @@ impl Script {
         format!(
             "t_s=86400\ntemp_c=4.93\nsetpoint_c={:.2}\nduty=0.412\nmode=normal\nalarm=off\ncontroller=gpc\n\
              adaptive=adaptive\ncontrollers=gpc,pi,onoff\nmodel_a=-1.7900,0.8000\nmodel_b=-0.0150,-0.0080\n\
-             model_k=1\nholdover_s=-\nresets=2\nfirmware=hter 0.1.0\ncommissioning={c}\nsettings_version=7\nok",
+             model_k=1\ncabinet_a=-1.9390,0.9392\ncabinet_b=-0.2798,0.2717\ncabinet_k=9\nholdover_s=-\nresets=2\nfirmware=hter 0.1.0\ncommissioning={c}\nsettings_version=7\nok",
             self.setpoint_c
         )
     }
@@ -220,8 +220,10 @@ fn identify_follows_commissioning_to_its_end() {
     // Not a terminal: one plain line per state, then the model.
     assert!(out.contains("commissioning=rest:0\ncommissioning=excite:50\ncommissioning=fit:90\n"), "{out}");
     assert!(
-        out.trim_end()
-            .ends_with("commissioning done: model a=-1.7900,0.8000 b=-0.0150,-0.0080 k=1; controller gpc (adaptive)"),
+        out.trim_end().ends_with(
+            "commissioning done: control model a=-1.7900,0.8000 b=-0.0150,-0.0080 k=1; \
+                 cabinet model a=-1.9390,0.9392 b=-0.2798,0.2717 k=9; controller gpc (adaptive)"
+        ),
         "{out}"
     );
     assert_eq!(fake.finish(), ["identify", "status", "status", "status", "status"]);

@@ -172,7 +172,7 @@ fn a_missing_port_is_one_line_and_non_zero() {
 
 #[test]
 fn identify_runs_to_completion_and_the_status_shows_the_new_model_and_adaptive_mode() {
-    // 3000×: the ≈ 5.3 h commissioning in well under a minute.
+    // 3000×: the ≈ 6.2 h commissioning (both models) in well under a minute.
     let b = Board::start("identify", &["--speed", "3000"]);
     b.wait_for("an hour at 4 °C", 30, |s| s["t_s"].as_f64().is_some_and(|t| t > 3600.0));
     let before = b.status()["model"].clone();
@@ -183,6 +183,12 @@ fn identify_runs_to_completion_and_the_status_shows_the_new_model_and_adaptive_m
     assert_eq!(s["commissioning"], "done");
     assert_eq!(s["controller"], "gpc");
     assert_ne!(s["model"], before, "the new model is in use");
+    // Two models from the one run: the self-tuner's (every b_i <= 0) and the cabinet model, the
+    // best fit, with b1 > 0 on H-TER I (two cooling lags in parallel), which the holdover runs on.
+    let (control, cabinet) = (&s["model"], &s["cabinet"]);
+    assert!(control["b"].as_array().unwrap().iter().all(|b| b.as_f64().unwrap() <= 0.0), "{s}");
+    assert!(cabinet["b"][1].as_f64().unwrap() > 0.0, "{s}");
+    assert_eq!(cabinet["k"], 9, "{s}");
     // The self-tuner runs from it: on its current estimate (`adaptive`) or, while the estimate
     // is not trusted, on the commissioned model (`frozen`); never on its fallback PI; and it
     // holds the setpoint.
@@ -190,4 +196,61 @@ fn identify_runs_to_completion_and_the_status_shows_the_new_model_and_adaptive_m
         s["t_s"].as_f64().unwrap() > 3600.0 * 8.0 && (s["temp_c"].as_f64().unwrap() - 4.0).abs() < 0.2
     });
     assert!(s["adaptive"] == "adaptive" || s["adaptive"] == "frozen", "{s}");
+    assert_eq!(&s["cabinet"], cabinet, "the self-tuner's running leaves the cabinet model");
+}
+
+/// The virtual board driven directly: after `identify`, a power cut; the board restores both
+/// models from their own records, the holdover runs on the cabinet model (not the start model,
+/// not the self-tuner's estimate) and GPC holds 4 °C from the control model.
+#[test]
+fn after_a_reset_the_holdover_still_runs_on_the_cabinet_model() {
+    use hal_sim::plant::Load;
+    use hal_sim::sim::virtual_board::{VirtualBoard, VirtualOptions};
+    use hal_sim::sim::PlantChoice;
+    let field = |b: &mut VirtualBoard, key: &str| {
+        let reply = b.request("status");
+        let prefix = format!("{key}=");
+        reply.lines().find_map(|l| l.strip_prefix(prefix.as_str())).map(str::to_string).unwrap()
+    };
+    let opts = VirtualOptions { plant: PlantChoice::Hter1, load: Load::Full, ambient_c: 28.0, seed: 1 };
+    let mut b = VirtualBoard::new(&opts).unwrap();
+    for _ in 0..360 {
+        b.step().unwrap();
+    }
+    assert_eq!(b.request("identify"), "ok\r\n");
+    let mut n = 0;
+    while field(&mut b, "commissioning") != "done" {
+        b.step().unwrap();
+        n += 1;
+        assert!(n < 2500, "commissioning: {}", field(&mut b, "commissioning"));
+    }
+    let cabinet = b.app().cabinet().expect("a cabinet model");
+    assert!(cabinet.b()[1] > 0.0, "{cabinet:?}");
+    assert_eq!(b.app().carrier().holdover_model(), Some(cabinet));
+    let control = (field(&mut b, "model_a"), field(&mut b, "model_k"));
+    let shown = (field(&mut b, "cabinet_a"), field(&mut b, "cabinet_b"), field(&mut b, "cabinet_k"));
+    // Both records are written at once (the supply has been good for an hour).
+    for _ in 0..6 {
+        b.step().unwrap();
+    }
+    b.power_cut();
+    assert_eq!(b.restarts, 1);
+    assert_eq!(b.app().cabinet(), Some(cabinet), "restored from its own record");
+    assert_eq!(b.app().carrier().holdover_model(), Some(cabinet), "the holdover runs on it after the reset");
+    assert_eq!((field(&mut b, "cabinet_a"), field(&mut b, "cabinet_b"), field(&mut b, "cabinet_k")), shown);
+    assert_eq!((field(&mut b, "model_a"), field(&mut b, "model_k")), control, "the self-tuner restarts from its model");
+    // Two hours on: GPC holds 4 °C, the holdover gives an estimate from the cabinet model.
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for i in 0..720 {
+        b.step().unwrap();
+        if i >= 360 {
+            lo = lo.min(b.load_c());
+            hi = hi.max(b.load_c());
+        }
+    }
+    assert!(lo > 3.7 && hi < 4.3, "holds 4 °C after the reset: {lo:.2}…{hi:.2}");
+    assert_eq!(field(&mut b, "controller"), "gpc");
+    let holdover: f64 = field(&mut b, "holdover_s").parse().expect("a number");
+    assert!((60.0..3600.0).contains(&holdover), "{holdover}");
+    assert_eq!(b.app().carrier().holdover_model(), Some(cabinet));
 }

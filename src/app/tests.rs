@@ -27,6 +27,8 @@ fn boot() -> Boot {
         settings: None,
         calibration: TwoPoint::IDENTITY,
         adaptive: None,
+        #[cfg(feature = "holdover")]
+        cabinet: None,
         history: HistoryRecord::EMPTY,
         log_last_s: 0,
         reset: ResetCause::Other,
@@ -131,6 +133,9 @@ fn status_has_every_field_of_the_contract_in_order() {
         "model_a",
         "model_b",
         "model_k",
+        "cabinet_a",
+        "cabinet_b",
+        "cabinet_k",
         "holdover_s",
         "resets",
         "firmware",
@@ -144,6 +149,9 @@ fn status_has_every_field_of_the_contract_in_order() {
     assert_eq!(b.field("resets"), "1", "the boot counts its own reset");
     assert_eq!(b.field("t_s"), "290.0");
     assert_eq!(b.field("model_k"), profile::START_MODEL_HTER1.k().to_string());
+    // Never commissioned: no cabinet model; the holdover runs on the build's start model.
+    assert_eq!(b.field("cabinet_k"), "-");
+    assert_eq!(b.app.carrier().holdover_model(), Some(profile::START_MODEL_HTER1));
 }
 
 #[test]
@@ -206,7 +214,18 @@ fn a_refused_value_changes_nothing_stores_nothing_and_says_why_in_one_line() {
         ("set cal_ice 3.0,0.0", "err cal_ice: the points give a gain outside 0.9…1.1\r\n"),
         ("set cal_warm 0.5,0.5", "err cal_warm: the two points are less than 1 °C apart\r\n"),
         ("set model 1.2,0.1;-0.02,-0.01;5", "err model: A is not stable (a root on or outside the unit circle)\r\n"),
-        ("set model -1.8,0.81;0.02,-0.01;5", "err model: B does not cool (every b_i must be <= 0, not all 0)\r\n"),
+        (
+            "set model -1.8,0.81;0.02,-0.01;5",
+            "err model: not a monotone cooling (A two real lags, b0 <= 0, the slow lag cooling: b0*p1 + b1 <= 0)\r\n",
+        ),
+        (
+            "set model -1.8,0.95;-0.02,-0.01;5",
+            "err model: not a monotone cooling (A two real lags, b0 <= 0, the slow lag cooling: b0*p1 + b1 <= 0)\r\n",
+        ),
+        (
+            "set model -1.94,0.9401;-0.02,0.0201;9",
+            "err model: not a monotone cooling (A two real lags, b0 <= 0, the slow lag cooling: b0*p1 + b1 <= 0)\r\n",
+        ),
         ("set model -1.8,0.81;-0.00001,0;5", "err model: static gain outside the self-tuner's plausible range\r\n"),
         ("identify now", "err line: usage: too many words\r\n"),
     ] {
@@ -267,6 +286,73 @@ fn a_plausible_model_restarts_the_self_tuner_from_it_and_is_stored() {
     assert_eq!(b.field("model_a"), "-1.859405,0.859802");
     assert!(b.saves.iter().any(|s| matches!(s, Save::Model(r) if r.k == 8)));
     assert_eq!(b.setting_logs(), [SettingKey::Model]);
+    // It is the cabinet model too: the holdover's, in its own record.
+    assert_eq!(b.field("cabinet_a"), "-1.859405,0.859802");
+    assert_eq!(b.field("cabinet_k"), "8");
+    #[cfg(feature = "holdover")]
+    assert!(b.saves.iter().any(|s| matches!(s, Save::Cabinet(r) if r.k == 8)));
+}
+
+/// H-TER I's output-error model (two cooling lags in parallel, b1 > 0): the cabinet model, not
+/// the self-tuner's.
+const PARALLEL_LAGS: &str = "-1.938996,0.939181;-0.279814,0.271719;9";
+
+#[test]
+fn a_monotone_model_with_b1_above_0_becomes_the_cabinet_model_only() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    let before = (b.field("model_a"), b.field("model_k"));
+    assert_eq!(b.send(&format!("set model {PARALLEL_LAGS}")), "ok\r\n");
+    assert_eq!((b.field("model_a"), b.field("model_k")), before, "the self-tuner keeps its model");
+    assert_eq!(b.field("cabinet_a"), "-1.938996,0.939181");
+    assert_eq!(b.field("cabinet_b"), "-0.279814,0.271719");
+    assert_eq!(b.field("cabinet_k"), "9");
+    let cab = b.app.cabinet().unwrap();
+    assert_eq!(b.app.carrier().holdover_model(), Some(cab));
+    assert!(!b.saves.iter().any(|s| matches!(s, Save::Model(_))), "the model record is the self-tuner's");
+    assert_eq!(b.setting_logs(), [SettingKey::Model]);
+    #[cfg(feature = "holdover")]
+    {
+        let Some(Save::Cabinet(rec)) = b.saves.iter().rev().find(|s| matches!(s, Save::Cabinet(_))).copied() else {
+            panic!("the cabinet record is stored")
+        };
+        // Restored at the next boot exactly as accepted, and the holdover runs on it there.
+        let back = crate::persist::CabinetRecord::decode(&rec.encode(), &profile::ADAPTIVE_GPC).unwrap();
+        assert_eq!(back, cab);
+        let mut again = Bench::new(&Boot { cabinet: Some(back), ..boot() });
+        assert_eq!(again.app.carrier().holdover_model(), Some(cab));
+        assert_eq!(again.field("cabinet_k"), "9");
+    }
+}
+
+#[test]
+#[cfg(feature = "holdover")]
+fn a_restored_self_tuner_model_does_not_replace_the_cabinet_model_in_the_holdover() {
+    // The self-tuner's periodically saved estimate comes back as its start; the holdover stays
+    // on the cabinet model (or the build's start model without one).
+    let Ok(Some(Command::Set(SetRequest::Model(cab)))) = Command::parse(&format!("set model {PARALLEL_LAGS}")) else {
+        panic!()
+    };
+    let estimate = Model::second_order([-1.859405, 0.859802], [-0.014713, -0.003021], 8).unwrap();
+    let restored = profile::ADAPTIVE_GPC.restored_from(estimate);
+    let mut b = Bench::new(&Boot { adaptive: Some(restored), cabinet: Some(cab), ..boot() });
+    assert_eq!(b.app.carrier().holdover_model(), Some(cab));
+    assert_eq!(b.field("model_k"), "8");
+    let b = Bench::new(&Boot { adaptive: Some(restored), ..boot() });
+    assert_eq!(b.app.carrier().holdover_model(), Some(profile::START_MODEL_HTER1));
+    // A stored cabinet record the upload check would refuse is refused as a record.
+    let heating = crate::persist::CabinetRecord { theta: [-1.94, 0.9401, -0.02, 0.0201], k: 9 };
+    let bytes = heating.encode();
+    assert_eq!(
+        crate::persist::CabinetRecord::decode(&bytes, &profile::ADAPTIVE_GPC),
+        Err(crate::persist::DecodeError::Implausible)
+    );
+    let mut bytes = crate::persist::CabinetRecord::from_model(&cab).unwrap().encode();
+    bytes[4] ^= 1;
+    assert_eq!(
+        crate::persist::CabinetRecord::decode(&bytes, &profile::ADAPTIVE_GPC),
+        Err(crate::persist::DecodeError::Crc)
+    );
 }
 
 #[test]

@@ -61,6 +61,21 @@
 //! last pass simulates the stored `Model` (f32 A, B) from the measured start, for the fit on its
 //! own record and the response check.
 //!
+//! # Two models from one run
+//!
+//! The sign rule enters only where each delay's 2×2 problem is solved: the sums of a pass are
+//! the rule's. So one run fits two models of the same record ([`CommissionConfig::cabinet`]):
+//! the **control model** of `cfg.sign` ([`SignRule::EveryCoefficient`] by default: what the
+//! self-tuner starts from and trusts) and the **cabinet model**, the best fit of the
+//! [`SignRule::Monotone`] cone (what a carrier's holdover estimate runs on: the best-fitting
+//! model a monotone cooling allows, [`Commissioning::cabinet`]). The grid's passes give both
+//! rules' candidates at once; the two compass searches run one after the other (each keeps only
+//! its own rule's candidates, so each model is exactly what a run of its rule alone gives), each
+//! ending with its final simulation and checks. The run is done only when both pass (the
+//! cabinet model by [`cabinet_plausible`] and its fit on the record); a failure of either keeps
+//! neither. The cabinet search costs its own passes: on the simulated carriers the fit phase
+//! takes 595–683 samples instead of 286–333 (+50–58 min at Ts = 10 s).
+//!
 //! Real poles only: the carriers' output-error models have two real lags (H-TER I 0.9968 and
 //! 0.943, H-TER II 0.997 and 0.924), as a chain of heat capacities must. The lags are kept a
 //! factor [`MIN_LN_TAU_RATIO`] apart: two nearly equal slow poles lose A(1) to f32 rounding.
@@ -79,19 +94,21 @@
 //! - RAM: the record is ỹ as i16 milli-°C (2 bytes/sample) and the PRBS level as one bit per
 //!   sample; samples where the step applied something else (the freeze guard) go to a table of
 //!   [`MAX_OVERRIDES`]. [`CAPACITY`] = 1600 samples covers the default 60 + 1524.
-//!   `size_of::<Commissioning>()` is 3 984 bytes on the Cortex-M4F (4 048 on a 64-bit host, which
-//!   a test checks); a pass keeps ≈ 0.6 KiB of sums on the stack.
+//!   `size_of::<Commissioning>()` is 4 232 bytes on the Cortex-M4F (4 296 on a 64-bit host, which
+//!   a test checks; the cabinet model's candidates added 248); a pass keeps ≈ 0.6 KiB of sums on
+//!   the stack.
 //! - Per sample in Rest and Excite: at most 303 instructions.
 //! - Per sample in Fit: **one pass** over the N stored samples: per sample the two lags (4
 //!   flops), then for each of the 10 delays the free response (3), the error (1) and six
 //!   multiply-adds (12): ≈ 165 flops, ≈ 2.6·10⁵ flops per pass for N = 1584. Measured on the
 //!   emulated Cortex-M4F (`pil/src/bin/commission.rs`, QEMU mps2-an386 `-icount`, the firmware's
-//!   build profile): 633 293 instructions per pass at most (mean 631 375), ≈ 8 ms at 80 MHz,
-//!   against Ts = 10 s (the GPC step is ≈ 4 800). The fit
-//!   takes at most [`MAX_FIT_PASSES`] samples (28 grid + 3 × 120 + 1 = 389, 65 min at Ts = 10 s);
-//!   on the simulated carriers 286–333.
-//! - Whole run, default settings: 60 + 1524 + (286…333) ≈ 1870–1917 samples (≈ 5.3 h at
-//!   Ts = 10 s), at most 1584 + 389 = 1973.
+//!   build profile): 632 088 instructions per pass at most (mean 629 733) with both cones (ten
+//!   more 2×2 solutions per pass; 633 293 / 631 375 measured with one), ≈ 8 ms at 80 MHz,
+//!   against Ts = 10 s (the GPC step is ≈ 4 800). The fit takes at most [`MAX_FIT_PASSES`]
+//!   samples (28 grid + 2 × (3 × 120 + 1) = 750, 125 min at Ts = 10 s; 389 for one model); on
+//!   the simulated carriers 595–683 for both models (286–333 for the control model alone).
+//! - Whole run, default settings: 60 + 1524 + (595…683) ≈ 2179–2267 samples (≈ 6.1–6.3 h at
+//!   Ts = 10 s), at most 1584 + 750 = 2334.
 //!
 //! # Glossary
 //!
@@ -165,8 +182,12 @@ pub const MIN_STEP: f32 = 0.004;
 /// Most passes of the compass search of one delay.
 pub const MAX_SEARCH_EVALS: usize = 120;
 
-/// Most samples of the fit phase: grid, search, and the final simulation.
-pub const MAX_FIT_PASSES: usize = GRID_PASSES + SEARCHED_DELAYS * MAX_SEARCH_EVALS + 1;
+/// Most passes of one model's search and final simulation after the shared grid.
+pub const MODEL_PASSES: usize = SEARCHED_DELAYS * MAX_SEARCH_EVALS + 1;
+
+/// Most samples of the fit phase: the grid (shared), then the search and final simulation of
+/// the control model and of the cabinet model ([`CommissionConfig::max_fit_passes`]).
+pub const MAX_FIT_PASSES: usize = GRID_PASSES + 2 * MODEL_PASSES;
 
 /// Samples per block of the two-level sums (module docs, numerics).
 pub const BLOCK: usize = 64;
@@ -214,6 +235,9 @@ pub enum Implausibility {
     Heating,
     /// The static gain is outside the plausible range of the profile.
     Gain,
+    /// The cabinet model's step response is not a monotone cooling: A's roots are not two real
+    /// lags in [0, 1), or b0 > 0, or the slow lag heats ([`cabinet_plausible`]).
+    NotMonotone,
 }
 
 /// What stopped a run from outside.
@@ -252,7 +276,7 @@ pub enum CommissionError {
 
 impl CommissionError {
     /// Every failure, in the order of their codes ([`CommissionError::code`]).
-    pub const ALL: [CommissionError; 20] = [
+    pub const ALL: [CommissionError; 21] = [
         CommissionError::Config(ConfigProblem::Rest),
         CommissionError::Config(ConfigProblem::Prbs),
         CommissionError::Config(ConfigProblem::Amplitude),
@@ -273,6 +297,8 @@ impl CommissionError {
         CommissionError::Fault(FaultKind::Overridden),
         CommissionError::Fault(FaultKind::OutputRange),
         CommissionError::Aborted,
+        // Appended: the codes above are in logs already written.
+        CommissionError::Implausible(Implausibility::NotMonotone),
     ];
 
     /// A stable number for the failure (the cold-chain log's entry): its index in [`Self::ALL`].
@@ -299,6 +325,7 @@ impl CommissionError {
                 Implausibility::Unstable => "implausible_unstable",
                 Implausibility::Heating => "implausible_heating",
                 Implausibility::Gain => "implausible_gain",
+                Implausibility::NotMonotone => "implausible_not_monotone",
             },
             CommissionError::PoorFit => "poor_fit",
             CommissionError::Fault(f) => match f {
@@ -335,6 +362,9 @@ impl CommissionError {
                 Implausibility::Unstable => "implausible fit: A is not stable",
                 Implausibility::Heating => "implausible fit: only a heating B explains the record",
                 Implausibility::Gain => "implausible fit: static gain outside the plausible range",
+                Implausibility::NotMonotone => {
+                    "implausible fit: the cabinet model's step response is not a monotone cooling"
+                }
             },
             CommissionError::PoorFit => "poor fit: the model does not simulate its own record well enough",
             CommissionError::Fault(f) => match f {
@@ -380,6 +410,10 @@ pub struct CommissionConfig {
     /// Fit this delay only, samples (1…[`MAX_DELAY`], as `hter identify --nk N`); `None`: the
     /// delay with the least V (`--nk auto`).
     pub delay: Option<u8>,
+    /// Also fit the cabinet model from the same record: the best-fitting model of the
+    /// [`SignRule::Monotone`] cone ([`Commissioning::cabinet`]; the module docs' "Two models").
+    /// Without effect when `sign` is already [`SignRule::Monotone`] (the one model is both).
+    pub cabinet: bool,
 }
 
 /// Which models with a cooling sign the fit may choose from.
@@ -396,9 +430,9 @@ pub enum SignRule {
     /// ("the step response of a Peltier cooler seen through the RTD is monotone"); every b_i ≤ 0
     /// implies it but is stricter: two cooling lags in parallel have b1 > 0, and so have the
     /// output-error models of both carriers. A model of this rule passes the final check by
-    /// its own test (stable, b0 ≤ 0, slow mode cooling, gain in range), not by
-    /// [`plausible_model`], which refuses it while b1 > 0: the self-tuner would not trust it
-    /// and a board would not restore it as the code stands.
+    /// [`cabinet_plausible`] (two real stable lags, b0 ≤ 0, slow mode cooling, gain in range),
+    /// not by [`plausible_model`], which refuses it while b1 > 0: the self-tuner would not
+    /// trust it; a board keeps it as its cabinet model (the holdover's, its own record).
     Monotone,
 }
 
@@ -419,6 +453,7 @@ impl CommissionConfig {
         plausible: crate::profile::ADAPTIVE_GPC,
         sign: SignRule::EveryCoefficient,
         delay: None,
+        cabinet: true,
     };
 
     /// One PRBS period, samples.
@@ -432,9 +467,19 @@ impl CommissionConfig {
         self.rest_samples as usize + self.prbs_samples()
     }
 
+    /// Whether the run fits two models: the control model of `sign` and the cabinet model.
+    pub const fn two_models(&self) -> bool {
+        self.cabinet && !matches!(self.sign, SignRule::Monotone)
+    }
+
+    /// Most samples of the fit phase: the grid and one model's search, or two.
+    pub const fn max_fit_passes(&self) -> usize {
+        GRID_PASSES + if self.two_models() { 2 * MODEL_PASSES } else { MODEL_PASSES }
+    }
+
     /// Most samples the whole commissioning takes: the record and the longest fit.
     pub const fn max_total_samples(&self) -> usize {
-        self.record_samples() + MAX_FIT_PASSES
+        self.record_samples() + self.max_fit_passes()
     }
 
     /// Checks every range [`Commissioning::new`] relies on.
@@ -540,10 +585,13 @@ enum FitStage {
     /// Evaluating grid pair `i`.
     Grid(u8),
     /// Compass search of the `round`-th delay of `order` around its best point: next
-    /// direction `dir` (of [`DIRECTIONS`]) at `step`.
-    Compass { round: u8, order: [u8; SEARCHED_DELAYS], step: f32, dir: u8, evals: u8 },
-    /// The final simulation of the best model.
+    /// direction `dir` (of [`DIRECTIONS`]) at `step`; of the cabinet model's candidates if
+    /// `cabinet`, else of the control model's.
+    Compass { cabinet: bool, round: u8, order: [u8; SEARCHED_DELAYS], step: f32, dir: u8, evals: u8 },
+    /// The final simulation of the control model.
     Final,
+    /// The final simulation of the cabinet model.
+    FinalCabinet,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -577,10 +625,15 @@ pub struct Commissioning {
     high_bits: [u8; CAPACITY / 8],
     overrides: [(u16, u16); MAX_OVERRIDES],
     n_overrides: u8,
-    /// The best candidate of each delay k = 1…[`MAX_DELAY`] so far.
+    /// The best candidate of each delay k = 1…[`MAX_DELAY`] so far (the rule `cfg.sign`).
     best: [Candidate; MAX_DELAY],
+    /// The same of the cabinet model (the monotone rule), when the run fits two models.
+    best_cabinet: [Candidate; MAX_DELAY],
     passes: u16,
     fit_percent: Option<f32>,
+    /// The cabinet model passed its checks (it is `preferred(best_cabinet)`'s model).
+    cabinet_ok: bool,
+    cabinet_fit_percent: Option<f32>,
 }
 
 /// exp(−1/τ) for τ = e^s.
@@ -685,6 +738,110 @@ fn sign_rows(rule: SignRule, p1: f32, p2: f32) -> [[f32; 2]; 2] {
     }
 }
 
+/// The candidate of delay `k` for the poles p1, p2 (at s) from its sums, under `rule`.
+fn candidate(n: &Normal, s: [f32; 2], k: usize, p1: f32, p2: f32, rule: SignRule) -> Candidate {
+    let (gains, v) = constrained_k(n, sign_rows(rule, p1, p2));
+    // On a boundary ray the constrained coefficient is 0 up to rounding, which may leave it at
+    // +1e-9: the rule holds it at 0 exactly (plausible_model refuses b > 0).
+    let [b0, b1] = b_of_modes(gains, p1, p2);
+    let b = match rule {
+        SignRule::EveryCoefficient => [crate::units::min_f32(b0, 0.0), crate::units::min_f32(b1, 0.0)],
+        SignRule::Monotone => [crate::units::min_f32(b0, 0.0), b1],
+    };
+    Candidate { s, v, k: k as u8, b }
+}
+
+/// Keeps every delay's better candidate.
+fn adopt(best: &mut [Candidate; MAX_DELAY], cands: &[Candidate; MAX_DELAY]) {
+    for (b, c) in best.iter_mut().zip(cands) {
+        if c.v < b.v {
+            *b = *c;
+        }
+    }
+}
+
+/// The best candidate over every delay.
+fn overall_best(best: &[Candidate; MAX_DELAY]) -> Candidate {
+    best.iter().fold(Candidate::NONE, |acc, c| if c.v < acc.v { *c } else { acc })
+}
+
+/// The candidate the fit keeps: of the delays whose RMS error is within [`DELAY_TOLERANCE`] of
+/// the best delay's, the longest. On the carriers the fit is nearly flat over the delay
+/// (H-TER I: 85.0–86.1 % for k = 1…8) because the two poles can mimic dead time; the longest
+/// delay that fits as well leaves the poles to the thermal lags, which is what a predictive law
+/// needs (self-tuning GPC from H-TER I's k = 8 model: 1.28–1.31 × the bound on `piecewise`;
+/// from the k = 5 the best fit picks: 2.42–2.48 ×, `tests/commission.rs::gpc_by_delay`).
+fn preferred(best: &[Candidate; MAX_DELAY]) -> Candidate {
+    let top = overall_best(best);
+    let limit = libm::sqrtf(top.v) * (1.0 + DELAY_TOLERANCE);
+    best.iter().rev().find(|c| c.v.is_finite() && libm::sqrtf(c.v) <= limit).copied().unwrap_or(top)
+}
+
+/// The best candidate of delay `k`.
+fn best_of(best: &[Candidate; MAX_DELAY], k: u8) -> Candidate {
+    best.get(usize::from(k).wrapping_sub(1)).copied().unwrap_or(Candidate::NONE)
+}
+
+/// The delay the fit would keep after the grid ([`preferred`]), then the others with the lowest
+/// V, best first.
+fn delay_order(best: &[Candidate; MAX_DELAY]) -> [u8; SEARCHED_DELAYS] {
+    let mut order = [0u8; SEARCHED_DELAYS];
+    let mut taken = [false; MAX_DELAY];
+    let keep = preferred(best).k;
+    if let (Some(o), Some(t)) = (order.first_mut(), taken.get_mut(usize::from(keep).wrapping_sub(1))) {
+        *o = keep;
+        *t = true;
+    }
+    for o in order.iter_mut().skip(1) {
+        let mut pick: Option<(usize, f32)> = None;
+        for (i, c) in best.iter().enumerate() {
+            let free = !taken.get(i).copied().unwrap_or(true);
+            if free && pick.is_none_or(|(_, v)| c.v < v) {
+                pick = Some((i, c.v));
+            }
+        }
+        if let Some((i, _)) = pick {
+            if let Some(t) = taken.get_mut(i) {
+                *t = true;
+            }
+            *o = (i + 1) as u8;
+        }
+    }
+    order
+}
+
+/// Whether `m` may be a carrier's cabinet model (the holdover's; what commissioning's
+/// monotone rule fits, what `set model` uploads and a board restores): a second-order model
+/// whose A has two real lags 0 ≤ p2 ≤ p1 < 1, whose step response is a monotone cooling
+/// (b0 ≤ 0 and the slow lag cooling, b0·p1 + b1 ≤ 0: with the impulse response
+/// h(j) = r1 p1^j + r2 p2^j, r1 = (b1 + b0 p1)/(p1 − p2) and r1 + r2 = b0, every h(j) ≤ 0 iff
+/// r1 ≤ 0 and b0 ≤ 0; the same holds for a repeated pole), and whose static gain is in `cfg`'s
+/// plausible range. Every model with every b_i ≤ 0 and real lags passes; two cooling lags in
+/// parallel (b1 > 0) pass too, which [`plausible_model`] refuses.
+pub fn cabinet_plausible(cfg: &AdaptiveConfig, m: &Model) -> Result<(), Implausibility> {
+    if m.na() != 2 || m.nb() != 2 || !m.a_is_stable() {
+        return Err(Implausibility::Unstable);
+    }
+    let (a1, a2, b0, b1) = (m.a()[0], m.a()[1], m.b()[0], m.b()[1]);
+    // Two real roots of z² + a1 z + a2 in [0, 1): a sum −a1 ≥ 0, a product a2 ≥ 0 and a
+    // discriminant ≥ 0 up to its f32 rounding (two lags 3× apart in τ near 1 differ by 10⁻³).
+    let disc = a1 * a1 - 4.0 * a2;
+    if !(a1 <= 0.0 && a2 >= 0.0 && disc >= -1e-6 * a1 * a1) {
+        return Err(Implausibility::NotMonotone);
+    }
+    let p1 = 0.5 * (-a1 + libm::sqrtf(crate::units::max_f32(disc, 0.0)));
+    // The fit holds r1 ≤ 0 exactly in its modal form; in (b0, b1) that is 0 up to rounding.
+    let slack = 1e-4 * (b0.abs() * p1 + b1.abs());
+    if !(b0 <= 0.0 && b0 * p1 + b1 <= slack) {
+        return Err(Implausibility::NotMonotone);
+    }
+    let (lo, hi) = (cfg.gain_min_c_per_duty, cfg.gain_max_c_per_duty);
+    if !m.static_gain().is_some_and(|g| (lo..=hi).contains(&g)) {
+        return Err(Implausibility::Gain);
+    }
+    Ok(())
+}
+
 impl Commissioning {
     /// A run at sample period `ts_s` (s) that rests at duty `u0`, the duty the board applied
     /// when it began.
@@ -717,8 +874,11 @@ impl Commissioning {
             overrides: [(0, 0); MAX_OVERRIDES],
             n_overrides: 0,
             best: [Candidate::NONE; MAX_DELAY],
+            best_cabinet: [Candidate::NONE; MAX_DELAY],
             passes: 0,
             fit_percent: None,
+            cabinet_ok: false,
+            cabinet_fit_percent: None,
         })
     }
 
@@ -734,7 +894,7 @@ impl Commissioning {
         match self.state {
             State::Rest => Phase::Rest { percent: percent(len, rest) },
             State::Excite => Phase::Excite { percent: percent(len.saturating_sub(rest), self.cfg.prbs_samples()) },
-            State::Fit(_) => Phase::Fit { percent: percent(usize::from(self.passes), MAX_FIT_PASSES) },
+            State::Fit(_) => Phase::Fit { percent: percent(usize::from(self.passes), self.cfg.max_fit_passes()) },
             State::Done(m) => Phase::Done(m),
             State::Failed(e) => Phase::Failed(e),
         }
@@ -753,6 +913,28 @@ impl Commissioning {
     /// then failed a check).
     pub fn fit_percent(&self) -> Option<f32> {
         self.fit_percent
+    }
+
+    /// The cabinet model (the best fit of the monotone rule, checked by
+    /// [`cabinet_plausible`] and on its own record) once the run is done: the second model of a
+    /// two-model run, or the one model of a [`SignRule::Monotone`] run; `None` before, after a
+    /// failure, or for a run with `cabinet` off.
+    pub fn cabinet(&self) -> Option<Model> {
+        match self.state {
+            State::Done(m) if self.cfg.sign == SignRule::Monotone => self.cfg.cabinet.then_some(m),
+            State::Done(_) if self.cabinet_ok => Self::model_of(&preferred(&self.best_cabinet)),
+            _ => None,
+        }
+    }
+
+    /// The cabinet model's fit on its own record, %, once fitted (a two-model run; the one
+    /// model's for a [`SignRule::Monotone`] run).
+    pub fn cabinet_fit_percent(&self) -> Option<f32> {
+        if self.cfg.sign == SignRule::Monotone {
+            self.fit_percent
+        } else {
+            self.cabinet_fit_percent
+        }
     }
 
     /// The operating point (y0 °C, u0 duty) of the model's deviation variables; y0 is known
@@ -868,10 +1050,10 @@ impl Commissioning {
         }
     }
 
-    /// One pass: the best delay and B for the poles at s (module docs).
-    fn evaluate(&self, s: [f32; 2]) -> [Candidate; MAX_DELAY] {
+    /// One pass: every delay's B for the poles at s (module docs), under the rule `cfg.sign`
+    /// and (a two-model run) the monotone rule: the sums are the same, only the cone differs.
+    fn evaluate(&self, s: [f32; 2]) -> [[Candidate; MAX_DELAY]; 2] {
         let (p1, p2) = (pole(s[0]), pole(s[1]));
-        let rows = sign_rows(self.cfg.sign, p1, p2);
         let (g1, g2) = (1.0 - p1, 1.0 - p2);
         // m_i(t) = p_i m_i(t−1) + (1 − p_i) ũ(t): each mode at unit DC gain.
         let mut ring = [[0.0f32; 2]; 16];
@@ -915,54 +1097,24 @@ impl Commissioning {
                 }
             }
         });
-        let mut out = [Candidate { s, ..Candidate::NONE }; MAX_DELAY];
-        for (k, (n, c)) in normal.iter().zip(out.iter_mut()).enumerate() {
+        let mut out = [[Candidate { s, ..Candidate::NONE }; MAX_DELAY]; 2];
+        let [control, cabinet] = &mut out;
+        let two = self.cfg.two_models();
+        for (k, ((n, c), cab)) in normal.iter().zip(control.iter_mut()).zip(cabinet.iter_mut()).enumerate() {
             if self.cfg.delay.is_some_and(|d| usize::from(d) != k + 1) {
                 continue;
             }
-            let (gains, v) = constrained_k(n, rows);
-            // On a boundary ray the constrained coefficient is 0 up to rounding, which may
-            // leave it at +1e-9: the rule holds it at 0 exactly (plausible_model refuses b > 0).
-            let [b0, b1] = b_of_modes(gains, p1, p2);
-            let b = match self.cfg.sign {
-                SignRule::EveryCoefficient => [crate::units::min_f32(b0, 0.0), crate::units::min_f32(b1, 0.0)],
-                SignRule::Monotone => [crate::units::min_f32(b0, 0.0), b1],
-            };
-            *c = Candidate { s, v, k: (k + 1) as u8, b };
+            *c = candidate(n, s, k + 1, p1, p2, self.cfg.sign);
+            if two {
+                *cab = candidate(n, s, k + 1, p1, p2, SignRule::Monotone);
+            }
         }
         out
     }
 
-    /// Keeps every delay's better candidate.
-    fn adopt(&mut self, cands: &[Candidate; MAX_DELAY]) {
-        for (b, c) in self.best.iter_mut().zip(cands) {
-            if c.v < b.v {
-                *b = *c;
-            }
-        }
-    }
-
-    /// The best candidate over every delay.
-    fn overall_best(&self) -> Candidate {
-        self.best.iter().fold(Candidate::NONE, |acc, c| if c.v < acc.v { *c } else { acc })
-    }
-
-    /// The candidate the fit keeps: of the delays whose RMS error is within
-    /// [`DELAY_TOLERANCE`] of the best delay's, the longest. On the carriers the fit is nearly
-    /// flat over the delay (H-TER I: 85.0–86.1 % for k = 1…8) because the two poles can mimic
-    /// dead time; the longest delay that fits as well leaves the poles to the thermal lags,
-    /// which is what a predictive law needs (self-tuning GPC from H-TER I's k = 8 model:
-    /// 1.28–1.31 × the bound on `piecewise`; from the k = 5 the best fit picks: 2.42–2.48 ×,
-    /// `tests/commission.rs::gpc_by_delay`).
+    /// The candidate the fit keeps of the control model ([`preferred`]).
     fn preferred(&self) -> Candidate {
-        let best = self.overall_best();
-        let limit = libm::sqrtf(best.v) * (1.0 + DELAY_TOLERANCE);
-        self.best.iter().rev().find(|c| c.v.is_finite() && libm::sqrtf(c.v) <= limit).copied().unwrap_or(best)
-    }
-
-    /// The best candidate of delay `k`.
-    fn best_of(&self, k: u8) -> Candidate {
-        self.best.get(usize::from(k).wrapping_sub(1)).copied().unwrap_or(Candidate::NONE)
+        preferred(&self.best)
     }
 
     /// The model of a candidate.
@@ -1023,22 +1175,30 @@ impl Commissioning {
                     j += 1;
                 }
                 let (t1, t2) = (TAU_GRID.get(j).copied().unwrap_or(1.0), TAU_GRID.get(idx).copied().unwrap_or(1.0));
-                let c = self.evaluate([libm::logf(t1), libm::logf(t2)]);
-                self.adopt(&c);
+                let [control, cabinet] = self.evaluate([libm::logf(t1), libm::logf(t2)]);
+                // The grid serves both models: one pass gives both cones' candidates.
+                adopt(&mut self.best, &control);
+                adopt(&mut self.best_cabinet, &cabinet);
                 let next = usize::from(i) + 1;
                 self.state = State::Fit(if next < GRID_PASSES {
                     FitStage::Grid(next as u8)
                 } else {
-                    FitStage::Compass { round: 0, order: self.delay_order(), step: FIRST_STEP, dir: 0, evals: 0 }
+                    Self::first_compass(false, &self.best)
                 });
             }
-            FitStage::Compass { round, order, step, dir, evals } => {
+            FitStage::Compass { cabinet, round, order, step, dir, evals } => {
                 let k = order.get(usize::from(round)).copied().unwrap_or(1);
-                let here = self.best_of(k);
+                let here = best_of(self.searched(cabinet), k);
                 let d = DIRECTIONS.get(usize::from(dir)).copied().unwrap_or([0.0; 2]);
-                let c = self.evaluate(separated([here.s[0] + step * d[0], here.s[1] + step * d[1]]));
-                self.adopt(&c);
-                let moved = self.best_of(k).v < here.v * (1.0 - MIN_IMPROVEMENT);
+                let [control, cab] = self.evaluate(separated([here.s[0] + step * d[0], here.s[1] + step * d[1]]));
+                // Each search keeps its own model's candidates only: the two searches, one after
+                // the other, give exactly what a run of either rule alone gives.
+                if cabinet {
+                    adopt(&mut self.best_cabinet, &cab);
+                } else {
+                    adopt(&mut self.best, &control);
+                }
+                let moved = best_of(self.searched(cabinet), k).v < here.v * (1.0 - MIN_IMPROVEMENT);
                 let evals = evals.saturating_add(1);
                 let next = if moved {
                     // Moved: try further the same way with a longer step (expansion: the valleys
@@ -1053,81 +1213,94 @@ impl Commissioning {
                 };
                 let next = next.filter(|_| usize::from(evals) < MAX_SEARCH_EVALS);
                 self.state = State::Fit(match next {
-                    Some((step, dir)) => FitStage::Compass { round, order, step, dir, evals },
+                    Some((step, dir)) => FitStage::Compass { cabinet, round, order, step, dir, evals },
                     None if usize::from(round) + 1 < SEARCHED_DELAYS => {
-                        FitStage::Compass { round: round + 1, order, step: FIRST_STEP, dir: 0, evals: 0 }
+                        FitStage::Compass { cabinet, round: round + 1, order, step: FIRST_STEP, dir: 0, evals: 0 }
                     }
+                    None if cabinet => FitStage::FinalCabinet,
                     None => FitStage::Final,
                 });
             }
             FitStage::Final => self.finish(),
+            FitStage::FinalCabinet => self.finish_cabinet(),
         }
     }
 
-    /// The delay the fit would keep after the grid ([`Self::preferred`]), then the others with
-    /// the lowest V, best first.
-    fn delay_order(&self) -> [u8; SEARCHED_DELAYS] {
-        let mut order = [0u8; SEARCHED_DELAYS];
-        let mut taken = [false; MAX_DELAY];
-        let keep = self.preferred().k;
-        if let (Some(o), Some(t)) = (order.first_mut(), taken.get_mut(usize::from(keep).wrapping_sub(1))) {
-            *o = keep;
-            *t = true;
+    /// The candidates a search refines.
+    fn searched(&self, cabinet: bool) -> &[Candidate; MAX_DELAY] {
+        if cabinet {
+            &self.best_cabinet
+        } else {
+            &self.best
         }
-        for o in order.iter_mut().skip(1) {
-            let mut pick: Option<(usize, f32)> = None;
-            for (i, c) in self.best.iter().enumerate() {
-                let free = !taken.get(i).copied().unwrap_or(true);
-                if free && pick.is_none_or(|(_, v)| c.v < v) {
-                    pick = Some((i, c.v));
-                }
-            }
-            if let Some((i, _)) = pick {
-                if let Some(t) = taken.get_mut(i) {
-                    *t = true;
-                }
-                *o = (i + 1) as u8;
-            }
-        }
-        order
     }
 
-    fn finish(&mut self) {
-        let c = self.preferred();
+    fn first_compass(cabinet: bool, best: &[Candidate; MAX_DELAY]) -> FitStage {
+        FitStage::Compass { cabinet, round: 0, order: delay_order(best), step: FIRST_STEP, dir: 0, evals: 0 }
+    }
+
+    /// The model of candidate `c`, its fit on the record, and whether it passes `rule`'s
+    /// checks (the record moved, plausible, fit ≥ `min_fit_percent`).
+    fn checked(&self, c: &Candidate, rule: SignRule) -> (Option<f32>, Result<Model, CommissionError>) {
         if c.b == [0.0, 0.0] || !c.v.is_finite() {
-            return self.fail(CommissionError::Implausible(Implausibility::Heating));
+            return (None, Err(CommissionError::Implausible(Implausibility::Heating)));
         }
-        let Some(m) = Self::model_of(&c) else {
-            return self.fail(CommissionError::Implausible(Implausibility::Unstable));
+        let Some(m) = Self::model_of(c) else {
+            return (None, Err(CommissionError::Implausible(Implausibility::Unstable)));
         };
         let (fit, rms) = self.simulate(&m);
-        self.fit_percent = Some(fit);
         if rms < self.cfg.min_response_c {
-            return self.fail(CommissionError::NoExcitation);
+            return (Some(fit), Err(CommissionError::NoExcitation));
         }
-        let plausible = match self.cfg.sign {
-            SignRule::EveryCoefficient => plausible_model(&self.cfg.plausible, &m),
-            // The slow mode cools by construction (the fit's constraint); A is stable since
-            // both poles are in (0, 1).
-            SignRule::Monotone => {
-                let (lo, hi) = (self.cfg.plausible.gain_min_c_per_duty, self.cfg.plausible.gain_max_c_per_duty);
-                m.a_is_stable() && m.b()[0] <= 0.0 && m.static_gain().is_some_and(|g| (lo..=hi).contains(&g))
-            }
-        };
-        if !plausible {
-            let why = if !m.a_is_stable() {
+        let plausible = match rule {
+            SignRule::EveryCoefficient if plausible_model(&self.cfg.plausible, &m) => Ok(()),
+            SignRule::EveryCoefficient => Err(if !m.a_is_stable() {
                 Implausibility::Unstable
-            } else if self.cfg.sign == SignRule::EveryCoefficient && m.b().iter().any(|b| *b > 0.0) || m.b()[0] > 0.0 {
+            } else if m.b().iter().any(|b| *b > 0.0) {
                 Implausibility::Heating
             } else {
                 Implausibility::Gain
-            };
-            return self.fail(CommissionError::Implausible(why));
+            }),
+            // The slow mode cools by construction (the fit's constraint); A is stable since
+            // both poles are in (0, 1); the check is the one an upload and a restore pass.
+            SignRule::Monotone => cabinet_plausible(&self.cfg.plausible, &m).map_err(|e| match e {
+                Implausibility::NotMonotone if m.b()[0] > 0.0 => Implausibility::Heating,
+                e => e,
+            }),
+        };
+        if let Err(why) = plausible {
+            return (Some(fit), Err(CommissionError::Implausible(why)));
         }
         if !(fit >= self.cfg.min_fit_percent) {
-            return self.fail(CommissionError::PoorFit);
+            return (Some(fit), Err(CommissionError::PoorFit));
         }
-        self.state = State::Done(m);
+        (Some(fit), Ok(m))
+    }
+
+    /// The control model's checks; a two-model run goes on to the cabinet model's search.
+    fn finish(&mut self) {
+        let (fit, m) = self.checked(&self.preferred(), self.cfg.sign);
+        self.fit_percent = fit;
+        match m {
+            Err(e) => self.fail(e),
+            // The control model is the preferred candidate's: the cabinet search leaves `best`.
+            Ok(_) if self.cfg.two_models() => self.state = State::Fit(Self::first_compass(true, &self.best_cabinet)),
+            Ok(m) => self.state = State::Done(m),
+        }
+    }
+
+    /// The cabinet model's checks: done with both models, or failed (neither is kept).
+    fn finish_cabinet(&mut self) {
+        let (fit, m) = self.checked(&preferred(&self.best_cabinet), SignRule::Monotone);
+        self.cabinet_fit_percent = fit;
+        match (m, Self::model_of(&self.preferred())) {
+            (Ok(_), Some(control)) => {
+                self.cabinet_ok = true;
+                self.state = State::Done(control);
+            }
+            (Err(e), _) => self.fail(e),
+            (Ok(_), None) => self.fail(CommissionError::Implausible(Implausibility::Unstable)),
+        }
     }
 }
 
@@ -1313,6 +1486,58 @@ mod tests {
 
     #[test]
     fn size_is_as_documented() {
-        assert_eq!(core::mem::size_of::<Commissioning>(), 4048);
+        assert_eq!(core::mem::size_of::<Commissioning>(), 4296);
+    }
+
+    #[test]
+    fn one_run_gives_the_control_and_the_cabinet_model() {
+        // H-TER I's output-error model (b1 > 0) as the plant: the cabinet model recovers it, the
+        // control model is the best every-b_i ≤ 0 model of the same record, as a run of that
+        // rule alone gives it.
+        let truth = Model::second_order([-1.939_966, 0.940_146], [-0.279_127, 0.271_187], 9).unwrap();
+        let mut both = Commissioning::new(CommissionConfig::DEFAULT, 10.0, 0.45).unwrap();
+        let n_both = run_on(&mut both, &truth, 0.45);
+        let control = both.outcome().unwrap().unwrap();
+        let cabinet = both.cabinet().unwrap();
+        assert!(plausible_model(&CommissionConfig::DEFAULT.plausible, &control), "{control:?}");
+        assert!(cabinet.b()[1] > 0.0 && cabinet.k() == 9, "{cabinet:?}");
+        assert!(both.cabinet_fit_percent().unwrap() > 99.0, "{:?}", both.cabinet_fit_percent());
+        assert_eq!(cabinet_plausible(&CommissionConfig::DEFAULT.plausible, &cabinet), Ok(()));
+        let alone_cfg = CommissionConfig { cabinet: false, ..CommissionConfig::DEFAULT };
+        let mut alone = Commissioning::new(alone_cfg, 10.0, 0.45).unwrap();
+        let n_alone = run_on(&mut alone, &truth, 0.45);
+        assert_eq!(alone.outcome(), both.outcome());
+        assert_eq!(alone.cabinet(), None);
+        let mono_cfg = CommissionConfig { sign: SignRule::Monotone, cabinet: false, ..CommissionConfig::DEFAULT };
+        let mut mono = Commissioning::new(mono_cfg, 10.0, 0.45).unwrap();
+        let n_mono = run_on(&mut mono, &truth, 0.45);
+        assert_eq!(mono.outcome(), Some(Ok(cabinet)));
+        // The grid is shared: the two-model run costs the cabinet search and its simulation.
+        let record = CommissionConfig::DEFAULT.record_samples();
+        assert_eq!(
+            n_both - record,
+            (n_alone - record) + (n_mono - record) - GRID_PASSES,
+            "{n_both} {n_alone} {n_mono}"
+        );
+        assert!(n_both - record <= CommissionConfig::DEFAULT.max_fit_passes());
+    }
+
+    #[test]
+    fn the_cabinet_check_wants_two_real_lags_and_a_monotone_cooling() {
+        let cfg = CommissionConfig::DEFAULT.plausible;
+        let m = |a: [f32; 2], b: [f32; 2]| Model::second_order(a, b, 5).unwrap();
+        // Two lags 0.997 and 0.94 with a gain of −40 °C/duty, every b ≤ 0 or b1 > 0.
+        let (p1, p2) = (0.997f32, 0.94f32);
+        let (a, g) = ([-(p1 + p2), p1 * p2], (1.0 - p1) * (1.0 - p2));
+        assert_eq!(cabinet_plausible(&cfg, &m(a, [-30.0 * g, -10.0 * g])), Ok(()));
+        assert_eq!(cabinet_plausible(&cfg, &m([-1.939_966, 0.940_146], [-0.279_127, 0.271_187])), Ok(()));
+        // A heating slow lag: b0·p1 + b1 > 0 (the step response turns back up).
+        assert_eq!(cabinet_plausible(&cfg, &m(a, [-0.02, 0.0201])), Err(Implausibility::NotMonotone), "slow lag heats");
+        assert_eq!(cabinet_plausible(&cfg, &m(a, [0.001, -0.0024])), Err(Implausibility::NotMonotone));
+        // Complex poles (an oscillating step response) and an unstable A.
+        assert_eq!(cabinet_plausible(&cfg, &m([-1.8, 0.95], [-0.01, -0.01])), Err(Implausibility::NotMonotone));
+        assert_eq!(cabinet_plausible(&cfg, &m([1.2, 0.1], [-0.02, -0.01])), Err(Implausibility::Unstable));
+        // The gain range.
+        assert_eq!(cabinet_plausible(&cfg, &m(a, [-0.000_001, 0.0])), Err(Implausibility::Gain));
     }
 }

@@ -61,6 +61,8 @@ pub mod key {
     pub const HISTORY: u8 = 3;
     /// [`super::SettingsRecord`].
     pub const SETTINGS: u8 = 4;
+    /// [`crate::persist::CabinetRecord`].
+    pub const CABINET: u8 = 5;
 }
 
 /// Repairs one load or store may make before it gives up with [`StoreError::Flash`]: one power
@@ -503,6 +505,18 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
         }
     }
 
+    /// Stores the cabinet model's record.
+    #[cfg(feature = "holdover")]
+    pub async fn save_cabinet(&mut self, rec: &super::CabinetRecord) -> Result<(), StoreError> {
+        self.store(key::CABINET, &rec.encode()).await
+    }
+
+    /// The stored cabinet model, checked with `cfg`'s gain range as an upload is.
+    #[cfg(feature = "holdover")]
+    pub async fn load_cabinet(&mut self, cfg: &AdaptiveConfig) -> Result<crate::model::Model, LoadStatus> {
+        self.load(key::CABINET, |b| super::CabinetRecord::decode(b, cfg)).await
+    }
+
     /// Stores the settings.
     pub async fn save_settings(&mut self, rec: &SettingsRecord) -> Result<(), StoreError> {
         self.store(key::SETTINGS, &rec.encode()).await
@@ -650,6 +664,8 @@ pub async fn write_record<F: NorFlash, E: EccErrors>(
         Save::History(h) | Save::AlarmHistory(h) => (key::HISTORY, put(&mut buf, &h.encode())),
         Save::Calibration(cal) => (key::CALIBRATION, put(&mut buf, &CalibrationRecord { cal: *cal }.encode())),
         Save::Settings(s) => (key::SETTINGS, put(&mut buf, &s.encode())),
+        #[cfg(feature = "holdover")]
+        Save::Cabinet(c) => (key::CABINET, put(&mut buf, &c.encode())),
     };
     store.store(key, buf.get(..len).unwrap_or(&[])).await
 }
@@ -671,6 +687,9 @@ fn put(buf: &mut [u8], bytes: &[u8]) -> usize {
 pub struct Restored {
     /// The settings, if a valid record is stored.
     pub settings: Result<SettingsRecord, LoadStatus>,
+    /// The cabinet model, if a valid record is stored (loaded with the settings, by [`restore`]).
+    #[cfg(feature = "holdover")]
+    pub cabinet: Result<crate::model::Model, LoadStatus>,
     /// The calibration record (an older firmware's, or the build's constant stored at boot).
     pub calibration: Loaded<TwoPoint>,
     /// The cold-chain history.
@@ -687,6 +706,8 @@ impl Restored {
     /// Nothing restored (no usable flash): every record its default.
     pub const NOTHING: Restored = Restored {
         settings: Err(LoadStatus::Missing),
+        #[cfg(feature = "holdover")]
+        cabinet: Err(LoadStatus::Missing),
         calibration: Loaded { value: TwoPoint::IDENTITY, status: LoadStatus::Missing },
         history: Loaded { value: HistoryRecord::EMPTY, status: LoadStatus::Missing },
         adaptive: None,
@@ -698,6 +719,8 @@ impl Restored {
     pub fn boot(&self, reset: super::ResetCause, fault: Option<crate::failsafe::StopInfo>) -> crate::app::Boot {
         crate::app::Boot {
             settings: self.settings.ok(),
+            #[cfg(feature = "holdover")]
+            cabinet: self.cabinet.ok(),
             calibration: self.calibration.value,
             adaptive: self.adaptive.map(|a| a.value),
             history: self.history.value,
@@ -719,6 +742,10 @@ pub async fn restore<F: NorFlash, E: EccErrors, G: NorFlash, H: EccErrors>(
     let _ = log.scrub().await;
     let mut r = restore_records(store, adaptive).await;
     r.settings = store.load_settings().await;
+    #[cfg(feature = "holdover")]
+    if let Some(cfg) = adaptive {
+        r.cabinet = store.load_cabinet(&cfg).await;
+    }
     r.log_last_s = log.last_t_s().await;
     let b = log.repairs();
     r.repairs = Repairs {
@@ -737,11 +764,22 @@ pub async fn restore_records<F: NorFlash, E: EccErrors>(
     // A scrub that fails leaves the loads to repair what they read.
     let _ = store.scrub().await;
     let settings = Err(LoadStatus::Missing);
+    #[cfg(feature = "holdover")]
+    let cabinet = Err(LoadStatus::Missing);
     let calibration = store.load_calibration().await;
     let history = store.load_history().await;
     let adaptive = match adaptive {
         Some(cfg) => Some(store.load_adaptive(cfg).await),
         None => None,
     };
-    Restored { settings, calibration, history, adaptive, log_last_s: Ok(0), repairs: store.repairs() }
+    Restored {
+        settings,
+        #[cfg(feature = "holdover")]
+        cabinet,
+        calibration,
+        history,
+        adaptive,
+        log_last_s: Ok(0),
+        repairs: store.repairs(),
+    }
 }

@@ -92,6 +92,10 @@ pub enum Save {
     Calibration(TwoPoint),
     /// The settings (an accepted change over the interface).
     Settings(super::SettingsRecord),
+    /// The cabinet model (commissioned or uploaded): the holdover's, in a record of its own.
+    /// Only builds with the holdover estimate keep it (the default firmware build has no room).
+    #[cfg(feature = "holdover")]
+    Cabinet(super::CabinetRecord),
     /// An entry of the cold-chain log: every one is kept, in order.
     Log(super::log::LogEntry),
 }
@@ -106,6 +110,8 @@ pub struct PendingSaves {
     model: Option<ModelRecord>,
     calibration: Option<TwoPoint>,
     settings: Option<super::SettingsRecord>,
+    #[cfg(feature = "holdover")]
+    cabinet: Option<super::CabinetRecord>,
     history: Option<HistoryRecord>,
     log: heapless::Deque<super::log::LogEntry, PENDING_LOG>,
     /// Log entries dropped because [`PENDING_LOG`] were waiting.
@@ -121,6 +127,8 @@ impl PendingSaves {
         model: None,
         calibration: None,
         settings: None,
+        #[cfg(feature = "holdover")]
+        cabinet: None,
         history: None,
         log: heapless::Deque::new(),
         log_dropped: 0,
@@ -133,6 +141,8 @@ impl PendingSaves {
             Save::Model(m) => self.model = Some(m),
             Save::Calibration(c) => self.calibration = Some(c),
             Save::Settings(s) => self.settings = Some(s),
+            #[cfg(feature = "holdover")]
+            Save::Cabinet(c) => self.cabinet = Some(c),
             Save::Log(e) => {
                 if self.log.is_full() {
                     self.log.pop_front();
@@ -150,6 +160,10 @@ impl PendingSaves {
 
     /// Whether nothing waits.
     pub fn is_empty(&self) -> bool {
+        #[cfg(feature = "holdover")]
+        if self.cabinet.is_some() {
+            return false;
+        }
         self.model.is_none()
             && self.calibration.is_none()
             && self.settings.is_none()
@@ -158,7 +172,8 @@ impl PendingSaves {
     }
 
     /// The next record `gate` lets through at `now_ms`, removed from the queue: an alarm history
-    /// first, then settings (a person waits for them), history, log entries, calibration, model.
+    /// first, then settings (a person waits for them), the cabinet model, history, log entries,
+    /// calibration, model.
     pub fn next(&mut self, gate: &WriteGate, now_ms: u64) -> Option<Save> {
         if self.alarm && gate.allows(now_ms, true) {
             self.alarm = false;
@@ -171,6 +186,10 @@ impl PendingSaves {
         }
         if let Some(s) = self.settings.take() {
             return Some(Save::Settings(s));
+        }
+        #[cfg(feature = "holdover")]
+        if let Some(c) = self.cabinet.take() {
+            return Some(Save::Cabinet(c));
         }
         if let Some(h) = self.history.take() {
             self.alarm = false;

@@ -174,6 +174,12 @@ impl VirtualBoard {
         self.t_ms = 0;
     }
 
+    /// A power cut between two samples (no write under way): the board boots again from what
+    /// its flash holds, as after a brown-out.
+    pub fn power_cut(&mut self) {
+        self.power_cycle();
+    }
+
     /// A power cut: both flashes power down and up, the board boots again.
     fn power_cycle(&mut self) {
         if let (Some(store), Some(log)) = (self.store.take(), self.log.take()) {
