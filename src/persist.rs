@@ -205,31 +205,13 @@ impl ModelRecord {
 
     /// The bytes to store.
     pub fn encode(&self) -> [u8; Self::LEN] {
-        let mut buf = [0u8; Self::LEN];
-        let mut w = Writer::new(&mut buf, Self::TAG, Self::VERSION);
-        for x in self.theta {
-            w.f32(x);
-        }
-        w.put(&[self.k]);
-        w.finish();
-        buf
+        encode_theta_k(Self::TAG, Self::VERSION, self.theta, self.k)
     }
 
     /// Parses stored bytes: frame, finite θ, 1 ≤ k ≤ [`MAX_K`]. Plausibility needs the
     /// controller's limits: see [`ModelRecord::to_model`].
     pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
-        let mut r = open_frame(bytes, Self::LEN, Self::TAG, Self::VERSION)?;
-        let mut theta = [0.0f32; 4];
-        for x in theta.iter_mut() {
-            *x = r.f32();
-            if !x.is_finite() {
-                return Err(DecodeError::NonFinite);
-            }
-        }
-        let k = r.u8();
-        if k == 0 || usize::from(k) > MAX_K {
-            return Err(DecodeError::OutOfRange);
-        }
+        let (theta, k) = decode_theta_k(bytes, Self::TAG, Self::VERSION)?;
         Ok(ModelRecord { theta, k })
     }
 
@@ -249,6 +231,36 @@ impl ModelRecord {
     pub fn restore(&self, cfg: &AdaptiveConfig) -> Result<AdaptiveConfig, DecodeError> {
         self.to_model(cfg).map(|m| cfg.restored_from(m))
     }
+}
+
+/// The layout [`ModelRecord`] and [`CabinetRecord`] share: `tag`, `version`, θ = [a1 a2 b0 b1]
+/// (f32 LE), k (u8), CRC-32.
+fn encode_theta_k(tag: u8, version: u8, theta: [f32; 4], k: u8) -> [u8; ModelRecord::LEN] {
+    let mut buf = [0u8; ModelRecord::LEN];
+    let mut w = Writer::new(&mut buf, tag, version);
+    for x in theta {
+        w.f32(x);
+    }
+    w.put(&[k]);
+    w.finish();
+    buf
+}
+
+/// θ and k from that layout: the frame, every θ finite, 1 ≤ k ≤ [`MAX_K`].
+fn decode_theta_k(bytes: &[u8], tag: u8, version: u8) -> Result<([f32; 4], u8), DecodeError> {
+    let mut r = open_frame(bytes, ModelRecord::LEN, tag, version)?;
+    let mut theta = [0.0f32; 4];
+    for x in theta.iter_mut() {
+        *x = r.f32();
+        if !x.is_finite() {
+            return Err(DecodeError::NonFinite);
+        }
+    }
+    let k = r.u8();
+    if k == 0 || usize::from(k) > MAX_K {
+        return Err(DecodeError::OutOfRange);
+    }
+    Ok((theta, k))
 }
 
 /// The carrier's cabinet model: the best-fitting model of its own commissioning run (the
@@ -275,7 +287,7 @@ impl CabinetRecord {
     /// Layout version written by this firmware.
     pub const VERSION: u8 = 1;
     /// Encoded length, bytes.
-    pub const LEN: usize = 2 + 4 * 4 + 1 + 4;
+    pub const LEN: usize = ModelRecord::LEN;
 
     /// The record of a second-order model; `None` for other orders.
     pub fn from_model(m: &Model) -> Option<Self> {
@@ -284,31 +296,13 @@ impl CabinetRecord {
 
     /// The bytes to store.
     pub fn encode(&self) -> [u8; Self::LEN] {
-        let mut buf = [0u8; Self::LEN];
-        let mut w = Writer::new(&mut buf, Self::TAG, Self::VERSION);
-        for x in self.theta {
-            w.f32(x);
-        }
-        w.put(&[self.k]);
-        w.finish();
-        buf
+        encode_theta_k(Self::TAG, Self::VERSION, self.theta, self.k)
     }
 
     /// Parses stored bytes and checks the model as an upload is checked, with the gain range of
     /// `cfg` (the build's self-tuner configuration).
     pub fn decode(bytes: &[u8], cfg: &AdaptiveConfig) -> Result<Model, DecodeError> {
-        let mut r = open_frame(bytes, Self::LEN, Self::TAG, Self::VERSION)?;
-        let mut theta = [0.0f32; 4];
-        for x in theta.iter_mut() {
-            *x = r.f32();
-            if !x.is_finite() {
-                return Err(DecodeError::NonFinite);
-            }
-        }
-        let k = r.u8();
-        if k == 0 || usize::from(k) > MAX_K {
-            return Err(DecodeError::OutOfRange);
-        }
+        let (theta, k) = decode_theta_k(bytes, Self::TAG, Self::VERSION)?;
         let m = Model::second_order([theta[0], theta[1]], [theta[2], theta[3]], usize::from(k))
             .map_err(|_| DecodeError::OutOfRange)?;
         cabinet_plausible(cfg, &m).map_err(|_| DecodeError::Implausible)?;
