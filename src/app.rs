@@ -664,36 +664,8 @@ impl App {
             Law::Gpc | Law::Igmvc => self.adaptive.initial,
             _ => None,
         });
-        match model {
-            Some(m) if m.na() == 2 && m.nb() == 2 => {
-                let (a, b) = (m.a(), m.b());
-                write!(
-                    out,
-                    "model_a={},{}\r\nmodel_b={},{}\r\nmodel_k={}\r\n",
-                    Fixed(a[0], 6),
-                    Fixed(a[1], 6),
-                    Fixed(b[0], 6),
-                    Fixed(b[1], 6),
-                    m.k()
-                )?;
-            }
-            _ => out.write_str("model_a=-\r\nmodel_b=-\r\nmodel_k=-\r\n")?,
-        }
-        match self.cabinet {
-            Some(m) => {
-                let (a, b) = (m.a(), m.b());
-                write!(
-                    out,
-                    "cabinet_a={},{}\r\ncabinet_b={},{}\r\ncabinet_k={}\r\n",
-                    Fixed(a[0], 6),
-                    Fixed(a[1], 6),
-                    Fixed(b[0], 6),
-                    Fixed(b[1], 6),
-                    m.k()
-                )?;
-            }
-            None => out.write_str("cabinet_a=-\r\ncabinet_b=-\r\ncabinet_k=-\r\n")?,
-        }
+        write_model(out, "model", model)?;
+        write_model(out, "cabinet", self.cabinet)?;
         let h = self.recorder.history();
         let resets: u32 = [ResetCause::Watchdog, ResetCause::BrownOut, ResetCause::Other]
             .into_iter()
@@ -721,5 +693,24 @@ pub fn commission_failure_name(code: u8) -> &'static str {
     CommissionError::ALL.get(usize::from(code)).map_or("unknown", |e| e.name())
 }
 
+/// A second-order model's status lines `{key}_a=a1,a2`, `{key}_b=b0,b1`, `{key}_k=k`, or `-` for
+/// each when there is none (or it is of another order).
+fn write_model(out: &mut impl Write, key: &str, m: Option<Model>) -> core::fmt::Result {
+    match m {
+        Some(m) if m.na() == 2 && m.nb() == 2 => {
+            let (a, b) = (m.a(), m.b());
+            write!(
+                out,
+                "{key}_a={},{}\r\n{key}_b={},{}\r\n{key}_k={}\r\n",
+                Fixed(a[0], 6),
+                Fixed(a[1], 6),
+                Fixed(b[0], 6),
+                Fixed(b[1], 6),
+                m.k()
+            )
+        }
+        _ => write!(out, "{key}_a=-\r\n{key}_b=-\r\n{key}_k=-\r\n"),
+    }
+}
 #[cfg(test)]
 mod tests;
