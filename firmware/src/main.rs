@@ -173,9 +173,10 @@ async fn main(spawner: Spawner) {
     spawner.spawn(sample(b.analog).unwrap());
     spawner.spawn(control(boot, b.heartbeat).unwrap());
     #[cfg(not(feature = "buck"))]
-    spawner.spawn(actuate(b.ssr, b.supply_enable, b.led, b.alarm).unwrap());
+    let drive = b.ssr;
     #[cfg(feature = "buck")]
-    spawner.spawn(actuate(b.buck, b.supply_enable, b.led, b.alarm).unwrap());
+    let drive = b.buck;
+    spawner.spawn(actuate(drive, b.supply_enable, b.led, b.alarm).unwrap());
     spawner.spawn(acknowledge(b.button).unwrap());
     spawner.spawn(telemetry().unwrap());
     #[cfg(feature = "interface")]
@@ -422,16 +423,53 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
     }
 }
 
-/// Applies each actuation to the SSR timer, the supply-enable switch and the indicators.
+/// The modules' drive: the SSR's timer, or the buck's half bridge (TIM1).
 #[cfg(not(feature = "buck"))]
+type Drive = embassy_stm32::timer::simple_pwm::SimplePwm<'static, embassy_stm32::peripherals::TIM3>;
+#[cfg(feature = "buck")]
+type Drive = board::Buck;
+
+/// Starts the SSR's channel.
+#[cfg(not(feature = "buck"))]
+fn start_drive(ssr: &mut Drive) {
+    ssr.ch1().enable();
+}
+
+/// Nothing to start: the buck's gates follow CCER, which each write sets.
+#[cfg(feature = "buck")]
+fn start_drive(_: &mut Drive) {}
+
+/// Writes `duty` to the SSR with its falling edge kept out of the RTD sampling window; returns
+/// the duty written.
+#[cfg(not(feature = "buck"))]
+fn write_drive(ssr: &mut Drive, duty: Duty) -> Duty {
+    let duty = config::SAMPLE_WINDOW.clear_duty(duty);
+    if apply_duty(&mut ssr.ch1(), duty).is_err() {
+        warn!("SSR duty write failed");
+    }
+    duty
+}
+
+/// Writes `duty` to the buck as it is: it switches at 40 kHz whatever the duty, and the 2.1 ms
+/// oversampled conversion averages 84 of its periods, so there is no window to keep off.
+#[cfg(feature = "buck")]
+fn write_drive(buck: &mut Drive, duty: Duty) -> Duty {
+    if apply_duty(buck, duty).is_err() {
+        warn!("buck duty write failed");
+    }
+    duty
+}
+
+/// Applies each actuation to the drive (the SSR or the buck), the supply-enable switch and the
+/// indicators.
 #[embassy_executor::task]
 async fn actuate(
-    mut ssr: embassy_stm32::timer::simple_pwm::SimplePwm<'static, embassy_stm32::peripherals::TIM3>,
+    mut drive: Drive,
     mut supply_enable: Output<'static>,
     mut led: Output<'static>,
     mut alarm: Output<'static>,
 ) {
-    ssr.ch1().enable();
+    start_drive(&mut drive);
     loop {
         let a = ACTUATION.wait().await;
         // Switch the supply first when cutting, last when enabling: the modules never see a
@@ -439,53 +477,11 @@ async fn actuate(
         if !a.supply_enable {
             supply_enable.set_low();
         }
-        // The SSR's falling edge stays out of the RTD sampling window.
-        let duty = config::SAMPLE_WINDOW.clear_duty(a.duty);
-        let mut ch = ssr.ch1();
-        if apply_duty(&mut ch, duty).is_err() {
-            warn!("SSR duty write failed");
-        }
+        let duty = write_drive(&mut drive, a.duty);
         if a.supply_enable {
             supply_enable.set_high();
         }
         if a.supply_enable && duty.get() > 0.0 {
-            led.set_high();
-        } else {
-            led.set_low();
-        }
-        if a.alarm {
-            alarm.set_high();
-        } else {
-            alarm.set_low();
-        }
-    }
-}
-/// Applies each actuation to the buck's half bridge (TIM1), the supply-enable switch and the
-/// indicators: the SSR build's order, without the SSR's sampling-window quantisation (the buck
-/// switches at 40 kHz whatever the duty, and the 2.1 ms oversampled conversion averages 84 of
-/// its periods).
-#[cfg(feature = "buck")]
-#[embassy_executor::task]
-async fn actuate(
-    mut buck: board::Buck,
-    mut supply_enable: Output<'static>,
-    mut led: Output<'static>,
-    mut alarm: Output<'static>,
-) {
-    loop {
-        let a = ACTUATION.wait().await;
-        // Switch the supply first when cutting, last when enabling: the modules never see a
-        // duty the supervisor did not allow.
-        if !a.supply_enable {
-            supply_enable.set_low();
-        }
-        if apply_duty(&mut buck, a.duty).is_err() {
-            warn!("buck duty write failed");
-        }
-        if a.supply_enable {
-            supply_enable.set_high();
-        }
-        if a.supply_enable && a.duty.get() > 0.0 {
             led.set_high();
         } else {
             led.set_low();
