@@ -188,7 +188,12 @@ fn identify_runs_to_completion_and_the_status_shows_the_new_model_and_adaptive_m
     let (control, cabinet) = (&s["model"], &s["cabinet"]);
     assert!(control["b"].as_array().unwrap().iter().all(|b| b.as_f64().unwrap() <= 0.0), "{s}");
     assert!(cabinet["b"][1].as_f64().unwrap() > 0.0, "{s}");
-    assert_eq!(cabinet["k"], 9, "{s}");
+    // Its delay covers the carrier's 20 s transport, 20 s RTD lag and the filter (90 s by `hter
+    // identify`). Which of the neighbouring delays fits best depends on the noise this run draws:
+    // the virtual board runs against the wall clock, so `identify` starts at a different sample
+    // each run (seen: k 8 and 9). tests/commission.rs pins the fit itself on a fixed seed.
+    let k = cabinet["k"].as_u64().unwrap();
+    assert!((7..=10).contains(&k), "{s}");
     // The self-tuner runs from it: on its current estimate (`adaptive`) or, while the estimate
     // is not trusted, on the commissioned model (`frozen`); never on its fallback PI; and it
     // holds the setpoint.
