@@ -123,6 +123,7 @@ mod tests {
             requested: 0.5,
             duty: Duty::saturating(0.5),
             supply_enable: true,
+            switch_test: false,
             mode,
             events: ev,
             status: None,

@@ -98,6 +98,9 @@ pub struct SampleIn {
     pub supply_v: Option<f32>,
     /// The switched rail after the supply-enable switch, V, if measured.
     pub switched_v: Option<f32>,
+    /// The switched rail at the end of the test pulse the previous sample asked for
+    /// ([`crate::step::StepOutput::switch_test`]), V, if one was taken.
+    pub switch_test_v: Option<f32>,
 }
 
 /// What one sample decided.
@@ -367,6 +370,9 @@ impl App {
         }
         if let Some(v) = s.switched_v {
             self.carrier.observe_switched_rail_v(v);
+        }
+        if let Some(v) = s.switch_test_v {
+            self.carrier.observe_switch_test_v(v);
         }
         let input = StepInput { t_ms: s.t_ms, counts: s.counts, setpoint_c: self.settings.setpoint_c };
         let out =

@@ -104,6 +104,11 @@ pub struct StepOutput {
     pub duty: Duty,
     /// Level of the supply-enable output (false opens the modules' supply switch).
     pub supply_enable: bool,
+    /// A supply-switch test is due: before the next sample's step, open the switch for
+    /// [`crate::supervisor::switch::TEST_PULSE_MS`] with the drive running, read the switched
+    /// rail, close the switch again (unless an output since has opened it) and give the reading
+    /// to [`Carrier::observe_switch_test_v`]. A board that ignores it only goes untested.
+    pub switch_test: bool,
     /// Safety mode after this sample.
     pub mode: Mode,
     /// What happened this sample.
@@ -177,14 +182,21 @@ impl<C: Controller> Carrier<C> {
     /// supply-enable switch — V, for the next sample. With it the step checks the switch
     /// ([`crate::supervisor::switch`]): the rail reading powered while the switch has been
     /// commanded open is [`EventKind::SupplySwitchShorted`]. Without this call (a board without
-    /// the sense, a replayed trace) there is no check and no test opening.
+    /// the sense, a replayed trace) there is no check and no test pulse.
     pub fn observe_switched_rail_v(&mut self, v: f32) {
         self.supervisor.observe_switched_rail_v(v);
     }
 
-    /// Holds the supply switch's periodic test openings off (`true`) while an identification run
-    /// records the plant: a 20 s opening in the excitation the applied duty does not show would
-    /// spoil the fit (the identify build turns them off for the same reason). The switch is
+    /// Gives the step the switched rail read at the end of the test pulse the previous output
+    /// asked for ([`StepOutput::switch_test`]), V, for the next sample: reading powered, the
+    /// switch is shorted.
+    pub fn observe_switch_test_v(&mut self, v: f32) {
+        self.supervisor.observe_switch_test_v(v);
+    }
+
+    /// Holds the supply switch's periodic test pulses off (`true`) while an identification run
+    /// records the plant: its record should hold its own excitation and nothing else (the
+    /// identify build turns them off for the same reason). The switch is
     /// still checked whenever the freeze guard or a sensor fault opens it.
     pub fn hold_switch_tests(&mut self, held: bool) {
         self.supervisor.hold_switch_tests(held);
@@ -301,6 +313,7 @@ impl<C: Controller> Carrier<C> {
             requested,
             duty: verdict.duty,
             supply_enable: verdict.supply_enable,
+            switch_test: verdict.switch_test,
             mode: verdict.mode,
             events,
             status,

@@ -52,7 +52,7 @@ impl Bench {
 
     fn new(plant: Plant, u0: f64, cfg: CommissionConfig) -> Bench {
         let mut ccfg = CarrierConfig::DEFAULT;
-        // As the identify build and `hter sim --scenario prbs`: no supply-switch test opening in
+        // As the identify build and `hter sim --scenario prbs`: no supply-switch test pulse in
         // the record (the glue must suspend it while commissioning).
         ccfg.supervisor.switch.test_interval_s = 0.0;
         let valid = ccfg.validated().expect("carrier configuration");

@@ -297,13 +297,13 @@ fn a_brownout_restarts_from_the_persisted_model() {
 
 /// A shorted supply-enable switch is invisible to the supply divider (upstream of it): the
 /// switched-rail sense finds it the next time the switch is commanded open — at the latest at
-/// the two-hourly test opening (two samples, once the load is at or below its setpoint) — and
-/// the alarm latches on it.
+/// the two-hourly test pulse (50 ms open, the rail judged on the next sample) — and the alarm
+/// latches on it.
 #[test]
 fn a_shorted_supply_switch_is_detected_within_two_hours() {
     check(Fault::SupplySwitchShort, 2.0 * 3600.0 + 60.0);
-    // Injected anywhere between two test openings: found within two hours (and a minute for
-    // the load to be at its setpoint), every controller, both carriers.
+    // Injected anywhere between two test pulses: found within two hours (and a minute of
+    // margin), every controller, both carriers.
     let mut worst: f64 = 0.0;
     for c in [ControllerChoice::Pi, ControllerChoice::Gpc, ControllerChoice::Onoff] {
         for plant in [PlantChoice::Hter1, PlantChoice::Hter2] {
@@ -340,7 +340,7 @@ fn a_shorted_supply_switch_is_detected_within_two_hours() {
 #[test]
 fn a_firmware_hang_opens_the_supply_and_sounds_the_alarm_hardware() {
     const TS: f64 = 10.0;
-    // Not at 3600 s: the switch test opening (due then) has the supply open for 20 s.
+    // Not at 3600 s, where the switch test pulse is due.
     const AT_S: f64 = 5000.0;
     let mut opts =
         SimOptions::new(Scenario::resolve("disturbance").unwrap(), ControllerSpec::new(ControllerChoice::Gpc));

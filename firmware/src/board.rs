@@ -51,7 +51,7 @@
 //! the internal reference VREFINT with it, so the supply reading is corrected for VDDA's
 //! tolerance (RM0351 §16.4.34).
 
-use core::sync::atomic::{AtomicU32, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 use embassy_stm32::adc::{Adc, AdcChannel, AnyAdcChannel, SampleTime, VrefInt};
 use embassy_stm32::gpio::{Input, Level, Output, OutputType, Pull, Speed};
@@ -466,10 +466,59 @@ pub struct Conversion {
     pub supply_v: Option<f32>,
     /// The switched rail after the switch, V (`None` if it could not be measured).
     pub switched_v: Option<f32>,
+    /// The switched rail at the end of a supply-switch test pulse, V (`None`: none was asked
+    /// for, or it could not be measured).
+    pub switch_test_v: Option<f32>,
     /// VDDA from VREFINT, V (`None` if it could not be measured).
     pub vdda_v: Option<f32>,
     /// The RTD conversion landed inside the sampling window of the SSR PWM period.
     pub in_window: bool,
+}
+
+/// A supply-switch test pulse is wanted with the next sample: set by the actuator when the step
+/// asks for one with the switch closed (`hter::step::StepOutput::switch_test`), cleared by the
+/// actuator whenever it opens the switch, and by the pulse.
+pub static SWITCH_TEST: AtomicBool = AtomicBool::new(false);
+
+/// The supply-enable pin (PB0) through its set/reset register, for the test pulse inside
+/// [`Analog::sample`]: the actuator owns the pin's `Output`, and the two never interleave (the
+/// pulse runs before the sample is handed over, so no new actuation can come in between).
+fn set_supply_switch(closed: bool) {
+    pac::GPIOB.bsrr().write(|w| if closed { w.set_bs(0, true) } else { w.set_br(0, true) });
+}
+
+/// The buck's compare and output enables, as the actuator left them, while a test pulse drives
+/// the buck at its ceiling.
+#[cfg(feature = "buck")]
+struct BuckHeld {
+    ccr: u16,
+    ccer: pac::timer::regs::CcerAdv,
+}
+
+/// Drives the buck at [`config::BUCK_MAX_DUTY`], both gates switching, for a test pulse: the
+/// input capacitor empties into the module within ≈ 0.2 ms, where at a low duty a synchronous
+/// buck would hold it at the module's Seebeck voltage ÷ D (`hter::supervisor::switch`). Called
+/// with the switch already open, so the module never sees the ceiling from the supply.
+#[cfg(feature = "buck")]
+fn buck_at_ceiling() -> BuckHeld {
+    let tim = pac::TIM1;
+    let held = BuckHeld { ccr: tim.ccr(0).read().ccr(), ccer: tim.ccer().read() };
+    let full = u32::from(tim.arr().read().arr()) + 1;
+    tim.ccr(0).write(|w| w.set_ccr((config::BUCK_MAX_DUTY * full as f32) as u16));
+    tim.ccer().modify(|w| {
+        w.set_cce(0, true);
+        w.set_ccne(0, true);
+    });
+    held
+}
+
+#[cfg(feature = "buck")]
+impl BuckHeld {
+    /// Puts the actuator's duty back (before the switch closes again).
+    fn restore(self) {
+        pac::TIM1.ccr(0).write(|w| w.set_ccr(self.ccr));
+        pac::TIM1.ccer().write_value(self.ccer);
+    }
 }
 
 fn tim3_update_pending() -> bool {
@@ -533,6 +582,25 @@ impl Analog {
         let cal = unsafe { core::ptr::read_volatile(VREFINT_CAL) };
         // VDDA is a supply reading through a 1:1 "divider" of VREFINT.
         let vdda_v = SupplySense { divider: 1.0, ..config::SUPPLY }.volts(CONVERSION_FULL_SCALE, vrefint, cal);
+        // The test pulse the last output asked for (`hter::supervisor::switch`): the switch
+        // opened with the drive running, the rail read at its end, the switch closed again
+        // unless the actuator opened it meanwhile. After the RTD's window, so the rail's step
+        // never lands in a conversion that counts.
+        let switch_test_v = if SWITCH_TEST.load(Ordering::Relaxed) {
+            set_supply_switch(false);
+            #[cfg(feature = "buck")]
+            let held = buck_at_ceiling();
+            Timer::after_millis(u64::from(hter::supervisor::switch::TEST_PULSE_MS)).await;
+            let rail = self.read(Ain::Switched);
+            #[cfg(feature = "buck")]
+            held.restore();
+            if SWITCH_TEST.swap(false, Ordering::Relaxed) {
+                set_supply_switch(true);
+            }
+            config::SUPPLY.volts(rail, vrefint, cal)
+        } else {
+            None
+        };
         let vdda_ok = vdda_v.is_some_and(|v| (config::VDDA_MIN_V..=config::VDDA_MAX_V).contains(&v));
         let counts = match reference {
             Ok(r) => hter::adc::ratiometric_counts(signal, r, config::CARRIER.adc.full_scale_counts),
@@ -543,6 +611,7 @@ impl Analog {
             reference_ok: reference.is_ok() && vdda_ok,
             supply_v: config::SUPPLY.volts(supply, vrefint, cal),
             switched_v: config::SUPPLY.volts(switched, vrefint, cal),
+            switch_test_v,
             vdda_v,
             in_window,
         }

@@ -44,9 +44,10 @@ pub const SETPOINT_C: f32 = 4.0;
 /// The step's configuration (Ts = 10 s, Pt100 on the default front end, F_a = 0.5, freeze
 /// guard at 1.5 °C with a 120 s look-ahead): see `hter::step::CarrierConfig::DEFAULT`. Its
 /// calibration is replaced at boot by [`CALIBRATION`] or the one stored in flash.
-/// The identification build turns off the supply-switch test openings (a 20 s gap in the
-/// excitation every 2 h spoils the fit, as the simulator's `prbs` runs showed); its switch is
-/// still checked whenever the freeze guard or a sensor fault opens it.
+/// The identification build turns off the supply-switch test pulses (its record holds its
+/// excitation and nothing else; the 20 s openings the test once was spoiled the fit, as the
+/// simulator's `prbs` runs showed); its switch is still checked whenever the freeze guard or a
+/// sensor fault opens it.
 pub const CARRIER: CarrierConfig = if cfg!(feature = "identify") {
     CarrierConfig {
         supervisor: SupervisorConfig {

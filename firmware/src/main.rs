@@ -35,6 +35,8 @@ mod persist;
 #[cfg(feature = "interface")]
 mod serial;
 
+use core::sync::atomic::Ordering;
+
 use defmt::{error, info, warn};
 use defmt_rtt as _;
 use embassy_executor::Spawner;
@@ -72,6 +74,8 @@ struct Sample {
     supply_v: Option<f32>,
     /// The switched rail after the supply-enable switch, V (`None` if it could not be measured).
     switched_v: Option<f32>,
+    /// The switched rail at the end of a supply-switch test pulse, V (`None`: none taken).
+    switch_test_v: Option<f32>,
     /// VDD above the PVD level: flash may be written.
     supply_ok: bool,
 }
@@ -81,6 +85,8 @@ struct Sample {
 struct Actuation {
     duty: Duty,
     supply_enable: bool,
+    /// The step asks for a supply-switch test pulse with the next sample.
+    switch_test: bool,
     alarm: bool,
 }
 
@@ -205,6 +211,7 @@ async fn sample(mut analog: board::Analog) {
                 reference_ok: c.reference_ok,
                 supply_v: c.supply_v,
                 switched_v: c.switched_v,
+                switch_test_v: c.switch_test_v,
                 supply_ok,
             })
             .await;
@@ -255,6 +262,9 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
         if let Some(v) = s.switched_v {
             carrier.observe_switched_rail_v(v);
         }
+        if let Some(v) = s.switch_test_v {
+            carrier.observe_switch_test_v(v);
+        }
         let input = hter::step::StepInput { t_ms: s.t_ms, counts: s.counts, setpoint_c: config::SETPOINT_C };
         let out = if s.reference_ok { carrier.step(&input) } else { carrier.step_with_reference_fault(&input) };
         let rec = recorder.push(s.t_ms, out.temp_c.0);
@@ -263,7 +273,12 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             annunciator.acknowledge();
         }
         let alarm = annunciator.update(&out, &rec.raised);
-        ACTUATION.signal(Actuation { duty: out.duty, supply_enable: out.supply_enable, alarm: alarm.is_on() });
+        ACTUATION.signal(Actuation {
+            duty: out.duty,
+            supply_enable: out.supply_enable,
+            switch_test: out.switch_test,
+            alarm: alarm.is_on(),
+        });
         for e in out.events.iter() {
             // Never block the loop on logging: a full queue drops the event, and says so.
             if EVENTS.try_send(e).is_err() {
@@ -366,9 +381,15 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             reference_ok: s.reference_ok,
             supply_v: s.supply_v,
             switched_v: s.switched_v,
+            switch_test_v: s.switch_test_v,
         });
         let step = &out.step;
-        ACTUATION.signal(Actuation { duty: step.duty, supply_enable: step.supply_enable, alarm: out.alarm.is_on() });
+        ACTUATION.signal(Actuation {
+            duty: step.duty,
+            supply_enable: step.supply_enable,
+            switch_test: step.switch_test,
+            alarm: out.alarm.is_on(),
+        });
         for e in step.events.iter() {
             // Never block the loop on logging: a full queue drops the event, and says so.
             if EVENTS.try_send(e).is_err() {
@@ -481,6 +502,8 @@ async fn actuate(
         if a.supply_enable {
             supply_enable.set_high();
         }
+        // Cleared whenever the switch opens: a pulse under way then leaves it open.
+        board::SWITCH_TEST.store(a.switch_test && a.supply_enable, Ordering::Relaxed);
         if a.supply_enable && duty.get() > 0.0 {
             led.set_high();
         } else {

@@ -1,8 +1,8 @@
 //! On-board commissioning of a simulated carrier, as a board does it when told `identify`
 //! (`hter board … identify`, [`hter::app::App`]): the carrier holding 4 °C, the step runs the
 //! library's [`Commissioning`] (rest, one PRBS period, the board's output-error fit) through the
-//! simulated ADC and SSR, with the supply-switch test openings held off (a 20 s gap in the input
-//! would spoil the record) and the run aborted if the step's mode leaves normal, exactly as the
+//! simulated ADC and SSR, with the supply-switch test pulses held off (the record holds its own
+//! excitation and nothing else) and the run aborted if the step's mode leaves normal, exactly as the
 //! App's glue does. [`commission_board`] gives what the board stores and adopts from one run:
 //! the control model (every b_i ≤ 0: the self-tuner's start) and the cabinet model (the
 //! monotone rule's best fit: the holdover's). [`commission`] runs one sign rule alone.

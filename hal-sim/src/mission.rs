@@ -330,12 +330,12 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
             // A shorted SSR shows only once less than full cooling is wanted: in a heat that
             // needs full cooling and still leaves the load above its setpoint it never does.
             Fault::SsrStuckOn => out.rows.iter().any(|r| r.t_s >= tf && r.true_temp_c < MISSION_SETPOINT_C - 1.0),
-            // A shorted switch shows only once the step commands it open for two samples
-            // (its test opening waits for the load to be at or below the setpoint: a hot
-            // day at full capacity may never give one).
-            Fault::SupplySwitchShort => {
-                out.rows.windows(2).any(|w| w[0].t_s >= tf && !w[0].supply_enable && !w[1].supply_enable)
-            }
+            // A shorted switch shows only once the step asks for a test pulse with a sample
+            // after it to take it, or commands the switch open for two samples.
+            Fault::SupplySwitchShort => out
+                .rows
+                .windows(2)
+                .any(|w| w[0].t_s >= tf && (w[0].switch_test || (!w[0].supply_enable && !w[1].supply_enable))),
             _ => true,
         }
     });

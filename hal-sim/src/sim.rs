@@ -339,7 +339,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
         cfg.filter.fa = 0.0;
     }
     if sc.excitation {
-        // As the identification build: no supply-switch test opening in the record.
+        // As the identification build: no supply-switch test pulse in the record.
         cfg.supervisor.switch.test_interval_s = 0.0;
     }
     let valid = cfg.validated().map_err(config_refused)?;

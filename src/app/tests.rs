@@ -62,6 +62,7 @@ impl Bench {
                 reference_ok: true,
                 supply_v: None,
                 switched_v: None,
+                switch_test_v: None,
             });
             // 10 s of a τ = 1800 s plant: equilibrium 28 − 43·duty, the duty of 60 s ago.
             self.pipe.push_back(out.step.duty.get());

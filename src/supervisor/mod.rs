@@ -56,7 +56,7 @@
 //!    SSR checks on the temperature history (stuck on after the off-run, stuck off, the supply
 //!    probe);
 //! 5. the mode's outputs: no duty unless the controller drives, limp home's On-Off;
-//! 6. the supply switch's test opening, the lid detector ([`lid`]) on the applied duty;
+//! 6. the supply switch's test pulse, the lid detector ([`lid`]) on the applied duty;
 //! 7. last, the SSR monitor counts this sample's duty: every check above saw the runs up to the
 //!    previous sample.
 //!
@@ -354,7 +354,7 @@ impl State {
         }
     }
 
-    /// The level of the supply-enable output in this mode (before a switch test opening): closed
+    /// The level of the supply-enable output in this mode: closed
     /// while the controller drives without a probe, and while limp home has it on. It also opens
     /// whenever the freeze guard holds cooling off: that costs nothing, and it is the only thing
     /// that stops a shorted SSR before the SSR checks have seen enough to be sure. No cooling
@@ -375,6 +375,8 @@ pub(crate) struct Verdict {
     pub(crate) duty: Duty,
     /// Level of the supply-enable output.
     pub(crate) supply_enable: bool,
+    /// Ask the board for a supply-switch test pulse ([`switch`]).
+    pub(crate) switch_test: bool,
     /// The mode after this sample.
     pub(crate) mode: Mode,
 }
@@ -425,7 +427,12 @@ impl Supervisor {
         self.switch.observe(v);
     }
 
-    /// Holds the supply switch's periodic test openings off, or lets them resume.
+    /// The switched supply rail read at the end of a test pulse, V, for the next sample.
+    pub(crate) fn observe_switch_test_v(&mut self, v: f32) {
+        self.switch.observe_pulse(v);
+    }
+
+    /// Holds the supply switch's periodic test pulses off, or lets them resume.
     pub(crate) fn hold_switch_tests(&mut self, held: bool) {
         self.switch.hold_tests(held);
     }
@@ -493,7 +500,7 @@ impl Supervisor {
                 duty = Duty::FULL;
             }
         }
-        let switch_test = self.switch.test_due(mode == Mode::Normal, temp_c, w);
+        let switch_test = self.switch.test_due(mode == Mode::Normal && self.state.supply_enable());
         let lid = LidInput {
             t_ms,
             duty: duty.get(),
@@ -505,8 +512,8 @@ impl Supervisor {
         };
         self.lid.run(&cfg.lid, self.ts_s, &lid, emit);
         self.ssr.applied(&cfg.ssr, duty, requested, temp_c);
-        let supply_enable = self.switch.note_enable(!switch_test && self.state.supply_enable());
-        Verdict { duty, supply_enable, mode }
+        let supply_enable = self.switch.note_enable(self.state.supply_enable());
+        Verdict { duty, supply_enable, switch_test, mode }
     }
 
     /// The freeze guard: trip (with SSR stuck-on paths 1 and 2) and release.

@@ -65,11 +65,14 @@ impl Rig {
     /// The step runs on the board's clock, [`step_clock_ms`].
     pub(super) fn step<C: Controller>(&mut self, carrier: &mut Carrier<C>, t_s: f64, w: f64) -> (StepOutput, u32) {
         match self {
-            Rig::Physical { plant, adc, ssr, .. } => {
+            Rig::Physical { plant, adc, ssr, board } => {
                 adc.set_temperature_c(plant.sensed_temp_c());
                 // The board's divider on the module supply rail, and the sense after the switch.
                 carrier.observe_supply_v(plant.supply_v() as f32);
                 carrier.observe_switched_rail_v(ssr.switched_rail_v(plant.supply_v()) as f32);
+                if let Some(v) = board.test_pulse(ssr, plant.supply_v()) {
+                    carrier.observe_switch_test_v(v);
+                }
                 let counts = match adc.sample() {
                     Ok(c) => c,
                     Err(never) => match never {},
@@ -85,7 +88,7 @@ impl Rig {
     /// plant, which has no ADC: its temperature is [`Rig::true_temp_c`].
     pub(super) fn sample_in(&mut self, t_ms: u64) -> Option<hter::app::SampleIn> {
         match self {
-            Rig::Physical { plant, adc, ssr, .. } => {
+            Rig::Physical { plant, adc, ssr, board } => {
                 adc.set_temperature_c(plant.sensed_temp_c());
                 let counts = match adc.sample() {
                     Ok(c) => c,
@@ -97,6 +100,7 @@ impl Rig {
                     reference_ok: true,
                     supply_v: Some(plant.supply_v() as f32),
                     switched_v: Some(ssr.switched_rail_v(plant.supply_v()) as f32),
+                    switch_test_v: board.test_pulse(ssr, plant.supply_v()),
                 })
             }
             Rig::Arx(_) => None,
@@ -116,6 +120,7 @@ impl Rig {
                 // SimSsr's error type is Infallible.
                 let _ = apply_duty(ssr, duty);
                 board.supply_pin = out.supply_enable;
+                board.pulse_asked = out.switch_test && out.supply_enable;
                 // A completed step: the heartbeat toggles, the monostable restarts.
                 board.beat(t_s);
                 ssr.set_supply_enabled(board.supply_on(t_s));
@@ -145,7 +150,10 @@ impl Rig {
                 Rig::Physical { ssr, board, .. } => {
                     let t = t_s + i as f64 * PWM_PERIOD_S;
                     ssr.set_supply_enabled(board.supply_on(t));
-                    ssr.effective_duty()
+                    // A test pulse (taken at the sample, so in this sample's first period)
+                    // cuts the drive for its length, unless the switch is shorted.
+                    let pulse = i == 0 && std::mem::take(&mut board.pulse_taken) && !ssr.switch_shorted;
+                    ssr.effective_duty() * if pulse { 1.0 - TEST_PULSE_S / PWM_PERIOD_S } else { 1.0 }
                 }
                 Rig::Arx(_) => d,
             };
@@ -288,11 +296,34 @@ pub(super) struct Board {
     supply_pin: bool,
     heartbeat: Heartbeat,
     mono: Monostable,
+    /// The last output asked for a supply-switch test pulse (with the switch closed).
+    pulse_asked: bool,
+    /// A pulse was taken at this sample: its drive cut is still to come.
+    pulse_taken: bool,
 }
+
+/// A supply-switch test pulse's length, s.
+const TEST_PULSE_S: f64 = hter::supervisor::switch::TEST_PULSE_MS as f64 / 1000.0;
 
 impl Board {
     fn new() -> Self {
-        Board { supply_pin: true, heartbeat: Heartbeat::new(), mono: Monostable::new(Monostable::TIMEOUT_S) }
+        Board {
+            supply_pin: true,
+            heartbeat: Heartbeat::new(),
+            mono: Monostable::new(Monostable::TIMEOUT_S),
+            pulse_asked: false,
+            pulse_taken: false,
+        }
+    }
+
+    /// The firmware's test pulse, if the last output asked for one: the switch opened for
+    /// [`TEST_PULSE_S`] with the drive running, the rail read at its end, V (the supply if the
+    /// switch is shorted, else emptied: the pulse is only asked with the drive on enough).
+    fn test_pulse(&mut self, ssr: &SimSsr, supply_v: f64) -> Option<f32> {
+        std::mem::take(&mut self.pulse_asked).then(|| {
+            self.pulse_taken = true;
+            (if ssr.switch_shorted { supply_v } else { 0.0 }) as f32
+        })
     }
 
     /// Whether the supply switch conducts at `t_s`: the MCU's pin, ANDed with the monostable.

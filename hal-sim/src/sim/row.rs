@@ -83,6 +83,10 @@ pub struct Row {
     pub alarm: Indication,
     /// The step's supply-enable output (the MCU's pin; the board's monostable gates it too).
     pub supply_enable: bool,
+    /// The step asked for a supply-switch test pulse, taken before the next sample; not in the
+    /// CSV.
+    #[serde(skip)]
+    pub switch_test: bool,
     /// The board's alarm hardware: true while the heartbeat monostable has expired (the MCU
     /// stopped stepping), whatever the MCU's own alarm pin says.
     pub alarm_hw: bool,
@@ -138,6 +142,7 @@ impl Row {
             adaptive_mode: out.status.map(|st| st.mode),
             alarm,
             supply_enable: out.supply_enable,
+            switch_test: out.switch_test,
             alarm_hw: rig.alarm_hw,
             holdover_s: out.holdover_s.map(f64::from),
             ideal_counts: rig.ideal_counts,
@@ -172,6 +177,8 @@ impl Row {
             adaptive_mode: None,
             alarm,
             supply_enable: out.is_some_and(|o| o.supply_enable),
+            // A hung loop takes no sample, so no pulse.
+            switch_test: false,
             alarm_hw: rig.alarm_hw,
             holdover_s: None,
             ideal_counts: rig.ideal_counts,
