@@ -30,10 +30,13 @@
 //! measured in its place and rejected: on the Cortex-M4F it costs more, not less (the
 //! monitor's push 196 → 224 instructions median, `cargo xtask pil`: its series divides four
 //! times, its range reduction branches), and it is 15 times less accurate (relative error up
-//! to 2.5e-3, the MKT off by up to 0.017 °C at −0.2 °C). The closed excursions are kept in a
-//! `heapless::HistoryBuf`, which overwrites the oldest when full.
-
-use heapless::HistoryBuf;
+//! to 2.5e-3, the MKT off by up to 0.017 °C at −0.2 °C).
+//!
+//! The excursion log is a ring that holds the excursion under way in its own slot, so closing
+//! one only moves an index. A `heapless::HistoryBuf` of closed excursions beside an
+//! `Option<Excursion>` was measured in its place: moving the closed excursion from the one into
+//! the other is a copy within the monitor that LLVM makes a `memmove` call, and that call was
+//! what linked `compiler_builtins`' 1.5 KB `memmove` into the firmware.
 
 use crate::units::{max_f32, min_f32};
 
@@ -168,10 +171,12 @@ pub struct ColdChainMonitor {
     max_c: f32,
     below_2_ms: u64,
     above_8_ms: u64,
-    /// Closed excursions, oldest overwritten first.
-    log: HistoryBuf<Excursion, EXCURSION_LOG>,
-    /// The excursion under way.
-    open: Option<Excursion>,
+    /// The excursion log, a ring: the slot at `head` holds the excursion under way (`None`
+    /// between excursions), the [`EXCURSION_LOG`] slots after it (wrapping) the closed ones,
+    /// oldest first (`None` until that many have closed).
+    log: [Option<Excursion>; EXCURSION_LOG + 1],
+    /// The open excursion's slot in `log`, always less than its length.
+    head: usize,
     excursions: u32,
 }
 
@@ -196,8 +201,8 @@ impl ColdChainMonitor {
             max_c: f32::NEG_INFINITY,
             below_2_ms: 0,
             above_8_ms: 0,
-            log: HistoryBuf::new(),
-            open: None,
+            log: [None; EXCURSION_LOG + 1],
+            head: 0,
             excursions: 0,
         }
     }
@@ -272,21 +277,25 @@ impl ColdChainMonitor {
         } else {
             None
         };
-        match (side, self.open.as_mut()) {
-            (Some(s), Some(e)) if e.side == s => {
+        match (side, self.log.get_mut(self.head)) {
+            (Some(s), Some(Some(e))) if e.side == s => {
                 e.end_s = crate::units::secs_f32(t_ms);
                 e.extreme_c = if s == Side::Cold { min_f32(e.extreme_c, temp_c) } else { max_f32(e.extreme_c, temp_c) };
+                return;
             }
-            (side, _) => {
-                if let Some(done) = self.open.take() {
-                    self.log.write(done);
-                }
-                if let Some(s) = side {
-                    let t_s = crate::units::secs_f32(t_ms);
-                    self.open = Some(Excursion { side: s, start_s: t_s, end_s: t_s, extreme_c: temp_c });
-                    self.excursions = self.excursions.saturating_add(1);
+            (_, Some(Some(_))) => {
+                // Closed where it lies: the next slot, the oldest closed one, makes room.
+                self.head = if self.head + 1 < self.log.len() { self.head + 1 } else { 0 };
+                if let Some(next) = self.log.get_mut(self.head) {
+                    *next = None;
                 }
             }
+            _ => {}
+        }
+        if let (Some(s), Some(slot)) = (side, self.log.get_mut(self.head)) {
+            let t_s = crate::units::secs_f32(t_ms);
+            *slot = Some(Excursion { side: s, start_s: t_s, end_s: t_s, extreme_c: temp_c });
+            self.excursions = self.excursions.saturating_add(1);
         }
     }
 
@@ -338,7 +347,8 @@ impl ColdChainMonitor {
 
     /// The newest closed excursions and the one under way, oldest first.
     pub fn excursions(&self) -> impl Iterator<Item = &Excursion> {
-        self.log.oldest_ordered().chain(self.open.iter())
+        let (to_open, closed) = self.log.split_at(self.head + 1);
+        closed.iter().chain(to_open).flatten()
     }
 
     /// Excursions since start (including those overwritten in the log).
@@ -606,6 +616,12 @@ mod tests {
         let want: std::vec::Vec<f32> = (3..20).map(|i| 9.0 + i as f32).collect();
         assert_eq!(extremes, want);
         assert_eq!(ex.last().map(|e| e.end_s), Some(((t - 10_000) / 1000) as f32));
+        // Closing it overwrites the oldest: excursions 4 … 19, none open.
+        m.push(t, 5.0);
+        let extremes: std::vec::Vec<f32> = m.excursions().map(|e| e.extreme_c).collect();
+        let want: std::vec::Vec<f32> = (4..20).map(|i| 9.0 + i as f32).collect();
+        assert_eq!(extremes, want);
+        assert_eq!(m.excursion_count(), 20);
     }
 
     #[test]

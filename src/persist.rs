@@ -626,15 +626,17 @@ impl HistoryRecord {
             (Some(a), Some(b)) => Some(f(a, b)),
             (a, b) => a.or(b),
         };
-        // This boot's excursions on the record's clock.
+        // This boot's excursions (on the record's clock) overwrite the oldest of the record's
+        // in a ring, unrolled oldest first at the end: rotating the array once per excursion
+        // instead is a `memmove` call each.
         let base = self.recorded_s as f32;
-        let mut last = self.last;
+        let mut ring = self.last;
+        let mut oldest = 0;
         for e in monitor.excursions() {
-            last.rotate_left(1);
-            if let Some(slot) = last.last_mut() {
-                *slot = Some(Excursion { start_s: base + e.start_s, end_s: base + e.end_s, ..*e });
-            }
+            ring[oldest] = Some(Excursion { start_s: base + e.start_s, end_s: base + e.end_s, ..*e });
+            oldest = (oldest + 1) % HISTORY_EXCURSIONS;
         }
+        let last = core::array::from_fn(|i| ring[(oldest + i) % HISTORY_EXCURSIONS]);
         HistoryRecord {
             min_c: pick(self.min_c, monitor.min_c(), f32::min),
             max_c: pick(self.max_c, monitor.max_c(), f32::max),
@@ -1060,6 +1062,15 @@ mod tests {
         assert_eq!(second.last[3].map(|e| (e.start_s, e.end_s)), Some((2340.0 + 120.0, 2340.0 + 120.0)));
         assert!(second.last[1].unwrap().end_s < second.last[2].unwrap().start_s);
         assert_eq!(HistoryRecord::decode(&second.encode()), Ok(second));
+
+        // A boot with more excursions than the record keeps: its newest four, oldest first.
+        let third =
+            second.merged(&monitor(&[(0.0, 9.0), (60.0, 1.0), (120.0, 9.0), (180.0, 1.0), (240.0, 9.0), (300.0, 5.0)]));
+        assert_eq!(third.excursions, 9);
+        let kept = third.last.map(|e| e.map(|e| (e.side, e.start_s)));
+        let base = 2340.0 + 180.0;
+        let want = [(Side::Cold, 60.0), (Side::Warm, 120.0), (Side::Cold, 180.0), (Side::Warm, 240.0)];
+        assert_eq!(kept, want.map(|(side, t)| Some((side, base + t))));
     }
 
     #[test]

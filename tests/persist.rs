@@ -44,7 +44,7 @@ fn reboot<const PAGE: usize>(store: MockStore<PAGE>, pages: usize) -> MockStore<
 fn blank_flash_gives_defaults_and_says_missing() {
     let mut store = open(MockFlash::<2048>::blank(4), 4);
     block_on(async {
-        let cfg = store.load_adaptive(gpc()).await;
+        let cfg = store.load_adaptive(&gpc()).await;
         assert_eq!(cfg.status, LoadStatus::Missing);
         assert_eq!(cfg.value, gpc());
         let cal = store.load_calibration().await;
@@ -76,7 +76,7 @@ fn records_survive_a_reboot_and_restart_the_self_tuner() {
     });
     let mut store = reboot(store, 4);
     block_on(async {
-        let cfg = store.load_adaptive(gpc()).await;
+        let cfg = store.load_adaptive(&gpc()).await;
         assert_eq!(cfg.status, LoadStatus::Restored);
         assert_eq!(cfg.value.k, 6);
         let tuner = SelfTuning::new(cfg.value, 10.0, 0.5).expect("a restored configuration is valid");
@@ -101,7 +101,7 @@ fn implausible_or_out_of_range_records_give_defaults() {
     let mut store = reboot(store, 4);
     block_on(async {
         assert_eq!(store.load_model_record().await, Ok(ModelRecord { theta: [-2.2, 1.2, -0.03, -0.03], k: 5 }));
-        let cfg = store.load_adaptive(gpc()).await;
+        let cfg = store.load_adaptive(&gpc()).await;
         assert_eq!(cfg.status, LoadStatus::Invalid(DecodeError::Implausible));
         assert_eq!(cfg.value, gpc());
         let cal = store.load_calibration().await;
@@ -129,7 +129,7 @@ fn garbage_flash_gives_defaults_and_can_be_reclaimed() {
         flash.bytes = noise(seed, 4 * 2048);
         let mut store = open(flash, 4);
         block_on(async {
-            let cfg = store.load_adaptive(gpc()).await;
+            let cfg = store.load_adaptive(&gpc()).await;
             assert_ne!(cfg.status, LoadStatus::Restored, "seed {seed}");
             assert_eq!(cfg.value, gpc());
             let cal = store.load_calibration().await;
@@ -659,7 +659,7 @@ fn a_stored_cabinet_model_is_checked_on_restore_as_an_upload_is() {
     let good = cabinet(-1.938_996, 0.271_719);
     block_on(store.save_cabinet(&CabinetRecord::from_model(&good).unwrap())).unwrap();
     let mut store = reboot(store, 4);
-    let restored = block_on(hter::persist::flash::restore_records(&mut store, Some(gpc())));
+    let restored = block_on(hter::persist::flash::restore_records(&mut store, Some(&gpc())));
     assert_eq!(restored.cabinet, Err(LoadStatus::Missing), "the build without the interface keeps none");
     assert_eq!(block_on(store.load_cabinet(&gpc())), Ok(good));
 }

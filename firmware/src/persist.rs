@@ -208,7 +208,7 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
     #[cfg(feature = "interface")]
     let restored = flash::restore(&mut store, &mut log, config::ADAPTIVE).await;
     #[cfg(not(feature = "interface"))]
-    let restored = flash::restore_records(&mut store, config::ADAPTIVE).await;
+    let restored = flash::restore_records(&mut store, config::ADAPTIVE.as_ref()).await;
     report(&restored);
     BOOTED.signal(restored);
     loop {

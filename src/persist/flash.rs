@@ -471,11 +471,14 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
     }
 
     /// `cfg` restarted from the stored model ([`AdaptiveConfig::restored_from`]) if one is stored
-    /// and plausible under `cfg`'s limits; otherwise `cfg` unchanged.
-    pub async fn load_adaptive(&mut self, cfg: AdaptiveConfig) -> Loaded<AdaptiveConfig> {
-        match self.load_model_record().await.and_then(|rec| rec.restore(&cfg).map_err(LoadStatus::Invalid)) {
+    /// and plausible under `cfg`'s limits; otherwise `cfg` unchanged. `cfg` is borrowed: taken by
+    /// value, it is moved into this future inside the caller's, a copy within one future that
+    /// LLVM makes a `memmove` call, and one such call links `compiler_builtins`' 1.5 KB
+    /// `memmove` into the firmware.
+    pub async fn load_adaptive(&mut self, cfg: &AdaptiveConfig) -> Loaded<AdaptiveConfig> {
+        match self.load_model_record().await.and_then(|rec| rec.restore(cfg).map_err(LoadStatus::Invalid)) {
             Ok(value) => Loaded { value, status: LoadStatus::Restored },
-            Err(status) => Loaded { value: cfg, status },
+            Err(status) => Loaded { value: *cfg, status },
         }
     }
 
@@ -740,7 +743,7 @@ pub async fn restore<F: NorFlash, E: EccErrors, G: NorFlash, H: EccErrors>(
     adaptive: Option<AdaptiveConfig>,
 ) -> Restored {
     let _ = log.scrub().await;
-    let mut r = restore_records(store, adaptive).await;
+    let mut r = restore_records(store, adaptive.as_ref()).await;
     r.settings = store.load_settings().await;
     #[cfg(feature = "holdover")]
     if let Some(cfg) = adaptive {
@@ -757,9 +760,10 @@ pub async fn restore<F: NorFlash, E: EccErrors, G: NorFlash, H: EccErrors>(
 
 /// [`restore`] of the store alone, for a board without the interface: no log (`log_last_s` is
 /// 0) and no settings (`settings` is [`LoadStatus::Missing`]; the build's constants apply).
+/// `adaptive` is borrowed for the reason [`Store::load_adaptive`]'s `cfg` is.
 pub async fn restore_records<F: NorFlash, E: EccErrors>(
     store: &mut Store<F, E>,
-    adaptive: Option<AdaptiveConfig>,
+    adaptive: Option<&AdaptiveConfig>,
 ) -> Restored {
     // A scrub that fails leaves the loads to repair what they read.
     let _ = store.scrub().await;

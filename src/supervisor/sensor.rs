@@ -189,8 +189,12 @@ pub(crate) struct SpikeFilter {
     run: u8,
     /// The last spike's reading, °C.
     last_c: f32,
-    /// When the last [`BURST`] spikes came, newest first.
+    /// When the last [`BURST`] spikes came, a ring (`None` until that many have come): a new
+    /// spike overwrites the oldest, at `next`. Shifting the times along instead is a
+    /// `copy_within`, which is a `memmove` call.
     times: [Option<u64>; BURST],
+    /// The oldest spike's slot in `times`, always less than [`BURST`].
+    next: usize,
     /// When a burst was last reported.
     reported_ms: Option<u64>,
 }
@@ -203,6 +207,7 @@ impl SpikeFilter {
             run: 0,
             last_c: f32::NAN,
             times: [None; BURST],
+            next: 0,
             reported_ms: None,
         }
     }
@@ -237,9 +242,13 @@ impl SpikeFilter {
             self.run = 0;
         }
         self.run = self.run.saturating_add(1);
-        self.times.copy_within(0..BURST - 1, 1);
-        self.times[0] = Some(t_ms);
-        let burst = self.times[BURST - 1].is_some_and(|t0| since(t_ms, t0) <= u64::from(self.window_ms));
+        if let Some(slot) = self.times.get_mut(self.next) {
+            *slot = Some(t_ms);
+        }
+        self.next = if self.next + 1 < BURST { self.next + 1 } else { 0 };
+        // Now the oldest of the last BURST spikes, this one included.
+        let oldest = self.times.get(self.next).copied().flatten();
+        let burst = oldest.is_some_and(|t0| since(t_ms, t0) <= u64::from(self.window_ms));
         let quiet = self.reported_ms.is_none_or(|r| since(t_ms, r) > u64::from(self.window_ms));
         if burst && quiet {
             emit(EventKind::SensorSpikes);
