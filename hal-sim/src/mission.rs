@@ -329,7 +329,11 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
             Fault::SsrStuckOff => out.rows.iter().any(|r| r.t_s >= tf && r.true_temp_c > MISSION_SETPOINT_C + 1.0),
             // A shorted SSR shows only once less than full cooling is wanted: in a heat that
             // needs full cooling and still leaves the load above its setpoint it never does.
-            Fault::SsrStuckOn => out.rows.iter().any(|r| r.t_s >= tf && r.true_temp_c < MISSION_SETPOINT_C - 1.0),
+            // Nor behind an open supply switch, where it conducts nothing: a cold spell the
+            // freeze guard holds off to the end of the mission never shows it.
+            Fault::SsrStuckOn => {
+                out.rows.iter().any(|r| r.t_s >= tf && r.supply_enable && r.true_temp_c < MISSION_SETPOINT_C - 1.0)
+            }
             // A shorted switch shows only once the step asks for a test pulse with a sample
             // after it to take it, or commands the switch open for two samples.
             Fault::SupplySwitchShort => out

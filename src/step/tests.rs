@@ -90,3 +90,27 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn below_the_floor_with_nothing_asked_the_supply_switch_opens_too() {
+    // A load held cold by a cold ambient, the controller asking for nothing: the switch opens,
+    // in normal control (no event: nothing is wrong), and closes again once the load is back
+    // at the floor. The load drifts slowly, so the freeze guard never trips.
+    let mut c = pi_carrier();
+    let mut t_ms = 0;
+    let mut run = |c: &mut Carrier<AnyController>, temp: f32, n: u32| {
+        let mut out = None;
+        for k in 0..n {
+            // The converter's noise (constant counts read as a stuck sensor).
+            let o = c.step(&StepInput { t_ms, counts: counts_at(temp) + k % 3, setpoint_c: 4.0 });
+            assert_eq!((o.mode, o.duty), (Mode::Normal, Duty::OFF), "{temp} °C");
+            assert!(o.events.is_empty(), "{temp} °C: {:?}", kinds(&o));
+            t_ms += 10_000;
+            out = Some(o);
+        }
+        out.unwrap()
+    };
+    assert!(run(&mut c, 2.05, 30).supply_enable, "at the floor: closed");
+    assert!(!run(&mut c, 1.9, 30).supply_enable, "below it, nothing asked: open");
+    assert!(run(&mut c, 2.05, 30).supply_enable, "back at the floor: closed again");
+}

@@ -500,7 +500,10 @@ impl Supervisor {
                 duty = Duty::FULL;
             }
         }
-        let switch_test = self.switch.test_due(mode == Mode::Normal && self.state.supply_enable());
+        // Below the floor with nothing asked, the switch opens too ([`FreezeConfig::idle_open_c`]).
+        let idle_cold = mode == Mode::Normal && duty.get() <= 0.0 && temp_c < cfg.freeze.idle_open_c;
+        let closed = self.state.supply_enable() && !idle_cold;
+        let switch_test = self.switch.test_due(mode == Mode::Normal && closed);
         let lid = LidInput {
             t_ms,
             duty: duty.get(),
@@ -512,7 +515,7 @@ impl Supervisor {
         };
         self.lid.run(&cfg.lid, self.ts_s, &lid, emit);
         self.ssr.applied(&cfg.ssr, duty, requested, temp_c);
-        let supply_enable = self.switch.note_enable(self.state.supply_enable());
+        let supply_enable = self.switch.note_enable(closed);
         Verdict { duty, supply_enable, switch_test, mode }
     }
 
