@@ -30,18 +30,31 @@ pub struct FreezeConfig {
     /// Weight of the previous slope in the smoothed one (0.7: smoothed over ≈ 3 samples, so one
     /// noisy reading cannot trip the guard).
     pub slope_smoothing: f32,
-    /// In normal control with the load below this, °C, and nothing asked of the drive, the
-    /// supply switch opens as well: nothing may cool a load below the 2 °C floor, and an SSR that
-    /// shorts then cannot take it down before the guard has seen the fall. A light load at
-    /// 1.7 °C in a 1.6 °C ambient fell 1.8 °C in the 50 s the guard needed to trip on a short
-    /// (`hter campaign` mission 41783: −0.09 °C). It costs nothing: no cooling was asked.
+    /// In normal control with the load below this, °C, nothing asked of the drive and the load
+    /// standing still ([`Self::idle_slope_c_per_s`]), the supply switch opens as well: nothing
+    /// may cool a load a cold ambient holds below the 2 °C floor, and an SSR that shorts then
+    /// cannot take it down before the guard has seen the fall. A light load at 1.7 °C in a
+    /// 1.6 °C ambient fell 1.8 °C in the 50 s the guard needed to trip on a short (`hter
+    /// campaign` mission 41783: −0.09 °C). It costs nothing: no cooling was asked.
     pub idle_open_c: f32,
+    /// …with the freeze guard's smoothed slope at or above this, °C/s (−0.06 °C/min, a third
+    /// of the SSR checks' "falling fast"). A load falling with nothing asked is left to the guard
+    /// and the SSR checks, which need to see it fall: opening on a heavy load that a short took
+    /// down at −0.12 °C/min hid the short for the rest of the day (mission 47432: the switch
+    /// cycling it around 2 °C, never reported).
+    pub idle_slope_c_per_s: f32,
 }
 
 impl FreezeConfig {
     /// The reference board's settings.
-    pub const DEFAULT: FreezeConfig =
-        FreezeConfig { cut_c: 1.5, release_c: 2.5, lookahead_s: 120.0, slope_smoothing: 0.7, idle_open_c: 2.0 };
+    pub const DEFAULT: FreezeConfig = FreezeConfig {
+        cut_c: 1.5,
+        release_c: 2.5,
+        lookahead_s: 120.0,
+        slope_smoothing: 0.7,
+        idle_open_c: 2.0,
+        idle_slope_c_per_s: -0.001,
+    };
 }
 
 /// This sample's movement of the filtered temperature.

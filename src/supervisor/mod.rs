@@ -500,8 +500,12 @@ impl Supervisor {
                 duty = Duty::FULL;
             }
         }
-        // Below the floor with nothing asked, the switch opens too ([`FreezeConfig::idle_open_c`]).
-        let idle_cold = mode == Mode::Normal && duty.get() <= 0.0 && temp_c < cfg.freeze.idle_open_c;
+        // Below the floor with nothing asked, the switch opens too ([`FreezeConfig::idle_open_c`]),
+        // while the load stands still: a fall nobody asked for is the SSR checks' to judge.
+        let idle_cold = mode == Mode::Normal
+            && duty.get() <= 0.0
+            && temp_c < cfg.freeze.idle_open_c
+            && self.freeze.slope_c_per_s() >= cfg.freeze.idle_slope_c_per_s;
         let closed = self.state.supply_enable() && !idle_cold;
         let switch_test = self.switch.test_due(mode == Mode::Normal && closed);
         let lid = LidInput {
