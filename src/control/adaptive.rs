@@ -69,8 +69,9 @@
 //! pull-down of missions 1–50 000 above 2.5 °C (10 left 45876 at 2.18 °C, 5 at 1.88); without
 //! the cap a light, fast H-TER I carrier (measured fall 0.4 °C per sample, the RTD 1.5 °C
 //! behind the water) had the duty cut at 9.5 °C and bounced back above 8 °C for up to 60 s
-//! after entering 2–8 °C (7 of missions 1–1000). The cost is a slower landing: the step from
-//! 28 °C reaches 4.5 °C 200 s later, from 9 °C 220–300 s later. Regulation and setpoint changes
+//! after entering 2–8 °C (7 of missions 1–1000). The cost is a slower landing: the step reaches 4.5 °C
+//! 200–230 s later from 28 °C and 110–280 s later from 9 °C (H-TER I–II; `hter sim --scenario
+//! step --no-approach-lead`). Regulation and setpoint changes
 //! after the first approach are not touched.
 //!
 //! Mode changes are reported through [`Controller::status`] so the step logs each one as an
