@@ -175,12 +175,19 @@ fn an_open_ssr_is_detected() {
 /// minutes), 20465 (a lid opened 49 s into a supply probe warmed a light load 0.157 °C in 30 s,
 /// read as a shorted SSR: a turn-up is now a short only when a second probe turns up too) and
 /// 26762 (three spikes in a row within 0.6 °C of each other, read as a 45 °C sensor offset: a
-/// step too large to compensate now holds six samples, as a spike run does to be a jump). All
-/// must now pass.
+/// step too large to compensate now holds six samples, as a spike run does to be a jump), 5639,
+/// 20602, 22766 and 45876 (a pull-down from a cool ambient, 7–12 °C, on a heavy stainless wall
+/// weakly coupled to its water: GPC cut the duty at 4.1–4.5 °C on the start model and the cold
+/// stored in the wall carried the load on to 1.5–1.9 °C, 410–1050 s below 2 °C; the self-tuner's
+/// first approach now aims above the setpoint by the rate of fall, and they bottom out at
+/// 2.65–3.35 °C). All must now pass.
 #[test]
 fn campaign_missions_that_once_failed_pass() {
     use hal_sim::mission::{evaluate, Mission};
-    for seed in [230, 588, 11338, 11047, 11205, 10805, 257, 925, 28631, 27640, 22550, 26642, 3101, 8885, 20465, 26762] {
+    for seed in [
+        230, 588, 11338, 11047, 11205, 10805, 257, 925, 28631, 27640, 22550, 26642, 3101, 8885, 20465, 26762, 5639,
+        20602, 22766, 45876,
+    ] {
         let m = Mission::generate(seed);
         let out = run(&m.options(ControllerSpec::new(ControllerChoice::Gpc))).unwrap();
         let r = evaluate(&m, &out);
@@ -263,7 +270,9 @@ fn a_brownout_restart_is_safe_and_control_resumes() {
 /// After a brownout the self-tuner restarts from the model it had persisted (every 4 h of
 /// trusted learning, as the firmware saves it), not from its built-in start model. Started here
 /// from a model of H-TER II on an H-TER I carrier, it has learnt a different B by the time the
-/// power dips at 5 h; the restart picks up the one it stored.
+/// power dips at 5.5 h; the restart picks up the one it stored. (The first store comes 4 h
+/// after the estimate is first trusted for good, about 1 h in: at 5 h it was 30 samples short
+/// once the first approach's lead made the pull-down land more slowly, issue 19.)
 #[test]
 fn a_brownout_restarts_from_the_persisted_model() {
     let scenario = Scenario::resolve("step").unwrap();
@@ -271,8 +280,8 @@ fn a_brownout_restarts_from_the_persisted_model() {
     let other = hter::profile::START_MODEL_HTER2;
     spec.initial = Some(other);
     let mut opts = SimOptions::new(scenario, spec);
-    opts.duration_s = 6.0 * 3600.0;
-    opts.faults = vec![Fault::parse("brownout@18000").unwrap()];
+    opts.duration_s = 6.5 * 3600.0;
+    opts.faults = vec![Fault::parse("brownout@19800").unwrap()];
     let out = run(&opts).unwrap();
     let b0 = |t: f64| out.rows.iter().find(|r| r.t_s >= t).and_then(|r| r.b0).unwrap();
     // The last model the board stored before the power dipped.
@@ -281,7 +290,7 @@ fn a_brownout_restarts_from_the_persisted_model() {
         .iter()
         .rev()
         .find_map(|(t, s)| match s {
-            hter::persist::Save::Model(r) if *t < 18000.0 => Some(*r),
+            hter::persist::Save::Model(r) if *t < 19800.0 => Some(*r),
             _ => None,
         })
         .expect("a model stored before the brownout");
@@ -291,7 +300,7 @@ fn a_brownout_restarts_from_the_persisted_model() {
         "the stored estimate should have moved: {start} → {persisted:?}"
     );
     // The first sample after the restart is designed on the stored model, not the start model.
-    assert_eq!(b0(18000.0), persisted.theta[2], "restart b0, stored {persisted:?}, start {start}");
+    assert_eq!(b0(19800.0), persisted.theta[2], "restart b0, stored {persisted:?}, start {start}");
     assert!(out.metrics.tracking.min_temp_c > 2.0, "{:?}", out.metrics);
 }
 

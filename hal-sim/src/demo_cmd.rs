@@ -29,6 +29,7 @@ pub fn run() -> Result<()> {
         s_weight: None,
         p_pole: None,
         t_pole: None,
+        no_approach_lead: false,
         load: LoadArg::Full,
         ambient: 28.0,
         duration: None,

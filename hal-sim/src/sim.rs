@@ -91,6 +91,9 @@ pub struct ControllerSpec {
     pub igmvc: IgmvcConfig,
     /// Self-tuning GPC: T-filter pole (`AdaptiveConfig::t_filter`).
     pub gpc_t_filter: f32,
+    /// Self-tuning laws: the first approach's lead (`hter::control::adaptive`, "The first
+    /// approach"); false only to measure without it (`hter sim --no-approach-lead`).
+    pub approach_lead: bool,
     /// Model the self-tuning laws start from; `None`: the one identified on the simulated
     /// carrier (`profile::START_MODEL_HTER1`, `START_MODEL_HTER2`), as a board starts from the
     /// model persisted from its own identification run.
@@ -115,6 +118,7 @@ impl ControllerSpec {
             gmvc: GmvcConfig::DEFAULT,
             igmvc: IgmvcConfig::DEFAULT,
             gpc_t_filter: profile::GPC_T_FILTER,
+            approach_lead: true,
             initial: None,
             pi: None,
             holdover: None,
@@ -154,7 +158,11 @@ impl ControllerSpec {
                     k: initial.map_or(profile_cfg.k, |m| m.k()),
                     ..profile_cfg
                 };
-                AnyController::SelfTuning(SelfTuning::new(cfg, ts_s, u0).map_err(refused)?)
+                let mut c = SelfTuning::new(cfg, ts_s, u0).map_err(refused)?;
+                if !self.approach_lead {
+                    c.end_approach();
+                }
+                AnyController::SelfTuning(c)
             }
         })
     }

@@ -57,6 +57,10 @@ pub struct SimArgs {
     /// default 0.9 for IGMVC, 0.8 for self-tuning GPC).
     #[arg(long, allow_negative_numbers = true)]
     pub t_pole: Option<f64>,
+    /// Self-tuning laws: no first-approach lead (the law aims at the setpoint from the start;
+    /// the board always runs with it: `hter::control::adaptive`, "The first approach").
+    #[arg(long)]
+    pub no_approach_lead: bool,
     /// PI: proportional gain, duty per °C (> 0; default: the carrier's SIMC tuning).
     #[arg(long, allow_negative_numbers = true)]
     pub kp: Option<f64>,
@@ -216,6 +220,7 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
         controller.igmvc.t_pole = tp as f32;
         controller.gpc_t_filter = tp as f32;
     }
+    controller.approach_lead = !a.no_approach_lead;
     let plant = PlantChoice::parse(&a.plant)?;
     if a.kp.is_some() || a.ti.is_some() {
         let mut pi = plant.default_pi();

@@ -52,6 +52,28 @@
 //!
 //! Warm-up and samples the estimator refused keep the mode, unless the law fails.
 //!
+//! **The first approach** (issue 19). From start until the load first stops falling less than
+//! 1 °C above the setpoint, the law is handed the setpoint raised by the rate of fall (over the
+//! last two samples) times [`APPROACH_LEAD_SAMPLES`], at most [`APPROACH_RAISE_MAX_C`] (never
+//! lowered; the fallback PI keeps the setpoint). A pull-down runs at full duty, which excites
+//! nothing, so the law runs on the start model, while the cabinet's wall and cold plate store
+//! cold. A heavy wall weakly coupled to its water (stainless steel, wall-to-water conductance
+//! × 0.5, wall and water capacities × 1.2–1.5) gives that cold back for ten minutes after the
+//! duty is cut, beyond the start model and the 5-minute horizon; from a cool ambient (7–12 °C,
+//! where little heat leaks back) GPC cut the duty at 4.1–4.5 °C and the load coasted on to
+//! 1.5–1.9 °C, 410–1050 s below 2 °C (campaign missions 5639, 20602, 22766, 45876). The water
+//! takes its heat from the wall alone, so the wall lies below it by (water capacity × rate of
+//! fall) / coupling: the cold still to come grows with the rate of fall, and a law that aims
+//! higher while the load falls fast cuts the duty before it is stored. Those missions now
+//! bottom out at 2.65–3.35 °C. The lead (15 samples) is the least that kept every cool-ambient
+//! pull-down of missions 1–50 000 above 2.5 °C (10 left 45876 at 2.18 °C, 5 at 1.88); without
+//! the cap a light, fast H-TER I carrier (measured fall 0.4 °C per sample, the RTD 1.5 °C
+//! behind the water) had the duty cut at 9.5 °C and bounced back above 8 °C for up to 60 s
+//! after entering 2–8 °C (7 of missions 1–1000). The cost is a slower landing: the step reaches 4.5 °C
+//! 200–230 s later from 28 °C and 110–280 s later from 9 °C (H-TER I–II; `hter sim --scenario
+//! step --no-approach-lead`). Regulation and setpoint changes
+//! after the first approach are not touched.
+//!
 //! Mode changes are reported through [`Controller::status`] so the step logs each one as an
 //! event (engaged, frozen, fallback). The fallback PI tracks the applied duty all the time, so
 //! switching in either direction is bumpless; the law's histories also track the applied duty.
@@ -103,6 +125,8 @@ pub enum AdaptiveError {
     GainRange,
     /// The T-filter pole is outside [0, 1).
     TFilter,
+    /// The first approach's lead is outside 0 … 3600 s.
+    ApproachLead,
     /// The fallback PI's gain is not finite and positive, or its integral time not positive.
     Fallback,
     /// The law's tuning is out of range, or the law is not built into this image.
@@ -214,6 +238,12 @@ impl SecondOrderRegressor {
     }
 }
 
+/// Lead of the first approach, samples of Ts (150 s at Ts = 10 s; see the module docs).
+pub const APPROACH_LEAD_SAMPLES: f32 = 15.0;
+
+/// Most the first approach raises the law's setpoint, °C (see the module docs).
+pub const APPROACH_RAISE_MAX_C: f32 = 1.5;
+
 /// Self-tuning state.
 #[derive(Clone, Debug)]
 pub struct SelfTuning {
@@ -223,6 +253,8 @@ pub struct SelfTuning {
     fallback: Pi,
     trusted: Option<Model>,
     mode: AdaptiveMode,
+    /// The first approach lasts.
+    approaching: bool,
     updates: u32,
     reg: SecondOrderRegressor,
     last_error: f32,
@@ -252,6 +284,7 @@ impl SelfTuning {
             law_state: LawState::new(u0),
             fallback,
             trusted,
+            approaching: true,
             mode: if trusted.is_some() { AdaptiveMode::Frozen } else { AdaptiveMode::Fallback },
             updates: 0,
             reg,
@@ -299,6 +332,31 @@ impl SelfTuning {
     /// The last trusted model (what a board would persist).
     pub fn trusted_model(&self) -> Option<Model> {
         self.trusted
+    }
+
+    /// The setpoint the law is handed during the first approach, for `w` after the measurement
+    /// y(t) = `y`: while the load falls, `w` raised by the lead times the fall per sample over
+    /// the last two samples, at most [`APPROACH_RAISE_MAX_C`]; else `w`, and the approach ends
+    /// if the load is less than 1 °C above `w`. Out of line and called only while the approach
+    /// lasts: after it a sample pays one flag test (the processor-in-the-loop budget, and the
+    /// default firmware's flash).
+    #[inline(never)]
+    fn approach_setpoint(&mut self, y: f32, w: f32) -> f32 {
+        let fall = self.reg.y[2] - self.reg.y[0];
+        if fall > 0.0 {
+            let raise = APPROACH_LEAD_SAMPLES * 0.5 * fall;
+            return w + if raise < APPROACH_RAISE_MAX_C { raise } else { APPROACH_RAISE_MAX_C };
+        }
+        if y < w + 1.0 {
+            self.approaching = false;
+        }
+        w
+    }
+
+    /// Ends the first approach now (the law aims at the setpoint from the next sample on): for
+    /// measuring what the approach's lead does (`hter sim --no-approach-lead`).
+    pub fn end_approach(&mut self) {
+        self.approaching = false;
     }
 
     /// Updates the estimator with y(t); returns true if an update was made.
@@ -356,7 +414,8 @@ impl Controller for SelfTuning {
                 self.mode = AdaptiveMode::Frozen;
             }
         }
-        let law_u = self.law_state.update(&self.cfg.law, self.trusted.as_ref(), input.y_c, input.w_c);
+        let w = if self.approaching { self.approach_setpoint(input.y_c, input.w_c) } else { input.w_c };
+        let law_u = self.law_state.update(&self.cfg.law, self.trusted.as_ref(), input.y_c, w);
         let pi_u = self.fallback.update(input);
         match law_u {
             Ok(u) if self.mode != AdaptiveMode::Fallback => Ok(u),
@@ -497,6 +556,42 @@ mod tests {
         }
         assert_eq!(c.updates(), 3);
         assert_eq!(SecondOrderRegressor::new(0, 0.4), Err(ModelError::Order));
+    }
+
+    #[test]
+    fn the_first_approach_aims_above_the_setpoint_while_the_load_falls() {
+        let mut c = start(ADAPTIVE_GPC);
+        let at = |c: &mut SelfTuning, y: f32| {
+            c.reg.push_y(y);
+            c.approach_setpoint(y, 4.0)
+        };
+        // At rest 5 °C above the setpoint (the history starts full of the first reading): the
+        // setpoint as it is, and the approach goes on.
+        assert_eq!(at(&mut c, 9.0), 4.0);
+        assert_eq!(at(&mut c, 9.0), 4.0);
+        assert!(c.approaching);
+        // Falling 0.125 °C over two samples: 15 × 0.0625 = 0.9375 °C higher; faster, at most
+        // 1.5 °C higher.
+        assert_eq!(at(&mut c, 8.875), 4.9375);
+        assert_eq!(at(&mut c, 8.75), 4.0 + APPROACH_RAISE_MAX_C);
+        assert_eq!(at(&mut c, 4.5), 4.0 + APPROACH_RAISE_MAX_C);
+        // Near the setpoint, still falling over the last two samples: still raised.
+        assert_eq!(at(&mut c, 4.5), 4.0 + APPROACH_RAISE_MAX_C);
+        assert!(c.approaching);
+        // No longer falling less than 1 °C above it: the approach is over for good.
+        assert_eq!(at(&mut c, 4.5), 4.0);
+        assert!(!c.approaching);
+        let (mut plant, mut y) = (Plant::start_model(), 0.0);
+        for _ in 0..5 {
+            sample(&mut c, &mut plant, &mut y, None);
+        }
+        assert!(!c.approaching);
+        // Started at the setpoint (a restart holding the load, `piecewise`'s pre-roll), the
+        // approach ends on the first sample.
+        let mut c = start(ADAPTIVE_GPC);
+        let (mut plant, mut y) = (Plant::start_model(), W_C);
+        sample(&mut c, &mut plant, &mut y, None);
+        assert!(!c.approaching);
     }
 
     #[test]

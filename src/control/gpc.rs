@@ -308,8 +308,13 @@ impl GpcState {
         // Normal equations H x = Gᵀ(w − f), H = GᵀG + λI, rows j = N1..N2, G[j][c] = g_{j−c}.
         let (n1, nu) = (cfg.n1, cfg.nu);
         // g_1 … g_lead are exact zeros (the dead time): their products are ±0 and are skipped
-        // below (adding ±0 to a sum that is not −0 changes nothing).
-        let lead = d.g[..n2].iter().take_while(|x| **x == 0.0).count();
+        // below (adding ±0 to a sum that is not −0 changes nothing). g_1 … g_{k−1} are +0 by
+        // construction (no b_i enters before j = k, and 0 − a_i·0 is +0), so the count starts
+        // at k − 1 (k ≥ 1 in every model; the probe above has refused a non-finite one).
+        let mut lead = (m.k() - 1).min(n2);
+        while lead < n2 && d.g[lead] == 0.0 {
+            lead += 1;
+        }
         let mut h = normal_matrix(&d.g, cfg, lead);
         if !cholesky_in_place(&mut h, nu) {
             return Err(GpcError::Singular);
