@@ -180,13 +180,19 @@ fn an_open_ssr_is_detected() {
 /// weakly coupled to its water: GPC cut the duty at 4.1–4.5 °C on the start model and the cold
 /// stored in the wall carried the load on to 1.5–1.9 °C, 410–1050 s below 2 °C; the self-tuner's
 /// first approach now aims above the setpoint by the rate of fall, and they bottom out at
-/// 2.65–3.35 °C). All must now pass.
+/// 2.65–3.35 °C), 41783 (a light load a 1.6 °C ambient held at 1.7 °C, its supply switch closed
+/// with nothing asked, frozen to −0.09 °C by an SSR short in the 50 s the freeze guard needed:
+/// below the 2 °C floor with nothing asked and the load still, the switch now opens too),
+/// 47432 (the first form of that rule opened on a heavy load a short was taking down at
+/// −0.12 °C/min and hid the short for the rest of the day: the load must stand still) and 42451
+/// (a short behind a supply switch the freeze guard held open to the end of the mission
+/// conducted nothing, and is no longer counted as a fault that showed). All must now pass.
 #[test]
 fn campaign_missions_that_once_failed_pass() {
     use hal_sim::mission::{evaluate, Mission};
     for seed in [
         230, 588, 11338, 11047, 11205, 10805, 257, 925, 28631, 27640, 22550, 26642, 3101, 8885, 20465, 26762, 5639,
-        20602, 22766, 45876,
+        20602, 22766, 45876, 41783, 47432, 42451,
     ] {
         let m = Mission::generate(seed);
         let out = run(&m.options(ControllerSpec::new(ControllerChoice::Gpc))).unwrap();
