@@ -117,6 +117,21 @@ pub struct CampaignSummary {
     pub worst_min_c: f64,
     /// Highest true load temperature in any judged window, °C.
     pub worst_max_c: f64,
+    /// The freeze margin: over the missions without a hardware fault, the lowest true load
+    /// temperature after pull-down outside cold ambient, °C (`None`: no such sample), and the
+    /// mission it was in.
+    pub fault_free_min_c: Option<f64>,
+    /// See [`Self::fault_free_min_c`].
+    pub fault_free_min_seed: Option<u64>,
+    /// Over the missions with a hardware fault, after it and outside cold ambient: the lowest
+    /// true load temperature, °C, and the mission it was in…
+    pub fault_min_c: Option<f64>,
+    /// See [`Self::fault_min_c`].
+    pub fault_min_seed: Option<u64>,
+    /// …the longest time below 2 °C in one mission, s, and all of it, min.
+    pub fault_below_2_max_s: f64,
+    /// See [`Self::fault_below_2_max_s`].
+    pub fault_below_2_minutes: f64,
     /// Missions whose pull-down took longest, s (None if none ended).
     pub longest_pulldown_s: Option<f64>,
     /// Seeds of the failing missions.
@@ -194,6 +209,12 @@ pub fn summarize(
     let faults_detected = by_kind.values().map(|k| k.detected).sum();
     let faults_missed_with_detector =
         by_kind.values().filter(|k| k.detector).map(|k| k.injected - k.detected - k.not_observable).sum();
+    // The lowest (temperature, seed) of `f` over `reports`.
+    let lowest = |f: &dyn Fn(&MissionReport) -> Option<f64>| {
+        reports.iter().filter_map(|r| f(r).map(|c| (c, r.seed))).reduce(|a, b| if b.0 < a.0 { b } else { a })
+    };
+    let free_min = lowest(&|r| if r.fault.is_none() { r.margin_c } else { None });
+    let fault_min = lowest(&|r| r.fault_min_c);
     CampaignSummary {
         missions: reports.len() as u64,
         controller: format!("{controller:?}").to_lowercase(),
@@ -221,6 +242,12 @@ pub fn summarize(
         spikes_reported: reports.iter().filter(|r| matches!(r.spikes, Some((_, Some(_))))).count() as u64,
         worst_min_c: reports.iter().map(|r| r.min_c).fold(f64::INFINITY, f64::min),
         worst_max_c: reports.iter().filter_map(|r| r.max_judged_c).fold(f64::NEG_INFINITY, f64::max),
+        fault_free_min_c: free_min.map(|(c, _)| c),
+        fault_free_min_seed: free_min.map(|(_, s)| s),
+        fault_min_c: fault_min.map(|(c, _)| c),
+        fault_min_seed: fault_min.map(|(_, s)| s),
+        fault_below_2_max_s: reports.iter().map(|r| r.fault_below_2_s).fold(0.0, f64::max),
+        fault_below_2_minutes: sum(&|r| r.fault_below_2_s) / 60.0,
         longest_pulldown_s: reports.iter().filter_map(|r| r.pulldown_s).reduce(f64::max),
         failures,
         failure_details: details,
@@ -290,6 +317,15 @@ fn print_table(s: &CampaignSummary) {
     println!("| minutes below 0 °C (all missions) | {:.1} ({} missions) |", s.freeze_minutes, s.freeze_missions);
     println!("| lowest load temperature | {:.2} °C |", s.worst_min_c);
     println!("| highest load temperature after pull-down, before faults | {:.2} °C |", s.worst_max_c);
+    if let (Some(c), Some(seed)) = (s.fault_free_min_c, s.fault_free_min_seed) {
+        println!("| freeze margin: lowest load after pull-down, fault-free missions, warm ambient | {c:.2} °C (mission {seed}) |");
+    }
+    if let (Some(c), Some(seed)) = (s.fault_min_c, s.fault_min_seed) {
+        println!(
+            "| after a hardware fault, warm ambient: lowest load, time below 2 °C | {c:.2} °C (mission {seed}); {:.1} min in all, at most {:.0} s in one mission |",
+            s.fault_below_2_minutes, s.fault_below_2_max_s
+        );
+    }
     println!(
         "| outside 2–8 °C after pull-down, before faults | {:.4} % ({:.1} min of {:.0} h; {:.1} min above 8 °C at full cooling for 30 min: capacity) |",
         100.0 * s.fraction_outside_2_8,

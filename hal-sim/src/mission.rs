@@ -262,6 +262,14 @@ pub struct MissionReport {
     pub fault_detectable: bool,
     /// Sensor spikes: (injected at s, first report at s).
     pub spikes: Option<(f64, Option<f64>)>,
+    /// The freeze margin: the lowest true load temperature after pull-down and before the
+    /// hardware fault (or the end), cold-ambient samples left out, °C (`None`: no such sample).
+    pub margin_c: Option<f64>,
+    /// After the hardware fault, cold-ambient samples left out: the lowest true load
+    /// temperature, °C, and the time below 2 °C, s.
+    pub fault_min_c: Option<f64>,
+    /// See [`Self::fault_min_c`].
+    pub fault_below_2_s: f64,
     /// Hardware-fault reports without a fault behind them (before the injected fault, or in a
     /// mission without one): (kind, first report at s), one per kind.
     pub spurious: Vec<(Detected, f64)>,
@@ -283,6 +291,7 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
     let mut pulldown_s = None;
     let mut min_c = f64::INFINITY;
     let mut max_judged_c: Option<f64> = None;
+    let (mut margin_c, mut fault_min_c, mut fault_below_2_s) = (None::<f64>, None::<f64>, 0.0);
     let mut last_cold = f64::NEG_INFINITY;
     for r in &out.rows {
         let t = r.true_temp_c;
@@ -297,6 +306,15 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
         let inside = (2.0..=8.0).contains(&t);
         if pulldown_s.is_none() && inside {
             pulldown_s = Some(r.t_s);
+        }
+        // The freeze margin: the lowest load after pull-down outside cold ambient, before the
+        // fault; after it, how low the fault took the load and for how long below 2 °C.
+        if pulldown_s.is_some() && r.t_s - last_cold > COLD_LAG_S {
+            let lowest = if r.t_s < t_fault { &mut margin_c } else { &mut fault_min_c };
+            *lowest = Some(lowest.map_or(t, |x| x.min(t)));
+            if r.t_s >= t_fault && t < 2.0 {
+                fault_below_2_s += ts;
+            }
         }
         if pulldown_s.is_none() || r.t_s >= t_fault {
             continue;
@@ -391,6 +409,9 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
         pulldown_s,
         min_c,
         max_judged_c,
+        margin_c,
+        fault_min_c,
+        fault_below_2_s,
         fault,
         fault_detectable,
         spikes,

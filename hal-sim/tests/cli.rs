@@ -416,3 +416,20 @@ fn the_sim_csv_has_holdover_s_as_numbers_and_json_predicts_from_it() {
     let predicted = v["holdover_predicted_s"].as_f64().expect("a prediction");
     assert!((predicted - before[before.len() - 1]).abs() < 1e-3, "{predicted} vs {:?}", before.last());
 }
+
+#[test]
+fn a_campaign_reports_the_freeze_margin_apart_from_the_faults() {
+    // Mission 665 has no hardware fault: its lowest load after pull-down (the freeze margin)
+    // is reported, never below the mission's lowest, and nothing after a fault.
+    let c = json(&["campaign", "--missions", "1", "--seed", "665", "--json"]);
+    let (margin, lowest) = (c["fault_free_min_c"].as_f64().unwrap(), c["worst_min_c"].as_f64().unwrap());
+    assert!((2.0..=8.0).contains(&margin) && margin >= lowest, "{c}");
+    assert_eq!(c["fault_free_min_seed"], 665, "{c}");
+    assert!(c["fault_min_c"].is_null() && c["fault_below_2_minutes"] == 0.0, "{c}");
+    // Mission 41783's SSR shorts on a light load: what the fault did is reported apart, and the
+    // mission is not in the freeze margin.
+    let c = json(&["campaign", "--missions", "1", "--seed", "41783", "--json"]);
+    assert!(c["fault_free_min_c"].is_null(), "{c}");
+    assert!(c["fault_min_c"].as_f64().unwrap() >= c["worst_min_c"].as_f64().unwrap(), "{c}");
+    assert_eq!(c["fault_min_seed"], 41783, "{c}");
+}
