@@ -55,7 +55,9 @@
 //!    stuck-on verdicts that come with a trip ([`ssr`], paths 1 and 2), its release; then the
 //!    SSR checks on the temperature history (stuck on after the off-run, stuck off, the supply
 //!    probe);
-//! 5. the mode's outputs: no duty unless the controller drives, limp home's On-Off;
+//! 5. the mode's outputs: no duty unless the controller drives, limp home's On-Off, the supply
+//!    switch open below the floor with nothing asked and the load still
+//!    ([`freeze::FreezeConfig::idle_open_c`]);
 //! 6. the supply switch's test pulse, the lid detector ([`lid`]) on the applied duty;
 //! 7. last, the SSR monitor counts this sample's duty: every check above saw the runs up to the
 //!    previous sample.
@@ -354,8 +356,8 @@ impl State {
         }
     }
 
-    /// The level of the supply-enable output in this mode: closed
-    /// while the controller drives without a probe, and while limp home has it on. It also opens
+    /// The level of the supply-enable output in this mode (before the idle opening below the
+    /// floor): closed while the controller drives without a probe, and while limp home has it on. It also opens
     /// whenever the freeze guard holds cooling off: that costs nothing, and it is the only thing
     /// that stops a shorted SSR before the SSR checks have seen enough to be sure. No cooling
     /// at all without a trustworthy reading either: a shorted SSR must not cool blind.
