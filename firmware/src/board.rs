@@ -230,7 +230,7 @@ pub fn force_safe() {
             w.set_ccne(0, false);
         });
     }
-    pac::GPIOB.bsrr().write(|w| w.set_br(0, true));
+    set_supply_switch(false);
     pac::GPIOB.moder().modify(|w| w.set_moder(0, Moder::OUTPUT));
     pac::GPIOC.bsrr().write(|w| w.set_bs(7, true));
     pac::GPIOC.moder().modify(|w| w.set_moder(7, Moder::OUTPUT));
@@ -480,9 +480,10 @@ pub struct Conversion {
 /// actuator whenever it opens the switch, and by the pulse.
 pub static SWITCH_TEST: AtomicBool = AtomicBool::new(false);
 
-/// The supply-enable pin (PB0) through its set/reset register, for the test pulse inside
-/// [`Analog::sample`]: the actuator owns the pin's `Output`, and the two never interleave (the
-/// pulse runs before the sample is handed over, so no new actuation can come in between).
+/// The supply-enable pin (PB0) through its set/reset register: for [`force_safe`], and for the
+/// test pulse inside [`Analog::sample`], where the actuator owns the pin's `Output` and the two
+/// never interleave (the pulse runs before the sample is handed over, so no new actuation can
+/// come in between).
 fn set_supply_switch(closed: bool) {
     pac::GPIOB.bsrr().write(|w| if closed { w.set_bs(0, true) } else { w.set_br(0, true) });
 }
@@ -503,13 +504,33 @@ struct BuckHeld {
 fn buck_at_ceiling() -> BuckHeld {
     let tim = pac::TIM1;
     let held = BuckHeld { ccr: tim.ccr(0).read().ccr(), ccer: tim.ccer().read() };
-    let full = u32::from(tim.arr().read().arr()) + 1;
-    tim.ccr(0).write(|w| w.set_ccr((config::BUCK_MAX_DUTY * full as f32) as u16));
-    tim.ccer().modify(|w| {
-        w.set_cce(0, true);
-        w.set_ccne(0, true);
-    });
+    buck_write(buck_ticks(config::BUCK_MAX_DUTY), true, true);
     held
+}
+
+/// Full duty in TIM1 compare ticks, ARR + 1 (2000 at 40 kHz); the duty's u16 (embedded-hal)
+/// holds it for any frequency above the 1.2 kHz where ARR would reach 65535.
+#[cfg(feature = "buck")]
+fn buck_full_ticks() -> u16 {
+    (u32::from(pac::TIM1.arr().read().arr()) + 1).min(u32::from(u16::MAX)) as u16
+}
+
+/// The duty `d` in TIM1 compare ticks.
+#[cfg(feature = "buck")]
+fn buck_ticks(d: f32) -> u16 {
+    (d * f32::from(buck_full_ticks())) as u16
+}
+
+/// CCR1 and the enables of the high side (CH1) and the low side (CH1N) through the registers:
+/// embassy's `set_duty` would re-read the period and assert on every write, and its `enable`
+/// sets CC1E and CC1NE only together.
+#[cfg(feature = "buck")]
+fn buck_write(ccr: u16, high: bool, low: bool) {
+    pac::TIM1.ccr(0).write(|w| w.set_ccr(ccr));
+    pac::TIM1.ccer().modify(|w| {
+        w.set_cce(0, high);
+        w.set_ccne(0, low);
+    });
 }
 
 #[cfg(feature = "buck")]
@@ -712,15 +733,11 @@ impl Buck {
         // Both gates off until the first actuation: embassy leaves CCER at its reset value (both
         // outputs of every channel disabled, inactive level under OSSR = 1) and CCR1 at 0; the
         // automatic output enable (AOE) stays at its reset value, off.
-        // Full duty is ARR + 1 compare ticks (2000 at 40 kHz); the duty's u16 (embedded-hal) holds
-        // it for any frequency above the 1.2 kHz where ARR would reach 65535.
-        let max = (u32::from(pac::TIM1.arr().read().arr()) + 1).min(u32::from(u16::MAX)) as u16;
-        let f = f32::from(max);
         Buck {
             _pwm: core::mem::ManuallyDrop::new(pwm),
-            max,
-            ceiling: (config::BUCK_MAX_DUTY * f) as u16,
-            sync_min: (config::BUCK_SYNC_MIN_DUTY * f) as u16,
+            max: buck_full_ticks(),
+            ceiling: buck_ticks(config::BUCK_MAX_DUTY),
+            sync_min: buck_ticks(config::BUCK_SYNC_MIN_DUTY),
         }
     }
 }
@@ -737,15 +754,8 @@ impl embedded_hal::pwm::SetDutyCycle for Buck {
     }
 
     fn set_duty_cycle(&mut self, duty: u16) -> Result<(), Self::Error> {
-        // CCR1 and CCER through the registers: the compare value is clamped here (embassy's
-        // `set_duty` would re-read the period and assert on every write), and embassy's
-        // `enable` sets CC1E and CC1NE only together.
-        let tim = pac::TIM1;
-        tim.ccr(0).write(|w| w.set_ccr(duty.min(self.ceiling)));
-        tim.ccer().modify(|w| {
-            w.set_cce(0, duty > 0);
-            w.set_ccne(0, duty >= self.sync_min);
-        });
+        // The compare value is clamped here; the low side switches only from the sync minimum.
+        buck_write(duty.min(self.ceiling), duty > 0, duty >= self.sync_min);
         Ok(())
     }
 }

@@ -318,7 +318,8 @@ impl Board {
 
     /// The firmware's test pulse, if the last output asked for one: the switch opened for
     /// [`TEST_PULSE_S`] with the drive running, the rail read at its end, V (the supply if the
-    /// switch is shorted, else emptied: the pulse is only asked with the drive on enough).
+    /// switch is shorted, else emptied: the firmware drives the buck at its ceiling for the
+    /// pulse, and nothing holds the SSR board's rail up).
     fn test_pulse(&mut self, ssr: &SimSsr, supply_v: f64) -> Option<f32> {
         std::mem::take(&mut self.pulse_asked).then(|| {
             self.pulse_taken = true;
