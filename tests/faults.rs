@@ -186,13 +186,18 @@ fn an_open_ssr_is_detected() {
 /// 47432 (the first form of that rule opened on a heavy load a short was taking down at
 /// −0.12 °C/min and hid the short for the rest of the day: the load must stand still) and 42451
 /// (a short behind a supply switch the freeze guard held open to the end of the mission
-/// conducted nothing, and is no longer counted as a fault that showed). All must now pass.
+/// conducted nothing, and is no longer counted as a fault that showed), 42110 (a lid left open on
+/// a carrier at full duty for hours at 42 °C: the `ssr_stuck_off` warning of an earlier opening
+/// covered the whole run of full duty; it is now armed again once the load stops warming) and
+/// 49578 (a +1.5 °C offset that began on the sample after a spike became the reference unseen:
+/// the first good reading after a spike is now checked for a step against the reference carried
+/// on by the load's trend). All must now pass.
 #[test]
 fn campaign_missions_that_once_failed_pass() {
     use hal_sim::mission::{evaluate, Mission};
     for seed in [
         230, 588, 11338, 11047, 11205, 10805, 257, 925, 28631, 27640, 22550, 26642, 3101, 8885, 20465, 26762, 5639,
-        20602, 22766, 45876, 41783, 47432, 42451,
+        20602, 22766, 45876, 41783, 47432, 42451, 42110, 49578,
     ] {
         let m = Mission::generate(seed);
         let out = run(&m.options(ControllerSpec::new(ControllerChoice::Gpc))).unwrap();

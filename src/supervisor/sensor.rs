@@ -274,13 +274,26 @@ pub(crate) struct OffsetWatch {
     /// After a spike the good reading that follows must not look like a step from the spike,
     /// and the filtered value lags a fast pull-down too much to serve.
     last_good_c: Option<f32>,
+    /// How far the reference moved from the good reading on the sample before it, °C (0 when
+    /// that sample had none): the load's own motion, to carry the reference across spikes.
+    trend_c: f32,
+    /// Readings watched since the reference was taken (1 on the sample right after it; more
+    /// when spikes came between).
+    age: u8,
     /// A step under watch: (level before, step, samples it has held).
     pending: Option<(f32, f32, u8)>,
 }
 
 impl OffsetWatch {
     pub(crate) fn new(cfg: &OffsetConfig, ts_s: f32) -> Self {
-        OffsetWatch { confirm_n: samples_u8(cfg.confirm_s, ts_s), offset_c: 0.0, last_good_c: None, pending: None }
+        OffsetWatch {
+            confirm_n: samples_u8(cfg.confirm_s, ts_s),
+            offset_c: 0.0,
+            last_good_c: None,
+            trend_c: 0.0,
+            age: 0,
+            pending: None,
+        }
     }
 
     /// The offset subtracted from every reading, °C.
@@ -292,7 +305,15 @@ impl OffsetWatch {
     /// sample (a step is under watch). Once a step has held its level for `confirm_n` samples
     /// (twice that for a step too large to compensate) it is measured, subtracted from every
     /// later reading and reported.
+    ///
+    /// A step whose own sample was a spike (not kept as the reference) ends with the first
+    /// reading that does not hold the spike's level. That reading is the first good one since
+    /// the reference, so it is itself checked for a step, against the reference carried on by
+    /// the load's trend over the samples between (mission 49578, `--seed 40001`: an offset that
+    /// began on the sample after a spike became the reference unseen; the trend keeps a fast
+    /// fall in limp home from reading as a step across the spike).
     pub(crate) fn watch(&mut self, cfg: &OffsetConfig, raw: f32, emit: &mut impl FnMut(EventKind)) -> bool {
+        self.age = self.age.saturating_add(1);
         match (self.pending, self.last_good_c) {
             (Some((before, step, n)), _) => {
                 if (raw - (before + step)).abs() <= min_f32(cfg.hold_fraction * step.abs(), cfg.hold_max_c) {
@@ -314,17 +335,27 @@ impl OffsetWatch {
                     }
                     true
                 } else {
-                    // Back (a transient, which the spike filter handles) or somewhere else.
+                    // Back (a transient, which the spike filter handles) or somewhere else,
+                    // which after a spike may be a step of its own.
                     self.pending = None;
-                    false
+                    match self.last_good_c {
+                        Some(p) if self.age >= 2 => self.step_from(cfg, p + f32::from(self.age) * self.trend_c, raw),
+                        _ => false,
+                    }
                 }
             }
-            (None, Some(p)) if (raw - p).abs() > cfg.step_c => {
-                self.pending = Some((p, raw - p, 1));
-                true
-            }
+            (None, Some(p)) => self.step_from(cfg, p, raw),
             _ => false,
         }
+    }
+
+    /// Starts watching `raw` as a step from `level` if it is one.
+    fn step_from(&mut self, cfg: &OffsetConfig, level: f32, raw: f32) -> bool {
+        let step = (raw - level).abs() > cfg.step_c;
+        if step {
+            self.pending = Some((level, raw - level, 1));
+        }
+        step
     }
 
     /// No reading this sample: a step under watch, and the reference, are gone.
@@ -336,7 +367,13 @@ impl OffsetWatch {
     /// `t`, which was not a spike, is the reference for the next step, in the frame of the
     /// offset in force after this sample (`offset_before` was in force before it).
     pub(crate) fn keep_reference(&mut self, t: f32, offset_before: f32) {
+        // Both in the frame of `offset_before`: a change of the offset is no motion.
+        self.trend_c = match self.last_good_c {
+            Some(p) if self.age == 1 => t - p,
+            _ => 0.0,
+        };
         self.last_good_c = Some(t - (self.offset_c - offset_before));
+        self.age = 0;
     }
 }
 
@@ -529,12 +566,20 @@ mod tests {
         let mut e = |k: EventKind| panic!("reported {k:?}");
         w.keep_reference(4.0, 0.0);
         assert!(w.watch(&OFFSET, 6.0, &mut e));
+        // 2 °C off the filtered value is not a spike: the step's reading is the reference.
+        w.keep_reference(6.0, 0.0);
         // Within a quarter of the 2 °C step is 0.5 °C; 0.51 °C off is not holding.
         assert!(!w.watch(&OFFSET, 6.51, &mut e), "released");
-        // A 10 °C step must hold within 0.5 °C, not within a quarter of it.
+        // A 10 °C step (a spike: not the reference) must hold within 0.5 °C, not within a
+        // quarter of it. The reading that does not hold it is the first since the reference
+        // and is watched as a step of its own from there.
+        w.keep_reference(4.0, 0.0);
         w.keep_reference(4.0, 0.0);
         assert!(w.watch(&OFFSET, 14.0, &mut e));
-        assert!(!w.watch(&OFFSET, 14.6, &mut e));
+        assert!(w.watch(&OFFSET, 14.6, &mut e));
+        assert_eq!(w.pending, Some((4.0, 10.6, 1)));
+        assert!(!w.watch(&OFFSET, 4.05, &mut e), "back at the reference: no step");
+        assert_eq!(w.pending, None);
     }
 
     #[test]
@@ -570,6 +615,42 @@ mod tests {
         w.keep_reference(4.0, 0.0);
         assert!((0..5).all(|_| w.watch(&OFFSET, 7.1, &mut none)));
         assert_eq!(kinds(|k| assert!(w.watch(&OFFSET, 7.1, &mut |x| k(x)))), [EventKind::SensorOffset]);
+    }
+
+    /// Feeds `readings` through the sensor checks (raw path) from time 0; the events and the
+    /// offset at the end.
+    fn through_checks(readings: &[f32]) -> (Vec<(usize, EventKind)>, f32) {
+        let mut s = SensorChecks::new(&SensorConfig::DEFAULT, TS);
+        let cfg = CarrierConfig::DEFAULT;
+        let mut f = FirstOrder::default();
+        let mut ev = Vec::new();
+        for (k, &t) in readings.iter().enumerate() {
+            s.reading(&cfg, k as u64 * 10_000, Ok(Celsius(t)), true, &mut f, &mut |e| ev.push((k, e)));
+        }
+        (ev, s.offset.offset_c())
+    }
+
+    #[test]
+    fn an_offset_that_starts_on_the_sample_after_a_spike_is_found() {
+        // Mission 49578 (`--seed 40001`), 72 000–72 060 s: the +1.5 °C offset began on the
+        // reading after a spike; it used to become the reference unseen.
+        let (ev, offset) = through_checks(&[4.046, 4.056, 4.082, -23.717, 5.568, 5.521, 5.500, 5.459]);
+        assert_eq!(ev, [(6, EventKind::SensorOffset)]);
+        assert!((1.3..=1.5).contains(&offset), "measured {offset}");
+        // The same without the offset: the reading after the spike is the load, no step.
+        let (ev, offset) = through_checks(&[4.046, 4.056, 4.082, -23.717, 4.090, 4.101, 4.095, 4.099]);
+        assert!(ev.is_empty(), "{ev:?}");
+        assert_eq!(offset, 0.0);
+    }
+
+    #[test]
+    fn a_fast_fall_across_a_spike_is_no_step() {
+        // A light load in limp home falls 0.4 °C a sample; across a spike the reading is 0.8 °C
+        // below the one before it, more than the 0.7 °C step, and its trend explains it. The
+        // fall then slows to a level that holds.
+        let (ev, offset) = through_checks(&[6.4, 6.0, 5.6, 5.2, 45.0, 4.4, 4.3, 4.25, 4.22, 4.2]);
+        assert!(ev.is_empty(), "{ev:?}");
+        assert_eq!(offset, 0.0);
     }
 
     #[test]

@@ -388,16 +388,31 @@ impl SsrMonitor {
     }
 
     /// Stuck off: whether the load at `temp_c` warms at full duty; true once per run of full
-    /// duty.
+    /// duty, and again in the same run after the load has stopped warming.
+    ///
+    /// A carrier at its capacity in the heat runs at full duty for hours. Once the load is no
+    /// warmer than [`StuckOffConfig::on_s`] ago the cooling holds it again, and a new fast
+    /// warming (a lid opened, the SSR dying) is news: the check is armed again, for the fast
+    /// test only (the slow test's start moves out of reach: a slow creep at full duty is the
+    /// capacity on a warming afternoon, already reported). Mission 42110 (`--seed 40001`): a
+    /// lid opening at 42 °C ambient was reported, the load levelled off, and a lid left open
+    /// 10 min later warmed it from 6.6 to 19.5 °C at full duty without a word.
     pub(crate) fn warms_at_full_duty(&mut self, c: &StuckOffConfig, temp_c: f32) -> bool {
         let mut found = false;
-        if !self.off_reported && self.on_run >= self.n.stuck_off {
+        if self.on_run >= self.n.stuck_off {
             if let Some(past) = self.ago(self.n.stuck_off as usize) {
-                let fast = temp_c - past > c.rise_c;
-                let slow = self.on_run >= self.n.slow && temp_c - self.on_start_c > c.slow_rise_c && temp_c > past;
-                if fast || slow {
-                    self.off_reported = true;
-                    found = true;
+                if self.off_reported {
+                    if temp_c <= past {
+                        self.off_reported = false;
+                        self.on_start_c = f32::INFINITY;
+                    }
+                } else {
+                    let fast = temp_c - past > c.rise_c;
+                    let slow = self.on_run >= self.n.slow && temp_c - self.on_start_c > c.slow_rise_c && temp_c > past;
+                    if fast || slow {
+                        self.off_reported = true;
+                        found = true;
+                    }
                 }
             }
         }
@@ -636,6 +651,43 @@ mod tests {
             assert!(!m.warms_at_full_duty(&CFG.stuck_off, t), "sample {k}");
             m.applied(&CFG, Duty::FULL, 1.0, t);
         }
+    }
+
+    #[test]
+    fn stuck_off_again_in_the_same_run_after_the_load_stopped_warming() {
+        // Mission 42110 in outline: one run of full duty; a lid opening warms the load (reported),
+        // the cooling levels it off, it creeps up slowly (the capacity: not reported again), a
+        // second opening warms it fast (reported again).
+        let mut m = monitor();
+        let mut t = 6.0f32;
+        let mut found = Vec::new();
+        let phases: [(u16, f32); 4] = [(40, 0.02), (40, -0.001), (120, 0.004), (40, 0.03)];
+        let mut k = 0u16;
+        for (n, rate) in phases {
+            for _ in 0..n {
+                m.remember(t);
+                if m.warms_at_full_duty(&CFG.stuck_off, t) {
+                    found.push(k);
+                }
+                m.applied(&CFG, Duty::FULL, 1.0, t);
+                t += rate;
+                k += 1;
+            }
+        }
+        assert_eq!(found.len(), 2, "{found:?}");
+        assert_eq!(found[0], 30);
+        assert!((200..230).contains(&found[1]), "{found:?}");
+        // Still warming after the first report: not armed again.
+        let mut m = monitor();
+        let mut t = 6.0f32;
+        let mut n = 0;
+        for _ in 0..300 {
+            m.remember(t);
+            n += usize::from(m.warms_at_full_duty(&CFG.stuck_off, t));
+            m.applied(&CFG, Duty::FULL, 1.0, t);
+            t += 0.02;
+        }
+        assert_eq!(n, 1);
     }
 
     #[test]
