@@ -5,6 +5,7 @@
 use hal_sim::plant::{Plant, PlantParams};
 use hter::ident::batch::least_squares;
 use hter::ident::model::Structure;
+use hter::ident::validate::simulate_fit;
 use hter::model::Model;
 
 /// Samples of the recorded step response.
@@ -24,38 +25,35 @@ pub fn filtered_step(params: PlantParams, ambient_c: f64) -> Option<(Vec<f64>, f
     Some((f, duty0))
 }
 
+/// Samples at rest before the step in the records [`fit`] and [`step_response`] build, so every
+/// regressor has its history (≥ the largest `Structure::first_index` the examples use).
+const PAD: usize = 10;
+
+/// The record of a unit duty step from rest: `y` (`PAD` zeros, then `f[..=n]`) and `u` (0
+/// before the step, 1 from it).
+fn step_record(f: &[f64], n: usize) -> (Vec<f64>, Vec<f64>) {
+    let y: Vec<f64> = std::iter::repeat_n(0.0, PAD).chain(f[..=n].iter().copied()).collect();
+    let u: Vec<f64> = (0..y.len()).map(|t| if t >= PAD { 1.0 } else { 0.0 }).collect();
+    (y, u)
+}
+
 /// Batch least-squares ARX fit of structure `s` to the first `n_fit` samples of the step
 /// response `f` (the library's `ident::batch::least_squares`): θ = [a…, b…], or `None` if the
 /// normal equations are singular.
 pub fn fit(s: &Structure, f: &[f64], n_fit: usize) -> Option<Vec<f64>> {
-    // 10 samples at rest before the step, so every regressor has its history.
-    let pad = 10;
-    let y: Vec<f64> = std::iter::repeat_n(0.0, pad).chain(f[..=n_fit].iter().copied()).collect();
-    let u: Vec<f64> = (0..y.len()).map(|t| if t >= pad { 1.0 } else { 0.0 }).collect();
+    let (y, u) = step_record(f, n_fit);
     let mut theta = vec![0.0; s.n_params()];
     least_squares(s, &y, &u, &mut theta).ok()?;
     Some(theta)
 }
 
-/// Step response of the ARX model `theta` = [a…, b…] of structure `s`, samples 0…n.
+/// Step response of the ARX model `theta` = [a…, b…] of structure `s`, samples 0…n: the
+/// library's simulation from rest (`ident::validate::simulate_fit`).
 pub fn step_response(s: &Structure, theta: &[f64], n: usize) -> Vec<f64> {
-    let (a, b) = theta.split_at(s.na);
-    let mut y = vec![0.0; n + 1];
-    for t in 1..=n {
-        let mut v = 0.0;
-        for (i, ai) in a.iter().enumerate() {
-            if t > i {
-                v -= ai * y[t - i - 1];
-            }
-        }
-        for (i, bi) in b.iter().enumerate() {
-            if t >= s.nk + i {
-                v += bi;
-            }
-        }
-        y[t] = v;
-    }
-    y
+    let (y, u) = step_record(&vec![0.0; n + 1], n);
+    let mut ysim = vec![0.0; y.len()];
+    simulate_fit(s, theta, &y, &u, &mut ysim);
+    ysim.split_off(PAD)
 }
 
 /// Root-mean-square difference of two equally long records.
@@ -70,8 +68,12 @@ pub fn cools(s: &Structure, theta: &[f64]) -> bool {
 
 /// `theta` of structure `s` as a law's model, with the T-filter C = 1 − τ q⁻¹ (`tau` = 0: none).
 pub fn model(s: &Structure, theta: &[f64], tau: f32) -> Option<Model> {
-    let a: Vec<f32> = theta[..s.na].iter().map(|&x| x as f32).collect();
-    let b: Vec<f32> = theta[s.na..].iter().map(|&x| x as f32).collect();
-    let c: &[f32] = if tau > 0.0 { &[-tau] } else { &[] };
-    Model::new(&a, &b, c, s.nk).ok()
+    let mut th: Vec<f32> = theta.iter().map(|&x| x as f32).collect();
+    let nc = if tau > 0.0 {
+        th.push(-tau);
+        1
+    } else {
+        0
+    };
+    Structure { nc, ..*s }.model(&th).ok()
 }
