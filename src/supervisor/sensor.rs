@@ -315,7 +315,7 @@ impl OffsetWatch {
     pub(crate) fn watch(&mut self, cfg: &OffsetConfig, raw: f32, emit: &mut impl FnMut(EventKind)) -> bool {
         self.age = self.age.saturating_add(1);
         match (self.pending, self.last_good_c) {
-            (Some((before, step, n)), _) => {
+            (Some((before, step, n)), reference) => {
                 if (raw - (before + step)).abs() <= min_f32(cfg.hold_fraction * step.abs(), cfg.hold_max_c) {
                     let n = n.saturating_add(1);
                     if n >= self.confirm_n << u8::from(step.abs() > cfg.max_comp_c) {
@@ -338,7 +338,7 @@ impl OffsetWatch {
                     // Back (a transient, which the spike filter handles) or somewhere else,
                     // which after a spike may be a step of its own.
                     self.pending = None;
-                    match self.last_good_c {
+                    match reference {
                         Some(p) if self.age >= 2 => self.step_from(cfg, p + f32::from(self.age) * self.trend_c, raw),
                         _ => false,
                     }
@@ -572,7 +572,8 @@ mod tests {
         assert!(!w.watch(&OFFSET, 6.51, &mut e), "released");
         // A 10 °C step (a spike: not the reference) must hold within 0.5 °C, not within a
         // quarter of it. The reading that does not hold it is the first since the reference
-        // and is watched as a step of its own from there.
+        // and is watched as a step of its own from there. Two references at 4 °C: a load at
+        // rest (no trend to carry the reference on by).
         w.keep_reference(4.0, 0.0);
         w.keep_reference(4.0, 0.0);
         assert!(w.watch(&OFFSET, 14.0, &mut e));
