@@ -219,7 +219,7 @@ impl ModelRecord {
     /// plausibility test the self-tuner applies to its own estimates ([`plausible_model`]).
     pub fn to_model(&self, cfg: &AdaptiveConfig) -> Result<Model, DecodeError> {
         let cfg = AdaptiveConfig { k: usize::from(self.k), ..*cfg };
-        let m = model_from_theta(&cfg, self.theta).ok_or(DecodeError::OutOfRange)?;
+        let m = model_from_theta(&cfg, &self.theta).ok_or(DecodeError::OutOfRange)?;
         if plausible_model(&cfg, &m) {
             Ok(m)
         } else {

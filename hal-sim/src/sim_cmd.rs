@@ -377,11 +377,13 @@ fn plot_run(path: &std::path::Path, opts: &SimOptions, out: &SimOutput) -> Resul
             y_range: None,
         });
         panels.push(plot::Panel {
-            title: "Estimated B(q⁻¹) = b0 + b1 q⁻¹ (°C per unit duty)".into(),
+            title: "Estimated B(q⁻¹) = b0 + b1 q⁻¹ + b2 q⁻² + b3 q⁻³ (°C per unit duty)".into(),
             y_label: "coefficient".into(),
             series: vec![
                 plot::Series { name: "b0".into(), points: est(&|r| r.b0) },
                 plot::Series { name: "b1".into(), points: est(&|r| r.b1) },
+                plot::Series { name: "b2".into(), points: est(&|r| r.b2) },
+                plot::Series { name: "b3".into(), points: est(&|r| r.b3) },
             ],
             y_range: None,
         });

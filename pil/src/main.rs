@@ -226,10 +226,10 @@ fn run() -> Result<(), &'static str> {
     let acfg = proto::ADAPTIVE;
     let m0 = acfg.initial.unwrap_or(hter::model::Model::NEUTRAL);
     let (a0, b0) = (m0.a(), m0.b());
+    let theta7 = SVector::<f32, 7>::from([a0[0], a0[1], b0[0], b0[1], b0[2], b0[3], 0.0]);
     let theta5 = SVector::<f32, 5>::from([a0[0], a0[1], b0[0], b0[1], 0.0]);
-    let theta4 = SVector::<f32, 4>::from([a0[0], a0[1], b0[0], b0[1]]);
+    let mut rls7 = Rls::new(&acfg.rls, theta7);
     let mut rls5 = Rls::new(&acfg.rls, theta5);
-    let mut rls4 = Rls::new(&acfg.rls, theta4);
     // The self-tuner's own regressor type, fed beside it as the self-tuner feeds its own.
     let mut reg = SecondOrderRegressor::new(acfg.k, PI_BIAS).map_err(|_| "the profile's delay is refused")?;
     let mut gpc = GpcState::new(PI_BIAS);
@@ -278,10 +278,10 @@ fn run() -> Result<(), &'static str> {
                 _ => None,
             };
             if reg.push_y(o.temp_c.0) {
-                let phi5 = reg.phi();
-                let phi4 = SVector::<f32, 4>::from([phi5[0], phi5[1], phi5[2], phi5[3]]);
-                ticks[4] = timed(|| rls5.update(&acfg.rls, &phi5, reg.y()).is_ok()).1;
-                ticks[5] = timed(|| rls4.update(&acfg.rls, &phi4, reg.y()).is_ok()).1;
+                let phi7 = reg.phi();
+                let phi5 = SVector::<f32, 5>::from([phi7[0], phi7[1], phi7[2], phi7[3], 1.0]);
+                ticks[4] = timed(|| rls7.update(&acfg.rls, &phi7, reg.y()).is_ok()).1;
+                ticks[5] = timed(|| rls5.update(&acfg.rls, &phi5, reg.y()).is_ok()).1;
             }
             let model = st.and_then(|s| s.trusted_model()).unwrap_or(m0);
             let gcfg = GpcConfig::DEFAULT;

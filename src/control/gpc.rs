@@ -69,15 +69,16 @@ pub struct GpcConfig {
 }
 
 impl GpcConfig {
-    /// N1 = 1, N2 = 30 (5 min at Ts = 10 s, the closed-loop settling scale), Nu = 3, λ = 3.
+    /// N1 = 1, N2 = 30 (5 min at Ts = 10 s, the closed-loop settling scale), Nu = 3, λ = 0.5.
     /// λ weighs Δu² (duty in [0, 1], so Δu ≤ 1) against squared errors in °C summed over 30
-    /// predictions, with step-response coefficients of tens of °C per unit duty: values of
-    /// 0.01–1 are negligible at this scale and let GPC bang the SSR between 0 and 1 on the
-    /// hal-sim plant (its unmodelled lag). Without a T-filter λ = 10 was best in a sweep of 1, 3,
-    /// 10, 30; with the self-tuner's T-filter (τ = 0.8, `AdaptiveConfig::t_filter`) λ = 3 gave
-    /// the lowest IAE on the full and the half load (seeds 1–3; `hter sim --scenario piecewise
-    /// --controller gpc --lambda L --t-pole T`).
-    pub const DEFAULT: GpcConfig = GpcConfig { n1: 1, n2: 30, nu: 3, lambda: 3.0 };
+    /// predictions, with step-response coefficients of tens of °C per unit duty. Tuned for the
+    /// self-tuner's 4-term B with its T-filter (τ = 0.7, `AdaptiveConfig::t_filter`): of 256
+    /// settings (τ 0.3–0.9, λ 0.5–10, Nu 2–3, N2 25–30) λ = 0.5, Nu = 3, N2 = 30 gave the lowest
+    /// IAE over the full load, the half load and H-TER II together, seeds 1–8 at 20, 28 and
+    /// 36 °C (EXPERIMENTS.md, issue 15; `hter compare --scenario S --plant P --lambda L --t-pole
+    /// T --nu U --n2 N`). With the old 2-term B, λ = 3: smaller values let GPC bang the SSR on
+    /// the model's unmodelled lag.
+    pub const DEFAULT: GpcConfig = GpcConfig { n1: 1, n2: 30, nu: 3, lambda: 0.5 };
 
     /// Checks the ranges of [`GpcError::Config`].
     pub const fn validate(&self) -> Result<(), GpcError> {
@@ -294,10 +295,10 @@ impl GpcState {
             return Err(GpcError::NonFinite);
         }
         let n2 = cfg.n2;
-        // Second-order models (the self-tuning controller's) get the recursions unrolled for
-        // two coefficients; anything larger for the most the model holds.
-        let probe = if m.na() <= 2 && m.nb() <= 2 {
-            self.responses::<2, 2, 3>(m, n2, d)
+        // The self-tuning controller's models (na ≤ 2, nb ≤ 4) get the recursions unrolled for
+        // two A and four B coefficients; anything larger for the most the model holds.
+        let probe = if m.na() <= 2 && m.nb() <= 4 {
+            self.responses::<2, 4, 3>(m, n2, d)
         } else {
             self.responses::<MAX_NA, MAX_NB, { MAX_NA + 1 }>(m, n2, d)
         };

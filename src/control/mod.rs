@@ -130,8 +130,8 @@ impl AdaptiveMode {
 pub struct ControllerStatus {
     /// Which controller drives the SSR.
     pub mode: AdaptiveMode,
-    /// Estimated θ = [a1 a2 b0 b1].
-    pub theta: [f32; 4],
+    /// Estimated θ = [a1 a2 b0 b1 b2 b3] (the self-tuner's model without its offset).
+    pub theta: [f32; 6],
     /// trace(P) of the estimator.
     pub trace_p: f32,
     /// Last a-priori prediction error, °C.

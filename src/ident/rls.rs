@@ -182,6 +182,55 @@ impl<const N: usize> Rls<N> {
         self.updates = updates;
     }
 
+    /// Projects θ onto the half-space cᵀθ ≥ `c0` if it lies outside: θ ← θ + P c (c0 − cᵀθ) /
+    /// (cᵀ P c), the point of the boundary nearest θ in the metric of P⁻¹ (the information the
+    /// data have given), so the move is along the directions the data determine least (Goodwin
+    /// & Sin 1984, §3.3.8). P is not changed. Returns true if θ moved; false if it was inside,
+    /// or `c`, `c0` or P give no finite step (θ unchanged).
+    ///
+    /// P c = U D Uᵀ c from the factors: N² multiply-adds, and only when the constraint is
+    /// violated (one dot product otherwise).
+    pub fn project_onto_halfspace(&mut self, c: &SVector<f32, N>, c0: f32) -> bool {
+        let v = c.dot(&self.theta);
+        if !(v < c0) {
+            return false;
+        }
+        // f = Uᵀ c (U unit upper triangular), g = D f, cᵀPc = fᵀ D f.
+        let mut g = [0.0f32; N];
+        let mut cpc = 0.0f32;
+        for j in 0..N {
+            let mut f = c[j];
+            for i in 0..j {
+                f += self.u[(i, j)] * c[i];
+            }
+            g[j] = self.d[j] * f;
+            cpc += f * g[j];
+        }
+        let s = (c0 - v) / cpc;
+        if !(s.is_finite() && cpc > 0.0) {
+            return false;
+        }
+        // θ += (U g) s.
+        let mut moved = self.theta;
+        for i in 0..N {
+            let mut pc = g[i];
+            for j in i + 1..N {
+                pc += self.u[(i, j)] * g[j];
+            }
+            moved[i] += pc * s;
+        }
+        let mut probe = 0.0f32;
+        for x in moved.iter() {
+            probe += finite_probe(*x);
+        }
+        if probe == 0.0 {
+            self.theta = moved;
+            true
+        } else {
+            false
+        }
+    }
+
     /// Prediction φᵀθ.
     pub fn predict(&self, phi: &SVector<f32, N>) -> f32 {
         phi.dot(&self.theta)

@@ -73,6 +73,10 @@ pub struct Row {
     pub b0: Option<f32>,
     /// Self-tuning estimate b1.
     pub b1: Option<f32>,
+    /// Self-tuning estimate b2.
+    pub b2: Option<f32>,
+    /// Self-tuning estimate b3.
+    pub b3: Option<f32>,
     /// trace(P) of the estimator.
     pub trace_p: Option<f32>,
     /// Self-tuning mode (empty for other controllers).
@@ -138,6 +142,8 @@ impl Row {
             a2: out.status.map(|st| st.theta[1]),
             b0: out.status.map(|st| st.theta[2]),
             b1: out.status.map(|st| st.theta[3]),
+            b2: out.status.map(|st| st.theta[4]),
+            b3: out.status.map(|st| st.theta[5]),
             trace_p: out.status.map(|st| st.trace_p),
             adaptive_mode: out.status.map(|st| st.mode),
             alarm,
@@ -173,6 +179,8 @@ impl Row {
             a2: None,
             b0: None,
             b1: None,
+            b2: None,
+            b3: None,
             trace_p: None,
             adaptive_mode: None,
             alarm,
