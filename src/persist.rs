@@ -1132,7 +1132,7 @@ mod tests {
         fn status(&self) -> Option<crate::control::ControllerStatus> {
             self.mode.map(|mode| crate::control::ControllerStatus {
                 mode,
-                theta: [0.0; 4],
+                theta: [0.0; 6],
                 trace_p: 0.0,
                 prediction_error: 0.0,
             })
