@@ -29,7 +29,7 @@ use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln, nr, syscall};
 use hter::alarm::Annunciator;
 use hter::control::adaptive::{plausible_model, SecondOrderRegressor};
-use hter::control::gpc::{GpcConfig, GpcDesign, GpcState};
+use hter::control::gpc::{GpcConfig, GpcStaged, GpcState};
 use hter::control::{AnyController, ControlInput, Controller};
 use hter::ident::rls::Rls;
 use hter::persist::{HistoryRecord, Recorder};
@@ -233,7 +233,7 @@ fn run() -> Result<(), &'static str> {
     // The self-tuner's own regressor type, fed beside it as the self-tuner feeds its own.
     let mut reg = SecondOrderRegressor::new(acfg.k, PI_BIAS).map_err(|_| "the profile's delay is refused")?;
     let mut gpc = GpcState::new(PI_BIAS);
-    let mut gpc_design = GpcDesign::ZERO; // kept between samples, as `LawState` does
+    let mut gpc_design = GpcStaged::NEW; // kept between samples, as `LawState` does
                                           // The firmware's record and indicator, timed beside the step as the control task runs them.
     let mut recorder = Recorder::new(HistoryRecord::EMPTY, proto::HISTORY_SAVE_SAMPLES);
     let mut annunciator = Annunciator::new();
@@ -287,7 +287,7 @@ fn run() -> Result<(), &'static str> {
             let gcfg = GpcConfig::DEFAULT;
             ticks[6] = timed(|| {
                 gpc.push_y(o.temp_c.0, &model).is_ok()
-                    && gpc.design_into(&model, &gcfg, o.setpoint_c.0, &mut gpc_design).is_ok()
+                    && gpc_design.update(&gpc, &model, &gcfg, o.setpoint_c.0).is_ok()
             })
             .1;
             gpc.track(o.duty.get());

@@ -102,7 +102,7 @@ pub const PARTS: [&str; 10] = [
     "counts → °C (ratio + CVD)",
     "RLS update, 7 parameters",
     "RLS update, 5 parameters",
-    "GPC push_y + design_into",
+    "GPC push_y + staged design",
     "estimate + projection",
     "Diophantine (Ã, k = 5)",
     "board: recorder + alarm indicator",

@@ -3,7 +3,7 @@
 //! [`Controller`] trait. The self-tuning versions redesign the same laws from the RLS estimate
 //! every sample.
 
-use super::gpc::{GpcConfig, GpcDesign, GpcState};
+use super::gpc::{GpcConfig, GpcStaged, GpcState};
 use super::mv::{GmvcConfig, IgmvcConfig, MvState};
 use super::{ControlError, ControlInput, Controller};
 use crate::model::Model;
@@ -57,14 +57,14 @@ impl Law {
 pub struct LawState {
     mv: MvState,
     gpc: GpcState,
-    /// GPC's working arrays, kept between samples so a design costs no zeroing and copying.
-    gpc_design: GpcDesign,
+    /// GPC's design, spread over samples ([`GpcStaged`]).
+    gpc_design: GpcStaged,
 }
 
 impl LawState {
     /// Empty histories holding the duty `u0`.
     pub fn new(u0: f32) -> Self {
-        Self { mv: MvState::new(u0), gpc: GpcState::new(u0), gpc_design: GpcDesign::ZERO }
+        Self { mv: MvState::new(u0), gpc: GpcState::new(u0), gpc_design: GpcStaged::NEW }
     }
 
     /// Computes the unclipped u(t) for measurement `y`, setpoint `w`, model `m`, or why not
@@ -99,8 +99,7 @@ impl LawState {
             #[cfg(not(feature = "igmvc-only"))]
             Law::Gpc(c) => {
                 pushed_gpc?;
-                self.gpc.design_into(m, c, w, &mut self.gpc_design)?;
-                self.gpc.u_prev() + self.gpc_design.du
+                self.gpc.u_prev() + self.gpc_design.update(&self.gpc, m, c, w)?
             }
             #[allow(unreachable_patterns)]
             _ => return Err(ControlError::NotBuilt),

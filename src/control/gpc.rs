@@ -192,47 +192,16 @@ impl GpcState {
         n2: usize,
         d: &mut GpcDesign,
     ) -> f32 {
-        let na = m.na().min(NA);
+        step_response::<NA, NB>(m, n2, &mut d.g) + self.free_response::<NB, NH>(m, n2, &mut d.f)
+    }
+
+    /// The free response f_1…f_N2 of [`responses`](Self::responses) alone.
+    #[inline(always)]
+    fn free_response<const NB: usize, const NH: usize>(&self, m: &Model, n2: usize, f: &mut [f32; MAX_N2]) -> f32 {
         let nb = m.nb().min(NB);
         let nc = m.nc().min(MAX_NC);
-        // (Element by element: a run-time-length copy is a memcpy call on the M4.)
-        let a: [f32; NA] = core::array::from_fn(|i| if i < na { m.a()[i] } else { 0.0 });
         let b: [f32; NB] = core::array::from_fn(|i| if i < nb { m.b()[i] } else { 0.0 });
         let mut probe = 0.0f32;
-
-        // Step response of q^−k B/A: y(j) = −Σ a_i y(j−i) + Σ b_i u(j−k−i), u = 1 from j = 0;
-        // y(j ≤ 0) = 0. From j = k + nb − 1 on every b_i is in (the padded zeros add +0), so
-        // that part needs no comparisons.
-        let mut past = [0.0f32; NA]; // y(j−1), y(j−2), …
-        let steady = (m.k() + nb).saturating_sub(1).clamp(1, n2 + 1);
-        let (head, tail) = d.g[..n2].split_at_mut(steady - 1);
-        for (idx, gj) in head.iter_mut().enumerate() {
-            let j = idx + 1;
-            let mut v = 0.0;
-            for (ai, yp) in a.iter().zip(&past) {
-                v -= ai * yp;
-            }
-            for (i, bi) in b.iter().enumerate() {
-                if j >= m.k() + i {
-                    v += bi;
-                }
-            }
-            probe += finite_probe(v);
-            shift_in(&mut past, v);
-            *gj = v;
-        }
-        for gj in tail.iter_mut() {
-            let mut v = 0.0;
-            for (ai, yp) in a.iter().zip(&past) {
-                v -= ai * yp;
-            }
-            for bi in &b {
-                v += bi;
-            }
-            probe += finite_probe(v);
-            shift_in(&mut past, v);
-            *gj = v;
-        }
 
         // Free response: run Ã ŷ(t+j) = B Δu(t+j−k) + C ê(t+j) with future Δu, ê = 0;
         // ŷ(t + j − i) = y(t + j − i) for j ≤ i. Past increments enter while j < k + nb, past
@@ -240,7 +209,7 @@ impl GpcState {
         let at = m.atilde();
         let mut past: [f32; NH] = core::array::from_fn(|i| self.y[i]); // ŷ(t+j−1), ŷ(t+j−2), …
         let known = (m.k() + nb).max(nc + 1).min(n2 + 1);
-        let (head, tail) = d.f[..n2].split_at_mut(known - 1);
+        let (head, tail) = f[..n2].split_at_mut(known - 1);
         for (idx, fj) in head.iter_mut().enumerate() {
             let j = idx + 1;
             let mut v = 0.0;
@@ -312,26 +281,10 @@ impl GpcState {
         // below (adding ±0 to a sum that is not −0 changes nothing). g_1 … g_{k−1} are +0 by
         // construction (no b_i enters before j = k, and 0 − a_i·0 is +0), so the count starts
         // at k − 1 (k ≥ 1 in every model; the probe above has refused a non-finite one).
-        let mut lead = (m.k() - 1).min(n2);
-        while lead < n2 && d.g[lead] == 0.0 {
-            lead += 1;
-        }
-        let mut h = normal_matrix(&d.g, cfg, lead);
-        if !cholesky_in_place(&mut h, nu) {
-            return Err(GpcError::Singular);
-        }
-        // First row of H⁻¹Gᵀ: solve H z = e₁ once, then k1_j = Σ_c z_c G[j][c] and
-        // Δu = Σ_j k1_j (w − f_j) (see `gains`).
-        let mut z = [0.0f32; MAX_NU];
-        z[0] = 1.0;
-        chol_solve(&h, nu, &mut z);
-        let du = match nu {
-            1 => gains::<1>(&z, d, n1, n2, lead, w),
-            2 => gains::<2>(&z, d, n1, n2, lead, w),
-            3 => gains::<3>(&z, d, n1, n2, lead, w),
-            4 => gains::<4>(&z, d, n1, n2, lead, w),
-            _ => gains::<MAX_NU>(&z, d, n1, n2, lead, w),
-        };
+        let lead = dead_lead(&d.g, m.k(), n2);
+        let z = first_row_solve(normal_matrix(&d.g, cfg, lead), nu)?;
+        let start = gain_row_nu(&z, d, n1, n2, nu, lead);
+        let du = increment(d, n1, n2, start, w);
         if !du.is_finite() {
             return Err(GpcError::NonFinite);
         }
@@ -347,6 +300,199 @@ impl GpcState {
         shift_in(&mut self.du, applied - self.u_prev);
         self.u_prev = applied;
     }
+}
+
+/// GPC with the model's share of the design spread over four samples, for the self-tuning
+/// loop on the M4F.
+///
+/// Of a design, only the free response f and Δu = Σ k1_j (w − f_j) depend on the data; the
+/// step response g, the factor of GᵀG + λI, z = H⁻¹e₁ and the gain row k1 depend on the model
+/// alone, and they are most of the work. Here each sample computes f on the current model and
+/// Δu with the last gain row, and one stage of the next gain row on the current model:
+/// stage 0 the step response and its dead time, stage 1 the normal matrix GᵀG + λI, stage 2
+/// its Cholesky factor and z, stage 3 k1. A gain row is thus at most seven samples (70 s)
+/// older than the model f
+/// uses, against a model that moves over tens of minutes; the sample's work falls from a whole
+/// design to its largest stage (`cargo xtask pil`, BENCHMARKS.md).
+///
+/// Until the first gain row is complete (the first four samples, and after a change of
+/// tuning) Δu is 0: the law holds the duty it starts from. A stage that fails (a non-finite or
+/// singular design) returns its error for that sample and the cycle starts again; the last
+/// complete gain row, if any, keeps serving.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GpcStaged {
+    d: GpcDesign,
+    /// GᵀG + λI (stage 1), then its factor's solve z = H⁻¹e₁ in row 0 (stage 2).
+    h: [[f32; MAX_NU]; MAX_NU],
+    /// Dead-time zeros of the step response in `d.g` (stage 0).
+    lead: usize,
+    /// First row of `d.k1` that is not an exact zero.
+    start: usize,
+    /// The tuning of the cycle under way (stage 0 on).
+    cycle: GpcConfig,
+    /// The tuning `d.k1` was built with, if a gain row is complete.
+    ready: Option<GpcConfig>,
+    /// Next stage: 0 … 3.
+    stage: u8,
+}
+
+impl GpcStaged {
+    /// No gain row yet.
+    pub const NEW: GpcStaged = GpcStaged {
+        d: GpcDesign::ZERO,
+        h: [[0.0; MAX_NU]; MAX_NU],
+        lead: 0,
+        start: 1,
+        cycle: GpcConfig::DEFAULT,
+        ready: None,
+        stage: 0,
+    };
+
+    /// The arrays of the last sample: g of the cycle under way, f of this sample, k1 of the last
+    /// complete gain row, and Δu.
+    pub fn design(&self) -> &GpcDesign {
+        &self.d
+    }
+
+    /// Δu(t) for setpoint `w` on model `m`, after [`GpcState::push_y`]; see the type's docs.
+    pub fn update(&mut self, st: &GpcState, m: &Model, cfg: &GpcConfig, w: f32) -> Result<f32, GpcError> {
+        cfg.validate()?;
+        if !w.is_finite() {
+            return Err(GpcError::NonFinite);
+        }
+        if self.ready.is_some_and(|c| c != *cfg) {
+            self.ready = None;
+        }
+        let small = m.na() <= 2 && m.nb() <= 4;
+        let probe = if small {
+            st.free_response::<4, 3>(m, cfg.n2, &mut self.d.f)
+        } else {
+            st.free_response::<MAX_NB, { MAX_NA + 1 }>(m, cfg.n2, &mut self.d.f)
+        };
+        if probe != 0.0 {
+            return Err(GpcError::NonFinite);
+        }
+        if let Err(e) = self.advance(m, cfg, small) {
+            self.stage = 0;
+            return Err(e);
+        }
+        let du = match self.ready {
+            Some(c) => increment(&self.d, c.n1, c.n2, self.start, w),
+            None => 0.0,
+        };
+        if !du.is_finite() {
+            return Err(GpcError::NonFinite);
+        }
+        self.d.du = du;
+        Ok(du)
+    }
+
+    /// This sample's stage of the next gain row.
+    fn advance(&mut self, m: &Model, cfg: &GpcConfig, small: bool) -> Result<(), GpcError> {
+        if self.stage != 0 && self.cycle != *cfg {
+            self.stage = 0;
+        }
+        match self.stage {
+            0 => {
+                let probe = if small {
+                    step_response::<2, 4>(m, cfg.n2, &mut self.d.g)
+                } else {
+                    step_response::<MAX_NA, MAX_NB>(m, cfg.n2, &mut self.d.g)
+                };
+                if probe != 0.0 {
+                    return Err(GpcError::NonFinite);
+                }
+                self.lead = dead_lead(&self.d.g, m.k(), cfg.n2);
+                self.cycle = *cfg;
+                self.stage = 1;
+            }
+            1 => {
+                self.h = normal_matrix(&self.d.g, cfg, self.lead);
+                self.stage = 2;
+            }
+            2 => {
+                self.h[0] = first_row_solve(self.h, cfg.nu)?;
+                self.stage = 3;
+            }
+            _ => {
+                self.start = gain_row_nu(&self.h[0], &mut self.d, cfg.n1, cfg.n2, cfg.nu, self.lead);
+                self.ready = Some(*cfg);
+                self.stage = 0;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The number of exact zeros g_1 … g_lead that open the step response (the dead time).
+#[inline(always)]
+fn dead_lead(g: &[f32; MAX_N2], k: usize, n2: usize) -> usize {
+    let mut lead = (k - 1).min(n2);
+    while lead < n2 && g[lead] == 0.0 {
+        lead += 1;
+    }
+    lead
+}
+
+/// z = H⁻¹ e₁ for H = GᵀG + λI (the first row of H⁻¹Gᵀ is then k1_j = Σ_c z_c G[j][c], see
+/// [`gain_row`]): one Cholesky factorisation of `h` (its lower triangle, [`normal_matrix`]) and
+/// one solve.
+#[inline(always)]
+fn first_row_solve(mut h: [[f32; MAX_NU]; MAX_NU], nu: usize) -> Result<[f32; MAX_NU], GpcError> {
+    if !cholesky_in_place(&mut h, nu) {
+        return Err(GpcError::Singular);
+    }
+    let mut z = [0.0f32; MAX_NU];
+    z[0] = 1.0;
+    chol_solve(&h, nu, &mut z);
+    Ok(z)
+}
+
+/// The step response g_1…g_N2 of q^−k B/A into `g`, A and B zero-padded to `NA` ≥ na and
+/// `NB` ≥ nb coefficients; returns the finiteness probe Σ (g − g).
+#[inline(always)]
+fn step_response<const NA: usize, const NB: usize>(m: &Model, n2: usize, g: &mut [f32; MAX_N2]) -> f32 {
+    let na = m.na().min(NA);
+    let nb = m.nb().min(NB);
+    // (Element by element: a run-time-length copy is a memcpy call on the M4.)
+    let a: [f32; NA] = core::array::from_fn(|i| if i < na { m.a()[i] } else { 0.0 });
+    let b: [f32; NB] = core::array::from_fn(|i| if i < nb { m.b()[i] } else { 0.0 });
+    let mut probe = 0.0f32;
+    // Step response of q^−k B/A: y(j) = −Σ a_i y(j−i) + Σ b_i u(j−k−i), u = 1 from j = 0;
+    // y(j ≤ 0) = 0. From j = k + nb − 1 on every b_i is in (the padded zeros add +0), so
+    // that part needs no comparisons.
+    let mut past = [0.0f32; NA]; // y(j−1), y(j−2), …
+    let steady = (m.k() + nb).saturating_sub(1).clamp(1, n2 + 1);
+    let (head, tail) = g[..n2].split_at_mut(steady - 1);
+    for (idx, gj) in head.iter_mut().enumerate() {
+        let j = idx + 1;
+        let mut v = 0.0;
+        for (ai, yp) in a.iter().zip(&past) {
+            v -= ai * yp;
+        }
+        for (i, bi) in b.iter().enumerate() {
+            if j >= m.k() + i {
+                v += bi;
+            }
+        }
+        probe += finite_probe(v);
+        shift_in(&mut past, v);
+        *gj = v;
+    }
+    for gj in tail.iter_mut() {
+        let mut v = 0.0;
+        for (ai, yp) in a.iter().zip(&past) {
+            v -= ai * yp;
+        }
+        for bi in &b {
+            v += bi;
+        }
+        probe += finite_probe(v);
+        shift_in(&mut past, v);
+        *gj = v;
+    }
+
+    probe
 }
 
 /// The lower triangle of H = GᵀG + λI (all the Cholesky factorisation reads) for rows j = N1..N2 of
@@ -395,15 +541,12 @@ fn normal_matrix(g: &[f32; MAX_N2], cfg: &GpcConfig, lead: usize) -> [[f32; MAX_
     h
 }
 
-/// k1_j = Σ_{c<Nu} z_c G[j][c] for j = N1…N2 (into `d.k1`) and Δu = Σ_j k1_j (w − f_j), both
-/// summed in the textbook order (k1_j from 0.0 over c = 0, 1, …, Δu over increasing j). Nu is
-/// a constant so the sum over c unrolls; G[j][c] = g_{j−c} is zero for c ≥ j, and those terms
-/// are skipped (rows j < Nu only).
+/// k1_j = Σ_{c<Nu} z_c G[j][c] for j = N1…N2 into `d.k1`, summed in the textbook order (k1_j
+/// from 0.0 over c = 0, 1, …). Nu is a constant so the sum over c unrolls; G[j][c] = g_{j−c} is
+/// zero for c ≥ j, and those terms are skipped (rows j < Nu only). Returns the first row that
+/// is not an exact zero (rows j ≤ lead see only the dead time's zero g's: k1_j = +0).
 #[inline(always)]
-fn gains<const NU: usize>(z: &[f32; MAX_NU], d: &mut GpcDesign, n1: usize, n2: usize, lead: usize, w: f32) -> f32 {
-    let mut du = 0.0;
-    // Rows j ≤ lead see only g's that are exact zeros: k1_j = 0.0 + (±0) = +0, and their
-    // Δu terms (+0)·(w − f_j) are ±0 (f and w are finite here).
+fn gain_row<const NU: usize>(z: &[f32; MAX_NU], d: &mut GpcDesign, n1: usize, n2: usize, lead: usize) -> usize {
     let start = n1.max(lead + 1).min(n2 + 1);
     for kj in &mut d.k1[..start - n1] {
         *kj = 0.0;
@@ -417,7 +560,6 @@ fn gains<const NU: usize>(z: &[f32; MAX_NU], d: &mut GpcDesign, n1: usize, n2: u
             }
         }
         d.k1[j - n1] = kj;
-        du += kj * (w - d.f[j - 1]);
     }
     for j in first_full..n2 + 1 {
         let mut kj = 0.0;
@@ -426,7 +568,28 @@ fn gains<const NU: usize>(z: &[f32; MAX_NU], d: &mut GpcDesign, n1: usize, n2: u
             kj += zc * gv;
         }
         d.k1[j - n1] = kj;
-        du += kj * (w - d.f[j - 1]);
+    }
+    start
+}
+
+/// [`gain_row`] for the run-time Nu (the common control horizons get their own unrolled copy).
+fn gain_row_nu(z: &[f32; MAX_NU], d: &mut GpcDesign, n1: usize, n2: usize, nu: usize, lead: usize) -> usize {
+    match nu {
+        1 => gain_row::<1>(z, d, n1, n2, lead),
+        2 => gain_row::<2>(z, d, n1, n2, lead),
+        3 => gain_row::<3>(z, d, n1, n2, lead),
+        4 => gain_row::<4>(z, d, n1, n2, lead),
+        _ => gain_row::<MAX_NU>(z, d, n1, n2, lead),
+    }
+}
+
+/// Δu = Σ_j k1_j (w − f_j) over j = `start` … N2, in increasing j from 0.0 (the rows before
+/// `start` have k1_j = +0 and would add ±0).
+#[inline(always)]
+fn increment(d: &GpcDesign, n1: usize, n2: usize, start: usize, w: f32) -> f32 {
+    let mut du = 0.0;
+    for (kj, fj) in d.k1[start - n1..=n2 - n1].iter().zip(&d.f[start - 1..n2]) {
+        du += kj * (w - fj);
     }
     du
 }
