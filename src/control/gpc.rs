@@ -52,6 +52,9 @@ pub enum GpcError {
     Singular,
     /// A non-finite number appeared (model or measurement).
     NonFinite,
+    /// [`GpcStaged`] on a model beyond na 2, nb 4 in a build without the library feature
+    /// `gpc-any-order` (a board: its models are the self-tuner's).
+    NotBuilt,
 }
 
 /// GPC tuning.
@@ -328,23 +331,24 @@ pub struct GpcStaged {
     lead: usize,
     /// First row of `d.k1` that is not an exact zero.
     start: usize,
-    /// The tuning of the cycle under way (stage 0 on).
-    cycle: GpcConfig,
-    /// The tuning `d.k1` was built with, if a gain row is complete.
-    ready: Option<GpcConfig>,
+    /// The tuning everything here was built with: a new one starts over.
+    cfg: GpcConfig,
+    /// A gain row is complete in `d.k1`.
+    ready: bool,
     /// Next stage: 0 … 3.
     stage: u8,
 }
 
 impl GpcStaged {
-    /// No gain row yet.
+    /// No gain row yet. All zeros, so a board fills it with a memset, not a copy of a
+    /// 500-byte constant (the zero tuning is no tuning: the first update starts over).
     pub const NEW: GpcStaged = GpcStaged {
         d: GpcDesign::ZERO,
         h: [[0.0; MAX_NU]; MAX_NU],
         lead: 0,
-        start: 1,
-        cycle: GpcConfig::DEFAULT,
-        ready: None,
+        start: 0,
+        cfg: GpcConfig { n1: 0, n2: 0, nu: 0, lambda: 0.0 },
+        ready: false,
         stage: 0,
     };
 
@@ -360,14 +364,21 @@ impl GpcStaged {
         if !w.is_finite() {
             return Err(GpcError::NonFinite);
         }
-        if self.ready.is_some_and(|c| c != *cfg) {
-            self.ready = None;
+        if *cfg != self.cfg {
+            self.cfg = *cfg;
+            self.ready = false;
+            self.stage = 0;
         }
         let small = m.na() <= 2 && m.nb() <= 4;
         let probe = if small {
             st.free_response::<4, 3>(m, cfg.n2, &mut self.d.f)
         } else {
-            st.free_response::<MAX_NB, { MAX_NA + 1 }>(m, cfg.n2, &mut self.d.f)
+            #[cfg(feature = "gpc-any-order")]
+            {
+                st.free_response::<MAX_NB, { MAX_NA + 1 }>(m, cfg.n2, &mut self.d.f)
+            }
+            #[cfg(not(feature = "gpc-any-order"))]
+            return Err(GpcError::NotBuilt);
         };
         if probe != 0.0 {
             return Err(GpcError::NonFinite);
@@ -376,10 +387,7 @@ impl GpcStaged {
             self.stage = 0;
             return Err(e);
         }
-        let du = match self.ready {
-            Some(c) => increment(&self.d, c.n1, c.n2, self.start, w),
-            None => 0.0,
-        };
+        let du = if self.ready { increment(&self.d, cfg.n1, cfg.n2, self.start, w) } else { 0.0 };
         if !du.is_finite() {
             return Err(GpcError::NonFinite);
         }
@@ -389,11 +397,9 @@ impl GpcStaged {
 
     /// This sample's stage of the next gain row.
     fn advance(&mut self, m: &Model, cfg: &GpcConfig, small: bool) -> Result<(), GpcError> {
-        if self.stage != 0 && self.cycle != *cfg {
-            self.stage = 0;
-        }
         match self.stage {
             0 => {
+                // (`update` has refused a larger model in a build without `gpc-any-order`.)
                 let probe = if small {
                     step_response::<2, 4>(m, cfg.n2, &mut self.d.g)
                 } else {
@@ -403,7 +409,6 @@ impl GpcStaged {
                     return Err(GpcError::NonFinite);
                 }
                 self.lead = dead_lead(&self.d.g, m.k(), cfg.n2);
-                self.cycle = *cfg;
                 self.stage = 1;
             }
             1 => {
@@ -415,8 +420,10 @@ impl GpcStaged {
                 self.stage = 3;
             }
             _ => {
-                self.start = gain_row_nu(&self.h[0], &mut self.d, cfg.n1, cfg.n2, cfg.nu, self.lead);
-                self.ready = Some(*cfg);
+                // One copy for every Nu: z is zero beyond Nu (`first_row_solve`), so the padded
+                // terms add ±0 to sums that are not −0 (the same bits as `gain_row::<Nu>`).
+                self.start = gain_row::<MAX_NU>(&self.h[0], &mut self.d, cfg.n1, cfg.n2, self.lead);
+                self.ready = true;
                 self.stage = 0;
             }
         }

@@ -49,7 +49,8 @@ pub enum ControlError {
     NonFinite,
     /// No model to design on.
     NoModel,
-    /// The law is not built into this image (the library's `mv-laws` / `igmvc-only` features).
+    /// The law is not built into this image (the library's `mv-laws` / `igmvc-only` features), or
+    /// GPC on a model beyond na 2, nb 4 without `gpc-any-order`.
     NotBuilt,
 }
 
@@ -59,6 +60,7 @@ impl From<gpc::GpcError> for ControlError {
             gpc::GpcError::Config => ControlError::Config,
             gpc::GpcError::Singular => ControlError::Singular,
             gpc::GpcError::NonFinite => ControlError::NonFinite,
+            gpc::GpcError::NotBuilt => ControlError::NotBuilt,
         }
     }
 }

@@ -95,13 +95,23 @@ pub struct Rls<const N: usize> {
     updates: u32,
     eps: f32,
     eps_post: f32,
+    /// trace(P), kept by every change of the factors (the self-tuner logs it every sample).
+    trace: f32,
 }
 
 impl<const N: usize> Rls<N> {
     /// Starts at `theta0` with P = p0·I.
     pub fn new(cfg: &RlsConfig, theta0: SVector<f32, N>) -> Self {
         let p0 = if cfg.p0 > 0.0 && cfg.p0.is_finite() { cfg.p0 } else { RlsConfig::DEFAULT.p0 };
-        Self { theta: theta0, u: SMatrix::identity(), d: SVector::repeat(p0), updates: 0, eps: 0.0, eps_post: 0.0 }
+        Self {
+            theta: theta0,
+            u: SMatrix::identity(),
+            d: SVector::repeat(p0),
+            updates: 0,
+            eps: 0.0,
+            eps_post: 0.0,
+            trace: N as f32 * p0,
+        }
     }
 
     /// The estimate θ.
@@ -151,8 +161,13 @@ impl<const N: usize> Rls<N> {
         (u, self.d)
     }
 
-    /// trace(P) = Σ_k d_k Σ_{i≤k} U_ik² (U_kk = 1).
+    /// trace(P), as the last change of the factors left it.
     pub fn trace_p(&self) -> f32 {
+        self.trace
+    }
+
+    /// trace(P) = Σ_k d_k Σ_{i≤k} U_ik² (U_kk = 1).
+    fn trace_of_factors(&self) -> f32 {
         let mut t = 0.0;
         for k in 0..N {
             let mut col = 0.0;
@@ -299,10 +314,14 @@ impl<const N: usize> Rls<N> {
         self.theta = theta;
         self.u = u;
         self.d = SVector::from(d);
-        let tr = self.trace_p();
-        if tr > cfg.trace_max {
-            self.d *= cfg.trace_max / tr;
-        }
+        let tr = self.trace_of_factors();
+        self.trace = if tr > cfg.trace_max {
+            let scale = cfg.trace_max / tr;
+            self.d *= scale;
+            tr * scale
+        } else {
+            tr
+        };
         self.updates = self.updates.saturating_add(1);
         self.eps = eps;
         // ε̄ = ε (1 − φᵀK) = ε λ_f / α, α = λ_f + φᵀPφ ≥ λ_f > 0.
