@@ -203,7 +203,7 @@ fn seed_conclusions_hold_on_piecewise() {
 /// Every law keeps the load within 2–8 °C, is back within ±0.3 °C of the setpoint in the last
 /// half hour, and its estimate follows the plant: the estimated effect of the duty, B(1) =
 /// b0 + b1, is at least a quarter smaller in magnitude at the end than before the sag (less
-/// cooling per unit duty at 9 V). Measured: 80 %, 41 % and 75 % smaller for GMVC, IGMVC, GPC.
+/// cooling per unit duty at 9 V; B(1) = b0 + … + b3 of the self-tuner's 4-term B).
 ///
 /// (What the estimate converges to, and what it does not, is
 /// `self_tuner_learns_the_plants_response_over_the_horizon_from_a_wrong_start`.)
@@ -241,7 +241,7 @@ fn self_tuning_laws_survive_a_plant_change_mid_run() {
         assert!(worst <= 0.3, "{c:?}: |T − 4| up to {worst} °C in the last half hour");
         let b_sum = |t: f64| {
             let r = out.rows.iter().find(|r| r.t_s >= t).unwrap();
-            r.b0.unwrap() + r.b1.unwrap()
+            r.b0.unwrap() + r.b1.unwrap() + r.b2.unwrap() + r.b3.unwrap()
         };
         let (before, after) = (b_sum(3500.0), b_sum(14000.0));
         assert!(before < 0.0 && after < 0.0, "{c:?}: B(1) {before} → {after} must cool");
@@ -276,13 +276,14 @@ fn plant_step_response(
 
 /// The step response of `y(t) = −a1 y(t−1) − a2 y(t−2) + b0 u(t−k) + b1 u(t−k−1)` to a unit
 /// step at t = 0, samples 1 … n (written out here, apart from the library's GPC).
-fn model_step_response(a: [f64; 2], b: [f64; 2], k: usize, n: usize) -> Vec<f64> {
+fn model_step_response(a: [f64; 2], b: &[f64], k: usize, n: usize) -> Vec<f64> {
     let u = |t: i64| if t >= 0 { 1.0 } else { 0.0 };
     let mut y = vec![0.0f64; n + 1];
     for t in 1..=n {
         let past = |m: usize| if t >= m { y[t - m] } else { 0.0 };
         let t_i = t as i64;
-        y[t] = -a[0] * past(1) - a[1] * past(2) + b[0] * u(t_i - k as i64) + b[1] * u(t_i - k as i64 - 1);
+        let forced: f64 = b.iter().enumerate().map(|(i, bi)| bi * u(t_i - (k + i) as i64)).sum();
+        y[t] = -a[0] * past(1) - a[1] * past(2) + forced;
     }
     y[1..].to_vec()
 }
@@ -291,8 +292,10 @@ fn model_step_response(a: [f64; 2], b: [f64; 2], k: usize, n: usize) -> Vec<f64>
 /// predicted response to the duty over GPC's horizon (30 samples, 5 min) and twice that. Started
 /// from a model whose cooling effect is half the real one (the start model's B halved), after
 /// `piecewise` on the full-load H-TER I, the estimate's step response at 30 and 60 samples is
-/// within 10 % of the physical plant's own (computed from the plant model alone,
-/// [`plant_step_response`]), where the start was 50 % off, on seeds 1–4.
+/// within 15 % and 10 % of the physical plant's own (computed from the plant model alone,
+/// [`plant_step_response`]), where the start was 50 % off, on seeds 1–4. Measured with the
+/// 4-term B (issue 15), seeds 1–8: 12–15 % under at 30 samples, 6–8 % at 60; the 2-term B it
+/// replaced was within 10 % at both, and controlled worse (EXPERIMENTS.md).
 ///
 /// The static gain B(1)/A(1) does not converge and is not asserted: it ends at −17.5 … −17.9 °C
 /// per unit duty on seeds 1–8 against the plant's −42.8 at 4 °C. The plant's slow mode
@@ -313,7 +316,7 @@ fn self_tuner_learns_the_plants_response_over_the_horizon_from_a_wrong_start() {
     let start = Model::second_order([M.a()[0], M.a()[1]], [0.5 * M.b()[0], 0.5 * M.b()[1]], M.k()).unwrap();
     let g_start = model_step_response(
         [M.a()[0], M.a()[1]].map(f64::from),
-        [0.5 * M.b()[0], 0.5 * M.b()[1]].map(f64::from),
+        &[0.5 * M.b()[0], 0.5 * M.b()[1]].map(f64::from),
         M.k(),
         60,
     );
@@ -335,11 +338,12 @@ fn self_tuner_learns_the_plants_response_over_the_horizon_from_a_wrong_start() {
         })
         .unwrap();
         let last = out.rows.last().unwrap();
-        let [a1, a2, b0, b1] = [last.a1, last.a2, last.b0, last.b1].map(|p| f64::from(p.unwrap()));
-        let g = model_step_response([a1, a2], [b0, b1], M.k(), 60);
-        for (n, (g, t)) in [30, 60].iter().zip(at(&g).iter().zip(at(&truth))) {
+        let [a1, a2, b0, b1, b2, b3] =
+            [last.a1, last.a2, last.b0, last.b1, last.b2, last.b3].map(|p| f64::from(p.unwrap()));
+        let g = model_step_response([a1, a2], &[b0, b1, b2, b3], M.k(), 60);
+        for ((n, tol), (g, t)) in [(30, 0.15), (60, 0.10)].iter().zip(at(&g).iter().zip(at(&truth))) {
             assert!(
-                (g / t - 1.0).abs() <= 0.10,
+                (g / t - 1.0).abs() <= *tol,
                 "seed {seed}: {n}-sample response {g:.2} vs the plant's {t:.2} °C per unit duty"
             );
         }
