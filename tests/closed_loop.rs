@@ -297,8 +297,9 @@ fn model_step_response(a: [f64; 2], b: &[f64], k: usize, n: usize) -> Vec<f64> {
 /// 4-term B (issue 15), seeds 1–8: 12–15 % under at 30 samples, 6–8 % at 60; the 2-term B it
 /// replaced was within 10 % at both, and controlled worse (EXPERIMENTS.md).
 ///
-/// The static gain B(1)/A(1) does not converge and is not asserted: it ends at −17.5 … −17.9 °C
-/// per unit duty on seeds 1–8 against the plant's −42.8 at 4 °C. The plant's slow mode
+/// The static gain B(1)/A(1) does not converge and is not asserted: it ends at −16.4 … −16.8 °C
+/// per unit duty on seeds 1–8 (−17.5 … −17.9 with the 2-term B) against the plant's −42.8 at
+/// 4 °C. The plant's slow mode
 /// (τ ≈ 50 min, the water) is far beyond what an hour of regulated data excites, and A(1) =
 /// 1 + a1 + a2 ≈ 2·10⁻⁴ makes the gain a ratio of two small numbers that a small bias of
 /// equation-error least squares moves far. What GPC predicts over its horizon is what it

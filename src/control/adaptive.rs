@@ -68,6 +68,10 @@
 //!
 //! Warm-up and samples the estimator refused keep the mode, unless the law fails.
 //!
+//! **Cautious while unconfirmed.** Outside `Adaptive` GPC runs with λ at least
+//! [`CAUTIOUS_GPC_LAMBDA`]: the model it designs on is one the estimate has not confirmed on
+//! this carrier, and the default λ (0.5) is tuned for a model that has.
+//!
 //! **The first approach** (issue 19). From start until the load first stops falling less than
 //! 1 °C above the setpoint, the law is handed the setpoint raised by the rate of fall (over the
 //! last two samples) times [`APPROACH_LEAD_SAMPLES`], at most [`APPROACH_RAISE_MAX_C`] (never
@@ -95,6 +99,7 @@
 //! switching in either direction is bumpless; the law's histories also track the applied duty.
 
 use super::fixed::{Law, LawState};
+use super::gpc::GpcConfig;
 use super::pi::{Pi, PiConfig};
 use super::{AdaptiveMode, ControlError, ControlInput, Controller, ControllerStatus};
 use crate::ident::rls::{Rls, RlsConfig};
@@ -268,6 +273,14 @@ impl SecondOrderRegressor {
         shift_in(&mut self.u, applied);
     }
 }
+
+/// GPC's λ while the law runs on a model the current estimate has not confirmed (`Frozen`: the
+/// start model, one restored from flash, or the last trusted one), at least this. On a
+/// carrier far faster than its start model (a small, light load) λ = 0.5 drove full duty for
+/// 30 s at start and the cold plate's stored cold then cooled the load at zero duty, which the
+/// stuck-on detector read as a stuck SSR (campaign mission 23269); λ = 3 is what GPC ran with
+/// before issue 15.
+pub const CAUTIOUS_GPC_LAMBDA: f32 = 3.0;
 
 /// Lead of the first approach, samples of Ts (150 s at Ts = 10 s; see the module docs).
 pub const APPROACH_LEAD_SAMPLES: f32 = 15.0;
@@ -467,7 +480,14 @@ impl Controller for SelfTuning {
             }
         }
         let w = if self.approaching { self.approach_setpoint(input.y_c, input.w_c) } else { input.w_c };
-        let law_u = self.law_state.update(&self.cfg.law, self.trusted.as_ref(), input.y_c, w);
+        let law = match self.cfg.law {
+            // Cautious while the model is one the estimate has not confirmed (module docs).
+            Law::Gpc(g) if self.mode != AdaptiveMode::Adaptive && g.lambda < CAUTIOUS_GPC_LAMBDA => {
+                Law::Gpc(GpcConfig { lambda: CAUTIOUS_GPC_LAMBDA, ..g })
+            }
+            other => other,
+        };
+        let law_u = self.law_state.update(&law, self.trusted.as_ref(), input.y_c, w);
         let pi_u = self.fallback.update(input);
         match law_u {
             Ok(u) if self.mode != AdaptiveMode::Fallback => Ok(u),
