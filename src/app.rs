@@ -699,24 +699,22 @@ pub fn commission_failure_name(code: u8) -> &'static str {
     CommissionError::ALL.get(usize::from(code)).map_or("unknown", |e| e.name())
 }
 
-/// A second-order model's status lines `{key}_a=a1,a2`, `{key}_b=b0,b1`, `{key}_k=k`, or `-` for
-/// each when there is none (or it is of another order).
+/// A model's status lines `{key}_a=a1,a2`, `{key}_b=b0,…` (its nb B terms: up to four for the
+/// self-tuner's estimate, two for a commissioned or uploaded model), `{key}_k=k`, or `-` for each
+/// when there is none (or its A is not second order).
 fn write_model(out: &mut impl Write, key: &str, m: Option<Model>) -> core::fmt::Result {
     match m {
-        Some(m) if m.na() == 2 && m.nb() == 2 => {
-            let (a, b) = (m.a(), m.b());
-            write!(
-                out,
-                "{key}_a={},{}\r\n{key}_b={},{}\r\n{key}_k={}\r\n",
-                Fixed(a[0], 6),
-                Fixed(a[1], 6),
-                Fixed(b[0], 6),
-                Fixed(b[1], 6),
-                m.k()
-            )
+        Some(m) if m.na() == 2 => {
+            let a = m.a();
+            write!(out, "{key}_a={},{}\r\n{key}_b=", Fixed(a[0], 6), Fixed(a[1], 6))?;
+            for (i, b) in m.b().iter().take(m.nb()).enumerate() {
+                write!(out, "{}{}", if i == 0 { "" } else { "," }, Fixed(*b, 6))?;
+            }
+            write!(out, "\r\n{key}_k={}\r\n", m.k())
         }
         _ => write!(out, "{key}_a=-\r\n{key}_b=-\r\n{key}_k=-\r\n"),
     }
 }
+
 #[cfg(test)]
 mod tests;

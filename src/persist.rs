@@ -15,13 +15,14 @@
 //! or a model that was plausible under different limits. A record that fails any check is
 //! rejected with a [`DecodeError`] and the caller starts from defaults.
 //!
-//! Glossary: θ = [a1 a2 b0 b1] the self-tuner's ARX estimate (see [`crate::control::adaptive`];
-//! its offset d is not kept: it tracks the operating point, which has changed by the next boot,
-//! and the estimator starts it at 0 anyway); k the model delay in samples.
+//! Glossary: θ = [a1 a2 b0 b1 b2 b3] the self-tuner's ARX estimate (see
+//! [`crate::control::adaptive`]; its offset d is not kept: it tracks the operating point, which
+//! has changed by the next boot, and the estimator starts it at 0 anyway); k the model delay in
+//! samples.
 
 use crate::calib::TwoPoint;
 use crate::coldchain::{AlarmKind, ColdChainMonitor, Excursion, Raised, Side};
-use crate::control::adaptive::{model_from_theta, plausible_model, AdaptiveConfig};
+use crate::control::adaptive::{model_from_theta, plausible_model, AdaptiveConfig, ESTIMATED_NB};
 use crate::control::{AdaptiveMode, Controller};
 use crate::failsafe::{StopInfo, StopKind};
 use crate::ident::commission::cabinet_plausible;
@@ -172,51 +173,75 @@ fn open_frame(bytes: &[u8], len: usize, tag: u8, version: u8) -> Result<Reader<'
     Ok(r)
 }
 
-/// The self-tuner's learned model: θ = [a1 a2 b0 b1] and the delay k.
+/// The self-tuner's learned model: θ = [a1 a2 b0 b1 b2 b3] and the delay k.
 ///
-/// Layout v1, 23 bytes: `'M'`, 1, a1 a2 b0 b1 (f32 LE), k (u8), CRC-32.
+/// Layout v2, 31 bytes: `'M'`, 2, a1 a2 b0 b1 b2 b3 (f32 LE), k (u8), CRC-32. A model with
+/// fewer than [`ModelRecord::NB`] B terms is stored with the rest zero.
+///
+/// v1 (23 bytes: `'M'`, 1, a1 a2 b0 b1, k, CRC-32; the self-tuner estimated two B terms) is
+/// still read, as b2 = b3 = 0: a board updated in the field restarts from the model it had
+/// learnt, not from the build's start model.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ModelRecord {
-    /// θ = [a1 a2 b0 b1].
-    pub theta: [f32; 4],
+    /// θ = [a1 a2 b0 b1 b2 b3] (zero beyond the model's B order).
+    pub theta: [f32; 2 + ModelRecord::NB],
     /// Delay, samples (1 … [`MAX_K`]).
     pub k: u8,
 }
+
+// The record must hold every B term the self-tuner estimates.
+const _: () = assert!(ESTIMATED_NB <= ModelRecord::NB);
 
 impl ModelRecord {
     /// Kind tag.
     pub const TAG: u8 = b'M';
     /// Layout version written by this firmware.
-    pub const VERSION: u8 = 1;
+    pub const VERSION: u8 = 2;
+    /// B terms the record holds (the layout's, fixed: not [`ESTIMATED_NB`], which may change
+    /// without the bytes on a board changing with it).
+    pub const NB: usize = 4;
     /// Encoded length, bytes.
-    pub const LEN: usize = 2 + 4 * 4 + 1 + 4;
+    pub const LEN: usize = theta_k_len(2 + Self::NB);
+    /// Length of a v1 record (θ = [a1 a2 b0 b1]; still read), bytes.
+    pub const LEN_V1: usize = theta_k_len(4);
 
-    /// The record of a second-order model (what [`crate::control::adaptive::SelfTuning`]
-    /// estimates); `None` for other orders.
+    /// The record of a model of the self-tuner's structure: na = 2 and 1 ≤ nb ≤
+    /// [`ModelRecord::NB`] (what [`crate::control::adaptive::SelfTuning`] estimates, or a
+    /// commissioned second-order model); `None` for other orders.
     pub fn from_model(m: &Model) -> Option<Self> {
-        if m.na() != 2 || m.nb() != 2 {
+        if m.na() != 2 || m.nb() > Self::NB {
             return None;
         }
+        // B is zero beyond nb (a `Model` invariant), so the padding is already there.
         let (a, b) = (m.a(), m.b());
         // A model's delay is 1 … MAX_K, which fits a byte.
-        Some(ModelRecord { theta: [a[0], a[1], b[0], b[1]], k: m.k() as u8 })
+        Some(ModelRecord { theta: [a[0], a[1], b[0], b[1], b[2], b[3]], k: m.k() as u8 })
     }
 
-    /// The bytes to store.
+    /// The bytes to store (layout v2).
     pub fn encode(&self) -> [u8; Self::LEN] {
-        encode_theta_k(Self::TAG, Self::VERSION, self.theta, self.k)
+        let mut buf = [0u8; Self::LEN];
+        encode_theta_k(&mut buf, Self::TAG, Self::VERSION, &self.theta, self.k);
+        buf
     }
 
-    /// Parses stored bytes: frame, finite θ, 1 ≤ k ≤ [`MAX_K`]. Plausibility needs the
-    /// controller's limits: see [`ModelRecord::to_model`].
+    /// Parses stored bytes, v2 or v1: frame, finite θ, 1 ≤ k ≤ [`MAX_K`]. Plausibility needs
+    /// the controller's limits: see [`ModelRecord::to_model`].
     pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
-        let (theta, k) = decode_theta_k(bytes, Self::TAG, Self::VERSION)?;
+        let mut theta = [0.0f32; 2 + Self::NB];
+        // Told apart as the history's versions are: by length and version byte together; the
+        // frame check then refuses a v1 byte on a v2 length (CRC) and the converse (length).
+        let v1 = bytes.len() == Self::LEN_V1 && bytes.get(1) == Some(&1);
+        let (version, n) = if v1 { (1, 4) } else { (Self::VERSION, theta.len()) };
+        let k = decode_theta_k(bytes, Self::TAG, version, theta.get_mut(..n).unwrap_or_default())?;
         Ok(ModelRecord { theta, k })
     }
 
     /// The model the self-tuner configured by `cfg` would design on, if it passes the same
-    /// plausibility test the self-tuner applies to its own estimates ([`plausible_model`]).
+    /// plausibility test the self-tuner applies to its own estimates ([`plausible_model`]). Its
+    /// B has [`ModelRecord::NB`] terms, the trailing ones zero for a model of lower order (the
+    /// same polynomial).
     pub fn to_model(&self, cfg: &AdaptiveConfig) -> Result<Model, DecodeError> {
         let cfg = AdaptiveConfig { k: usize::from(self.k), ..*cfg };
         let m = model_from_theta(&cfg, &self.theta).ok_or(DecodeError::OutOfRange)?;
@@ -233,23 +258,27 @@ impl ModelRecord {
     }
 }
 
-/// The layout [`ModelRecord`] and [`CabinetRecord`] share: `tag`, `version`, θ = [a1 a2 b0 b1]
-/// (f32 LE), k (u8), CRC-32.
-fn encode_theta_k(tag: u8, version: u8, theta: [f32; 4], k: u8) -> [u8; ModelRecord::LEN] {
-    let mut buf = [0u8; ModelRecord::LEN];
-    let mut w = Writer::new(&mut buf, tag, version);
-    for x in theta {
+/// Length of a record of the layout [`ModelRecord`] and [`CabinetRecord`] share, with `n` θ
+/// entries, bytes.
+const fn theta_k_len(n: usize) -> usize {
+    2 + 4 * n + 1 + 4
+}
+
+/// That layout into `buf` (of [`theta_k_len`]`(theta.len())` bytes): `tag`, `version`, θ (f32
+/// LE), k (u8), CRC-32.
+fn encode_theta_k(buf: &mut [u8], tag: u8, version: u8, theta: &[f32], k: u8) {
+    let mut w = Writer::new(buf, tag, version);
+    for &x in theta {
         w.f32(x);
     }
     w.put(&[k]);
     w.finish();
-    buf
 }
 
-/// θ and k from that layout: the frame, every θ finite, 1 ≤ k ≤ [`MAX_K`].
-fn decode_theta_k(bytes: &[u8], tag: u8, version: u8) -> Result<([f32; 4], u8), DecodeError> {
-    let mut r = open_frame(bytes, ModelRecord::LEN, tag, version)?;
-    let mut theta = [0.0f32; 4];
+/// θ (as many entries as `theta` has) and k from that layout: the frame, every θ finite,
+/// 1 ≤ k ≤ [`MAX_K`].
+fn decode_theta_k(bytes: &[u8], tag: u8, version: u8, theta: &mut [f32]) -> Result<u8, DecodeError> {
+    let mut r = open_frame(bytes, theta_k_len(theta.len()), tag, version)?;
     for x in theta.iter_mut() {
         *x = r.f32();
         if !x.is_finite() {
@@ -260,7 +289,7 @@ fn decode_theta_k(bytes: &[u8], tag: u8, version: u8) -> Result<([f32; 4], u8), 
     if k == 0 || usize::from(k) > MAX_K {
         return Err(DecodeError::OutOfRange);
     }
-    Ok((theta, k))
+    Ok(k)
 }
 
 /// The carrier's cabinet model: the best-fitting model of its own commissioning run (the
@@ -268,10 +297,10 @@ fn decode_theta_k(bytes: &[u8], tag: u8, version: u8) -> Result<([f32; 4], u8), 
 /// (README "Holdover"). A record of its own: the self-tuner's periodic save
 /// ([`ModelCadence`], [`ModelRecord`]) never overwrites it.
 ///
-/// Layout v1, 23 bytes: `'K'`, 1, a1 a2 b0 b1 (f32 LE), k (u8), CRC-32. On decode the model
-/// must pass exactly what it passed when accepted: finite, 1 ≤ k ≤ [`MAX_K`] and
-/// [`cabinet_plausible`] (two real stable lags, a monotone cooling step response, a static
-/// gain in the configured range).
+/// Layout v1, 23 bytes: `'K'`, 1, a1 a2 b0 b1 (f32 LE), k (u8), CRC-32 (the model is second
+/// order: [`cabinet_plausible`] accepts nothing else). On decode the model must pass exactly
+/// what it passed when accepted: finite, 1 ≤ k ≤ [`MAX_K`] and [`cabinet_plausible`] (two real
+/// stable lags, a monotone cooling step response, a static gain in the configured range).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct CabinetRecord {
@@ -287,22 +316,29 @@ impl CabinetRecord {
     /// Layout version written by this firmware.
     pub const VERSION: u8 = 1;
     /// Encoded length, bytes.
-    pub const LEN: usize = ModelRecord::LEN;
+    pub const LEN: usize = theta_k_len(4);
 
-    /// The record of a second-order model; `None` for other orders.
+    /// The record of a second-order model (na = nb = 2); `None` for other orders.
     pub fn from_model(m: &Model) -> Option<Self> {
-        ModelRecord::from_model(m).map(|r| CabinetRecord { theta: r.theta, k: r.k })
+        if m.na() != 2 || m.nb() != 2 {
+            return None;
+        }
+        let (a, b) = (m.a(), m.b());
+        Some(CabinetRecord { theta: [a[0], a[1], b[0], b[1]], k: m.k() as u8 })
     }
 
     /// The bytes to store.
     pub fn encode(&self) -> [u8; Self::LEN] {
-        encode_theta_k(Self::TAG, Self::VERSION, self.theta, self.k)
+        let mut buf = [0u8; Self::LEN];
+        encode_theta_k(&mut buf, Self::TAG, Self::VERSION, &self.theta, self.k);
+        buf
     }
 
     /// Parses stored bytes and checks the model as an upload is checked, with the gain range of
     /// `cfg` (the build's self-tuner configuration).
     pub fn decode(bytes: &[u8], cfg: &AdaptiveConfig) -> Result<Model, DecodeError> {
-        let (theta, k) = decode_theta_k(bytes, Self::TAG, Self::VERSION)?;
+        let mut theta = [0.0f32; 4];
+        let k = decode_theta_k(bytes, Self::TAG, Self::VERSION, &mut theta)?;
         let m = Model::second_order([theta[0], theta[1]], [theta[2], theta[3]], usize::from(k))
             .map_err(|_| DecodeError::OutOfRange)?;
         cabinet_plausible(cfg, &m).map_err(|_| DecodeError::Implausible)?;
@@ -884,7 +920,7 @@ impl ModelCadence {
     /// Counts one step of `controller` (after `Carrier::step`), `mode` the self-tuner's mode
     /// that step reported (`StepOutput::status`; `None` for a controller that learns nothing);
     /// the record to store when one is due. A due store of a model [`ModelRecord`] cannot hold
-    /// (not second order) is skipped, and the count starts again.
+    /// (na ≠ 2, or more than [`ModelRecord::NB`] B terms) is skipped, and the count starts again.
     pub fn push(&mut self, mode: Option<AdaptiveMode>, controller: &impl Controller) -> Option<ModelRecord> {
         if mode != Some(AdaptiveMode::Adaptive) {
             return None;
@@ -927,39 +963,136 @@ mod tests {
         assert_eq!(crc32(b""), 0);
     }
 
+    /// A θ-and-k record built byte by byte from the documented layout, independent of the
+    /// encoder: `tag`, `version`, θ (f32 LE), k, CRC-32 (LE) of everything before it.
+    fn frame_by_hand(tag: u8, version: u8, theta: &[f32], k: u8) -> std::vec::Vec<u8> {
+        let mut b = std::vec![tag, version];
+        for x in theta {
+            b.extend_from_slice(&x.to_le_bytes());
+        }
+        b.push(k);
+        let crc = crc32(&b);
+        b.extend_from_slice(&crc.to_le_bytes());
+        b
+    }
+
     #[test]
     fn model_round_trip_and_restore() {
         let rec = ModelRecord::from_model(&START_MODEL_HTER2).unwrap();
         assert_eq!(rec.k, 6);
+        let (a, b) = (START_MODEL_HTER2.a(), START_MODEL_HTER2.b());
+        assert_eq!(rec.theta, [a[0], a[1], b[0], b[1], 0.0, 0.0], "a second-order B padded with zeros");
         let bytes = rec.encode();
         assert_eq!(bytes.len(), ModelRecord::LEN);
-        assert_eq!(&bytes[..2], &[b'M', 1]);
+        assert_eq!(ModelRecord::LEN, 31);
+        assert_eq!(&bytes[..2], &[b'M', 2]);
+        assert_eq!(bytes[..], frame_by_hand(b'M', 2, &rec.theta, 6)[..], "the documented layout v2");
         assert_eq!(ModelRecord::decode(&bytes), Ok(rec));
         let restored = rec.restore(&cfg()).unwrap();
         assert_eq!(restored.k, 6);
         let m = restored.initial.unwrap();
         assert_eq!(m.a()[..2], START_MODEL_HTER2.a()[..2]);
-        assert_eq!(m.b()[..2], START_MODEL_HTER2.b()[..2]);
+        // The record's four B terms, the last two zero: the same polynomial.
+        assert_eq!(m.nb(), ModelRecord::NB);
+        assert_eq!(m.b()[..], [b[0], b[1], 0.0, 0.0]);
+        assert_eq!(m.static_gain(), START_MODEL_HTER2.static_gain());
         // GPC's T-filter is rebuilt from the configuration, as for a live estimate.
         assert_eq!(m.nc(), 1);
-        // Only the self-tuner's second-order structure has a record.
+    }
+
+    #[test]
+    fn every_b_order_of_the_self_tuner_has_a_record_and_no_other_structure_does() {
+        let a = [-1.7f32, 0.75];
+        // Static gains −16 … −30 °C per duty: plausible for every nb.
+        let b4 = [-0.8f32, -0.4, -0.2, -0.1];
+        for nb in 1..=ModelRecord::NB {
+            let m = Model::new(&a, &b4[..nb], &[], 5).unwrap();
+            let rec = ModelRecord::from_model(&m).unwrap_or_else(|| panic!("nb {nb}"));
+            let mut want = [0.0f32; 6];
+            want[..2].copy_from_slice(&a);
+            want[2..2 + nb].copy_from_slice(&b4[..nb]);
+            assert_eq!(rec.theta, want, "nb {nb}");
+            let back = ModelRecord::decode(&rec.encode()).unwrap();
+            assert_eq!(back, rec, "nb {nb}");
+            let m2 = back.to_model(&cfg()).unwrap();
+            assert_eq!((&m2.a()[..2], &m2.b()[..nb], m2.k()), (&a[..], &b4[..nb], 5), "nb {nb}");
+            assert!(m2.b()[nb..].iter().all(|&x| x == 0.0), "nb {nb}");
+        }
+        // The self-tuner's A is second order: first and third order have no record.
         let first_order = Model::new(&[-0.9], &[-0.5], &[], 3).unwrap();
         assert_eq!(ModelRecord::from_model(&first_order), None);
+        let third_order = Model::new(&[-1.7, 0.75, -0.01], &b4, &[], 3).unwrap();
+        assert_eq!(ModelRecord::from_model(&third_order), None);
+        // The cabinet record keeps the commissioning's second-order model only.
+        assert_eq!(CabinetRecord::from_model(&Model::new(&a, &b4, &[], 5).unwrap()), None);
+        assert_eq!(CabinetRecord::from_model(&Model::new(&a, &b4[..1], &[], 5).unwrap()), None);
+        let cab = CabinetRecord::from_model(&START_MODEL_HTER1).unwrap();
+        let bytes = cab.encode();
+        assert_eq!(bytes.len(), 23);
+        assert_eq!(bytes[..], frame_by_hand(b'K', 1, &cab.theta, cab.k)[..], "the cabinet record stays v1");
+    }
+
+    /// A board updated in the field finds the v1 record its previous firmware wrote (two B
+    /// terms, 23 bytes) and restarts from that model.
+    #[test]
+    fn a_v1_model_record_is_still_read() {
+        let (a, b) = (START_MODEL_HTER1.a(), START_MODEL_HTER1.b());
+        let k = START_MODEL_HTER1.k() as u8;
+        let v1 = frame_by_hand(b'M', 1, &[a[0], a[1], b[0], b[1]], k);
+        assert_eq!(v1.len(), ModelRecord::LEN_V1);
+        assert_eq!(v1.len(), 23);
+        let rec = ModelRecord::decode(&v1).expect("v1 is read");
+        assert_eq!(rec, ModelRecord { theta: [a[0], a[1], b[0], b[1], 0.0, 0.0], k });
+        let m = rec.restore(&cfg()).expect("the v1 model is restored").initial.unwrap();
+        assert_eq!((&m.a()[..2], &m.b()[..], m.k()), (&a[..2], &[b[0], b[1], 0.0, 0.0][..], usize::from(k)));
+        // Stored again, it is written as v2 with the same θ.
+        assert_eq!(&rec.encode()[..2], &[b'M', 2]);
+        assert_eq!(ModelRecord::decode(&rec.encode()), Ok(rec));
+
+        // A v1 record is checked as a v2 one is.
+        let mut torn = v1.clone();
+        torn[5] ^= 0x10;
+        assert_eq!(ModelRecord::decode(&torn), Err(DecodeError::Crc));
+        let bad_k = frame_by_hand(b'M', 1, &[a[0], a[1], b[0], b[1]], 0);
+        assert_eq!(ModelRecord::decode(&bad_k), Err(DecodeError::OutOfRange));
+        let nan = frame_by_hand(b'M', 1, &[a[0], f32::NAN, b[0], b[1]], k);
+        assert_eq!(ModelRecord::decode(&nan), Err(DecodeError::NonFinite));
+        let heating = frame_by_hand(b'M', 1, &[a[0], a[1], 0.03, b[1]], k);
+        assert_eq!(ModelRecord::decode(&heating).unwrap().to_model(&cfg()), Err(DecodeError::Implausible));
+        // The version byte and the length go together: a v2 byte on a v1 length is not a v2
+        // record (its length), a v1 byte on a v2 record breaks its CRC, and a v1 byte with a
+        // valid CRC on a v2 length is a version this firmware does not read.
+        let mut b2 = v1.clone();
+        b2[1] = 2;
+        assert_eq!(ModelRecord::decode(&b2), Err(DecodeError::Length));
+        let mut b1 = rec.encode();
+        b1[1] = 1;
+        assert_eq!(ModelRecord::decode(&b1), Err(DecodeError::Crc));
+        let v1_byte_31 = frame_by_hand(b'M', 1, &rec.theta, k);
+        assert_eq!(ModelRecord::decode(&v1_byte_31), Err(DecodeError::Version));
+        // A cabinet record (same length as v1, its own tag) is not a model record.
+        let cab = CabinetRecord::from_model(&START_MODEL_HTER1).unwrap().encode();
+        assert_eq!(ModelRecord::decode(&cab), Err(DecodeError::Kind));
     }
 
     #[test]
     fn every_single_bit_flip_is_caught() {
-        let bytes = ModelRecord::from_model(&START_MODEL_HTER1).unwrap().encode();
-        for i in 0..bytes.len() * 8 {
-            let mut b = bytes;
-            b[i / 8] ^= 1 << (i % 8);
-            assert!(ModelRecord::decode(&b).is_err(), "flip of bit {i} accepted");
+        let v2 = ModelRecord::from_model(&START_MODEL_HTER1).unwrap().encode();
+        let (a, b) = (START_MODEL_HTER1.a(), START_MODEL_HTER1.b());
+        let v1 = frame_by_hand(b'M', 1, &[a[0], a[1], b[0], b[1]], START_MODEL_HTER1.k() as u8);
+        for bytes in [&v2[..], &v1[..]] {
+            for i in 0..bytes.len() * 8 {
+                let mut b = bytes.to_vec();
+                b[i / 8] ^= 1 << (i % 8);
+                assert!(ModelRecord::decode(&b).is_err(), "flip of bit {i} of {} bytes accepted", bytes.len());
+            }
         }
     }
 
     #[test]
     fn frame_errors() {
-        let bytes = ModelRecord { theta: [-1.7, 0.75, -0.03, -0.03], k: 5 }.encode();
+        let bytes = ModelRecord { theta: [-1.7, 0.75, -0.03, -0.03, -0.01, 0.0], k: 5 }.encode();
+        assert_eq!(ModelRecord::decode(&bytes[..30]), Err(DecodeError::Length));
         assert_eq!(ModelRecord::decode(&bytes[..22]), Err(DecodeError::Length));
         assert_eq!(ModelRecord::decode(&[0xFF; ModelRecord::LEN]), Err(DecodeError::Crc));
         assert_eq!(CalibrationRecord::decode(&bytes[..14]), Err(DecodeError::Crc));
@@ -968,22 +1101,31 @@ mod tests {
             let mut b = bytes;
             b[0] = tag;
             b[1] = ver;
-            let crc = crc32(&b[..19]);
-            b[19..].copy_from_slice(&crc.to_le_bytes());
+            let n = ModelRecord::LEN - 4;
+            let crc = crc32(&b[..n]);
+            b[n..].copy_from_slice(&crc.to_le_bytes());
             b
         };
-        assert_eq!(ModelRecord::decode(&reframe(b'M', 2)), Err(DecodeError::Version));
-        assert_eq!(ModelRecord::decode(&reframe(b'C', 1)), Err(DecodeError::Kind));
+        assert_eq!(ModelRecord::decode(&reframe(b'M', 3)), Err(DecodeError::Version));
+        assert_eq!(ModelRecord::decode(&reframe(b'C', 2)), Err(DecodeError::Kind));
     }
 
     #[test]
     fn model_checks() {
-        let bad_k = ModelRecord { theta: [-1.7, 0.75, -0.03, -0.03], k: 0 }.encode();
+        let bad_k = ModelRecord { theta: [-1.7, 0.75, -0.03, -0.03, 0.0, 0.0], k: 0 }.encode();
         assert_eq!(ModelRecord::decode(&bad_k), Err(DecodeError::OutOfRange));
-        let nan = ModelRecord { theta: [f32::NAN, 0.75, -0.03, -0.03], k: 5 }.encode();
+        let nan = ModelRecord { theta: [f32::NAN, 0.75, -0.03, -0.03, 0.0, 0.0], k: 5 }.encode();
         assert_eq!(ModelRecord::decode(&nan), Err(DecodeError::NonFinite));
-        // Decodes, but: unstable A (pole at 1.2), a heating b0, a gain of −1 °C per duty.
-        for theta in [[-2.2, 1.2, -0.03, -0.03], [-1.7, 0.75, 0.03, -0.03], [-1.7, 0.75, -0.0005, -0.0005]] {
+        let inf_b3 = ModelRecord { theta: [-1.7, 0.75, -0.03, -0.03, 0.0, f32::NEG_INFINITY], k: 5 }.encode();
+        assert_eq!(ModelRecord::decode(&inf_b3), Err(DecodeError::NonFinite));
+        // Decodes, but: unstable A (pole at 1.2), a heating b0, a heating b3, a gain of −1 °C per
+        // duty.
+        for theta in [
+            [-2.2, 1.2, -0.03, -0.03, 0.0, 0.0],
+            [-1.7, 0.75, 0.03, -0.03, 0.0, 0.0],
+            [-1.7, 0.75, -0.03, -0.03, -0.01, 0.002],
+            [-1.7, 0.75, -0.0005, -0.0005, 0.0, 0.0],
+        ] {
             let rec = ModelRecord::decode(&ModelRecord { theta, k: 5 }.encode()).unwrap();
             assert_eq!(rec.to_model(&cfg()), Err(DecodeError::Implausible), "{theta:?}");
         }
@@ -1157,7 +1299,7 @@ mod tests {
         assert_eq!(cadence.push(c.mode, &c), want);
         // The count starts again after a store.
         assert_eq!([cadence.push(c.mode, &c), cadence.push(c.mode, &c), cadence.push(c.mode, &c)], [None, None, want]);
-        // A model without a record (not second order) is skipped, and the count restarts.
+        // A model without a record (A not second order) is skipped, and the count restarts.
         c.trusted = Some(Model::new(&[-0.9], &[-0.5], &[], 3).unwrap());
         assert_eq!([cadence.push(c.mode, &c), cadence.push(c.mode, &c), cadence.push(c.mode, &c)], [None, None, None]);
         c.trusted = Some(START_MODEL_HTER2);

@@ -125,7 +125,7 @@ pub const HISTORY_SAVE_S: u32 = 3600;
 
 /// Store the trusted model after every 4 h of samples with a trusted, freshly updated estimate:
 /// power lost within 4 h of learning loses at most those 4 h. With the hourly history this
-/// erases each of the four 2 KiB persist pages every 2.9 days, ≈ 79 years of the L4's 10 000
+/// erases each of the four 2 KiB persist pages every 2.3 days, ≈ 64 years of the L4's 10 000
 /// cycles (`tests/persist.rs`, `wear_at_the_firmware_cadence`).
 pub const MODEL_SAVE_S: u32 = 4 * 3600;
 

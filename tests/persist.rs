@@ -82,7 +82,9 @@ fn records_survive_a_reboot_and_restart_the_self_tuner() {
         let tuner = SelfTuning::new(cfg.value, 10.0, 0.5).expect("a restored configuration is valid");
         let trusted = tuner.trusted_model().expect("a plausible restored model is trusted at once");
         assert_eq!(ModelRecord::from_model(&trusted), Some(model));
-        assert_eq!(tuner.theta()[..4], model.theta);
+        // The self-tuner's θ = [a1 a2 b0 … b3 d]: the record's six, b2 = b3 = 0 for this
+        // second-order start model.
+        assert_eq!(tuner.theta()[..6], model.theta);
         assert_eq!(store.load_calibration().await.value, cal);
         let h = store.load_history().await;
         assert_eq!((h.value, h.status), (hist, LoadStatus::Restored));
@@ -94,13 +96,16 @@ fn implausible_or_out_of_range_records_give_defaults() {
     let mut store = open(MockFlash::<2048>::blank(4), 4);
     block_on(async {
         // CRC-correct and finite, but A has a pole at 1.2.
-        let unstable = ModelRecord { theta: [-2.2, 1.2, -0.03, -0.03], k: 5 };
+        let unstable = ModelRecord { theta: [-2.2, 1.2, -0.03, -0.03, 0.0, 0.0], k: 5 };
         store.save_model(&unstable).await.unwrap();
         store.save_calibration(TwoPoint { gain: 1.5, offset_c: 0.0 }).await.unwrap();
     });
     let mut store = reboot(store, 4);
     block_on(async {
-        assert_eq!(store.load_model_record().await, Ok(ModelRecord { theta: [-2.2, 1.2, -0.03, -0.03], k: 5 }));
+        assert_eq!(
+            store.load_model_record().await,
+            Ok(ModelRecord { theta: [-2.2, 1.2, -0.03, -0.03, 0.0, 0.0], k: 5 })
+        );
         let cfg = store.load_adaptive(&gpc()).await;
         assert_eq!(cfg.status, LoadStatus::Invalid(DecodeError::Implausible));
         assert_eq!(cfg.value, gpc());
@@ -173,7 +178,7 @@ fn sequence(n: usize) -> Vec<Save> {
     let mut out = Vec::new();
     for i in 0..n {
         let f = i as f32;
-        out.push(Save::Model(ModelRecord { theta: [-1.75 + 0.001 * f, 0.75, -0.027, -0.03], k: 5 }));
+        out.push(Save::Model(ModelRecord { theta: [-1.75 + 0.001 * f, 0.75, -0.027, -0.03, -0.01, -0.005], k: 5 }));
         if i % 5 == 0 {
             out.push(Save::Cal(TwoPoint { gain: 1.0 + 0.0005 * f, offset_c: -0.01 * f }));
         }
@@ -294,7 +299,7 @@ fn cut_and_check<const PAGE: usize>(seq: &[Save], pages: usize, cut: usize, tear
     let what = format!("{tear:?} cut {cut} in {cut_in:?}");
     let (mut store, outcome, repairs) = boot_and_check(open(flash, pages), pages, &committed, in_flight, &what);
     block_on(async {
-        let next = Save::Model(ModelRecord { theta: [-1.6, 0.65, -0.02, -0.02], k: 4 });
+        let next = Save::Model(ModelRecord { theta: [-1.6, 0.65, -0.02, -0.02, -0.01, 0.0], k: 4 });
         apply(&mut store, &next).await.unwrap_or_else(|e| panic!("{what}: store after reboot: {e:?}"));
         assert_eq!(read_back(&mut store).await[0], Ok(Some(next)), "{what}");
     });
@@ -471,23 +476,24 @@ fn power_loss_during_the_repair_after_a_power_loss() {
 }
 
 /// Wear of the firmware's use: model saves only, 4 pages × 2 KiB. The README and
-/// `firmware/src/config.rs` quote this figure: ≥ 60 saves per page erase, and the pages are
-/// erased in turn, so each page once per ≥ 240 saves. (Measured: 2000 saves, 29 erases; the
-/// first three pages fill before the first erase.)
+/// `firmware/src/config.rs` quote this figure: ≥ 50 saves per page erase, and the pages are
+/// erased in turn, so each page once per ≥ 200 saves. (Measured: 2000 saves, 37 erases; the
+/// first three pages fill before the first erase. A v2 model record of 31 bytes is a 40-byte
+/// item, 8 header and 1 + 31 in 8-byte words; the 23-byte v1 record's was 32 and gave ≥ 60.)
 #[test]
 fn wear_per_save() {
     let mut store = open(MockFlash::<2048>::blank(4), 4);
     let saves = 2000;
     block_on(async {
         for i in 0..saves {
-            let rec = ModelRecord { theta: [-1.75 + 1e-5 * i as f32, 0.75, -0.027, -0.03], k: 5 };
+            let rec = ModelRecord { theta: [-1.75 + 1e-5 * i as f32, 0.75, -0.027, -0.03, -0.01, -0.005], k: 5 };
             store.save_model(&rec).await.unwrap();
         }
     });
     let erases = store.release().erases;
     println!("{saves} model saves: {erases} page erases, {:.1} saves per erase", saves as f32 / erases as f32);
     assert!(erases > 0);
-    assert!(saves / erases >= 60, "{erases} erases for {saves} saves");
+    assert!(saves / erases >= 50, "{erases} erases for {saves} saves");
 }
 
 /// The board's cadence (`hter::profile`): the history every `HISTORY_SAVE_S` (an hour), the
@@ -514,7 +520,8 @@ fn wear_at_the_firmware_cadence() {
                 }
                 store.save_history(&h).await.unwrap();
                 if (t_s + HISTORY_SAVE_S).is_multiple_of(MODEL_SAVE_S) {
-                    let rec = ModelRecord { theta: [-1.75 + 1e-5 * n as f32, 0.75, -0.027, -0.03], k: 5 };
+                    let rec =
+                        ModelRecord { theta: [-1.75 + 1e-5 * n as f32, 0.75, -0.027, -0.03, -0.01, -0.005], k: 5 };
                     store.save_model(&rec).await.unwrap();
                 }
             }

@@ -381,7 +381,7 @@ pub const HISTORY_SAVE_SAMPLES: u32 = profile::samples(profile::HISTORY_SAVE_S, 
 pub const SUMMARY_SAMPLES: u32 = 3600 / (CARRIER.ts_s as u32);
 
 // Flash wear (sequential-storage erases the four pages of `PERSIST` in turn): a model item takes
-// ≈ 32 bytes (1 key + 23 record bytes and the item header, in 8-byte words), a history item
-// ≈ 112 (1 + 96 and the header), a calibration item ≈ 24. At the profile's hourly history and
-// 4-hourly model cadence each page is erased every 2.9 days, so the L4's 10 000 cycles
-// (datasheet DS10198, "NEND") last ≈ 79 years (`tests/persist.rs::wear_at_the_firmware_cadence`).
+// 40 bytes (1 key + 31 record bytes in 8-byte words and the 8-byte item header), a history item
+// 136 (1 + 121 and the header), a calibration item 24. At the profile's hourly history and
+// 4-hourly model cadence each page is erased every 2.3 days, so the L4's 10 000 cycles
+// (datasheet DS10198, "NEND") last ≈ 64 years (`tests/persist.rs::wear_at_the_firmware_cadence`).

@@ -216,9 +216,11 @@ fn numbers(key: &str, v: &str) -> Result<Value> {
 }
 
 /// The `status` reply as one JSON object: `NUMERIC` keys as numbers, `model_a`/`model_b`/
-/// `model_k` as `model: {a: [a1, a2], b: [b0, b1], k}` (null when the board trusts no model),
-/// `cabinet_a`/`cabinet_b`/`cabinet_k` likewise as `cabinet` (null without one, or from a board
-/// that does not send them), every other key as a string, `-` as null anywhere.
+/// `model_k` as `model: {a: [a1, a2], b: [b0, …], k}` with every B term the board sends (four,
+/// b0 … b3, for the self-tuner's own estimate; two for a commissioned or uploaded model; null
+/// when the board trusts no model), `cabinet_a`/`cabinet_b`/`cabinet_k` likewise as `cabinet`
+/// (second order: b = [b0, b1]; null without one, or from a board that does not send them),
+/// every other key as a string, `-` as null anywhere.
 pub fn status_json(kv: &[(String, String)]) -> Result<Value> {
     if let Some(missing) = REQUIRED.iter().find(|r| !kv.iter().any(|(k, _)| k == *r)) {
         bail!("the board's status has no '{missing}'");
@@ -600,6 +602,12 @@ mod tests {
         });
         assert_eq!(v, want);
         assert!(v["resets"].is_u64() && v["temp_c"].is_f64());
+        // The self-tuner's own estimate has four B terms: all of them are in the JSON.
+        let mut s = STATUS.to_vec();
+        s[10] = "model_b=-0.0150,-0.0080,-0.0040,0.0000";
+        let v = status_json(&kv(&s)).unwrap();
+        assert_eq!(v["model"]["b"], serde_json::json!([-0.015, -0.008, -0.004, 0.0]));
+        assert_eq!(v["cabinet"]["b"], serde_json::json!([-0.2798, 0.2717]));
     }
 
     #[test]

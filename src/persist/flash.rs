@@ -639,6 +639,14 @@ impl<F: NorFlash, E: EccErrors> LogStore<F, E> {
 }
 
 const _: () = assert!(ENTRY_LEN <= BUF_LEN);
+// Every record fits `write_record`'s buffer and `Store::rec`, both sized by the history (the
+// largest): a record that did not would be stored as nothing.
+const _: () = assert!(
+    ModelRecord::LEN <= HistoryRecord::LEN
+        && super::CabinetRecord::LEN <= HistoryRecord::LEN
+        && CalibrationRecord::LEN <= HistoryRecord::LEN
+        && SettingsRecord::LEN <= HistoryRecord::LEN
+);
 
 /// Writes one [`Save`](super::Save) where it belongs: the log entries to the log, every other
 /// record to the store under its key (encoded here, stored through one call: one copy of the
