@@ -29,7 +29,10 @@
 //! open, and with four B terms that drift took A(1) below zero (a pole at 1.02) on every
 //! half-load run: the estimate was refused for the whole hold and GPC limit-cycled ±0.6 °C on
 //! the start model. Projected, the estimate stays in the set the laws accept and keeps
-//! following the plant.
+//! following the plant. The model the laws get has the tail of B, b1 … b3, clipped at zero: a
+//! term the data leave near zero (the start model's b2 = b3 = 0 on a plant that has them so)
+//! is estimated a hair above it as often as below, and refusing each such estimate kept the
+//! law frozen for hours. b0 > 0 is still refused: it would reverse the first-step gain.
 //!
 //! **When the estimate is trusted** (all must hold, else the law runs on the last trusted
 //! model, and with no trusted model the bumpless fallback PI drives the SSR):
@@ -345,9 +348,16 @@ impl SelfTuning {
         &self.cfg
     }
 
-    /// The current estimate as a model.
+    /// The current estimate as a model, its B's tail b1 … b3 no warmer than zero (module docs,
+    /// "Projection").
     pub fn estimate(&self) -> Option<Model> {
-        model_from_theta(&self.cfg, &self.theta())
+        let mut th = self.theta();
+        for b in &mut th[3..] {
+            if *b > 0.0 {
+                *b = 0.0;
+            }
+        }
+        model_from_theta(&self.cfg, &th)
     }
 
     /// θ = [a1 a2 b0 b1 b2 b3] (without the offset d).
