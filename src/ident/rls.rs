@@ -85,6 +85,9 @@ impl RlsConfig {
     }
 }
 
+/// The variance [`Rls::hold`] leaves a held parameter with.
+pub const HELD_VARIANCE: f32 = 1e-9;
+
 /// RLS state for N parameters.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Rls<const N: usize> {
@@ -243,6 +246,17 @@ impl<const N: usize> Rls<N> {
             true
         } else {
             false
+        }
+    }
+
+    /// Keeps parameter `k` where it is: its variance in P is set to `HELD_VARIANCE`, so an
+    /// update with φ_k = 0 leaves θ_k and its coupling to the others (zero, as P starts) as they
+    /// are, and it adds nothing to trace(P). Call it after every update that should hold k
+    /// (forgetting grows the variance by 1/λ_f each time). Out of range: nothing.
+    pub fn hold(&mut self, k: usize) {
+        if let Some(d) = self.d.get_mut(k) {
+            self.trace += HELD_VARIANCE - *d;
+            *d = HELD_VARIANCE;
         }
     }
 
