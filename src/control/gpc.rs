@@ -75,7 +75,7 @@ impl GpcConfig {
     /// N1 = 1, N2 = 30 (5 min at Ts = 10 s, the closed-loop settling scale), Nu = 3, λ = 0.5.
     /// λ weighs Δu² (duty in [0, 1], so Δu ≤ 1) against squared errors in °C summed over 30
     /// predictions, with step-response coefficients of tens of °C per unit duty. Tuned for the
-    /// self-tuner's 4-term B with its T-filter (τ = 0.7, `AdaptiveConfig::t_filter`), issue 15:
+    /// self-tuner's 4-term B with its T-filter (τ = 0.8 after issue 15's campaigns, `AdaptiveConfig::t_filter`):
     /// 64 settings (τ 0.3–0.7, λ 0.5–3, Nu 2–3, N2 25–30) on seeds 1–3 at 28 °C, the best five
     /// on seeds 1–8 at 20, 28 and 36 °C, then τ 0.6–0.8 × λ 0.5–1 again with the staged design
     /// ([`GpcStaged`]); this one has the lowest IAE / bound over the full load, the half load and
