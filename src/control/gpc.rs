@@ -363,6 +363,7 @@ impl GpcStaged {
 
     /// Δu(t) for setpoint `w` on model `m`, after [`GpcState::push_y`]; see the type's docs.
     pub fn update(&mut self, st: &GpcState, m: &Model, cfg: &GpcConfig, w: f32) -> Result<f32, GpcError> {
+        // (Checked every sample: checking only a changed tuning took 200 B more flash.)
         cfg.validate()?;
         if !w.is_finite() {
             return Err(GpcError::NonFinite);
@@ -425,9 +426,7 @@ impl GpcStaged {
                 self.stage = 3;
             }
             _ => {
-                // One copy for every Nu: z is zero beyond Nu (`first_row_solve`), so the padded
-                // terms add ±0 to sums that are not −0 (the same bits as `gain_row::<Nu>`).
-                self.start = gain_row::<MAX_NU>(&self.h[0], &mut self.d, cfg.n1, cfg.n2, self.lead);
+                self.start = gain_row_nu(&self.h[0], &mut self.d, cfg.n1, cfg.n2, cfg.nu, self.lead);
                 self.ready = true;
                 self.stage = 0;
             }
@@ -584,14 +583,16 @@ fn gain_row<const NU: usize>(z: &[f32; MAX_NU], d: &mut GpcDesign, n1: usize, n2
     start
 }
 
-/// [`gain_row`] for the run-time Nu (the common control horizons get their own unrolled copy).
+/// [`gain_row`] for the run-time Nu, the one both [`GpcState::design_into`] and [`GpcStaged`]
+/// call: the default Nu = 3 gets its own unrolled copy (the staged gain row is the largest
+/// stage of the board's sample, `cargo xtask pil`), every other Nu the `MAX_NU` copy. z is zero
+/// beyond Nu ([`first_row_solve`]), so the padded terms add ±0 to sums that are not −0: the
+/// same bits as `gain_row::<Nu>`.
 fn gain_row_nu(z: &[f32; MAX_NU], d: &mut GpcDesign, n1: usize, n2: usize, nu: usize, lead: usize) -> usize {
-    match nu {
-        1 => gain_row::<1>(z, d, n1, n2, lead),
-        2 => gain_row::<2>(z, d, n1, n2, lead),
-        3 => gain_row::<3>(z, d, n1, n2, lead),
-        4 => gain_row::<4>(z, d, n1, n2, lead),
-        _ => gain_row::<MAX_NU>(z, d, n1, n2, lead),
+    if nu == 3 {
+        gain_row::<3>(z, d, n1, n2, lead)
+    } else {
+        gain_row::<MAX_NU>(z, d, n1, n2, lead)
     }
 }
 
