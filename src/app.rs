@@ -682,7 +682,8 @@ impl App {
             _ => [1.0, 0.0],
         };
         self.save(Save::Log(LogEntry::Setting { t_s, key: SettingKey::IdentifyEnd, value: code }));
-        *self.carrier.controller_mut() = build(law, &self.adaptive, ts_s, self.duty_mean.get(self.cfg.adaptive.fallback.bias));
+        *self.carrier.controller_mut() =
+            build(law, &self.adaptive, ts_s, self.duty_mean.get(self.cfg.adaptive.fallback.bias));
         self.carrier.hold_switch_tests(false);
         if law != self.settings.law {
             self.settings.law = law;
