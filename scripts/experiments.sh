@@ -43,8 +43,8 @@ table --scenario disturbance --plot "$D/disturbance.png"             | put distu
 {
   sweep_header "λ"
   bound_row --scenario piecewise
-  for l in 0.01 0.1 1 3 10 30; do
-    label=$l; [[ $l == 3 ]] && label="**3 (default)**"
+  for l in 0.01 0.1 0.5 1 3 10 30; do
+    label=$l; [[ $l == 0.5 ]] && label="**0.5 (default)**"
     sweep_row "$label" --scenario piecewise --controllers gpc --lambda "$l"
   done
 } | put gpc-lambda
