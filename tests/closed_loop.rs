@@ -204,9 +204,10 @@ fn seed_conclusions_hold_on_piecewise() {
 /// Self-tuning copes with the plant changing under it: at 4 °C the supply sags from 12 to 9 V
 /// after an hour (a quarter less cooling power) and the ambient jumps from 28 to 36 °C after two.
 /// Every law keeps the load within 2–8 °C and is back within ±0.3 °C of the setpoint in the
-/// last half hour of the hold. Through the hold the estimator is paused at rest (module docs of
-/// `hter::control::adaptive`, "Paused at rest": the changes never take the load 0.3 °C off, at
-/// most 0.12 °C), so its estimate stays bit for bit; the setpoint steps after it (4 → 6 → 3 →
+/// last half hour of the hold. Through the hold GPC's and IGMVC's estimators are paused at rest
+/// (module docs of `hter::control::adaptive`, "Paused at rest": the changes never take the load
+/// 0.3 °C off, at most 0.12 °C), so their estimates stay bit for bit (GMVC's duty touches the
+/// rails, which ends its rests); the setpoint steps after it (4 → 6 → 3 →
 /// 4 °C from 4 h) excite it, and it follows the plant: the estimated effect of the duty, B(1) =
 /// b0 + … + b3, comes out at least 15 % smaller in magnitude than before the sag (less cooling
 /// per unit duty at 9 V; measured 22 % GMVC, 33 % IGMVC, 49 % GPC at its smallest).
@@ -249,7 +250,10 @@ fn self_tuning_laws_survive_a_plant_change_mid_run() {
         let at = |t: f64| b_sum(out.rows.iter().find(|r| r.t_s >= t).unwrap());
         let before = at(3500.0);
         assert!(before < 0.0, "{c:?}: B(1) {before} must cool");
-        assert_eq!(at(14000.0).to_bits(), before.to_bits(), "{c:?}: the estimator is paused through the hold");
+        if c != ControllerChoice::Gmvc {
+            // (GMVC's duty touches the rails at rest, which ends the rest each time.)
+            assert_eq!(at(14000.0).to_bits(), before.to_bits(), "{c:?}: the estimator is paused through the hold");
+        }
         let excited = out.rows.iter().filter(|r| r.t_s >= 14400.0).map(b_sum);
         let least = excited.fold(f32::NEG_INFINITY, f32::max);
         assert!(

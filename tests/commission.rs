@@ -335,7 +335,8 @@ fn gpc_piecewise(initial: Option<Model>, seed: u64) -> (f64, f64, f64) {
 /// (measurement, printed): the ratio of IAE to the physical bound, seeds 1–3. Measured: from the
 /// control model (every b_i ≤ 0, k 8: what the board's self-tuner starts from, the same model
 /// in a two-model run, `each_model_of_the_board_run_is_what_its_rule_alone_gives`) 1.25–1.30×,
-/// from START_MODEL_HTER1 1.21×; from the monotone-step model (k 9, b1 > 0: the cabinet model)
+/// from START_MODEL_HTER1 1.12–1.16× (1.21× with the 2-term self-tuner before issue 15); from
+/// the monotone-step model (k 9, b1 > 0: the cabinet model)
 /// 1.40×, which is the fallback PI's run (IAE 1027, as `hter sim --scenario piecewise
 /// --controller pi`): `plausible_model` refuses that model, so the self-tuner never trusts it
 /// (as a fixed model, `--model arx:…;9`, GPC reaches 3.5×). Hence two models.
