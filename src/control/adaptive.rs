@@ -56,9 +56,9 @@
 //! simulator's 1-hour pre-roll, and GPC, designed on a plant four times too weak, kept the load
 //! moving ±0.07 °C for as long as it held (`hter compare --scenario disturbance`: IAE 340 against
 //! 291 before issue 15's 4-term estimate; IGMVC 354 against 211). Paused, the same runs give GPC
-//! 170 and IGMVC 132 (GMVC, whose duty touches the rails, rarely rests: 451, against 130 before
-//! the 4-term estimate), and the piecewise runs (seeds 1–8 at 20, 28 and 36 °C) move by −0.06 …
-//! +0.014 in IAE / bound, median and worst seed (EXPERIMENTS.md, issue 15). A dead zone on
+//! 137 and IGMVC 132 (GMVC, whose duty touches the rails, rarely rests: 451, against 130 before
+//! the 4-term estimate), and the piecewise runs (seeds 1–8 at 20, 28 and 36 °C) move by −0.056 …
+//! +0.024 in IAE / bound, median and worst seed (EXPERIMENTS.md, issue 15). A dead zone on
 //! the prediction error instead (no update while |ε| < 0.01–0.04 °C) also held the gain, but it
 //! stopped the learning in the piecewise steps too: 1.15–1.28 × the bound on the full load, up
 //! to 2.2 on the half load. Neither a longer memory (forgetting 0.998–0.999) nor a smaller
