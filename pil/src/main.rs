@@ -234,7 +234,7 @@ fn run() -> Result<(), &'static str> {
     let mut reg = SecondOrderRegressor::new(acfg.k, PI_BIAS).map_err(|_| "the profile's delay is refused")?;
     let mut gpc = GpcState::new(PI_BIAS);
     let mut gpc_design = GpcStaged::NEW; // kept between samples, as `LawState` does
-                                          // The firmware's record and indicator, timed beside the step as the control task runs them.
+                                         // The firmware's record and indicator, timed beside the step as the control task runs them.
     let mut recorder = Recorder::new(HistoryRecord::EMPTY, proto::HISTORY_SAVE_SAMPLES);
     let mut annunciator = Annunciator::new();
 
@@ -286,8 +286,7 @@ fn run() -> Result<(), &'static str> {
             let model = st.and_then(|s| s.trusted_model()).unwrap_or(m0);
             let gcfg = GpcConfig::DEFAULT;
             ticks[6] = timed(|| {
-                gpc.push_y(o.temp_c.0, &model).is_ok()
-                    && gpc_design.update(&gpc, &model, &gcfg, o.setpoint_c.0).is_ok()
+                gpc.push_y(o.temp_c.0, &model).is_ok() && gpc_design.update(&gpc, &model, &gcfg, o.setpoint_c.0).is_ok()
             })
             .1;
             gpc.track(o.duty.get());
