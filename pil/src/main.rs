@@ -233,8 +233,9 @@ fn run() -> Result<(), &'static str> {
     // The self-tuner's own regressor type, fed beside it as the self-tuner feeds its own.
     let mut reg = SecondOrderRegressor::new(acfg.k, PI_BIAS).map_err(|_| "the profile's delay is refused")?;
     let mut gpc = GpcState::new(PI_BIAS);
-    let mut gpc_design = GpcStaged::NEW; // kept between samples, as `LawState` does
-                                         // The firmware's record and indicator, timed beside the step as the control task runs them.
+    // Kept between samples, as `LawState` does.
+    let mut gpc_design = GpcStaged::NEW;
+    // The firmware's record and indicator, timed beside the step as the control task runs them.
     let mut recorder = Recorder::new(HistoryRecord::EMPTY, proto::HISTORY_SAVE_SAMPLES);
     let mut annunciator = Annunciator::new();
 

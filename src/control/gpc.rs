@@ -317,9 +317,9 @@ impl GpcState {
 /// Δu with the last gain row, and one stage of the next gain row on the current model:
 /// stage 0 the step response and its dead time, stage 1 the normal matrix GᵀG + λI, stage 2
 /// its Cholesky factor and z, stage 3 k1. A gain row is thus at most seven samples (70 s)
-/// older than the model f
-/// uses, against a model that moves over tens of minutes; the sample's work falls from a whole
-/// design to its largest stage (`cargo xtask pil`, BENCHMARKS.md).
+/// older than the model f uses, against a model that moves over tens of minutes; the
+/// sample's work falls from a whole design to its largest stage (`cargo xtask pil`,
+/// BENCHMARKS.md).
 ///
 /// Until the first gain row is complete (the first four samples, and after a change of
 /// tuning) Δu is 0: the law holds the duty it starts from. A stage that fails (a non-finite or
