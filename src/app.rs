@@ -613,6 +613,12 @@ impl App {
         matches!(self.carrier.controller(), BoardController::Commission(_))
     }
 
+    /// The applied duty's recent mean ([`DutyMean`]), or the fallback PI's bias before the first
+    /// sample: where a commissioning rests, and where the law after it starts.
+    fn rest_duty(&self) -> f32 {
+        self.duty_mean.get(self.cfg.adaptive.fallback.bias)
+    }
+
     /// `identify`: the law hands over to a commissioning that rests at the recent mean duty.
     fn start_commissioning(&mut self) -> Result<(), Refusal> {
         let refuse = |why| Err(Refusal { what: "identify", why: Why::NotNow(why) });
@@ -627,7 +633,7 @@ impl App {
             None => return refuse("no sample yet"),
         }
         let cfg = CommissionConfig { plausible: self.adaptive, ..CommissionConfig::DEFAULT };
-        let u0 = self.duty_mean.get(self.cfg.adaptive.fallback.bias);
+        let u0 = self.rest_duty();
         let c = Commissioning::new(cfg, self.cfg.carrier.get().ts_s, u0)
             .map_err(|e| Refusal { what: "identify", why: Why::NotNow(e.reason()) })?;
         *self.carrier.controller_mut() = BoardController::Commission(c);
@@ -682,8 +688,7 @@ impl App {
             _ => [1.0, 0.0],
         };
         self.save(Save::Log(LogEntry::Setting { t_s, key: SettingKey::IdentifyEnd, value: code }));
-        *self.carrier.controller_mut() =
-            build(law, &self.adaptive, ts_s, self.duty_mean.get(self.cfg.adaptive.fallback.bias));
+        *self.carrier.controller_mut() = build(law, &self.adaptive, ts_s, self.rest_duty());
         self.carrier.hold_switch_tests(false);
         if law != self.settings.law {
             self.settings.law = law;

@@ -404,9 +404,17 @@ impl SelfTuning {
                 *b = 0.0;
             }
         }
-        // GMVC and IGMVC keep the 2-term B (module docs).
-        let n = if matches!(self.cfg.law, Law::Gpc(_)) { th.len() } else { 4 };
-        model_from_theta(&self.cfg, &th[..n])
+        model_from_theta(&self.cfg, &th[..2 + self.b_terms()])
+    }
+
+    /// B terms the law's model has: [`ESTIMATED_NB`] for GPC; two for GMVC and IGMVC, whose
+    /// b2, b3 the estimator holds at zero (module docs).
+    fn b_terms(&self) -> usize {
+        if matches!(self.cfg.law, Law::Gpc(_)) {
+            ESTIMATED_NB
+        } else {
+            2
+        }
     }
 
     /// θ = [a1 a2 b0 b1 b2 b3] (without the offset d).
@@ -511,16 +519,15 @@ impl SelfTuning {
             return true;
         }
         let mut phi = self.reg.phi();
-        let two_terms = !matches!(self.cfg.law, Law::Gpc(_));
-        if two_terms {
-            phi[4] = 0.0;
-            phi[5] = 0.0;
+        // The B terms the law does not use stay at zero (θ index 2 + i is b_i).
+        let unused = 2 + self.b_terms()..2 + ESTIMATED_NB;
+        for i in unused.clone() {
+            phi[i] = 0.0;
         }
         match self.rls.update(&self.cfg.rls, &phi, self.reg.y()) {
             Ok(e) => {
-                if two_terms {
-                    self.rls.hold(4);
-                    self.rls.hold(5);
+                for i in unused {
+                    self.rls.hold(i);
                 }
                 self.project();
                 self.last_error = e;
