@@ -50,7 +50,10 @@
 //! setpoint at 35 °C ambient while the estimate stayed paused, the law kept asking for a little
 //! cooling, and the short, which the supervisor recognises by freeze-guard trips with none
 //! asked, went unreported; ending the rest when the duty sits at 0 lets the estimate, and with
-//! it the law, follow.) At rest the only excitation is the sensor's noise fed back through the law,
+//! it the law, follow. With GPC's λ 3 at rest, below, the same mission lost its short a second
+//! way: the supply probe ended on the law's request for cooling, the law's answer to the very
+//! turn-up the probe waits for; [`crate::supervisor::ssr::ProbeConfig::yield_within_c`].) At
+//! rest the only excitation is the sensor's noise fed back through the law,
 //! and the equation-error estimate of a noisy closed loop is biased: on every hold the static
 //! gain drifted from the plant's ≈ −44 °C/duty to the projection's bound, −10, within the
 //! simulator's 1-hour pre-roll, and GPC, designed on a plant four times too weak, kept the load
@@ -103,7 +106,15 @@
 //!
 //! **Cautious while unconfirmed.** Outside `Adaptive` GPC runs with λ at least
 //! [`CAUTIOUS_GPC_LAMBDA`]: the model it designs on is one the estimate has not confirmed on
-//! this carrier, and the default λ (0.5) is tuned for a model that has.
+//! this carrier, and the default λ (0.5) is tuned for a model that has. **And at rest**: paused,
+//! the estimate is no longer being confirmed either, and what the law meets there is the sensor's
+//! noise and slow disturbances, which λ 0.5 answered by moving the duty more than they need.
+//! With λ 3 while resting: `hter compare --scenario disturbance` GPC 137 → 92 (IGMVC 132, GMVC
+//! 451 unchanged); holding 4 °C at 28 °C on the buck drive 7.12 → 6.76 W (H-TER I) and
+//! 8.48 → 7.27 W (H-TER II), steady-state error 0.055 → 0.047 and 0.036 → 0.021 °C; the
+//! `step` pull-down 1.078 → 1.062 × the bound (PI 1.016), its steady-state error 0.118 →
+//! 0.032 °C. It leaves the rest when it ends (a step, an error past [`REST_EXIT_C`], a duty at
+//! a rail), so tracking and disturbance rejection run at λ 0.5 again.
 //!
 //! **The first approach** (issue 19). From start until the load first stops falling less than
 //! 1 °C above the setpoint, the law is handed the setpoint raised by the rate of fall (over the
@@ -308,7 +319,8 @@ impl SecondOrderRegressor {
 }
 
 /// GPC's λ while the law runs on a model the current estimate has not confirmed (`Frozen`: the
-/// start model, one restored from flash, or the last trusted one), at least this. On a
+/// start model, one restored from flash, or the last trusted one), or while the estimator is
+/// paused at rest ([`SelfTuning::resting`]), at least this. On a
 /// carrier far faster than its start model (a small, light load) λ = 0.5 drove full duty for
 /// 30 s at start and the cold plate's stored cold then cooled the load at zero duty, which the
 /// stuck-on detector read as a stuck SSR (campaign mission 23269); λ = 3 is what GPC ran with
@@ -585,8 +597,11 @@ impl Controller for SelfTuning {
         }
         let w = if self.approaching { self.approach_setpoint(input.y_c, input.w_c) } else { input.w_c };
         let law = match self.cfg.law {
-            // Cautious while the model is one the estimate has not confirmed (module docs).
-            Law::Gpc(g) if self.mode != AdaptiveMode::Adaptive && g.lambda < CAUTIOUS_GPC_LAMBDA => {
+            // Cautious while the model is one the estimate has not confirmed, or no longer
+            // confirms because it is paused at rest (module docs).
+            Law::Gpc(g)
+                if (self.mode != AdaptiveMode::Adaptive || self.resting()) && g.lambda < CAUTIOUS_GPC_LAMBDA =>
+            {
                 Law::Gpc(GpcConfig { lambda: CAUTIOUS_GPC_LAMBDA, ..g })
             }
             other => other,
@@ -863,6 +878,42 @@ mod tests {
         assert_eq!(c.theta(), theta, "paused: θ unchanged");
         assert_eq!(c.updates(), updates + 500, "the paused samples count towards warm-up");
         assert_eq!(c.mode(), mode, "the trust decision is that of the paused estimate");
+        // At rest GPC asks what it would with the cautious λ, bit for bit, though the estimate is
+        // trusted; awake (the count started again) it runs with its own λ (0.5). The noise took
+        // this estimate outside the plausible set before the pause (Frozen: cautious anyway), so
+        // the resting controller is given the start model's, which the rules trust.
+        let mut trusting = c.clone();
+        trusting.rls = start(ADAPTIVE_GPC).rls;
+        let cautious = |c: &SelfTuning| {
+            let mut c = c.clone();
+            match &mut c.cfg.law {
+                Law::Gpc(g) => g.lambda = CAUTIOUS_GPC_LAMBDA,
+                _ => unreachable!("ADAPTIVE_GPC is GPC"),
+            }
+            c
+        };
+        // Eight samples of the same measurements (a new λ reaches the staged GPC's gain row
+        // within four); the duties asked, and whether the controller rested and trusted its
+        // estimate throughout.
+        let y0 = r.y;
+        let asks = |mut c: SelfTuning| {
+            let mut out = std::vec::Vec::new();
+            for k in 0..8 {
+                let input = ControlInput { y_c: y0 + 0.002 * (k % 2) as f32, w_c: W_C };
+                let u = c.update(&input).unwrap();
+                c.track(&input, u.clamp(0.0, 1.0));
+                out.push((u, c.resting(), c.mode()));
+            }
+            out
+        };
+        let at_rest = asks(trusting.clone());
+        assert!(at_rest.iter().all(|&(_, rest, mode)| rest && mode == AdaptiveMode::Adaptive), "{at_rest:?}");
+        assert_eq!(at_rest, asks(cautious(&trusting)));
+        let mut awake = trusting.clone();
+        awake.rest_n = 0;
+        let own = asks(awake.clone());
+        assert!(own.iter().all(|&(_, rest, mode)| !rest && mode == AdaptiveMode::Adaptive), "{own:?}");
+        assert_ne!(own, asks(cautious(&awake)));
         // A load pushed 0.25 °C off stays at rest (within the exit band); 0.35 °C ends it.
         r.run(&mut c, W_C, 0.25 - (r.y - W_C));
         assert!(c.resting());

@@ -127,7 +127,9 @@ impl SupervisorConfig {
     /// fits its counter at the sample period `ts_s` (a count that saturated would silently
     /// shorten the check), and that every window the SSR monitor looks back over is at least one
     /// sample and shorter than the history it keeps ([`ssr::HISTORY`] samples): a longer window
-    /// never has its sample, and its check would never fire.
+    /// never has its sample, and its check would never fire. And that the supply probe's
+    /// [`ssr::ProbeConfig::yield_within_c`] is a finite, non-negative temperature and
+    /// [`ssr::StuckOnConfig::unrequested_duty`] a duty in [0, 1).
     pub const fn validate(&self, ts_s: f32) -> Result<(), WindowError> {
         if !(ts_s.is_finite() && ts_s > 0.0) {
             return Err(WindowError("ts_s"));
@@ -190,6 +192,18 @@ impl SupervisorConfig {
                 return Err(WindowError(field));
             }
             i += 1;
+        }
+        // The probe's margin is a distance below the setpoint (a NaN would compare false and
+        // leave the probe deaf to every request).
+        let y = p.yield_within_c;
+        if !(y.is_finite() && y >= 0.0) {
+            return Err(WindowError("ssr.probe.yield_within_c"));
+        }
+        // No cooling requested is a duty below full (a NaN would compare false: no run of it
+        // would ever start, and stuck-on paths 1 and 2 and the probe would be off).
+        let u = on.unrequested_duty;
+        if !(u >= 0.0 && u < 1.0) {
+            return Err(WindowError("ssr.stuck_on.unrequested_duty"));
         }
         Ok(())
     }
@@ -652,6 +666,16 @@ mod tests {
         assert_eq!(refused(|c| c.supply.sag_s = 2556.0, 10.0), Some(WindowError("supply.sag_s")));
         assert_eq!(refused(|c| c.sensor.stuck_s = -1.0, 10.0), Some(WindowError("sensor.stuck_s")));
         assert_eq!(refused(|c| c.ssr.probe.interval_s = 5.0e6, 10.0), Some(WindowError("ssr.probe.interval_s")));
+        assert_eq!(refused(|c| c.ssr.probe.yield_within_c = 0.0, 10.0), None);
+        let yield_within = Some(WindowError("ssr.probe.yield_within_c"));
+        assert_eq!(refused(|c| c.ssr.probe.yield_within_c = -0.1, 10.0), yield_within);
+        assert_eq!(refused(|c| c.ssr.probe.yield_within_c = f32::NAN, 10.0), yield_within);
+        assert_eq!(refused(|c| c.ssr.probe.yield_within_c = f32::INFINITY, 10.0), yield_within);
+        assert_eq!(refused(|c| c.ssr.stuck_on.unrequested_duty = 0.0, 10.0), None);
+        let unrequested = Some(WindowError("ssr.stuck_on.unrequested_duty"));
+        assert_eq!(refused(|c| c.ssr.stuck_on.unrequested_duty = -0.01, 10.0), unrequested);
+        assert_eq!(refused(|c| c.ssr.stuck_on.unrequested_duty = 1.0, 10.0), unrequested);
+        assert_eq!(refused(|c| c.ssr.stuck_on.unrequested_duty = f32::NAN, 10.0), unrequested);
         // The same seconds at a faster sample period are more samples than the ring holds.
         assert_eq!(d.validate(1.0), Err(WindowError("ssr.stuck_on.window_s")));
         assert_eq!(d.validate(0.0), Err(WindowError("ts_s")));

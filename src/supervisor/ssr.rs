@@ -24,7 +24,10 @@
 //!   guard (a hot day: full cooling barely wins) never trips the guard. Nothing asked for
 //!   10 min, 1 °C below the setpoint and still falling: the supply switch opens for 5 min
 //!   (harmless, no cooling is wanted). A shorted SSR stops cooling and the load turns up; a load
-//!   falling toward a cold ambient does not notice. One probe an hour at most. A turn-up is a
+//!   falling toward a cold ambient does not notice. A request for cooling ends the probe early
+//!   only once the load is back within 0.5 °C of the setpoint: further below, the law asking is
+//!   its answer to the turn-up the probe waits for, and it came before the verdict (mission
+//!   24204, [`ProbeConfig::yield_within_c`]). One probe an hour at most. A turn-up is a
 //!   short only when it comes again: the first closes the supply and lets a confirming probe
 //!   start 5 min later, once the load has fallen again with nothing asked; a turn-up at that
 //!   probe or the next is the verdict. A lid opened during a probe warms a light load as fast
@@ -34,9 +37,11 @@
 //!   (slow, a cool day).
 //! - **Limp home** ([`LimpConfig`]): after a shorted SSR, On-Off through the supply switch.
 //!
-//! The checks read `off_run`/`on_run`/`req_off_run`, the runs of the applied and requested duty
-//! up to the *previous* sample (`SsrMonitor::applied` counts this one last), and a ring of
-//! the filtered temperature.
+//! The checks read `off_run`/`on_run`/`req_off_run`, the runs of the applied duty at 0 and at
+//! full duty and of the requested duty at no cooling (at most a tenth of full,
+//! [`StuckOnConfig::unrequested_duty`]: not exactly zero, which a law backing off gradually may
+//! reach a sample late) up to the *previous* sample (`SsrMonitor::applied` counts this one
+//! last), and a ring of the filtered temperature.
 
 use super::{ms, samples_u16, since};
 use crate::units::Duty;
@@ -73,8 +78,19 @@ impl SsrConfig {
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct StuckOnConfig {
-    /// Paths 1 and 2: no cooling requested for this long before the sample, s (a minute).
+    /// Paths 1 and 2: no cooling requested ([`Self::unrequested_duty`]) for this long before the
+    /// sample, s (a minute).
     pub unrequested_s: f32,
+    /// A requested duty at or below this is no cooling requested, for every run of it the
+    /// checks count (paths 1 and 2, the supply probe) (0.1: a tenth of full cooling). The runs
+    /// are there to keep out the coast after cooling the law asked for, and a sample at this
+    /// duty leaves a tenth of the cold a full-duty one does: the run is still at least the
+    /// minute after the last sample that really cooled, as after a cut straight to zero. Not
+    /// zero: a law that backs off gradually can ask a few hundredths for one last sample while a
+    /// shorted SSR takes a light load down; with GPC's λ 3 at rest, 0.07 at that sample moved
+    /// campaign mission 9515's trip inside the minute, and the short was found at the second
+    /// trip, 180 s later with the load at 1.08 °C instead of 1.63 (`--seed 1`).
+    pub unrequested_duty: f32,
     /// Path 1: a second unrequested trip within this time of the first is a short; path 2 only
     /// looks this long after a trip, s (half an hour: a hot ambient on a shorted SSR trips
     /// every ≈ 15 min).
@@ -103,6 +119,7 @@ impl StuckOnConfig {
     /// The reference board's settings.
     pub const DEFAULT: StuckOnConfig = StuckOnConfig {
         unrequested_s: 60.0,
+        unrequested_duty: 0.1,
         trip_window_s: 1800.0,
         falling_c_per_s: -0.003,
         between_trips_drop_c: 0.1,
@@ -140,7 +157,8 @@ impl StuckOffConfig {
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ProbeConfig {
-    /// A probe starts when no cooling was requested for this long, s (10 min)…
+    /// A probe starts when no cooling was requested ([`StuckOnConfig::unrequested_duty`]) for
+    /// this long, s (10 min)…
     pub unrequested_s: f32,
     /// …the load is more than this below the setpoint, °C…
     pub below_setpoint_c: f32,
@@ -149,8 +167,20 @@ pub struct ProbeConfig {
     /// …°C.
     pub fall_c: f32,
     /// The supply stays open for at most this long, s (5 min), and the probe ends early when
-    /// cooling is requested again.
+    /// cooling is requested again with the load back within [`Self::yield_within_c`] of the
+    /// setpoint.
     pub open_s: f32,
+    /// A request for cooling ends the probe only once the load is less than this below the
+    /// setpoint, °C (0.5: half of [`Self::below_setpoint_c`]). Further below, the request is the
+    /// law anticipating the rise it sees — the very turn-up the probe is looking for: GPC saw a
+    /// shorted SSR's load turn up at 3.1 °C under a 4 °C setpoint and asked for cooling 90 s into
+    /// the confirming probe, one sample before the rise reached [`Self::turn_up_c`] in 30 s; the
+    /// probe ended, and the short went unreported (campaign mission 24204, `--seed 20001`, with
+    /// GPC's λ 3 at rest; with λ 0.5 the request came a sample later, with the verdict).
+    /// Nothing is lost by waiting: no cooling is needed that far below the setpoint, and a
+    /// warming too slow to be a turn-up (a lid: ≤ 0.1 °C in 30 s) takes a load from 1 °C below
+    /// the setpoint at most to it in [`Self::open_s`].
+    pub yield_within_c: f32,
     /// A rise of more than [`Self::turn_up_c`] over this window while the supply is open, s…
     pub turn_up_window_s: f32,
     /// …°C, was the supply cooling: a shorted SSR. A shorted SSR's cold side warms the load by
@@ -170,6 +200,7 @@ impl ProbeConfig {
         fall_window_s: 300.0,
         fall_c: 0.05,
         open_s: 300.0,
+        yield_within_c: 0.5,
         turn_up_window_s: 30.0,
         turn_up_c: 0.15,
         interval_s: 3600.0,
@@ -260,7 +291,8 @@ pub(crate) struct SsrMonitor {
     on_run: u16,
     /// Filtered temperature when the current run of full duty began, °C.
     on_start_c: f32,
-    /// Samples in a row with no cooling requested, up to the previous sample.
+    /// Samples in a row with no cooling requested (at most [`StuckOnConfig::unrequested_duty`]),
+    /// up to the previous sample.
     req_off_run: u16,
     /// Stuck off was reported during this run of full duty.
     off_reported: bool,
@@ -437,7 +469,9 @@ impl SsrMonitor {
                     self.confirm_left = 3;
                     self.probe_ms = Some(t_ms.saturating_sub(u64::from(self.n.probe_again_ms)));
                     Probe::End
-                } else if self.req_off_run == 0 || since(t_ms, t0) >= u64::from(self.n.probe_open_ms) {
+                } else if (self.req_off_run == 0 && temp_c > w - p.yield_within_c)
+                    || since(t_ms, t0) >= u64::from(self.n.probe_open_ms)
+                {
                     Probe::End
                 } else {
                     Probe::Keep
@@ -468,7 +502,8 @@ impl SsrMonitor {
             self.on_start_c = temp_c;
         }
         self.on_run = if full { self.on_run.saturating_add(1) } else { 0 };
-        self.req_off_run = if requested <= 0.0 { self.req_off_run.saturating_add(1) } else { 0 };
+        self.req_off_run =
+            if requested <= cfg.stuck_on.unrequested_duty { self.req_off_run.saturating_add(1) } else { 0 };
     }
 }
 
@@ -531,6 +566,59 @@ mod tests {
             !m.freeze_tripped(&CFG.stuck_on, 1_800_001, &trend(0.0, 0.0), false),
             "half an hour and a millisecond later"
         );
+    }
+
+    /// Mission 9515 (`hter campaign --seed 1`, GPC with λ 3 at rest) in outline: a shorted SSR
+    /// takes a light load down while the law backs off from its holding duty, 0.25, through
+    /// 0.07 for one last sample to nothing; the guard trips five samples after the 0.07, on a
+    /// fast fall. A tenth of full duty is no cooling requested: the minute runs from the 0.07,
+    /// and the trip is the short's.
+    #[test]
+    fn a_few_hundredths_asked_are_no_cooling_requested() {
+        let fast = trend(0.3, -0.02);
+        let backing_off = |m: &mut SsrMonitor, last: f32| {
+            apply(m, 10, Duty::saturating(0.25), 0.25, 4.0);
+            m.applied(&CFG, Duty::saturating(last), last, 3.9);
+            apply(m, 5, Duty::OFF, -1.0, 3.0);
+        };
+        let mut m = monitor();
+        backing_off(&mut m, 0.07);
+        assert!(m.freeze_tripped(&CFG.stuck_on, 0, &fast, false), "path 1");
+        let mut m = monitor();
+        backing_off(&mut m, 0.07);
+        assert!(!m.between_trips(&CFG.stuck_on, 0, &fast, false), "no trip yet");
+        m.trip_ms = Some(0);
+        assert!(m.between_trips(&CFG.stuck_on, 10_000, &fast, false), "path 2");
+        // 0.1 is still nothing; 0.11 is cooling, and the minute has not passed since.
+        let mut m = monitor();
+        backing_off(&mut m, 0.1);
+        assert!(m.freeze_tripped(&CFG.stuck_on, 0, &fast, false));
+        let mut m = monitor();
+        backing_off(&mut m, 0.11);
+        assert!(!m.freeze_tripped(&CFG.stuck_on, 0, &fast, false));
+    }
+
+    /// The coast after cooling the law asked for: a pull-down at full duty cut to nothing, the
+    /// load still falling fast for the ≈ 50 s the sensor lags. A trip within the minute after the
+    /// last sample above a tenth of full duty is no short's, however little was asked at the
+    /// samples between.
+    #[test]
+    fn the_coast_within_a_minute_of_real_cooling_is_no_short() {
+        let fast = trend(0.3, -0.02);
+        for (cut, last) in [(0.0f32, -0.5f32), (0.08, 0.08), (0.1, 0.1)] {
+            let mut m = monitor();
+            apply(&mut m, 30, Duty::FULL, 1.0, 6.0);
+            m.applied(&CFG, Duty::saturating(0.5), 0.5, 5.0);
+            // Five samples at or below a tenth since the 0.5 (`cut` three times, `last`, 0).
+            apply(&mut m, 3, Duty::saturating(cut), cut, 4.0);
+            m.applied(&CFG, Duty::saturating(last.max(0.0)), last, 3.0);
+            apply(&mut m, 1, Duty::OFF, -1.0, 2.5);
+            assert!(!m.freeze_tripped(&CFG.stuck_on, 0, &fast, false), "{cut}: 50 s after the 0.5");
+            m.trip_ms = Some(0);
+            assert!(!m.between_trips(&CFG.stuck_on, 10_000, &fast, false), "{cut}: path 2");
+            m.applied(&CFG, Duty::OFF, -1.0, 2.0);
+            assert!(m.freeze_tripped(&CFG.stuck_on, 20_000, &fast, false), "{cut}: a minute after it");
+        }
     }
 
     #[test]
@@ -709,26 +797,121 @@ mod tests {
         // probe (what confirms it: the next test).
         m.remember(3.2);
         assert_eq!(m.probe(&CFG.probe, 20_000, Some(0), 3.2, 4.1), Probe::End);
-        // Cooling requested again ends it.
+        // Cooling requested again ends it, once the load is within 0.5 °C of the setpoint; further
+        // below the request is the law's anticipation and the probe goes on. The load warms
+        // 0.045 °C a sample (0.135 °C in 30 s: no turn-up) from 3 °C.
         m.applied(&CFG, Duty::OFF, 0.5, 3.0);
-        m.remember(3.0);
-        m.remember(3.0);
-        m.remember(3.0);
-        assert_eq!(m.probe(&CFG.probe, 30_000, Some(0), 3.0, 4.1), Probe::End);
+        for k in 1..=14u16 {
+            let t = 3.0 + 0.045 * f32::from(k);
+            m.remember(t);
+            let expected = if k < 14 { Probe::Keep } else { Probe::End };
+            assert_eq!(m.probe(&CFG.probe, 20_000 + 10_000 * u64::from(k), Some(0), t, 4.1), expected, "{t} °C");
+        }
+    }
+
+    /// A probe under way since `t0_ms`, one sample every 10 s from `t0_ms + 10 s`: each sample's
+    /// filtered load and the duty the law asked for at it (seen by the probe from the next
+    /// sample on, as in the step), at setpoint `w`. The probe's answers, up to the first that
+    /// is not `Keep`.
+    fn probe_through(m: &mut SsrMonitor, t0_ms: u64, samples: &[(f32, f32)], w: f32) -> Vec<Probe> {
+        let mut out = Vec::new();
+        for (k, &(temp_c, requested)) in samples.iter().enumerate() {
+            m.remember(temp_c);
+            let p = m.probe(&CFG.probe, t0_ms + 10_000 * (k as u64 + 1), Some(t0_ms), temp_c, w);
+            out.push(p);
+            if p != Probe::Keep {
+                break;
+            }
+            m.applied(&CFG, Duty::OFF, requested, temp_c);
+        }
+        out
+    }
+
+    /// Mission 24204 (`hter campaign --seed 20001`, GPC with λ 3 at rest): a shorted SSR's
+    /// load at 35 °C ambient, 1 °C under a 4 °C setpoint. At the confirming probe the load
+    /// turned up and GPC asked for cooling (0.11, then 0.45) a sample before the rise reached
+    /// 0.15 °C in 30 s; the request ended the probe and the short went unreported. The filtered
+    /// readings of that probe, the requests as GPC made them.
+    #[test]
+    fn a_turn_up_is_a_short_though_the_law_asks_for_cooling_far_below_the_setpoint() {
+        let confirming: [(f32, f32); 11] = [
+            (2.9898, -0.79),
+            (2.9889, -0.78),
+            (2.9780, -0.92),
+            (2.9804, -0.74),
+            (2.9790, -0.79),
+            (2.9835, -0.70),
+            (3.0092, -0.38),
+            (3.0351, -0.34),
+            (3.0897, 0.114),
+            (3.1561, 0.448),
+            (3.2232, 0.80),
+        ];
+        let mut m = monitor();
+        assert_eq!(probe_at(&mut m, 7_200_000, true), (Probe::Start, Probe::End), "the first turn-up");
+        let again = 7_200_000 + 600_000;
+        assert_eq!(start_probe_at(&mut m, again), Probe::Start);
+        let answers = probe_through(&mut m, again, &confirming, 4.0);
+        assert_eq!(answers.last(), Some(&Probe::Shorted), "{answers:?}");
+        assert_eq!(answers.len(), confirming.len(), "found at 3.22 °C, 0.19 °C up in 30 s");
+        // Before: a request ended the probe whatever the load, one sample short of the verdict.
+        let before = SsrConfig { probe: ProbeConfig { yield_within_c: f32::INFINITY, ..CFG.probe }, ..CFG };
+        let mut m = SsrMonitor::new(&before, TS);
+        assert_eq!(probe_at(&mut m, 7_200_000, true).1, Probe::End);
+        assert_eq!(start_probe_at(&mut m, again), Probe::Start);
+        let mut ended = None;
+        for (k, &(t, r)) in confirming.iter().enumerate() {
+            m.remember(t);
+            let p = m.probe(&before.probe, again + 10_000 * (k as u64 + 1), Some(again), t, 4.0);
+            if p != Probe::Keep {
+                ended = Some((k, p));
+                break;
+            }
+            m.applied(&before, Duty::OFF, r, t);
+        }
+        assert_eq!(ended, Some((9, Probe::End)));
+    }
+
+    /// Without a short nothing turns the load up: a probe on a load coasting down, or warming as
+    /// slowly as an opened lid warms it (0.1 °C in 30 s), with the law asking for a little
+    /// cooling all along, ends without a verdict — at 5 min, or once the warming load is back
+    /// within 0.5 °C of the setpoint.
+    #[test]
+    fn a_probe_with_cooling_asked_and_no_turn_up_finds_nothing() {
+        let mut m = monitor();
+        let coast: Vec<(f32, f32)> = (1..=40).map(|k| (3.0 - 0.002 * k as f32, 0.05)).collect();
+        let answers = probe_through(&mut m, 0, &coast, 4.1);
+        assert_eq!(answers.len(), 30, "five minutes: {answers:?}");
+        assert_eq!(answers.last(), Some(&Probe::End));
+        let mut m = monitor();
+        for k in 0..31 {
+            m.remember(3.06 - 0.002 * k as f32);
+        }
+        let lid: Vec<(f32, f32)> = (1..=40).map(|k| (3.0 + 0.03 * k as f32, 0.3)).collect();
+        let answers = probe_through(&mut m, 0, &lid, 4.0);
+        assert!(!answers.contains(&Probe::Shorted), "{answers:?}");
+        // 3.51 °C, within 0.5 °C of 4, at the 17th sample.
+        assert_eq!(answers.len(), 17, "{answers:?}");
+        assert_eq!(answers.last(), Some(&Probe::End));
     }
 
     /// A probe at `t_ms` (the load at 3 °C, setpoint 4.1 °C, falling 0.002 °C a sample, nothing
     /// asked for 10 min): its start, and its verdict 5 min later with the load up 0.2 °C in
     /// 30 s (`up`) or not.
     fn probe_at(m: &mut SsrMonitor, t_ms: u64, up: bool) -> (Probe, Probe) {
+        let start = start_probe_at(m, t_ms);
+        let t = if up { 3.2 } else { 3.0 };
+        m.remember(t);
+        (start, m.probe(&CFG.probe, t_ms + 300_000, Some(t_ms), t, 4.1))
+    }
+
+    /// [`probe_at`]'s start alone.
+    fn start_probe_at(m: &mut SsrMonitor, t_ms: u64) -> Probe {
         for k in 0..31 {
             m.remember(3.06 - 0.002 * k as f32);
         }
         apply(m, 60, Duty::OFF, 0.0, 3.0);
-        let start = m.probe(&CFG.probe, t_ms, None, 3.0, 4.1);
-        let t = if up { 3.2 } else { 3.0 };
-        m.remember(t);
-        (start, m.probe(&CFG.probe, t_ms + 300_000, Some(t_ms), t, 4.1))
+        m.probe(&CFG.probe, t_ms, None, 3.0, 4.1)
     }
 
     /// Mission 20465 (`hter campaign --seed 20001`): a lid opened 49 s into a probe warmed a
