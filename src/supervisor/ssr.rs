@@ -811,18 +811,18 @@ mod tests {
 
     /// A probe under way since `t0_ms`, one sample every 10 s from `t0_ms + 10 s`: each sample's
     /// filtered load and the duty the law asked for at it (seen by the probe from the next
-    /// sample on, as in the step), at setpoint `w`. The probe's answers, up to the first that
+    /// sample on, as in the step), at setpoint `w`, under `cfg`. The probe's answers, up to the first that
     /// is not `Keep`.
-    fn probe_through(m: &mut SsrMonitor, t0_ms: u64, samples: &[(f32, f32)], w: f32) -> Vec<Probe> {
+    fn probe_through(m: &mut SsrMonitor, cfg: &SsrConfig, t0_ms: u64, samples: &[(f32, f32)], w: f32) -> Vec<Probe> {
         let mut out = Vec::new();
         for (k, &(temp_c, requested)) in samples.iter().enumerate() {
             m.remember(temp_c);
-            let p = m.probe(&CFG.probe, t0_ms + 10_000 * (k as u64 + 1), Some(t0_ms), temp_c, w);
+            let p = m.probe(&cfg.probe, t0_ms + 10_000 * (k as u64 + 1), Some(t0_ms), temp_c, w);
             out.push(p);
             if p != Probe::Keep {
                 break;
             }
-            m.applied(&CFG, Duty::OFF, requested, temp_c);
+            m.applied(cfg, Duty::OFF, requested, temp_c);
         }
         out
     }
@@ -851,7 +851,7 @@ mod tests {
         assert_eq!(probe_at(&mut m, 7_200_000, true), (Probe::Start, Probe::End), "the first turn-up");
         let again = 7_200_000 + 600_000;
         assert_eq!(start_probe_at(&mut m, again), Probe::Start);
-        let answers = probe_through(&mut m, again, &confirming, 4.0);
+        let answers = probe_through(&mut m, &CFG, again, &confirming, 4.0);
         assert_eq!(answers.last(), Some(&Probe::Shorted), "{answers:?}");
         assert_eq!(answers.len(), confirming.len(), "found at 3.22 °C, 0.19 °C up in 30 s");
         // Before: a request ended the probe whatever the load, one sample short of the verdict.
@@ -859,17 +859,8 @@ mod tests {
         let mut m = SsrMonitor::new(&before, TS);
         assert_eq!(probe_at(&mut m, 7_200_000, true).1, Probe::End);
         assert_eq!(start_probe_at(&mut m, again), Probe::Start);
-        let mut ended = None;
-        for (k, &(t, r)) in confirming.iter().enumerate() {
-            m.remember(t);
-            let p = m.probe(&before.probe, again + 10_000 * (k as u64 + 1), Some(again), t, 4.0);
-            if p != Probe::Keep {
-                ended = Some((k, p));
-                break;
-            }
-            m.applied(&before, Duty::OFF, r, t);
-        }
-        assert_eq!(ended, Some((9, Probe::End)));
+        let answers = probe_through(&mut m, &before, again, &confirming, 4.0);
+        assert_eq!((answers.len(), answers.last()), (10, Some(&Probe::End)), "{answers:?}");
     }
 
     /// Without a short nothing turns the load up: a probe on a load coasting down, or warming as
@@ -880,7 +871,7 @@ mod tests {
     fn a_probe_with_cooling_asked_and_no_turn_up_finds_nothing() {
         let mut m = monitor();
         let coast: Vec<(f32, f32)> = (1..=40).map(|k| (3.0 - 0.002 * k as f32, 0.05)).collect();
-        let answers = probe_through(&mut m, 0, &coast, 4.1);
+        let answers = probe_through(&mut m, &CFG, 0, &coast, 4.1);
         assert_eq!(answers.len(), 30, "five minutes: {answers:?}");
         assert_eq!(answers.last(), Some(&Probe::End));
         let mut m = monitor();
@@ -888,7 +879,7 @@ mod tests {
             m.remember(3.06 - 0.002 * k as f32);
         }
         let lid: Vec<(f32, f32)> = (1..=40).map(|k| (3.0 + 0.03 * k as f32, 0.3)).collect();
-        let answers = probe_through(&mut m, 0, &lid, 4.0);
+        let answers = probe_through(&mut m, &CFG, 0, &lid, 4.0);
         assert!(!answers.contains(&Probe::Shorted), "{answers:?}");
         // 3.51 °C, within 0.5 °C of 4, at the 17th sample.
         assert_eq!(answers.len(), 17, "{answers:?}");
