@@ -300,6 +300,11 @@ impl OffsetWatch {
         }
     }
 
+    /// Whether a step is under watch.
+    pub(crate) fn watching(&self) -> bool {
+        self.pending.is_some()
+    }
+
     /// The offset subtracted from every reading, °C.
     pub(crate) fn offset_c(&self) -> f32 {
         self.offset_c
@@ -440,10 +445,10 @@ impl SensorChecks {
         let raw_c = match raw.ok() {
             Some(t) if sensor => {
                 let corrected = t.0 - self.offset.offset_c();
-                hold = self.offset.watch(&sc.offset, corrected, &mut |k| {
-                    offset_reported |= k == EventKind::SensorOffset;
-                    emit(k)
-                });
+                let watching = self.offset.watching();
+                hold = self.offset.watch(&sc.offset, corrected, emit);
+                // A step under watch that ended held: it was confirmed, and reported.
+                offset_reported = watching && hold && !self.offset.watching();
                 Some(Celsius(corrected))
             }
             other => other,
@@ -697,7 +702,14 @@ mod tests {
         for k in 3..7 {
             assert_eq!(read(&mut s, &mut f, k, 9.0), 4.1, "sample {k}");
         }
-        assert_eq!(read(&mut s, &mut f, 7, 9.0), 9.0, "the sixth in a row restarts the filter");
+        // The sixth in a row restarts the filter, and is reported (here with no offset watch,
+        // `sensor` false, to have reported it).
+        let jump = kinds(|e| {
+            let r = s.reading(&cfg, 70_000, Ok(Celsius(9.0)), false, &mut f, &mut |k| e(k));
+            assert_eq!((r.temp_c, r.jump), (9.0, true));
+        });
+        assert_eq!(jump, [EventKind::SensorOffset]);
+        assert!(!s.reading(&cfg, 75_000, Ok(Celsius(9.0)), false, &mut f, &mut |_| {}).jump);
         let none = s.reading(&cfg, 80_000, Err(EventKind::SensorOpen), false, &mut f, &mut |_| {});
         assert_eq!((none.raw_c, none.temp_c), (None, 9.0));
     }
