@@ -26,8 +26,10 @@ pub enum EventKind {
     /// modules are open, or the cabinet is open.
     SsrStuckOff,
     /// The reading stepped by more than physics allows in one sample and stayed at the new level
-    /// (a drifting reference, a damaged lead, a probe pulled out of the load). The step is
-    /// measured and subtracted from then on, and this alarm asks for a service check.
+    /// (a drifting reference, a damaged lead, a probe pulled out of the load). A step up of at
+    /// most 3 °C is measured and subtracted from then on; a larger one the spike filter takes
+    /// for a real jump holds cooling off as a sensor fault for the stuck-converter window
+    /// first. This alarm asks for a service check.
     SensorOffset,
     /// The measured supply of the Peltier modules is below its minimum (a failing battery, a
     /// weak car socket or solar panel): cooling power falls with the square of the voltage.

@@ -37,6 +37,11 @@
 //!                                        +----+ limp_switched
 //! ```
 //!
+//! `sensor_failed` also comes from a plausible reading that jumped by more than the load can
+//! move and stays there (the spike filter's real jump, reported as `sensor_offset`): that
+//! fault ends with the first plausible reading [`sensor::SensorConfig::stuck_s`] after the
+//! jump, not before, so that a front end stuck at the new level is found before it cools.
+//!
 //! The summary the step reports, [`Mode`], is `SensorFault` or `FreezeGuard` while those hold
 //! cooling off, and otherwise `Normal` or `LimpHome` by who drives. During a sensor fault
 //! nothing that needs a reading runs, so the freeze guard's verdict (`guard`), the probe and
@@ -404,6 +409,11 @@ pub(crate) struct Supervisor {
     ts_s: f32,
     state: State,
     sensor: SensorChecks,
+    /// Samples a jump's sensor fault lasts ([`SensorConfig::stuck_s`]).
+    distrust_n: u16,
+    /// Samples left before a jump's sensor fault may end on a plausible reading (0 outside
+    /// one).
+    distrust_left: u16,
     freeze: FreezeGuard,
     ssr: SsrMonitor,
     supply: SupplyMonitor,
@@ -420,6 +430,8 @@ impl Supervisor {
             ts_s,
             state: State::START,
             sensor: SensorChecks::new(&cfg.sensor, ts_s),
+            distrust_n: samples_u16(cfg.sensor.stuck_s, ts_s),
+            distrust_left: 0,
             freeze: FreezeGuard::new(&cfg.freeze),
             ssr: SsrMonitor::new(&cfg.ssr, ts_s),
             supply: SupplyMonitor::new(&cfg.supply, ts_s),
@@ -474,7 +486,10 @@ impl Supervisor {
             Some(Diagnosis::Failed(kind)) => {
                 emit(kind);
                 self.state.sensor_failed(kind);
+                self.distrust_left = 0;
             }
+            // A jump's fault outlasts the plausible readings that follow it.
+            Some(Diagnosis::Recovered) if self.distrust_left > 0 => self.distrust_left -= 1,
             Some(Diagnosis::Recovered) => {
                 emit(EventKind::SensorRecovered);
                 self.state.sensor_recovered();
@@ -486,6 +501,16 @@ impl Supervisor {
             None => {}
         }
         let reading = self.sensor.reading(cfg, t_ms, raw, sensor, filter, emit);
+        if reading.jump {
+            // The reading left the load's level by more than physics allows and stays there.
+            // It may be a probe re-seated in another load, or a front end stuck at a new
+            // level: it cools nothing, nor releases the freeze guard, until the stuck-converter
+            // check has had `stuck_s` to tell (mission 70549, `--seed 70001`: a reading stuck
+            // at 55 °C released the guard over a load at 0.6 °C, and 12 samples of full cooling
+            // took it to −2.3 °C before the check fired).
+            self.state.sensor_failed(EventKind::SensorOffset);
+            self.distrust_left = self.distrust_n.saturating_sub(1);
+        }
         self.supply.run(&cfg.supervisor.supply, emit);
         self.switch.check(&cfg.supervisor.switch, self.supply.v(), emit);
         reading

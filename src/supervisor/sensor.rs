@@ -8,7 +8,9 @@
 //!   same 16-bit result [`SensorConfig::stuck_s`] in a row is a frozen front end.
 //! - **Spikes** (`SpikeFilter`): a reading further than [`SpikeConfig::c`] from the filtered
 //!   value is ignored; a run of them that agree with each other is a real jump (a re-seated
-//!   probe) and restarts the filter; several within [`SpikeConfig::window_s`] are reported.
+//!   probe, or a front end stuck at a new level) and restarts the filter, is reported as a
+//!   [`EventKind::SensorOffset`], and is a sensor fault for [`SensorConfig::stuck_s`] (in the
+//!   supervisor's `check`): nothing cools on it until the stuck check has had its time; several within [`SpikeConfig::window_s`] are reported.
 //! - **Offset** (`OffsetWatch`): a step larger than physics allows that stays at its new level
 //!   is a sensor offset; it is reported, and an upward one is measured and subtracted.
 //!
@@ -28,7 +30,9 @@ use crate::units::{min_f32, Celsius};
 pub struct SensorConfig {
     /// Identical conversions in a row for this long mean a stuck converter, s. 180 s = 18
     /// samples at 10 s: with the front end's ≈ 1.5 counts of noise, 18 equal 16-bit results in
-    /// a row happen by chance about once in 10¹² samples.
+    /// a row happen by chance about once in 10¹² samples. A real jump
+    /// ([`SpikeConfig::jump_s`]) is a sensor fault for as long: a front end that stuck at the
+    /// level it jumped to is found before the reading drives anything.
     pub stuck_s: f32,
     /// The spike filter.
     pub spike: SpikeConfig,
@@ -296,6 +300,11 @@ impl OffsetWatch {
         }
     }
 
+    /// Whether a step is under watch.
+    pub(crate) fn watching(&self) -> bool {
+        self.pending.is_some()
+    }
+
     /// The offset subtracted from every reading, °C.
     pub(crate) fn offset_c(&self) -> f32 {
         self.offset_c
@@ -358,6 +367,15 @@ impl OffsetWatch {
         step
     }
 
+    /// The spike filter took the reading `t` for a real jump: the step under watch is over,
+    /// and `t` is the reference for the next one.
+    pub(crate) fn rebase(&mut self, t: f32) {
+        self.pending = None;
+        self.last_good_c = Some(t);
+        self.trend_c = 0.0;
+        self.age = 0;
+    }
+
     /// No reading this sample: a step under watch, and the reference, are gone.
     pub(crate) fn forget(&mut self) {
         self.last_good_c = None;
@@ -385,6 +403,9 @@ pub(crate) struct Reading {
     /// The filtered temperature, °C (the last good value on a fault or a spike; NaN before the
     /// first good reading).
     pub(crate) temp_c: f32,
+    /// The spike filter took a run of agreeing spikes for a real jump this sample, and
+    /// restarted from it (reported as [`EventKind::SensorOffset`]).
+    pub(crate) jump: bool,
 }
 
 /// The stuck, spike and offset checks of the sensor.
@@ -420,10 +441,14 @@ impl SensorChecks {
         let (sc, filter_cfg) = (&cfg.supervisor.sensor, &cfg.filter);
         let mut hold = false;
         let offset_before = self.offset.offset_c();
+        let mut offset_reported = false;
         let raw_c = match raw.ok() {
             Some(t) if sensor => {
                 let corrected = t.0 - self.offset.offset_c();
+                let watching = self.offset.watching();
                 hold = self.offset.watch(&sc.offset, corrected, emit);
+                // A step under watch that ended held: it was confirmed, and reported.
+                offset_reported = watching && hold && !self.offset.watching();
                 Some(Celsius(corrected))
             }
             other => other,
@@ -436,8 +461,17 @@ impl SensorChecks {
             self.offset.keep_reference(t.0, offset_before);
         }
         let verdict = self.spikes.run(&sc.spike, t_ms, raw_c, spike, emit);
-        if verdict == Spike::Jump {
+        let jump = verdict == Spike::Jump;
+        if jump {
             filter.reset();
+            // The jump is the step the offset watch was watching: its new level is the
+            // reference from now on, and it is reported once, here if the watch has not yet.
+            if let Some(t) = raw_c {
+                self.offset.rebase(t.0);
+            }
+            if !offset_reported {
+                emit(EventKind::SensorOffset);
+            }
         }
         let temp_c = match raw_c {
             Some(t) if !hold && verdict != Spike::Ignored => filter.step(filter_cfg, t.0),
@@ -445,7 +479,7 @@ impl SensorChecks {
             Some(t) if filter.output().is_none() => filter.step(filter_cfg, t.0),
             _ => filter.output().unwrap_or(f32::NAN),
         };
-        Reading { raw_c, temp_c }
+        Reading { raw_c, temp_c, jump }
     }
 }
 
@@ -668,7 +702,14 @@ mod tests {
         for k in 3..7 {
             assert_eq!(read(&mut s, &mut f, k, 9.0), 4.1, "sample {k}");
         }
-        assert_eq!(read(&mut s, &mut f, 7, 9.0), 9.0, "the sixth in a row restarts the filter");
+        // The sixth in a row restarts the filter, and is reported (here with no offset watch,
+        // `sensor` false, to have reported it).
+        let jump = kinds(|e| {
+            let r = s.reading(&cfg, 70_000, Ok(Celsius(9.0)), false, &mut f, &mut |k| e(k));
+            assert_eq!((r.temp_c, r.jump), (9.0, true));
+        });
+        assert_eq!(jump, [EventKind::SensorOffset]);
+        assert!(!s.reading(&cfg, 75_000, Ok(Celsius(9.0)), false, &mut f, &mut |_| {}).jump);
         let none = s.reading(&cfg, 80_000, Err(EventKind::SensorOpen), false, &mut f, &mut |_| {});
         assert_eq!((none.raw_c, none.temp_c), (None, 9.0));
     }
@@ -725,6 +766,75 @@ mod carrier {
         let back = c.step(&StepInput { t_ms: 30_000, ..bad });
         assert_eq!(back.mode, Mode::Normal);
         assert_eq!(back.events.iter().map(|e| e.kind).collect::<Vec<_>>(), [EventKind::SensorRecovered]);
+    }
+
+    /// Steps `c` at sample `k` on counts `counts`; the output.
+    fn at(c: &mut crate::step::Carrier<crate::control::AnyController>, k: u64, counts: u32) -> crate::step::StepOutput {
+        c.step(&StepInput { t_ms: k * 10_000, counts, setpoint_c: 4.0 })
+    }
+
+    /// A default carrier under PI whose freeze guard holds a load at 0.64 °C (counts with a
+    /// count of noise, so that the stuck-converter check stays quiet), at sample 30.
+    fn guarded_at_0_64() -> crate::step::Carrier<crate::control::AnyController> {
+        let mut c = pi_carrier();
+        for k in 0..30 {
+            let out = at(&mut c, k, counts_at(0.64) + (k % 2) as u32);
+            assert_eq!((out.mode, out.duty, out.supply_enable), (Mode::FreezeGuard, Duty::OFF, false), "sample {k}");
+        }
+        c
+    }
+
+    #[test]
+    fn a_reading_stuck_high_over_a_cold_load_never_cools() {
+        // Mission 70549 (`--seed 70001`): the front end stuck at 55.12 °C over a load the
+        // freeze guard held at 0.64 °C. The spike filter took the sixth agreeing reading for a
+        // real jump, the guard released, and 12 samples of full cooling took the load to
+        // −2.3 °C before the stuck-converter check fired.
+        let mut c = guarded_at_0_64();
+        let stuck = counts_at(55.12);
+        let mut events = Vec::new();
+        for k in 30..60 {
+            let out = at(&mut c, k, stuck);
+            assert_eq!((out.duty, out.supply_enable), (Duty::OFF, false), "sample {k}");
+            let expected = match k {
+                30..35 => Mode::FreezeGuard,
+                _ => Mode::SensorFault,
+            };
+            assert_eq!(out.mode, expected, "sample {k}");
+            events.extend(out.events.iter().map(|e| (k, e.kind)));
+        }
+        // The jump on the sixth stuck reading, reported once; the stuck check twelve later.
+        assert_eq!(
+            events.iter().filter(|(_, e)| *e != EventKind::SensorSpikes).copied().collect::<Vec<_>>(),
+            [(35, EventKind::SensorOffset), (47, EventKind::SensorStuck)]
+        );
+    }
+
+    #[test]
+    fn a_re_seated_probe_is_distrusted_for_the_stuck_window_then_controlled() {
+        // A probe moved into a warm load reads 12 °C from one sample to the next. Nothing
+        // cools for `stuck_s` after the jump; then the reading, alive, is the load.
+        let mut c = guarded_at_0_64();
+        let mut first_recovered = None;
+        for k in 30..60 {
+            let out = at(&mut c, k, counts_at(12.0) + (k % 3) as u32);
+            let kinds: Vec<EventKind> = out.events.iter().map(|e| e.kind).collect();
+            if k == 35 {
+                assert!(kinds.contains(&EventKind::SensorOffset), "{kinds:?}");
+            }
+            if kinds.contains(&EventKind::SensorRecovered) {
+                first_recovered.get_or_insert(k);
+            }
+            if k < 53 {
+                assert_eq!((out.duty, out.supply_enable), (Duty::OFF, false), "sample {k}");
+                assert_ne!(out.mode, Mode::Normal, "sample {k}");
+            } else {
+                assert_eq!(out.mode, Mode::Normal, "sample {k}");
+                assert!(out.duty.get() > 0.5 && out.supply_enable, "sample {k}: {:?}", out.duty);
+            }
+        }
+        // 180 s after the jump at sample 35.
+        assert_eq!(first_recovered, Some(53));
     }
 
     #[test]
