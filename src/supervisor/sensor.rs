@@ -10,7 +10,8 @@
 //!   value is ignored; a run of them that agree with each other is a real jump (a re-seated
 //!   probe, or a front end stuck at a new level) and restarts the filter, is reported as a
 //!   [`EventKind::SensorOffset`], and is a sensor fault for [`SensorConfig::stuck_s`] (in the
-//!   supervisor's `check`): nothing cools on it until the stuck check has had its time; several within [`SpikeConfig::window_s`] are reported.
+//!   supervisor's `check`): nothing cools on it until the stuck check has had its time.
+//!   Several spikes within [`SpikeConfig::window_s`] are reported.
 //! - **Offset** (`OffsetWatch`): a step larger than physics allows that stays at its new level
 //!   is a sensor offset; it is reported, and an upward one is measured and subtracted.
 //!
