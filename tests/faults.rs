@@ -197,7 +197,7 @@ fn campaign_missions_that_once_failed_pass() {
     use hal_sim::mission::{evaluate, Mission};
     for seed in [
         230, 588, 11338, 11047, 11205, 10805, 257, 925, 28631, 27640, 22550, 26642, 3101, 8885, 20465, 26762, 5639,
-        20602, 22766, 45876, 41783, 47432, 42451, 42110, 49578, 9515, 24204, 70549, 72870,
+        20602, 22766, 45876, 41783, 47432, 42451, 42110, 49578, 9515, 24204, 70549, 72870, 110774,
     ] {
         let m = Mission::generate(seed);
         let out = run(&m.options(ControllerSpec::new(ControllerChoice::Gpc))).unwrap();

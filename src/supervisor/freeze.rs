@@ -35,7 +35,10 @@ pub struct FreezeConfig {
     /// may cool a load a cold ambient holds below the 2 °C floor, and an SSR that shorts then
     /// cannot take it down before the guard has seen the fall. A light load at 1.7 °C in a
     /// 1.6 °C ambient fell 1.8 °C in the 50 s the guard needed to trip on a short (`hter
-    /// campaign` mission 41783: −0.09 °C). It costs nothing: no cooling was asked.
+    /// campaign` mission 41783: −0.09 °C). It costs nothing: no cooling was asked. 2.5 °C, the
+    /// guard's release level, not the 2 °C floor: a light load a 1.2 °C ambient held at 2.05 °C
+    /// fell 1.5 °C in the 60 s before the guard tripped on a short, and coasted to −0.2 °C
+    /// (mission 110774, `--seed 110001`).
     pub idle_open_c: f32,
     /// …with the freeze guard's smoothed slope at or above this, °C/s (−0.06 °C/min, a third
     /// of the SSR checks' "falling fast"). A load falling with nothing asked is left to the guard
@@ -52,7 +55,7 @@ impl FreezeConfig {
         release_c: 2.5,
         lookahead_s: 120.0,
         slope_smoothing: 0.7,
-        idle_open_c: 2.0,
+        idle_open_c: 2.5,
         idle_slope_c_per_s: -0.001,
     };
 }
