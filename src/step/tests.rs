@@ -110,9 +110,10 @@ fn below_the_floor_with_nothing_asked_the_supply_switch_opens_too() {
         }
         out.unwrap()
     };
-    assert!(run(&mut c, 2.55, 30).supply_enable, "at the floor: closed");
-    assert!(!run(&mut c, 2.4, 30).supply_enable, "below it, nothing asked: open");
-    assert!(run(&mut c, 2.55, 30).supply_enable, "back at the floor: closed again");
+    let floor = CarrierConfig::DEFAULT.supervisor.freeze.idle_open_c;
+    assert!(run(&mut c, floor + 0.05, 30).supply_enable, "at the floor: closed");
+    assert!(!run(&mut c, floor - 0.1, 30).supply_enable, "below it, nothing asked: open");
+    assert!(run(&mut c, floor + 0.05, 30).supply_enable, "back at the floor: closed again");
     // Falling at 0.18 °C/min with nothing asked (what a shorted SSR does to a heavy load) is for
     // the freeze guard and the SSR checks to see: the switch stays closed below the floor until
     // they act. (The SSR checks' supply probe, which would open it on such a fall after 10 min,
@@ -120,7 +121,7 @@ fn below_the_floor_with_nothing_asked_the_supply_switch_opens_too() {
     let mut cfg = CarrierConfig::DEFAULT;
     cfg.supervisor.ssr.probe.fall_c = f32::INFINITY;
     let mut c = Carrier::new(cfg.validated().unwrap(), AnyController::Pi(crate::profile::pi(cfg.ts_s)));
-    let (mut temp, mut below_floor_closed) = (2.65, 0);
+    let (mut temp, mut below_floor_closed) = (floor + 0.15, 0);
     for k in 0..60u32 {
         let o = c.step(&StepInput { t_ms: u64::from(k) * 10_000, counts: counts_at(temp) + k % 3, setpoint_c: 4.0 });
         if o.mode != Mode::Normal {
@@ -128,7 +129,7 @@ fn below_the_floor_with_nothing_asked_the_supply_switch_opens_too() {
             return;
         }
         assert_eq!((o.mode, o.duty, o.supply_enable), (Mode::Normal, Duty::OFF, true), "{temp} °C");
-        below_floor_closed += u32::from(o.temp_c.0 < cfg.supervisor.freeze.idle_open_c);
+        below_floor_closed += u32::from(o.temp_c.0 < floor);
         if k >= 30 {
             temp -= 0.03;
         }

@@ -409,10 +409,8 @@ pub(crate) struct Supervisor {
     ts_s: f32,
     state: State,
     sensor: SensorChecks,
-    /// Samples a jump's sensor fault lasts ([`SensorConfig::stuck_s`]).
-    distrust_n: u16,
     /// Samples left before a jump's sensor fault may end on a plausible reading (0 outside
-    /// one).
+    /// one); it lasts the stuck-converter check's window ([`SensorConfig::stuck_s`]).
     distrust_left: u16,
     freeze: FreezeGuard,
     ssr: SsrMonitor,
@@ -430,7 +428,6 @@ impl Supervisor {
             ts_s,
             state: State::START,
             sensor: SensorChecks::new(&cfg.sensor, ts_s),
-            distrust_n: samples_u16(cfg.sensor.stuck_s, ts_s),
             distrust_left: 0,
             freeze: FreezeGuard::new(&cfg.freeze),
             ssr: SsrMonitor::new(&cfg.ssr, ts_s),
@@ -509,7 +506,7 @@ impl Supervisor {
             // at 55 °C released the guard over a load at 0.6 °C, and 12 samples of full cooling
             // took it to −2.3 °C before the check fired).
             self.state.sensor_failed(EventKind::SensorOffset);
-            self.distrust_left = self.distrust_n.saturating_sub(1);
+            self.distrust_left = self.sensor.stuck.window().saturating_sub(1);
         }
         self.supply.run(&cfg.supervisor.supply, emit);
         self.switch.check(&cfg.supervisor.switch, self.supply.v(), emit);

@@ -162,6 +162,11 @@ impl StuckConverter {
         StuckConverter { limit: samples_u16(cfg.stuck_s, ts_s), last: None, repeats: 0 }
     }
 
+    /// Identical conversions in a row that are stuck: the check's window in samples.
+    pub(crate) fn window(&self) -> u16 {
+        self.limit
+    }
+
     /// Takes this sample's conversion; whether it makes `limit` identical ones in a row.
     pub(crate) fn run(&mut self, counts: u32) -> bool {
         self.repeats = if self.last == Some(counts) { self.repeats.saturating_add(1) } else { 0 };

@@ -784,9 +784,7 @@ mod tests {
     fn the_probe_starts_below_the_setpoint_and_finds_a_turn_up() {
         let mut m = monitor();
         // Falling 0.002 °C a sample, 3 °C at setpoint 4.1 °C, nothing asked for 10 min.
-        for k in 0..31 {
-            m.remember(3.06 - 0.002 * k as f32);
-        }
+        falling_to_3(&mut m);
         apply(&mut m, 59, Duty::OFF, 0.0, 3.0);
         assert_eq!(m.probe(&CFG.probe, 0, None, 3.0, 4.1), Probe::Keep, "59 samples are not 10 min");
         m.applied(&CFG, Duty::OFF, 0.0, 3.0);
@@ -813,8 +811,8 @@ mod tests {
 
     /// A probe under way since `t0_ms`, one sample every 10 s from `t0_ms + 10 s`: each sample's
     /// filtered load and the duty the law asked for at it (seen by the probe from the next
-    /// sample on, as in the step), at setpoint `w`, under `cfg`. The probe's answers, up to the first that
-    /// is not `Keep`.
+    /// sample on, as in the step), at setpoint `w`, under `cfg`. The probe's answers, up to the
+    /// first that is not `Keep`.
     fn probe_through(m: &mut SsrMonitor, cfg: &SsrConfig, t0_ms: u64, samples: &[(f32, f32)], w: f32) -> Vec<Probe> {
         let mut out = Vec::new();
         for (k, &(temp_c, requested)) in samples.iter().enumerate() {
@@ -877,9 +875,7 @@ mod tests {
         assert_eq!(answers.len(), 30, "five minutes: {answers:?}");
         assert_eq!(answers.last(), Some(&Probe::End));
         let mut m = monitor();
-        for k in 0..31 {
-            m.remember(3.06 - 0.002 * k as f32);
-        }
+        falling_to_3(&mut m);
         let lid: Vec<(f32, f32)> = (1..=40).map(|k| (3.0 + 0.03 * k as f32, 0.3)).collect();
         let answers = probe_through(&mut m, &CFG, 0, &lid, 4.0);
         assert!(!answers.contains(&Probe::Shorted), "{answers:?}");
@@ -898,11 +894,16 @@ mod tests {
         (start, m.probe(&CFG.probe, t_ms + 300_000, Some(t_ms), t, 4.1))
     }
 
-    /// [`probe_at`]'s start alone.
-    fn start_probe_at(m: &mut SsrMonitor, t_ms: u64) -> Probe {
+    /// Five minutes of the load's history, falling 0.002 °C a sample to 3 °C.
+    fn falling_to_3(m: &mut SsrMonitor) {
         for k in 0..31 {
             m.remember(3.06 - 0.002 * k as f32);
         }
+    }
+
+    /// [`probe_at`]'s start alone.
+    fn start_probe_at(m: &mut SsrMonitor, t_ms: u64) -> Probe {
+        falling_to_3(m);
         apply(m, 60, Duty::OFF, 0.0, 3.0);
         m.probe(&CFG.probe, t_ms, None, 3.0, 4.1)
     }
