@@ -333,7 +333,7 @@ impl GpcState {
 /// from (`tail_weights`, computed by stage 4 on that stage's Ã). Each sample computes the
 /// head f_1 … f_{k+3} (the longest head of the small models, `fold_split`) and
 /// Δu = Σ_{head} k1_j (w − f_j) − τ·(ŷ − w): three products for the tail's 21 rows instead of
-/// four a row (`cargo xtask pil`: −292 instructions in the median sample). The same increment
+/// four a row (`cargo xtask pil`: −295 instructions in the median sample). The same increment
 /// but for rounding (`staged_increment_with_the_tail_folded_in_is_the_full_designs`);
 /// [`design`](Self::design)'s f holds the head only. A model of another delay than the row's,
 /// or beyond na ≤ 2, nb ≤ 4, runs the whole f instead.
@@ -356,11 +356,11 @@ pub struct GpcStaged {
     k1_next: [f32; MAX_N2],
     start_next: usize,
     /// The free response's tail j = `split` … N2 folded into the gain row ([`tail_weights`]):
-    /// Σ_{j ≥ split} k1_j (f_j − w) = Σ_i `tail`_i (ŷ(t+split−1−i) − w). Valid for the small
-    /// models (na ≤ 2, nb ≤ 4) of the gain row's model, `tail_ok`.
+    /// Σ_{j ≥ split} k1_j (f_j − w) = Σ_i `tail`_i (ŷ(t+split−1−i) − w), for a model whose
+    /// [`fold_split`] is `split`; 0 (no model's) when the gain row's model was not a small one
+    /// (na ≤ 2, nb ≤ 4).
     tail: [f32; 3],
     split: usize,
-    tail_ok: bool,
     /// The tuning everything here was built with: a new one starts over.
     cfg: GpcConfig,
     /// A gain row is complete in `d.k1`.
@@ -381,7 +381,6 @@ impl GpcStaged {
         start_next: 0,
         tail: [0.0; 3],
         split: 0,
-        tail_ok: false,
         cfg: GpcConfig { n1: 0, n2: 0, nu: 0, lambda: 0.0 },
         ready: false,
         stage: 0,
@@ -416,7 +415,7 @@ impl GpcStaged {
         let du = if small {
             // The head of f on the current model; its tail through the gain row's `tail` when
             // it folds in here, or run out.
-            let fold = self.ready && self.tail_ok && fold_split(m, n2) == self.split;
+            let fold = self.ready && self.split == fold_split(m, n2);
             let split = if fold { self.split } else { head_end::<4>(m, n2) };
             let (past, mut probe) = st.free_head::<4, 3>(m, split, &mut self.d.f);
             if !fold {
@@ -496,9 +495,8 @@ impl GpcStaged {
             }
             _ => {
                 let (start, k1) = (self.start_next, &self.k1_next);
-                self.tail_ok = small;
+                self.split = if small { fold_split(m, cfg.n2) } else { 0 };
                 if small {
-                    self.split = fold_split(m, cfg.n2);
                     self.tail = tail_weights(&m.atilde(), k1, cfg.n1, cfg.n2, start, self.split);
                 }
                 self.d.k1 = *k1;
@@ -550,15 +548,14 @@ fn tail_weights(
     start: usize,
     split: usize,
 ) -> [f32; 3] {
+    let back = |lam: [f32; 3], s: f32| [-at[1] * s + lam[1], -at[2] * s + lam[2], -at[3] * s];
     let mut lam = [0.0f32; 3];
     for j in (split.max(start)..=n2).rev() {
-        let s = k1[j - n1] + lam[0];
-        lam = [-at[1] * s + lam[1], -at[2] * s + lam[2], -at[3] * s];
+        lam = back(lam, k1[j - n1] + lam[0]);
     }
     // Rows split ≤ j < start have k1_j = 0: the recursion runs on with no weight.
     for _ in split..start.min(n2 + 1) {
-        let s = lam[0];
-        lam = [-at[1] * s + lam[1], -at[2] * s + lam[2], -at[3] * s];
+        lam = back(lam, lam[0]);
     }
     lam
 }
@@ -1127,7 +1124,7 @@ mod tests {
                     }
                     s.track((0.4 + 0.3 * du).clamp(0.0, 1.0));
                 }
-                assert!(checked > 0 && staged.tail_ok, "{m:?} {cfg:?}");
+                assert!(checked > 0 && staged.split != 0, "{m:?} {cfg:?}");
             }
         }
     }
