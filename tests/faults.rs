@@ -215,6 +215,35 @@ fn campaign_missions_that_once_failed_pass() {
     }
 }
 
+/// Mission 117730 (`--seed 110001`): after the supply probe found the short, limp home's
+/// thermostat opened and closed the supply all day, and after every off period the heavy load
+/// warmed on at full cooling for 6 min; each was reported as an SSR stuck off too (11 reports,
+/// a technician sent to the wrong part). Full duty after the supply was open is now tested only
+/// after twice the stuck-off window (`SsrMonitor::warms_at_full_duty`).
+#[test]
+fn a_short_is_not_also_reported_as_an_open_ssr() {
+    use hal_sim::mission::{evaluate, Mission};
+    let m = Mission::generate(117730);
+    let out = run(&m.options(ControllerSpec::new(ControllerChoice::Gpc))).unwrap();
+    let r = evaluate(&m, &out);
+    assert!(matches!(r.fault, Some((Fault::SsrStuckOn, _, Some(_)))), "{:?}", r.fault);
+    assert!(r.misreported.iter().all(|(k, _)| *k != Detected::Event(EventKind::SsrStuckOff)), "{:?}", r.misreported);
+}
+
+/// Missions 281, 623 and 950 (`--seed 1`): a carrier at full duty for hours in a 42 °C heat,
+/// its load more than 1 °C above the setpoint. The lid detector's "overwhelmed" report re-armed
+/// on its duty averages, which at full duty do not part, and came every other sample: 68, 63 and
+/// 131 `lid_open` reports. It now re-arms once the load is held again.
+#[test]
+fn an_overwhelmed_carrier_is_reported_once_not_every_other_sample() {
+    use hal_sim::mission::Mission;
+    for seed in [281, 623, 950] {
+        let out = run(&Mission::generate(seed).options(ControllerSpec::new(ControllerChoice::Gpc))).unwrap();
+        let lids = out.metrics.faults_detected.iter().filter(|d| d.kind == Detected::Event(EventKind::LidOpen)).count();
+        assert!((1..=2).contains(&lids), "mission {seed}: {lids} lid_open reports");
+    }
+}
+
 /// No detector fires on healthy hardware across the baseline scenarios, controllers and plants.
 #[test]
 fn no_false_detections_without_faults() {

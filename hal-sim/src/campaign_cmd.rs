@@ -109,6 +109,11 @@ pub struct CampaignSummary {
     pub spurious_missions: u64,
     /// Spurious reports per kind (missions).
     pub spurious_by_kind: BTreeMap<String, u64>,
+    /// Missions in which the step reported, after the injected hardware fault, another one
+    /// (a misdiagnosis: not a failure, the injected fault's own report is what is judged).
+    pub misreported_missions: u64,
+    /// Those reports per injected fault and reported kind, `"fault → kind"` (missions).
+    pub misreported_by_kind: BTreeMap<String, u64>,
     /// Missions with sensor spikes (not a hardware fault).
     pub spikes_injected: u64,
     /// Of which the step reported spikes.
@@ -238,6 +243,15 @@ pub fn summarize(
             *m.entry(k.name().to_string()).or_insert(0) += 1;
             m
         }),
+        misreported_missions: reports.iter().filter(|r| !r.misreported.is_empty()).count() as u64,
+        misreported_by_kind: reports
+            .iter()
+            .filter_map(|r| r.fault.map(|(f, _, _)| (f, &r.misreported)))
+            .flat_map(|(f, list)| list.iter().map(move |(k, _)| format!("{} → {}", f.name(), k.name())))
+            .fold(BTreeMap::new(), |mut m, key| {
+                *m.entry(key).or_insert(0) += 1;
+                m
+            }),
         spikes_injected: reports.iter().filter(|r| r.spikes.is_some()).count() as u64,
         spikes_reported: reports.iter().filter(|r| matches!(r.spikes, Some((_, Some(_))))).count() as u64,
         worst_min_c: reports.iter().map(|r| r.min_c).fold(f64::INFINITY, f64::min),
@@ -344,6 +358,10 @@ fn print_table(s: &CampaignSummary) {
     println!(
         "| hardware faults reported without a fault | {} missions {:?} |",
         s.spurious_missions, s.spurious_by_kind
+    );
+    println!(
+        "| another fault reported after the injected one | {} missions {:?} |",
+        s.misreported_missions, s.misreported_by_kind
     );
     println!("| sensor spikes reported | {} of {} missions |", s.spikes_reported, s.spikes_injected);
     println!("| failing missions | {} |", s.failures.len());

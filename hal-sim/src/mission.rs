@@ -273,6 +273,9 @@ pub struct MissionReport {
     /// Hardware-fault reports without a fault behind them (before the injected fault, or in a
     /// mission without one): (kind, first report at s), one per kind.
     pub spurious: Vec<(Detected, f64)>,
+    /// Reports of another hardware fault than the injected one, after it (a misdiagnosis, which
+    /// sends a technician to the wrong part): (kind, first report at s), one per kind.
+    pub misreported: Vec<(Detected, f64)>,
     /// Why the mission failed (empty: passed).
     pub reasons: Vec<String>,
 }
@@ -368,9 +371,15 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
     // A nuisance's report is expected whenever the nuisance is there: never spurious.
     let nuisances = Fault::of_class(FaultClass::Nuisance);
     let mut spurious: Vec<(Detected, f64)> = Vec::new();
-    for d in detected.iter().filter(|d| d.t_s < t_fault && !nuisances.iter().any(|f| f.detected_by(d.kind))) {
-        if !spurious.iter().any(|(k, _)| *k == d.kind) {
-            spurious.push((d.kind, d.t_s));
+    let mut misreported: Vec<(Detected, f64)> = Vec::new();
+    for d in detected.iter().filter(|d| !nuisances.iter().any(|f| f.detected_by(d.kind))) {
+        let list = match m.hardware_fault {
+            _ if d.t_s < t_fault => &mut spurious,
+            Some((_, kind)) if !kind.detected_by(d.kind) => &mut misreported,
+            _ => continue,
+        };
+        if !list.iter().any(|(k, _)| *k == d.kind) {
+            list.push((d.kind, d.t_s));
         }
     }
 
@@ -416,6 +425,7 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
         fault_detectable,
         spikes,
         spurious,
+        misreported,
         reasons,
     }
 }

@@ -293,6 +293,9 @@ pub(crate) struct SsrMonitor {
     history_head: usize,
     /// Samples in a row with the applied duty 0, up to the previous sample.
     off_run: u16,
+    /// Samples since the last one with the applied duty 0, up to the previous sample
+    /// (`u16::MAX`: none yet).
+    since_off: u16,
     /// Samples in a row at full duty, up to the previous sample.
     on_run: u16,
     /// Filtered temperature when the current run of full duty began, °C.
@@ -337,6 +340,7 @@ impl SsrMonitor {
             history_len: 0,
             history_head: 0,
             off_run: 0,
+            since_off: u16::MAX,
             on_run: 0,
             on_start_c: 0.0,
             req_off_run: 0,
@@ -435,9 +439,20 @@ impl SsrMonitor {
     /// capacity on a warming afternoon, already reported). Mission 42110 (`--seed 40001`): a
     /// lid opening at 42 °C ambient was reported, the load levelled off, and a lid left open
     /// 10 min later warmed it from 6.6 to 19.5 °C at full duty without a word.
+    ///
+    /// A run of full duty that began within [`StuckOffConfig::on_s`] of a sample with no
+    /// cooling (a supply probe, the supply opened at the floor, limp home's thermostat) is
+    /// tested fast only after twice `on_s`: the heat the cabinet took in meanwhile keeps a heavy
+    /// load warming for longer than `on_s` at full cooling. Mission 117730 (`--seed 110001`, a heavy
+    /// H-TER II at 37 °C with a shorted SSR): after every probe and every limp-home off period
+    /// it rose 0.5–0.7 °C in the 5 min after the supply closed again, and the short was
+    /// reported 14 times as an SSR stuck off as well.
     pub(crate) fn warms_at_full_duty(&mut self, c: &StuckOffConfig, temp_c: f32) -> bool {
         let mut found = false;
-        if self.on_run >= self.n.stuck_off {
+        // Full duty for `on_run` samples, some cooling for `since_off`: the run's first sample
+        // came `since_off − on_run + 1` samples after the last one with none.
+        let soaked = u32::from(self.since_off) < u32::from(self.on_run) + u32::from(self.n.stuck_off);
+        if self.on_run >= self.n.stuck_off << u16::from(soaked) {
             if let Some(past) = self.ago(self.n.stuck_off as usize) {
                 if self.off_reported {
                     if temp_c <= past {
@@ -503,7 +518,9 @@ impl SsrMonitor {
     /// sees the runs up to the one before), with the load at `temp_c`.
     pub(crate) fn applied(&mut self, cfg: &SsrConfig, duty: Duty, requested: f32, temp_c: f32) {
         let full = duty.get() >= cfg.full_duty;
-        self.off_run = if duty.get() == 0.0 { self.off_run.saturating_add(1) } else { 0 };
+        let off = duty.get() == 0.0;
+        self.off_run = if off { self.off_run.saturating_add(1) } else { 0 };
+        self.since_off = if off { 0 } else { self.since_off.saturating_add(1) };
         if self.on_run == 0 && full {
             self.on_start_c = temp_c;
         }
@@ -745,6 +762,65 @@ mod tests {
             assert!(!m.warms_at_full_duty(&CFG.stuck_off, t), "sample {k}");
             m.applied(&CFG, Duty::FULL, 1.0, t);
         }
+    }
+
+    /// Mission 117730 (`--seed 110001`): a shorted SSR on a heavy H-TER II at 37 °C, found at
+    /// 55 760 s; limp home's thermostat then opens the supply (36 samples here, the load warming
+    /// from 3.26 to 5.00 °C) and closes it, and at full cooling the load warms on for 6 min,
+    /// 0.86 °C in the first 5, before it turns. The filtered readings, 55 700–56 800 s.
+    const SOAK_117730_OFF: [f32; 36] = [
+        3.261, 3.294, 3.336, 3.373, 3.413, 3.456, 3.501, 3.544, 3.592, 3.639, 3.684, 3.727, 3.782, 3.836, 3.873, 3.926,
+        3.983, 4.030, 4.080, 4.133, 4.181, 4.231, 4.282, 4.338, 4.393, 4.446, 4.501, 4.560, 4.616, 4.665, 4.723, 4.780,
+        4.833, 4.890, 4.942, 4.997,
+    ];
+    const SOAK_117730_FULL: [f32; 75] = [
+        5.051, 5.114, 5.172, 5.221, 5.275, 5.338, 5.391, 5.443, 5.495, 5.545, 5.582, 5.617, 5.655, 5.690, 5.715, 5.735,
+        5.759, 5.781, 5.797, 5.816, 5.827, 5.841, 5.864, 5.875, 5.883, 5.898, 5.905, 5.903, 5.908, 5.913, 5.923, 5.931,
+        5.935, 5.944, 5.949, 5.957, 5.948, 5.953, 5.951, 5.958, 5.961, 5.963, 5.961, 5.965, 5.970, 5.970, 5.965, 5.954,
+        5.959, 5.954, 5.964, 5.957, 5.950, 5.949, 5.947, 5.953, 5.956, 5.942, 5.945, 5.945, 5.944, 5.933, 5.938, 5.931,
+        5.921, 5.914, 5.916, 5.906, 5.907, 5.904, 5.903, 5.892, 5.889, 5.882, 5.877,
+    ];
+
+    /// The samples of full duty at which a monitor reports stuck off on `full`, after the
+    /// samples `before` (the load, °C, and the duty applied).
+    fn stuck_off_after(before: &[(f32, f32)], full: &[f32]) -> Vec<usize> {
+        let mut m = monitor();
+        for &(t, duty) in before {
+            m.remember(t);
+            assert!(!m.warms_at_full_duty(&CFG.stuck_off, t));
+            m.applied(&CFG, Duty::new(duty).unwrap(), duty, t);
+        }
+        let mut found = Vec::new();
+        for (k, &t) in full.iter().enumerate() {
+            m.remember(t);
+            if m.warms_at_full_duty(&CFG.stuck_off, t) {
+                found.push(k);
+            }
+            m.applied(&CFG, Duty::FULL, 1.0, t);
+        }
+        found
+    }
+
+    #[test]
+    fn full_duty_after_the_supply_was_open_waits_out_the_heat_the_cabinet_took_in() {
+        let at = |duty: f32| SOAK_117730_OFF.map(|t| (t, duty));
+        // Mission 117730's limp-home cycle: no report (it was one on every cycle, 11 in the day).
+        assert_eq!(stuck_off_after(&at(0.0), &SOAK_117730_FULL), []);
+        // The same full-duty run after the same readings at half duty, or from the start, is
+        // tested at 5 min, and reported.
+        assert_eq!(stuck_off_after(&at(0.5), &SOAK_117730_FULL), [30]);
+        assert_eq!(stuck_off_after(&[], &SOAK_117730_FULL), [30]);
+        // The last sample with no cooling 310 s before full duty's first: at 5 min; 300 s
+        // before (within `on_s`), at 10 min.
+        let mut before = at(0.5);
+        before[before.len() - 31].1 = 0.0;
+        assert_eq!(stuck_off_after(&before, &SOAK_117730_FULL), [30]);
+        let dead: Vec<f32> = (0..80).map(|k| 5.0 + 0.02 * k as f32).collect();
+        before[before.len() - 30].1 = 0.0;
+        assert_eq!(stuck_off_after(&before, &dead), [60]);
+        // An SSR that dies while the supply was open: the load keeps warming 0.02 °C a sample
+        // (0.6 °C in 5 min) at full duty. Reported at 10 min, and not before.
+        assert_eq!(stuck_off_after(&at(0.0), &dead), [60]);
     }
 
     #[test]
