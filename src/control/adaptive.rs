@@ -892,13 +892,13 @@ mod tests {
             }
             c
         };
-        // Eight samples of the same measurements (a new λ reaches the staged GPC's gain row
-        // within four); the duties asked, and whether the controller rested and trusted its
+        // Fourteen samples of the same measurements (a new λ reaches the staged GPC's design
+        // within 2·(3 + Nu) = 12); the duties asked, and whether the controller rested and trusted its
         // estimate throughout.
         let y0 = r.y;
         let asks = |mut c: SelfTuning| {
             let mut out = std::vec::Vec::new();
-            for k in 0..8 {
+            for k in 0..14 {
                 let input = ControlInput { y_c: y0 + 0.002 * (k % 2) as f32, w_c: W_C };
                 let u = c.update(&input).unwrap();
                 c.track(&input, u.clamp(0.0, 1.0));
