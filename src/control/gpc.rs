@@ -314,80 +314,119 @@ impl GpcState {
     }
 }
 
-/// GPC with the model's share of the design spread over five samples, for the self-tuning
-/// loop on the M4F.
+/// GPC with the model's share of the design spread over samples, and the cost solved with the
+/// duty's limits as constraints, for the self-tuning loop on the M4F.
 ///
-/// Of a design, only the free response f and Δu = Σ k1_j (w − f_j) depend on the data; the
-/// step response g, the factor of GᵀG + λI, z = H⁻¹e₁ and the gain row k1 depend on the model
-/// alone, and they are most of the work. Here each sample does one stage of the next gain row
-/// on the current model: stage 0 the step response and its dead time, stage 1 the normal
-/// matrix GᵀG + λI, stage 2 its Cholesky factor and z, stage 3 k1, stage 4 the fold of the
-/// free response's tail into it (below), after which the new row serves. A gain row is thus
-/// at most nine samples (90 s) older than the model f uses, against a model that moves over
-/// tens of minutes; the sample's work falls from a whole design to its largest stage
-/// (`cargo xtask pil`, BENCHMARKS.md).
+/// **Staged.** Of a design, only the free response f depends on the data; the step response g,
+/// H = GᵀG + λI, its inverse Z, the levels' gain rows and P = Q⁻¹ (below) depend on the model
+/// alone, and they are most of the work. Each sample computes f on the current model and the
+/// levels with the gains in use, and does one stage of the next design on the current model:
+/// stage 0 the step response and its dead time, stage 1 H, stage 2 H's Cholesky factor,
+/// stage 3 Z = H⁻¹, M = D⁻¹Z and P, stages 4 … 3 + Nu the gain row of level i = stage − 4
+/// with its folded tail, the last of which puts the new design in use (a swap of banks, no
+/// copy). A design is thus at most 2·(4 + Nu) samples old (the constrained samples below skip
+/// their stage), against a model that moves over tens of minutes; the sample's work falls from
+/// a whole design to its largest stage (`cargo xtask pil`, BENCHMARKS.md).
 ///
-/// Then Δu with the gain row in use, on the current model's data: past increments and
-/// residuals enter f only up to j < k + nb (and j ≤ nc, `head_end`); beyond, f runs alone on
-/// Ã, so the gain row's share of it is a fixed combination τ of the three values it starts
-/// from (`tail_weights`, computed by stage 4 on that stage's Ã). Each sample computes the
-/// head f_1 … f_{k+3} (the longest head of the small models, `fold_split`) and
-/// Δu = Σ_{head} k1_j (w − f_j) − τ·(ŷ − w): three products for the tail's 21 rows instead of
-/// four a row (`cargo xtask pil`: −295 instructions in the median sample). The same increment
-/// but for rounding (`staged_increment_with_the_tail_folded_in_is_the_full_designs`);
-/// [`design`](Self::design)'s f holds the head only. A model of another delay than the row's,
-/// or beyond na ≤ 2, nb ≤ 4, runs the whole f instead.
+/// **Level gains.** The unconstrained plan is Δũ = Z Gᵀ(w − f), and its levels relative to
+/// u(t−1) are v = D⁻¹Δũ = M Gᵀ(w − f), M = D⁻¹Z (D⁻¹ the lower triangle of ones: M's row i
+/// is the sum of Z's rows 0 … i). So level i is a gain row L_i[j] = Σ_c M[i][c] g_{j−c} over
+/// the rows j = N1 … N2, as the unconstrained law's Δu(t) is the gain row of Z's first row
+/// (level 0 is exactly that), and the sums over c cancel on the model's numbers only, once a
+/// design, not on the data every sample.
 ///
-/// Until the first gain row is complete (the first five samples, and after a change of
-/// tuning) Δu is 0: the law holds the duty it starts from. A stage that fails (a non-finite or
-/// singular design) returns its error for that sample and the cycle starts again; the last
-/// complete gain row, if any, keeps serving.
+/// **Folded tail.** Past increments and residuals enter f only up to j < k + nb (and j ≤ nc,
+/// `head_end`); beyond, f runs alone on Ã, so level i's share of it,
+/// Σ_{j ≥ split} L_i[j] (w − f_j), is −T_i·(ŷ − w) for a fixed combination T_i of the three
+/// values the tail starts from ([`tail_weights`] with the weights L_i[j]). Each sample
+/// computes the head f_1 … f_{k+3} (the longest head of the small models, `fold_split`) and
+/// v_i = Σ_{head} L_i[j] (w − f_j) − T_i·(ŷ − w): Nu × (head + 3) products
+/// (`staged_increment_with_the_tail_folded_in_is_the_full_designs`); [`design`](Self::design)'s
+/// f holds the head only. A model of another delay than the design's, or beyond na ≤ 2,
+/// nb ≤ 4, runs the whole f and the whole sums instead.
+///
+/// **Constrained** (issue 15). The Nu future duties are the levels u(t−1) + v_i; the cost is
+/// minimised over them with 0 ≤ u(t−1) + v_i ≤ 1, not solved unconstrained and clipped. In
+/// v, Δũ = D v with D lower bidiagonal (1, −1), so the cost ½ΔũᵀHΔũ − bᵀΔũ (b = Gᵀ(w − f))
+/// is ½vᵀQv − (Dᵀb)ᵀv with Q = DᵀHD, whose unconstrained minimiser is the v above. It is kept
+/// when every level is within the box, which is most samples; otherwise [`box_qp`] solves the
+/// levels' problem from it through P = Q⁻¹ = D⁻¹ZD⁻ᵀ (M's prefix sums along its rows), and
+/// that sample skips its design stage, so that no sample does both (`cargo xtask pil`).
+/// After [`MAX_SKIPS`] such samples in a row the next one clips v_0 into the box instead and
+/// does its stage: while the limits hold for long (a pull-down) the design still moves on,
+/// at one stage in `MAX_SKIPS + 1` samples. Δu(t) = v_0.
+///
+/// Until the first design is complete (the first 4 + Nu samples, and after a change of
+/// horizons) Δu is 0: the law holds the duty it starts from. A stage that fails (a non-finite
+/// or singular design) returns its error for that sample and the cycle starts again; the last
+/// complete design, if any, keeps serving.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GpcStaged {
+    /// g of the cycle under way (stage 0), f of this sample, Δu of this sample (k1 unused).
     d: GpcDesign,
-    /// GᵀG + λI (stage 1), then its factor's solve z = H⁻¹e₁ in row 0 (stage 2).
+    /// H = GᵀG + λI of the cycle under way (stage 1), its Cholesky factor (stage 2), then
+    /// M = D⁻¹Z (stage 3), all of it.
     h: [[f32; MAX_NU]; MAX_NU],
-    /// Dead-time zeros of the step response in `d.g` (stage 0).
+    /// Dead-time zeros of the step response in `d.g` of the cycle under way.
     lead: usize,
-    /// First row of `d.k1` that is not an exact zero.
-    start: usize,
-    /// The next gain row (stage 3) and its first row that is not an exact zero, until stage 4
-    /// has folded its tail and moves it into `d.k1`.
-    k1_next: [f32; MAX_N2],
-    start_next: usize,
-    /// The free response's tail j = `split` … N2 folded into the gain row ([`tail_weights`]):
-    /// Σ_{j ≥ split} k1_j (f_j − w) = Σ_i `tail`_i (ŷ(t+split−1−i) − w), for a model whose
-    /// [`fold_split`] is `split`; 0 (no model's) when the gain row's model was not a small one
-    /// (na ≤ 2, nb ≤ 4).
-    tail: [f32; 3],
-    split: usize,
-    /// The tuning everything here was built with: a new one starts over.
+    /// The design in use, `bank[cur]`, and the one under way, the other.
+    bank: [StagedBank; 2],
+    cur: usize,
+    /// The tuning everything here was built with: new horizons start over.
     cfg: GpcConfig,
-    /// A gain row is complete in `d.k1`.
+    /// A design is complete in `bank[cur]`.
     ready: bool,
-    /// Next stage: 0 … 4.
+    /// Next stage: 0 … 3 + Nu.
     stage: u8,
+    /// Samples in a row that skipped their stage.
+    skipped: u8,
+}
+
+/// One [`GpcStaged`] design: what the sample's solve reads.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct StagedBank {
+    /// Level i's gain row L_i[j] over j = `start` … N2 (index j − N1; the rows before are +0
+    /// and not stored).
+    l: [[f32; MAX_N2]; MAX_NU],
+    /// Level i's folded tail: Σ_{j ≥ split} L_i[j] (f_j − w) = Σ_k T_i,k (ŷ(t+split−1−k) − w),
+    /// valid when `tail_ok` (the small models, na ≤ 2, nb ≤ 4).
+    t: [[f32; 3]; MAX_NU],
+    /// P = Q⁻¹ = D⁻¹ZD⁻ᵀ (all of it).
+    p: [[f32; MAX_NU]; MAX_NU],
+    /// The first row that is not an exact zero, where the tail folds, and whether it does.
+    start: usize,
+    split: usize,
+    tail_ok: bool,
+}
+
+impl StagedBank {
+    const ZERO: StagedBank = StagedBank {
+        l: [[0.0; MAX_N2]; MAX_NU],
+        t: [[0.0; 3]; MAX_NU],
+        p: [[0.0; MAX_NU]; MAX_NU],
+        start: 0,
+        split: 0,
+        tail_ok: false,
+    };
 }
 
 impl GpcStaged {
-    /// No gain row yet. All zeros, so a board fills it with a memset, not a copy of a
-    /// 500-byte constant (the zero tuning is no tuning: the first update starts over).
+    /// No design yet. All zeros, so a board fills it with a memset, not a copy of a
+    /// kilobyte constant (the zero tuning is no tuning: the first update starts over).
     pub const NEW: GpcStaged = GpcStaged {
         d: GpcDesign::ZERO,
         h: [[0.0; MAX_NU]; MAX_NU],
         lead: 0,
-        start: 0,
-        k1_next: [0.0; MAX_N2],
-        start_next: 0,
-        tail: [0.0; 3],
-        split: 0,
+        bank: [StagedBank::ZERO; 2],
+        cur: 0,
         cfg: GpcConfig { n1: 0, n2: 0, nu: 0, lambda: 0.0 },
         ready: false,
         stage: 0,
+        skipped: 0,
     };
 
     /// The arrays of the last sample: g of the cycle under way, f of this sample (its head only
-    /// when the tail was folded in), k1 of the last complete gain row, and Δu.
+    /// when the tail was folded in), and Δu (k1 is not used here).
     pub fn design(&self) -> &GpcDesign {
         &self.d
     }
@@ -399,59 +438,51 @@ impl GpcStaged {
         if !w.is_finite() {
             return Err(GpcError::NonFinite);
         }
-        // A new horizon starts over; a new λ (the self-tuner's cautious λ, `adaptive`) enters at
-        // the next normal matrix, and the gain row follows within five samples.
+        // New horizons start over; a new λ (the self-tuner's cautious λ, `adaptive`) enters at
+        // the next normal matrix, and the design follows within 4 + Nu samples.
         if (cfg.n1, cfg.n2, cfg.nu) != (self.cfg.n1, self.cfg.n2, self.cfg.nu) {
             self.ready = false;
             self.stage = 0;
         }
         self.cfg = *cfg;
+        let n2 = cfg.n2;
         let small = m.na() <= 2 && m.nb() <= 4;
-        if let Err(e) = self.advance(m, cfg, small) {
-            self.stage = 0;
-            return Err(e);
-        }
-        let (n1, n2, start) = (cfg.n1, cfg.n2, self.start);
-        let du = if small {
-            // The head of f on the current model; its tail through the gain row's `tail` when
-            // it folds in here, or run out.
-            let fold = self.ready && self.split == fold_split(m, n2);
-            let split = if fold { self.split } else { head_end::<4>(m, n2) };
+        let (tail_ok, split) = (self.bank[self.cur & 1].tail_ok, self.bank[self.cur & 1].split);
+        // The head of f on the current model; its tail through the folded tails when it folds
+        // in here, or run out.
+        let fold = self.ready && tail_ok && small && fold_split(m, n2) == split;
+        let (last, probe, past) = if small {
+            let split = if fold { split } else { head_end::<4>(m, n2) };
             let (past, mut probe) = st.free_head::<4, 3>(m, split, &mut self.d.f);
             if !fold {
                 probe += free_tail(&m.atilde(), past, &mut self.d.f[split - 1..n2]);
             }
-            if probe != 0.0 {
-                return Err(GpcError::NonFinite);
-            }
-            if fold {
-                let head = if start < split { increment(&self.d, n1, split - 1, start, w) } else { 0.0 };
-                let mut tail = 0.0;
-                for (ti, p) in self.tail.iter().zip(&past) {
-                    tail += ti * (p - w);
-                }
-                head - tail
-            } else if self.ready {
-                increment(&self.d, n1, n2, start, w)
-            } else {
-                0.0
-            }
+            (if fold { split - 1 } else { n2 }, probe, past)
         } else {
             #[cfg(feature = "gpc-any-order")]
             {
                 let probe = st.free_response::<MAX_NB, { MAX_NA + 1 }>(m, n2, &mut self.d.f);
-                if probe != 0.0 {
-                    return Err(GpcError::NonFinite);
-                }
-                if self.ready {
-                    increment(&self.d, n1, n2, start, w)
-                } else {
-                    0.0
-                }
+                (n2, probe, [0.0; 3])
             }
             #[cfg(not(feature = "gpc-any-order"))]
             return Err(GpcError::NotBuilt);
         };
+        if probe != 0.0 {
+            return Err(GpcError::NonFinite);
+        }
+        let qp = self.skipped < MAX_SKIPS;
+        let (du, heavy) =
+            if self.ready { self.solve(cfg.nu, st.u_prev(), w, last, fold.then_some(&past), qp) } else { (0.0, false) };
+        // A sample whose solve met the limits skips its design stage (type docs).
+        if heavy {
+            self.skipped += 1;
+        } else {
+            self.skipped = 0;
+            if let Err(e) = self.advance(m, cfg, small) {
+                self.stage = 0;
+                return Err(e);
+            }
+        }
         if !du.is_finite() {
             return Err(GpcError::NonFinite);
         }
@@ -459,8 +490,50 @@ impl GpcStaged {
         Ok(du)
     }
 
-    /// This sample's stage of the next gain row.
+    /// Δu(t) of the constrained cost with the design in use (type docs), from f_1 … f_`last`
+    /// and, when the tail folds, the values `past` it starts from; and whether the limits were
+    /// at work (the longer path: the design stage waits).
+    /// Without `qp` a level outside the box is clipped instead (v_0 into the box).
+    fn solve(&self, nu: usize, u_prev: f32, w: f32, last: usize, past: Option<&[f32; 3]>, qp: bool) -> (f32, bool) {
+        let bk = &self.bank[self.cur & 1];
+        let (n1, start) = (self.cfg.n1, bk.start);
+        // The unconstrained levels relative to u(t−1): the gain rows over j = start … last…
+        let (lo, hi) = (-u_prev, 1.0 - u_prev);
+        let mut v = [0.0f32; MAX_NU];
+        let mut inside = true;
+        for ((vi, li), ti) in v[..nu].iter_mut().zip(&bk.l).zip(&bk.t) {
+            let mut x = 0.0;
+            if start <= last {
+                for (lj, fj) in li[start - n1..last + 1 - n1].iter().zip(&self.d.f[start - 1..last]) {
+                    x += lj * (w - fj);
+                }
+            }
+            // …and the folded tail's rows.
+            if let Some(past) = past {
+                let mut tail = 0.0;
+                for (ti, p) in ti.iter().zip(past) {
+                    tail += ti * (p - w);
+                }
+                x -= tail;
+            }
+            *vi = x;
+            inside &= x >= lo && x <= hi;
+        }
+        if inside {
+            return (v[0], false);
+        }
+        if !qp {
+            // (Not `f32::clamp`: its assertion formats floats, kilobytes of flash.)
+            return (v[0].max(lo).min(hi), false);
+        }
+        (box_qp(&bk.p, &v, nu, lo, hi)[0], true)
+    }
+
+    /// This sample's stage of the next design.
     fn advance(&mut self, m: &Model, cfg: &GpcConfig, small: bool) -> Result<(), GpcError> {
+        let nu = cfg.nu;
+        // (`& 1`: no bounds check.)
+        let next = (self.cur ^ 1) & 1;
         match self.stage {
             0 => {
                 // (`update` has refused a larger model in a build without `gpc-any-order`.)
@@ -478,35 +551,92 @@ impl GpcStaged {
                     return Err(GpcError::NonFinite);
                 }
                 self.lead = dead_lead(&self.d.g, m.k(), cfg.n2);
-                self.stage = 1;
+                self.bank[next].split = fold_split(m, cfg.n2);
+                self.bank[next].tail_ok = small;
             }
             1 => {
                 self.h = normal_matrix(&self.d.g, cfg, self.lead);
-                self.stage = 2;
             }
             2 => {
-                self.h[0] = first_row_solve(self.h, cfg.nu)?;
-                self.stage = 3;
+                if !cholesky_in_place(&mut self.h, nu) {
+                    return Err(GpcError::Singular);
+                }
             }
             3 => {
-                self.start_next =
-                    gain_row_nu(&self.h[0], &self.d.g, &mut self.k1_next, cfg.n1, cfg.n2, cfg.nu, self.lead);
-                self.stage = 4;
-            }
-            _ => {
-                let (start, k1) = (self.start_next, &self.k1_next);
-                self.split = if small { fold_split(m, cfg.n2) } else { 0 };
-                if small {
-                    self.tail = tail_weights(&m.atilde(), k1, cfg.n1, cfg.n2, start, self.split);
+                // Z = H⁻¹ column by column (symmetric: its rows are its columns), M = D⁻¹Z
+                // (row i the sum of Z's rows 0 … i: D⁻¹ is lower triangular with ones), and
+                // P = M D⁻ᵀ, M's prefix sums along each row.
+                let mut mz = [[0.0f32; MAX_NU]; MAX_NU];
+                for (i, zi) in mz[..nu].iter_mut().enumerate() {
+                    zi[i] = 1.0;
+                    chol_solve_out_of_line(&self.h, nu, zi);
                 }
-                self.d.k1 = *k1;
-                self.start = start;
+                let mut acc = [0.0f32; MAX_NU];
+                for (zi, pi) in mz[..nu].iter_mut().zip(&mut self.bank[next].p) {
+                    let mut s = 0.0;
+                    for ((a, z), pk) in acc.iter_mut().zip(zi.iter_mut()).zip(pi.iter_mut()) {
+                        *a += *z;
+                        *z = *a;
+                        s += *a;
+                        *pk = s;
+                    }
+                }
+                self.h = mz;
+            }
+            s => {
+                // Level i's gain row and, on this stage's Ã (the tail f runs on), its folded tail.
+                // (`min`: i < Nu ≤ MAX_NU anyway, and no bounds checks below.)
+                let i = usize::from(s - 4).min(MAX_NU - 1);
+                let (n1, n2) = (cfg.n1, cfg.n2);
+                let nb = &mut self.bank[next];
+                let start = level_row(&self.h[i], &self.d.g, &mut nb.l[i], n1, n2, nu, self.lead);
+                nb.start = start;
+                nb.tail_ok &= small;
+                if small {
+                    let from = nb.split.max(start);
+                    let rows = if from <= n2 { &nb.l[i][from - n1..n2 + 1 - n1] } else { &[] };
+                    nb.t[i] = tail_weights(&m.atilde(), rows, start.saturating_sub(nb.split));
+                }
+                if i + 1 < nu {
+                    self.stage += 1;
+                    return Ok(());
+                }
+                // Complete: in use from the next sample.
+                self.cur = next;
                 self.ready = true;
                 self.stage = 0;
+                return Ok(());
             }
         }
+        self.stage += 1;
         Ok(())
     }
+}
+
+/// Level i's gain row L_i[j] = Σ_{c < min(Nu, j)} M[i][c] g_{j−c} (`mi` = M's row i) over
+/// j = N1 … N2 into `l` (index j − N1) from the first row that is not an exact zero on, which
+/// it returns (rows j ≤ lead see only the dead time's zero g's; they are left as they were,
+/// and nothing reads them). [`gain_row`] with
+/// loops that do not unroll: one small copy for every Nu.
+fn level_row(
+    mi: &[f32; MAX_NU],
+    g: &[f32; MAX_N2],
+    l: &mut [f32; MAX_N2],
+    n1: usize,
+    n2: usize,
+    nu: usize,
+    lead: usize,
+) -> usize {
+    let start = n1.max(lead + 1).min(n2 + 1);
+    for j in start..n2 + 1 {
+        let mut x = 0.0;
+        // M[i][0] g_j, M[i][1] g_{j−1}, …
+        for (mc, gv) in mi[..nu.min(j)].iter().zip(g[..j].iter().rev()) {
+            x += mc * gv;
+        }
+        l[j - n1] = x;
+    }
+    start
 }
 
 /// The free response's tail into `f` (f_split … f_N2), from the head's last values `past`:
@@ -533,28 +663,24 @@ fn head_end<const NB: usize>(m: &Model, n2: usize) -> usize {
     (m.k() + m.nb().min(NB)).max(m.nc().min(MAX_NC) + 1).min(n2 + 1)
 }
 
-/// The gain row's weights on the free response's tail, folded onto the values it starts from.
+/// A weight row's share of the free response's tail, folded onto the values it starts from.
 /// Beyond the head the free response runs alone, x_j = −Σ_i ã_{i+1} P_j[i] with P_j = (x_{j−1},
-/// x_{j−2}, x_{j−3}) (and so does x = f − w: Ã(1) = 0), so Σ_{j = split…N2} k1_j x_j = τ·P_split
-/// for the τ of the adjoint recursion run backwards from j = N2: λ ← 0, then for each j
-/// λ_i ← −ã_{i+1} (k1_j + λ_0) + λ_{i+1} (λ_3 = 0), and τ = λ at j = split. Three products a
-/// row instead of the row's four (three for f_j, one for k1_j (w − f_j)) every sample.
+/// x_{j−2}, x_{j−3}) (and so does x = f − w: Ã(1) = 0), so Σ_{j = split…N2} r_j x_j = σ·P_split
+/// for the σ of the adjoint recursion run backwards from j = N2: λ ← 0, then for each j
+/// λ_i ← −ã_{i+1} (r_j + λ_0) + λ_{i+1} (λ_3 = 0), and σ = λ at j = split. `rows` holds
+/// r_j for the last rows, up to N2, that are not known zeros, and `zeros` counts the rows
+/// from `split` on before them whose weight is zero ([`GpcStaged`]: r_j = g_{j−c}, zero up to
+/// the dead time and before N1). Three products a row, computed once a design, instead of
+/// the row's four every sample (three for f_j, one for its weight).
 #[inline(always)]
-fn tail_weights(
-    at: &[f32; MAX_NA + 2],
-    k1: &[f32; MAX_N2],
-    n1: usize,
-    n2: usize,
-    start: usize,
-    split: usize,
-) -> [f32; 3] {
+fn tail_weights(at: &[f32; MAX_NA + 2], rows: &[f32], zeros: usize) -> [f32; 3] {
     let back = |lam: [f32; 3], s: f32| [-at[1] * s + lam[1], -at[2] * s + lam[2], -at[3] * s];
     let mut lam = [0.0f32; 3];
-    for j in (split.max(start)..=n2).rev() {
-        lam = back(lam, k1[j - n1] + lam[0]);
+    for r in rows.iter().rev() {
+        lam = back(lam, r + lam[0]);
     }
-    // Rows split ≤ j < start have k1_j = 0: the recursion runs on with no weight.
-    for _ in split..start.min(n2 + 1) {
+    // The rows with no weight: the recursion runs on.
+    for _ in 0..zeros {
         lam = back(lam, lam[0]);
     }
     lam
@@ -567,6 +693,117 @@ fn tail_weights(
 #[inline(always)]
 fn fold_split(m: &Model, n2: usize) -> usize {
     (m.k() + 4).max(MAX_NC + 1).min(n2 + 1)
+}
+
+/// Most samples in a row whose constrained solve skips [`GpcStaged`]'s design stage; the next
+/// clips instead and does its stage.
+const MAX_SKIPS: u8 = 8;
+
+/// Most iterations of [`box_qp`]: each adds or drops one bound, and with Nu ≤ 5 levels the
+/// optimum is reached in far fewer (the tests enumerate every active set); every iterate is
+/// feasible, so running out returns a feasible, if not optimal, plan.
+const BOX_QP_ITERS: usize = 2 * MAX_NU;
+
+/// min ½vᵀQv − cᵀv over lo ≤ v_i ≤ hi (i < n), Q symmetric positive definite, given P = Q⁻¹
+/// and the unconstrained minimiser `unc` = P c, by the primal active-set method (Nocedal &
+/// Wright, *Numerical Optimization*, 2nd ed., Alg. 16.3) from `unc` clamped into the box, with
+/// the bounds it touches as the first working set W.
+///
+/// The equality-constrained problem of W (v_W = t_W) is solved through P: its minimiser is
+/// y = P(c + E_W μ) = unc + P_{:W} μ with P_WW μ = t_W − unc_W, and μ = (Qy − c)_W is then the
+/// gradient on the held bounds, their multipliers: a |W|×|W| Cholesky factor an iteration, no
+/// n×n one. Each iteration either steps to y, or stops at the first bound in the way and holds
+/// it; at y it drops the held bound whose multiplier has the wrong sign (μ > 0 at hi: the cost
+/// falls below it; μ < 0 at lo), the worst first, or stops.
+#[inline(never)]
+fn box_qp(p: &[[f32; MAX_NU]; MAX_NU], unc: &[f32; MAX_NU], n: usize, lo: f32, hi: f32) -> [f32; MAX_NU] {
+    let n = n.min(MAX_NU);
+    let mut v = *unc;
+    let mut held = [false; MAX_NU];
+    for (vi, h) in v[..n].iter_mut().zip(&mut held) {
+        if *vi > hi {
+            *vi = hi;
+            *h = true;
+        } else if *vi < lo {
+            *vi = lo;
+            *h = true;
+        }
+    }
+    for _ in 0..BOX_QP_ITERS {
+        // The held levels, P_WW and t_W − unc_W.
+        let mut w = [0usize; MAX_NU];
+        let mut m = 0;
+        for (i, &h) in held[..n].iter().enumerate() {
+            if h {
+                w[m] = i;
+                m += 1;
+            }
+        }
+        let mut a = [[0.0f32; MAX_NU]; MAX_NU];
+        let mut mu = [0.0f32; MAX_NU];
+        for r in 0..m {
+            mu[r] = v[w[r]] - unc[w[r]];
+            for s in 0..=r {
+                a[r][s] = p[w[r]][w[s]];
+            }
+        }
+        if !cholesky_in_place(&mut a, m) {
+            return v;
+        }
+        chol_solve_out_of_line(&a, m, &mut mu);
+        let mut y = *unc;
+        for (yi, pi) in y[..n].iter_mut().zip(p) {
+            for r in 0..m {
+                *yi += pi[w[r]] * mu[r];
+            }
+        }
+        for r in 0..m {
+            y[w[r]] = v[w[r]];
+        }
+        // The longest step toward y that stays in the box, and the level that stops it.
+        let (mut alpha, mut block) = (1.0f32, n);
+        for (i, (yi, vi)) in y[..n].iter().zip(&v).enumerate() {
+            let to = if *yi > hi {
+                hi
+            } else if *yi < lo {
+                lo
+            } else {
+                continue;
+            };
+            let t = (to - vi) / (yi - vi);
+            if t < alpha {
+                (alpha, block) = (t, i);
+            }
+        }
+        if block < n {
+            for (vi, yi) in v[..n].iter_mut().zip(&y) {
+                *vi += alpha * (yi - *vi);
+            }
+            v[block] = if y[block] > hi { hi } else { lo };
+            held[block] = true;
+            continue;
+        }
+        v = y;
+        // Release the held bound whose multiplier has the worst wrong sign, or stop.
+        let (mut worst, mut drop) = (0.0f32, n);
+        for r in 0..m {
+            let wrong = if v[w[r]] == hi { mu[r] } else { -mu[r] };
+            if wrong > worst {
+                (worst, drop) = (wrong, w[r]);
+            }
+        }
+        if drop == n {
+            return v;
+        }
+        held[drop] = false;
+    }
+    v
+}
+
+/// [`chol_solve`], not inlined (the constrained solve's iterations call it).
+#[inline(never)]
+fn chol_solve_out_of_line(l: &[[f32; MAX_NU]; MAX_NU], n: usize, b: &mut [f32; MAX_NU]) {
+    chol_solve(l, n, b);
 }
 
 /// The number of exact zeros g_1 … g_lead that open the step response (the dead time).
@@ -1037,6 +1274,14 @@ mod tests {
     /// response by their recursions, the gain row by [`reference_k1`].
     fn reference_du(s: &GpcState, m: &Model, cfg: &GpcConfig, w: f32) -> f64 {
         let (n1, n2) = (cfg.n1, cfg.n2);
+        let (g, f) = reference_gf(s, m, n2);
+        let k1 = reference_k1(&g[1..], n1, n2, cfg.nu, f64::from(cfg.lambda));
+        k1.iter().enumerate().map(|(jj, k)| k * (f64::from(w) - f[n1 + jj])).sum()
+    }
+
+    /// The step response g_0 = 0, g_1 … g_N2 and the free response f_0 = 0, f_1 … f_N2 in f64
+    /// from the state's histories, by their recursions.
+    fn reference_gf(s: &GpcState, m: &Model, n2: usize) -> (Vec<f64>, Vec<f64>) {
         let a: Vec<f64> = m.a()[..m.na()].iter().map(|&x| f64::from(x)).collect();
         let b: Vec<f64> = m.b()[..m.nb()].iter().map(|&x| f64::from(x)).collect();
         let mut g = vec![0.0f64; n2 + 1];
@@ -1076,8 +1321,238 @@ mod tests {
             yy.push(v);
             f[j] = v;
         }
-        let k1 = reference_k1(&g[1..], n1, n2, cfg.nu, f64::from(cfg.lambda));
-        k1.iter().enumerate().map(|(jj, k)| k * (f64::from(w) - f[n1 + jj])).sum()
+        (g, f)
+    }
+
+    /// Solves a x = r by Gaussian elimination with partial pivoting (f64, small and dense).
+    fn gauss(mut a: Vec<Vec<f64>>, mut r: Vec<f64>) -> Vec<f64> {
+        let n = r.len();
+        for col in 0..n {
+            let piv = (col..n).max_by(|&x, &y| a[x][col].abs().total_cmp(&a[y][col].abs())).unwrap();
+            a.swap(col, piv);
+            r.swap(col, piv);
+            for row in 0..n {
+                if row != col {
+                    let f = a[row][col] / a[col][col];
+                    for k in col..n {
+                        a[row][k] -= f * a[col][k];
+                    }
+                    r[row] -= f * r[col];
+                }
+            }
+        }
+        (0..n).map(|i| r[i] / a[i][i]).collect()
+    }
+
+    /// The constrained law's Δu(t) in f64 from scratch: G by index from the step response,
+    /// H = GᵀG + λI, b = Gᵀ(w − f), the unconstrained plan H⁻¹b; if its levels
+    /// u(t−1) + Σ_{k≤i} Δu_k leave [0, 1], the levels' problem (Q = DᵀHD, Dᵀb, relative to
+    /// u(t−1)) by enumerating every active set ([`reference_box_qp`]). Also whether the
+    /// unconstrained plan was inside.
+    fn reference_constrained_du(s: &GpcState, m: &Model, cfg: &GpcConfig, w: f32) -> (f64, bool) {
+        let (n1, n2, nu) = (cfg.n1, cfg.n2, cfg.nu);
+        let (g, f) = reference_gf(s, m, n2);
+        let gm = |j: usize, c: usize| if j > c { g[j - c] } else { 0.0 };
+        let h: Vec<Vec<f64>> = (0..nu)
+            .map(|r| {
+                (0..nu)
+                    .map(|c| {
+                        (n1..=n2).map(|j| gm(j, r) * gm(j, c)).sum::<f64>()
+                            + if r == c { f64::from(cfg.lambda) } else { 0.0 }
+                    })
+                    .collect()
+            })
+            .collect();
+        let b: Vec<f64> = (0..nu).map(|c| (n1..=n2).map(|j| gm(j, c) * (f64::from(w) - f[j])).sum()).collect();
+        let x = gauss(h.clone(), b.clone());
+        let u = f64::from(s.u_prev());
+        let (lo, hi) = (-u, 1.0 - u);
+        let mut lvl = 0.0;
+        let inside = x.iter().all(|xi| {
+            lvl += xi;
+            (lo..=hi).contains(&lvl)
+        });
+        if inside {
+            return (x[0], true);
+        }
+        // D: Δu_0 = v_0, Δu_i = v_i − v_{i−1}; Q = DᵀHD, c = Dᵀb.
+        let d = |r: usize, c: usize| {
+            if r == c {
+                1.0
+            } else if r == c + 1 {
+                -1.0
+            } else {
+                0.0
+            }
+        };
+        let q: Vec<Vec<f64>> = (0..nu)
+            .map(|i| {
+                (0..nu)
+                    .map(|k| (0..nu).map(|r| (0..nu).map(|c| d(r, i) * h[r][c] * d(c, k)).sum::<f64>()).sum())
+                    .collect()
+            })
+            .collect();
+        let c: Vec<f64> = (0..nu).map(|i| (0..nu).map(|r| d(r, i) * b[r]).sum()).collect();
+        (reference_box_qp(&q, &c, lo, hi).0[0], false)
+    }
+
+    /// Independent f64 reference of a box QP: min ½vᵀQv − cᵀv over lo ≤ v ≤ hi by enumerating
+    /// every assignment of each level to free, lo or hi (3ⁿ), solving the free block by Gaussian
+    /// elimination, keeping the feasible ones and the least cost.
+    fn reference_box_qp(q: &[Vec<f64>], c: &[f64], lo: f64, hi: f64) -> (Vec<f64>, f64) {
+        let n = c.len();
+        let cost = |v: &[f64]| {
+            let mut j = 0.0;
+            for i in 0..n {
+                j -= c[i] * v[i];
+                for k in 0..n {
+                    j += 0.5 * v[i] * q[i][k] * v[k];
+                }
+            }
+            j
+        };
+        let mut best: Option<(Vec<f64>, f64)> = None;
+        for code in 0..3usize.pow(n as u32) {
+            let kind: Vec<usize> = (0..n).map(|i| code / 3usize.pow(i as u32) % 3).collect();
+            let mut v: Vec<f64> = kind.iter().map(|&k| if k == 1 { lo } else { hi }).collect();
+            let free: Vec<usize> = (0..n).filter(|&i| kind[i] == 0).collect();
+            let m = free.len();
+            // [Q_FF | c_F − Q_FW v_W], then elimination with partial pivoting.
+            let mut a: Vec<Vec<f64>> = free
+                .iter()
+                .map(|&i| {
+                    let mut row: Vec<f64> = free.iter().map(|&j| q[i][j]).collect();
+                    row.push(c[i] - (0..n).filter(|j| kind[*j] != 0).map(|j| q[i][j] * v[j]).sum::<f64>());
+                    row
+                })
+                .collect();
+            for col in 0..m {
+                let p = (col..m).max_by(|&x, &y| a[x][col].abs().total_cmp(&a[y][col].abs())).unwrap();
+                a.swap(col, p);
+                for r in 0..m {
+                    if r != col {
+                        let f = a[r][col] / a[col][col];
+                        for k in col..=m {
+                            a[r][k] -= f * a[col][k];
+                        }
+                    }
+                }
+            }
+            for (r, &i) in free.iter().enumerate() {
+                v[i] = a[r][m] / a[r][r];
+            }
+            if free.iter().all(|&i| v[i] >= lo - 1e-12 && v[i] <= hi + 1e-12) {
+                let j = cost(&v);
+                if best.as_ref().is_none_or(|(_, b)| j < *b) {
+                    best = Some((v, j));
+                }
+            }
+        }
+        best.unwrap()
+    }
+
+    #[test]
+    fn box_qp_finds_the_optimum_of_every_active_set() {
+        // Random symmetric positive definite Q = AᵀA + εI, n = 1 … 5, with c scaled so that
+        // anything from no bound to every bound is active (a small LCG: no host RNG needed).
+        let mut seed = 0x2545_f491u32;
+        let mut rnd = move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f64 / (1u32 << 24) as f64 * 2.0 - 1.0
+        };
+        let mut active_seen = [false; MAX_NU + 1];
+        for case in 0..3000 {
+            let n = 1 + case % MAX_NU;
+            let a: Vec<Vec<f64>> = (0..n).map(|_| (0..n).map(|_| rnd()).collect()).collect();
+            let q: Vec<Vec<f64>> = (0..n)
+                .map(|i| {
+                    (0..n)
+                        .map(|j| (0..n).map(|k| a[k][i] * a[k][j]).sum::<f64>() + if i == j { 0.05 } else { 0.0 })
+                        .collect()
+                })
+                .collect();
+            let scale = 0.2 + 3.0 * (rnd() + 1.0);
+            let c: Vec<f64> = (0..n).map(|_| scale * rnd()).collect();
+            let u_prev = 0.5 * (rnd() + 1.0);
+            let (lo, hi) = (-u_prev, 1.0 - u_prev);
+            // P = Q⁻¹ column by column and the unconstrained minimiser P c, in f64, rounded.
+            let mut pf = [[0.0f32; MAX_NU]; MAX_NU];
+            for k in 0..n {
+                let col = gauss(q.clone(), (0..n).map(|i| if i == k { 1.0 } else { 0.0 }).collect());
+                for i in 0..n {
+                    pf[i][k] = col[i] as f32;
+                }
+            }
+            let unc = gauss(q.clone(), c.clone());
+            let mut uf = [0.0f32; MAX_NU];
+            for i in 0..n {
+                uf[i] = unc[i] as f32;
+            }
+            let (want, want_cost) = reference_box_qp(&q, &c, lo, hi);
+            let v = box_qp(&pf, &uf, n, lo as f32, hi as f32);
+            let vf: Vec<f64> = v[..n].iter().map(|&x| f64::from(x)).collect();
+            assert!(vf.iter().all(|&x| x >= lo - 1e-6 && x <= hi + 1e-6), "case {case}: {vf:?} outside");
+            let cost: f64 =
+                (0..n).map(|i| -c[i] * vf[i] + (0..n).map(|j| 0.5 * vf[i] * q[i][j] * vf[j]).sum::<f64>()).sum();
+            assert!(
+                cost - want_cost <= 1e-4 * (1.0 + want_cost.abs()),
+                "case {case}: cost {cost} against the optimum {want_cost} ({vf:?} vs {want:?})"
+            );
+            let bound = want.iter().filter(|&&x| x == lo || x == hi).count();
+            active_seen[bound] = true;
+        }
+        assert!(active_seen.iter().all(|&s| s), "every number of active bounds was exercised: {active_seen:?}");
+    }
+
+    /// Runs the staged law on `m` through a history `ys` (oldest first, u held at `u0`); its
+    /// last Δu and the state.
+    fn staged_du(m: &Model, cfg: &GpcConfig, ys: &[f32], u0: f32, w: f32) -> (f32, GpcState) {
+        let mut s = GpcState::new(u0);
+        let mut st = GpcStaged::NEW;
+        let mut du = 0.0;
+        for (t, y) in ys.iter().enumerate() {
+            if t > 0 {
+                s.track(u0);
+            }
+            s.push_y(*y, m).unwrap();
+            du = st.update(&s, m, cfg, w).unwrap();
+        }
+        (du, s)
+    }
+
+    #[test]
+    fn staged_law_solves_the_constrained_cost() {
+        // The H-TER I start model's shape. A pull-down from 12 °C to 4 °C at duty 0.3 (the
+        // unconstrained levels ask for more than full cooling), a warm-up at duty 0.9 with the
+        // load far below the setpoint (less than none), a load just above the setpoint (no
+        // bound active), and a load at 5 °C falling 0.1 °C a sample toward 3 °C at duty 0.3.
+        let m = Model::new(&[-1.749_27, 0.751_376], &[-0.027_079_1, -0.029_865], &[], 5).unwrap();
+        let hist = |y0: f32, slope: f32| (0..14).map(|t| y0 + slope * t as f32).collect::<Vec<_>>();
+        let cases = [
+            (hist(12.0, 0.0), 0.3, 4.0),
+            (hist(3.0, -0.01), 0.9, 6.0),
+            (hist(4.2, -0.005), 0.5, 4.0),
+            (hist(5.0, -0.1), 0.3, 3.0),
+            (hist(4.0, 0.05), 0.95, 4.0),
+        ];
+        let mut clipped_differs = false;
+        let mut constrained = 0;
+        for cfg in [GpcConfig::DEFAULT, GpcConfig { nu: 5, lambda: 0.1, ..GpcConfig::DEFAULT }] {
+            for (ys, u0, w) in &cases {
+                let (du, s) = staged_du(&m, &cfg, ys, *u0, *w);
+                let (want, inside) = reference_constrained_du(&s, &m, &cfg, *w);
+                constrained += usize::from(!inside);
+                assert!(
+                    (f64::from(du) - want).abs() < 1e-3,
+                    "Δu {du} against the reference {want} ({u0}, {w}, inside {inside}, {cfg:?})"
+                );
+                // The unconstrained design, clipped, is what the law did before.
+                let free = s.design(&m, &cfg, *w).unwrap().du;
+                clipped_differs |= ((u0 + free).clamp(0.0, 1.0) - (u0 + du)).abs() > 0.01;
+            }
+        }
+        assert!(constrained >= 4, "the limits were at work in {constrained} cases");
+        assert!(clipped_differs, "some case has a constrained move unlike the clipped one");
     }
 
     /// The staged law's Δu, its free response's tail folded into the gain row
@@ -1105,26 +1580,46 @@ mod tests {
                 let mut s = GpcState::new(0.4);
                 let mut staged = GpcStaged::NEW;
                 let mut checked = 0;
+                let mut unconstrained = 0;
                 for t in 0..40 {
                     let y = 4.0 + 0.3 * libm::sinf(0.37 * t as f32) + 0.02 * (t % 3) as f32;
                     s.push_y(y, m).unwrap();
+                    // (After `MAX_SKIPS` constrained samples in a row the next one clips.)
+                    let clips = staged.skipped >= MAX_SKIPS;
                     let du = staged.update(&s, m, cfg, 4.0).unwrap();
-                    if t >= 8 {
+                    // (The first design is in use from sample 4 + Nu.)
+                    if t >= 4 + cfg.nu {
                         // Both f32 paths are within 2.2e-4 of the f64 design here (the H-TER model's
                         // pole at 0.9986 makes the gain row's rounding the larger part).
                         let r = reference_du(&s, m, cfg, 4.0);
                         let tol = 4e-4 * r.abs().max(1.0);
                         let want = textbook_design(&s, m, cfg, 4.0).3;
                         assert!((f64::from(want) - r).abs() <= tol, "t {t}: whole design {want} against {r}");
+                        // Where the f64 plan's levels stay within [0, 1], the same increment;
+                        // where not, the f64 levels' box QP (`staged_law_solves_the_constrained_cost`).
+                        let (mut rc, inside) = reference_constrained_du(&s, m, cfg, 4.0);
+                        if clips && !inside {
+                            let u = f64::from(s.u_prev());
+                            rc = r.clamp(-u, 1.0 - u);
+                        }
+                        if inside {
+                            assert!((rc - r).abs() <= 1e-9 * r.abs().max(1.0), "{rc} against {r}");
+                            unconstrained += 1;
+                        }
+                        // (The levels' problem goes through P = Q⁻¹, Z's prefix sums: its f32
+                        // rounding is about four times the plain design's on this model.)
+                        let tol = if inside { tol } else { 4.0 * tol };
                         assert!(
-                            (f64::from(du) - r).abs() <= tol,
-                            "t {t}: staged Δu {du} against {r} (whole design {want}), {m:?} {cfg:?}"
+                            (f64::from(du) - rc).abs() <= tol,
+                            "t {t}: staged Δu {du} against {rc} (inside {inside}; whole design {want}), {m:?} {cfg:?}"
                         );
                         checked += 1;
                     }
                     s.track((0.4 + 0.3 * du).clamp(0.0, 1.0));
                 }
-                assert!(checked > 0 && staged.split != 0, "{m:?} {cfg:?}");
+                assert!(checked > 0 && staged.bank[staged.cur].tail_ok, "{m:?} {cfg:?}");
+                // The unconstrained law, at the tight tolerance, is exercised in every case.
+                assert!(unconstrained > 0, "{unconstrained} of {checked} inside, {m:?} {cfg:?}");
             }
         }
     }
