@@ -403,6 +403,7 @@ impl SelfTuning {
     }
 
     /// The configuration.
+    /// The configuration.
     pub fn config(&self) -> &AdaptiveConfig {
         &self.cfg
     }
@@ -892,13 +893,13 @@ mod tests {
             }
             c
         };
-        // Sixteen samples of the same measurements (a new λ reaches the staged GPC's design
-        // within 2·(4 + Nu) = 14); the duties asked, and whether the controller rested and trusted its
-        // estimate throughout.
+        // Twenty samples of the same measurements (a new λ reaches the staged GPC's design
+        // within 2·(3 + 2·Nu) = 18); the duties asked, and whether the controller rested and
+        // trusted its estimate throughout.
         let y0 = r.y;
         let asks = |mut c: SelfTuning| {
             let mut out = std::vec::Vec::new();
-            for k in 0..16 {
+            for k in 0..20 {
                 let input = ControlInput { y_c: y0 + 0.002 * (k % 2) as f32, w_c: W_C };
                 let u = c.update(&input).unwrap();
                 c.track(&input, u.clamp(0.0, 1.0));

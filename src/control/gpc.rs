@@ -253,6 +253,43 @@ impl GpcState {
         (past, probe)
     }
 
+    /// The free response f_1 … f_R into `f` (R = its length) for a model with na ≤ 2, nb ≤ 4
+    /// ([`GpcStaged`]'s), and its last four values f_R, f_{R−1}, f_{R−2}, f_{R−3} (y(t + j) for
+    /// j ≤ 0), with the finiteness probe. [`free_head`](Self::free_head) and
+    /// [`free_tail`] with every row alike: the past increments row j sees,
+    /// Δu(t + j − k − i) for i = 0 … 3 (zero from t on), slide through four registers one
+    /// value a row, and the residuals' share (rows 1 and 2) through two, so every row is the
+    /// same eight products with no comparisons.
+    #[inline(always)]
+    fn free_window(&self, m: &Model, f: &mut [f32]) -> ([f32; 4], f32) {
+        let at = m.atilde();
+        let (b, c, e) = (m.b(), m.c(), &self.e);
+        let k = m.k().min(MAX_K);
+        // Δu(t − 1 − q) = du[q]; row 1 sees q = k − 2 … k + 1, each row after one less.
+        let du = |q: usize| self.du.get(q).copied().unwrap_or(0.0);
+        let mut win = [du(k.wrapping_sub(2)), du(k - 1), du(k), du(k + 1)];
+        let mut incoming = self.du[..k.saturating_sub(2)].iter().rev();
+        let mut res = [c[0] * e[0] + c[1] * e[1], c[1] * e[0]];
+        let mut past: [f32; 4] = core::array::from_fn(|i| self.y[i]);
+        let mut probe = 0.0f32;
+        for fj in f.iter_mut() {
+            let mut v = 0.0;
+            for (ai, yp) in at[1..4].iter().zip(&past) {
+                v -= ai * yp;
+            }
+            for (bi, ui) in b.iter().zip(&win) {
+                v += bi * ui;
+            }
+            v += res[0];
+            probe += finite_probe(v);
+            shift_in(&mut past, v);
+            shift_in(&mut res, 0.0);
+            shift_in(&mut win, incoming.next().copied().unwrap_or(0.0));
+            *fj = v;
+        }
+        (past, probe)
+    }
+
     /// The GPC increment Δu(t) for setpoint `w`, after [`push_y`](Self::push_y).
     ///
     /// Runs every sample of the self-tuning controller (the model changes every sample), so it
@@ -322,11 +359,11 @@ impl GpcState {
 /// alone, and they are most of the work. Each sample computes f on the current model and the
 /// levels with the gains in use, and does one stage of the next design on the current model:
 /// stage 0 the step response and its dead time, stage 1 H, stage 2 H's Cholesky factor,
-/// stage 3 Z = H⁻¹, M = D⁻¹Z and P, stages 4 … 3 + Nu the gain row of level i = stage − 4
-/// with its folded tail, the last of which puts the new design in use (a swap of banks, no
-/// copy). A design is thus at most 2·(4 + Nu) samples old (the constrained samples below skip
-/// their stage), against a model that moves over tens of minutes; the sample's work falls from
-/// a whole design to its largest stage (`cargo xtask pil`, BENCHMARKS.md).
+/// Z = H⁻¹, M = D⁻¹Z and P, then two stages a level i: stage 3 + 2i its gain row, stage
+/// 4 + 2i its folded tail; the last puts the new design in use (a swap of banks, no copy).
+/// A design is thus at most 2·(3 + 2·Nu) samples old (the constrained samples below skip their
+/// stage), against a model that moves over tens of minutes; the sample's work falls from a
+/// whole design to its largest stage (`cargo xtask pil`, BENCHMARKS.md).
 ///
 /// **Level gains.** The unconstrained plan is Δũ = Z Gᵀ(w − f), and its levels relative to
 /// u(t−1) are v = D⁻¹Δũ = M Gᵀ(w − f), M = D⁻¹Z (D⁻¹ the lower triangle of ones: M's row i
@@ -338,12 +375,13 @@ impl GpcState {
 /// **Folded tail.** Past increments and residuals enter f only up to j < k + nb (and j ≤ nc,
 /// `head_end`); beyond, f runs alone on Ã, so level i's share of it,
 /// Σ_{j ≥ split} L_i[j] (w − f_j), is −T_i·(ŷ − w) for a fixed combination T_i of the three
-/// values the tail starts from ([`tail_weights`] with the weights L_i[j]). Each sample
-/// computes the head f_1 … f_{k+3} (the longest head of the small models, `fold_split`) and
-/// v_i = Σ_{head} L_i[j] (w − f_j) − T_i·(ŷ − w): Nu × (head + 3) products
-/// (`staged_increment_with_the_tail_folded_in_is_the_full_designs`); [`design`](Self::design)'s
-/// f holds the head only. A model of another delay than the design's, or beyond na ≤ 2,
-/// nb ≤ 4, runs the whole f and the whole sums instead.
+/// values the tail starts from ([`tail_weights`] with the weights L_i[j]). The head's rows in
+/// the cost are at most the four from the dead time k to k + 3 (the longest head of the small
+/// models, `fold_split`), so the gain row's head and the folded tail make four weights C_i on
+/// the last four values of the head, f_{split−4} … f_{split−1}. Each sample computes the head
+/// f_1 … f_{k+3} ([`GpcState::free_window`]) and v_i = C_i·(f_window − w): Nu × 4 products
+/// (`staged_increment_with_the_tail_folded_in_is_the_full_designs`). A model of another delay
+/// than the design's, or beyond na ≤ 2, nb ≤ 4, runs the whole f and the whole sums instead.
 ///
 /// **Constrained** (issue 15). The Nu future duties are the levels u(t−1) + v_i; the cost is
 /// minimised over them with 0 ≤ u(t−1) + v_i ≤ 1, not solved unconstrained and clipped. In
@@ -356,18 +394,26 @@ impl GpcState {
 /// does its stage: while the limits hold for long (a pull-down) the design still moves on,
 /// at one stage in `MAX_SKIPS + 1` samples. Δu(t) = v_0.
 ///
-/// Until the first design is complete (the first 4 + Nu samples, and after a change of
+/// **Sizes.** Everything runs on [`NQ`] = 3 levels, fixed, so the loops unroll and carry no
+/// bounds checks: a smaller Nu pads H with the identity (its factor, inverse and P are then the
+/// Nu×Nu ones bordered by the identity, exactly, and the padded levels stay 0 inside the box).
+/// A larger Nu (4, 5) runs the same code on [`MAX_NU`] levels, in builds with the library
+/// feature `gpc-any-nu` (the host's); a board's Nu is the profile's 3, and without the feature
+/// a larger one is [`GpcError::NotBuilt`].
+///
+/// Until the first design is complete (the first 3 + 2·Nu samples, and after a change of
 /// horizons) Δu is 0: the law holds the duty it starts from. A stage that fails (a non-finite
 /// or singular design) returns its error for that sample and the cycle starts again; the last
 /// complete design, if any, keeps serving.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GpcStaged {
-    /// g of the cycle under way (stage 0), f of this sample, Δu of this sample (k1 unused).
-    d: GpcDesign,
-    /// H = GᵀG + λI of the cycle under way (stage 1), its Cholesky factor (stage 2), then
-    /// M = D⁻¹Z (stage 3), all of it.
+    /// g of the cycle under way (stage 0).
+    g: [f32; MAX_N2],
+    /// f of this sample (its head only when the tail folds).
+    f: [f32; MAX_N2],
+    /// H = GᵀG + λI of the cycle under way (stage 1), then M = D⁻¹Z (stage 2).
     h: [[f32; MAX_NU]; MAX_NU],
-    /// Dead-time zeros of the step response in `d.g` of the cycle under way.
+    /// Dead-time zeros of the step response in `g` of the cycle under way.
     lead: usize,
     /// The design in use, `bank[cur]`, and the one under way, the other.
     bank: [StagedBank; 2],
@@ -376,7 +422,7 @@ pub struct GpcStaged {
     cfg: GpcConfig,
     /// A design is complete in `bank[cur]`.
     ready: bool,
-    /// Next stage: 0 … 3 + Nu.
+    /// Next stage: 0 … 2 + 2·Nu.
     stage: u8,
     /// Samples in a row that skipped their stage.
     skipped: u8,
@@ -385,13 +431,12 @@ pub struct GpcStaged {
 /// One [`GpcStaged`] design: what the sample's solve reads.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct StagedBank {
-    /// Level i's gain row L_i[j] over j = `start` … N2 (index j − N1; the rows before are +0
-    /// and not stored).
+    /// Level i's gain row L_i[j] over j = N1 … N2 (index j − N1; +0 before `start`).
     l: [[f32; MAX_N2]; MAX_NU],
-    /// Level i's folded tail: Σ_{j ≥ split} L_i[j] (f_j − w) = Σ_k T_i,k (ŷ(t+split−1−k) − w),
-    /// valid when `tail_ok` (the small models, na ≤ 2, nb ≤ 4).
-    t: [[f32; 3]; MAX_NU],
-    /// P = Q⁻¹ = D⁻¹ZD⁻ᵀ (all of it).
+    /// Level i's weights on f_{split−1−r} − w, r = 0 … 3: the gain row's head and the folded
+    /// tail (type docs), valid when `tail_ok` (the small models, na ≤ 2, nb ≤ 4).
+    c: [[f32; 4]; MAX_NU],
+    /// P = Q⁻¹ = D⁻¹ZD⁻ᵀ, bordered by the identity beyond Nu.
     p: [[f32; MAX_NU]; MAX_NU],
     /// The first row that is not an exact zero, where the tail folds, and whether it does.
     start: usize,
@@ -402,7 +447,7 @@ struct StagedBank {
 impl StagedBank {
     const ZERO: StagedBank = StagedBank {
         l: [[0.0; MAX_N2]; MAX_NU],
-        t: [[0.0; 3]; MAX_NU],
+        c: [[0.0; 4]; MAX_NU],
         p: [[0.0; MAX_NU]; MAX_NU],
         start: 0,
         split: 0,
@@ -410,11 +455,15 @@ impl StagedBank {
     };
 }
 
+/// The number of levels [`GpcStaged`] is written for: the board's Nu (`GpcConfig::DEFAULT`).
+pub const NQ: usize = 3;
+
 impl GpcStaged {
     /// No design yet. All zeros, so a board fills it with a memset, not a copy of a
     /// kilobyte constant (the zero tuning is no tuning: the first update starts over).
     pub const NEW: GpcStaged = GpcStaged {
-        d: GpcDesign::ZERO,
+        g: [0.0; MAX_N2],
+        f: [0.0; MAX_N2],
         h: [[0.0; MAX_NU]; MAX_NU],
         lead: 0,
         bank: [StagedBank::ZERO; 2],
@@ -425,12 +474,6 @@ impl GpcStaged {
         skipped: 0,
     };
 
-    /// The arrays of the last sample: g of the cycle under way, f of this sample (its head only
-    /// when the tail was folded in), and Δu (k1 is not used here).
-    pub fn design(&self) -> &GpcDesign {
-        &self.d
-    }
-
     /// Δu(t) for setpoint `w` on model `m`, after [`GpcState::push_y`]; see the type's docs.
     pub fn update(&mut self, st: &GpcState, m: &Model, cfg: &GpcConfig, w: f32) -> Result<f32, GpcError> {
         // (Checked every sample: checking only a changed tuning took 200 B more flash.)
@@ -439,46 +482,72 @@ impl GpcStaged {
             return Err(GpcError::NonFinite);
         }
         // New horizons start over; a new λ (the self-tuner's cautious λ, `adaptive`) enters at
-        // the next normal matrix, and the design follows within 4 + Nu samples.
+        // the next normal matrix, and the design follows within 3 + 2·Nu samples.
         if (cfg.n1, cfg.n2, cfg.nu) != (self.cfg.n1, self.cfg.n2, self.cfg.nu) {
             self.ready = false;
             self.stage = 0;
         }
         self.cfg = *cfg;
-        let n2 = cfg.n2;
-        let small = m.na() <= 2 && m.nb() <= 4;
-        let (tail_ok, split) = (self.bank[self.cur & 1].tail_ok, self.bank[self.cur & 1].split);
-        // The head of f on the current model; its tail through the folded tails when it folds
-        // in here, or run out.
-        let fold = self.ready && tail_ok && small && fold_split(m, n2) == split;
-        let (last, probe, past) = if small {
-            let split = if fold { split } else { head_end::<4>(m, n2) };
-            let (past, mut probe) = st.free_head::<4, 3>(m, split, &mut self.d.f);
-            if !fold {
-                probe += free_tail(&m.atilde(), past, &mut self.d.f[split - 1..n2]);
-            }
-            (if fold { split - 1 } else { n2 }, probe, past)
-        } else {
-            #[cfg(feature = "gpc-any-order")]
-            {
-                let probe = st.free_response::<MAX_NB, { MAX_NA + 1 }>(m, n2, &mut self.d.f);
-                (n2, probe, [0.0; 3])
-            }
-            #[cfg(not(feature = "gpc-any-order"))]
-            return Err(GpcError::NotBuilt);
-        };
-        if probe != 0.0 {
-            return Err(GpcError::NonFinite);
+        if cfg.nu <= NQ {
+            return self.update_n::<NQ>(st, m, w);
         }
-        let qp = self.skipped < MAX_SKIPS;
-        let (du, heavy) =
-            if self.ready { self.solve(cfg.nu, st.u_prev(), w, last, fold.then_some(&past), qp) } else { (0.0, false) };
+        #[cfg(feature = "gpc-any-nu")]
+        {
+            self.update_n::<MAX_NU>(st, m, w)
+        }
+        #[cfg(not(feature = "gpc-any-nu"))]
+        Err(GpcError::NotBuilt)
+    }
+
+    /// [`update`](Self::update) on `N` ≥ Nu levels.
+    #[inline(always)]
+    fn update_n<const N: usize>(&mut self, st: &GpcState, m: &Model, w: f32) -> Result<f32, GpcError> {
+        let (n2, nu) = (self.cfg.n2, self.cfg.nu);
+        let small = m.na() <= 2 && m.nb() <= 4;
+        let bk = &self.bank[self.cur & 1];
+        let mut v = [0.0f32; N];
+        if self.ready {
+            // The head of f on the current model, and the levels through the folded tails when
+            // the tail folds in here, or the whole f and the whole gain rows.
+            let probe = if small && bk.tail_ok && fold_split(m, n2) == bk.split {
+                let (past, probe) = st.free_window(m, &mut self.f[..bk.split - 1]);
+                let d = past.map(|x| x - w);
+                for (vi, ci) in v.iter_mut().zip(&bk.c).take(nu) {
+                    *vi = ci[0] * d[0] + ci[1] * d[1] + ci[2] * d[2] + ci[3] * d[3];
+                }
+                probe
+            } else {
+                let probe = if small {
+                    st.free_window(m, &mut self.f[..n2]).1
+                } else {
+                    #[cfg(feature = "gpc-any-order")]
+                    {
+                        st.free_response::<MAX_NB, { MAX_NA + 1 }>(m, n2, &mut self.f)
+                    }
+                    #[cfg(not(feature = "gpc-any-order"))]
+                    return Err(GpcError::NotBuilt);
+                };
+                let (n1, start) = (self.cfg.n1, bk.start);
+                for (vi, li) in v.iter_mut().zip(&bk.l).take(nu) {
+                    let mut x = 0.0;
+                    for (lj, fj) in li[start - n1..n2 + 1 - n1].iter().zip(&self.f[start - 1..n2]) {
+                        x += lj * (w - fj);
+                    }
+                    *vi = x;
+                }
+                probe
+            };
+            if probe != 0.0 {
+                return Err(GpcError::NonFinite);
+            }
+        }
+        let (du, heavy) = if self.ready { self.constrain::<N>(&v, st.u_prev()) } else { (0.0, false) };
         // A sample whose solve met the limits skips its design stage (type docs).
         if heavy {
             self.skipped += 1;
         } else {
             self.skipped = 0;
-            if let Err(e) = self.advance(m, cfg, small) {
+            if let Err(e) = self.advance::<N>(m, small) {
                 self.stage = 0;
                 return Err(e);
             }
@@ -486,63 +555,42 @@ impl GpcStaged {
         if !du.is_finite() {
             return Err(GpcError::NonFinite);
         }
-        self.d.du = du;
         Ok(du)
     }
 
-    /// Δu(t) of the constrained cost with the design in use (type docs), from f_1 … f_`last`
-    /// and, when the tail folds, the values `past` it starts from; and whether the limits were
-    /// at work (the longer path: the design stage waits).
-    /// Without `qp` a level outside the box is clipped instead (v_0 into the box).
-    fn solve(&self, nu: usize, u_prev: f32, w: f32, last: usize, past: Option<&[f32; 3]>, qp: bool) -> (f32, bool) {
-        let bk = &self.bank[self.cur & 1];
-        let (n1, start) = (self.cfg.n1, bk.start);
-        // The unconstrained levels relative to u(t−1): the gain rows over j = start … last…
+    /// Δu(t) of the constrained cost with the design in use (type docs) from the unconstrained
+    /// levels `v` relative to u(t−1) = `u_prev`, and whether the limits were at work (the
+    /// longer path: the design stage waits). After [`MAX_SKIPS`] such samples in a row a level
+    /// outside the box is clipped instead (v_0 into the box).
+    #[inline(always)]
+    fn constrain<const N: usize>(&self, v: &[f32; N], u_prev: f32) -> (f32, bool) {
         let (lo, hi) = (-u_prev, 1.0 - u_prev);
-        let mut v = [0.0f32; MAX_NU];
-        let mut inside = true;
-        for ((vi, li), ti) in v[..nu].iter_mut().zip(&bk.l).zip(&bk.t) {
-            let mut x = 0.0;
-            if start <= last {
-                for (lj, fj) in li[start - n1..last + 1 - n1].iter().zip(&self.d.f[start - 1..last]) {
-                    x += lj * (w - fj);
-                }
-            }
-            // …and the folded tail's rows.
-            if let Some(past) = past {
-                let mut tail = 0.0;
-                for (ti, p) in ti.iter().zip(past) {
-                    tail += ti * (p - w);
-                }
-                x -= tail;
-            }
-            *vi = x;
-            inside &= x >= lo && x <= hi;
-        }
-        if inside {
+        if v.iter().all(|x| *x >= lo && *x <= hi) {
             return (v[0], false);
         }
-        if !qp {
+        if self.skipped >= MAX_SKIPS {
             // (Not `f32::clamp`: its assertion formats floats, kilobytes of flash.)
             return (v[0].max(lo).min(hi), false);
         }
-        (box_qp(&bk.p, &v, nu, lo, hi)[0], true)
+        (box_qp::<N>(&self.bank[self.cur & 1].p, v, lo, hi)[0], true)
     }
 
-    /// This sample's stage of the next design.
-    fn advance(&mut self, m: &Model, cfg: &GpcConfig, small: bool) -> Result<(), GpcError> {
-        let nu = cfg.nu;
+    /// This sample's stage of the next design, on `N` ≥ Nu levels.
+    #[inline(always)]
+    fn advance<const N: usize>(&mut self, m: &Model, small: bool) -> Result<(), GpcError> {
+        let cfg = self.cfg;
+        let (n1, n2, nu) = (cfg.n1, cfg.n2, cfg.nu);
         // (`& 1`: no bounds check.)
         let next = (self.cur ^ 1) & 1;
         match self.stage {
             0 => {
                 // (`update` has refused a larger model in a build without `gpc-any-order`.)
                 let probe = if small {
-                    step_response::<2, 4>(m, cfg.n2, &mut self.d.g)
+                    step_response::<2, 4>(m, n2, &mut self.g)
                 } else {
                     #[cfg(feature = "gpc-any-order")]
                     {
-                        step_response::<MAX_NA, MAX_NB>(m, cfg.n2, &mut self.d.g)
+                        step_response::<MAX_NA, MAX_NB>(m, n2, &mut self.g)
                     }
                     #[cfg(not(feature = "gpc-any-order"))]
                     return Err(GpcError::NotBuilt);
@@ -550,52 +598,64 @@ impl GpcStaged {
                 if probe != 0.0 {
                     return Err(GpcError::NonFinite);
                 }
-                self.lead = dead_lead(&self.d.g, m.k(), cfg.n2);
-                self.bank[next].split = fold_split(m, cfg.n2);
-                self.bank[next].tail_ok = small;
+                self.lead = dead_lead(&self.g, m.k(), n2);
+                let nb = &mut self.bank[next];
+                nb.split = fold_split(m, n2);
+                nb.tail_ok = small;
+                nb.start = n1.max(self.lead + 1).min(n2 + 1);
             }
             1 => {
-                self.h = normal_matrix(&self.d.g, cfg, self.lead);
+                self.h = normal_matrix(&self.g, &cfg, self.lead);
+                // Bordered by the identity beyond Nu (type docs).
+                for (r, hr) in self.h.iter_mut().enumerate().take(N).skip(nu) {
+                    hr[r] = 1.0;
+                }
             }
             2 => {
-                if !cholesky_in_place(&mut self.h, nu) {
+                if !cholesky_in_place(&mut self.h, N) {
                     return Err(GpcError::Singular);
                 }
-            }
-            3 => {
                 // Z = H⁻¹ column by column (symmetric: its rows are its columns), M = D⁻¹Z
                 // (row i the sum of Z's rows 0 … i: D⁻¹ is lower triangular with ones), and
-                // P = M D⁻ᵀ, M's prefix sums along each row.
+                // P = M D⁻ᵀ, M's prefix sums along each row, bordered by the identity.
                 let mut mz = [[0.0f32; MAX_NU]; MAX_NU];
-                for (i, zi) in mz[..nu].iter_mut().enumerate() {
+                for (i, zi) in mz.iter_mut().enumerate().take(N) {
                     zi[i] = 1.0;
-                    chol_solve_out_of_line(&self.h, nu, zi);
+                    chol_solve(&self.h, N, zi);
                 }
-                let mut acc = [0.0f32; MAX_NU];
-                for (zi, pi) in mz[..nu].iter_mut().zip(&mut self.bank[next].p) {
+                let mut acc = [0.0f32; N];
+                let p = &mut self.bank[next].p;
+                for (i, (zi, pi)) in mz.iter_mut().zip(p.iter_mut()).enumerate().take(N) {
                     let mut s = 0.0;
-                    for ((a, z), pk) in acc.iter_mut().zip(zi.iter_mut()).zip(pi.iter_mut()) {
+                    for (k, ((a, z), pk)) in acc.iter_mut().zip(zi.iter_mut()).zip(pi.iter_mut()).enumerate() {
                         *a += *z;
                         *z = *a;
                         s += *a;
-                        *pk = s;
+                        *pk = if i < nu && k < nu {
+                            s
+                        } else if i == k {
+                            1.0
+                        } else {
+                            0.0
+                        };
                     }
                 }
                 self.h = mz;
             }
             s => {
-                // Level i's gain row and, on this stage's Ã (the tail f runs on), its folded tail.
-                // (`min`: i < Nu ≤ MAX_NU anyway, and no bounds checks below.)
-                let i = usize::from(s - 4).min(MAX_NU - 1);
-                let (n1, n2) = (cfg.n1, cfg.n2);
+                // Level i = (stage − 3) / 2: its gain row, then (on this stage's Ã, the one
+                // the tail f runs on) its folded tail and its four weights.
+                // (`min`: i < Nu ≤ N anyway, and no bounds checks below.)
+                let i = usize::from((s - 3) / 2).min(N - 1);
                 let nb = &mut self.bank[next];
-                let start = level_row(&self.h[i], &self.d.g, &mut nb.l[i], n1, n2, nu, self.lead);
-                nb.start = start;
+                if (s - 3) % 2 == 0 {
+                    gain_row::<N>(&self.h[i], &self.g, &mut nb.l[i], n1, n2, self.lead);
+                    self.stage += 1;
+                    return Ok(());
+                }
                 nb.tail_ok &= small;
-                if small {
-                    let from = nb.split.max(start);
-                    let rows = if from <= n2 { &nb.l[i][from - n1..n2 + 1 - n1] } else { &[] };
-                    nb.t[i] = tail_weights(&m.atilde(), rows, start.saturating_sub(nb.split));
+                if nb.tail_ok {
+                    nb.c[i] = window_weights(&m.atilde(), &nb.l[i], n1, n2, nb.start, nb.split);
                 }
                 if i + 1 < nu {
                     self.stage += 1;
@@ -613,30 +673,27 @@ impl GpcStaged {
     }
 }
 
-/// Level i's gain row L_i[j] = Σ_{c < min(Nu, j)} M[i][c] g_{j−c} (`mi` = M's row i) over
-/// j = N1 … N2 into `l` (index j − N1) from the first row that is not an exact zero on, which
-/// it returns (rows j ≤ lead see only the dead time's zero g's; they are left as they were,
-/// and nothing reads them). [`gain_row`] with
-/// loops that do not unroll: one small copy for every Nu.
-fn level_row(
-    mi: &[f32; MAX_NU],
-    g: &[f32; MAX_N2],
-    l: &mut [f32; MAX_N2],
+/// Level i's four weights on f_{split−1−r} − w, r = 0 … 3 ([`GpcStaged`]'s folded tail), from
+/// its gain row `l` (index j − N1, +0 before `start`): −L_i[split−1−r] where that row is in
+/// the cost, less the folded tail's T_i[r] ([`tail_weights`] over the rows from `split` on).
+#[inline(always)]
+fn window_weights(
+    at: &[f32; MAX_NA + 2],
+    l: &[f32; MAX_N2],
     n1: usize,
     n2: usize,
-    nu: usize,
-    lead: usize,
-) -> usize {
-    let start = n1.max(lead + 1).min(n2 + 1);
-    for j in start..n2 + 1 {
-        let mut x = 0.0;
-        // M[i][0] g_j, M[i][1] g_{j−1}, …
-        for (mc, gv) in mi[..nu.min(j)].iter().zip(g[..j].iter().rev()) {
-            x += mc * gv;
-        }
-        l[j - n1] = x;
-    }
-    start
+    start: usize,
+    split: usize,
+) -> [f32; 4] {
+    let from = split.max(start);
+    let rows = if from <= n2 { &l[from - n1..n2 + 1 - n1] } else { &[] };
+    let t = tail_weights(at, rows, start.saturating_sub(split));
+    core::array::from_fn(|r| {
+        // Row split − 1 − r (≥ 1 or not in the cost), before N2.
+        let j = split.wrapping_sub(1 + r);
+        let head = if j >= start && j <= n2 { l[(j - n1).min(MAX_N2 - 1)] } else { 0.0 };
+        -head - t.get(r).copied().unwrap_or(0.0)
+    })
 }
 
 /// The free response's tail into `f` (f_split … f_N2), from the head's last values `past`:
@@ -699,28 +756,27 @@ fn fold_split(m: &Model, n2: usize) -> usize {
 /// clips instead and does its stage.
 const MAX_SKIPS: u8 = 8;
 
-/// Most iterations of [`box_qp`]: each adds or drops one bound, and with Nu ≤ 5 levels the
-/// optimum is reached in far fewer (the tests enumerate every active set); every iterate is
-/// feasible, so running out returns a feasible, if not optimal, plan.
-const BOX_QP_ITERS: usize = 2 * MAX_NU;
-
-/// min ½vᵀQv − cᵀv over lo ≤ v_i ≤ hi (i < n), Q symmetric positive definite, given P = Q⁻¹
+/// min ½vᵀQv − cᵀv over lo ≤ v_i ≤ hi (i < N), Q symmetric positive definite, given P = Q⁻¹
 /// and the unconstrained minimiser `unc` = P c, by the primal active-set method (Nocedal &
 /// Wright, *Numerical Optimization*, 2nd ed., Alg. 16.3) from `unc` clamped into the box, with
 /// the bounds it touches as the first working set W.
 ///
 /// The equality-constrained problem of W (v_W = t_W) is solved through P: its minimiser is
 /// y = P(c + E_W μ) = unc + P_{:W} μ with P_WW μ = t_W − unc_W, and μ = (Qy − c)_W is then the
-/// gradient on the held bounds, their multipliers: a |W|×|W| Cholesky factor an iteration, no
-/// n×n one. Each iteration either steps to y, or stops at the first bound in the way and holds
-/// it; at y it drops the held bound whose multiplier has the wrong sign (μ > 0 at hi: the cost
-/// falls below it; μ < 0 at lo), the worst first, or stops.
+/// gradient on the held bounds, their multipliers. P_WW is factored bordered by the identity
+/// (rows and columns of the free levels replaced by those of I, right-hand side 0 there): an
+/// N×N Cholesky factor of fixed size, which unrolls, whose free entries come out exact zeros.
+/// Each iteration either steps to y, or stops at the first bound in the way and holds it; at y
+/// it drops the held bound whose multiplier has the wrong sign (μ > 0 at hi: the cost falls
+/// below it; μ < 0 at lo), the worst first, or stops. Each iteration adds or drops a bound,
+/// and with N ≤ 5 levels the optimum is reached in far fewer than 2N (the tests enumerate
+/// every active set); every iterate is feasible, so running out returns a feasible, if not
+/// optimal, plan.
 #[inline(never)]
-fn box_qp(p: &[[f32; MAX_NU]; MAX_NU], unc: &[f32; MAX_NU], n: usize, lo: f32, hi: f32) -> [f32; MAX_NU] {
-    let n = n.min(MAX_NU);
+fn box_qp<const N: usize>(p: &[[f32; MAX_NU]; MAX_NU], unc: &[f32; N], lo: f32, hi: f32) -> [f32; N] {
     let mut v = *unc;
-    let mut held = [false; MAX_NU];
-    for (vi, h) in v[..n].iter_mut().zip(&mut held) {
+    let mut held = [false; N];
+    for (vi, h) in v.iter_mut().zip(&mut held) {
         if *vi > hi {
             *vi = hi;
             *h = true;
@@ -729,40 +785,41 @@ fn box_qp(p: &[[f32; MAX_NU]; MAX_NU], unc: &[f32; MAX_NU], n: usize, lo: f32, h
             *h = true;
         }
     }
-    for _ in 0..BOX_QP_ITERS {
-        // The held levels, P_WW and t_W − unc_W.
-        let mut w = [0usize; MAX_NU];
-        let mut m = 0;
-        for (i, &h) in held[..n].iter().enumerate() {
-            if h {
-                w[m] = i;
-                m += 1;
-            }
-        }
+    for _ in 0..2 * N {
+        // P_WW bordered by I, and t_W − unc_W (0 on the free levels).
         let mut a = [[0.0f32; MAX_NU]; MAX_NU];
         let mut mu = [0.0f32; MAX_NU];
-        for r in 0..m {
-            mu[r] = v[w[r]] - unc[w[r]];
-            for s in 0..=r {
-                a[r][s] = p[w[r]][w[s]];
+        for r in 0..N {
+            if held[r] {
+                mu[r] = v[r] - unc[r];
+                for s in 0..r {
+                    if held[s] {
+                        a[r][s] = p[r][s];
+                    }
+                }
+                a[r][r] = p[r][r];
+            } else {
+                a[r][r] = 1.0;
             }
         }
-        if !cholesky_in_place(&mut a, m) {
+        if !cholesky_in_place(&mut a, N) {
             return v;
         }
-        chol_solve_out_of_line(&a, m, &mut mu);
+        chol_solve(&a, N, &mut mu);
         let mut y = *unc;
-        for (yi, pi) in y[..n].iter_mut().zip(p) {
-            for r in 0..m {
-                *yi += pi[w[r]] * mu[r];
+        for (yi, pi) in y.iter_mut().zip(p) {
+            for (pk, mk) in pi.iter().zip(&mu).take(N) {
+                *yi += pk * mk;
             }
         }
-        for r in 0..m {
-            y[w[r]] = v[w[r]];
+        for ((yi, vi), h) in y.iter_mut().zip(&v).zip(&held) {
+            if *h {
+                *yi = *vi;
+            }
         }
         // The longest step toward y that stays in the box, and the level that stops it.
-        let (mut alpha, mut block) = (1.0f32, n);
-        for (i, (yi, vi)) in y[..n].iter().zip(&v).enumerate() {
+        let (mut alpha, mut block) = (1.0f32, N);
+        for (i, (yi, vi)) in y.iter().zip(&v).enumerate() {
             let to = if *yi > hi {
                 hi
             } else if *yi < lo {
@@ -775,8 +832,8 @@ fn box_qp(p: &[[f32; MAX_NU]; MAX_NU], unc: &[f32; MAX_NU], n: usize, lo: f32, h
                 (alpha, block) = (t, i);
             }
         }
-        if block < n {
-            for (vi, yi) in v[..n].iter_mut().zip(&y) {
+        if block < N {
+            for (vi, yi) in v.iter_mut().zip(&y) {
                 *vi += alpha * (yi - *vi);
             }
             v[block] = if y[block] > hi { hi } else { lo };
@@ -785,25 +842,19 @@ fn box_qp(p: &[[f32; MAX_NU]; MAX_NU], unc: &[f32; MAX_NU], n: usize, lo: f32, h
         }
         v = y;
         // Release the held bound whose multiplier has the worst wrong sign, or stop.
-        let (mut worst, mut drop) = (0.0f32, n);
-        for r in 0..m {
-            let wrong = if v[w[r]] == hi { mu[r] } else { -mu[r] };
-            if wrong > worst {
-                (worst, drop) = (wrong, w[r]);
+        let (mut worst, mut drop) = (0.0f32, N);
+        for (i, ((vi, m), h)) in v.iter().zip(&mu).zip(&held).enumerate() {
+            let wrong = if *vi == hi { *m } else { -*m };
+            if *h && wrong > worst {
+                (worst, drop) = (wrong, i);
             }
         }
-        if drop == n {
+        if drop == N {
             return v;
         }
         held[drop] = false;
     }
     v
-}
-
-/// [`chol_solve`], not inlined (the constrained solve's iterations call it).
-#[inline(never)]
-fn chol_solve_out_of_line(l: &[[f32; MAX_NU]; MAX_NU], n: usize, b: &mut [f32; MAX_NU]) {
-    chol_solve(l, n, b);
 }
 
 /// The number of exact zeros g_1 … g_lead that open the step response (the dead time).
@@ -995,6 +1046,8 @@ fn increment(d: &GpcDesign, n1: usize, n2: usize, start: usize, w: f32) -> f32 {
 
 /// Lower Cholesky factor of the leading n×n block, computed in place over the lower triangle
 /// of `h` (each entry is read before it is overwritten); false if not positive definite.
+/// Inlined: with a constant n ([`GpcStaged`]'s stages and [`box_qp`]) it unrolls.
+#[inline(always)]
 fn cholesky_in_place(h: &mut [[f32; MAX_NU]; MAX_NU], n: usize) -> bool {
     for i in 0..n {
         for j in 0..=i {
@@ -1489,7 +1542,20 @@ mod tests {
                 uf[i] = unc[i] as f32;
             }
             let (want, want_cost) = reference_box_qp(&q, &c, lo, hi);
-            let v = box_qp(&pf, &uf, n, lo as f32, hi as f32);
+            // Bordered by the identity beyond n, as `GpcStaged` pads P: on NQ levels where
+            // n ≤ NQ (the board's), else on MAX_NU.
+            for (i, pi) in pf.iter_mut().enumerate().skip(n) {
+                pi[i] = 1.0;
+            }
+            let v: Vec<f32> = if n <= NQ {
+                let mut u = [0.0f32; NQ];
+                u.copy_from_slice(&uf[..NQ]);
+                let v = box_qp::<NQ>(&pf, &u, lo as f32, hi as f32);
+                assert!(v[n..].iter().all(|&x| x == 0.0), "case {case}: padded levels {v:?}");
+                v.to_vec()
+            } else {
+                box_qp::<MAX_NU>(&pf, &uf, lo as f32, hi as f32).to_vec()
+            };
             let vf: Vec<f64> = v[..n].iter().map(|&x| f64::from(x)).collect();
             assert!(vf.iter().all(|&x| x >= lo - 1e-6 && x <= hi + 1e-6), "case {case}: {vf:?} outside");
             let cost: f64 =
@@ -1587,8 +1653,8 @@ mod tests {
                     // (After `MAX_SKIPS` constrained samples in a row the next one clips.)
                     let clips = staged.skipped >= MAX_SKIPS;
                     let du = staged.update(&s, m, cfg, 4.0).unwrap();
-                    // (The first design is in use from sample 4 + Nu.)
-                    if t >= 4 + cfg.nu {
+                    // (The first design is in use from sample 3 + 2·Nu.)
+                    if t >= 3 + 2 * cfg.nu {
                         // Both f32 paths are within 2.2e-4 of the f64 design here (the H-TER model's
                         // pole at 0.9986 makes the gain row's rounding the larger part).
                         let r = reference_du(&s, m, cfg, 4.0);
