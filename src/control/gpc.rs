@@ -401,8 +401,10 @@ impl GpcState {
 /// feature `gpc-any-nu` (the host's); a board's Nu is the profile's 3, and without the feature
 /// a larger one is [`GpcError::NotBuilt`].
 ///
-/// Until the first design is complete (the first 3 + 2·Nu samples, and after a change of
-/// horizons) Δu is 0: the law holds the duty it starts from. A stage that fails (a non-finite
+/// Until the first design is complete Δu is 0: the law holds the duty it starts from. Those
+/// samples have no levels to solve and do two stages each, so the first design is in use from
+/// sample ⌈(3 + 2·Nu)/2⌉ (5 at Nu = 3, as when a design was five stages), and after a change
+/// of horizons. A stage that fails (a non-finite
 /// or singular design) returns its error for that sample and the cycle starts again; the last
 /// complete design, if any, keeps serving.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -482,7 +484,7 @@ impl GpcStaged {
             return Err(GpcError::NonFinite);
         }
         // New horizons start over; a new λ (the self-tuner's cautious λ, `adaptive`) enters at
-        // the next normal matrix, and the design follows within 3 + 2·Nu samples.
+        // the next normal matrix, and the design follows within 2·(3 + 2·Nu) samples.
         if (cfg.n1, cfg.n2, cfg.nu) != (self.cfg.n1, self.cfg.n2, self.cfg.nu) {
             self.ready = false;
             self.stage = 0;
@@ -542,12 +544,18 @@ impl GpcStaged {
             }
         }
         let (du, heavy) = if self.ready { self.constrain::<N>(&v, st.u_prev()) } else { (0.0, false) };
-        // A sample whose solve met the limits skips its design stage (type docs).
+        // A sample whose solve met the limits skips its design stage (type docs). Until the
+        // first design is complete a sample has no solve, and does two.
         if heavy {
             self.skipped += 1;
         } else {
             self.skipped = 0;
-            if let Err(e) = self.advance::<N>(m, small) {
+            let first = !self.ready;
+            let mut r = self.advance::<N>(m, small);
+            if first && !self.ready && r.is_ok() {
+                r = self.advance::<N>(m, small);
+            }
+            if let Err(e) = r {
                 self.stage = 0;
                 return Err(e);
             }
@@ -1593,7 +1601,9 @@ mod tests {
         // load far below the setpoint (less than none), a load just above the setpoint (no
         // bound active), and a load at 5 °C falling 0.1 °C a sample toward 3 °C at duty 0.3.
         let m = Model::new(&[-1.749_27, 0.751_376], &[-0.027_079_1, -0.029_865], &[], 5).unwrap();
-        let hist = |y0: f32, slope: f32| (0..14).map(|t| y0 + slope * t as f32).collect::<Vec<_>>();
+        // (Twelve samples: the first design is in use from sample Nu + 2, and the ninth
+        // constrained sample in a row would clip instead.)
+        let hist = |y0: f32, slope: f32| (0..12).map(|t| y0 + slope * t as f32).collect::<Vec<_>>();
         let cases = [
             (hist(12.0, 0.0), 0.3, 4.0),
             (hist(3.0, -0.01), 0.9, 6.0),
@@ -1603,7 +1613,14 @@ mod tests {
         ];
         let mut clipped_differs = false;
         let mut constrained = 0;
-        for cfg in [GpcConfig::DEFAULT, GpcConfig { nu: 5, lambda: 0.1, ..GpcConfig::DEFAULT }] {
+        // Nu 1 and 2 run on three levels bordered by the identity, 5 on five.
+        let cfgs = [
+            GpcConfig::DEFAULT,
+            GpcConfig { nu: 2, ..GpcConfig::DEFAULT },
+            GpcConfig { nu: 1, lambda: 1.0, ..GpcConfig::DEFAULT },
+            GpcConfig { nu: 5, lambda: 0.1, ..GpcConfig::DEFAULT },
+        ];
+        for cfg in cfgs {
             for (ys, u0, w) in &cases {
                 let (du, s) = staged_du(&m, &cfg, ys, *u0, *w);
                 let (want, inside) = reference_constrained_du(&s, &m, &cfg, *w);
@@ -1653,8 +1670,8 @@ mod tests {
                     // (After `MAX_SKIPS` constrained samples in a row the next one clips.)
                     let clips = staged.skipped >= MAX_SKIPS;
                     let du = staged.update(&s, m, cfg, 4.0).unwrap();
-                    // (The first design is in use from sample 3 + 2·Nu.)
-                    if t >= 3 + 2 * cfg.nu {
+                    // (The first design is in use from sample ⌈(3 + 2·Nu)/2⌉.)
+                    if t >= 2 + cfg.nu {
                         // Both f32 paths are within 2.2e-4 of the f64 design here (the H-TER model's
                         // pole at 0.9986 makes the gain row's rounding the larger part).
                         let r = reference_du(&s, m, cfg, 4.0);
