@@ -403,7 +403,6 @@ impl SelfTuning {
     }
 
     /// The configuration.
-    /// The configuration.
     pub fn config(&self) -> &AdaptiveConfig {
         &self.cfg
     }
@@ -893,13 +892,13 @@ mod tests {
             }
             c
         };
-        // Twenty samples of the same measurements (a new λ reaches the staged GPC's design
-        // within 2·(3 + 2·Nu) = 18); the duties asked, and whether the controller rested and
-        // trusted its estimate throughout.
+        // Sixteen samples of the same measurements (a new λ reaches the staged GPC's design
+        // within eight); the duties asked, and whether the controller rested and trusted its
+        // estimate throughout.
         let y0 = r.y;
         let asks = |mut c: SelfTuning| {
             let mut out = std::vec::Vec::new();
-            for k in 0..20 {
+            for k in 0..16 {
                 let input = ControlInput { y_c: y0 + 0.002 * (k % 2) as f32, w_c: W_C };
                 let u = c.update(&input).unwrap();
                 c.track(&input, u.clamp(0.0, 1.0));
