@@ -892,13 +892,13 @@ mod tests {
             }
             c
         };
-        // Eight samples of the same measurements (a new λ reaches the staged GPC's gain row
-        // within four); the duties asked, and whether the controller rested and trusted its
+        // Sixteen samples of the same measurements (a new λ reaches the staged GPC's design
+        // within eight); the duties asked, and whether the controller rested and trusted its
         // estimate throughout.
         let y0 = r.y;
         let asks = |mut c: SelfTuning| {
             let mut out = std::vec::Vec::new();
-            for k in 0..8 {
+            for k in 0..16 {
                 let input = ControlInput { y_c: y0 + 0.002 * (k % 2) as f32, w_c: W_C };
                 let u = c.update(&input).unwrap();
                 c.track(&input, u.clamp(0.0, 1.0));
@@ -912,7 +912,10 @@ mod tests {
         let mut awake = trusting.clone();
         awake.rest_n = 0;
         let own = asks(awake.clone());
-        assert!(own.iter().all(|&(_, rest, mode)| !rest && mode == AdaptiveMode::Adaptive), "{own:?}");
+        // (The first awake update may find the estimate of this noise-driven history implausible
+        // and hold the start model's for that sample: Frozen, cautious; then it is trusted.)
+        assert!(own.iter().all(|&(_, rest, _)| !rest), "{own:?}");
+        assert!(own[1..].iter().all(|&(_, _, mode)| mode == AdaptiveMode::Adaptive), "{own:?}");
         assert_ne!(own, asks(cautious(&awake)));
         // A load pushed 0.25 °C off stays at rest (within the exit band); 0.35 °C ends it.
         r.run(&mut c, W_C, 0.25 - (r.y - W_C));
