@@ -369,19 +369,19 @@ impl GpcState {
 ///
 /// **Level gains.** The unconstrained plan is Δũ = Z Gᵀ(w − f), and its levels relative to
 /// u(t−1) are v = D⁻¹Δũ = M Gᵀ(w − f), M = D⁻¹Z (D⁻¹ the lower triangle of ones: M's row i
-/// is the sum of Z's rows 0 … i). So level i is a gain row L_i[j] = Σ_c M[i][c] g_{j−c} over
+/// is the sum of Z's rows 0 … i). So level i is a gain row `L_i[j]` = Σ_c `M[i][c]` g_{j−c} over
 /// the rows j = N1 … N2, as the unconstrained law's Δu(t) is the gain row of Z's first row
 /// (level 0 is exactly that), and the sums over c cancel on the model's numbers only, once a
 /// design, not on the data every sample.
 ///
 /// **Folded tail.** Past increments and residuals enter f only up to j < k + nb (and j ≤ nc,
 /// `head_end`); beyond, f runs alone on Ã, so level i's share of it,
-/// Σ_{j ≥ split} L_i[j] (w − f_j), is −T_i·(ŷ − w) for a fixed combination T_i of the three
-/// values the tail starts from ([`fold_weights`] with the weights L_i[j]). The head's rows in
+/// Σ_{j ≥ split} `L_i[j]` (w − f_j), is −T_i·(ŷ − w) for a fixed combination T_i of the three
+/// values the tail starts from (`fold_weights` with the weights `L_i[j]`). The head's rows in
 /// the cost are at most the four from the dead time k to k + 3 (the longest head of the small
 /// models, `fold_split`), so the gain row's head and the folded tail make four weights C_i on
 /// the last four values of the head, f_{split−4} … f_{split−1}. Each sample computes the head
-/// f_1 … f_{k+3} ([`GpcState::free_window`]) and v_i = C_i·(f_window − w): Nu × 4 products
+/// f_1 … f_{k+3} (`GpcState::free_window`) and v_i = C_i·(f_window − w): Nu × 4 products
 /// (`staged_increment_with_the_tail_folded_in_is_the_full_designs`). A model of another delay
 /// than the design's, or beyond na ≤ 2, nb ≤ 4, runs the whole f and the whole sums instead.
 ///
@@ -389,10 +389,10 @@ impl GpcState {
 /// minimised over them with 0 ≤ u(t−1) + v_i ≤ 1, not solved unconstrained and clipped. In
 /// v, Δũ = D v with D lower bidiagonal (1, −1), so the cost ½ΔũᵀHΔũ − bᵀΔũ (b = Gᵀ(w − f))
 /// is ½vᵀQv − (Dᵀb)ᵀv with Q = DᵀHD, whose unconstrained minimiser is the v above. It is kept
-/// when every level is within the box, which is most samples; otherwise [`box_qp`] solves the
+/// when every level is within the box, which is most samples; otherwise `box_qp` solves the
 /// levels' problem from it through P = Q⁻¹ = D⁻¹ZD⁻ᵀ (M's prefix sums along its rows), and
 /// that sample skips its design stage, so that no sample does both (`cargo xtask pil`).
-/// After [`MAX_SKIPS`] such samples in a row the next one clips v_0 into the box instead and
+/// After `MAX_SKIPS` such samples in a row the next one clips v_0 into the box instead and
 /// does its stage: while the limits hold for long (a pull-down) the design still moves on,
 /// at one stage in `MAX_SKIPS + 1` samples. Δu(t) = v_0.
 ///
