@@ -239,19 +239,14 @@ pub fn summarize(
         faults_missed_with_detector,
         faults_by_kind: by_kind,
         spurious_missions: reports.iter().filter(|r| !r.spurious.is_empty()).count() as u64,
-        spurious_by_kind: reports.iter().flat_map(|r| r.spurious.iter()).fold(BTreeMap::new(), |mut m, (k, _)| {
-            *m.entry(k.name().to_string()).or_insert(0) += 1;
-            m
-        }),
+        spurious_by_kind: tally(reports.iter().flat_map(|r| r.spurious.iter().map(|(k, _)| k.name().to_string()))),
         misreported_missions: reports.iter().filter(|r| !r.misreported.is_empty()).count() as u64,
-        misreported_by_kind: reports
-            .iter()
-            .filter_map(|r| r.fault.map(|(f, _, _)| (f, &r.misreported)))
-            .flat_map(|(f, list)| list.iter().map(move |(k, _)| format!("{} → {}", f.name(), k.name())))
-            .fold(BTreeMap::new(), |mut m, key| {
-                *m.entry(key).or_insert(0) += 1;
-                m
-            }),
+        misreported_by_kind: tally(
+            reports
+                .iter()
+                .filter_map(|r| r.fault.map(|(f, _, _)| (f, &r.misreported)))
+                .flat_map(|(f, list)| list.iter().map(move |(k, _)| format!("{} → {}", f.name(), k.name()))),
+        ),
         spikes_injected: reports.iter().filter(|r| r.spikes.is_some()).count() as u64,
         spikes_reported: reports.iter().filter(|r| matches!(r.spikes, Some((_, Some(_))))).count() as u64,
         worst_min_c: reports.iter().map(|r| r.min_c).fold(f64::INFINITY, f64::min),
@@ -267,6 +262,14 @@ pub fn summarize(
         failure_details: details,
         wall_s,
     }
+}
+
+/// How many times each key occurs.
+fn tally(keys: impl Iterator<Item = String>) -> BTreeMap<String, u64> {
+    keys.fold(BTreeMap::new(), |mut m, key| {
+        *m.entry(key).or_insert(0) += 1;
+        m
+    })
 }
 
 /// `hter campaign`.

@@ -433,8 +433,8 @@ pub struct GpcStaged {
 /// One [`GpcStaged`] design: what the sample's solve reads.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct StagedBank {
-    /// The levels' gain rows L_i[j] over j = N1 … N2 (`l[j − N1][i]`; +0 before `start`, and
-    /// on the levels beyond Nu).
+    /// The levels' gain rows L_i[j] over j = N1 … N2 (`l[j − N1][i]`; +0 on the levels beyond
+    /// Nu; the rows before `start` are never read, and may hold an earlier design's).
     l: [[f32; MAX_NU]; MAX_N2],
     /// Level i's weights on f_{split−1−r} − w, r = 0 … 3: the gain row's head and the folded
     /// tail (type docs), valid when `tail_ok` (the small models, na ≤ 2, nb ≤ 4).
@@ -644,7 +644,8 @@ impl GpcStaged {
                     }
                 }
                 // Every level's gain row.
-                level_rows::<N>(&mz, &self.g, &mut self.bank[next].l, n1, n2, self.lead);
+                let nb = &mut self.bank[next];
+                level_rows::<N>(&mz, &self.g, &mut nb.l, n1, n2, nb.start);
             }
             _ => {
                 // Every level's folded tail (on this stage's Ã, the one the tail f runs on) and
@@ -666,7 +667,7 @@ impl GpcStaged {
 }
 
 /// Every level's gain row L_i[j] = Σ_{c<N} M[i][c] g_{j−c} (g_{≤0} = 0) over j = `start` … N2
-/// into `l` (row j − N1; the rows before are left as they were, +0), in one pass over the rows:
+/// into `l` (row j − N1; the rows before are left as they were: nothing reads them), in one pass over the rows:
 /// the last N g's slide through registers, each a row's N² products.
 #[inline(always)]
 fn level_rows<const N: usize>(
@@ -675,9 +676,8 @@ fn level_rows<const N: usize>(
     l: &mut [[f32; MAX_NU]; MAX_N2],
     n1: usize,
     n2: usize,
-    lead: usize,
+    start: usize,
 ) {
-    let start = n1.max(lead + 1).min(n2 + 1);
     // g_{start−1}, g_{start−2}, … (zero for an index ≤ 0), then each row shifts its own in.
     let mut win = [0.0f32; N];
     for (c, wc) in win.iter_mut().enumerate() {
@@ -698,7 +698,7 @@ fn level_rows<const N: usize>(
 }
 
 /// Every level's four weights on f_{split−1−r} − w, r = 0 … 3 ([`GpcStaged`]'s folded tail),
-/// from the gain rows `l` (row j − N1, +0 before `start`): −L_i[split−1−r] where that row is in
+/// from the gain rows `l` (row j − N1, read from `start` on): −L_i[split−1−r] where that row is in
 /// the cost, less the folded tail's T_i[r] ([`adjoint_step`] over the rows from
 /// `split` on, all levels in one pass).
 #[inline(always)]
@@ -1500,30 +1500,14 @@ mod tests {
             let kind: Vec<usize> = (0..n).map(|i| code / 3usize.pow(i as u32) % 3).collect();
             let mut v: Vec<f64> = kind.iter().map(|&k| if k == 1 { lo } else { hi }).collect();
             let free: Vec<usize> = (0..n).filter(|&i| kind[i] == 0).collect();
-            let m = free.len();
-            // [Q_FF | c_F − Q_FW v_W], then elimination with partial pivoting.
-            let mut a: Vec<Vec<f64>> = free
+            // Q_FF v_F = c_F − Q_FW v_W.
+            let qff: Vec<Vec<f64>> = free.iter().map(|&i| free.iter().map(|&j| q[i][j]).collect()).collect();
+            let rhs: Vec<f64> = free
                 .iter()
-                .map(|&i| {
-                    let mut row: Vec<f64> = free.iter().map(|&j| q[i][j]).collect();
-                    row.push(c[i] - (0..n).filter(|j| kind[*j] != 0).map(|j| q[i][j] * v[j]).sum::<f64>());
-                    row
-                })
+                .map(|&i| c[i] - (0..n).filter(|j| kind[*j] != 0).map(|j| q[i][j] * v[j]).sum::<f64>())
                 .collect();
-            for col in 0..m {
-                let p = (col..m).max_by(|&x, &y| a[x][col].abs().total_cmp(&a[y][col].abs())).unwrap();
-                a.swap(col, p);
-                for r in 0..m {
-                    if r != col {
-                        let f = a[r][col] / a[col][col];
-                        for k in col..=m {
-                            a[r][k] -= f * a[col][k];
-                        }
-                    }
-                }
-            }
-            for (r, &i) in free.iter().enumerate() {
-                v[i] = a[r][m] / a[r][r];
+            for (&i, vi) in free.iter().zip(gauss(qff, rhs)) {
+                v[i] = vi;
             }
             if free.iter().all(|&i| v[i] >= lo - 1e-12 && v[i] <= hi + 1e-12) {
                 let j = cost(&v);

@@ -444,9 +444,9 @@ impl SsrMonitor {
     /// cooling (a supply probe, the supply opened at the floor, limp home's thermostat) is
     /// tested fast only after twice `on_s`: the heat the cabinet took in meanwhile keeps a heavy
     /// load warming for longer than `on_s` at full cooling. Mission 117730 (`--seed 110001`, a heavy
-    /// H-TER II at 37 °C with a shorted SSR): after every probe and every limp-home off period
-    /// it rose 0.5–0.7 °C in the 5 min after the supply closed again, and the short was
-    /// reported 14 times as an SSR stuck off as well.
+    /// H-TER II at 37 °C with a shorted SSR): after the supply was opened at the floor and after
+    /// every limp-home off period it rose 0.7–0.9 °C in the 5 min after the supply closed again,
+    /// and the short was reported 12 times that day as an SSR stuck off as well.
     pub(crate) fn warms_at_full_duty(&mut self, c: &StuckOffConfig, temp_c: f32) -> bool {
         let mut found = false;
         // Full duty for `on_run` samples, some cooling for `since_off`: the run's first sample
