@@ -107,7 +107,7 @@ pub const fn adaptive(law: Law) -> AdaptiveConfig {
     }
 }
 
-/// Self-tuning GPC (N2 = 30, Nu = 3, λ = 0.5, 3 while unconfirmed, T-filter τ = 0.8): the firmware's default build and
+/// Self-tuning GPC (N1 = k + 1, N2 = 30, Nu = 3, λ = 0.5, 3 while unconfirmed, T-filter τ = 0.8): the firmware's default build and
 /// `hter sim --controller gpc`.
 pub const ADAPTIVE_GPC: AdaptiveConfig = adaptive(Law::Gpc(GpcConfig::DEFAULT));
 

@@ -114,7 +114,18 @@
 //! 8.48 → 7.27 W (H-TER II), steady-state error 0.055 → 0.047 and 0.036 → 0.021 °C; the
 //! `step` pull-down 1.078 → 1.062 × the bound (PI 1.016), its steady-state error 0.118 →
 //! 0.032 °C. It leaves the rest when it ends (a step, an error past [`REST_EXIT_C`], a duty at
-//! a rail), so tracking and disturbance rejection run at λ 0.5 again.
+//! a rail), so tracking and disturbance rejection run at the default λ again.
+//!
+//! **The cost's first row.** Self-tuning GPC's cost starts at N1 = k + 1, one sample after
+//! the first one the model's delay k lets the duty reach (`GpcConfig::n1` when larger). The
+//! estimate's first B term carries the fraction of a sample by which the plant's real delay
+//! exceeds k − 1, so it is small and its zero can lie outside the unit circle (b1 larger than
+//! b0); a cost that asks the first reachable sample to be right inverts that zero. With λ 0.2
+//! (and the design's gains on the predictions of another model, before [`super::gpc::GpcStaged`]'s
+//! "One model"), the duty rang between 0 and 1 every sample for minutes on campaign missions
+//! 127954 (to 1.99 °C) and 119510; from k + 1 they did not (3.47 and 3.45 °C), for `hter
+//! compare` IAE / bound within ±0.01, median and worst of seeds 1–8 at 20, 28 and 36 °C
+//! (EXPERIMENTS.md, issue 15). With one model it was not measured again without.
 //!
 //! **The first approach** (issue 19). From start until the load first stops falling less than
 //! 1 °C above the setpoint, the law is handed the setpoint raised by the rate of fall (over the
@@ -598,11 +609,11 @@ impl Controller for SelfTuning {
         let w = if self.approaching { self.approach_setpoint(input.y_c, input.w_c) } else { input.w_c };
         let law = match self.cfg.law {
             // Cautious while the model is one the estimate has not confirmed, or no longer
-            // confirms because it is paused at rest (module docs).
-            Law::Gpc(g)
-                if (self.mode != AdaptiveMode::Adaptive || self.resting()) && g.lambda < CAUTIOUS_GPC_LAMBDA =>
-            {
-                Law::Gpc(GpcConfig { lambda: CAUTIOUS_GPC_LAMBDA, ..g })
+            // confirms because it is paused at rest; the cost from k + 1 (module docs).
+            Law::Gpc(g) => {
+                let cautious = self.mode != AdaptiveMode::Adaptive || self.resting();
+                let lambda = if cautious { g.lambda.max(CAUTIOUS_GPC_LAMBDA) } else { g.lambda };
+                Law::Gpc(GpcConfig { n1: g.n1.max(self.cfg.k + 1), lambda, ..g })
             }
             other => other,
         };

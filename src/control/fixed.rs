@@ -81,7 +81,7 @@ impl LawState {
         #[cfg(feature = "mv-laws")]
         let pushed_mv = self.mv.push_y(y, m);
         #[cfg(not(feature = "igmvc-only"))]
-        let pushed_gpc = self.gpc.push_y(y, m);
+        let pushed_gpc = self.gpc.push_y(y, self.gpc_design.model().unwrap_or(m));
         if !have_model {
             return Err(ControlError::NoModel);
         }

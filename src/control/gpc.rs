@@ -72,7 +72,9 @@ pub struct GpcConfig {
 }
 
 impl GpcConfig {
-    /// N1 = 1, N2 = 30 (5 min at Ts = 10 s, the closed-loop settling scale), Nu = 3, λ = 0.5.
+    /// N1 = 1, N2 = 30 (5 min at Ts = 10 s, the closed-loop settling scale), Nu = 3, λ = 0.5
+    /// (the self-tuner starts its cost one sample after the model's delay instead,
+    /// [`crate::control::adaptive`], "The cost's first row").
     /// λ weighs Δu² (duty in [0, 1], so Δu ≤ 1) against squared errors in °C summed over 30
     /// predictions, with step-response coefficients of tens of °C per unit duty. Tuned for the
     /// self-tuner's 4-term B with its T-filter (τ = 0.8 after issue 15's campaigns, `AdaptiveConfig::t_filter`):
@@ -83,7 +85,10 @@ impl GpcConfig {
     /// --t-pole T --nu U --n2 N`). With the old 2-term B, λ = 3: smaller values let GPC bang
     /// the SSR on the model's unmodelled lag. At rest the duty moves more than with λ = 3
     /// (standard deviation 0.08 against 0.02 over the last hour of `hter sim --scenario step`,
-    /// the load within 3.92–4.06 °C against 3.96–4.04), for the same energy.
+    /// the load within 3.92–4.06 °C against 3.96–4.04), for the same energy. λ 0.2 with one
+    /// model ([`GpcStaged`], "One model") has less IAE everywhere (28 °C, seed 1: 1.130 · 1.320
+    /// · 1.048 × the bound) and no ringing, but its worst sample in `cargo xtask pil` is 5 056
+    /// instructions, over the 5 000 budget (EXPERIMENTS.md).
     pub const DEFAULT: GpcConfig = GpcConfig { n1: 1, n2: 30, nu: 3, lambda: 0.5 };
 
     /// Checks the ranges of [`GpcError::Config`].
@@ -356,8 +361,9 @@ impl GpcState {
 ///
 /// **Staged.** Of a design, only the free response f depends on the data; the step response g,
 /// H = GᵀG + λI, its inverse Z, the levels' gain rows and P = Q⁻¹ (below) depend on the model
-/// alone, and they are most of the work. Each sample computes f on the current model and the
-/// levels with the gains in use, and does one stage of the next design on the current model:
+/// alone, and they are most of the work. Each sample computes f and the levels with the design
+/// in use, on that design's own model (below), and does one stage of the next design on the
+/// current model:
 /// stage 0 the step response and its dead time, stage 1 H, stage 2 H's Cholesky factor,
 /// Z = H⁻¹, M = D⁻¹Z, P and every level's gain row, stage 3 every level's folded tail, which
 /// puts the new design in use (a swap of banks, no copy). A design is thus at most eight
@@ -366,6 +372,16 @@ impl GpcState {
 /// (`cargo xtask pil`, BENCHMARKS.md). The staleness costs a little: the same law designed
 /// whole every sample (a host experiment) has 0.01 less IAE / bound on `hter compare`'s
 /// piecewise run (EXPERIMENTS.md).
+///
+/// **One model.** Stage 0 keeps the model it starts from with the design, stages 1–3 build on
+/// it, and the samples the design serves compute f on it ([`GpcStaged::model`]; `LawState`
+/// also computes the residuals ê on it, which f's C terms read), not on the current estimate.
+/// The law is then GPC on a model a few samples old, not the gains of one model on the
+/// predictions of another. With f on the current model, a self-tuner whose estimate moved
+/// fast (the first samples after it was trusted, a light carrier's swings) met gains designed
+/// for a model 2–4 times stronger or weaker, and the duty rang between 0 and 1 every sample
+/// while the load fell below the setpoint: the dips of campaign missions 4700, 120740, 123834
+/// and 127954 to 2.0–2.6 °C (issue 15; EXPERIMENTS.md).
 ///
 /// **Level gains.** The unconstrained plan is Δũ = Z Gᵀ(w − f), and its levels relative to
 /// u(t−1) are v = D⁻¹Δũ = M Gᵀ(w − f), M = D⁻¹Z (D⁻¹ the lower triangle of ones: M's row i
@@ -382,8 +398,8 @@ impl GpcState {
 /// models, `fold_split`), so the gain row's head and the folded tail make four weights C_i on
 /// the last four values of the head, f_{split−4} … f_{split−1}. Each sample computes the head
 /// f_1 … f_{k+3} (`GpcState::free_window`) and v_i = C_i·(f_window − w): Nu × 4 products
-/// (`staged_increment_with_the_tail_folded_in_is_the_full_designs`). A model of another delay
-/// than the design's, or beyond na ≤ 2, nb ≤ 4, runs the whole f and the whole sums instead.
+/// (`staged_increment_with_the_tail_folded_in_is_the_full_designs`). A model beyond na ≤ 2,
+/// nb ≤ 4 runs the whole f and the whole sums instead.
 ///
 /// **Constrained** (issue 15). The Nu future duties are the levels u(t−1) + v_i; the cost is
 /// minimised over them with 0 ≤ u(t−1) + v_i ≤ 1, not solved unconstrained and clipped. In
@@ -445,6 +461,8 @@ struct StagedBank {
     start: usize,
     split: usize,
     tail_ok: bool,
+    /// The model the design is made on (stage 0's), which the sample's free response runs on.
+    m: Model,
 }
 
 impl StagedBank {
@@ -455,6 +473,7 @@ impl StagedBank {
         start: 0,
         split: 0,
         tail_ok: false,
+        m: Model::ZERO,
     };
 }
 
@@ -476,6 +495,11 @@ impl GpcStaged {
         stage: 0,
         skipped: 0,
     };
+
+    /// The model of the design in use, once one is complete.
+    pub fn model(&self) -> Option<&Model> {
+        self.ready.then(|| &self.bank[self.cur & 1].m)
+    }
 
     /// Δu(t) for setpoint `w` on model `m`, after [`GpcState::push_y`]; see the type's docs.
     pub fn update(&mut self, st: &GpcState, m: &Model, cfg: &GpcConfig, w: f32) -> Result<f32, GpcError> {
@@ -505,14 +529,15 @@ impl GpcStaged {
     /// [`update`](Self::update) on `N` ≥ Nu levels.
     #[inline(always)]
     fn update_n<const N: usize>(&mut self, st: &GpcState, m: &Model, w: f32) -> Result<f32, GpcError> {
-        let n2 = self.cfg.n2;
         let small = m.na() <= 2 && m.nb() <= 4;
         let bk = &self.bank[self.cur & 1];
         let mut v = [0.0f32; N];
         if self.ready {
-            // The head of f on the current model, and the levels through the folded tails when
-            // the tail folds in here, or the whole f and the whole gain rows.
-            let probe = if small && bk.tail_ok && fold_split(m, n2) == bk.split {
+            // The free response on the design's own model (type docs, "One model"): its head
+            // and the levels through the folded tails for the small models, or the whole f and
+            // the whole gain rows.
+            let m = &bk.m;
+            let probe = if bk.tail_ok {
                 let (past, probe) = st.free_window(m, &mut self.f[..bk.split - 1]);
                 let d = past.map(|x| x - w);
                 for (vi, ci) in v.iter_mut().zip(&bk.c) {
@@ -520,24 +545,21 @@ impl GpcStaged {
                 }
                 probe
             } else {
-                let probe = if small {
-                    st.free_window(m, &mut self.f[..n2]).1
-                } else {
-                    #[cfg(feature = "gpc-any-order")]
-                    {
-                        st.free_response::<MAX_NB, { MAX_NA + 1 }>(m, n2, &mut self.f)
+                // (A model the tail does not fold for is larger than na ≤ 2, nb ≤ 4.)
+                #[cfg(not(feature = "gpc-any-order"))]
+                return Err(GpcError::NotBuilt);
+                #[cfg(feature = "gpc-any-order")]
+                {
+                    let (n1, n2, start) = (self.cfg.n1, self.cfg.n2, bk.start);
+                    let probe = st.free_response::<MAX_NB, { MAX_NA + 1 }>(m, n2, &mut self.f);
+                    for (lj, fj) in bk.l[start - n1..n2 + 1 - n1].iter().zip(&self.f[start - 1..n2]) {
+                        let e = w - fj;
+                        for (vi, li) in v.iter_mut().zip(lj) {
+                            *vi += li * e;
+                        }
                     }
-                    #[cfg(not(feature = "gpc-any-order"))]
-                    return Err(GpcError::NotBuilt);
-                };
-                let (n1, start) = (self.cfg.n1, bk.start);
-                for (lj, fj) in bk.l[start - n1..n2 + 1 - n1].iter().zip(&self.f[start - 1..n2]) {
-                    let e = w - fj;
-                    for (vi, li) in v.iter_mut().zip(lj) {
-                        *vi += li * e;
-                    }
+                    probe
                 }
-                probe
             };
             if probe != 0.0 {
                 return Err(GpcError::NonFinite);
@@ -602,6 +624,7 @@ impl GpcStaged {
                 }
                 self.lead = dead_lead(&self.g, m.k(), n2);
                 let nb = &mut self.bank[next];
+                nb.m = *m;
                 nb.split = fold_split(m, n2);
                 nb.tail_ok = small;
                 nb.start = n1.max(self.lead + 1).min(n2 + 1);
@@ -651,9 +674,8 @@ impl GpcStaged {
                 // Every level's folded tail (on this stage's Ã, the one the tail f runs on) and
                 // its four weights, and the design is complete: in use from the next sample.
                 let nb = &mut self.bank[next];
-                nb.tail_ok &= small;
                 if nb.tail_ok {
-                    nb.c = fold_weights::<N>(&m.atilde(), &nb.l, n1, n2, nb.start, nb.split);
+                    nb.c = fold_weights::<N>(&nb.m.atilde(), &nb.l, n1, n2, nb.start, nb.split);
                 }
                 self.cur = next;
                 self.ready = true;
