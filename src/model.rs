@@ -62,7 +62,8 @@ impl Model {
     /// All zeros, orders included: not a model any constructor gives, only a placeholder for
     /// storage that is written before it is read (a `GpcStaged` bank before its first
     /// design), which a board then fills with a memset instead of copying a constant.
-    pub(crate) const ZERO: Model = Model { a: [0.0; MAX_NA], b: [0.0; MAX_NB], c: [0.0; MAX_NC], na: 0, nb: 0, nc: 0, k: 0 };
+    pub(crate) const ZERO: Model =
+        Model { a: [0.0; MAX_NA], b: [0.0; MAX_NB], c: [0.0; MAX_NC], na: 0, nb: 0, nc: 0, k: 0 };
 
     /// Builds a model from coefficient slices (a without the leading 1, c likewise).
     pub fn new(a: &[f32], b: &[f32], c: &[f32], k: usize) -> Result<Model, ModelError> {
