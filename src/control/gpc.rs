@@ -1667,6 +1667,50 @@ mod tests {
         assert!(clipped_differs, "some case has a constrained move unlike the clipped one");
     }
 
+    /// One model per design: when the estimate moves, the samples before its design is in use
+    /// plan on the design's model alone (its free response too), and from the sample its own
+    /// design is complete they plan on the new one. Both against the f64 constrained reference.
+    #[test]
+    fn a_design_plans_on_its_own_model_until_the_next_is_in_use() {
+        // The start model, and an estimate with a B three times as strong a sample after the
+        // delay (the first trusted estimates of light carriers were 2–4 times off).
+        let old = Model::new(&[-1.749_27, 0.751_376], &[-0.027_079_1, -0.029_865], &[], 5).unwrap();
+        let new = Model::new(&[-1.749_27, 0.751_376], &[-0.027_079_1, -0.089_6], &[], 5).unwrap();
+        let cfg = GpcConfig { n1: 6, ..GpcConfig::DEFAULT };
+        let (u0, w) = (0.4, 4.0);
+        // The load at 4.6 °C and falling, on the old model, until its design is in use; the
+        // duty stepped up 0.2 four samples ago, so past increments enter the free response.
+        let (mut s, mut st) = (GpcState::new(u0), GpcStaged::NEW);
+        for t in 0..12 {
+            if t > 0 {
+                s.track(if t >= 8 { u0 + 0.2 } else { u0 });
+            }
+            s.push_y(4.6 - 0.02 * t as f32, st.model().unwrap_or(&old)).unwrap();
+            st.update(&s, &old, &cfg, w).unwrap();
+        }
+        assert_eq!(st.model(), Some(&old));
+        // The estimate moves to `new`: its design takes four samples (none constrained here).
+        let mut seen_new = false;
+        for t in 0..6 {
+            s.track(u0 + 0.2);
+            let in_use = *st.model().unwrap();
+            s.push_y(4.36 - 0.02 * t as f32, &in_use).unwrap();
+            let du = st.update(&s, &new, &cfg, w).unwrap();
+            let (want, inside) = reference_constrained_du(&s, &in_use, &cfg, w);
+            assert!(inside, "sample {t}: the case is meant to leave the limits alone");
+            assert!((f64::from(du) - want).abs() < 1e-3, "sample {t}: Δu {du}, its design's model gives {want}");
+            if in_use == old {
+                // What the sample would plan on the new model: far off.
+                let (other, _) = reference_constrained_du(&s, &new, &cfg, w);
+                assert!((want - other).abs() > 0.02, "sample {t}: the two models plan alike ({want}, {other})");
+            } else {
+                seen_new = true;
+            }
+        }
+        assert!(seen_new, "the new design came into use within six samples");
+        assert_eq!(st.model(), Some(&new));
+    }
+
     /// The staged law's Δu, its free response's tail folded into the gain row
     /// ([`fold_weights`]), against the whole design in f64 ([`reference_du`]) and the textbook
     /// loops in f32: as close as the whole design is, on horizons that end before, across and
