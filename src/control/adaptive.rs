@@ -117,7 +117,8 @@
 //! a rail), so tracking and disturbance rejection run at the default λ again.
 //!
 //! **The cost's first row.** Self-tuning GPC's cost starts at N1 = k + 1, one sample after
-//! the first one the model's delay k lets the duty reach (`GpcConfig::n1` when larger). The
+//! the first one the model's delay k lets the duty reach (`GpcConfig::n1` when larger, N2 when
+//! smaller). The
 //! estimate's first B term carries the fraction of a sample by which the plant's real delay
 //! exceeds k − 1, so it is small and its zero can lie outside the unit circle (b1 larger than
 //! b0); a cost that asks the first reachable sample to be right inverts that zero. With λ 0.2
@@ -613,7 +614,8 @@ impl Controller for SelfTuning {
             Law::Gpc(g) => {
                 let cautious = self.mode != AdaptiveMode::Adaptive || self.resting();
                 let lambda = if cautious { g.lambda.max(CAUTIOUS_GPC_LAMBDA) } else { g.lambda };
-                Law::Gpc(GpcConfig { n1: g.n1.max(self.cfg.k + 1), lambda, ..g })
+                // (At most N2: a horizon that ends sooner keeps its last row, as before.)
+                Law::Gpc(GpcConfig { n1: g.n1.max(self.cfg.k + 1).min(g.n2), lambda, ..g })
             }
             other => other,
         };
@@ -815,6 +817,18 @@ mod tests {
         r.push_y(5.0);
         assert!(r.push_y(5.5));
         assert_eq!(r.phi().as_slice(), &[-5.0, -5.0, 0.4, 0.4, 0.4, 0.4, 1.0]);
+    }
+
+    /// The cost from k + 1 stops at N2: a horizon that ends at the delay (N2 = k = 5) keeps
+    /// its last row and GPC runs, instead of a refused N1 > N2 handing every sample to the PI.
+    #[test]
+    fn a_horizon_ending_at_the_delay_still_runs_gpc() {
+        let law = Law::Gpc(GpcConfig { n2: START_MODEL_HTER1.k(), ..GpcConfig::DEFAULT });
+        let mut c = start(AdaptiveConfig { law, ..ADAPTIVE_GPC });
+        let (mut plant, mut y) = (Plant::start_model(), 0.0);
+        for t in 0..40 {
+            assert_ne!(sample(&mut c, &mut plant, &mut y, None), AdaptiveMode::Fallback, "sample {t}");
+        }
     }
 
     #[test]

@@ -671,7 +671,7 @@ impl GpcStaged {
                 level_rows::<N>(&mz, &self.g, &mut nb.l, n1, n2, nb.start);
             }
             _ => {
-                // Every level's folded tail (on this stage's Ã, the one the tail f runs on) and
+                // Every level's folded tail (on the design's Ã, the one its samples' f runs on) and
                 // its four weights, and the design is complete: in use from the next sample.
                 let nb = &mut self.bank[next];
                 if nb.tail_ok {
