@@ -412,6 +412,22 @@ impl GpcState {
 /// does its stage: while the limits hold for long (a pull-down) the design still moves on,
 /// at one stage in `MAX_SKIPS + 1` samples. Δu(t) = v_0.
 ///
+/// **Soft floor** (issue 15). The cost also weighs ρ (`FLOOR_WEIGHT`) times the squared
+/// amount by which the plan's prediction falls below [`SOFT_FLOOR_C`] (at most [`FLOOR_GAP_C`]
+/// below the setpoint), so that the plan itself keeps the load off the freeze guard, which
+/// stays the second line. It is checked on one row, midway from the fold to N2 (`floor_row`:
+/// the plan's largest undershoot comes some samples after its first move takes effect), as
+/// ŷ_j = f_j + Σ_i d_i v_i, three weights on the head's last values for f_j and three on the
+/// levels, made once a design. When the plan is within the box and falls below the floor
+/// there, the penalty enters the levels' problem: Q + ρddᵀ, whose inverse is P less a rank-one
+/// term (Sherman–Morrison), so the minimiser moves along Pd, and its first move, clipped into
+/// the box, is Δu(t); that sample skips its design stage like a constrained one. A plan the box
+/// is at work on is left as it is (one solve a sample at most, `cargo xtask pil`): at the
+/// board's λ the plans that fall below the floor have met the "no cooling" bound first, which
+/// the penalty would push further into (`a_soft_floor_lifts_a_plan_that_dips_below_it`,
+/// against the f64 move of the penalised cost). So the floor matters for heavily damped
+/// tunings (λ 20–50, an engineer's setting) and is inert on `hter compare`'s runs.
+///
 /// **Sizes.** Everything runs on [`NQ`] = 3 levels, fixed, so the loops unroll and carry no
 /// bounds checks: a smaller Nu pads H with the identity (its factor, inverse and P are then the
 /// Nu×Nu ones bordered by the identity, exactly, and the padded levels stay 0 inside the box).
@@ -463,6 +479,11 @@ struct StagedBank {
     tail_ok: bool,
     /// The model the design is made on (stage 0's), which the sample's free response runs on.
     m: Model,
+    /// The soft floor's check row j (type docs, "Soft floor"), its free response's weights on
+    /// f_{split−1−r} − w (r < 3, when `tail_ok`), and its forced response's on the levels.
+    fj: usize,
+    fa: [f32; 3],
+    fd: [f32; MAX_NU],
 }
 
 impl StagedBank {
@@ -474,6 +495,9 @@ impl StagedBank {
         split: 0,
         tail_ok: false,
         m: Model::ZERO,
+        fj: 0,
+        fa: [0.0; 3],
+        fd: [0.0; MAX_NU],
     };
 }
 
@@ -532,6 +556,8 @@ impl GpcStaged {
         let small = m.na() <= 2 && m.nb() <= 4;
         let bk = &self.bank[self.cur & 1];
         let mut v = [0.0f32; N];
+        // The check row's free response less w (type docs, "Soft floor").
+        let mut x = 0.0f32;
         if self.ready {
             // The free response on the design's own model (type docs, "One model"): its head
             // and the levels through the folded tails for the small models, or the whole f and
@@ -543,6 +569,8 @@ impl GpcStaged {
                 for (vi, ci) in v.iter_mut().zip(&bk.c) {
                     *vi = ci[0] * d[0] + ci[1] * d[1] + ci[2] * d[2] + ci[3] * d[3];
                 }
+                let a = &bk.fa;
+                x = a[0] * d[0] + a[1] * d[1] + a[2] * d[2];
                 probe
             } else {
                 // (A model the tail does not fold for is larger than na ≤ 2, nb ≤ 4.)
@@ -558,6 +586,7 @@ impl GpcStaged {
                             *vi += li * e;
                         }
                     }
+                    x = self.f[bk.fj - 1] - w;
                     probe
                 }
             };
@@ -565,7 +594,17 @@ impl GpcStaged {
                 return Err(GpcError::NonFinite);
             }
         }
-        let (du, heavy) = if self.ready { self.constrain::<N>(&v, st.u_prev()) } else { (0.0, false) };
+        let (du, heavy) = if self.ready {
+            let (du, heavy) = self.constrain::<N>(&bk.p, &v, st.u_prev());
+            // The floor, on a plan the box left alone; at work, the stage waits too, unless it
+            // has waited long enough.
+            match if heavy { None } else { soft_floor::<N>(bk, x, &v, w, st.u_prev()) } {
+                Some(du) => (du, self.skipped < MAX_SKIPS),
+                None => (du, heavy),
+            }
+        } else {
+            (0.0, false)
+        };
         // A sample whose solve met the limits skips its design stage (type docs).
         if heavy {
             self.skipped += 1;
@@ -587,7 +626,7 @@ impl GpcStaged {
     /// longer path: the design stage waits). After [`MAX_SKIPS`] such samples in a row a level
     /// outside the box is clipped instead (v_0 into the box).
     #[inline(always)]
-    fn constrain<const N: usize>(&self, v: &[f32; N], u_prev: f32) -> (f32, bool) {
+    fn constrain<const N: usize>(&self, p: &[[f32; MAX_NU]; MAX_NU], v: &[f32; N], u_prev: f32) -> (f32, bool) {
         let (lo, hi) = (-u_prev, 1.0 - u_prev);
         if v.iter().all(|x| *x >= lo && *x <= hi) {
             return (v[0], false);
@@ -596,7 +635,7 @@ impl GpcStaged {
             // (Not `f32::clamp`: its assertion formats floats, kilobytes of flash.)
             return (v[0].max(lo).min(hi), false);
         }
-        (box_qp::<N>(&self.bank[self.cur & 1].p, v, lo, hi)[0], true)
+        (box_qp::<N>(p, v, lo, hi)[0], true)
     }
 
     /// This sample's stage of the next design, on `N` ≥ Nu levels.
@@ -628,6 +667,7 @@ impl GpcStaged {
                 nb.split = fold_split(m, n2);
                 nb.tail_ok = small;
                 nb.start = n1.max(self.lead + 1).min(n2 + 1);
+                floor_row(&m.atilde(), &self.g, nb, n2, nu);
             }
             1 => {
                 self.h = normal_matrix(&self.g, &cfg, self.lead);
@@ -685,6 +725,75 @@ impl GpcStaged {
         }
         self.stage += 1;
         Ok(())
+    }
+}
+
+/// The soft floor ([`GpcStaged`], "Soft floor"), with `x` the check row's free response less
+/// `w` and `v` the unconstrained levels, u(t−1) = `u_prev`: if the plan is within the box and
+/// falls below the floor on the row, Δu(t) of the penalised problem, clipped into the box.
+/// (Out of line: inlined, it slowed the whole controller update by a fifth on the M4F,
+/// `cargo xtask pil`.)
+#[inline(never)]
+fn soft_floor<const N: usize>(bk: &StagedBank, x: f32, v: &[f32; N], w: f32, u_prev: f32) -> Option<f32> {
+    let d = &bk.fd;
+    let (lo, hi) = (-u_prev, 1.0 - u_prev);
+    let mut y = w + x;
+    for (di, vi) in d.iter().zip(v) {
+        y += di * vi;
+    }
+    let below = SOFT_FLOOR_C.min(w - FLOOR_GAP_C) - y;
+    if !(below > 0.0) || !v.iter().all(|x| *x >= lo && *x <= hi) {
+        return None;
+    }
+    // Its squared violation weighed ρ in the cost: Q + ρddᵀ, whose inverse is P − γssᵀ
+    // (s = Pd, γ = ρ/(1 + ρdᵀs), Sherman–Morrison), so the minimiser moves by
+    // γ·(floor − ŷ_j)·s; only its first level is applied.
+    let mut s0 = 0.0;
+    let mut q = 0.0;
+    for (i, (pi, di)) in bk.p.iter().zip(d).take(N).enumerate() {
+        let mut si = 0.0;
+        for (pk, dk) in pi.iter().zip(d).take(N) {
+            si += pk * dk;
+        }
+        q += di * si;
+        if i == 0 {
+            s0 = si;
+        }
+    }
+    let du = v[0] + FLOOR_WEIGHT / (1.0 + FLOOR_WEIGHT * q) * below * s0;
+    // (Not `f32::clamp`: its assertion formats floats, kilobytes of flash.)
+    Some(du.max(lo).min(hi))
+}
+
+/// The soft floor's check row j, midway from the fold to N2 (`fj`; the plan's largest
+/// undershoot comes a few samples after its first move takes effect, the fold), the free
+/// response's weights on f_{split−1−r} − w there (`fa`, [`adjoint_step`] with the row's weight
+/// alone: beyond the head, f − w runs on Ã from the window's last three values) and the forced
+/// response's on the levels (`fd`: Σ_c g_{j−c}Δũ_c with Δũ = Dv is
+/// Σ_i (g_{j−i} − g_{j−i−1}) v_i, the last level held, g_{j−i} alone).
+#[inline(never)]
+fn floor_row(at: &[f32; MAX_NA + 2], g: &[f32; MAX_N2], bk: &mut StagedBank, n2: usize, nu: usize) {
+    let split = bk.split;
+    // (split ≤ N2 + 1: the row is at least split − 1, the window's last value.)
+    let j = (split + n2) / 2;
+    bk.fj = j;
+    let mut l = [1.0f32, 0.0, 0.0];
+    if j >= split {
+        let mut s = 1.0;
+        l = [0.0; 3];
+        for _ in split..=j {
+            l = adjoint_step(at, l, s);
+            s = l[0];
+        }
+    }
+    bk.fa = l;
+    // g_{j−i} (zero at an index ≤ 0) less g_{j−i−1}, but on the last level, from the last up.
+    bk.fd = [0.0; MAX_NU];
+    let mut prev = 0.0;
+    for i in (0..nu.min(MAX_NU)).rev() {
+        let gi = j.checked_sub(i + 1).and_then(|q| g.get(q)).copied().unwrap_or(0.0);
+        bk.fd[i] = gi - prev;
+        prev = gi;
     }
 }
 
@@ -804,6 +913,20 @@ fn adjoint_step(at: &[f32; MAX_NA + 2], lam: [f32; 3], s: f32) -> [f32; 3] {
 fn fold_split(m: &Model, n2: usize) -> usize {
     (m.k() + 4).max(MAX_NC + 1).min(n2 + 1)
 }
+
+/// The soft lower output bound (issue 15), °C: the freeze guard's release level
+/// (`FreezeConfig::DEFAULT.release_c`), so that the plan keeps the load where the guard would let
+/// cooling resume ([`GpcStaged`], "Soft floor"). Never closer than [`FLOOR_GAP_C`] below the setpoint.
+pub const SOFT_FLOOR_C: f32 = 2.5;
+
+/// How far the soft floor stays below the setpoint, °C: a setpoint of 2.5 °C, the lowest the
+/// board accepts, gets a floor at 2.0 °C, and no setpoint has its steady state pushed up.
+pub const FLOOR_GAP_C: f32 = 0.5;
+
+/// ρ, the weight of the floor's squared violation against the cost's squared errors (1 a row):
+/// with the step responses of the carriers (tens of °C per unit duty over 30 rows) the plan
+/// keeps a few percent of the violation it would otherwise have.
+const FLOOR_WEIGHT: f32 = 1000.0;
 
 /// Most samples in a row whose constrained solve skips [`GpcStaged`]'s design stage; the next
 /// clips instead and does its stage.
@@ -1456,10 +1579,18 @@ mod tests {
     /// u(t−1)) by enumerating every active set ([`reference_box_qp`]). Also whether the
     /// unconstrained plan was inside.
     fn reference_constrained_du(s: &GpcState, m: &Model, cfg: &GpcConfig, w: f32) -> (f64, bool) {
+        reference_du_floor(s, m, cfg, w, true).0
+    }
+
+    /// [`reference_constrained_du`] with or without the soft floor, and whether the floor was
+    /// at work: the plan without it is within the box and falls below the floor on its check
+    /// row (midway from k + 4 to N2); the move is then the first of the minimiser of the cost
+    /// with ρ(floor − ŷ_j)² added (ρ g_jg_jᵀ in H, ρ g_j (floor − f_j) in b), clipped.
+    fn reference_du_floor(s: &GpcState, m: &Model, cfg: &GpcConfig, w: f32, with_floor: bool) -> ((f64, bool), bool) {
         let (n1, n2, nu) = (cfg.n1, cfg.n2, cfg.nu);
         let (g, f) = reference_gf(s, m, n2);
         let gm = |j: usize, c: usize| if j > c { g[j - c] } else { 0.0 };
-        let h: Vec<Vec<f64>> = (0..nu)
+        let mut h: Vec<Vec<f64>> = (0..nu)
             .map(|r| {
                 (0..nu)
                     .map(|c| {
@@ -1469,17 +1600,42 @@ mod tests {
                     .collect()
             })
             .collect();
-        let b: Vec<f64> = (0..nu).map(|c| (n1..=n2).map(|j| gm(j, c) * (f64::from(w) - f[j])).sum()).collect();
-        let x = gauss(h.clone(), b.clone());
+        let mut b: Vec<f64> = (0..nu).map(|c| (n1..=n2).map(|j| gm(j, c) * (f64::from(w) - f[j])).sum()).collect();
         let u = f64::from(s.u_prev());
+        let (lvl, inside) = reference_box_plan(&h, &b, u);
+        let j = ((m.k() + 4).min(n2 + 1) + n2) / 2;
+        let floor = 2.5f64.min(f64::from(w) - 0.5);
+        let y = f[j] + (0..nu).map(|c| gm(j, c) * (lvl[c] - if c > 0 { lvl[c - 1] } else { 0.0 })).sum::<f64>();
+        if !(with_floor && inside && y < floor) {
+            return ((lvl[0], inside), false);
+        }
+        let rho = 1000.0;
+        for r in 0..nu {
+            for c in 0..nu {
+                h[r][c] += rho * gm(j, r) * gm(j, c);
+            }
+            b[r] += rho * gm(j, r) * (floor - f[j]);
+        }
+        // The penalised plan's first move, clipped into the box.
+        let x = gauss(h, b);
+        ((x[0].clamp(-u, 1.0 - u), true), true)
+    }
+
+    /// The levels u(t + i) − u(t − 1) minimising ½ΔũᵀHΔũ − bᵀΔũ with 0 ≤ u(t − 1) + level ≤ 1,
+    /// and whether the unconstrained minimiser was inside the box.
+    fn reference_box_plan(h: &[Vec<f64>], b: &[f64], u: f64) -> (Vec<f64>, bool) {
+        let nu = b.len();
+        let x = gauss(h.to_vec(), b.to_vec());
         let (lo, hi) = (-u, 1.0 - u);
-        let mut lvl = 0.0;
-        let inside = x.iter().all(|xi| {
-            lvl += xi;
-            (lo..=hi).contains(&lvl)
-        });
-        if inside {
-            return (x[0], true);
+        let lvl: Vec<f64> = x
+            .iter()
+            .scan(0.0, |acc, xi| {
+                *acc += xi;
+                Some(*acc)
+            })
+            .collect();
+        if lvl.iter().all(|l| (lo..=hi).contains(l)) {
+            return (lvl, true);
         }
         // D: Δu_0 = v_0, Δu_i = v_i − v_{i−1}; Q = DᵀHD, c = Dᵀb.
         let d = |r: usize, c: usize| {
@@ -1499,7 +1655,43 @@ mod tests {
             })
             .collect();
         let c: Vec<f64> = (0..nu).map(|i| (0..nu).map(|r| d(r, i) * b[r]).sum()).collect();
-        (reference_box_qp(&q, &c, lo, hi).0[0], false)
+        (reference_box_qp(&q, &c, lo, hi).0, false)
+    }
+
+    /// A plan falling toward the soft floor: the law's Δu is the f64 move of the penalised cost
+    /// ([`reference_du_floor`]). At the board's λ the plans that reach the floor have met the
+    /// box first (no cooling); with a heavily damped λ (50) at full duty and the load falling
+    /// 0.15 °C a sample through the setpoint, the floor asks for less cooling than the optimum
+    /// without it.
+    #[test]
+    fn a_soft_floor_lifts_a_plan_that_dips_below_it() {
+        let m = Model::new(&[-1.749_27, 0.751_376], &[-0.027_079_1, -0.029_865], &[], 5).unwrap();
+        // (λ, the load's fall a sample, the duty held, where it ends against the 3 °C setpoint,
+        // floor at work, how much less duty it asks for at least)
+        let cases = [
+            (50.0, -0.15, 1.0, -0.2, true, 0.01),
+            (50.0, -0.15, 1.0, 0.0, true, 0.002),
+            (0.5, -0.15, 0.6, 0.3, false, 0.0),
+            (0.5, -0.05, 0.6, 0.0, false, 0.0),
+            (3.0, -0.02, 0.9, 0.6, false, 0.0),
+            (20.0, -0.3, 1.0, 0.0, false, 0.0),
+        ];
+        let w = 3.0;
+        for (lambda, slope, u0, end, at_work, less) in cases {
+            let cfg = GpcConfig { lambda, ..GpcConfig::DEFAULT };
+            let ys: Vec<f32> = (0..12).map(|t| w + end - slope * (11 - t) as f32).collect();
+            let (du, s) = staged_du(&m, &cfg, &ys, u0, w);
+            let ((want, _), below) = reference_du_floor(&s, &m, &cfg, w, true);
+            let ((without, _), _) = reference_du_floor(&s, &m, &cfg, w, false);
+            let case = format!("λ {lambda}, fall {slope}, u {u0}, end {end}");
+            assert!((f64::from(du) - want).abs() < 1e-4, "{case}: Δu {du} against the reference {want}");
+            assert_eq!(below, at_work, "{case}: floor at work");
+            if at_work {
+                assert!(want < without - less, "{case}: {want} against {without} without the floor");
+            } else {
+                assert_eq!(want, without, "{case}");
+            }
+        }
     }
 
     /// Independent f64 reference of a box QP: min ½vᵀQv − cᵀv over lo ≤ v ≤ hi by enumerating
