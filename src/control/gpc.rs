@@ -421,8 +421,10 @@ impl GpcState {
 /// levels, made once a design. When the plan is within the box and falls below the floor
 /// there, the penalty enters the levels' problem: Q + ρddᵀ, whose inverse is P less a rank-one
 /// term (Sherman–Morrison), so the minimiser moves along Pd, and its first move, clipped into
-/// the box, is Δu(t); that sample skips its design stage like a constrained one. A plan the box
-/// is at work on is left as it is (one solve a sample at most, `cargo xtask pil`): at the
+/// the box, is Δu(t); that sample skips its design stage like a constrained one (and the one
+/// sample in `MAX_SKIPS + 1` that may not skip goes without the floor, so that no sample pays
+/// for both). A plan the box is at work on is left as it is (one solve a sample at most,
+/// `cargo xtask pil`): at the
 /// board's λ the plans that fall below the floor have met the "no cooling" bound first, which
 /// the penalty would push further into (`a_soft_floor_lifts_a_plan_that_dips_below_it`,
 /// against the f64 move of the penalised cost). So the floor matters for heavily damped
@@ -596,10 +598,10 @@ impl GpcStaged {
         }
         let (du, heavy) = if self.ready {
             let (du, heavy) = self.constrain::<N>(&bk.p, &v, st.u_prev());
-            // The floor, on a plan the box left alone; at work, the stage waits too, unless it
-            // has waited long enough.
-            match if heavy { None } else { soft_floor::<N>(bk, x, &v, w, st.u_prev()) } {
-                Some(du) => (du, self.skipped < MAX_SKIPS),
+            // The floor, on a plan the box left alone, and the stage waits (so that a sample
+            // never does both); not on the sample whose stage has waited long enough.
+            match if heavy || self.skipped >= MAX_SKIPS { None } else { soft_floor::<N>(bk, x, &v, w, st.u_prev()) } {
+                Some(du) => (du, true),
                 None => (du, heavy),
             }
         } else {
