@@ -427,8 +427,9 @@ impl GpcState {
 /// `cargo xtask pil`): at the
 /// board's λ the plans that fall below the floor have met the "no cooling" bound first, which
 /// the penalty would push further into (`a_soft_floor_lifts_a_plan_that_dips_below_it`,
-/// against the f64 move of the penalised cost). So the floor matters for heavily damped
-/// tunings (λ 20–50, an engineer's setting) and is inert on `hter compare`'s runs.
+/// against the f64 move of the penalised cost). It is inert on `hter compare`'s runs at λ 0.5–50
+/// alike, and changes a plan in states like its test's (λ 50, full duty, the load falling
+/// 0.15 °C a sample through the setpoint): a second guard, not a tuning.
 ///
 /// **Sizes.** Everything runs on [`NQ`] = 3 levels, fixed, so the loops unroll and carry no
 /// bounds checks: a smaller Nu pads H with the identity (its factor, inverse and P are then the
