@@ -424,12 +424,12 @@ impl GpcState {
 /// the box, is Δu(t); that sample skips its design stage like a constrained one (and the one
 /// sample in `MAX_SKIPS + 1` that may not skip goes without the floor, so that no sample pays
 /// for both). A plan the box is at work on is left as it is (one solve a sample at most,
-/// `cargo xtask pil`): at the
-/// board's λ the plans that fall below the floor have met the "no cooling" bound first, which
-/// the penalty would push further into (`a_soft_floor_lifts_a_plan_that_dips_below_it`,
-/// against the f64 move of the penalised cost). It is inert on `hter compare`'s runs at λ 0.5–50
-/// alike, and changes a plan in states like its test's (λ 50, full duty, the load falling
-/// 0.15 °C a sample through the setpoint): a second guard, not a tuning.
+/// `cargo xtask pil`): at the board's λ the plans that fall below the floor have met the "no
+/// cooling" bound first, which the penalty would push further into
+/// (`a_soft_floor_lifts_a_plan_that_dips_below_it`, against the f64 move of the penalised
+/// cost). It is inert on `hter compare`'s runs at λ 0.5–50 alike, and changes a plan in
+/// states like its test's (λ 50, full duty, the load falling 0.15 °C a sample through the
+/// setpoint): a second guard, not a tuning.
 ///
 /// **Sizes.** Everything runs on [`NQ`] = 3 levels, fixed, so the loops unroll and carry no
 /// bounds checks: a smaller Nu pads H with the identity (its factor, inverse and P are then the
@@ -599,8 +599,9 @@ impl GpcStaged {
         }
         let (du, heavy) = if self.ready {
             let (du, heavy) = self.constrain::<N>(&bk.p, &v, st.u_prev());
-            // The floor, on a plan the box left alone, and the stage waits (so that a sample
-            // never does both); not on the sample whose stage has waited long enough.
+            // The floor, on a plan the box left alone (not heavy and not clipped: inside it),
+            // and the stage waits (so that a sample never does both); not on the sample whose
+            // stage has waited long enough.
             match if heavy || self.skipped >= MAX_SKIPS { None } else { soft_floor::<N>(bk, x, &v, w, st.u_prev()) } {
                 Some(du) => (du, true),
                 None => (du, heavy),
@@ -627,7 +628,8 @@ impl GpcStaged {
     /// Δu(t) of the constrained cost with the design in use (type docs) from the unconstrained
     /// levels `v` relative to u(t−1) = `u_prev`, and whether the limits were at work (the
     /// longer path: the design stage waits). After [`MAX_SKIPS`] such samples in a row a level
-    /// outside the box is clipped instead (v_0 into the box).
+    /// outside the box is clipped instead (v_0 into the box). `p` is the design in use's P,
+    /// which the caller holds (indexing the bank again here costs 128 B of flash).
     #[inline(always)]
     fn constrain<const N: usize>(&self, p: &[[f32; MAX_NU]; MAX_NU], v: &[f32; N], u_prev: f32) -> (f32, bool) {
         let (lo, hi) = (-u_prev, 1.0 - u_prev);
@@ -732,8 +734,9 @@ impl GpcStaged {
 }
 
 /// The soft floor ([`GpcStaged`], "Soft floor"), with `x` the check row's free response less
-/// `w` and `v` the unconstrained levels, u(t−1) = `u_prev`: if the plan is within the box and
-/// falls below the floor on the row, Δu(t) of the penalised problem, clipped into the box.
+/// `w` and `v` the unconstrained levels, within the box (the caller's), u(t−1) = `u_prev`: if
+/// the plan falls below the floor on the row, Δu(t) of the penalised problem, clipped into the
+/// box.
 /// (Out of line: inlined, it slowed the whole controller update by a fifth on the M4F,
 /// `cargo xtask pil`.)
 #[inline(never)]
@@ -745,7 +748,7 @@ fn soft_floor<const N: usize>(bk: &StagedBank, x: f32, v: &[f32; N], w: f32, u_p
         y += di * vi;
     }
     let below = SOFT_FLOOR_C.min(w - FLOOR_GAP_C) - y;
-    if !(below > 0.0) || !v.iter().all(|x| *x >= lo && *x <= hi) {
+    if !(below > 0.0) {
         return None;
     }
     // Its squared violation weighed ρ in the cost: Q + ρddᵀ, whose inverse is P − γssᵀ
