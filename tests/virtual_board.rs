@@ -140,7 +140,7 @@ fn identify_commissions_the_cabinet_on_the_board_and_continues_with_the_self_tun
     // The cabinet model of the same run: the holdover's.
     let cabinet_k: usize = field(&mut b, "cabinet_k").parse().unwrap();
     assert!((1..=10).contains(&cabinet_k));
-    // Under the self-tuner from the commissioned model (k = 8 on H-TER I) the load stays in the
+    // Under the self-tuner from the commissioned model (k = 7 on H-TER I) the load stays in the
     // band and settles back at the setpoint.
     for _ in 0..1080 {
         b.step().unwrap();
