@@ -13,7 +13,9 @@
 //! word pairs m, and m × `(code, value)` from [`event_words`]; then the runner's peak stack and the size of the carrier + monitor state, bytes.
 
 use hter::coldchain::{ColdChainMonitor, Raised};
-use hter::control::adaptive::AdaptiveConfig;
+use hter::control::adaptive::{AdaptiveConfig, SelfTuning};
+use hter::control::fixed::Law;
+use hter::control::gpc::GpcConfig;
 use hter::control::AnyController;
 use hter::profile::{self, Kind};
 use hter::step::{Carrier, StepInput, StepOutput, ValidConfig};
@@ -36,8 +38,18 @@ pub const KIND_PI: u32 = 0;
 /// Controller kind 1: the firmware's default, self-tuning GPC (N2 = 30, Nu = 3).
 pub const KIND_GPC: u32 = 1;
 
+/// Controller kind 2: the default self-tuning GPC with λ 200, a heavily damped tuning: the only
+/// kind here whose plans meet GPC's soft floor (`hter::control::gpc::GpcStaged`, "Soft floor"),
+/// so that `cargo xtask pil` times such a sample (the default's λ 0.5 plans meet the no-cooling
+/// bound first).
+pub const KIND_GPC_DAMPED: u32 = 2;
+
 /// The self-tuning GPC configuration the firmware runs by default.
 pub const ADAPTIVE: AdaptiveConfig = profile::ADAPTIVE_GPC;
+
+/// [`KIND_GPC_DAMPED`]'s configuration: [`ADAPTIVE`] with λ 200.
+pub const DAMPED: AdaptiveConfig =
+    AdaptiveConfig { law: Law::Gpc(GpcConfig { lambda: 200.0, ..GpcConfig::DEFAULT }), ..ADAPTIVE };
 
 /// The board-profile controller of a kind code.
 fn kind(code: u32) -> Option<Kind> {
@@ -51,7 +63,21 @@ fn kind(code: u32) -> Option<Kind> {
 /// The controller of kind `code`, from the board profile as the firmware builds it: at the
 /// step's sample period, a self-tuner starting from the PI's bias.
 pub fn controller(code: u32) -> Option<AnyController> {
-    profile::controller(kind(code)?, CARRIER.get().ts_s, profile::PI.bias).ok()
+    let ts_s = CARRIER.get().ts_s;
+    if code == KIND_GPC_DAMPED {
+        return SelfTuning::new(DAMPED, ts_s, profile::PI.bias).ok().map(AnyController::SelfTuning);
+    }
+    profile::controller(kind(code)?, ts_s, profile::PI.bias).ok()
+}
+
+/// How many samples GPC's soft floor has moved the plan on, modulo 256, for a self-tuning
+/// carrier (the host's check that [`KIND_GPC_DAMPED`]'s case meets the floor).
+#[allow(dead_code)] // the host reads it, the runner does not
+pub fn floor_samples(carrier: &Carrier<AnyController>) -> Option<u8> {
+    match carrier.controller() {
+        AnyController::SelfTuning(s) => Some(s.law_state().gpc().floor_samples()),
+        _ => None,
+    }
 }
 
 /// A fresh carrier and cold-chain record for `kind`.

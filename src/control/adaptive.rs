@@ -419,6 +419,11 @@ impl SelfTuning {
         &self.cfg
     }
 
+    /// The law's state (e.g. GPC's staged design, [`LawState::gpc`]).
+    pub fn law_state(&self) -> &LawState {
+        &self.law_state
+    }
+
     /// The current estimate as a model, its B's tail b1 … b3 no warmer than zero (module docs,
     /// "Projection").
     pub fn estimate(&self) -> Option<Model> {

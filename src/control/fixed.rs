@@ -111,6 +111,11 @@ impl LawState {
         }
     }
 
+    /// GPC's staged design (its soft-floor count, [`GpcStaged::floor_samples`]).
+    pub fn gpc(&self) -> &GpcStaged {
+        &self.gpc_design
+    }
+
     /// Records the applied u.
     pub fn track(&mut self, applied: f32) {
         self.mv.track(applied);

@@ -429,7 +429,9 @@ impl GpcState {
 /// (`a_soft_floor_lifts_a_plan_that_dips_below_it`, against the f64 move of the penalised
 /// cost). It is inert on `hter compare`'s runs at λ 0.5–50 alike, and changes a plan in
 /// states like its test's (λ 50, full duty, the load falling 0.15 °C a sample through the
-/// setpoint): a second guard, not a tuning.
+/// setpoint): a second guard, not a tuning. `cargo xtask pil` times such samples in a case
+/// made up to meet the floor (readings falling 0.2 °C a sample through a 3 °C setpoint, GPC at
+/// λ 200; [`Self::floor_samples`] tells it which samples): 3 607 instructions at most.
 ///
 /// **Sizes.** Everything runs on [`NQ`] = 3 levels, fixed, so the loops unroll and carry no
 /// bounds checks: a smaller Nu pads H with the identity (its factor, inverse and P are then the
@@ -463,6 +465,8 @@ pub struct GpcStaged {
     stage: u8,
     /// Samples in a row that skipped their stage.
     skipped: u8,
+    /// Samples on which the soft floor moved the plan, modulo 256 ([`Self::floor_samples`]).
+    floors: u8,
 }
 
 /// One [`GpcStaged`] design: what the sample's solve reads.
@@ -521,7 +525,15 @@ impl GpcStaged {
         ready: false,
         stage: 0,
         skipped: 0,
+        floors: 0,
     };
+
+    /// How many samples the soft floor has moved the plan on, modulo 256 (type docs, "Soft
+    /// floor"): what `cargo xtask pil` checks to time such a sample on the M4F (it sits in
+    /// padding: no RAM).
+    pub fn floor_samples(&self) -> u8 {
+        self.floors
+    }
 
     /// The model of the design in use, once one is complete.
     pub fn model(&self) -> Option<&Model> {
@@ -603,7 +615,10 @@ impl GpcStaged {
             // and the stage waits (so that a sample never does both); not on the sample whose
             // stage has waited long enough.
             match if heavy || self.skipped >= MAX_SKIPS { None } else { soft_floor::<N>(bk, x, &v, w, st.u_prev()) } {
-                Some(du) => (du, true),
+                Some(du) => {
+                    self.floors = self.floors.wrapping_add(1);
+                    (du, true)
+                }
                 None => (du, heavy),
             }
         } else {

@@ -1,7 +1,9 @@
 //! Host automation for hter (`cargo xtask <command>`).
 //!
 //! `cargo xtask pil` — processor-in-the-loop: records ADC counts from closed-loop `hal-sim`
-//! runs, builds the bare-metal runner `pil/` for the Cortex-M4F (thumbv7em-none-eabihf), runs
+//! runs (and one made-up sequence that meets GPC's soft floor, which no closed-loop run at the
+//! board's tuning does: it reports those samples' instructions apart, and fails when no sample
+//! meets the floor), builds the bare-metal runner `pil/` for the Cortex-M4F (thumbv7em-none-eabihf), runs
 //! it under QEMU (`-M mps2-an386`, `-icount shift=6,sleep=off`: deterministic virtual time, one
 //! instruction = 64 ns), and checks that every duty (bit for bit) and every event and alarm the
 //! target computes equals what the same library code computes here on the host from the same
@@ -73,22 +75,25 @@ const TICKS_PER_INSN: f64 = 1.6;
 const QEMU_TIMEOUT: Duration = Duration::from_secs(300);
 const TARGET: &str = "thumbv7em-none-eabihf";
 
-/// One recorded sequence.
+/// One recorded sequence: a closed-loop `hal-sim` run, or (`synthetic`) inputs made up to reach
+/// a path no such run reaches.
 struct Case {
     name: &'static str,
     scenario: &'static str,
     duration_s: Option<f64>,
     kind: u32,
     faults: &'static [&'static str],
+    synthetic: Option<fn() -> Vec<StepInput>>,
 }
 
-const CASES: [Case; 5] = [
+const CASES: [Case; 6] = [
     Case {
         name: "piecewise, self-tuning GPC",
         scenario: "piecewise",
         duration_s: None,
         kind: proto::KIND_GPC,
         faults: &[],
+        synthetic: None,
     },
     Case {
         name: "piecewise, self-tuning GPC, sensor open at 1500 s",
@@ -96,6 +101,7 @@ const CASES: [Case; 5] = [
         duration_s: None,
         kind: proto::KIND_GPC,
         faults: &["sensor-open@1500"],
+        synthetic: None,
     },
     Case {
         name: "step, self-tuning GPC, SSR stuck on at 5400 s",
@@ -103,6 +109,7 @@ const CASES: [Case; 5] = [
         duration_s: None,
         kind: proto::KIND_GPC,
         faults: &["ssr-stuck-on@5400"],
+        synthetic: None,
     },
     Case {
         name: "step 24 h, self-tuning GPC",
@@ -110,9 +117,40 @@ const CASES: [Case; 5] = [
         duration_s: Some(86_400.0),
         kind: proto::KIND_GPC,
         faults: &[],
+        synthetic: None,
     },
-    Case { name: "step, PI", scenario: "step", duration_s: None, kind: proto::KIND_PI, faults: &[] },
+    Case { name: "step, PI", scenario: "step", duration_s: None, kind: proto::KIND_PI, faults: &[], synthetic: None },
+    Case {
+        name: "load falling through 3 °C, GPC at λ 200",
+        scenario: "",
+        duration_s: None,
+        kind: proto::KIND_GPC_DAMPED,
+        faults: &[],
+        synthetic: Some(falling_through_3c),
+    },
 ];
+
+/// The soft floor's case ([`proto::KIND_GPC_DAMPED`]): 4 °C held for 4 000 s, the setpoint to
+/// 3 °C, and 120 s later the reading falls 0.2 °C a sample to 1.5 °C, the duty's effect or not
+/// (the replay is open loop). The damped plan cuts the duty slowly and still dips below the
+/// floor, so the floor moves it; no closed-loop run meets it at the board's λ 0.5 (the plan
+/// meets the no-cooling bound first). A little deterministic noise keeps the estimator fed.
+fn falling_through_3c() -> Vec<StepInput> {
+    let counts = |t: f64| {
+        let r = hter::rtd::Rtd::PT100.resistance(hter::units::Celsius(t as f32)).expect("an RTD temperature");
+        hter::adc::AdcFrontEnd::DEFAULT.counts(r)
+    };
+    let mut t = 4.0;
+    (0..512u64)
+        .map(|i| {
+            if i >= 412 && t > 1.5 {
+                t -= 0.2;
+            }
+            let noise = ((i * 7919) % 13) as f64 * 0.0004;
+            StepInput { t_ms: i * 10_000, counts: counts(t + noise), setpoint_c: if i < 400 { 4.0 } else { 3.0 } }
+        })
+        .collect()
+}
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -210,6 +248,7 @@ fn pil() -> Result<()> {
     let mut steps = 0usize;
     let mut gpc_insn: Vec<f64> = Vec::new();
     let mut pi_insn: Vec<f64> = Vec::new();
+    let mut floor_insn: Vec<f64> = Vec::new();
     let mut parts: Vec<Vec<f64>> = vec![Vec::new(); proto::PARTS.len()];
     let mut cal_seen = None;
     let mut stack = 0;
@@ -228,11 +267,12 @@ fn pil() -> Result<()> {
         state = state.max(tr.state_bytes);
         let host = run_host(case.kind, &inputs)?;
         let mismatches = compare(&host, &tr.samples);
+        let floors = floor_samples(case.kind, &inputs)?;
         steps += inputs.len();
         let insn = |t: u32| (f64::from(t) - f64::from(empty)).max(0.0) / TICKS_PER_INSN;
         let per_step: Vec<f64> =
             tr.samples.iter().map(|s| insn(s.ticks[proto::PART_STEP]) + insn(s.ticks[proto::PART_MONITOR])).collect();
-        if case.kind == proto::KIND_GPC {
+        if case.kind != proto::KIND_PI {
             gpc_insn.extend(&per_step);
             for s in &tr.samples {
                 for (p, t) in s.ticks.iter().enumerate() {
@@ -255,6 +295,16 @@ fn pil() -> Result<()> {
             max(&per_step),
             qemu_s
         );
+        if !floors.is_empty() {
+            let at: Vec<f64> = floors.iter().map(|&i| per_step[i]).collect();
+            println!(
+                "    soft floor at work on {} samples ({:?}): insn/sample max {:.0}",
+                floors.len(),
+                floors,
+                max(&at)
+            );
+            floor_insn.extend(at);
+        }
         for m in mismatches.iter().take(5) {
             println!("    mismatch: {m}");
         }
@@ -312,13 +362,17 @@ fn pil() -> Result<()> {
     let failsafe_ok = fs.iter().all(failsafe::Check::ok);
     let failsafe_json: Vec<String> = fs.iter().map(|c| format!("\"{}\": {}", c.kind, c.ok())).collect();
 
+    if floor_insn.is_empty() {
+        bail!("no case met GPC's soft floor: its samples went untimed");
+    }
     let worst = max(&gpc_insn);
     let within = worst <= BUDGET_INSN;
     println!(
-        "budget: self-tuning GPC worst case {:.0} instructions per sample ({} the {} budget); host and target {}",
+        "budget: self-tuning GPC worst case {:.0} instructions per sample ({} the {} budget; samples the soft floor moved: max {:.0}); host and target {}",
         worst,
         if within { "within" } else { "OVER" },
         BUDGET_INSN,
+        max(&floor_insn),
         if all_equal { "bit-equal on every sample" } else { "DIFFER" }
     );
     println!(
@@ -372,6 +426,9 @@ fn build_runner() -> Result<PathBuf> {
 
 /// Runs the case's closed loop on the simulated plant; returns the step inputs it recorded.
 fn record(case: &Case) -> Result<Vec<StepInput>> {
+    if let Some(make) = case.synthetic {
+        return Ok(make());
+    }
     let scenario = Scenario::resolve(case.scenario)?;
     let choice = if case.kind == proto::KIND_PI { ControllerChoice::Pi } else { ControllerChoice::Gpc };
     let mut opts = SimOptions::new(scenario, ControllerSpec::new(choice));
@@ -383,6 +440,23 @@ fn record(case: &Case) -> Result<Vec<StepInput>> {
         .iter()
         .map(|r| StepInput { t_ms: sim_clock_ms(r.t_s), counts: r.counts, setpoint_c: r.setpoint_c as f32 })
         .collect())
+}
+
+/// The samples on which GPC's soft floor moved the plan, replaying `inputs` on the host (the
+/// floor's count in [`proto::floor_samples`] changed); empty for a controller without it.
+fn floor_samples(kind: u32, inputs: &[StepInput]) -> Result<Vec<usize>> {
+    let (mut carrier, _) = proto::carrier(kind).context("unknown controller kind")?;
+    let mut seen = proto::floor_samples(&carrier);
+    let mut at = Vec::new();
+    for (i, input) in inputs.iter().enumerate() {
+        carrier.step(input);
+        let now = proto::floor_samples(&carrier);
+        if now != seen {
+            at.push(i);
+        }
+        seen = now;
+    }
+    Ok(at)
 }
 
 /// The board's millisecond clock at sim time `t_s` (rows start at 0), converted once per sample.
@@ -635,5 +709,16 @@ mod tests {
         assert_eq!(host[20].1, [(open, 200_000), (open, 0)]);
         assert!(host[21..].iter().all(|(_, e)| e.is_empty()), "{:?}", &host[21..]);
         assert!(run_host(7, &inputs).is_err(), "unknown controller kind");
+    }
+
+    #[test]
+    fn the_floor_case_meets_the_soft_floor_and_only_with_the_damped_tuning() {
+        let inputs = falling_through_3c();
+        let at = floor_samples(proto::KIND_GPC_DAMPED, &inputs).unwrap();
+        // The fall starts at sample 412; the floor can only act once the plan dips, after it.
+        assert!(!at.is_empty() && at.iter().all(|&i| i >= 412), "{at:?}");
+        // The board's λ 0.5 meets the no-cooling bound first; PI has no floor.
+        assert!(floor_samples(proto::KIND_GPC, &inputs).unwrap().is_empty());
+        assert!(floor_samples(proto::KIND_PI, &inputs).unwrap().is_empty());
     }
 }
