@@ -1,19 +1,19 @@
 //! Host automation for hter (`cargo xtask <command>`).
 //!
-//! `cargo xtask pil` — processor-in-the-loop: records ADC counts from closed-loop `hal-sim`
-//! runs (and one made-up sequence that meets GPC's soft floor, which no closed-loop run at the
-//! board's tuning does: it reports those samples' instructions apart, and fails when no sample
-//! meets the floor), builds the bare-metal runner `pil/` for the Cortex-M4F (thumbv7em-none-eabihf), runs
-//! it under QEMU (`-M mps2-an386`, `-icount shift=6,sleep=off`: deterministic virtual time, one
+//! `cargo xtask pil` — processor-in-the-loop: records ADC counts from closed-loop `hal-sim` runs
+//! (and one made-up sequence that meets GPC's soft floor, which no closed-loop run at the board's
+//! tuning does: it reports those samples' instructions apart, and fails when no sample meets the
+//! floor), builds the bare-metal runner `pil/` for the Cortex-M4F (thumbv7em-none-eabihf), runs it
+//! under QEMU (`-M mps2-an386`, `-icount shift=6,sleep=off`: deterministic virtual time, one
 //! instruction = 64 ns), and checks that every duty (bit for bit) and every event and alarm the
 //! target computes equals what the same library code computes here on the host from the same
-//! counts. It reports the instructions per sample (the step plus the cold-chain monitor), a
-//! profile by part, the runner's flash and RAM, and ends with one JSON line. It exits non-zero
-//! when a bit differs or when a self-tuning GPC sample takes more than [`BUDGET_INSN`]
-//! instructions. It then boots `pil`'s `failsafe` binary, which takes a panic, a
-//! HardFault, an NMI and an unexpected interrupt through the firmware's stop path, each across a
-//! real system reset, and checks each path ([`failsafe`]); the JSON line's `failsafe` object
-//! says which passed, and any `false` fails the command.
+//! counts. It reports the instructions per sample (the step plus the cold-chain monitor), a profile
+//! by part, the runner's flash and RAM, and ends with one JSON line. It exits non-zero when a bit
+//! differs or when a self-tuning GPC sample takes more than [`BUDGET_INSN`] instructions. It then
+//! boots `pil`'s `failsafe` binary, which takes a panic, a HardFault, an NMI and an unexpected
+//! interrupt through the firmware's stop path, each across a real system reset, and checks each
+//! path ([`failsafe`]); the JSON line's `failsafe` object says which passed, and any `false` fails
+//! the command.
 //!
 //! `cargo xtask size` — the firmware's footprint: builds the release firmware once per
 //! controller (the default self-tuning GPC, the same on the buck drive, then each controller
