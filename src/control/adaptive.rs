@@ -106,15 +106,31 @@
 //!
 //! **Cautious while unconfirmed.** Outside `Adaptive` GPC runs with λ at least
 //! [`CAUTIOUS_GPC_LAMBDA`]: the model it designs on is one the estimate has not confirmed on
-//! this carrier, and the default λ (0.5) is tuned for a model that has. **And at rest**: paused,
-//! the estimate is no longer being confirmed either, and what the law meets there is the sensor's
-//! noise and slow disturbances, which λ 0.5 answered by moving the duty more than they need.
-//! With λ 3 while resting: `hter compare --scenario disturbance` GPC 137 → 92 (IGMVC 132, GMVC
-//! 451 unchanged); holding 4 °C at 28 °C on the buck drive 7.12 → 6.76 W (H-TER I) and
-//! 8.48 → 7.27 W (H-TER II), steady-state error 0.055 → 0.047 and 0.036 → 0.021 °C; the
-//! `step` pull-down 1.078 → 1.062 × the bound (PI 1.016), its steady-state error 0.118 →
-//! 0.032 °C. It leaves the rest when it ends (a step, an error past [`REST_EXIT_C`], a duty at
-//! a rail), so tracking and disturbance rejection run at the default λ again.
+//! this carrier, and the default λ (0.5) is tuned for a model that has.
+//!
+//! **Damped at rest.** Paused, the estimate is no longer being confirmed either, and what the
+//! law meets there is the sensor's noise and slow disturbances, which λ 0.5 answered by moving
+//! the duty more than they need: while resting on a confirmed model GPC runs with λ at least
+//! [`REST_GPC_LAMBDA`] (10). It leaves the rest when it ends (a step, an error past
+//! [`REST_EXIT_C`], a duty at a rail), so tracking and disturbance rejection run at the default
+//! λ again. The rest's λ was the cautious 3 until issue 15 found a half-loaded H-TER I on `step`
+//! (28 °C) holding a ±0.25 °C cycle of about 100 s for the last hour and a half: its estimate
+//! had drifted into the cycle on the full-load start model and paused there, and λ 3 kept it
+//! (steady-state error 0.31 °C). `hter compare --scenario step --load L --ambient A --seed S`,
+//! seeds 1–8 at 20 · 28 · 36 °C: the half load's steady-state error, median 0.19 · 0.08 · 0.08
+//! → 0.031 · 0.029 · 0.032 °C and worst 0.39 · 0.31 · 0.36 → 0.051 · 0.048 · 0.070; the full
+//! load's worst 0.066 · 0.393 · 0.040 → 0.027 · 0.023 · 0.022; IAE / bound, half load medians
+//! 1.274 · 1.111 · 1.062 → 1.221 · 1.094 · 1.055, full and H-TER II within 0.004. `disturbance`
+//! 87 → 73 (full) and 94 → 79 °C·s (half); `hot-zone` 1 828 → 1 435 and 2 155 → 1 696 °C·s;
+//! `mission` on the half load 1.385 → 1.142 × the bound; `piecewise`, whose holds are shorter
+//! than the pause, 1.129 · 1.320 · 1.033 → 1.132 · 1.317 · 1.037 (seeds 1–8, 28 °C: the seed
+//! spread). λ 30 holds `step` closer (worst 0.030 °C) but a design made at rest still serves the
+//! first samples after a setpoint change (the staged design takes four to eight to follow a
+//! new λ): `piecewise` 1.146 · 1.339 · 1.044, and `hot-zone` on the half load 2 657 °C·s.
+//! Scaling the law's Δu by 0.1–0.15 at rest instead (no redesign) let `hot-zone` reach 4.51 °C.
+//! λ 3 at rest had itself taken the disturbance run from 137 to 92 °C·s and the buck drive's
+//! holding power at 28 °C from 7.12 to 6.76 W (H-TER I) and 8.48 to 7.27 W (H-TER II), against
+//! λ 0.5.
 //!
 //! **The cost's first row.** Self-tuning GPC's cost starts at N1 = k + 1, one sample after
 //! the first one the model's delay k lets the duty reach (`GpcConfig::n1` when larger, N2 when
@@ -331,13 +347,18 @@ impl SecondOrderRegressor {
 }
 
 /// GPC's λ while the law runs on a model the current estimate has not confirmed (`Frozen`: the
-/// start model, one restored from flash, or the last trusted one), or while the estimator is
-/// paused at rest ([`SelfTuning::resting`]), at least this. On a
+/// start model, one restored from flash, or the last trusted one), at least this. On a
 /// carrier far faster than its start model (a small, light load) λ = 0.5 drove full duty for
 /// 30 s at start and the cold plate's stored cold then cooled the load at zero duty, which the
 /// stuck-on detector read as a stuck SSR (campaign mission 23269); λ = 3 is what GPC ran with
 /// before issue 15.
 pub const CAUTIOUS_GPC_LAMBDA: f32 = 3.0;
+
+/// GPC's λ while the estimator is paused at rest ([`SelfTuning::resting`]) on a model it had
+/// confirmed, at least this (module docs, "Damped at rest"; an unconfirmed one keeps
+/// [`CAUTIOUS_GPC_LAMBDA`]): a half-loaded H-TER I that had drifted into a ±0.25 °C cycle of
+/// about 100 s on its full-load start model kept it for hours at λ 3.
+pub const REST_GPC_LAMBDA: f32 = 10.0;
 
 /// Samples at rest after which the estimator pauses (30 min at Ts = 10 s; module docs, "Paused
 /// at rest").
@@ -614,11 +635,17 @@ impl Controller for SelfTuning {
         }
         let w = if self.approaching { self.approach_setpoint(input.y_c, input.w_c) } else { input.w_c };
         let law = match self.cfg.law {
-            // Cautious while the model is one the estimate has not confirmed, or no longer
-            // confirms because it is paused at rest; the cost from k + 1 (module docs).
+            // Cautious while the model is one the estimate has not confirmed, damped while the
+            // estimator is paused at rest; the cost from k + 1 (module docs).
             Law::Gpc(g) => {
-                let cautious = self.mode != AdaptiveMode::Adaptive || self.resting();
-                let lambda = if cautious { g.lambda.max(CAUTIOUS_GPC_LAMBDA) } else { g.lambda };
+                let least = if self.mode != AdaptiveMode::Adaptive {
+                    CAUTIOUS_GPC_LAMBDA
+                } else if self.resting() {
+                    REST_GPC_LAMBDA
+                } else {
+                    0.0
+                };
+                let lambda = g.lambda.max(least);
                 // (At most N2: a horizon that ends sooner keeps its last row, as before.)
                 Law::Gpc(GpcConfig { n1: g.n1.max(self.cfg.k + 1).min(g.n2), lambda, ..g })
             }
@@ -908,16 +935,16 @@ mod tests {
         assert_eq!(c.theta(), theta, "paused: θ unchanged");
         assert_eq!(c.updates(), updates + 500, "the paused samples count towards warm-up");
         assert_eq!(c.mode(), mode, "the trust decision is that of the paused estimate");
-        // At rest GPC asks what it would with the cautious λ, bit for bit, though the estimate is
+        // At rest GPC asks what it would with the rest's λ, bit for bit, though the estimate is
         // trusted; awake (the count started again) it runs with its own λ (0.5). The noise took
-        // this estimate outside the plausible set before the pause (Frozen: cautious anyway), so
-        // the resting controller is given the start model's, which the rules trust.
+        // this estimate outside the plausible set before the pause (Frozen: cautious), so the
+        // resting controller is given the start model's, which the rules trust.
         let mut trusting = c.clone();
         trusting.rls = start(ADAPTIVE_GPC).rls;
-        let cautious = |c: &SelfTuning| {
+        let with_lambda = |c: &SelfTuning, lambda: f32| {
             let mut c = c.clone();
             match &mut c.cfg.law {
-                Law::Gpc(g) => g.lambda = CAUTIOUS_GPC_LAMBDA,
+                Law::Gpc(g) => g.lambda = lambda,
                 _ => unreachable!("ADAPTIVE_GPC is GPC"),
             }
             c
@@ -938,15 +965,18 @@ mod tests {
         };
         let at_rest = asks(trusting.clone());
         assert!(at_rest.iter().all(|&(_, rest, mode)| rest && mode == AdaptiveMode::Adaptive), "{at_rest:?}");
-        assert_eq!(at_rest, asks(cautious(&trusting)));
+        assert_eq!(at_rest, asks(with_lambda(&trusting, REST_GPC_LAMBDA)));
         let mut awake = trusting.clone();
         awake.rest_n = 0;
+        // (The rest's λ and the cautious one ask differently here: the equality above is the
+        // rest's λ at work.)
+        assert_ne!(asks(with_lambda(&awake, REST_GPC_LAMBDA)), asks(with_lambda(&awake, CAUTIOUS_GPC_LAMBDA)));
         let own = asks(awake.clone());
         // (The first awake update may find the estimate of this noise-driven history implausible
         // and hold the start model's for that sample: Frozen, cautious; then it is trusted.)
         assert!(own.iter().all(|&(_, rest, _)| !rest), "{own:?}");
         assert!(own[1..].iter().all(|&(_, _, mode)| mode == AdaptiveMode::Adaptive), "{own:?}");
-        assert_ne!(own, asks(cautious(&awake)));
+        assert_ne!(own, asks(with_lambda(&awake, REST_GPC_LAMBDA)));
         // A load pushed 0.25 °C off stays at rest (within the exit band); 0.35 °C ends it.
         r.run(&mut c, W_C, 0.25 - (r.y - W_C));
         assert!(c.resting());

@@ -431,7 +431,7 @@ impl GpcState {
 /// states like its test's (λ 50, full duty, the load falling 0.15 °C a sample through the
 /// setpoint): a second guard, not a tuning. `cargo xtask pil` times such samples in a case
 /// made up to meet the floor (readings falling 0.2 °C a sample through a 3 °C setpoint, GPC at
-/// λ 200; [`Self::floor_samples`] tells it which samples): 3 607 instructions at most.
+/// λ 200; [`Self::floor_samples`] tells it which samples): 3 608 instructions at most.
 ///
 /// **Sizes.** Everything runs on [`NQ`] = 3 levels, fixed, so the loops unroll and carry no
 /// bounds checks: a smaller Nu pads H with the identity (its factor, inverse and P are then the
