@@ -34,6 +34,7 @@ sweep_header() { "$H" compare --controllers pi --duration 10 | awk -v h="$1" '/^
 sweep_row() { local label=$1; shift; "$H" compare "$@" | awk -v l="$label" '/^\| (onoff|p|pi|gmvc|igmvc|gpc) \|/ { sub(/^\| [a-z]+ \|/, "| " l " |"); print }'; }
 bound_row() { "$H" compare "$@" --controllers pi | awk '/^\| bound \|/ { print }'; }
 
+HTER="$H" scripts/targets.sh                                         | put targets
 table --scenario step --plot "$D/step.png"                           | put step
 table --scenario piecewise --plot "$D/piecewise.png"                 | put piecewise
 table --scenario half-load --plot "$D/half-load.png"                 | put half-load

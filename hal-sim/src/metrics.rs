@@ -143,6 +143,10 @@ pub struct SimMetrics {
     pub alarms: Vec<Stamped<AlarmKind>>,
     /// Faults the step detected.
     pub faults_detected: Vec<Stamped<Detected>>,
+    /// Times the safety supervisor's freeze guard took the output from the controller
+    /// (`freeze_guard_tripped` events after the pre-roll): 0 in a run the controller kept
+    /// above the guard on its own.
+    pub freeze_guard_trips: u32,
     /// Time the board's alarm indicator was on (`hter::alarm`: out of range, not in control,
     /// or a fault or alarm nobody acknowledged — the simulation never presses the button), s.
     pub alarm_indicator_s: f64,

@@ -26,6 +26,7 @@ use hter::control::gpc::GpcConfig;
 use hter::control::mv::{GmvcConfig, IgmvcConfig};
 use hter::control::Controller;
 use hter::control::{AnyController, FixedModel, Law, Pi, PiConfig};
+use hter::event::EventKind;
 use hter::ident::prbs::PrbsConfig;
 use hter::model::Model;
 use hter::persist::{HistoryRecord, ModelCadence, ModelRecord, Recorder, ResetCause, Save};
@@ -449,6 +450,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
     // The step has stopped being called (`firmware-hang`); what the hung MCU's pins still show.
     let mut hung = false;
     let mut alarm_hw_first_s: Option<f64> = None;
+    let mut freeze_guard_trips = 0u32;
     let mut held: Option<(StepOutput, u32, Indication)> = None;
     for k in -preroll..n {
         let t_s = k as f64 * ts;
@@ -504,6 +506,8 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             for e in out.events.iter().filter(|e| fault::is_reported(e.kind)) {
                 faults.push(Stamped { kind: Detected::Event(e.kind), t_s: e.t_s() - PREROLL_S });
             }
+            let trips = out.events.iter().filter(|e| e.kind == EventKind::FreezeGuardTripped).count();
+            freeze_guard_trips = freeze_guard_trips.saturating_add(trips as u32);
             let recorded = recorder.push(step_clock_ms(t_s), out.temp_c.0);
             if let Some(save) = recorder.due_save(&recorded) {
                 stores.push((t_s, save));
@@ -538,6 +542,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
         ssr_switches: switches,
         alarms,
         faults_detected: faults,
+        freeze_guard_trips,
         alarm_indicator_s: alarm_on_s,
         alarm_indicator_first_s: alarm_first_s,
         alarm_hw_first_s,

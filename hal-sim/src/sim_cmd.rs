@@ -418,6 +418,7 @@ pub fn print_summary(opts: &SimOptions, out: &SimOutput) {
     println!("energy                      {:10.2} Wh", m.energy_wh);
     println!("mean power                  {:10.2} W", m.mean_power_w);
     println!("SSR switches                {:10}", m.ssr_switches);
+    println!("freeze-guard trips          {:10}", m.freeze_guard_trips);
     if !m.faults_detected.is_empty() {
         let list: Vec<String> = m.faults_detected.iter().map(|f| format!("{}@{}s", f.kind, f.t_s)).collect();
         println!("faults detected             {}", list.join(", "));

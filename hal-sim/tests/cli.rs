@@ -113,6 +113,7 @@ fn sim_json_has_every_contract_field_and_writes_csv_and_plot() {
         "ssr_switches",
         "alarms",
         "faults_detected",
+        "freeze_guard_trips",
     ] {
         assert!(v.get(key).is_some(), "missing {key} in {v}");
     }
@@ -267,6 +268,32 @@ fn a_buck_campaign_mission_replays_with_its_drive() {
     assert_eq!(c["worst_min_c"].as_f64(), s["min_temp_c"].as_f64(), "{c}\n{s}");
     let ssr = json(&["sim", "--mission-seed", "116", "--controller", "pi", "--json"]);
     assert_ne!(s["energy_wh"], ssr["energy_wh"], "the replay ran on the SSR: {s}\n{ssr}");
+}
+
+/// `freeze_guard_trips` counts the supervisor's trips, read here from the CSV's `mode` column
+/// instead of its events: every entry into `freeze_guard`. A shorted SSR at 5 400 s cools the
+/// load into the guard again and again; a clean run never meets it.
+#[test]
+fn freeze_guard_trips_count_the_entries_into_the_guard() {
+    let csv = std::env::temp_dir().join(format!("hter-cli-freeze-{}.csv", std::process::id()));
+    let path = csv.to_str().unwrap();
+    for (fault, tripped) in [(Some("ssr-stuck-on@5400"), true), (None, false)] {
+        let mut args = vec!["sim", "--scenario", "step", "--json", "--csv", path];
+        if let Some(f) = fault {
+            args.extend(["--fault", f]);
+        }
+        let v = json(&args);
+        let text = std::fs::read_to_string(&csv).unwrap();
+        let mut lines = text.lines();
+        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let col = header.iter().position(|h| *h == "mode").expect("a mode column");
+        let modes: Vec<String> = lines.map(|l| l.split(',').nth(col).unwrap().to_string()).collect();
+        let entries = modes.windows(2).filter(|m| m[0] != "freeze_guard" && m[1] == "freeze_guard").count()
+            + usize::from(modes.first().is_some_and(|m| m == "freeze_guard"));
+        assert_eq!(v["freeze_guard_trips"].as_u64(), Some(entries as u64), "{fault:?}: {v}");
+        assert_eq!(entries > 0, tripped, "{fault:?}: {entries} entries");
+    }
+    let _ = std::fs::remove_file(&csv);
 }
 
 #[test]
