@@ -457,3 +457,20 @@ fn edge_aligned_samples_are_biased_and_synchronised_ones_are_not() {
         assert!(sync_mean.abs() < 0.3 && sync_rms < 1.8, "{c:?}: synchronised {sync_mean} (rms {sync_rms})");
     }
 }
+
+/// `guard_trips` counts the freeze guard's trips in the freeze margin's window only (after
+/// pull-down, before the hardware fault, warm ambient): where the control alone should have
+/// kept the load up. Mission 206 (`--seed 1`: a light carrier from a 5.8 °C ambient, no
+/// hardware fault) trips it once on its first approach to 4 °C, and that trip is the run's
+/// only one; mission 6391's shorted SSR trips it 27 times, all after the short, none counted.
+#[test]
+fn guard_trips_count_the_control_s_own_trips_not_a_fault_s() {
+    use hal_sim::mission::{evaluate, Mission};
+    for (seed, counted, all) in [(206, 1, 1), (6391, 0, 27)] {
+        let m = Mission::generate(seed);
+        let out = run(&m.options(ControllerSpec::new(ControllerChoice::Gpc))).unwrap();
+        let r = evaluate(&m, &out);
+        assert_eq!(out.metrics.freeze_guard_trips, all, "mission {seed}");
+        assert_eq!(r.guard_trips, counted, "mission {seed}");
+    }
+}

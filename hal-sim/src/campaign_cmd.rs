@@ -137,6 +137,14 @@ pub struct CampaignSummary {
     pub fault_below_2_max_s: f64,
     /// See [`Self::fault_below_2_max_s`].
     pub fault_below_2_minutes: f64,
+    /// Freeze-guard trips after pull-down, before any hardware fault and outside cold ambient
+    /// ([`MissionReport::guard_trips`]), over all missions, and the missions that had one.
+    pub guard_trips: u64,
+    /// See [`Self::guard_trips`].
+    pub guard_trip_missions: u64,
+    /// Those missions' seeds, to replay with `hter sim --mission-seed N --csv F` (the `mode`
+    /// column shows each trip).
+    pub guard_trip_seeds: Vec<u64>,
     /// Missions whose pull-down took longest, s (None if none ended).
     pub longest_pulldown_s: Option<f64>,
     /// Seeds of the failing missions.
@@ -257,6 +265,9 @@ pub fn summarize(
         fault_min_seed: fault_min.map(|(_, s)| s),
         fault_below_2_max_s: reports.iter().map(|r| r.fault_below_2_s).fold(0.0, f64::max),
         fault_below_2_minutes: sum(&|r| r.fault_below_2_s) / 60.0,
+        guard_trips: reports.iter().map(|r| u64::from(r.guard_trips)).sum(),
+        guard_trip_missions: reports.iter().filter(|r| r.guard_trips > 0).count() as u64,
+        guard_trip_seeds: reports.iter().filter(|r| r.guard_trips > 0).map(|r| r.seed).collect(),
         longest_pulldown_s: reports.iter().filter_map(|r| r.pulldown_s).reduce(f64::max),
         failures,
         failure_details: details,
@@ -337,6 +348,10 @@ fn print_table(s: &CampaignSummary) {
     if let (Some(c), Some(seed)) = (s.fault_free_min_c, s.fault_free_min_seed) {
         println!("| freeze margin: lowest load after pull-down, fault-free missions, warm ambient | {c:.2} °C (mission {seed}) |");
     }
+    println!(
+        "| freeze-guard trips after pull-down, before faults, warm ambient | {} in {} missions {:?} |",
+        s.guard_trips, s.guard_trip_missions, s.guard_trip_seeds
+    );
     if let (Some(c), Some(seed)) = (s.fault_min_c, s.fault_min_seed) {
         println!(
             "| after a hardware fault, warm ambient: lowest load, time below 2 °C | {c:.2} °C (mission {seed}); {:.1} min in all, at most {:.0} s in one mission |",

@@ -27,12 +27,13 @@ use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
 use hter::event::EventKind;
+use hter::step::Mode;
 
 use crate::fault::{Fault, FaultClass};
 use crate::metrics::Detected;
 use crate::plant::{Load, PlantParams};
 use crate::scenario::{day_night, Change, Scenario, Start, DAY_S};
-use crate::sim::{ControllerSpec, PlantChoice, SimOptions, SimOutput};
+use crate::sim::{ControllerSpec, PlantChoice, RowMode, SimOptions, SimOutput};
 
 /// Probability of a board fault in a mission without a hardware fault: 0.1, so a 40-mission
 /// campaign carries about three and 1000 missions about 80 (as many of each kind as of the
@@ -270,6 +271,10 @@ pub struct MissionReport {
     pub fault_min_c: Option<f64>,
     /// See [`Self::fault_min_c`].
     pub fault_below_2_s: f64,
+    /// Freeze-guard trips in the freeze margin's window (after pull-down, before the hardware
+    /// fault, cold ambient left out): entries of the step into `freeze_guard` where the
+    /// controller alone should have kept the load up, the supervisor acting as the first line.
+    pub guard_trips: u32,
     /// Hardware-fault reports without a fault behind them (before the injected fault, or in a
     /// mission without one): (kind, first report at s), one per kind.
     pub spurious: Vec<(Detected, f64)>,
@@ -296,7 +301,11 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
     let mut max_judged_c: Option<f64> = None;
     let (mut margin_c, mut fault_min_c, mut fault_below_2_s) = (None::<f64>, None::<f64>, 0.0);
     let mut last_cold = f64::NEG_INFINITY;
+    let (mut guard_trips, mut guarded) = (0u32, false);
     for r in &out.rows {
+        let guard = matches!(r.mode, RowMode::Step(Mode::FreezeGuard));
+        let entered = guard && !guarded;
+        guarded = guard;
         let t = r.true_temp_c;
         full_run = if r.duty >= 0.99 { full_run + 1 } else { 0 };
         min_c = min_c.min(t);
@@ -315,6 +324,9 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
         if pulldown_s.is_some() && r.t_s - last_cold > COLD_LAG_S {
             let lowest = if r.t_s < t_fault { &mut margin_c } else { &mut fault_min_c };
             *lowest = Some(lowest.map_or(t, |x| x.min(t)));
+            if r.t_s < t_fault && entered {
+                guard_trips += 1;
+            }
             if r.t_s >= t_fault && t < 2.0 {
                 fault_below_2_s += ts;
             }
@@ -421,6 +433,7 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
         margin_c,
         fault_min_c,
         fault_below_2_s,
+        guard_trips,
         fault,
         fault_detectable,
         spikes,
