@@ -265,9 +265,8 @@ fn pil() -> Result<()> {
         cal_seen = Some((tr.cal, tpi));
         stack = stack.max(tr.stack_bytes);
         state = state.max(tr.state_bytes);
-        let host = run_host(case.kind, &inputs)?;
+        let (host, floors) = run_host(case.kind, &inputs)?;
         let mismatches = compare(&host, &tr.samples);
-        let floors = floor_samples(case.kind, &inputs)?;
         steps += inputs.len();
         let insn = |t: u32| (f64::from(t) - f64::from(empty)).max(0.0) / TICKS_PER_INSN;
         let per_step: Vec<f64> =
@@ -442,23 +441,6 @@ fn record(case: &Case) -> Result<Vec<StepInput>> {
         .collect())
 }
 
-/// The samples on which GPC's soft floor moved the plan, replaying `inputs` on the host (the
-/// floor's count in [`proto::floor_samples`] changed); empty for a controller without it.
-fn floor_samples(kind: u32, inputs: &[StepInput]) -> Result<Vec<usize>> {
-    let (mut carrier, _) = proto::carrier(kind).context("unknown controller kind")?;
-    let mut seen = proto::floor_samples(&carrier);
-    let mut at = Vec::new();
-    for (i, input) in inputs.iter().enumerate() {
-        carrier.step(input);
-        let now = proto::floor_samples(&carrier);
-        if now != seen {
-            at.push(i);
-        }
-        seen = now;
-    }
-    Ok(at)
-}
-
 /// The board's millisecond clock at sim time `t_s` (rows start at 0), converted once per sample.
 fn sim_clock_ms(t_s: f64) -> u64 {
     (t_s * 1000.0).round() as u64
@@ -467,19 +449,30 @@ fn sim_clock_ms(t_s: f64) -> u64 {
 /// One host sample: the duty's bits and the event words.
 type HostSample = (u32, Vec<(u32, u32)>);
 
-/// The same samples through the same library code on the host.
-fn run_host(kind: u32, inputs: &[StepInput]) -> Result<Vec<HostSample>> {
+/// The same samples through the same library code on the host, and the samples on which GPC's
+/// soft floor moved the plan (the floor's count in [`proto::floor_samples`] changed; none for a
+/// controller without it).
+fn run_host(kind: u32, inputs: &[StepInput]) -> Result<(Vec<HostSample>, Vec<usize>)> {
     let (mut carrier, mut monitor) = proto::carrier(kind).context("unknown controller kind")?;
-    Ok(inputs
+    let mut seen = proto::floor_samples(&carrier);
+    let mut floors = Vec::new();
+    let samples = inputs
         .iter()
-        .map(|inp| {
+        .enumerate()
+        .map(|(i, inp)| {
             let o = carrier.step(inp);
+            let now = proto::floor_samples(&carrier);
+            if now != seen {
+                floors.push(i);
+            }
+            seen = now;
             let raised = proto::monitor_push(&mut monitor, inp, &o);
             let mut ev = Vec::new();
             proto::event_words(&o, &raised, |c, v| ev.push((c, v)));
             (o.duty.get().to_bits(), ev)
         })
-        .collect())
+        .collect();
+    Ok((samples, floors))
 }
 
 fn compare(host: &[HostSample], target: &[TargetSample]) -> Vec<String> {
@@ -700,7 +693,7 @@ mod tests {
                 setpoint_c: 4.0,
             })
             .collect();
-        let host = run_host(proto::KIND_PI, &inputs).unwrap();
+        let (host, _) = run_host(proto::KIND_PI, &inputs).unwrap();
         assert_eq!(host.len(), inputs.len());
         assert!(host[..20].iter().all(|(d, _)| f32::from_bits(*d) > 0.0), "a warm load is cooled");
         assert!(host[20..].iter().all(|(d, _)| f32::from_bits(*d) == 0.0), "an open sensor stops cooling");
@@ -714,11 +707,12 @@ mod tests {
     #[test]
     fn the_floor_case_meets_the_soft_floor_and_only_with_the_damped_tuning() {
         let inputs = falling_through_3c();
-        let at = floor_samples(proto::KIND_GPC_DAMPED, &inputs).unwrap();
+        let floors = |kind| run_host(kind, &inputs).unwrap().1;
+        let at = floors(proto::KIND_GPC_DAMPED);
         // The fall starts at sample 412; the floor can only act once the plan dips, after it.
         assert!(!at.is_empty() && at.iter().all(|&i| i >= 412), "{at:?}");
         // The board's λ 0.5 meets the no-cooling bound first; PI has no floor.
-        assert!(floor_samples(proto::KIND_GPC, &inputs).unwrap().is_empty());
-        assert!(floor_samples(proto::KIND_PI, &inputs).unwrap().is_empty());
+        assert!(floors(proto::KIND_GPC).is_empty());
+        assert!(floors(proto::KIND_PI).is_empty());
     }
 }
