@@ -13,10 +13,8 @@
 # Set HTER to use an already built binary (otherwise it builds hter in release first).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-if [[ -z "${HTER:-}" ]]; then
-  cargo build --release --bin hter -q
-  HTER="${CARGO_TARGET_DIR:-target}/release/hter"
-fi
+source scripts/lib.sh
+hter_bin
 KP="${KP:-0.2 0.3 0.4 0.5 0.6 0.7 0.8 0.9 1.0}"
 TI="${TI:-150 200 250 300 350 400 450 500 550 600 650 700 750 800 850 900}"
 if [[ "${1:-}" == "--header" ]]; then
@@ -24,8 +22,6 @@ if [[ "${1:-}" == "--header" ]]; then
   echo "| case | Kp (duty/°C) | Ti (s) | IAE (°C·s) | min (°C) | bound (°C·s) | IAE / bound |"
   echo "| --- | --- | --- | --- | --- | --- | --- |"
 fi
-# One JSON number out of the compare object: the first "key": value.
-field() { grep -o "\"$1\":[-0-9.eE+]*" <<<"$2" | head -1 | cut -d: -f2; }
 best=""
 for kp in $KP; do
   for ti in $TI; do

@@ -13,16 +13,11 @@
 # SEEDS (default "1 2 3 4 5 6 7 8") and AMBIENTS (default "20 28 36") to measure fewer runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-if [[ -z "${HTER:-}" ]]; then
-  cargo build --release --bin hter -q
-  HTER="${CARGO_TARGET_DIR:-target}/release/hter"
-fi
-export HTER
+source scripts/lib.sh
+hter_bin
 SEEDS="${SEEDS:-1 2 3 4 5 6 7 8}"
 AMBIENTS="${AMBIENTS:-20 28 36}"
 CASES=("piecewise hter1" "half-load hter1" "piecewise hter2")
-# One JSON number out of a compare object: the first "key": value.
-field() { grep -o "\"$1\":[-0-9.eE+]*" <<<"$2" | head -1 | cut -d: -f2; }
 
 # Median (worst) of the numbers on stdin, one a line, to 3 decimals; "worst" is the largest.
 medworst() { sort -g | awk '{ v[NR] = $1 } END {
