@@ -22,7 +22,7 @@
 
 use crate::calib::TwoPoint;
 use crate::coldchain::{AlarmKind, ColdChainMonitor, Excursion, Raised, Side};
-use crate::control::adaptive::{model_from_theta, plausible_model, AdaptiveConfig, ESTIMATED_NB};
+use crate::control::adaptive::{model_from_theta, plausible_model_cold, AdaptiveConfig, ESTIMATED_NB};
 use crate::control::{AdaptiveMode, Controller};
 use crate::failsafe::{StopInfo, StopKind};
 use crate::ident::commission::cabinet_plausible;
@@ -242,13 +242,14 @@ impl ModelRecord {
     }
 
     /// The model the self-tuner configured by `cfg` would design on, if it passes the same
-    /// plausibility test the self-tuner applies to its own estimates ([`plausible_model`]). Its
+    /// plausibility test the self-tuner applies to its own estimates
+    /// ([`plausible_model`](crate::control::adaptive::plausible_model)). Its
     /// B has [`ModelRecord::NB`] terms, the trailing ones zero for a model of lower order (the
     /// same polynomial).
     pub fn to_model(&self, cfg: &AdaptiveConfig) -> Result<Model, DecodeError> {
         let cfg = AdaptiveConfig { k: usize::from(self.k), ..*cfg };
         let m = model_from_theta(&cfg, &self.theta).ok_or(DecodeError::OutOfRange)?;
-        if plausible_model(&cfg, &m) {
+        if plausible_model_cold(&cfg, &m) {
             Ok(m)
         } else {
             Err(DecodeError::Implausible)

@@ -239,6 +239,9 @@ pub type Ctl = Identify;
 /// The controller of this build. `adaptive` is the self-tuner's configuration as restored from
 /// flash (the built-in one when nothing good is stored); the others ignore it.
 #[cfg(not(any(feature = "pi", feature = "onoff", feature = "identify")))]
+// Out of line: inlined into the step's constructor, the self-tuner's folded constants were
+// stored into the control task's future and copied on from there (−232 B of flash).
+#[inline(never)]
 pub fn controller(adaptive: Option<AdaptiveConfig>) -> Ctl {
     // Only the start model and its delay come from flash (`AdaptiveConfig::restored_from`);
     // taking the rest from the constant lets the compiler fold its checks, which

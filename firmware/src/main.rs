@@ -168,7 +168,7 @@ async fn main(spawner: Spawner) {
     );
     // The persist task owns the flash: it restores both regions, then serves the writes.
     spawner.spawn(persist::persist(b.flash).unwrap());
-    let restored = persist::BOOTED.wait().await;
+    let restored = persist::BOOTED.receive().await;
     let mut boot = restored.boot(reset, fault);
     if restored.settings.is_err() {
         // No settings stored: this build's calibration constant, if it has one.
@@ -219,18 +219,26 @@ async fn sample(mut analog: board::Analog) {
     }
 }
 
+/// The step, built from the constant profile, so that its derived sample counts fold at compile
+/// time; only the calibration (and the self-tuner's start model) come from flash. Out of line:
+/// inlined into the control task, its constants were stored field by field into the task's
+/// future and copied about there (−256 B of flash; `config::controller` likewise).
+#[cfg(not(feature = "interface"))]
+#[inline(never)]
+fn new_carrier(boot: &Boot) -> hter::step::Carrier<config::Ctl> {
+    hter::step::Carrier::new(
+        config::VALID_CARRIER.with_calibration(boot.calibration),
+        config::controller(boot.adaptive),
+    )
+}
+
 /// Runs the library's per-sample step on each sample, records it, decides the alarm
 /// indicator; after each completed step beats the heartbeat, tells the stall check and feeds
 /// the watchdog.
 #[cfg(not(feature = "interface"))]
 #[embassy_executor::task]
 async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
-    // Built here from the constant profile, so that its derived sample counts fold at compile
-    // time; only the calibration comes from flash.
-    let mut carrier: hter::step::Carrier<config::Ctl> = hter::step::Carrier::new(
-        config::VALID_CARRIER.with_calibration(boot.calibration),
-        config::controller(boot.adaptive),
-    );
+    let mut carrier = new_carrier(&boot);
     carrier.note_reset(boot.reset);
     let mut recorder = hter::persist::Recorder::new(boot.history, config::HISTORY_SAVE_SAMPLES);
     let mut history = recorder.note_reset(boot.reset);

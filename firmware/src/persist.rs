@@ -34,6 +34,7 @@ use embassy_stm32::peripherals::FLASH;
 use embassy_stm32::Peri;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::channel::Channel;
 #[cfg(feature = "interface")]
 use embassy_sync::pipe::Pipe;
 use embassy_sync::signal::Signal;
@@ -103,13 +104,43 @@ impl EccErrors for L4Ecc {
     }
 }
 
-static PENDING: Mutex<CriticalSectionRawMutex, RefCell<(PendingSaves, WriteGate)>> =
-    Mutex::new(RefCell::new((PendingSaves::EMPTY, WriteGate::firmware())));
+/// The records waiting for the write gate, and the gate; set up on first use.
+static PENDING: Mutex<CriticalSectionRawMutex, RefCell<Pending>> = Mutex::new(RefCell::new(Pending::Unset));
+
+/// [`PENDING`]'s contents. Not the queue and gate themselves: their empty states hold niche
+/// values and the gate's constants, which put all 672 bytes in `.data` (flash); `Unset` is a
+/// zero tag (`repr(u8)`, no niche), so the static is `.bss` and the first use builds them
+/// field by field (`PendingSaves::default()` is `EMPTY`; −536 B of flash in all).
+// (One static of it: the empty variant's unused room is the point.)
+#[allow(clippy::large_enum_variant)]
+#[repr(u8)]
+enum Pending {
+    Unset = 0,
+    Set(PendingSaves, WriteGate) = 1,
+}
+
+/// Runs `f` on the waiting records and the write gate.
+fn with_pending<R>(f: impl FnOnce(&mut PendingSaves, &mut WriteGate) -> R) -> R {
+    PENDING.lock(|p| {
+        let mut p = p.borrow_mut();
+        if matches!(*p, Pending::Unset) {
+            *p = Pending::Set(PendingSaves::default(), WriteGate::firmware());
+        }
+        match &mut *p {
+            Pending::Set(pending, gate) => f(pending, gate),
+            // Set just above.
+            Pending::Unset => f(&mut PendingSaves::default(), &mut WriteGate::firmware()),
+        }
+    })
+}
 
 static WAKE: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
-/// What the boot restored: the persist task signals it once, `main` waits for it.
-pub static BOOTED: Signal<CriticalSectionRawMutex, Restored> = Signal::new();
+/// What the boot restored: the persist task sends it once, `main` waits for it. A one-slot
+/// channel, not a `Signal`: a signal's empty state is a niche value inside `Restored`, which
+/// puts all 324 bytes of it in `.data` (flash); the channel's empty state is all zeros (`.bss`):
+/// −292 B of flash.
+pub static BOOTED: Channel<CriticalSectionRawMutex, Restored, 1> = Channel::new();
 
 /// A `history` request: stream the log from this record time, s.
 #[cfg(feature = "interface")]
@@ -125,6 +156,11 @@ pub static HISTORY_PIPE: Pipe<CriticalSectionRawMutex, 256> = Pipe::new();
 #[cfg(feature = "interface")]
 const HISTORY_STALL_MS: u64 = 2_000;
 
+/// Hands `main` what the boot restored (once: the slot is free).
+fn send_booted(r: Restored) {
+    let _ = BOOTED.try_send(r);
+}
+
 fn now_ms() -> u64 {
     Instant::now().as_millis()
 }
@@ -132,14 +168,14 @@ fn now_ms() -> u64 {
 /// Tells the write gate how the supply is (every sample).
 pub fn note_supply(ok: bool) {
     let now = now_ms();
-    PENDING.lock(|p| p.borrow_mut().1.note_supply(now, ok));
+    with_pending(|_, gate| gate.note_supply(now, ok));
     WAKE.signal(());
 }
 
 /// Queues a record for the [`persist`] task (a waiting one of its kind is replaced; log entries
 /// queue in order); it is written once the write gate opens.
 pub fn request(save: Save) {
-    PENDING.lock(|p| p.borrow_mut().0.put(save));
+    with_pending(|pending, _| pending.put(save));
     WAKE.signal(());
 }
 
@@ -192,7 +228,7 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
     #[cfg(feature = "interface")]
     let (Ok(mut store), Ok(mut log)) = (store, log) else {
         warn!("persist: flash regions unusable: nothing is restored or saved");
-        BOOTED.signal(Restored::NOTHING);
+        send_booted(Restored::NOTHING);
         loop {
             HISTORY.wait().await;
             HISTORY_PIPE.write_all(b"err history: no flash\r\n").await;
@@ -202,7 +238,7 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
     let Ok(mut store) = store
     else {
         warn!("persist: flash region unusable: nothing is restored or saved");
-        BOOTED.signal(Restored::NOTHING);
+        send_booted(Restored::NOTHING);
         return;
     };
     #[cfg(feature = "interface")]
@@ -210,7 +246,7 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
     #[cfg(not(feature = "interface"))]
     let restored = flash::restore_records(&mut store, config::ADAPTIVE.as_ref()).await;
     report(&restored);
-    BOOTED.signal(restored);
+    send_booted(restored);
     loop {
         #[cfg(feature = "interface")]
         if let Either::Second(since_s) = select(WAKE.wait(), HISTORY.wait()).await {
@@ -219,10 +255,7 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
         #[cfg(not(feature = "interface"))]
         WAKE.wait().await;
         loop {
-            let next = PENDING.lock(|p| {
-                let (pending, gate) = &mut *p.borrow_mut();
-                pending.next(gate, now_ms())
-            });
+            let next = with_pending(|pending, gate| pending.next(gate, now_ms()));
             let Some(save) = next else { break };
             #[cfg(feature = "interface")]
             let mut result = flash::write(&mut store, &mut log, &save).await;
