@@ -413,25 +413,38 @@ impl GpcState {
 /// at one stage in `MAX_SKIPS + 1` samples. Δu(t) = v_0.
 ///
 /// **Soft floor** (issue 15). The cost also weighs ρ (`FLOOR_WEIGHT`) times the squared
-/// amount by which the plan's prediction falls below [`SOFT_FLOOR_C`] (at most [`FLOOR_GAP_C`]
-/// below the setpoint), so that the plan itself keeps the load off the freeze guard, which
-/// stays the second line. It is checked on one row, midway from the fold to N2 (`floor_row`:
-/// the plan's largest undershoot comes some samples after its first move takes effect), as
-/// ŷ_j = f_j + Σ_i d_i v_i, three weights on the head's last values for f_j and three on the
-/// levels, made once a design. When the plan is within the box and falls below the floor
-/// there, the penalty enters the levels' problem: Q + ρddᵀ, whose inverse is P less a rank-one
-/// term (Sherman–Morrison), so the minimiser moves along Pd, and its first move, clipped into
-/// the box, is Δu(t); that sample skips its design stage like a constrained one (and the one
-/// sample in `MAX_SKIPS + 1` that may not skip goes without the floor, so that no sample pays
-/// for both). A plan the box is at work on is left as it is (one solve a sample at most,
-/// `cargo xtask pil`): at the board's λ the plans that fall below the floor have met the "no
-/// cooling" bound first, which the penalty would push further into
-/// (`a_soft_floor_lifts_a_plan_that_dips_below_it`, against the f64 move of the penalised
-/// cost). It is inert on `hter compare`'s runs at λ 0.5–50 alike, and changes a plan in
-/// states like its test's (λ 50, full duty, the load falling 0.15 °C a sample through the
-/// setpoint): a second guard, not a tuning. `cargo xtask pil` times such samples in a case
-/// made up to meet the floor (readings falling 0.2 °C a sample through a 3 °C setpoint, GPC at
-/// λ 200; [`Self::floor_samples`] tells it which samples): 3 608 instructions at most.
+/// amount by which the plan falls below either of two rows, so that the plan itself keeps the
+/// load off the freeze guard, which stays the second line:
+/// - the *floor row*: the plan's prediction midway from the fold to N2 (`floor_row`: the
+///   plan's largest undershoot comes some samples after its first move takes effect) against
+///   [`SOFT_FLOOR_C`] (at most [`FLOOR_GAP_C`] below the setpoint), as ŷ_j = f_j + Σ_i d_i v_i,
+///   three weights on the head's last values for f_j and three on the levels;
+/// - the *guard row*: what the freeze guard will extrapolate from the plan at row k + 3, the
+///   head's last (its reading plus its smoothed slope times its 120 s look-ahead,
+///   [`GUARD_ROW_WEIGHTS`] on the head's last four values), against [`GUARD_ROW_C`]: its
+///   free response is the head's own values, and its weights on the levels are made once a
+///   design with the floor row's.
+///
+/// The row the plan falls further below enters the levels' problem: Q + ρddᵀ, whose inverse is
+/// P less a rank-one term (Sherman–Morrison), so the plan moves along Pd by the penalised
+/// cost's Newton step, and its first move, clipped into the box, is Δu(t). The plan is the
+/// box's levels when the limits were at work, and a plan that does not cool now (its first
+/// move is the "no cooling" bound) is left as it is: the penalty could only push it further
+/// in. That sample skips its design stage like a constrained one (and the one sample in
+/// `MAX_SKIPS + 1` that may not skip goes without the floor, so that no sample pays for both);
+/// `a_soft_floor_lifts_a_plan_that_dips_below_it` checks it against the f64 move of the
+/// penalised cost.
+///
+/// The guard row is the one that acts on `hter compare`'s runs: a full-duty descent from 6 to
+/// 3 °C that any plan close to the bound makes (the half-loaded H-TER I at 20 °C, the RTD
+/// falling 1.5 °C a minute at 4.1 °C) reached the guard's extrapolated 1.5 °C with the load
+/// itself turning at 3.24 °C, and the trip's 40 s without cooling then cost an undershoot to
+/// 2.73 °C; with the row the plan eases off a sample or two earlier on its own and lands
+/// without a trip (`scripts/targets.sh`: 8 trips on seeds 1–8 at 20 °C to none). The floor
+/// row changes a plan in states like its test's (λ 50, the box holding no cooling after the
+/// first move). `cargo xtask pil` times such samples in a case made up to meet the floor
+/// (readings falling 0.2 °C a sample through a 3 °C setpoint, GPC at λ 200;
+/// [`Self::floor_samples`] tells it which samples), the box solved on the same sample.
 ///
 /// **Sizes.** Everything runs on [`NQ`] = 3 levels, fixed, so the loops unroll and carry no
 /// bounds checks: a smaller Nu pads H with the identity (its factor, inverse and P are then the
@@ -491,6 +504,8 @@ struct StagedBank {
     fj: usize,
     fa: [f32; 3],
     fd: [f32; MAX_NU],
+    /// The guard row's forced response's weights on the levels (type docs, "Soft floor").
+    gd: [f32; MAX_NU],
 }
 
 impl StagedBank {
@@ -505,6 +520,7 @@ impl StagedBank {
         fj: 0,
         fa: [0.0; 3],
         fd: [0.0; MAX_NU],
+        gd: [0.0; MAX_NU],
     };
 }
 
@@ -571,8 +587,9 @@ impl GpcStaged {
         let small = m.na() <= 2 && m.nb() <= 4;
         let bk = &self.bank[self.cur & 1];
         let mut v = [0.0f32; N];
-        // The check row's free response less w (type docs, "Soft floor").
+        // The check row's and the guard row's free responses less w (type docs, "Soft floor").
         let mut x = 0.0f32;
+        let mut xg = 0.0f32;
         if self.ready {
             // The free response on the design's own model (type docs, "One model"): its head
             // and the levels through the folded tails for the small models, or the whole f and
@@ -586,6 +603,7 @@ impl GpcStaged {
                 }
                 let a = &bk.fa;
                 x = a[0] * d[0] + a[1] * d[1] + a[2] * d[2];
+                xg = guard_value(d);
                 probe
             } else {
                 // (A model the tail does not fold for is larger than na ≤ 2, nb ≤ 4.)
@@ -602,6 +620,11 @@ impl GpcStaged {
                         }
                     }
                     x = self.f[bk.fj - 1] - w;
+                    // (Rows 0, −1, … are y(t), y(t − 1), …: split ≥ 2.)
+                    let split = bk.split;
+                    xg = guard_value(core::array::from_fn(|r| {
+                        (if split > r + 1 { self.f[split - r - 2] } else { st.y[r + 1 - split] }) - w
+                    }));
                     probe
                 }
             };
@@ -610,11 +633,16 @@ impl GpcStaged {
             }
         }
         let (du, heavy) = if self.ready {
-            let (du, heavy) = self.constrain::<N>(&bk.p, &v, st.u_prev());
-            // The floor, on a plan the box left alone (not heavy and not clipped: inside it),
-            // and the stage waits (so that a sample never does both); not on the sample whose
-            // stage has waited long enough.
-            match if heavy || self.skipped >= MAX_SKIPS { None } else { soft_floor::<N>(bk, x, &v, w, st.u_prev()) } {
+            let (du, heavy) = self.constrain::<N>(&bk.p, &mut v, st.u_prev());
+            // The floor, on the plan (the box's, if the limits were at work) unless it cools
+            // not at all now, and the stage waits (so that a sample never does both); not on
+            // the sample whose stage has waited long enough, which clipped.
+            let cools = du > -st.u_prev();
+            match if !cools || self.skipped >= MAX_SKIPS {
+                None
+            } else {
+                soft_floor::<N>(bk, x, xg, &v, w, st.u_prev())
+            } {
                 Some(du) => {
                     self.floors = self.floors.wrapping_add(1);
                     (du, true)
@@ -642,11 +670,12 @@ impl GpcStaged {
 
     /// Δu(t) of the constrained cost with the design in use (type docs) from the unconstrained
     /// levels `v` relative to u(t−1) = `u_prev`, and whether the limits were at work (the
-    /// longer path: the design stage waits). After [`MAX_SKIPS`] such samples in a row a level
-    /// outside the box is clipped instead (v_0 into the box). `p` is the design in use's P,
-    /// which the caller holds (indexing the bank again here costs 128 B of flash).
+    /// longer path: the design stage waits); `v` becomes the box's levels then. After
+    /// [`MAX_SKIPS`] such samples in a row a level outside the box is clipped instead (v_0 into
+    /// the box). `p` is the design in use's P, which the caller holds (indexing the bank again
+    /// here costs 128 B of flash).
     #[inline(always)]
-    fn constrain<const N: usize>(&self, p: &[[f32; MAX_NU]; MAX_NU], v: &[f32; N], u_prev: f32) -> (f32, bool) {
+    fn constrain<const N: usize>(&self, p: &[[f32; MAX_NU]; MAX_NU], v: &mut [f32; N], u_prev: f32) -> (f32, bool) {
         let (lo, hi) = (-u_prev, 1.0 - u_prev);
         if v.iter().all(|x| *x >= lo && *x <= hi) {
             return (v[0], false);
@@ -655,7 +684,8 @@ impl GpcStaged {
             // (Not `f32::clamp`: its assertion formats floats, kilobytes of flash.)
             return (v[0].max(lo).min(hi), false);
         }
-        (box_qp::<N>(p, v, lo, hi)[0], true)
+        *v = box_qp::<N>(p, v, lo, hi);
+        (v[0], true)
     }
 
     /// This sample's stage of the next design, on `N` ≥ Nu levels.
@@ -748,21 +778,29 @@ impl GpcStaged {
     }
 }
 
-/// The soft floor ([`GpcStaged`], "Soft floor"), with `x` the check row's free response less
-/// `w` and `v` the unconstrained levels, within the box (the caller's), u(t−1) = `u_prev`: if
-/// the plan falls below the floor on the row, Δu(t) of the penalised problem, clipped into the
-/// box.
+/// The soft floor ([`GpcStaged`], "Soft floor"), with `x` and `xg` the floor row's and the
+/// guard row's free responses less `w` and `v` the plan's levels, within the box, u(t−1) =
+/// `u_prev`: if the plan falls below either row, Δu(t) of the problem penalised on the one it
+/// falls further below, clipped into the box.
 /// (Out of line: inlined, it slowed the whole controller update by a fifth on the M4F,
 /// `cargo xtask pil`.)
 #[inline(never)]
-fn soft_floor<const N: usize>(bk: &StagedBank, x: f32, v: &[f32; N], w: f32, u_prev: f32) -> Option<f32> {
-    let d = &bk.fd;
+fn soft_floor<const N: usize>(bk: &StagedBank, x: f32, xg: f32, v: &[f32; N], w: f32, u_prev: f32) -> Option<f32> {
     let (lo, hi) = (-u_prev, 1.0 - u_prev);
-    let mut y = w + x;
-    for (di, vi) in d.iter().zip(v) {
+    let (mut y, mut yg) = (w + x, w + xg);
+    for ((di, gi), vi) in bk.fd.iter().zip(&bk.gd).zip(v) {
         y += di * vi;
+        yg += gi * vi;
     }
-    let below = SOFT_FLOOR_C.min(w - FLOOR_GAP_C) - y;
+    // The row the plan violates more.
+    let (below, d) = {
+        let (fb, gb) = (SOFT_FLOOR_C.min(w - FLOOR_GAP_C) - y, GUARD_ROW_C.min(w - FLOOR_GAP_C) - yg);
+        if gb > fb {
+            (gb, &bk.gd)
+        } else {
+            (fb, &bk.fd)
+        }
+    };
     if !(below > 0.0) {
         return None;
     }
@@ -808,14 +846,35 @@ fn floor_row(at: &[f32; MAX_NA + 2], g: &[f32; MAX_N2], bk: &mut StagedBank, n2:
         }
     }
     bk.fa = l;
-    // g_{j−i} (zero at an index ≤ 0) less g_{j−i−1}, but on the last level, from the last up.
     bk.fd = [0.0; MAX_NU];
+    bk.gd = [0.0; MAX_NU];
+    add_forced_weights(g, j, nu, 1.0, &mut bk.fd);
+    // The guard row on rows split − 1 … split − 4 (a row ≤ 0 has no forced response).
+    for (r, wr) in GUARD_ROW_WEIGHTS.iter().enumerate() {
+        add_forced_weights(g, split.wrapping_sub(r + 1), nu, *wr, &mut bk.gd);
+    }
+}
+
+/// Adds `scale` times row j's forced response's weights on the levels to `d`: Σ_c g_{j−c}Δũ_c
+/// with Δũ = Dv is Σ_i (g_{j−i} − g_{j−i−1}) v_i, the last level held, g_{j−i} alone (g at an
+/// index ≤ 0 is 0; so is every weight of a row j ≤ 0, passed wrapped).
+#[inline(never)]
+fn add_forced_weights(g: &[f32; MAX_N2], j: usize, nu: usize, scale: f32, d: &mut [f32; MAX_NU]) {
     let mut prev = 0.0;
     for i in (0..nu.min(MAX_NU)).rev() {
         let gi = j.checked_sub(i + 1).and_then(|q| g.get(q)).copied().unwrap_or(0.0);
-        bk.fd[i] = gi - prev;
+        d[i] += scale * (gi - prev);
         prev = gi;
     }
+}
+
+/// The freeze guard's look-ahead on four consecutive values of a plan, the last first
+/// ([`GUARD_ROW_WEIGHTS`]): linear in them, so it applies alike to the predictions, their
+/// free responses less w (the weights sum to 1) and their weights on the levels.
+#[inline(always)]
+fn guard_value(y: [f32; 4]) -> f32 {
+    let w = &GUARD_ROW_WEIGHTS;
+    w[0] * y[0] + w[1] * y[1] + w[2] * y[2] + w[3] * y[3]
 }
 
 /// Every level's gain row L_i[j] = Σ_{c<N} M[i][c] g_{j−c} (g_{≤0} = 0) over j = `start` … N2
@@ -939,6 +998,29 @@ fn fold_split(m: &Model, n2: usize) -> usize {
 /// (`FreezeConfig::DEFAULT.release_c`), so that the plan keeps the load where the guard would let
 /// cooling resume ([`GpcStaged`], "Soft floor"). Never closer than [`FLOOR_GAP_C`] below the setpoint.
 pub const SOFT_FLOOR_C: f32 = 2.5;
+
+/// The freeze guard's prediction (`supervisor::freeze`: the reading plus its smoothed slope
+/// times the look-ahead) as weights on four consecutive predictions ŷ_j, ŷ_{j−1}, ŷ_{j−2},
+/// ŷ_{j−3} ([`GpcStaged`], "Soft floor"): ŷ_j + L·s_j with L the look-ahead in samples
+/// (`FreezeConfig::DEFAULT`: 120 s at the board's Ts of 10 s, 12) and s_j the guard's
+/// smoothing of the slope (memory m = 0.7: the last three differences weighted (1 − m)·mⁱ),
+/// truncated to the three differences the four values give and scaled back to a slope.
+pub const GUARD_ROW_WEIGHTS: [f32; 4] = guard_row_weights(12.0, 0.7);
+
+const fn guard_row_weights(l: f32, m: f32) -> [f32; 4] {
+    let (a, b, c) = (1.0 - m, (1.0 - m) * m, (1.0 - m) * m * m);
+    let n = a + b + c;
+    let (a, b, c) = (l * a / n, l * b / n, l * c / n);
+    [1.0 + a, b - a, c - b, -c]
+}
+
+/// The level the soft floor's guard row keeps the plan's guard prediction above, °C: 0.5 °C
+/// above the freeze guard's cut (`FreezeConfig::DEFAULT.cut_c`, 1.5 °C), for the model's
+/// error on a fast descent ([`GpcStaged`], "Soft floor"); never closer than [`FLOOR_GAP_C`] below
+/// the setpoint, as the floor row (the same level for every setpoint the board accepts, 2.5 °C
+/// and up). `scripts/targets.sh`: the half load at 20 °C (seeds 1–8) trips the guard with the
+/// level at 1.5–1.7 °C (8, 7 and 3 trips), not from 1.8.
+pub const GUARD_ROW_C: f32 = 2.0;
 
 /// How far the soft floor stays below the setpoint, °C: a setpoint of 2.5 °C, the lowest the
 /// board accepts, gets a floor at 2.0 °C, and no setpoint has its steady state pushed up.
@@ -1603,11 +1685,30 @@ mod tests {
         reference_du_floor(s, m, cfg, w, true).0
     }
 
-    /// [`reference_constrained_du`] with or without the soft floor, and whether the floor was
-    /// at work: the plan without it is within the box and falls below the floor on its check
-    /// row (midway from k + 4 to N2); the move is then the first of the minimiser of the cost
-    /// with ρ(floor − ŷ_j)² added (ρ g_jg_jᵀ in H, ρ g_j (floor − f_j) in b), clipped.
-    fn reference_du_floor(s: &GpcState, m: &Model, cfg: &GpcConfig, w: f32, with_floor: bool) -> ((f64, bool), bool) {
+    /// Which of the soft floor's rows moved a plan ([`reference_du_floor`]).
+    #[derive(Clone, Copy, Debug, PartialEq)]
+    enum FloorRow {
+        None,
+        Floor,
+        Guard,
+    }
+
+    /// [`reference_constrained_du`] with or without the soft floor, and which row of it was at
+    /// work. The plan (the box's levels if the unconstrained one leaves the box) is checked on
+    /// two rows: its prediction midway from k + 4 to N2 against 2.5 °C (at most 0.5 °C below
+    /// w), and the freeze guard's look-ahead on it against 2.0 °C (as far below w at most):
+    /// ŷ_j + 12·s_j at j = k + 3, s_j the guard's slope smoothing (memory 0.7) over the three
+    /// differences of ŷ_j … ŷ_{j−3}, its weights scaled to sum to 1. If the plan cools now (its first level is above "no
+    /// cooling") and falls below either, the row it falls further below adds ρ(level − r·Δũ)² to
+    /// the cost, and the move is the first of the plan plus the penalised cost's Newton step
+    /// from it, (H + ρrrᵀ)⁻¹ρr·(level − r·Δũ), clipped into the box.
+    fn reference_du_floor(
+        s: &GpcState,
+        m: &Model,
+        cfg: &GpcConfig,
+        w: f32,
+        with_floor: bool,
+    ) -> ((f64, bool), FloorRow) {
         let (n1, n2, nu) = (cfg.n1, cfg.n2, cfg.nu);
         let (g, f) = reference_gf(s, m, n2);
         let gm = |j: usize, c: usize| if j > c { g[j - c] } else { 0.0 };
@@ -1621,25 +1722,54 @@ mod tests {
                     .collect()
             })
             .collect();
-        let mut b: Vec<f64> = (0..nu).map(|c| (n1..=n2).map(|j| gm(j, c) * (f64::from(w) - f[j])).sum()).collect();
+        let b: Vec<f64> = (0..nu).map(|c| (n1..=n2).map(|j| gm(j, c) * (f64::from(w) - f[j])).sum()).collect();
         let u = f64::from(s.u_prev());
         let (lvl, inside) = reference_box_plan(&h, &b, u);
-        let j = ((m.k() + 4).min(n2 + 1) + n2) / 2;
-        let floor = 2.5f64.min(f64::from(w) - 0.5);
-        let y = f[j] + (0..nu).map(|c| gm(j, c) * (lvl[c] - if c > 0 { lvl[c - 1] } else { 0.0 })).sum::<f64>();
-        if !(with_floor && inside && y < floor) {
-            return ((lvl[0], inside), false);
+        let du: Vec<f64> = (0..nu).map(|c| lvl[c] - if c > 0 { lvl[c - 1] } else { 0.0 }).collect();
+        // Row q's weights on Δũ, and the plan's prediction there.
+        let row = |q: usize| (0..nu).map(|c| gm(q, c)).collect::<Vec<f64>>();
+        let predict = |r: &[f64], free: f64| free + r.iter().zip(&du).map(|(a, d)| a * d).sum::<f64>();
+        let split = (m.k() + 4).max(3).min(n2 + 1);
+        let j = (split + n2) / 2;
+        // The free response at row q, and the measured y(t + q) at q ≤ 0.
+        let free = |q: isize| if q >= 1 { f[q as usize] } else { f64::from(s.y[(-q) as usize]) };
+        let (floor_r, floor_f) = (row(j), f[j]);
+        // The guard's look-ahead: weights on ŷ_{split−1−q}, q = 0 … 3.
+        let (look, mem) = (12.0f64, 0.7f64);
+        let sw: Vec<f64> = (0..3).map(|i| (1.0 - mem) * mem.powi(i)).collect();
+        let total: f64 = sw.iter().sum();
+        let mut cw = [1.0f64, 0.0, 0.0, 0.0];
+        for (i, si) in sw.iter().enumerate() {
+            cw[i] += look * si / total;
+            cw[i + 1] -= look * si / total;
+        }
+        let mut guard_r = vec![0.0f64; nu];
+        let mut guard_f = 0.0;
+        for (q, wq) in cw.iter().enumerate() {
+            let at = split as isize - 1 - q as isize;
+            if at >= 1 {
+                for (gr, x) in guard_r.iter_mut().zip(row(at as usize)) {
+                    *gr += wq * x;
+                }
+            }
+            guard_f += wq * free(at);
+        }
+        let floor = 2.5f64.min(f64::from(w) - 0.5) - predict(&floor_r, floor_f);
+        let guard = 2.0f64.min(f64::from(w) - 0.5) - predict(&guard_r, guard_f);
+        let (below, r, which) =
+            if guard > floor { (guard, guard_r, FloorRow::Guard) } else { (floor, floor_r, FloorRow::Floor) };
+        if !(with_floor && below > 0.0 && lvl[0] > -u) {
+            return ((lvl[0], inside), FloorRow::None);
         }
         let rho = 1000.0;
-        for r in 0..nu {
-            for c in 0..nu {
-                h[r][c] += rho * gm(j, r) * gm(j, c);
+        for (hr, ra) in h.iter_mut().zip(&r) {
+            for (hc, rc) in hr.iter_mut().zip(&r) {
+                *hc += rho * ra * rc;
             }
-            b[r] += rho * gm(j, r) * (floor - f[j]);
         }
+        let step = gauss(h, r.iter().map(|x| rho * x * below).collect());
         // The penalised plan's first move, clipped into the box.
-        let x = gauss(h, b);
-        ((x[0].clamp(-u, 1.0 - u), true), true)
+        (((du[0] + step[0]).clamp(-u, 1.0 - u), inside), which)
     }
 
     /// The levels u(t + i) − u(t − 1) minimising ½ΔũᵀHΔũ − bᵀΔũ with 0 ≤ u(t − 1) + level ≤ 1,
@@ -1680,37 +1810,41 @@ mod tests {
     }
 
     /// A plan falling toward the soft floor: the law's Δu is the f64 move of the penalised cost
-    /// ([`reference_du_floor`]). At the board's λ the plans that reach the floor have met the
-    /// box first (no cooling); with a heavily damped λ (50) at full duty and the load falling
-    /// 0.15 °C a sample through the setpoint, the floor asks for less cooling than the optimum
-    /// without it.
+    /// ([`reference_du_floor`]), and the row at work is the reference's. The guard row acts on
+    /// plans inside the box and on the box's own plans (full duty, the load falling 0.1–0.3 °C
+    /// a sample toward the 3 °C setpoint) and asks for less cooling than the optimum without
+    /// it; the floor row on a damped plan (λ 50) the box holds at no duty after the first
+    /// move; neither on a plan that cools not at all now, nor on one that lands well above.
     #[test]
     fn a_soft_floor_lifts_a_plan_that_dips_below_it() {
         let m = Model::new(&[-1.749_27, 0.751_376], &[-0.027_079_1, -0.029_865], &[], 5).unwrap();
         // (λ, the load's fall a sample, the duty held, where it ends against the 3 °C setpoint,
-        // floor at work, how much less duty it asks for at least)
+        // the row at work, how much less duty it asks for at least)
         let cases = [
-            (50.0, -0.15, 1.0, -0.2, true, 0.01),
-            (50.0, -0.15, 1.0, 0.0, true, 0.002),
-            (0.5, -0.15, 0.6, 0.3, false, 0.0),
-            (0.5, -0.05, 0.6, 0.0, false, 0.0),
-            (3.0, -0.02, 0.9, 0.6, false, 0.0),
-            (20.0, -0.3, 1.0, 0.0, false, 0.0),
+            (50.0, -0.15, 1.0, -0.2, FloorRow::Guard, 0.5),
+            (3.0, -0.15, 0.9, 0.6, FloorRow::Guard, 0.1),
+            (10.0, -0.1, 0.6, 0.0, FloorRow::Guard, 0.03),
+            (20.0, -0.3, 1.0, 0.0, FloorRow::Guard, 0.15),
+            (50.0, -0.1, 0.3, 0.3, FloorRow::Floor, 0.04),
+            (50.0, -0.15, 1.0, 1.5, FloorRow::None, 0.0),
+            (0.5, -0.1, 0.3, -0.2, FloorRow::None, 0.0),
+            (0.5, -0.05, 0.6, 0.0, FloorRow::None, 0.0),
+            (0.5, -0.02, 0.3, 1.0, FloorRow::None, 0.0),
         ];
         let w = 3.0;
-        for (lambda, slope, u0, end, at_work, less) in cases {
+        for (lambda, slope, u0, end, row, less) in cases {
             let cfg = GpcConfig { lambda, ..GpcConfig::DEFAULT };
             let ys: Vec<f32> = (0..12).map(|t| w + end - slope * (11 - t) as f32).collect();
             let (du, s) = staged_du(&m, &cfg, &ys, u0, w);
-            let ((want, _), below) = reference_du_floor(&s, &m, &cfg, w, true);
+            let ((want, _), at_work) = reference_du_floor(&s, &m, &cfg, w, true);
             let ((without, _), _) = reference_du_floor(&s, &m, &cfg, w, false);
             let case = format!("λ {lambda}, fall {slope}, u {u0}, end {end}");
             assert!((f64::from(du) - want).abs() < 1e-4, "{case}: Δu {du} against the reference {want}");
-            assert_eq!(below, at_work, "{case}: floor at work");
-            if at_work {
-                assert!(want < without - less, "{case}: {want} against {without} without the floor");
-            } else {
+            assert_eq!(at_work, row, "{case}: the row at work");
+            if row == FloorRow::None {
                 assert_eq!(want, without, "{case}");
+            } else {
+                assert!(want < without - less, "{case}: {want} against {without} without the floor");
             }
         }
     }
