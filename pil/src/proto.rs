@@ -40,8 +40,8 @@ pub const KIND_GPC: u32 = 1;
 
 /// Controller kind 2: the default self-tuning GPC with λ 200, a heavily damped tuning: the only
 /// kind here whose plans meet GPC's soft floor (`hter::control::gpc::GpcStaged`, "Soft floor"),
-/// so that `cargo xtask pil` times such a sample (the default's λ 0.5 plans meet the no-cooling
-/// bound first).
+/// so that `cargo xtask pil` times such a sample (the default's λ 0.5 meets it on one sample of
+/// the same case, through the floor's guard row).
 pub const KIND_GPC_DAMPED: u32 = 2;
 
 /// The self-tuning GPC configuration the firmware runs by default.
