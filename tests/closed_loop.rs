@@ -148,20 +148,30 @@ fn self_tuning_gpc_stays_in_range_and_trusts_its_own_estimate() {
 }
 
 fn sim_spec(scenario: &str, controller: ControllerSpec, plant: PlantChoice, load: Load) -> SimOutput {
+    run(&options(scenario, controller, plant, load, 28.0, 7)).unwrap()
+}
+
+/// A run of `scenario` for its whole duration, with no fault.
+fn options(
+    scenario: &str,
+    controller: ControllerSpec,
+    plant: PlantChoice,
+    load: Load,
+    ambient_c: f64,
+    seed: u64,
+) -> SimOptions {
     let scenario = Scenario::resolve(scenario).unwrap();
-    let duration_s = scenario.duration_s;
-    run(&SimOptions {
+    SimOptions {
         drive: Default::default(),
+        duration_s: scenario.duration_s,
         scenario,
         controller,
         plant,
         load,
-        ambient_c: 28.0,
-        duration_s,
-        seed: 7,
+        ambient_c,
+        seed,
         faults: vec![],
-    })
-    .unwrap()
+    }
 }
 
 /// The method's conclusions on `piecewise`, with the self-tuning laws at their
@@ -210,18 +220,8 @@ fn seed_conclusions_hold_on_piecewise() {
 #[test]
 fn self_tuning_gpc_lands_a_fast_descent_without_tripping_the_freeze_guard() {
     for seed in 1..=8 {
-        let scenario = Scenario::resolve("half-load").unwrap();
-        let opts = SimOptions {
-            drive: Default::default(),
-            duration_s: scenario.duration_s,
-            scenario,
-            controller: ControllerSpec::new(ControllerChoice::Gpc),
-            plant: PlantChoice::Hter1,
-            load: Load::Half,
-            ambient_c: 20.0,
-            seed,
-            faults: vec![],
-        };
+        let gpc = ControllerSpec::new(ControllerChoice::Gpc);
+        let opts = options("half-load", gpc, PlantChoice::Hter1, Load::Half, 20.0, seed);
         let m = run(&opts).unwrap().metrics;
         let bound = hal_sim::bound::bound(&opts).unwrap().iae;
         assert_eq!(m.freeze_guard_trips, 0, "seed {seed}: {m:?}");

@@ -119,18 +119,18 @@ enum Pending {
     Set(PendingSaves, WriteGate) = 1,
 }
 
-/// Runs `f` on the waiting records and the write gate.
+/// Runs `f` on the waiting records and the write gate (on the first use, on new ones, which
+/// it then keeps).
 fn with_pending<R>(f: impl FnOnce(&mut PendingSaves, &mut WriteGate) -> R) -> R {
     PENDING.lock(|p| {
         let mut p = p.borrow_mut();
-        if matches!(*p, Pending::Unset) {
-            *p = Pending::Set(PendingSaves::default(), WriteGate::firmware());
-        }
-        match &mut *p {
-            Pending::Set(pending, gate) => f(pending, gate),
-            // Set just above.
-            Pending::Unset => f(&mut PendingSaves::default(), &mut WriteGate::firmware()),
-        }
+        let Pending::Set(pending, gate) = &mut *p else {
+            let (mut pending, mut gate) = (PendingSaves::default(), WriteGate::firmware());
+            let r = f(&mut pending, &mut gate);
+            *p = Pending::Set(pending, gate);
+            return r;
+        };
+        f(pending, gate)
     })
 }
 
