@@ -410,7 +410,10 @@ impl GpcState {
 /// that sample skips its design stage, so that no sample does both (`cargo xtask pil`).
 /// After `MAX_SKIPS` such samples in a row the next one clips v_0 into the box instead and
 /// does its stage: while the limits hold for long (a pull-down) the design still moves on,
-/// at one stage in `MAX_SKIPS + 1` samples. Δu(t) = v_0.
+/// at one stage in `MAX_SKIPS + 1` samples. That sample never raises the duty (v_0 is
+/// clipped into [−u(t−1), 0]): it goes without the soft floor below, and amid a fast
+/// descent's landing its plan would otherwise ask for full duty again between samples the
+/// floor had eased off. Δu(t) = v_0.
 ///
 /// **Soft floor** (issue 15). The cost also weighs ρ (`FLOOR_WEIGHT`) times the squared
 /// amount by which the plan falls below either of two rows, so that the plan itself keeps the
@@ -672,8 +675,8 @@ impl GpcStaged {
     /// levels `v` relative to u(t−1) = `u_prev`, and whether the limits were at work (the
     /// longer path: the design stage waits); `v` becomes the box's levels then. After
     /// [`MAX_SKIPS`] such samples in a row a level outside the box is clipped instead (v_0 into
-    /// the box). `p` is the design in use's P, which the caller holds (indexing the bank again
-    /// here costs 128 B of flash).
+    /// the box, and never above the duty before: into [−u(t−1), 0]). `p` is the design in
+    /// use's P, which the caller holds (indexing the bank again here costs 128 B of flash).
     #[inline(always)]
     fn constrain<const N: usize>(&self, p: &[[f32; MAX_NU]; MAX_NU], v: &mut [f32; N], u_prev: f32) -> (f32, bool) {
         let (lo, hi) = (-u_prev, 1.0 - u_prev);
@@ -681,8 +684,9 @@ impl GpcStaged {
             return (v[0], false);
         }
         if self.skipped >= MAX_SKIPS {
-            // (Not `f32::clamp`: its assertion formats floats, kilobytes of flash.)
-            return (v[0].max(lo).min(hi), false);
+            // Hold the duty rather than raise it (type docs); (not `f32::clamp`: its assertion
+            // formats floats, kilobytes of flash).
+            return (v[0].max(lo).min(0.0), false);
         }
         *v = box_qp::<N>(p, v, lo, hi);
         (v[0], true)
@@ -2102,8 +2106,9 @@ mod tests {
                         // where not, the f64 levels' box QP (`staged_law_solves_the_constrained_cost`).
                         let (mut rc, inside) = reference_constrained_du(&s, m, cfg, 4.0);
                         if clips && !inside {
+                            // (That sample clips into the box and never raises the duty.)
                             let u = f64::from(s.u_prev());
-                            rc = r.clamp(-u, 1.0 - u);
+                            rc = r.clamp(-u, 0.0);
                         }
                         if inside {
                             assert!((rc - r).abs() <= 1e-9 * r.abs().max(1.0), "{rc} against {r}");
