@@ -236,6 +236,21 @@ fn self_tuning_gpc_lands_a_fast_descent_without_tripping_the_freeze_guard() {
     }
 }
 
+/// The sample that may not skip its design stage holds the duty only after a floor sample
+/// (`hter::control::gpc::GpcStaged`, "Constrained"): campaign mission 4207 (`hter sim
+/// --mission-seed 4207`) pulls a light carrier down from 13.9 °C, its duty banging between the
+/// rails on box-limited plans, and a hold there kept the duty at 0 at 120 s when the load
+/// needed cooling: after the pull-down it rose back to 8.29 °C, 40 s above 8 °C. Clipped into
+/// the box as before the hold, the load peaks at 8.01 °C (10 s above).
+#[test]
+fn the_sample_that_may_not_skip_holds_the_duty_only_after_a_floor_sample() {
+    use hal_sim::mission::{evaluate, Mission};
+    let m = Mission::generate(4207);
+    let r = evaluate(&m, &run(&m.options(ControllerSpec::new(ControllerChoice::Gpc))).unwrap());
+    let max = r.max_judged_c.unwrap_or(f64::NAN);
+    assert!(max <= 8.05 && r.outside_s <= 10.0, "highest {max} °C, {} s outside 2–8 °C", r.outside_s);
+}
+
 /// Self-tuning copes with the plant changing under it: at 4 °C the supply sags from 12 to 9 V
 /// after an hour (a quarter less cooling power) and the ambient jumps from 28 to 36 °C after two.
 /// Every law keeps the load within 2–8 °C and is back within ±0.3 °C of the setpoint in the

@@ -410,10 +410,13 @@ impl GpcState {
 /// that sample skips its design stage, so that no sample does both (`cargo xtask pil`).
 /// After `MAX_SKIPS` such samples in a row the next one clips v_0 into the box instead and
 /// does its stage: while the limits hold for long (a pull-down) the design still moves on,
-/// at one stage in `MAX_SKIPS + 1` samples. That sample never raises the duty (v_0 is
-/// clipped into [−u(t−1), 0]): it goes without the soft floor below, and amid a fast
-/// descent's landing its plan would otherwise ask for full duty again between samples the
-/// floor had eased off. Δu(t) = v_0.
+/// at one stage in `MAX_SKIPS + 1` samples. If the soft floor (below) moved a plan among the
+/// samples that skipped, that sample does not raise the duty (v_0 is clipped into
+/// [−u(t−1), 0]): it goes without the floor, and amid a fast descent's landing its plan asked
+/// for full duty again between samples the floor had eased off. Without a floor sample it
+/// clips into the box: on a pull-down from a warm start a hold there held the duty at 0 for
+/// a sample the load needed cooling (campaign mission 4207: 8.29 °C for 40 s after the
+/// pull-down, against 8.01 °C for 10 s). Δu(t) = v_0.
 ///
 /// **Soft floor** (issue 15). The cost also weighs ρ (`FLOOR_WEIGHT`) times the squared
 /// amount by which the plan falls below either of two rows, so that the plan itself keeps the
@@ -481,6 +484,8 @@ pub struct GpcStaged {
     stage: u8,
     /// Samples in a row that skipped their stage.
     skipped: u8,
+    /// The soft floor moved a plan since the last sample that did its stage.
+    floored: bool,
     /// Samples on which the soft floor moved the plan, modulo 256 ([`Self::floor_samples`]).
     floors: u8,
 }
@@ -544,6 +549,7 @@ impl GpcStaged {
         ready: false,
         stage: 0,
         skipped: 0,
+        floored: false,
         floors: 0,
     };
 
@@ -648,6 +654,7 @@ impl GpcStaged {
             } {
                 Some(du) => {
                     self.floors = self.floors.wrapping_add(1);
+                    self.floored = true;
                     (du, true)
                 }
                 None => (du, heavy),
@@ -660,6 +667,7 @@ impl GpcStaged {
             self.skipped += 1;
         } else {
             self.skipped = 0;
+            self.floored = false;
             if let Err(e) = self.advance::<N>(m, small) {
                 self.stage = 0;
                 return Err(e);
@@ -675,8 +683,9 @@ impl GpcStaged {
     /// levels `v` relative to u(t−1) = `u_prev`, and whether the limits were at work (the
     /// longer path: the design stage waits); `v` becomes the box's levels then. After
     /// [`MAX_SKIPS`] such samples in a row a level outside the box is clipped instead (v_0 into
-    /// the box, and never above the duty before: into [−u(t−1), 0]). `p` is the design in
-    /// use's P, which the caller holds (indexing the bank again here costs 128 B of flash).
+    /// the box, and after a floor sample never above the duty before: into [−u(t−1), 0]). `p`
+    /// is the design in use's P, which the caller holds (indexing the bank again here costs
+    /// 128 B of flash).
     #[inline(always)]
     fn constrain<const N: usize>(&self, p: &[[f32; MAX_NU]; MAX_NU], v: &mut [f32; N], u_prev: f32) -> (f32, bool) {
         let (lo, hi) = (-u_prev, 1.0 - u_prev);
@@ -684,9 +693,10 @@ impl GpcStaged {
             return (v[0], false);
         }
         if self.skipped >= MAX_SKIPS {
-            // Hold the duty rather than raise it (type docs); (not `f32::clamp`: its assertion
-            // formats floats, kilobytes of flash).
-            return (v[0].max(lo).min(0.0), false);
+            // After a floor sample, hold the duty rather than raise it (type docs); (not
+            // `f32::clamp`: its assertion formats floats, kilobytes of flash).
+            let top = if self.floored { 0.0 } else { hi };
+            return (v[0].max(lo).min(top), false);
         }
         *v = box_qp::<N>(p, v, lo, hi);
         (v[0], true)
@@ -2093,6 +2103,7 @@ mod tests {
                     s.push_y(y, m).unwrap();
                     // (After `MAX_SKIPS` constrained samples in a row the next one clips.)
                     let clips = staged.skipped >= MAX_SKIPS;
+                    let floored = staged.floored;
                     let du = staged.update(&s, m, cfg, 4.0).unwrap();
                     // (The first design is in use from sample 4.)
                     if t >= 4 {
@@ -2106,9 +2117,10 @@ mod tests {
                         // where not, the f64 levels' box QP (`staged_law_solves_the_constrained_cost`).
                         let (mut rc, inside) = reference_constrained_du(&s, m, cfg, 4.0);
                         if clips && !inside {
-                            // (That sample clips into the box and never raises the duty.)
+                            // (That sample clips into the box, and after a floor sample it never
+                            // raises the duty.)
                             let u = f64::from(s.u_prev());
-                            rc = r.clamp(-u, 0.0);
+                            rc = r.clamp(-u, if floored { 0.0 } else { 1.0 - u });
                         }
                         if inside {
                             assert!((rc - r).abs() <= 1e-9 * r.abs().max(1.0), "{rc} against {r}");
