@@ -60,8 +60,12 @@ fn a_day_stores_the_history_hourly_and_the_model_after_every_4_h_of_trust() {
     for (t, rec) in &stored {
         let row = out.rows.iter().find(|r| r.t_s == *t).unwrap();
         assert_eq!(row.adaptive_mode, Some(AdaptiveMode::Adaptive), "stored at {t} s");
-        // All four B terms of the self-tuner's estimate (`ESTIMATED_NB`), as the row shows them.
-        let theta = [row.a1, row.a2, row.b0, row.b1, row.b2, row.b3].map(Option::unwrap);
+        // All four B terms of the self-tuner's estimate (`ESTIMATED_NB`), as the row shows them,
+        // with the tail b1 … b3 clipped at zero as the laws get it (`SelfTuning::estimate`).
+        let mut theta = [row.a1, row.a2, row.b0, row.b1, row.b2, row.b3].map(Option::unwrap);
+        for b in &mut theta[3..] {
+            *b = b.min(0.0);
+        }
         assert_eq!(rec.theta, theta, "stored at {t} s");
         assert_eq!(rec.k, 5);
     }
