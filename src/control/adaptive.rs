@@ -55,9 +55,11 @@
 //! step. `scripts/targets.sh`, seeds 1–8, medians at 20 · 28 · 36 °C: the half load 1.329 ·
 //! 1.352 · 1.276 → 1.294 · 1.317 · 1.233 × the bound, the full load and H-TER II within
 //! ±0.003; the best grid PI's share at seed 1, 28 °C, 0.46 · 0.52 · 0.40 → 0.40 · 0.45 ·
-//! 0.41. (A first sweep, on a build whose rest check read the filtered duty and so never
-//! paused: τ 0.3 … 0.6 all helped the half load; 0.8, GPC's own T-filter, took it to 1.57, a
-//! limit cycle of 0.22 °C.) GMVC and IGMVC keep the raw data:
+//! 0.41. The pole trades the full load against the half: τ 0.5 gives the half load 1.281 ·
+//! 1.296 · 1.218 and the full load 1.121 · 1.146 · 1.126, τ 0.7 the full load 1.104 · 1.111 ·
+//! 1.102 and the half load 1.348 · 1.383 · 1.271; 0.6 keeps the full load where it was (τ 0.8,
+//! GPC's own T-filter, gave the half load a limit cycle of 0.22 °C). GMVC and IGMVC keep the
+//! raw data:
 //! with the filter IGMVC limit-cycles on `piecewise` (1.49 → 2.42 × the bound, steady-state
 //! error 1.2 °C). The rest's check and the first approach read the raw samples.
 //!
