@@ -175,9 +175,9 @@
 //! (steady-state error up to 0.13 °C); started at the first sample in the band, while the
 //! step's own overshoot is still settling, the half load gained 0.01–0.02 less. The bound
 //! never binds on these runs (at a gain of 0.01, bounds of 0.08, 0.15 and 0.3 gave the same
-//! runs); it is there for a load the law cannot
-//! bring back, whose error would otherwise wind the reset up. While the estimator is paused
-//! at rest the reset goes on. GMVC and IGMVC aim at the setpoint as given.
+//! runs); it is there for a load the law cannot bring back, whose error would otherwise wind
+//! the reset up. While the estimator is paused at rest the reset goes on. GMVC and IGMVC aim
+//! at the setpoint as given.
 //!
 //! **The cost's first row.** Self-tuning GPC's cost starts at N1 = k + 1, one sample after
 //! the first one the model's delay k lets the duty reach (`GpcConfig::n1` when larger, N2 when
@@ -491,8 +491,9 @@ impl SelfTuning {
     /// `cfg` is refused ([`AdaptiveConfig::validate`]).
     pub fn new(cfg: AdaptiveConfig, ts_s: f32, u0: f32) -> Result<Self, AdaptiveError> {
         cfg.validate()?;
-        // The prefilter for GPC only (module docs, "Prefiltered").
-        let tau = if matches!(cfg.law, Law::Gpc(_)) { PREFILTER_POLE } else { 0.0 };
+        // The prefilter and the reset for GPC only (module docs, "Prefiltered", "Reset at rest").
+        let gpc = matches!(cfg.law, Law::Gpc(_));
+        let tau = if gpc { PREFILTER_POLE } else { 0.0 };
         let reg = SecondOrderRegressor::prefiltered(cfg.k, u0, tau).map_err(|_| AdaptiveError::Delay)?;
         let trusted = cfg.initial.filter(|m| plausible_model_cold(&cfg, m));
         let theta0 = match trusted {
@@ -523,7 +524,7 @@ impl SelfTuning {
             last_error: 0.0,
             rest_w: f32::NAN,
             rest_n: 0,
-            reset_gain: if tau > 0.0 { RESET_GAIN } else { 0.0 },
+            reset_gain: if gpc { RESET_GAIN } else { 0.0 },
             reset_c: 0.0,
             // (At most N2: a horizon that ends sooner keeps its last row, as before.)
             gpc_n1: match cfg.law {
