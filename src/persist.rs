@@ -1281,6 +1281,7 @@ mod tests {
                 theta: [0.0; 6],
                 trace_p: 0.0,
                 prediction_error: 0.0,
+                reset_c: 0.0,
             })
         }
         fn trusted_model(&self) -> Option<Model> {

@@ -578,8 +578,8 @@ async fn telemetry() {
         );
         if let Some(st) = r.status {
             info!(
-                "est t={=u64:ms} ctl={} theta={} trace_p={} pe={}",
-                r.t_ms, st.mode, st.theta, st.trace_p, st.prediction_error
+                "est t={=u64:ms} ctl={} theta={} trace_p={} pe={} reset={}",
+                r.t_ms, st.mode, st.theta, st.trace_p, st.prediction_error, st.reset_c
             );
         }
         while let Ok(e) = EVENTS.try_receive() {

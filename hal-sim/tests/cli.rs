@@ -460,3 +460,52 @@ fn a_campaign_reports_the_freeze_margin_apart_from_the_faults() {
     assert!(c["fault_min_c"].as_f64().unwrap() >= c["worst_min_c"].as_f64().unwrap(), "{c}");
     assert_eq!(c["fault_min_seed"], 41783, "{c}");
 }
+
+/// `hter sim --csv` logs the self-tuner's reset at rest in `reset_c`: 0 on every sample of a
+/// setpoint change, within ±`RESET_MAX_C`, and from one sample to the next it moves by
+/// −`RESET_GAIN` × the error the law saw (`hter::control::adaptive`, "Reset at rest"); empty for
+/// a controller without one.
+#[test]
+fn the_sim_csv_logs_the_reset_at_rest_the_law_aims_at() {
+    use hter::control::adaptive::{RESET_GAIN, RESET_MAX_C};
+    let run = |controller: &str| {
+        let csv = std::env::temp_dir().join(format!("hter-cli-reset-{controller}-{}.csv", std::process::id()));
+        let out = hter(&["sim", "--scenario", "half-load", "--controller", controller, "--csv", csv.to_str().unwrap()]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let text = std::fs::read_to_string(&csv).unwrap();
+        let _ = std::fs::remove_file(&csv);
+        text
+    };
+    let cells = |text: &str, name: &str| -> Vec<String> {
+        let mut lines = text.lines();
+        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let i = header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no {name} column: {header:?}"));
+        lines.map(|l| l.split(',').nth(i).unwrap().to_string()).collect()
+    };
+    let pi = run("pi");
+    assert!(cells(&pi, "reset_c").iter().all(String::is_empty), "PI has no reset");
+
+    let gpc = run("gpc");
+    let num = |name: &str| -> Vec<f32> {
+        cells(&gpc, name).iter().map(|c| c.parse().unwrap_or_else(|_| panic!("{name} '{c}'"))).collect()
+    };
+    let (w, y, r) = (num("setpoint_c"), num("temp_c"), num("reset_c"));
+    assert!(r.iter().all(|r| r.abs() <= RESET_MAX_C), "every reset within ±{RESET_MAX_C}");
+    let (mut moved, mut resting) = (0, 0);
+    for t in 1..r.len() {
+        if w[t] != w[t - 1] {
+            assert_eq!(r[t], 0.0, "a setpoint change ends the rest (sample {t})");
+        }
+        if r[t] != 0.0 {
+            resting += 1;
+        }
+        if r[t] != 0.0 && r[t - 1] != 0.0 && r[t] != r[t - 1] {
+            moved += 1;
+            let step = r[t] - r[t - 1];
+            let want = -RESET_GAIN * (y[t] - w[t]);
+            assert!((step - want).abs() < 1e-6, "sample {t}: reset moved {step}, the rule says {want}");
+        }
+    }
+    // The run's holds are long: the reset runs on a large part of it.
+    assert!(resting > r.len() / 3 && moved > r.len() / 4, "{resting} resting, {moved} moved of {}", r.len());
+}

@@ -177,7 +177,9 @@
 //! never binds on these runs (at a gain of 0.01, bounds of 0.08, 0.15 and 0.3 gave the same
 //! runs); it is there for a load the law cannot bring back, whose error would otherwise wind
 //! the reset up. While the estimator is paused at rest the reset goes on. GMVC and IGMVC aim
-//! at the setpoint as given.
+//! at the setpoint as given. The reset is logged ([`ControllerStatus::reset_c`]: `hter sim
+//! --csv`'s `reset_c` column, the firmware's `est … reset=` line), so a duty that creeps
+//! through a long hold can be read back to the error that moves it.
 //!
 //! **The cost's first row.** Self-tuning GPC's cost starts at N1 = k + 1, one sample after
 //! the first one the model's delay k lets the duty reach (`GpcConfig::n1` when larger, N2 when
@@ -805,6 +807,7 @@ impl Controller for SelfTuning {
             theta: self.theta(),
             trace_p: self.trace_p(),
             prediction_error: self.last_error,
+            reset_c: self.reset_c,
         })
     }
 

@@ -138,6 +138,9 @@ pub struct ControllerStatus {
     pub trace_p: f32,
     /// Last a-priori prediction error, °C.
     pub prediction_error: f32,
+    /// The reset at rest the law adds to the setpoint it aims at, °C (0 outside a rest, and
+    /// always for laws without one; [`crate::control::adaptive`], "Reset at rest").
+    pub reset_c: f32,
 }
 
 /// Selects a controller at run time without a heap: the host CLI and the firmware config pick

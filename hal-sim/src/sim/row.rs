@@ -97,6 +97,9 @@ pub struct Row {
     /// The step's holdover estimate: how long the load would stay at or below 8 °C if cooling
     /// stopped now, s (empty without a model or before the first estimate; [`hter::holdover`]).
     pub holdover_s: Option<f64>,
+    /// The self-tuner's reset at rest, °C: what it adds to the setpoint the law aims at
+    /// (empty for other controllers; [`hter::control::adaptive`], "Reset at rest").
+    pub reset_c: Option<f32>,
     /// The conversion an ideal ADC would have made of this sample, counts (no noise, no SSR
     /// switching disturbance, not rounded); not in the CSV.
     #[serde(skip)]
@@ -151,6 +154,7 @@ impl Row {
             switch_test: out.switch_test,
             alarm_hw: rig.alarm_hw,
             holdover_s: out.holdover_s.map(f64::from),
+            reset_c: out.status.map(|st| st.reset_c),
             ideal_counts: rig.ideal_counts,
         }
     }
@@ -189,6 +193,7 @@ impl Row {
             switch_test: false,
             alarm_hw: rig.alarm_hw,
             holdover_s: None,
+            reset_c: None,
             ideal_counts: rig.ideal_counts,
         }
     }
