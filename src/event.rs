@@ -49,7 +49,8 @@ pub enum EventKind {
     ControllerNonFinite,
     /// Self-tuning: the law now runs on the current estimate.
     AdaptiveEngaged,
-    /// Self-tuning: the estimate is not trusted; the law runs on the last trusted model.
+    /// Self-tuning: the estimate is not trusted; the law runs on the last trusted model (or the
+    /// one its last rest confirmed, [`crate::control::adaptive`]).
     AdaptiveFrozen,
     /// Self-tuning: no trusted model or the law failed; the fallback PI drives.
     FallbackEngaged,

@@ -283,6 +283,29 @@ fn the_sample_that_may_not_skip_holds_the_duty_only_after_a_floor_sample() {
     assert!(max <= 8.05 && r.outside_s <= 10.0, "highest {max} °C, {} s outside 2–8 °C", r.outside_s);
 }
 
+/// A refused estimate freezes the law on the model its last rest confirmed
+/// (`hter::control::adaptive`, "Frozen on the rest's model"): on campaign mission 4384 (`hter
+/// sim --mission-seed 4384`, a light H-TER I carrier, the room down to 9 °C) a warming pulse at
+/// 13.3 h ends a long rest at duty 0.14, the estimate drifts to a near double pole at 1 and is
+/// refused. Frozen on that last trusted model, GPC held the load 0.4 °C below the setpoint in a
+/// rail-to-rail cycle for 4.4 h: mean error 0.34 °C from 13 h to the end, lowest 2.25 °C. On
+/// the rest's model: 0.055 °C (PI 0.051), lowest 2.93 °C.
+#[test]
+fn a_drifted_estimate_freezes_the_law_on_the_model_of_the_last_rest() {
+    use hal_sim::mission::{evaluate, Mission};
+    let m = Mission::generate(4384);
+    let out = run(&m.options(ControllerSpec::new(ControllerChoice::Gpc))).unwrap();
+    let late: Vec<_> = out.rows.iter().filter(|r| r.t_s >= 13.0 * 3600.0).collect();
+    assert!(
+        late.iter().any(|r| r.adaptive_mode == Some(AdaptiveMode::Frozen)),
+        "the run no longer refuses its estimate after the rest: the test does not reach the case"
+    );
+    let mean = late.iter().map(|r| (r.true_temp_c - r.setpoint_c).abs()).sum::<f64>() / late.len() as f64;
+    let lowest = late.iter().map(|r| r.true_temp_c).fold(f64::INFINITY, f64::min);
+    assert!(mean <= 0.1 && lowest >= 2.8, "mean error {mean:.3} °C, lowest {lowest:.2} °C from 13 h");
+    assert!(evaluate(&m, &out).guard_trips == 0);
+}
+
 /// Self-tuning copes with the plant changing under it: at 4 °C the supply sags from 12 to 9 V
 /// after an hour (a quarter less cooling power) and the ambient jumps from 28 to 36 °C after two.
 /// Every law keeps the load within 2–8 °C and is back within ±0.3 °C of the setpoint in the

@@ -89,7 +89,8 @@
 //! covariance bound (trace P 1–3) nor centred regressors stopped the drift.
 //!
 //! **When the estimate is trusted** (all must hold, else the law runs on the last trusted
-//! model, and with no trusted model the bumpless fallback PI drives the SSR):
+//! model or the one its last rest confirmed ("Frozen on the rest's model"), and with no
+//! trusted model the bumpless fallback PI drives the SSR):
 //! - every θ finite and the estimator healthy;
 //! - parameter projection: A stable (Jury's conditions), every b_i ≤ 0 (cooling), static gain
 //!   B(1)/A(1) negative and within [`AdaptiveConfig::gain_min_c_per_duty`]…[`AdaptiveConfig::gain_max_c_per_duty`];
@@ -118,12 +119,34 @@
 //! ```
 //!
 //! - Frozen: the law runs on the last trusted model (the start model until the first trusted
-//!   estimate).
+//!   estimate); when the estimate is refused after running `Adaptive`, on the model that was
+//!   trusted when the estimator last paused at rest, if it has ("Frozen on the rest's model"
+//!   below).
 //! - Adaptive: the law runs on the current estimate, trusted this sample.
 //! - Fallback: the law failed (a numerical error, a non-finite measurement, or no trusted model
 //!   yet) and the PI drives.
 //!
 //! Warm-up and samples the estimator refused keep the mode, unless the law fails.
+//!
+//! **Frozen on the rest's model.** The model trusted when the estimator pauses at rest (30
+//! minutes within 0.2 °C, [`REST_PAUSE_SAMPLES`]) is kept; an estimate refused after the law
+//! ran `Adaptive` sends the law back to it rather than to the last model trusted. The estimate
+//! that is refused has usually drifted through plausible models on its way out of the set, and
+//! the last of them is the furthest gone; a rest's model held the load still for half an
+//! hour. Found on campaign mission 4384 (`hter sim --mission-seed 4384`, a light H-TER I
+//! carrier whose room falls from 28 to 9 °C): at duty 0.14 a warming pulse ended a long rest,
+//! the estimator (its covariance at the bound after the hold) took A from 1 − 1.76 q⁻¹ +
+//! 0.76 q⁻² to 1 − 1.99 q⁻¹ + 0.99 q⁻² in 60 samples, GPC on it drove the duty between 0 and
+//! 0.94 with the load below the setpoint (2.85 °C), and once the estimate left the plausible
+//! set (A(1) → 0: with its warming b3 clipped, a static gain beyond −1 000 °C/duty; then a
+//! pole past 1) it ran frozen on that last trusted model for 16 000 s, the load cycling 0.4 °C below the
+//! setpoint (IAE 26 014 °C·s, steady-state error 1.21 °C, lowest 2.25 °C; PI 13 415, 0.06,
+//! 3.75). On the rest's model: 14 910, 0.13, 2.93 °C; three 10 000-mission campaigns and 504
+//! piecewise runs (12–36 °C, seeds 1–24) keep their trips, 56 of the runs move by −0.019 …
+//! +0.009 in IAE / bound, and the campaigns' lowest fault-free load goes from 2.25 to 2.30 °C.
+//! Handing the law to the fallback PI after
+//! 30 minutes frozen instead made it worse (lowest 2.02 °C, a freeze-guard trip): under the PI
+//! the drifted estimate became plausible again and GPC took it up (EXPERIMENTS.md, issue 15).
 //!
 //! **Cautious while unconfirmed.** Outside `Adaptive` GPC runs with λ at least
 //! [`CAUTIOUS_GPC_LAMBDA`]: the model it designs on is one the estimate has not confirmed on
@@ -486,6 +509,8 @@ pub struct SelfTuning {
     /// GPC's first cost row, N1 = k + 1 or `GpcConfig::n1` when larger, at most N2 (module
     /// docs, "The cost's first row"; 0 for the other laws): made once, not every sample.
     gpc_n1: usize,
+    /// The model trusted when the estimator last paused at rest.
+    rested: Option<Model>,
 }
 
 impl SelfTuning {
@@ -533,6 +558,7 @@ impl SelfTuning {
                 Law::Gpc(g) => g.n1.max(cfg.k + 1).min(g.n2),
                 _ => 0,
             },
+            rested: None,
         })
     }
 
@@ -595,7 +621,9 @@ impl SelfTuning {
         self.updates
     }
 
-    /// The last trusted model (what a board would persist).
+    /// The model the law runs on when the estimate is not trusted: the last trusted one, or the
+    /// one its last rest confirmed (module docs, "Frozen on the rest's model"); what a board
+    /// would persist.
     pub fn trusted_model(&self) -> Option<Model> {
         self.trusted
     }
@@ -685,6 +713,10 @@ impl SelfTuning {
         }
         if self.resting() {
             self.updates = self.updates.saturating_add(1);
+            // The model the rest confirms (module docs, "Frozen on the rest's model"): kept on
+            // the paused samples, which skip the estimator's update, so the samples that run it
+            // pay nothing for it.
+            self.rested = self.trusted;
             return true;
         }
         let mut phi = self.reg.phi();
@@ -757,6 +789,9 @@ impl Controller for SelfTuning {
                 self.trusted = Some(m);
                 self.mode = AdaptiveMode::Adaptive;
             } else if self.trusted.is_some() {
+                if self.mode == AdaptiveMode::Adaptive && self.rested.is_some() {
+                    self.trusted = self.rested;
+                }
                 self.mode = AdaptiveMode::Frozen;
             }
         }
@@ -1259,6 +1294,46 @@ mod tests {
         c.track(&nan, 0.0);
         assert_ne!(sample(&mut c, &mut plant, &mut y, Some(0.4)), AdaptiveMode::Fallback);
         assert!(c.trusted_model().is_some_and(|m| plausible_model(c.config(), &m)));
+    }
+
+    #[test]
+    fn a_refused_estimate_freezes_the_law_on_the_model_its_last_rest_confirmed() {
+        let mut c = start(ADAPTIVE_GPC);
+        let (mut plant, mut y) = (Plant::start_model(), 0.0);
+        let gain = |m: Option<Model>| m.and_then(|m| m.static_gain()).expect("a model with a static gain");
+        // Closed loop on the start model's own plant until the estimator pauses at rest: the
+        // model trusted then is the one the rest confirmed.
+        let mut t = 0;
+        while !c.resting() {
+            sample(&mut c, &mut plant, &mut y, None);
+            t += 1;
+            assert!(t < 5000, "never at rest");
+        }
+        assert_eq!(c.mode(), AdaptiveMode::Adaptive);
+        let rested = c.trusted_model();
+        // The cooler gets 1.6 times stronger and the estimate follows it under excitation: a
+        // newer trusted model, far from the rested one.
+        plant.b = [plant.b[0] * 1.6, plant.b[1] * 1.6];
+        let mut t = 0;
+        while !(c.mode() == AdaptiveMode::Adaptive && gain(c.trusted_model()) < 1.4 * gain(rested)) {
+            sample(&mut c, &mut plant, &mut y, Some(square(t)));
+            t += 1;
+            assert!(t < 5000, "the estimate never followed the stronger cooler");
+        }
+        // Then the plant turns into a heater: the estimate is refused, and the law freezes on the
+        // model the rest confirmed, not on the last one trusted (module docs, "Modes").
+        plant.b = [0.03, 0.03];
+        let mut t = 0;
+        loop {
+            let last = c.trusted_model();
+            if sample(&mut c, &mut plant, &mut y, Some(square(t))) == AdaptiveMode::Frozen {
+                assert_ne!(last, rested, "the last trusted model was another");
+                break;
+            }
+            t += 1;
+            assert!(t < 1000, "an implausible estimate freezes the law");
+        }
+        assert_eq!(c.trusted_model(), rested);
     }
 
     #[test]

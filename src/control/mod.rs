@@ -106,7 +106,8 @@ pub trait Controller {
 pub enum AdaptiveMode {
     /// The law runs on the current RLS estimate.
     Adaptive,
-    /// The estimate is not trustworthy: the law runs on the last trusted model.
+    /// The estimate is not trustworthy: the law runs on the last trusted model (self-tuning:
+    /// or on the one its last rest confirmed).
     Frozen,
     /// No trusted model at all: the fallback PI drives.
     Fallback,
