@@ -144,7 +144,7 @@
 //! 3.75). On the rest's model: 14 910, 0.13, 2.93 °C; three 10 000-mission campaigns and 504
 //! piecewise runs (12–36 °C, seeds 1–24) keep their trips, 56 of the runs move by −0.019 …
 //! +0.009 in IAE / bound, and the campaigns' lowest fault-free load goes from 2.25 to 2.30 °C;
-//! IGMVC on H-TER II's `piecewise` 1 878 → 1 768 °C·s, steady-state error 0.33 → 0.09 °C.
+//! IGMVC on H-TER II's `piecewise` 1 878 → 1 768 °C·s, overshoot 0.33 → 0.09 °C.
 //! Handing the law to the fallback PI after
 //! 30 minutes frozen instead made it worse (lowest 2.02 °C, a freeze-guard trip): under the PI
 //! the drifted estimate became plausible again and GPC took it up (EXPERIMENTS.md, issue 15).
