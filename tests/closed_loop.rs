@@ -303,7 +303,7 @@ fn a_drifted_estimate_freezes_the_law_on_the_model_of_the_last_rest() {
     let mean = late.iter().map(|r| (r.true_temp_c - r.setpoint_c).abs()).sum::<f64>() / late.len() as f64;
     let lowest = late.iter().map(|r| r.true_temp_c).fold(f64::INFINITY, f64::min);
     assert!(mean <= 0.1 && lowest >= 2.8, "mean error {mean:.3} °C, lowest {lowest:.2} °C from 13 h");
-    assert!(evaluate(&m, &out).guard_trips == 0);
+    assert_eq!(evaluate(&m, &out).guard_trips, 0, "freeze-guard trips");
 }
 
 /// Self-tuning copes with the plant changing under it: at 4 °C the supply sags from 12 to 9 V

@@ -8,6 +8,14 @@ fn hter(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_hter")).args(args).output().expect("run hter")
 }
 
+/// The cells of the column `name` of a `hter sim --csv` text, one per row after the header.
+fn column(text: &str, name: &str) -> Vec<String> {
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+    let i = header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no {name} column: {header:?}"));
+    lines.map(|l| l.split(',').nth(i).unwrap_or_else(|| panic!("short row {l}")).to_string()).collect()
+}
+
 fn assert_one_line_error(args: &[&str], needle: &str) {
     let out = hter(args);
     assert!(!out.status.success(), "{args:?} should fail");
@@ -283,11 +291,7 @@ fn freeze_guard_trips_count_the_entries_into_the_guard() {
             args.extend(["--fault", f]);
         }
         let v = json(&args);
-        let text = std::fs::read_to_string(&csv).unwrap();
-        let mut lines = text.lines();
-        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-        let col = header.iter().position(|h| *h == "mode").expect("a mode column");
-        let modes: Vec<String> = lines.map(|l| l.split(',').nth(col).unwrap().to_string()).collect();
+        let modes = column(&std::fs::read_to_string(&csv).unwrap(), "mode");
         let entries = modes.windows(2).filter(|m| m[0] != "freeze_guard" && m[1] == "freeze_guard").count()
             + usize::from(modes.first().is_some_and(|m| m == "freeze_guard"));
         assert_eq!(v["freeze_guard_trips"].as_u64(), Some(entries as u64), "{fault:?}: {v}");
@@ -476,18 +480,12 @@ fn the_sim_csv_logs_the_reset_at_rest_the_law_aims_at() {
         let _ = std::fs::remove_file(&csv);
         text
     };
-    let cells = |text: &str, name: &str| -> Vec<String> {
-        let mut lines = text.lines();
-        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-        let i = header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no {name} column: {header:?}"));
-        lines.map(|l| l.split(',').nth(i).unwrap().to_string()).collect()
-    };
     let pi = run("pi");
-    assert!(cells(&pi, "reset_c").iter().all(String::is_empty), "PI has no reset");
+    assert!(column(&pi, "reset_c").iter().all(String::is_empty), "PI has no reset");
 
     let gpc = run("gpc");
     let num = |name: &str| -> Vec<f32> {
-        cells(&gpc, name).iter().map(|c| c.parse().unwrap_or_else(|_| panic!("{name} '{c}'"))).collect()
+        column(&gpc, name).iter().map(|c| c.parse().unwrap_or_else(|_| panic!("{name} '{c}'"))).collect()
     };
     let (w, y, r) = (num("setpoint_c"), num("temp_c"), num("reset_c"));
     assert!(r.iter().all(|r| r.abs() <= RESET_MAX_C), "every reset within ±{RESET_MAX_C}");

@@ -139,15 +139,15 @@
 //! 0.76 q⁻² to 1 − 1.99 q⁻¹ + 0.99 q⁻² in 60 samples, GPC on it drove the duty between 0 and
 //! 0.94 with the load below the setpoint (2.85 °C), and once the estimate left the plausible
 //! set (A(1) → 0: with its warming b3 clipped, a static gain beyond −1 000 °C/duty; then a
-//! pole past 1) it ran frozen on that last trusted model for 16 000 s, the load cycling 0.4 °C below the
-//! setpoint (IAE 26 014 °C·s, steady-state error 1.21 °C, lowest 2.25 °C; PI 13 415, 0.06,
-//! 3.75). On the rest's model: 14 910, 0.13, 2.93 °C; three 10 000-mission campaigns and 504
-//! piecewise runs (12–36 °C, seeds 1–24) keep their trips, 56 of the runs move by −0.019 …
-//! +0.009 in IAE / bound, and the campaigns' lowest fault-free load goes from 2.25 to 2.30 °C;
-//! IGMVC on H-TER II's `piecewise` 1 878 → 1 768 °C·s, overshoot 0.33 → 0.09 °C.
-//! Handing the law to the fallback PI after
-//! 30 minutes frozen instead made it worse (lowest 2.02 °C, a freeze-guard trip): under the PI
-//! the drifted estimate became plausible again and GPC took it up (EXPERIMENTS.md, issue 15).
+//! pole past 1) it ran frozen on that last trusted model for 16 000 s, the load cycling
+//! 0.4 °C below the setpoint (IAE 26 014 °C·s, steady-state error 1.21 °C, lowest 2.25 °C;
+//! PI 13 415, 0.06, 3.75). On the rest's model: 14 910, 0.13, 2.93 °C; three 10 000-mission
+//! campaigns and 504 piecewise runs (12–36 °C, seeds 1–24) keep their trips, 56 of the runs
+//! move by −0.019 … +0.009 in IAE / bound, and the campaigns' lowest fault-free load goes
+//! from 2.25 to 2.30 °C; IGMVC on H-TER II's `piecewise` 1 878 → 1 768 °C·s, overshoot
+//! 0.33 → 0.09 °C. Handing the law to the fallback PI after 30 minutes frozen instead made it
+//! worse (lowest 2.02 °C, a freeze-guard trip): under the PI the drifted estimate became
+//! plausible again and GPC took it up (EXPERIMENTS.md, issue 15).
 //!
 //! **Cautious while unconfirmed.** Outside `Adaptive` GPC runs with λ at least
 //! [`CAUTIOUS_GPC_LAMBDA`]: the model it designs on is one the estimate has not confirmed on
