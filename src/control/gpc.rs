@@ -737,10 +737,13 @@ impl GpcStaged {
                 floor_row(&m.atilde(), &self.g, nb, n2, nu);
             }
             1 => {
-                self.h = normal_matrix(&self.g, &cfg, self.lead);
-                // Bordered by the identity beyond Nu (type docs).
-                for (r, hr) in self.h.iter_mut().enumerate().take(N).skip(nu) {
-                    hr[r] = 1.0;
+                normal_matrix_into(&self.g, &cfg, self.lead, &mut self.h);
+                // Bordered by the identity beyond Nu (type docs). Tested first: `skip` is an
+                // out-of-line `nth` call, and at Nu = N there is no border.
+                if nu < N {
+                    for (r, hr) in self.h.iter_mut().enumerate().take(N).skip(nu) {
+                        hr[r] = 1.0;
+                    }
                 }
             }
             2 => {
@@ -1234,8 +1237,17 @@ fn step_response<const NA: usize, const NB: usize>(m: &Model, n2: usize, g: &mut
 /// g's are exact zeros (dead time); their products are skipped there.
 #[inline(always)]
 fn normal_matrix(g: &[f32; MAX_N2], cfg: &GpcConfig, lead: usize) -> [[f32; MAX_NU]; MAX_NU] {
-    let (n1, n2, nu) = (cfg.n1, cfg.n2, cfg.nu);
     let mut h = [[0.0f32; MAX_NU]; MAX_NU];
+    normal_matrix_into(g, cfg, lead, &mut h);
+    h
+}
+
+/// [`normal_matrix`] written into `h` (zeroed first): the staged design's stage 1 makes it in
+/// its own `h`, without a copy of the matrix through the stack (≈ 120 instructions a design).
+#[inline(always)]
+fn normal_matrix_into(g: &[f32; MAX_N2], cfg: &GpcConfig, lead: usize, h: &mut [[f32; MAX_NU]; MAX_NU]) {
+    let (n1, n2, nu) = (cfg.n1, cfg.n2, cfg.nu);
+    *h = [[0.0f32; MAX_NU]; MAX_NU];
     if n1 == 1 {
         for band in 0..nu {
             let mut s = if band == 0 { cfg.lambda } else { 0.0 };
@@ -1267,7 +1279,6 @@ fn normal_matrix(g: &[f32; MAX_N2], cfg: &GpcConfig, lead: usize) -> [[f32; MAX_
             }
         }
     }
-    h
 }
 
 /// k1_j = Σ_{c<Nu} z_c G[j][c] for j = N1…N2 into `d.k1`, summed in the textbook order (k1_j
