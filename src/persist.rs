@@ -256,9 +256,9 @@ impl ModelRecord {
         }
     }
 
-    /// `cfg` restarted from this record ([`AdaptiveConfig::restored_from`]), or why not.
+    /// `cfg` resumed from this record ([`AdaptiveConfig::resumed_from`]), or why not.
     pub fn restore(&self, cfg: &AdaptiveConfig) -> Result<AdaptiveConfig, DecodeError> {
-        self.to_model(cfg).map(|m| cfg.restored_from(m))
+        self.to_model(cfg).map(|m| cfg.resumed_from(m))
     }
 }
 

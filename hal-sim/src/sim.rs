@@ -107,6 +107,9 @@ pub struct ControllerSpec {
     /// the carrier's start model. Set apart from `initial` for a model the self-tuner would not
     /// trust (`hter sim --commission monotone`).
     pub holdover: Option<Model>,
+    /// `initial` is the model this self-tuner stored before a reset: the estimator resumes
+    /// from it ([`AdaptiveConfig::resumed_from`]), as the board's boot does.
+    pub resumed: bool,
 }
 
 impl ControllerSpec {
@@ -123,6 +126,7 @@ impl ControllerSpec {
             initial: None,
             pi: None,
             holdover: None,
+            resumed: false,
         }
     }
 
@@ -158,6 +162,10 @@ impl ControllerSpec {
                     // The estimator uses the start model's delay.
                     k: initial.map_or(profile_cfg.k, |m| m.k()),
                     ..profile_cfg
+                };
+                let cfg = match initial {
+                    Some(m) if self.resumed => cfg.resumed_from(m),
+                    _ => cfg,
                 };
                 let mut c = SelfTuning::new(cfg, ts_s, u0).map_err(refused)?;
                 if !self.approach_lead {
@@ -403,6 +411,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             if let (Some(bytes), Some(check)) = (persisted, spec.choice.kind().adaptive()) {
                 if let Ok(m) = ModelRecord::decode(bytes).and_then(|r| r.to_model(&check)) {
                     spec.initial = Some(m);
+                    spec.resumed = true;
                 }
             }
             spec.build(cfg.ts_s, u0 as f32)?

@@ -254,9 +254,16 @@ impl<const N: usize> Rls<N> {
     /// are, and it adds nothing to trace(P). Call it after every update that should hold k
     /// (forgetting grows the variance by 1/λ_f each time). Out of range: nothing.
     pub fn hold(&mut self, k: usize) {
-        if let Some(d) = self.d.get_mut(k) {
-            self.trace += HELD_VARIANCE - *d;
-            *d = HELD_VARIANCE;
+        self.set_variance(k, HELD_VARIANCE);
+    }
+
+    /// Sets the variance of parameter `k` in P's factor D to `v` (finite and positive, else
+    /// nothing; out of range: nothing). P = U D Uᵀ: this is P_kk only while row k of U is
+    /// zero off the diagonal, as it is from [`Rls::new`] until the first update.
+    pub fn set_variance(&mut self, k: usize, v: f32) {
+        if let (Some(d), true) = (self.d.get_mut(k), v.is_finite() && v > 0.0) {
+            self.trace += v - *d;
+            *d = v;
         }
     }
 
@@ -380,6 +387,42 @@ mod tests {
                 assert!((f64::from(pu[(i, j)]) - p[(i, j)]).abs() < 1e-3 * p[(i, j)].abs().max(1e-3), "P[{i}{j}]");
             }
         }
+    }
+
+    #[test]
+    fn a_variance_set_at_the_start_is_that_parameter_s_prior() {
+        // P(0) = diag(0.01, 0.01, 1) through `set_variance` against the textbook update in f64
+        // started from that P: the third parameter (an offset, φ = 1) takes the first error.
+        let cfg = RlsConfig { forgetting: 0.995, p0: 0.01, trace_max: 1e9 };
+        let mut ud = Rls::<3>::new(&cfg, SVector::from([0.5, -1.0, 0.0]));
+        ud.set_variance(2, 1.0);
+        ud.set_variance(7, 1.0);
+        ud.set_variance(0, f32::NAN);
+        assert!((ud.trace_p() - 1.02).abs() < 1e-6);
+        let mut p = nalgebra::Matrix3::<f64>::from_diagonal(&nalgebra::Vector3::new(0.01, 0.01, 1.0));
+        let mut th = nalgebra::Vector3::<f64>::new(0.5, -1.0, 0.0);
+        let mut seed = 777u32;
+        for _ in 0..50 {
+            let mut phi = [0.0f64, 0.0, 1.0];
+            for x in phi.iter_mut().take(2) {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                *x = (seed >> 8) as f64 / (1u32 << 24) as f64 - 0.5;
+            }
+            // The model is right; the offset, 3, is not known.
+            let y = 0.5 * phi[0] - phi[1] + 3.0;
+            let ph = nalgebra::Vector3::from(phi);
+            let k = p * ph / (0.995 + (ph.transpose() * p * ph)[0]);
+            th += k * (y - ph.dot(&th));
+            p = (p - k * ph.transpose() * p) / 0.995;
+            let phf = SVector::<f32, 3>::new(phi[0] as f32, phi[1] as f32, 1.0);
+            ud.update(&cfg, &phf, y as f32).unwrap();
+        }
+        for i in 0..3 {
+            assert!((f64::from(ud.theta()[i]) - th[i]).abs() < 1e-4, "{i}: {} vs {}", ud.theta()[i], th[i]);
+        }
+        // The offset is learnt; the model moved by a fraction of the error.
+        assert!((ud.theta()[2] - 3.0).abs() < 0.1, "offset {}", ud.theta()[2]);
+        assert!((ud.theta()[0] - 0.5).abs() < 0.05 && (ud.theta()[1] + 1.0).abs() < 0.05, "{:?}", ud.theta());
     }
 
     #[test]
