@@ -110,6 +110,6 @@ fn a_brownout_in_a_hold_resumes_from_the_stored_model_without_a_swing() {
     let after: Vec<_> = out.rows.iter().filter(|r| r.t_s >= RESET_S).collect();
     let worst = after.iter().map(|r| (r.true_temp_c - r.setpoint_c).abs()).fold(0.0, f64::max);
     assert!(worst <= 0.1, "{worst:.2} °C from the setpoint after the restart");
-    let late = after.iter().filter(|r| r.t_s >= RESET_S + 3600.0);
-    assert!(late.clone().all(|r| r.adaptive_mode == Some(AdaptiveMode::Adaptive)), "not adaptive an hour on");
+    let mut late = after.iter().filter(|r| r.t_s >= RESET_S + 3600.0);
+    assert!(late.all(|r| r.adaptive_mode == Some(AdaptiveMode::Adaptive)), "not adaptive an hour on");
 }

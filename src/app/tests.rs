@@ -340,7 +340,7 @@ fn a_restored_self_tuner_model_does_not_replace_the_cabinet_model_in_the_holdove
         panic!()
     };
     let estimate = Model::second_order([-1.859405, 0.859802], [-0.014713, -0.003021], 8).unwrap();
-    let restored = profile::ADAPTIVE_GPC.restored_from(estimate);
+    let restored = profile::ADAPTIVE_GPC.resumed_from(estimate);
     let mut b = Bench::new(&Boot { adaptive: Some(restored), cabinet: Some(cab), ..boot() });
     assert_eq!(b.app.carrier().holdover_model(), Some(cab));
     assert_eq!(b.field("model_k"), "8");

@@ -470,7 +470,7 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
         self.load(key::MODEL, ModelRecord::decode).await
     }
 
-    /// `cfg` restarted from the stored model ([`AdaptiveConfig::restored_from`]) if one is stored
+    /// `cfg` resumed from the stored model ([`AdaptiveConfig::resumed_from`]) if one is stored
     /// and plausible under `cfg`'s limits; otherwise `cfg` unchanged. `cfg` is borrowed: taken by
     /// value, it is moved into this future inside the caller's, a copy within one future that
     /// LLVM makes a `memmove` call, and one such call links `compiler_builtins`' 1.5 KB
