@@ -112,4 +112,11 @@ fn a_brownout_in_a_hold_resumes_from_the_stored_model_without_a_swing() {
     assert!(worst <= 0.1, "{worst:.2} °C from the setpoint after the restart");
     let mut late = after.iter().filter(|r| r.t_s >= RESET_S + 3600.0);
     assert!(late.all(|r| r.adaptive_mode == Some(AdaptiveMode::Adaptive)), "not adaptive an hour on");
+    // The trust decision settles once: frozen at the restart, adaptive when the estimate is
+    // trusted again. The stored estimate sits on the static-gain cone's far edge (≈ −1 000
+    // °C/duty, an integrator-like A), and when the projection bounded the raw B(1) while the
+    // trust check took the B with its warming tail clipped, it went in and out of the set every
+    // few samples: 44 mode changes in 20 minutes, each a logged event.
+    let changes = after.windows(2).filter(|w| w[0].adaptive_mode != w[1].adaptive_mode).count();
+    assert!(changes <= 2, "{changes} mode changes after the restart");
 }

@@ -30,7 +30,15 @@
 //! open, and with four B terms that drift took A(1) below zero (a pole at 1.02) on every
 //! half-load run: the estimate was refused for the whole hold and GPC limit-cycled ±0.6 °C on
 //! the start model. Projected, the estimate stays in the set the laws accept and keeps
-//! following the plant. The model the laws get has the tail of B, b1 … b3, clipped at zero: a
+//! following the plant. The cone is the one the trust check applies, to the model the laws get
+//! (below: B's warming tail clipped) and [`CONE_MARGIN`] inside it. Bounding the raw B(1)
+//! instead, a stored estimate that had drifted to the cone's far edge (−1 000 °C/duty, A(1) ≈
+//! 1e-4) with a warming b3 of 0.0013 was projected to −1 000 while the trust check saw −1 013:
+//! after a brown-out in a long hold (`hter sim --scenario half-load --duration 86400 --fault
+//! brownout@20000`) the decision flipped 44 times in 20 minutes, the law switching between the
+//! estimate and the rest's model and each flip an event in the log; over seeds 1–8 of
+//! `piecewise` (H-TER I and II) and `half-load` at 20, 28 and 36 °C there were 140 such changes in 72 runs, now
+//! none. The model the laws get has the tail of B, b1 … b3, clipped at zero: a
 //! term the data leave near zero (the start model's b2 = b3 = 0 on a plant that has them so)
 //! is estimated a hair above it as often as below, and refusing each such estimate kept the
 //! law frozen for hours. b0 > 0 is still refused: it would reverse the first-step gain. Larger
@@ -763,11 +771,16 @@ impl SelfTuning {
 
     /// Moves the estimate into the cone of plausible static gains (module docs, "Projection"):
     /// B(1) − g_min·A(1) ≥ 0, then g_max·A(1) − B(1) ≥ 0, with A(1) = 1 + a1 + a2 and B(1) the
-    /// sum of the b_i. Each is a half-space cᵀθ ≥ c₀ of θ = [a1 a2 b0 … b3 d].
+    /// sum of the b_i, each bound [`CONE_MARGIN`] inside the trust check's. Each is a half-space
+    /// cᵀθ ≥ c₀ of θ = [a1 a2 b0 … b3 d]. The far bound (g_min) is on the B the laws and the
+    /// trust check get, its warming tail clipped: the tail's terms above zero are left out of
+    /// B(1) there. The near bound needs no such care: clipping only makes B(1) cool more.
     fn project(&mut self) {
-        let (lo, hi) = (self.cfg.gain_min_c_per_duty, self.cfg.gain_max_c_per_duty);
+        let (lo, hi) = (CONE_MARGIN * self.cfg.gain_min_c_per_duty, self.cfg.gain_max_c_per_duty / CONE_MARGIN);
         // B(1) − lo·(1 + a1 + a2) ≥ 0  ⇔  −lo·a1 − lo·a2 + Σb ≥ lo
-        let c = SVector::<f32, N_THETA>::from([-lo, -lo, 1.0, 1.0, 1.0, 1.0, 0.0]);
+        let th = self.rls.theta();
+        let cool = |b: f32| if b > 0.0 { 0.0 } else { 1.0 };
+        let c = SVector::<f32, N_THETA>::from([-lo, -lo, 1.0, cool(th[3]), cool(th[4]), cool(th[5]), 0.0]);
         self.rls.project_onto_halfspace(&c, lo);
         // hi·(1 + a1 + a2) − B(1) ≥ 0  ⇔  hi·a1 + hi·a2 − Σb ≥ −hi
         let c = SVector::<f32, N_THETA>::from([hi, hi, -1.0, -1.0, -1.0, -1.0, 0.0]);
@@ -881,6 +894,13 @@ pub fn model_from_theta(cfg: &AdaptiveConfig, theta: &[f32]) -> Option<Model> {
 /// "Projection"): clipped at zero, more would give the model a static gain over
 /// 1 / (1 − 0.7) ≈ 3.3 × the estimate's own.
 pub const WARM_TAIL_MAX: f32 = 0.7;
+
+/// How far inside the trust check's static-gain bounds the projection puts the estimate (module
+/// docs, "Projection"): to 0.98 × g_min and g_max / 0.98. With A(1) near zero (an estimate
+/// drifted towards an integrator in a long hold), the static gain B(1) / A(1) computed in f32
+/// is uncertain by ≈ 0.1 %, and an estimate projected exactly onto the bound went in and out of
+/// the trusted set on rounding alone.
+pub const CONE_MARGIN: f32 = 0.98;
 
 /// θ = [a1 a2 b0 … b3] with B's tail b1 … b3 clipped at zero, or `None` when the warming terms
 /// clipped sum to more than [`WARM_TAIL_MAX`] × the cooling terms' |sum| (b0 included; a b0 above
@@ -1186,6 +1206,30 @@ mod tests {
         // A warming b0 is not clipped nor counted as cooling: the plausibility rule refuses it.
         assert_eq!(clip_warming_tail([-1.8, 0.8, 0.01, -0.05, 0.0, 0.0]), Some([-1.8, 0.8, 0.01, -0.05, 0.0, 0.0]));
         assert_eq!(clip_warming_tail([-1.8, 0.8, 0.01, -0.05, 0.0, 0.04]), None);
+    }
+
+    #[test]
+    fn the_projection_bounds_the_gain_of_the_model_the_trust_check_sees() {
+        // A stored estimate after a brown-out in a long hold (`tests/board_stores.rs`): A near an
+        // integrator, A(1) = 1e-4, and a small warming b3. Its raw static gain, −970 °C/duty, is
+        // inside the cone; with b3 clipped, as the laws and the trust check take it, −1 000 is
+        // on its edge, and rounding put it in and out of the set every few samples.
+        let mut c = start(ADAPTIVE_GPC);
+        let th = [-1.75, 0.7501, -0.017, -0.046, -0.037, 0.003, 0.0];
+        c.rls = Rls::new(&c.cfg.rls, SVector::from(th));
+        let gain = |c: &SelfTuning| c.estimate().and_then(|m| m.static_gain()).unwrap();
+        let raw = (th[2..6].iter().sum::<f32>()) / (1.0 + th[0] + th[1]);
+        assert!((-1000.0..=-10.0).contains(&raw), "{raw}");
+        assert!(gain(&c) < -995.0, "{}", gain(&c));
+        c.project();
+        // Moved into the cone of the clipped model, with a margin that rounding cannot cross.
+        let g = gain(&c);
+        assert!((-985.0..=-975.0).contains(&g), "{g}");
+        assert!(c.estimate().is_some_and(|m| plausible_model(c.config(), &m)));
+        // Inside already: left where it is.
+        let before = c.theta();
+        c.project();
+        assert_eq!(c.theta(), before);
     }
 
     #[test]
