@@ -60,7 +60,8 @@
 //!    stuck-on verdicts that come with a trip ([`ssr`], paths 1 and 2), its release; then the
 //!    SSR checks on the temperature history (stuck on after the off-run, stuck off, the supply
 //!    probe);
-//! 5. the mode's outputs: no duty unless the controller drives, limp home's On-Off, the supply
+//! 5. the mode's outputs: no duty unless the controller drives, limp home's On-Off (on the
+//!    freeze guard's look-ahead, [`ssr::LimpConfig`]), the supply
 //!    switch open below the floor with nothing asked and the load still
 //!    ([`freeze::FreezeConfig::idle_open_c`]);
 //! 6. the supply switch's test pulse, the lid detector ([`lid`]) on the applied duty;
@@ -532,7 +533,10 @@ impl Supervisor {
         let mode = self.state.mode();
         let mut duty = if mode == Mode::Normal { duty } else { Duty::OFF };
         if let State { hold: Hold::Free, drive: Drive::LimpHome { supply_on } } = self.state {
-            let on = cfg.ssr.limp.supply_on(supply_on, temp_c, w);
+            // On the freeze guard's look-ahead ([`ssr::LimpConfig`]): the RTD reads the water
+            // ≈ 50 s late, and a light load at full cooling falls 2–3 °C in that time.
+            let ahead = temp_c + crate::units::min_f32(self.freeze.slope_c_per_s(), 0.0) * cfg.freeze.lookahead_s;
+            let on = cfg.ssr.limp.supply_on(supply_on, ahead, w);
             self.state.limp_switched(on);
             if on {
                 duty = Duty::FULL;

@@ -217,6 +217,15 @@ impl ProbeConfig {
 /// alike, in case the short was a false alarm). Cooling that cannot be modulated still keeps
 /// vaccines in 2–8 °C, where a latched-off supply would let them warm to the ambient; the
 /// freeze guard still cuts.
+///
+/// The thermostat reads what the freeze guard reads: the filtered temperature extrapolated
+/// along its falling slope ([`super::freeze::FreezeConfig::lookahead_s`], 120 s). The RTD reads
+/// the water ≈ 50 s late, and on the reading alone the supply stayed on until the water had
+/// fallen past the off level by that lag's worth of cooling: on a light carrier (campaign
+/// mission 6391, `hter sim --mission-seed 6391`) the water fell 5.0 → 1.4 °C before the
+/// supply opened and every cycle's low was 1.2–1.6 °C (0.8 °C once); on the look-ahead the
+/// cycles' lows are 1.8–2.3 °C. On the reference carriers (`disturbance`, seed 11, full and half
+/// load at 20, 32 and 43 °C) the band moves from 2.4–7.0 to 3.2–7.2 °C (`tests/faults.rs::a_shorted_ssr_limps_home_within_2_to_8`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct LimpConfig {
