@@ -107,8 +107,13 @@ impl FreezeGuard {
             }
         }
         self.last_temp_c = Some(temp_c);
-        let predicted_c = temp_c + crate::units::min_f32(self.slope_c_per_s, 0.0) * cfg.lookahead_s;
-        Trend { drop_c, slope_c_per_s: self.slope_c_per_s, predicted_c }
+        Trend { drop_c, slope_c_per_s: self.slope_c_per_s, predicted_c: self.predicted_c(cfg, temp_c) }
+    }
+
+    /// `temp_c` extrapolated `lookahead_s` along the smoothed slope when it falls, °C: what the
+    /// guard judges, and limp home's thermostat reads ([`super::ssr::LimpConfig`]).
+    pub(crate) fn predicted_c(&self, cfg: &FreezeConfig, temp_c: f32) -> f32 {
+        temp_c + crate::units::min_f32(self.slope_c_per_s, 0.0) * cfg.lookahead_s
     }
 
     /// Whether the guard trips on `trend`.

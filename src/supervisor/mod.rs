@@ -535,8 +535,7 @@ impl Supervisor {
         if let State { hold: Hold::Free, drive: Drive::LimpHome { supply_on } } = self.state {
             // On the freeze guard's look-ahead ([`ssr::LimpConfig`]): the RTD reads the water
             // ≈ 50 s late, and a light load at full cooling falls 2–3 °C in that time.
-            let ahead = temp_c + crate::units::min_f32(self.freeze.slope_c_per_s(), 0.0) * cfg.freeze.lookahead_s;
-            let on = cfg.ssr.limp.supply_on(supply_on, ahead, w);
+            let on = cfg.ssr.limp.supply_on(supply_on, self.freeze.predicted_c(&cfg.freeze, temp_c), w);
             self.state.limp_switched(on);
             if on {
                 duty = Duty::FULL;
