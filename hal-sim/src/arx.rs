@@ -54,11 +54,15 @@ pub fn parse(spec: &str) -> Result<Model> {
     Model::new(&a, &b, &c, k).map_err(|e| anyhow!("model '{spec}': {e:?}"))
 }
 
-/// Parses a controller's fixed design model (`--model`): [`parse`], and the model must be one a
-/// cooler can have, as the board requires of any model it accepts (SPEC §8): a stable A and a
-/// cooling static gain. Anything else is refused here, with why, rather than run into a loop
-/// that saturates the drive for the whole scenario.
-pub fn design_model(spec: &str) -> Result<Model> {
+/// Parses a model that stands for a carrier: a controller's fixed design model (`--model`) or
+/// the ideal plant (`--plant arx:…`). [`parse`], and the model must be one a cooler can have, as
+/// the board requires of any model it accepts (SPEC §8): a stable A and a cooling static gain.
+/// Anything else is refused here, with why: any other design model runs the loop into a drive
+/// saturated for the whole scenario; an unstable plant drove the simulated
+/// temperature to ±10¹⁸⁰ °C and printed that as the run's IAE (`arx:1;2;3`, A written with its
+/// leading 1), and a heating plant is a sign error the run would only show as a load stuck at
+/// the ambient.
+pub fn carrier_model(spec: &str) -> Result<Model> {
     let m = parse(spec)?;
     if !m.a_is_stable() {
         let hint = if m.a().first().is_some_and(|a1| (*a1 - 1.0).abs() < 1e-6) {
@@ -146,20 +150,33 @@ mod tests {
     }
 
     #[test]
-    fn a_design_model_must_be_stable_and_cooling() {
+    fn a_carrier_model_must_be_stable_and_cooling() {
         // The documented example: stable, static gain −0.03 / 0.01 = −3 °C per unit duty.
-        assert!(design_model("arx:-1.8,0.81;-0.02,-0.01;1").is_ok());
+        assert!(carrier_model("arx:-1.8,0.81;-0.02,-0.01;1").is_ok());
         // A written with its leading 1 is a third-order A with a1 = 1 (roots 1 ± …): refused,
         // and the message says how A is written.
-        let e = design_model("arx:1,-1.936244,0.936443;-0.286523,0.277790;9").unwrap_err().to_string();
+        let e = carrier_model("arx:1,-1.936244,0.936443;-0.286523,0.277790;9").unwrap_err().to_string();
         assert!(e.contains("not stable") && e.contains("without the leading 1"), "{e}");
         // y(t) = 1.1 y(t−1) …: a pole at 1.1.
-        let e = design_model("arx:-1.1;-0.1;1").unwrap_err().to_string();
+        let e = carrier_model("arx:-1.1;-0.1;1").unwrap_err().to_string();
         assert!(e.contains("not stable") && !e.contains("leading"), "{e}");
         // b0 = +0.1 with a1 = −0.9: gain +1 °C per unit duty heats.
-        let e = design_model("arx:-0.9;0.1;2").unwrap_err().to_string();
+        let e = carrier_model("arx:-0.9;0.1;2").unwrap_err().to_string();
         assert!(e.contains("does not cool"), "{e}");
         assert!(!e.contains('\n'), "{e}");
+    }
+
+    /// `--plant arx:1;2;3` (A written with its leading 1: a pole at −1, and a heating B) ran and
+    /// printed an IAE of 265 560 °C·s; `arx:-1.5;-0.1;3` (a pole at 1.5) one of 5·10¹⁸⁶ °C·s.
+    #[test]
+    fn a_plant_is_held_to_the_same_rules() {
+        assert!(carrier_model("arx:-1.8,0.81;-0.2,-0.1;1").is_ok());
+        let e = carrier_model("arx:1;2;3").unwrap_err().to_string();
+        assert!(e.contains("not stable") && e.contains("without the leading 1"), "{e}");
+        let e = carrier_model("arx:-1.5;-0.1;3").unwrap_err().to_string();
+        assert!(e.contains("not stable"), "{e}");
+        let e = carrier_model("arx:-0.9;0.1;2").unwrap_err().to_string();
+        assert!(e.contains("does not cool"), "{e}");
     }
 
     #[test]

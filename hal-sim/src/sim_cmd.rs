@@ -22,7 +22,8 @@ pub struct SimArgs {
     #[arg(long, value_enum, default_value = "gpc")]
     pub controller: ControllerChoice,
     /// Plant: hter1 (aluminium container), hter2 (stainless steel), or an ideal ARX model
-    /// arx:A;B;K (y = temperature − ambient, u = duty).
+    /// arx:A;B;K (y = temperature − ambient, u = duty; refused unless A is stable and the static
+    /// gain cools).
     #[arg(long, default_value = "hter1")]
     pub plant: String,
     /// Fixed model for gmvc/igmvc/gpc, arx:A;B;K or arx:A;B;K;C (without it they are self-tuning); refused unless A is stable and the static gain cools.
@@ -162,7 +163,7 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
     };
     let mut controller = ControllerSpec::new(a.controller);
     if let Some(m) = &a.model {
-        controller.model = Some(crate::arx::design_model(m)?);
+        controller.model = Some(crate::arx::carrier_model(m)?);
     }
     if let Some(n) = a.n1 {
         controller.gpc.n1 = n;

@@ -57,6 +57,9 @@ fn bad_input_is_a_one_line_error() {
         "--commission needs a physical plant",
     );
     assert_one_line_error(&["sim", "--model", "arx:-0.9;0.1;2"], "does not cool");
+    assert_one_line_error(&["sim", "--plant", "arx:1;2;3"], "without the leading 1");
+    assert_one_line_error(&["sim", "--plant", "arx:-1.5;-0.1;3"], "not stable");
+    assert_one_line_error(&["compare", "--plant", "arx:-0.9;0.1;2"], "does not cool");
     assert_one_line_error(&["identify", "--input", "/dev/null", "--forgetting", "0"], "--forgetting");
     assert_one_line_error(&["identify", "--input", "/dev/null", "--nk", "x"], "'x' is not a delay");
     assert_one_line_error(&["identify", "--input", "/dev/null", "--nk", "11"], "orders out of range");
