@@ -98,6 +98,11 @@ impl Annunciator {
         }
     }
 
+    /// Something latched that a person has not acknowledged yet.
+    pub fn latched(&self) -> bool {
+        self.latched
+    }
+
     /// A person has seen it: clears what latched.
     pub fn acknowledge(&mut self) {
         self.latched = false;

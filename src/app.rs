@@ -502,6 +502,13 @@ impl App {
                 );
                 Ok(())
             }
+            // Nothing to acknowledge (or an `ack` already waiting for the next sample): said,
+            // and neither applied nor recorded, so that a repeated `ack` (a script in a loop, a
+            // key held down) cannot fill the record's ring with events and push out its days.
+            Command::Set(SetRequest::Ack) if !self.annunciator.latched() || self.ack_pending => {
+                let _ = out.write_str("no alarm\r\n");
+                Ok(())
+            }
             Command::Set(req) => self.set(req),
             Command::Identify => self.start_commissioning(),
             Command::IdentifyAbort => match self.carrier.controller_mut() {
@@ -543,12 +550,18 @@ impl App {
                 (SettingKey::Controller, [law as u8 as f32, 0.0])
             }
             SetRequest::CalIce(p) | SetRequest::CalWarm(p) => {
-                let (what, key) = if matches!(req, SetRequest::CalIce(_)) {
+                let what = if matches!(req, SetRequest::CalIce(_)) { "cal_ice" } else { "cal_warm" };
+                // The commissioning's record is of readings through today's calibration: a new
+                // one mid-run is a step in the record the fit would take for the carrier's.
+                if self.commissioning() {
+                    return Err(Refusal { what, why: Why::NotNow("commissioning is running (identify abort)") });
+                }
+                let key = if matches!(req, SetRequest::CalIce(_)) {
                     next.cal_ice = p;
-                    ("cal_ice", SettingKey::CalIce)
+                    SettingKey::CalIce
                 } else {
                     next.cal_warm = p;
-                    ("cal_warm", SettingKey::CalWarm)
+                    SettingKey::CalWarm
                 };
                 next.calibration().map_err(|e| Refusal { what, why: Why::Calibration(e) })?;
                 (key, p)
@@ -560,6 +573,11 @@ impl App {
                 return Ok(());
             }
         };
+        // The value it already has: nothing to use, store or record (a script repeating a
+        // `set` would otherwise fill the record's ring with events).
+        if next == self.settings {
+            return Ok(());
+        }
         // Accepted: used from the next sample, stored, logged.
         next.seq = next.seq.wrapping_add(1);
         if next.law != self.settings.law {

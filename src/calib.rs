@@ -12,6 +12,15 @@
 //!
 //! where mᵢ is what the channel read and rᵢ what the reference read at point i. A straight line
 //! absorbs lead-resistance offset, reference-resistor tolerance and amplifier gain error.
+//!
+//! **How large a correction may be.** Those errors together are about a degree: a class B Pt100
+//! is within ±0.35 °C between 0 and 10 °C (IEC 60751), 0.1 % on the reference resistor is
+//! ±0.26 °C, and a metre of two-wire lead adds ≈ +0.5 °C. A line that moves a reading in the
+//! carrier's range (0…10 °C) by more than [`MAX_CORRECTION_C`] is a broken channel or a typing
+//! error (a reference entered in the measured column, the ice point's reference not the ice
+//! bath's), and it is refused: such a line once let a board read 5.00 °C while its load sat at
+//! −4.4 °C (an ice point of (0, 9) with a warm point of (100, 100): gain 0.91, offset +9 °C),
+//! the freeze guard reading the same false 5 °C.
 
 use crate::units::Celsius;
 
@@ -25,7 +34,13 @@ pub enum CalError {
     PointsTooClose,
     /// The fitted gain is outside 0.9…1.1: the channel is broken, not mis-calibrated.
     ImplausibleGain,
+    /// The line moves a reading between 0 and 10 °C by more than [`MAX_CORRECTION_C`].
+    ImplausibleCorrection,
 }
+
+/// Largest correction a calibration may apply to a reading between 0 and 10 °C, °C (module
+/// docs: the channel's own errors are about a degree).
+pub const MAX_CORRECTION_C: f32 = 1.5;
 
 /// A straight-line correction `T_cal = gain · T_meas + offset_c`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -67,7 +82,13 @@ impl TwoPoint {
         if !(gain >= 0.9 && gain <= 1.1) {
             return Err(CalError::ImplausibleGain);
         }
-        Ok(TwoPoint { gain, offset_c: r0 - gain * m0 })
+        let offset_c = r0 - gain * m0;
+        // The correction gain·t + offset − t is linear in t: its ends bound it on 0…10 °C.
+        let at_10 = (gain - 1.0) * 10.0 + offset_c;
+        if !(offset_c.abs() <= MAX_CORRECTION_C && at_10.abs() <= MAX_CORRECTION_C) {
+            return Err(CalError::ImplausibleCorrection);
+        }
+        Ok(TwoPoint { gain, offset_c })
     }
 
     /// The corrected temperature.
@@ -96,5 +117,21 @@ mod tests {
         assert_eq!(TwoPoint::from_points(c(0.1), c(0.0), c(0.5), c(0.4)), Err(CalError::PointsTooClose));
         assert_eq!(TwoPoint::from_points(c(0.0), c(0.0), c(20.0), c(30.0)), Err(CalError::ImplausibleGain));
         assert_eq!(TwoPoint::from_points(c(f32::NAN), c(0.0), c(20.0), c(20.0)), Err(CalError::NonFinite));
+    }
+
+    /// The interface sweep's pair: each point was accepted with the other's default, together
+    /// they read a −4.4 °C load as 5.00 °C.
+    #[test]
+    fn refuses_a_line_that_moves_the_carriers_range_by_more_than_a_degree_and_a_half() {
+        let c = Celsius;
+        let e = Err(CalError::ImplausibleCorrection);
+        assert_eq!(TwoPoint::from_points(c(0.0), c(9.0), c(100.0), c(100.0)), e);
+        // An offset of 1.6 °C at both ends; 1.4 °C passes.
+        assert_eq!(TwoPoint::from_points(c(0.0), c(1.6), c(25.0), c(26.6)), e);
+        assert!(TwoPoint::from_points(c(0.0), c(1.4), c(25.0), c(26.4)).is_ok());
+        // Gain 1.1 with no offset at 0 °C: +1.0 °C at 10 °C passes; with 0.6 °C more at 0 °C,
+        // +1.6 °C at 10 °C does not.
+        assert!(TwoPoint::from_points(c(0.0), c(0.0), c(10.0), c(11.0)).is_ok());
+        assert_eq!(TwoPoint::from_points(c(0.0), c(0.6), c(10.0), c(11.6)), e);
     }
 }

@@ -76,7 +76,8 @@ pub const VALID_CARRIER: ValidConfig = match CARRIER.validated() {
 /// ```
 ///
 /// and flash once: the boot stores it, and later images with `None` keep using it. A pair of
-/// points the library refuses (closer than 1 °C, gain outside 0.9–1.1, not finite) stops the
+/// points the library refuses (closer than 1 °C, gain outside 0.9–1.1, a correction beyond
+/// ±1.5 °C between 0 and 10 °C, not finite) stops the
 /// build.
 pub const CALIBRATION: Option<TwoPoint> = None;
 
@@ -96,7 +97,7 @@ pub const fn calibration(
         Celsius(reference_warm_c),
     ) {
         Ok(cal) => cal,
-        Err(_) => panic!("CALIBRATION refused: the points must be ≥ 1 °C apart and give a gain within 0.9–1.1"),
+        Err(_) => panic!("CALIBRATION refused: the points must be ≥ 1 °C apart, give a gain within 0.9–1.1 and correct 0–10 °C by at most 1.5 °C"),
     }
 }
 

@@ -114,8 +114,10 @@ impl<P: Read + Write> Board<P> {
     /// message is the board's `err …` line, verbatim, if it ends in `err`.
     pub fn request(&mut self, line: &str) -> Result<Vec<String>> {
         check_request(line)?;
+        // Ctrl-U first: it drops whatever a client that went away mid-line left in the board's
+        // line (docs/interface.md, "Framing"), which the request would otherwise be glued to.
         self.port
-            .write_all(format!("{line}\n").as_bytes())
+            .write_all(format!("{}{line}\n", char::from(hter::iface::line::LINE_KILL)).as_bytes())
             .and_then(|()| self.port.flush())
             .with_context(|| format!("cannot write to '{}'", self.name))?;
         let mut data = Vec::new();
@@ -529,7 +531,7 @@ mod tests {
     fn a_reply_ends_at_its_final_line_however_it_is_split() {
         let mut b = board(&[b"t_s=1", b"2\r\nmode=nor", b"mal\r", b"\nok\r\nstray"]);
         assert_eq!(b.request("status").unwrap(), vec!["t_s=12", "mode=normal"]);
-        assert_eq!(b.port.written, b"status\n");
+        assert_eq!(b.port.written, b"\x15status\n", "Ctrl-U, then the request");
         // The stray bytes after `ok` are the start of what comes next, not lost.
         b.port.chunks.push_back(b"=1\nok\n".to_vec());
         assert_eq!(b.request("get").unwrap(), vec!["stray=1"]);

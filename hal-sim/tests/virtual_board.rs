@@ -259,3 +259,21 @@ fn after_a_reset_the_holdover_still_runs_on_the_cabinet_model() {
     assert!((60.0..3600.0).contains(&holdover), "{holdover}");
     assert_eq!(b.app().carrier().holdover_model(), Some(cabinet));
 }
+
+/// A client that wrote half a request and went away: the serial port shows no hang-up, so the
+/// board keeps the bytes, and the next `hter board` request was read glued to them
+/// (`set setpoint_c 6` + `status` → `err setpoint_c: not a decimal number`). `hter board` begins
+/// every request with Ctrl-U, which drops them; the half request is not run either.
+#[test]
+fn a_half_request_left_by_a_client_that_went_away_is_dropped() {
+    use std::io::Write;
+    let b = Board::start("half-line", &[]);
+    assert_eq!(b.status()["setpoint_c"], 4.0);
+    {
+        let mut raw = std::fs::OpenOptions::new().write(true).open(b.port()).unwrap();
+        raw.write_all(b"set setpoint_c 6").unwrap();
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let s = b.status();
+    assert_eq!(s["setpoint_c"], 4.0, "{s}");
+}

@@ -418,3 +418,65 @@ fn help_lists_every_command_and_unknown_ones_point_to_it() {
 
 use std::format;
 use std::string::ToString;
+
+/// The interface sweep's two calibration writes: each point was accepted against the other's
+/// value, and together they read a −4.4 °C load as 5.00 °C. The second is refused now, and a
+/// calibration is refused while a commissioning records readings through the present one.
+#[test]
+fn a_calibration_that_moves_the_reading_by_degrees_or_lands_mid_commissioning_is_refused() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    assert_eq!(b.send("set cal_warm 100,100"), "ok\r\n");
+    let before = *b.app.settings();
+    assert_eq!(
+        b.send("set cal_ice 0,9"),
+        "err cal_ice: the points move a reading between 0 and 10 °C by more than 1.5 °C\r\n"
+    );
+    assert_eq!(*b.app.settings(), before);
+    assert_eq!(b.send("identify"), "ok\r\n");
+    b.run(3);
+    assert_eq!(b.send("set cal_ice 0.5,0"), "err cal_ice: commissioning is running (identify abort)\r\n");
+    assert_eq!(*b.app.settings(), before);
+    assert_eq!(b.send("identify abort"), "ok\r\n");
+    assert_eq!(b.send("set cal_ice 0.5,0"), "ok\r\n");
+}
+
+/// The record is a ring: whatever is logged pushes its oldest entries out. 42 600 `ack`s with
+/// no alarm pending once left 9 h of a 3.6-day record; an `ack` with nothing to acknowledge
+/// and a `set` to the value a setting already has are said `ok` and record nothing.
+#[test]
+fn repeated_acks_and_unchanged_settings_leave_the_record_alone() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    let saves = b.saves.len();
+    for _ in 0..100 {
+        assert_eq!(b.send("ack"), "no alarm\r\nok\r\n");
+        assert_eq!(b.send("set setpoint_c 4"), "ok\r\n");
+        assert_eq!(b.send("set controller gpc"), "ok\r\n");
+    }
+    assert_eq!(b.saves.len(), saves, "nothing stored or logged");
+    assert_eq!(b.app.settings().seq, 0);
+    assert_eq!(b.send("set ack 0"), "err ack: usage: set ack 1, or ack\r\n");
+    // A change is still a change.
+    assert_eq!(b.send("set setpoint_c 5"), "ok\r\n");
+    assert_eq!(b.setting_logs(), [SettingKey::Setpoint]);
+}
+
+/// With an alarm latched, `ack` acknowledges it and is recorded, once: a second `ack` before the
+/// next sample has nothing left to acknowledge.
+#[test]
+fn an_ack_with_an_alarm_latched_is_applied_and_recorded_once() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    // A broken sensor for a few samples latches the indicator.
+    let load = b.load_c;
+    b.load_c = 400.0;
+    b.run(3);
+    b.load_c = load;
+    let out = b.run(30);
+    assert_eq!(out.alarm, Indication::Unacknowledged, "{out:?}");
+    assert_eq!(b.send("ack"), "ok\r\n");
+    assert_eq!(b.send("ack"), "no alarm\r\nok\r\n");
+    assert_eq!(b.setting_logs(), [SettingKey::Ack]);
+    assert_eq!(b.run(1).alarm, Indication::Off);
+}

@@ -3,9 +3,13 @@
 //!
 //! `\n`, `\r\n` or a bare `\r` end a line (a terminal's Enter sends `\r`); backspace (0x08) and
 //! DEL (0x7f, what most terminals send for Backspace) erase the last byte, so a person can
-//! correct a typo; an empty or all-space line is nothing. A line longer than [`MAX_LINE`] or
-//! with another byte outside printable ASCII is answered by its [`Frame`] error and dropped
-//! whole.
+//! correct a typo; Ctrl-U (0x15, a terminal's line kill) drops the whole line so far, which is
+//! how `hter board` begins every request: a client that went away in the middle of a line (the
+//! board's UART sees no hang-up) leaves its bytes behind, and the next request was read glued to
+//! them (`set setpoint_c 6` + `status` came to `set setpoint_c 6status`, refused; a glued
+//! remainder could as well have made a valid, unintended request). An empty or all-space line
+//! is nothing. A line longer than [`MAX_LINE`] or with another byte outside printable ASCII is
+//! answered by its [`Frame`] error and dropped whole.
 
 use super::MAX_LINE;
 
@@ -30,6 +34,9 @@ impl Frame<'_> {
         }
     }
 }
+
+/// Ctrl-U: drops the line so far ([`LineFramer::push`]).
+pub const LINE_KILL: u8 = 0x15;
 
 /// Splits a byte stream into [`Frame`]s.
 #[derive(Clone, Debug, Default)]
@@ -71,6 +78,10 @@ impl LineFramer {
             b'\r' | b'\n' => self.end_line(),
             0x08 | 0x7f => {
                 self.buf.pop();
+                None
+            }
+            LINE_KILL => {
+                self.reset();
                 None
             }
             0x20..=0x7e => {
@@ -144,6 +155,17 @@ mod tests {
     fn backspace_and_del_erase_so_a_typo_can_be_fixed() {
         assert_eq!(frames(b"statsu\x08\x08us\n"), [line("status")]);
         assert_eq!(frames(b"st\x7f\x7f\x7fstatus\n"), [line("status")]);
+    }
+
+    /// What a client that went away mid-line leaves, and how the next request drops it.
+    #[test]
+    fn line_kill_drops_a_partial_line_left_behind() {
+        assert_eq!(frames(b"set setpoint_c 6status\n"), [line("set setpoint_c 6status")]);
+        assert_eq!(frames(b"set setpoint_c 6\x15status\n"), [line("status")]);
+        // Also after a line already too long or unprintable, and at the start of a line.
+        let over = "y".repeat(MAX_LINE + 1);
+        assert_eq!(frames(format!("{over}\x15get\n").as_bytes()), [line("get")]);
+        assert_eq!(frames(b"a\tb\x15\x15get\n"), [line("get")]);
     }
 
     #[test]

@@ -142,6 +142,9 @@ impl core::fmt::Display for Refusal {
                 crate::calib::CalError::NonFinite => "a point is not finite",
                 crate::calib::CalError::PointsTooClose => "the two points are less than 1 °C apart",
                 crate::calib::CalError::ImplausibleGain => "the points give a gain outside 0.9…1.1",
+                crate::calib::CalError::ImplausibleCorrection => {
+                    "the points move a reading between 0 and 10 °C by more than 1.5 °C"
+                }
             }),
             Why::Model(w) | Why::NotNow(w) | Why::Line(w) => f.write_str(w),
         }
@@ -225,7 +228,9 @@ fn parse_set(key: &str, value: &str) -> Result<SetRequest, Refusal> {
             Ok(if what == "cal_ice" { SetRequest::CalIce(p) } else { SetRequest::CalWarm(p) })
         }
         "model" => parse_model(value).map(SetRequest::Model),
-        "ack" => Ok(SetRequest::Ack),
+        // `set ack 0` must not read as "do not acknowledge" and acknowledge.
+        "ack" if value == "1" => Ok(SetRequest::Ack),
+        "ack" => refuse("ack", Why::Usage("set ack 1, or ack")),
         _ => refuse("set", Why::UnknownKey),
     }
 }
