@@ -56,7 +56,11 @@ pub fn parse(spec: &str) -> Result<Model> {
 
 /// Parses a model that stands for a carrier: a controller's fixed design model (`--model`) or
 /// the ideal plant (`--plant arx:…`). [`parse`], and the model must be one a cooler can have, as
-/// the board requires of any model it accepts (SPEC §8): a stable A and a cooling static gain.
+/// the board requires of any model it accepts (SPEC §8): a stable A and a cooling static gain,
+/// no more negative than the self-tuner's plausible range allows
+/// (`hter::profile::ADAPTIVE_GPC.gain_min_c_per_duty`, −1000 °C per unit duty): a plant of
+/// −3e38 °C per unit duty ran to −1e33 °C. Small gains stay allowed: they are valid ideal
+/// plants (the documented example's is −3), only unable to hold a setpoint far from ambient.
 /// Anything else is refused here, with why: any other design model runs the loop into a drive
 /// saturated for the whole scenario; an unstable plant drove the simulated
 /// temperature to ±10¹⁸⁰ °C and printed that as the run's IAE (`arx:1;2;3`, A written with its
@@ -72,7 +76,11 @@ pub fn carrier_model(spec: &str) -> Result<Model> {
         };
         bail!("model '{spec}': A is not stable (a pole on or outside the unit circle){hint}");
     }
+    let gain_min = hter::profile::ADAPTIVE_GPC.gain_min_c_per_duty;
     match m.static_gain() {
+        Some(g) if g < gain_min => bail!(
+            "model '{spec}': static gain {g:e} °C per unit duty is beyond what a carrier can have (at least {gain_min}, the self-tuner's plausible range)"
+        ),
         Some(g) if g < 0.0 => Ok(m),
         Some(g) => bail!("model '{spec}': static gain {g:.3} °C per unit duty does not cool (it must be < 0)"),
         None => bail!("model '{spec}': the static gain is not finite"),
@@ -177,6 +185,19 @@ mod tests {
         assert!(e.contains("not stable"), "{e}");
         let e = carrier_model("arx:-0.9;0.1;2").unwrap_err().to_string();
         assert!(e.contains("does not cool"), "{e}");
+    }
+
+    /// `arx:-0.5;-3e38;1` (a finite but absurd gain, −6e38 °C per unit duty) drove the
+    /// simulated load to −1e33 °C. The bound is the self-tuner's: −1000 °C per unit duty is
+    /// allowed, just beyond it is not, and the tiny gains of the ideal plants in the tests stay.
+    #[test]
+    fn a_gain_beyond_any_carrier_is_refused() {
+        let e = carrier_model("arx:-0.5;-3e38;1").unwrap_err().to_string();
+        assert!(e.contains("beyond what a carrier can have") && e.contains("-1000"), "{e}");
+        // A(1) = 0.5: B(1) = −500 is −1000 °C per unit duty, −500.5 is −1001.
+        assert!(carrier_model("arx:-0.5;-500;1").is_ok());
+        assert!(carrier_model("arx:-0.5;-500.5;1").is_err());
+        assert!(carrier_model("arx:-0.5;-0.0001;1").is_ok());
     }
 
     #[test]

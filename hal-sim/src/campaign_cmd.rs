@@ -12,6 +12,7 @@ use serde::Serialize;
 use crate::fault::{Fault, FaultClass};
 use crate::mission::{self, Mission, MissionReport};
 use crate::sim::{self, ControllerChoice, ControllerSpec};
+use crate::sim_cmd::whole;
 
 /// Most missions one campaign may run.
 pub const MAX_MISSIONS: u64 = 1_000_000;
@@ -20,10 +21,10 @@ pub const MAX_MISSIONS: u64 = 1_000_000;
 #[derive(clap::Args, Debug)]
 pub struct CampaignArgs {
     /// Number of randomized 24 h missions.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = whole("the number of missions", 1, MAX_MISSIONS))]
     pub missions: u64,
     /// Seed of the first mission; mission i has seed S + i.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true, value_parser = whole("the first mission's seed", 0, u64::MAX))]
     pub seed: u64,
     /// Controller (default: the self-tuning GPC the adaptive firmware runs).
     #[arg(long, value_enum, default_value = "gpc")]

@@ -170,8 +170,13 @@ pub const UNKNOWN_CAUSE: &str = "unknown";
 
 /// The sample period of the firmware's boot line (`hter firmware …: Ts = 10 s, …`), s.
 fn period_line(line: &str) -> Option<f64> {
-    word_after(line, "Ts = ")?.parse::<f64>().ok().filter(|ts| ts.is_finite() && *ts > 0.0)
+    word_after(line, "Ts = ")?.parse::<f64>().ok().filter(|ts| ts.is_finite() && *ts > 0.0 && *ts <= MAX_CLOCK_S)
 }
+
+/// The largest time the board's clock can show, s: a monotonic 64-bit millisecond counter
+/// (SPEC §7). A `t=` beyond it is not a board's: `t=1e303` became `inf` once rounded to the
+/// microsecond, and the CSV carried it.
+pub const MAX_CLOCK_S: f64 = u64::MAX as f64 / 1000.0;
 
 /// Parses one telemetry line; `None` for any other line.
 pub fn parse_line(line: &str) -> Option<Result<Sample>> {
@@ -203,6 +208,10 @@ pub fn parse_line(line: &str) -> Option<Result<Sample>> {
             (None, Some(t)) => num("t", t)?,
             (None, None) => bail!("no time"),
         };
+        if t_s > MAX_CLOCK_S {
+            let t = crate::sim_cmd::shown(t_s);
+            bail!("t = {t} s is beyond the board's 64-bit millisecond clock (at most {MAX_CLOCK_S:e} s)");
+        }
         Ok(Sample {
             mode: named_field(line, "mode=", &Mode::ALL, Mode::name)?,
             alarm: named_field(line, "alarm=", &Indication::ALL, Indication::name)?,

@@ -48,6 +48,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    restore_sigpipe();
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {
@@ -56,10 +57,7 @@ fn main() -> ExitCode {
                 let _ = e.print();
                 return ExitCode::SUCCESS;
             }
-            // clap's own message can span lines; keep the first, which names the problem.
-            let msg = e.to_string();
-            let first = msg.lines().next().unwrap_or("invalid arguments").trim_start_matches("error: ");
-            eprintln!("error: {first} (see 'hter --help')");
+            eprintln!("error: {} (see 'hter --help')", one_line(&e.to_string()));
             return ExitCode::from(2);
         }
     };
@@ -82,5 +80,39 @@ fn main() -> ExitCode {
             eprintln!("error: {}", format!("{e:#}").replace('\n', " "));
             ExitCode::FAILURE
         }
+    }
+}
+
+/// clap's message on one line. clap spreads it over paragraphs: the problem, whose later lines
+/// carry what it is about (the missing arguments, the possible values), then tips, the usage
+/// and a pointer to `--help`. The first line alone said "the following required arguments were
+/// not provided:" without naming them; this keeps the whole first paragraph and the tips.
+fn one_line(msg: &str) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    for (i, para) in msg.split("\n\n").enumerate() {
+        let text = para.lines().map(str::trim).filter(|l| !l.is_empty()).collect::<Vec<_>>().join(" ");
+        if i == 0 || text.starts_with("tip:") {
+            parts.push(text);
+        }
+    }
+    let text = parts.join("; ");
+    let text = text.trim_start_matches("error: ");
+    if text.is_empty() {
+        "invalid arguments".into()
+    } else {
+        text.into()
+    }
+}
+
+/// A closed stdout (`hter sim | head -3`) ends the program quietly, as it ends `cat` or `ls`:
+/// Rust ignores SIGPIPE, so `println!` got EPIPE and panicked with exit code 101 and a
+/// backtrace hint on stderr. With the default action the kernel ends the process at the first
+/// write into the closed pipe, and the shell sees the usual "killed by SIGPIPE" status.
+fn restore_sigpipe() {
+    #[cfg(unix)]
+    // SAFETY: called first thing in `main`, before any other thread exists; setting a signal's
+    // disposition to its default has no other effect on the process.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{anyhow, bail, Context, Result};
 use hter::coldchain::ColdChainMonitor;
+use hter::rtd::{T_MAX_C, T_MIN_C};
 use serde::Serialize;
 
 use crate::log;
@@ -168,6 +169,11 @@ pub struct Input {
 /// an event, not a sample (its temperature cells only repeat the last interval's mean, or are
 /// empty); a non-empty `reset_cause` is a reset event at that (sample) row. Sample times must
 /// strictly increase and no row may go back in time.
+///
+/// A sample's temperature must lie in the range the carrier's Pt100 can report (IEC 60751,
+/// [`T_MIN_C`]…[`T_MAX_C`]): anything else is a corrupt log, not a reading. Unchecked, 1e39 °C
+/// became infinite in the library monitor's f32 and was dropped, so `report` said "IN RANGE"
+/// over a day table showing hours above 8 °C, and −500 °C gave no mean kinetic temperature.
 pub fn read_input(path: &std::path::Path) -> Result<Input> {
     let shown = path.display();
     let mut cols = log::read_cells(path, &["t_s", "temp_c"])?.into_iter();
@@ -194,6 +200,12 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
         }
         if let Some(p) = last.filter(|&p| t < p) {
             bail!("'{shown}' line {line}: t_s = {t} goes back in time (previous {p})");
+        }
+        if let Some(c) = c.filter(|c| !(f64::from(T_MIN_C)..=f64::from(T_MAX_C)).contains(c)) {
+            bail!(
+                "'{shown}' line {line}, column 'temp_c': {} °C is outside what a Pt100 can report (IEC 60751: {T_MIN_C}…{T_MAX_C} °C)",
+                crate::sim_cmd::shown(c)
+            );
         }
         if let Some(cause) = cell(&reset_col, i) {
             // `hter log2csv` names the cause (`restarted_brownout`, …, or `unknown`).

@@ -5,7 +5,16 @@ use anyhow::{bail, Result};
 use hter::rtd::Rtd;
 use hter::units::{Celsius, Ohms};
 
-use crate::sim_cmd::finite;
+use crate::sim_cmd::{finite, whole};
+
+/// The clap value parser of `--r0`: a negative one (`--r0 -100`) is this error, naming the
+/// values, instead of clap's "unexpected argument '-100' found".
+fn r0(s: &str) -> std::result::Result<u32, String> {
+    match s.parse() {
+        Ok(r @ (100 | 1000)) => Ok(r),
+        _ => Err("the nominal resistance must be 100 (Pt100) or 1000 (Pt1000)".into()),
+    }
+}
 
 /// Arguments of `hter rtd`.
 #[derive(clap::Args, Debug)]
@@ -19,10 +28,10 @@ pub struct RtdArgs {
     pub celsius: Option<f64>,
     /// A conversion of the board's RTD channel (the `counts=` of its telemetry) to convert
     /// through the default front end, uncalibrated: the "measured" reading of a calibration.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = whole("the RTD conversion in counts", 0, u32::MAX))]
     pub counts: Option<u32>,
     /// Nominal resistance at 0 °C: 100 (Pt100) or 1000 (Pt1000).
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = 100, allow_negative_numbers = true, value_parser = r0)]
     pub r0: u32,
     /// Print one JSON object.
     #[arg(long)]

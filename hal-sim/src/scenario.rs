@@ -276,20 +276,49 @@ pub struct ScenarioFile {
     pub duration_s: f64,
 }
 
+/// Ambient range a run supports, °C (`--ambient`, and every `ambient` entry of a scenario file):
+/// the plant table's parameters (fan-cooled hot sink, foam leak) are for a carrier in use, from
+/// a cold store to the 43 °C of the WHO hot zone with margin.
+pub const AMBIENT_RANGE_C: (f64, f64) = (-10.0, 50.0);
+
+/// Supply range of a scenario file's `supply_v`, V. 0 V is a power cut (`power-cut`); the
+/// plant's module is TEC1-12706 class (plant table), rated at most ≈ 15.4 V, and the carrier
+/// runs from a 12 V supply or battery: above 16 V the module would be driven beyond its
+/// datasheet, where the lumped model's numbers mean nothing. The plant itself only clips
+/// negative volts to 0, so a sign error in a file would pass as a power cut.
+pub const SUPPLY_RANGE_V: (f64, f64) = (0.0, 16.0);
+
+/// Largest extra heat of a scenario file's `extra_heat_w`, W, either sign (negative: a cold
+/// pack). The lid-open fault is 15 W and the module pumps at most Q_max ≈ 50 W (plant table):
+/// twice that already swamps the cabinet and tests no controller, and without a bound ±1e6 W
+/// drove the simulated load far below absolute zero.
+pub const EXTRA_HEAT_MAX_W: f64 = 100.0;
+
 impl ScenarioFile {
     fn into_scenario(self, name: &str) -> Result<Scenario> {
         let finite = |v: &[(f64, f64)]| v.iter().all(|(a, b)| a.is_finite() && b.is_finite() && *a >= 0.0);
         if self.setpoints.is_empty() {
             bail!("scenario file '{name}': 'setpoints' is empty");
         }
-        for (field, v) in
-            [("setpoints", &self.setpoints), ("ambient", &self.ambient), ("extra_heat_w", &self.extra_heat_w)]
-        {
+        // The board's own range: `set setpoint_c` refuses anything else (SPEC §8), and the step
+        // clamps it, so a file asking for −40 °C ran at 2 °C and reported its error from −40.
+        let (sp_lo, sp_hi) = hter::iface::SETPOINT_RANGE_C;
+        let ranges = [
+            ("setpoints", &self.setpoints, f64::from(sp_lo), f64::from(sp_hi), "°C"),
+            ("ambient", &self.ambient, AMBIENT_RANGE_C.0, AMBIENT_RANGE_C.1, "°C"),
+            ("extra_heat_w", &self.extra_heat_w, -EXTRA_HEAT_MAX_W, EXTRA_HEAT_MAX_W, "W"),
+            ("supply_v", &self.supply_v, SUPPLY_RANGE_V.0, SUPPLY_RANGE_V.1, "V"),
+        ];
+        for (field, v, lo, hi, unit) in ranges {
             if !finite(v) {
                 bail!("scenario file '{name}': '{field}' has a negative time or a non-finite number");
             }
             if v.windows(2).any(|w| w[1].0 < w[0].0) {
                 bail!("scenario file '{name}': '{field}' times are not increasing");
+            }
+            if let Some((t, x)) = v.iter().find(|(_, x)| !(lo..=hi).contains(x)) {
+                let (t, x) = (crate::sim_cmd::shown(*t), crate::sim_cmd::shown(*x));
+                bail!("scenario file '{name}': '{field}' at {t} s is {x} {unit}, outside {lo}…{hi} {unit}");
             }
         }
         if !(self.duration_s.is_finite() && self.duration_s > 0.0) {

@@ -343,11 +343,12 @@ pub fn run(opts: &SimOptions) -> Result<SimOutput> {
 
 /// Runs a scenario on a board built as `board` says.
 pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
-    if !(opts.ambient_c.is_finite() && (-10.0..=50.0).contains(&opts.ambient_c)) {
-        bail!("ambient {} °C is outside the supported -10..50 °C", opts.ambient_c);
+    let (amb_lo, amb_hi) = crate::scenario::AMBIENT_RANGE_C;
+    if !(opts.ambient_c.is_finite() && (amb_lo..=amb_hi).contains(&opts.ambient_c)) {
+        bail!("ambient {} °C is outside the supported {amb_lo}..{amb_hi} °C", crate::sim_cmd::shown(opts.ambient_c));
     }
     if !(opts.duration_s.is_finite() && opts.duration_s > 0.0 && opts.duration_s <= 90.0 * 86400.0) {
-        bail!("duration {} s must be positive and at most 90 days", opts.duration_s);
+        bail!("duration {} s must be positive and at most 90 days", crate::sim_cmd::shown(opts.duration_s));
     }
     let sc = &opts.scenario;
     let mut cfg = CarrierConfig::DEFAULT;
@@ -361,6 +362,11 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
     }
     let valid = cfg.validated().map_err(config_refused)?;
     let ts = f64::from(cfg.ts_s);
+    // Shorter than one sample, the run has no sample: it reported IAE 0, settled at 0 s and a
+    // temperature range of inf…−inf.
+    if opts.duration_s < ts {
+        bail!("duration {} s is shorter than one control sample (Ts = {ts} s)", crate::sim_cmd::shown(opts.duration_s));
+    }
     let (mut rig, u0) = Rig::new(opts)?;
     rig.set_sample_phase(board.sample_phase);
     if sc.excitation {

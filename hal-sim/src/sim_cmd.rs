@@ -6,6 +6,8 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 
+use hter::control::gpc::{MAX_N2, MAX_NU};
+
 use crate::plant::Load;
 use crate::plot;
 use crate::scenario::Scenario;
@@ -30,13 +32,13 @@ pub struct SimArgs {
     #[arg(long)]
     pub model: Option<String>,
     /// GPC: first predicted sample in the cost.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = whole("GPC's first predicted sample N1", 1, MAX_N2))]
     pub n1: Option<usize>,
     /// GPC: last predicted sample in the cost (≤ 30).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = whole("GPC's last predicted sample N2", 1, MAX_N2))]
     pub n2: Option<usize>,
     /// GPC: control horizon (≤ 5).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = whole("GPC's control horizon Nu", 1, MAX_NU))]
     pub nu: Option<usize>,
     /// GPC and IGMVC: weight on the control increment (≥ 0).
     #[arg(long, allow_negative_numbers = true)]
@@ -62,10 +64,10 @@ pub struct SimArgs {
     /// the board always runs with it: `hter::control::adaptive`, "The first approach").
     #[arg(long)]
     pub no_approach_lead: bool,
-    /// PI: proportional gain, duty per °C (> 0; default: the carrier's SIMC tuning).
+    /// PI: proportional gain, duty per °C (0.001…100; default: the carrier's SIMC tuning).
     #[arg(long, allow_negative_numbers = true)]
     pub kp: Option<f64>,
-    /// PI: integral time, s (> 0; default: the carrier's SIMC tuning).
+    /// PI: integral time, s (1…1e6; default: the carrier's SIMC tuning).
     #[arg(long, allow_negative_numbers = true)]
     pub ti: Option<f64>,
     /// Water load: full (100 ml) or half (50 ml).
@@ -78,7 +80,7 @@ pub struct SimArgs {
     #[arg(long, allow_negative_numbers = true)]
     pub duration: Option<f64>,
     /// Seed of the measurement noise.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true, value_parser = whole("the noise seed", 0, u64::MAX))]
     pub seed: u64,
     /// How the modules are driven: ssr (switched fully on and off at 1 Hz, the default) or buck
     /// (a synchronous buck with an LC filter: a smooth voltage, duty × supply).
@@ -112,7 +114,12 @@ pub struct SimArgs {
     pub commission_ambient: Option<f64>,
     /// Replay the randomized mission of this seed from `hter campaign` (its carrier, ambient,
     /// lid openings, supply sag, faults and noise seed); the controller flags still apply.
-    #[arg(long, conflicts_with_all = ["scenario", "plant", "load", "ambient", "duration", "seed", "faults"])]
+    #[arg(
+        long,
+        conflicts_with_all = ["scenario", "plant", "load", "ambient", "duration", "seed", "faults"],
+        allow_negative_numbers = true,
+        value_parser = whole("the mission seed", 0, u64::MAX)
+    )]
     pub mission_seed: Option<u64>,
 }
 
@@ -154,6 +161,82 @@ pub fn finite(name: &str, x: f64) -> Result<f64> {
     }
 }
 
+/// `x` for a one-line message: as typed for everyday magnitudes, in exponent form beyond them
+/// (1e300 is not 301 digits, 1e-300 not 300 zeros).
+pub fn shown(x: f64) -> String {
+    if x != 0.0 && x.is_finite() && !(1e-6..1e16).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
+/// `x` as the f32 the library computes with, or a one-line error naming the flag `--name`: a
+/// finite f64 can overflow to ±inf (`--ti 1e39`) or underflow to 0 or a subnormal
+/// (`--kp 1e-300`) on the way, and silently change what the flag means (a PI without its
+/// integral, a controller that never cools).
+pub fn single(name: &str, x: f64) -> Result<f32> {
+    let v = finite(name, x)? as f32;
+    if !v.is_finite() {
+        bail!("--{name} = {} is too large for the library's f32 arithmetic (at most {:e})", shown(x), f32::MAX);
+    }
+    if x != 0.0 && !v.is_normal() {
+        bail!(
+            "--{name} = {} is too small for the library's f32 arithmetic (at least {:e})",
+            shown(x),
+            f32::MIN_POSITIVE
+        );
+    }
+    Ok(v)
+}
+
+/// A clap value parser of a whole-number flag within `lo..=hi` whose message says what the
+/// flag is and its range (clap names the flag and the value). With `allow_negative_numbers` on
+/// the flag, `--seed -1` is this error instead of clap's "unexpected argument '-1' found".
+pub fn whole<T>(
+    what: &'static str,
+    lo: T,
+    hi: T,
+) -> impl Fn(&str) -> std::result::Result<T, String> + Clone + Send + Sync + 'static
+where
+    T: std::str::FromStr + PartialOrd + Copy + std::fmt::Display + Send + Sync + 'static,
+{
+    move |s: &str| {
+        s.parse::<T>()
+            .ok()
+            .filter(|v| (lo..=hi).contains(v))
+            .ok_or_else(|| format!("{what} must be a whole number in {lo}…{hi}"))
+    }
+}
+
+/// [`whole`] with no upper bound but the type's.
+pub fn at_least<T>(
+    what: &'static str,
+    lo: T,
+) -> impl Fn(&str) -> std::result::Result<T, String> + Clone + Send + Sync + 'static
+where
+    T: std::str::FromStr + PartialOrd + Copy + std::fmt::Display + Send + Sync + 'static,
+{
+    move |s: &str| {
+        s.parse::<T>().ok().filter(|v| *v >= lo).ok_or_else(|| format!("{what} must be a whole number ≥ {lo}"))
+    }
+}
+
+/// PI gain range accepted by `--kp`, duty per °C. Below 0.001 the proportional term of the
+/// largest error a run can see (≈ 50 °C, the hottest supported ambient against the setpoint)
+/// is under 5 % duty: a loop that barely cools. Above 100 an error of 0.01 °C, the size of the
+/// ADC noise (1.5 counts), already asks for the whole drive: on-off control, which `--controller onoff`
+/// is. `--kp 1e39` was infinite in f32 and the loop never cooled.
+pub const KP_RANGE_PER_C: (f64, f64) = (1e-3, 100.0);
+
+/// PI integral time range accepted by `--ti`, s. Below 1 s (a tenth of the 10 s sample) the
+/// integral adds ten times the proportional term every sample: the discrete PI (Kp·Ts/Ti per
+/// sample) is then a relay, not the PI it names. Above 1e6 s (11.6 days) its per-sample step
+/// Kp·Ts·e/Ti is lost in the f32 rounding of the integral for small errors: P control in
+/// disguise, which `--controller p` is. `--ti 1e39` was infinite in f32 and `--ti 1e-300` 0,
+/// and both silently turned PI into P.
+pub const TI_RANGE_S: (f64, f64) = (1.0, 1e6);
+
 /// The simulation a `hter sim` command line asks for: its arguments checked and resolved.
 pub fn options(a: &SimArgs) -> Result<SimOptions> {
     let scenario = Scenario::resolve(&a.scenario)?;
@@ -175,12 +258,12 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
         controller.gpc.nu = n;
     }
     if let Some(l) = a.lambda {
-        let l = finite("lambda", l)?;
+        let l = single("lambda", l)?;
         if l < 0.0 {
             bail!("--lambda must be ≥ 0, got {l}");
         }
-        controller.gpc.lambda = l as f32;
-        controller.igmvc.lambda = l as f32;
+        controller.gpc.lambda = l;
+        controller.igmvc.lambda = l;
     }
     let g = &controller.gpc;
     if g.n1 < 1 || g.n2 < g.n1 || g.n2 > hter::control::gpc::MAX_N2 {
@@ -190,20 +273,20 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
         bail!("GPC control horizon needs 1 ≤ Nu ≤ min(N2, {}), got Nu = {}", hter::control::gpc::MAX_NU, g.nu);
     }
     if let Some(p) = a.p_weight {
-        controller.gmvc.p = finite("p-weight", p)? as f32;
+        controller.gmvc.p = single("p-weight", p)?;
         if p == 0.0 {
             bail!("--p-weight must not be 0");
         }
     }
     if let Some(r) = a.r_weight {
-        controller.gmvc.r = finite("r-weight", r)? as f32;
+        controller.gmvc.r = single("r-weight", r)?;
     }
     if let Some(sw) = a.s_weight {
-        let sw = finite("s-weight", sw)?;
+        let sw = single("s-weight", sw)?;
         if sw < 0.0 {
             bail!("--s-weight must be ≥ 0, got {sw}");
         }
-        controller.gmvc.s = sw as f32;
+        controller.gmvc.s = sw;
     }
     if let Some(al) = a.p_pole {
         let al = finite("p-pole", al)?;
@@ -223,6 +306,16 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
     }
     controller.approach_lead = !a.no_approach_lead;
     let plant = PlantChoice::parse(&a.plant)?;
+    // The ideal ARX plant takes the duty as is and has no hardware to fail: a fault or a drive
+    // on it would be silently ignored, as `--commission` would.
+    if let PlantChoice::Arx(_) = plant {
+        if let Some(f) = a.faults.first() {
+            bail!("--fault {f} needs a physical plant (hter1 or hter2): an ARX plant has no hardware to fail");
+        }
+        if a.drive == Drive::Buck {
+            bail!("--drive buck needs a physical plant (hter1 or hter2): an ARX plant takes the duty as is");
+        }
+    }
     if a.kp.is_some() || a.ti.is_some() {
         let mut pi = plant.default_pi();
         if let Some(kp) = a.kp {
@@ -230,14 +323,22 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
             if kp <= 0.0 {
                 bail!("--kp must be > 0 (duty per °C), got {kp}");
             }
-            pi.kp_per_c = kp as f32;
+            let (lo, hi) = KP_RANGE_PER_C;
+            if !(lo..=hi).contains(&kp) {
+                bail!("--kp must be within {lo}…{hi} duty per °C, got {}", shown(kp));
+            }
+            pi.kp_per_c = single("kp", kp)?;
         }
         if let Some(ti) = a.ti {
             let ti = finite("ti", ti)?;
             if ti <= 0.0 {
                 bail!("--ti must be > 0 (s), got {ti}");
             }
-            pi.ti_s = ti as f32;
+            let (lo, hi) = TI_RANGE_S;
+            if !(lo..=hi).contains(&ti) {
+                bail!("--ti must be within {lo}…{hi:e} s, got {}", shown(ti));
+            }
+            pi.ti_s = single("ti", ti)?;
         }
         controller.pi = Some(pi);
     }
@@ -255,6 +356,20 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
             drive: a.drive,
         },
     };
+    // A fault is injected at the first sample at or after its time: one after the last sample
+    // never happens, and the run would report a clean carrier.
+    let ts = f64::from(hter::step::CarrierConfig::DEFAULT.ts_s);
+    let last_sample_s = ((opts.duration_s / ts).round() - 1.0) * ts;
+    // (A run shorter than one sample is refused by `sim::run` for what it is.)
+    let late = |(t, _): &&(f64, sim::Fault)| opts.duration_s >= ts && *t > last_sample_s;
+    if let Some((t, f)) = opts.faults.iter().find(late).filter(|_| a.mission_seed.is_none()) {
+        bail!(
+            "--fault {}@{}: the run lasts {} s (last sample at {last_sample_s} s), the fault would never happen",
+            f.name(),
+            shown(*t),
+            shown(opts.duration_s)
+        );
+    }
     if let Some(rule) = a.commission {
         let Some(params) = opts.plant_params() else { bail!("--commission needs a physical plant (hter1 or hter2)") };
         let ambient = match a.commission_ambient {

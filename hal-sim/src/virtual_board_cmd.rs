@@ -12,7 +12,7 @@ use anyhow::{bail, Context, Result};
 use crate::link::PtyLink;
 use crate::sim::virtual_board::{VirtualBoard, VirtualOptions};
 use crate::sim::PlantChoice;
-use crate::sim_cmd::{finite, LoadArg};
+use crate::sim_cmd::{at_least, finite, whole, LoadArg};
 
 /// `hter virtual-board` arguments.
 #[derive(clap::Args, Debug, Clone)]
@@ -30,27 +30,36 @@ pub struct VirtualBoardArgs {
     #[arg(long, default_value_t = 28.0, allow_negative_numbers = true)]
     pub ambient: f64,
     /// Simulated seconds per real second (1 = real time; at 600 a 10 s sample takes 17 ms).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     pub speed: f64,
     /// Seed of the ADC noise.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true, value_parser = whole("the noise seed", 0, u64::MAX))]
     pub seed: u64,
     /// Test hook: the first settings write loses power after this many flash operations (word
     /// programs, page erases); the board restarts as after a brown-out and restores its flash.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = at_least("the number of flash operations", 0usize))]
     pub cut_settings_write: Option<usize>,
     /// Stop after this many simulated seconds (default: run until stopped).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub duration: Option<f64>,
 }
 
 /// Serves the virtual board until stopped (or `--duration`).
 pub fn run(a: &VirtualBoardArgs) -> Result<()> {
-    let speed = finite("--speed", a.speed)?;
+    let speed = finite("speed", a.speed)?;
     if !(0.01..=100_000.0).contains(&speed) {
         bail!("--speed must be within 0.01…100000, got {speed}");
     }
-    let ambient_c = finite("--ambient", a.ambient)?;
+    let ambient_c = finite("ambient", a.ambient)?;
+    let (lo, hi) = crate::scenario::AMBIENT_RANGE_C;
+    if !(lo..=hi).contains(&ambient_c) {
+        bail!("--ambient must be within {lo}…{hi} °C, got {ambient_c}");
+    }
+    // A NaN duration compared false with the simulated time for ever: the board never stopped.
+    let duration_s = match a.duration {
+        Some(d) if finite("duration", d)? <= 0.0 => bail!("--duration must be > 0 s, got {d}"),
+        d => d,
+    };
     let plant = PlantChoice::parse(&a.plant)?;
     let mut board = VirtualBoard::new(&VirtualOptions { plant, load: a.load.into(), ambient_c, seed: a.seed })?;
     if let Some(ops) = a.cut_settings_write {
@@ -80,7 +89,7 @@ pub fn run(a: &VirtualBoardArgs) -> Result<()> {
             }
             // A slow host does not make the simulation catch up in a burst.
             next = (next + period).max(now);
-            if a.duration.is_some_and(|d| board.sim_s() >= d) {
+            if duration_s.is_some_and(|d| board.sim_s() >= d) {
                 return Ok(());
             }
             continue;

@@ -510,3 +510,249 @@ fn the_sim_csv_logs_the_reset_at_rest_the_law_aims_at() {
     // The run's holds are long: the reset runs on a large part of it.
     assert!(resting > r.len() / 3 && moved > r.len() / 4, "{resting} resting, {moved} moved of {}", r.len());
 }
+
+/// A temporary file with `text`, named for the test and the process.
+fn temp_file(name: &str, text: &str) -> std::path::PathBuf {
+    let p = std::env::temp_dir().join(format!("hter-cli-{}-{name}", std::process::id()));
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// `monitor` and `report` refuse a temperature no Pt100 can report (IEC 60751: −200…850 °C)
+/// with its line and column. 1e39 °C was infinite in the monitor's f32 and dropped: `report`
+/// said "IN RANGE"; −500 °C left no mean kinetic temperature.
+#[test]
+fn a_temperature_no_rtd_can_report_is_refused_with_its_line() {
+    for (name, cell) in [("huge", "1e39"), ("below", "-500"), ("above", "850.5")] {
+        let csv = temp_file(&format!("temp-{name}.csv"), &format!("t_s,temp_c\n0,4\n10,{cell}\n20,4\n30,4\n"));
+        let path = csv.to_str().unwrap();
+        let html = std::env::temp_dir().join(format!("hter-cli-{}-temp-{name}.html", std::process::id()));
+        assert_one_line_error(&["monitor", "--input", path], "line 3, column 'temp_c'");
+        assert_one_line_error(&["monitor", "--input", path, "--json"], "IEC 60751");
+        assert_one_line_error(&["report", "--input", path, "--output", html.to_str().unwrap()], "line 3");
+        assert!(!html.exists(), "{name}: no report is written");
+        let _ = std::fs::remove_file(&csv);
+    }
+    // The range's ends are readings.
+    let csv = temp_file("temp-ends.csv", "t_s,temp_c\n0,-200\n10,850\n20,4\n");
+    let v = json(&["monitor", "--input", csv.to_str().unwrap(), "--json"]);
+    let _ = std::fs::remove_file(&csv);
+    assert_eq!((v["min_c"].as_f64(), v["max_c"].as_f64()), (Some(-200.0), Some(850.0)), "{v}");
+}
+
+/// A closed stdout ends `hter` quietly, as it ends other Unix tools: before, every printing
+/// command panicked ("failed printing to stdout: Broken pipe") with exit code 101. The read end
+/// of the pipe is closed before the child starts, so its first write meets a closed pipe.
+#[cfg(unix)]
+#[test]
+fn a_closed_stdout_is_not_a_panic() {
+    use std::os::fd::{FromRawFd, OwnedFd};
+    use std::os::unix::process::ExitStatusExt;
+    for args in [&["sim", "--duration", "600"][..], &["rtd", "--celsius", "4"], &["compare", "--duration", "600"]] {
+        let mut fds = [0; 2];
+        // SAFETY: `pipe` fills both descriptors on success, each then owned exactly once.
+        assert_eq!(unsafe { libc::pipe(fds.as_mut_ptr()) }, 0);
+        let (read, write) = unsafe { (OwnedFd::from_raw_fd(fds[0]), OwnedFd::from_raw_fd(fds[1])) };
+        drop(read);
+        let out = Command::new(env!("CARGO_BIN_EXE_hter"))
+            .args(args)
+            .stdout(std::process::Stdio::from(write))
+            .stderr(std::process::Stdio::piped())
+            .output()
+            .expect("run hter");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!err.contains("panicked") && !err.contains("Broken pipe"), "{args:?}: {err}");
+        assert_ne!(out.status.code(), Some(101), "{args:?}: {err}");
+        assert_eq!(out.status.signal(), Some(libc::SIGPIPE), "{args:?}: {:?} {err}", out.status);
+    }
+}
+
+/// A run shorter than one control sample (Ts = 10 s) has no sample: it reported IAE 0, settled
+/// at 0 s and min/max of inf/−inf.
+#[test]
+fn a_run_shorter_than_one_sample_is_refused() {
+    assert_one_line_error(&["sim", "--duration", "1"], "shorter than one control sample");
+    assert_one_line_error(&["compare", "--controllers", "pi", "--duration", "9.9"], "shorter than one control sample");
+    let file = temp_file("tiny.json", r#"{"setpoints": [[0, 4]], "duration_s": 1e-9}"#);
+    assert_one_line_error(&["sim", "--scenario", file.to_str().unwrap()], "duration 1e-9 s is shorter");
+    let _ = std::fs::remove_file(&file);
+    // One sample is a run.
+    let v = json(&["sim", "--duration", "10", "--controller", "pi", "--json"]);
+    assert!(v["min_temp_c"].as_f64().is_some_and(f64::is_finite), "{v}");
+}
+
+/// A scenario file is held to the ranges of the flags and of the board: ambient as `--ambient`
+/// (−10…50 °C), setpoints as the board's `set setpoint_c` (2.5…7.5 °C), supply 0…16 V with the
+/// same time checks as the other schedules, extra heat within ±100 W.
+#[test]
+fn scenario_files_are_held_to_physical_ranges() {
+    let cases = [
+        ("amb-hot", r#""ambient": [[0, 1e6]]"#, "'ambient' at 0 s is 1000000 °C, outside -10…50 °C"),
+        ("amb-cold", r#""ambient": [[0, 28], [600, -273]]"#, "'ambient' at 600 s is -273 °C"),
+        ("sup-neg", r#""supply_v": [[0, -12]]"#, "'supply_v' at 0 s is -12 V, outside 0…16 V"),
+        ("sup-huge", r#""supply_v": [[0, 1e6]]"#, "'supply_v' at 0 s is 1000000 V"),
+        ("sup-neg-t", r#""supply_v": [[-100, 12]]"#, "'supply_v' has a negative time"),
+        ("sup-dec", r#""supply_v": [[300, 12], [100, 0]]"#, "'supply_v' times are not increasing"),
+        ("heat-huge", r#""extra_heat_w": [[0, 1e6]]"#, "'extra_heat_w' at 0 s is 1000000 W, outside -100…100 W"),
+        ("heat-neg", r#""extra_heat_w": [[0, -1e6]]"#, "'extra_heat_w' at 0 s is -1000000 W"),
+    ];
+    for (name, field, needle) in cases {
+        let text = format!(r#"{{"setpoints": [[0, 4]], {field}, "duration_s": 600}}"#);
+        let file = temp_file(&format!("{name}.json"), &text);
+        assert_one_line_error(&["sim", "--scenario", file.to_str().unwrap()], needle);
+        let _ = std::fs::remove_file(&file);
+    }
+    for (name, sp, needle) in [("sp-neg", "-40", "-40 °C, outside 2.5…7.5 °C"), ("sp-huge", "1e300", "is 1e300 °C")]
+    {
+        let file = temp_file(
+            &format!("{name}.json"),
+            &format!(r#"{{"setpoints": [[0, 4], [300, {sp}]], "duration_s": 600}}"#),
+        );
+        assert_one_line_error(&["sim", "--scenario", file.to_str().unwrap()], needle);
+        let _ = std::fs::remove_file(&file);
+    }
+    // The ends of every range run.
+    let text = r#"{"setpoints": [[0, 2.5], [300, 7.5]], "ambient": [[0, -10], [300, 50]],
+        "supply_v": [[0, 16], [300, 0]], "extra_heat_w": [[0, -100], [300, 100]], "duration_s": 600}"#;
+    let file = temp_file("ends.json", text);
+    let v = json(&["sim", "--scenario", file.to_str().unwrap(), "--controller", "pi", "--json"]);
+    let _ = std::fs::remove_file(&file);
+    assert!(v["iae"].as_f64().is_some_and(f64::is_finite), "{v}");
+}
+
+/// Identification from a record whose duty or temperature never changes is refused, naming
+/// which, by every method: output error and RLS returned gains of 1e12 °C per unit duty or a
+/// "stable" model with no fit, with exit 0.
+#[test]
+fn identify_refuses_a_record_without_excitation() {
+    let rows = |duty: &dyn Fn(usize) -> f64, temp: &dyn Fn(usize) -> f64| {
+        let mut s = String::from("t_s,duty,temp_c\n");
+        for i in 0..200 {
+            s.push_str(&format!("{},{},{}\n", 10 * i, duty(i), temp(i)));
+        }
+        s
+    };
+    let prbs = |i: usize| if (i / 7 + i / 3).is_multiple_of(2) { 0.3 } else { 0.6 };
+    let drift = |i: usize| 4.0 + 0.01 * i as f64;
+    let const_duty = temp_file("const-duty.csv", &rows(&|_| 0.459, &drift));
+    let const_temp = temp_file("const-temp.csv", &rows(&prbs, &|_| 4.0));
+    for method in ["oe", "rls", "rels", "ls", "iv"] {
+        let args =
+            |p: &std::path::Path| ["identify", "--input", p.to_str().unwrap(), "--method", method].map(String::from);
+        let a = args(&const_duty);
+        assert_one_line_error(&a.iter().map(String::as_str).collect::<Vec<_>>(), "duty is 0.459 in every row");
+        let a = args(&const_temp);
+        assert_one_line_error(&a.iter().map(String::as_str).collect::<Vec<_>>(), "temp_c is 4 in every row");
+    }
+    let _ = (std::fs::remove_file(&const_duty), std::fs::remove_file(&const_temp));
+}
+
+/// Numeric flags the library takes as f32 are checked as the library will see them, and
+/// within a range the carrier makes sense of: `--ti 1e39` and `--ti 1e-300` silently turned
+/// PI into P, `--kp 1e-300` into nothing, `--kp 1e39` never cooled, `--forgetting 1e-50` became
+/// 0 then 1, and `--filter 0.99999999999` was refused as if it were below 1.
+#[test]
+fn f32_flags_are_checked_as_the_library_sees_them() {
+    assert_one_line_error(&["sim", "--controller", "pi", "--ti", "1e39"], "--ti must be within 1…1e6 s, got 1e39");
+    assert_one_line_error(&["sim", "--controller", "pi", "--ti", "1e-300"], "--ti must be within");
+    assert_one_line_error(&["sim", "--controller", "pi", "--ti", "0.5"], "--ti must be within");
+    assert_one_line_error(&["sim", "--controller", "pi", "--kp", "1e-300"], "--kp must be within 0.001…100");
+    assert_one_line_error(&["sim", "--controller", "pi", "--kp", "1e39"], "--kp must be within");
+    assert_one_line_error(&["sim", "--controller", "gpc", "--lambda", "1e39"], "--lambda = 1e39 is too large");
+    assert_one_line_error(&["sim", "--controller", "gmvc", "--p-weight", "1e-300"], "--p-weight = 1e-300 is too small");
+    assert_one_line_error(&["identify", "--input", "/dev/null", "--forgetting", "1e-50"], "--forgetting");
+    assert_one_line_error(
+        &["identify", "--input", "/dev/null", "--forgetting", "0.1"],
+        "--forgetting must be in [0.5, 1]",
+    );
+    assert_one_line_error(
+        &["identify", "--input", "/dev/null", "--filter", "0.99999999999"],
+        "which is 1 in the filter's f32 arithmetic",
+    );
+    // The ends of the PI ranges run.
+    for (kp, ti) in [("0.001", "1e6"), ("100", "1")] {
+        let v = json(&["sim", "--scenario", "piecewise", "--controller", "pi", "--kp", kp, "--ti", ti, "--json"]);
+        assert!(v["iae"].as_f64().is_some_and(f64::is_finite), "{kp} {ti}: {v}");
+    }
+}
+
+/// What a run would silently ignore is refused: a fault or the buck drive on an ideal ARX
+/// plant (as `--commission` already was), a fault after the run's last sample.
+#[test]
+fn flags_a_run_would_ignore_are_refused() {
+    let arx = "arx:-0.99;-0.5;1";
+    assert_one_line_error(
+        &["sim", "--plant", arx, "--fault", "sensor-open@100"],
+        "--fault sensor-open@100 needs a physical plant",
+    );
+    assert_one_line_error(&["sim", "--plant", arx, "--drive", "buck"], "--drive buck needs a physical plant");
+    assert_one_line_error(&["compare", "--plant", arx, "--fault", "lid-open@60"], "needs a physical plant");
+    // `step` lasts 10 800 s, its last sample at 10 790 s.
+    assert_one_line_error(&["sim", "--fault", "lid-open@10800"], "the run lasts 10800 s");
+    assert_one_line_error(&["sim", "--duration", "600", "--fault", "ssr-stuck-off@595"], "the run lasts 600 s");
+    let v = json(&["sim", "--duration", "600", "--controller", "pi", "--fault", "sensor-open@590", "--json"]);
+    assert!(!v["faults_detected"].as_array().unwrap().is_empty(), "a fault at the last sample happens: {v}");
+}
+
+/// clap's errors on one line that still says what is wrong: the missing arguments by name, and
+/// a negative number as the flag's value with its valid range instead of "unexpected argument
+/// '-1' found".
+#[test]
+fn argument_errors_name_the_argument_and_its_range() {
+    assert_one_line_error(&["rtd"], "--ohms");
+    assert_one_line_error(&["campaign"], "--missions <MISSIONS>");
+    assert_one_line_error(&["identify"], "--input <INPUT>");
+    assert_one_line_error(
+        &["campaign", "--missions", "-1"],
+        "'--missions <MISSIONS>': the number of missions must be a whole number in 1…1000000",
+    );
+    assert_one_line_error(&["campaign", "--missions", "1", "--seed", "-1"], "'--seed <SEED>'");
+    assert_one_line_error(&["sim", "--seed", "-1"], "the noise seed must be a whole number in 0…");
+    assert_one_line_error(&["sim", "--n1", "-1"], "N1 must be a whole number in 1…30");
+    assert_one_line_error(&["sim", "--n2", "-1"], "'--n2 <N2>'");
+    assert_one_line_error(&["identify", "--input", "/dev/null", "--nk", "-1"], "'-1' is not a delay: give 1–10");
+    assert_one_line_error(&["identify", "--input", "/dev/null", "--na", "-1"], "na, must be a whole number in 1…4");
+    assert_one_line_error(&["rtd", "--ohms", "100", "--r0", "-100"], "must be 100 (Pt100) or 1000 (Pt1000)");
+    assert_one_line_error(&["sim", "--controller", "magic"], "possible values: onoff");
+}
+
+/// `virtual-board --duration nan` ran for ever; its messages named "----speed".
+#[test]
+fn virtual_board_flags_are_checked_before_it_serves() {
+    let link = std::env::temp_dir().join(format!("hter-cli-vb-{}", std::process::id()));
+    let link = link.to_str().unwrap();
+    assert_one_line_error(&["virtual-board", "--link", link, "--duration", "nan"], "--duration must be a finite");
+    assert_one_line_error(&["virtual-board", "--link", link, "--duration", "0"], "--duration must be > 0");
+    assert_one_line_error(&["virtual-board", "--link", link, "--duration", "-5"], "--duration must be > 0");
+    for (flag, v) in [("--speed", "nan"), ("--ambient", "inf")] {
+        let out = hter(&["virtual-board", "--link", link, flag, v]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains(&format!("error: {flag} must")) && !err.contains("----"),
+            "{err}"
+        );
+    }
+    assert_one_line_error(&["virtual-board", "--link", link, "--ambient", "80"], "--ambient must be within -10…50 °C");
+}
+
+/// `log2csv` refuses a time the board's 64-bit millisecond clock cannot show, with its line:
+/// `t=1e303` was written as `inf`.
+#[test]
+fn log2csv_refuses_a_time_beyond_the_boards_clock() {
+    let log =
+        temp_file("huge-t.log", "t=0 temp=4 sp=4 duty=0.5 mode=Normal\nt=1e303 temp=4 sp=4 duty=0.5 mode=Normal\n");
+    let csv = std::env::temp_dir().join(format!("hter-cli-{}-huge-t.csv", std::process::id()));
+    assert_one_line_error(
+        &["log2csv", "--input", log.to_str().unwrap(), "--output", csv.to_str().unwrap()],
+        "line 2: t = 1e303 s is beyond the board's 64-bit millisecond clock",
+    );
+    let _ = (std::fs::remove_file(&log), std::fs::remove_file(&csv));
+}
+
+/// An ideal plant with a gain no carrier can have (−6e38 °C per unit duty) ran the load to
+/// −1e33 °C; the bound is the self-tuner's plausible range.
+#[test]
+fn an_arx_plant_beyond_any_carrier_is_refused() {
+    assert_one_line_error(&["sim", "--plant", "arx:-0.5;-3e38;1"], "beyond what a carrier can have");
+    assert_one_line_error(&["sim", "--model", "arx:-0.9;-101;1"], "beyond what a carrier can have");
+}

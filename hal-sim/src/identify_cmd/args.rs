@@ -3,7 +3,10 @@
 use std::path::PathBuf;
 
 use hter::ident::model::MAX_NK;
+use hter::model::{MAX_NA, MAX_NB, MAX_NC};
 use serde::Serialize;
+
+use crate::sim_cmd::{at_least, whole};
 
 /// Estimation method.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
@@ -63,22 +66,22 @@ pub struct IdentifyArgs {
     #[arg(long)]
     pub input: PathBuf,
     /// Order of A (1–4).
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, allow_negative_numbers = true, value_parser = whole("the order of A, na,", 1, MAX_NA))]
     pub na: usize,
     /// Number of B coefficients (1–4).
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, allow_negative_numbers = true, value_parser = whole("the number of B coefficients, nb,", 1, MAX_NB))]
     pub nb: usize,
     /// Order of C (0–2; rels needs ≥ 1 and uses 1 when 0 is given).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = whole("the order of C, nc,", 0, MAX_NC))]
     pub nc: usize,
     /// Delay in samples (1–10), or `auto`: fit each delay 1–10 and keep the best simulated fit
     /// (per order in the 1/2/4 comparison).
-    #[arg(long, default_value = "auto")]
+    #[arg(long, default_value = "auto", allow_negative_numbers = true)]
     pub nk: Delay,
     /// Estimator: oe (output error, the default), ls, iv, rls or rels.
     #[arg(long, value_enum, default_value = "oe")]
     pub method: Method,
-    /// Forgetting factor λ_f of rls/rels, in (0, 1].
+    /// Forgetting factor λ_f of rls/rels, in [0.5, 1].
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     pub forgetting: f64,
     /// First-order filter parameter F_a in [0, 1) applied to the output first.
@@ -96,7 +99,7 @@ pub struct IdentifyArgs {
     pub y_column: String,
     /// Average every N samples into one before identifying (for logs sampled much faster than
     /// the plant moves, where quantisation noise would dominate each step).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true, value_parser = at_least("--decimate", 1usize))]
     pub decimate: usize,
     /// Operating point removed: initial (the log starts at rest), mean, or auto (initial when
     /// the log starts at rest, else mean).

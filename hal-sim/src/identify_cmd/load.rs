@@ -105,12 +105,18 @@ fn operating_point(kind: OperatingPointChoice, y: &[f64], u: &[f64]) -> Operatin
 }
 
 /// A first-order filter configuration from a command-line value, or a one-line error naming
-/// the flag.
+/// the flag. The filter runs in f32, as on the board: a value that rounds to 1 there
+/// (0.99999999999) is refused as what it becomes, not as what was typed.
 fn first_order_cfg(flag: &str, fa: Option<f64>) -> Result<Option<FirstOrderConfig>> {
     fa.map(|fa| {
-        FirstOrderConfig::new(fa as f32)
-            .filter(|_| fa.is_finite())
-            .ok_or_else(|| anyhow!("--{flag} must be in [0, 1), got {fa}"))
+        let single = fa as f32;
+        FirstOrderConfig::new(single).filter(|_| fa.is_finite()).ok_or_else(|| {
+            if fa.is_finite() && f64::from(single) != fa && (0.0..1.0).contains(&fa) {
+                anyhow!("--{flag} must be in [0, 1), got {fa}, which is {single} in the filter's f32 arithmetic (at most {})", 1.0 - f32::EPSILON / 2.0)
+            } else {
+                anyhow!("--{flag} must be in [0, 1), got {fa}")
+            }
+        })
     })
     .transpose()
 }
@@ -137,6 +143,17 @@ pub fn load(
     let prefilter_cfg = first_order_cfg("prefilter", prefilter)?;
     let cols = log::read_columns(path, &["t_s", "duty", y_column])?;
     let ts_raw = check_time_axis(path, &cols[0])?;
+    // A record whose input or output never moves says nothing about the dynamics, yet output
+    // error and RLS fitted it: gains of 1e12 °C per unit duty from a constant duty, a "stable"
+    // model with no fit from a constant temperature.
+    for (col, name, what) in [(&cols[1], "duty", "input"), (&cols[2], y_column, "output")] {
+        if let Some(&v0) = col.first().filter(|&&v0| col.iter().all(|&v| v == v0)) {
+            bail!(
+                "'{}': {name} is {v0} in every row: identification needs the {what} ({name}) to change during the record",
+                path.display()
+            );
+        }
+    }
     let avg =
         |v: &[f64]| -> Vec<f64> { v.chunks_exact(decimate).map(|c| c.iter().sum::<f64>() / decimate as f64).collect() };
     // The operating point is a level: found on the raw samples (where the initial rest is

@@ -103,10 +103,18 @@ pub use report::Report;
 
 use fit::{delay_reason, fit_delay, orders_error};
 
+/// Smallest forgetting factor λ_f `--forgetting` accepts. RLS with λ_f remembers about
+/// 1/(1 − λ_f) samples, and it must remember at least as many as the smallest model has
+/// parameters (two: na = nb = 1) to determine them; below that each update fits the last sample
+/// alone (λ_f = 1e-10 gave B ≈ ±6e6 and an unstable A, with exit 0).
+pub const FORGETTING_MIN: f32 = 0.5;
+
 /// `hter identify`.
 pub fn run(args: &IdentifyArgs) -> Result<()> {
-    if !(args.forgetting.is_finite() && args.forgetting > 0.0 && args.forgetting <= 1.0) {
-        bail!("--forgetting must be in (0, 1], got {}", args.forgetting);
+    // The estimator runs in f32: checked as it will run (1e-50 was 0 there, and then 1).
+    let forgetting = crate::sim_cmd::single("forgetting", args.forgetting)?;
+    if !(FORGETTING_MIN..=1.0).contains(&forgetting) {
+        bail!("--forgetting must be in [{FORGETTING_MIN}, 1], got {}", crate::sim_cmd::shown(args.forgetting));
     }
     let nc = if args.method == Method::Rels && args.nc == 0 { 1 } else { args.nc };
     let nk_check = match args.nk {
@@ -182,8 +190,9 @@ mod tests {
 
     #[test]
     fn too_few_rows_and_bad_time_axis() {
-        let few: String =
-            std::iter::once("t_s,duty,temp_c\n".to_string()).chain((0..20).map(|i| format!("{i},0.5,4\n"))).collect();
+        let few: String = std::iter::once("t_s,duty,temp_c\n".to_string())
+            .chain((0..20).map(|i| format!("{i},0.{},4.{i}\n", i % 2 + 4)))
+            .collect();
         let e = err(&args(write("few", &few)));
         assert!(e.contains("too few rows (20)"), "{e}");
         let jump = write("jump", "t_s,duty,temp_c\n0,0,1\n1,0,1\n2,0,1\n10,0,1\n11,0,1\n");
@@ -197,10 +206,16 @@ mod tests {
     #[test]
     fn impossible_parameters_are_refused() {
         let ok = write("params", &synthetic_log(200));
-        for bad in [0.0, 1.5, -0.5, f64::NAN] {
+        for bad in [0.0, 1.5, -0.5, 0.49] {
             let mut a = args(ok.clone());
             a.forgetting = bad;
-            assert!(err(&a).contains("--forgetting must be in (0, 1]"), "{bad}");
+            assert!(err(&a).contains("--forgetting must be in [0.5, 1]"), "{bad}");
+        }
+        // Not a number, or one the estimator's f32 cannot hold (1e-50 was 0 there).
+        for (bad, why) in [(f64::NAN, "finite"), (1e-50, "too small"), (1e39, "too large")] {
+            let mut a = args(ok.clone());
+            a.forgetting = bad;
+            assert!(err(&a).contains(why), "{bad}");
         }
         for bad in [1.0, -0.1, 2.0] {
             let mut a = args(ok.clone());
