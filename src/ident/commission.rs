@@ -156,9 +156,9 @@ pub const MIN_LN_TAU_RATIO: f32 = 1.0986;
 pub const DELAY_TOLERANCE: f32 = 0.04;
 
 /// Longest delay the control model (the [`SignRule::EveryCoefficient`] rule's) may have, s:
-/// 60 s, 6 samples at Ts = 10 s. [`preferred`] chooses among the delays up to it; the cabinet
-/// model (the monotone rule's) is not bounded, nor is a delay the configuration asks for
-/// ([`CommissionConfig::delay`]).
+/// 60 s, 6 samples at Ts = 10 s. The delay choice (`preferred`) looks only at the delays up to
+/// it; the cabinet model (the monotone rule's) is not bounded, nor is a delay the configuration
+/// asks for ([`CommissionConfig::delay`]).
 ///
 /// Why: the RTD reads the water 20 s late through a 20 s lag, and every simulated carrier's
 /// step response as the RTD sees it has started within 60 s (at 50 s it is 0.5–2.3 % of its
