@@ -389,7 +389,8 @@ pub fn check_history(text: &str) -> Result<(usize, usize)> {
 }
 
 fn history<P: Read + Write>(b: &mut Board<P>, output: &Path, since: Option<f64>) -> Result<()> {
-    let request = since.map_or_else(|| "history".to_string(), |s| format!("history {s}"));
+    // Rows are stamped in whole record seconds: the next whole second is the same request.
+    let request = since.map_or_else(|| "history".to_string(), |s| format!("history {}", s.ceil() as u64));
     let rows = b.request(&request)?;
     if rows.is_empty() {
         bail!("the board sent no CSV header for '{request}'");
@@ -413,8 +414,8 @@ pub fn check_command(cmd: &BoardCommand) -> Result<()> {
             }
             Ok(())
         }
-        BoardCommand::History { since: Some(s), .. } if !s.is_finite() || *s < 0.0 => {
-            bail!("--since must be a finite time ≥ 0 s, got {s}")
+        BoardCommand::History { since: Some(s), .. } if !(s.is_finite() && *s >= 0.0 && *s < 4e9) => {
+            bail!("--since must be a time ≥ 0 s and below 4e9 s (the record's clock), got {s}")
         }
         _ => Ok(()),
     }

@@ -13,7 +13,7 @@ pub mod line;
 pub mod num;
 
 use crate::model::{Model, MAX_K};
-use num::{parse_decimal, parse_list};
+use num::{parse_decimal, parse_list, parse_whole};
 
 /// Longest request line, bytes (docs/interface.md).
 pub const MAX_LINE: usize = 96;
@@ -183,9 +183,9 @@ impl Command {
             ("history", since, None) => Command::History {
                 since_s: match since {
                     None => 0,
-                    Some(s) => match parse_decimal(s) {
-                        Some(x) if (0.0..4.0e9).contains(&x) => x as u32,
-                        Some(x) => return refuse("history", Why::OutOfRange(x, 0.0, 4.0e9)),
+                    Some(s) => match since_seconds(s) {
+                        Some(x) if x < HISTORY_SINCE_LIMIT_S => x,
+                        Some(_) => return refuse("history", Why::Usage("history [SINCE_S], SINCE_S below 4000000000")),
                         None => return refuse("history", Why::NotDecimal),
                     },
                 },
@@ -200,6 +200,22 @@ impl Command {
         };
         Ok(Some(cmd))
     }
+}
+
+/// `history`'s SINCE_S must be below this, record s.
+const HISTORY_SINCE_LIMIT_S: u32 = 4_000_000_000;
+
+/// `history`'s SINCE_S: a decimal ≥ 0 of up to 10 whole digits, rounded up to the record's whole
+/// seconds (rows are stamped in them). Not [`parse_decimal`]: the record's time passes its 7
+/// digits after 116 days of service, and `history 10000000` was "not a decimal number".
+fn since_seconds(s: &str) -> Option<u32> {
+    let (whole, frac) = s.split_once('.').unwrap_or((s, ""));
+    let whole = parse_whole(whole)?;
+    if frac.len() > 6 || !frac.bytes().all(|b| b.is_ascii_digit()) || (s.contains('.') && frac.is_empty()) {
+        return None;
+    }
+    let up = u32::from(frac.bytes().any(|b| b != b'0'));
+    whole.checked_add(up)
 }
 
 fn parse_set(key: &str, value: &str) -> Result<SetRequest, Refusal> {
@@ -288,6 +304,15 @@ mod tests {
         assert_eq!(Command::parse("set ack 1"), Ok(Some(Command::Set(SetRequest::Ack))));
         assert_eq!(Command::parse("history"), Ok(Some(Command::History { since_s: 0 })));
         assert_eq!(Command::parse("history 3600"), Ok(Some(Command::History { since_s: 3600 })));
+        // The record's time after 116 days and more, and a fraction rounded up to the next row.
+        assert_eq!(Command::parse("history 10000000"), Ok(Some(Command::History { since_s: 10_000_000 })));
+        assert_eq!(Command::parse("history 3999999999"), Ok(Some(Command::History { since_s: 3_999_999_999 })));
+        assert_eq!(Command::parse("history 3600.5"), Ok(Some(Command::History { since_s: 3601 })));
+        assert_eq!(Command::parse("history 3600.00"), Ok(Some(Command::History { since_s: 3600 })));
+        for bad in ["history -1", "history 1e9", "history 3600.", "history .5", "history 99999999999", "history x"] {
+            assert!(Command::parse(bad).is_err(), "{bad}");
+        }
+        assert_eq!(refusal("history 4000000000"), "err history: usage: history [SINCE_S], SINCE_S below 4000000000");
         assert_eq!(Command::parse("identify abort"), Ok(Some(Command::IdentifyAbort)));
         let Ok(Some(Command::Set(SetRequest::Model(m)))) = Command::parse("set model -1.8,0.81;-0.02,-0.01;9") else {
             panic!()

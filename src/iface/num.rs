@@ -46,6 +46,21 @@ pub fn parse_decimal(s: &str) -> Option<f32> {
     Some(if neg { -x } else { x })
 }
 
+/// A whole number of at most 10 digits that fits a `u32` (`0`, `3600`, `4000000000`); anything
+/// else, a sign or a `.` included, is `None`. For values past [`parse_decimal`]'s 7 digits: the
+/// record's seconds, which pass 10⁷ after 116 days of service.
+pub fn parse_whole(s: &str) -> Option<u32> {
+    if s.is_empty() || s.len() > 10 {
+        return None;
+    }
+    let mut n: u32 = 0;
+    for &c in s.as_bytes() {
+        let d = c.checked_sub(b'0').filter(|d| *d <= 9)?;
+        n = n.checked_mul(10)?.checked_add(u32::from(d))?;
+    }
+    Some(n)
+}
+
 /// A comma-separated list of exactly `N` decimals (`-1.8,0.81`).
 pub fn parse_list<const N: usize>(s: &str) -> Option<[f32; N]> {
     let mut out = [0.0f32; N];
@@ -159,5 +174,15 @@ mod tests {
         assert_eq!(Fixed(4.0, 2).to_string(), "4.00");
         assert_eq!(Fixed(-1.936244, 6).to_string(), "-1.936244");
         assert_eq!(Fixed(3.0e9, 0).to_string(), "-");
+    }
+
+    #[test]
+    fn whole_numbers_take_ten_digits_and_nothing_else() {
+        assert_eq!(parse_whole("0"), Some(0));
+        assert_eq!(parse_whole("10000000"), Some(10_000_000));
+        assert_eq!(parse_whole("4294967295"), Some(u32::MAX));
+        for bad in ["", "4294967296", "00000000000", "-1", "+1", "1.0", "1e3", " 1", "x"] {
+            assert_eq!(parse_whole(bad), None, "{bad}");
+        }
     }
 }
