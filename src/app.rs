@@ -718,8 +718,9 @@ impl App {
 
     fn write_status(&self, out: &mut impl Write) -> core::fmt::Result {
         let last = self.last;
-        let t_s = self.last_t_ms as f32 / 1000.0;
-        write!(out, "t_s={}\r\n", Fixed(t_s, 1))?;
+        // From the integer clock: through f32 the tenths went wrong after 48 days (8025510.4 on a
+        // 10 s grid) and the whole value became `-` after 6 years.
+        write!(out, "t_s={}.{}\r\n", self.last_t_ms / 1000, self.last_t_ms % 1000 / 100)?;
         let (temp, sp, duty, mode, alarm) = match last {
             Some(o) => (o.step.temp_c.0, o.step.setpoint_c.0, o.step.duty.get(), o.step.mode.name(), o.alarm.name()),
             None => (f32::NAN, self.settings.setpoint_c, f32::NAN, "-", "-"),

@@ -480,3 +480,16 @@ fn an_ack_with_an_alarm_latched_is_applied_and_recorded_once() {
     assert_eq!(b.setting_logs(), [SettingKey::Ack]);
     assert_eq!(b.run(1).alarm, Indication::Off);
 }
+
+/// `t_s` from the integer clock: through f32 it read 8025510.4 on a 10 s grid after 93 days,
+/// and `-` after 6 years.
+#[test]
+fn status_time_stays_exact_after_months_and_years() {
+    let mut b = Bench::new(&boot());
+    b.t_ms = 8_025_510_000;
+    b.run(1);
+    assert_eq!(b.field("t_s"), "8025510.0");
+    b.t_ms = 250_000_000_000;
+    b.run(1);
+    assert_eq!(b.field("t_s"), "250000000.0");
+}
