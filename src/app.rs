@@ -540,29 +540,21 @@ impl App {
                 if !self.cfg.laws.contains(&law) {
                     return Err(Refusal { what: "controller", why: Why::NotInBuild });
                 }
-                if self.commissioning() {
-                    return Err(Refusal {
-                        what: "controller",
-                        why: Why::NotNow("commissioning is running (identify abort)"),
-                    });
-                }
+                self.not_while_commissioning("controller")?;
                 next.law = law;
                 (SettingKey::Controller, [law as u8 as f32, 0.0])
             }
             SetRequest::CalIce(p) | SetRequest::CalWarm(p) => {
-                let what = if matches!(req, SetRequest::CalIce(_)) { "cal_ice" } else { "cal_warm" };
+                let ice = matches!(req, SetRequest::CalIce(_));
+                let (what, key) = if ice { ("cal_ice", SettingKey::CalIce) } else { ("cal_warm", SettingKey::CalWarm) };
                 // The commissioning's record is of readings through today's calibration: a new
                 // one mid-run is a step in the record the fit would take for the carrier's.
-                if self.commissioning() {
-                    return Err(Refusal { what, why: Why::NotNow("commissioning is running (identify abort)") });
-                }
-                let key = if matches!(req, SetRequest::CalIce(_)) {
+                self.not_while_commissioning(what)?;
+                if ice {
                     next.cal_ice = p;
-                    SettingKey::CalIce
                 } else {
                     next.cal_warm = p;
-                    SettingKey::CalWarm
-                };
+                }
                 next.calibration().map_err(|e| Refusal { what, why: Why::Calibration(e) })?;
                 (key, p)
             }
@@ -629,6 +621,14 @@ impl App {
 
     fn commissioning(&self) -> bool {
         matches!(self.carrier.controller(), BoardController::Commission(_))
+    }
+
+    /// The refusal of setting `what` while a commissioning runs.
+    fn not_while_commissioning(&self, what: &'static str) -> Result<(), Refusal> {
+        if self.commissioning() {
+            return Err(Refusal { what, why: Why::NotNow("commissioning is running (identify abort)") });
+        }
+        Ok(())
     }
 
     /// The applied duty's recent mean ([`DutyMean`]), or the fallback PI's bias before the first

@@ -414,7 +414,9 @@ pub fn check_command(cmd: &BoardCommand) -> Result<()> {
             }
             Ok(())
         }
-        BoardCommand::History { since: Some(s), .. } if !(s.is_finite() && *s >= 0.0 && *s < 4e9) => {
+        BoardCommand::History { since: Some(s), .. }
+            if !(s.is_finite() && *s >= 0.0 && *s < f64::from(hter::iface::HISTORY_SINCE_LIMIT_S)) =>
+        {
             bail!("--since must be a time ≥ 0 s and below 4e9 s (the record's clock), got {s}")
         }
         _ => Ok(()),

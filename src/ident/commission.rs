@@ -651,8 +651,8 @@ pub struct Commissioning {
     high_bits: [u8; CAPACITY / 8],
     overrides: [(u16, u16); MAX_OVERRIDES],
     n_overrides: u8,
-    /// Longest delay of the every-b_i ≤ 0 rule's model, samples ([`MAX_CONTROL_DELAY_S`] at
-    /// this Ts, at least 1).
+    /// Longest delay of the `cfg.sign` rule's candidates, samples: [`MAX_CONTROL_DELAY_S`] at
+    /// this Ts (at least 1) for the every-b_i ≤ 0 rule's model, [`MAX_DELAY`] otherwise.
     max_control_k: u8,
     /// The best candidate of each delay k = 1…[`MAX_DELAY`] so far (the rule `cfg.sign`).
     best: [Candidate; MAX_DELAY],
@@ -904,8 +904,13 @@ impl Commissioning {
             high_bits: [0; CAPACITY / 8],
             overrides: [(0, 0); MAX_OVERRIDES],
             n_overrides: 0,
-            // Whole samples within the bound; at least one (a Ts above 60 s).
-            max_control_k: (MAX_CONTROL_DELAY_S / ts_s).clamp(1.0, MAX_DELAY as f32) as u8,
+            // Whole samples within the bound, at least one (a Ts above 60 s); the whole scan for
+            // the monotone rule's model and for a delay asked for.
+            max_control_k: if cfg.sign == SignRule::EveryCoefficient && cfg.delay.is_none() {
+                (MAX_CONTROL_DELAY_S / ts_s).clamp(1.0, MAX_DELAY as f32) as u8
+            } else {
+                MAX_DELAY as u8
+            },
             best: [Candidate::NONE; MAX_DELAY],
             best_cabinet: [Candidate::NONE; MAX_DELAY],
             passes: 0,
@@ -1137,9 +1142,7 @@ impl Commissioning {
             if self.cfg.delay.is_some_and(|d| usize::from(d) != k + 1) {
                 continue;
             }
-            // The control model's delay is bounded ([`MAX_CONTROL_DELAY_S`]) unless asked for.
-            let bounded = self.cfg.sign == SignRule::EveryCoefficient && self.cfg.delay.is_none();
-            if !bounded || k < usize::from(self.max_control_k) {
+            if k < usize::from(self.max_control_k) {
                 *c = candidate(n, s, k + 1, p1, p2, self.cfg.sign);
             }
             if two {
@@ -1397,13 +1400,17 @@ mod tests {
         5000
     }
 
-    #[test]
-    fn recovers_an_exact_second_order_plant() {
-        // Poles 0.997 and 0.94, k = 5 (within the control model's bound of 6 at Ts = 10 s),
-        // gain −40 °C/duty, every b ≤ 0.
+    /// Poles 0.997 and 0.94, delay `k`, gain −40 °C/duty, every b ≤ 0.
+    fn two_lags(k: usize) -> Model {
         let (p1, p2) = (0.997f32, 0.94f32);
         let g = (1.0 - p1) * (1.0 - p2);
-        let truth = Model::second_order([-(p1 + p2), p1 * p2], [-30.0 * g, -10.0 * g], 5).unwrap();
+        Model::second_order([-(p1 + p2), p1 * p2], [-30.0 * g, -10.0 * g], k).unwrap()
+    }
+
+    #[test]
+    fn recovers_an_exact_second_order_plant() {
+        // k = 5: within the control model's bound of 6 at Ts = 10 s.
+        let truth = two_lags(5);
         let mut c = Commissioning::new(CommissionConfig::DEFAULT, 10.0, 0.45).unwrap();
         let n = run_on(&mut c, &truth, 0.45);
         let m = c.outcome().unwrap().unwrap();
@@ -1434,9 +1441,7 @@ mod tests {
     /// in seconds, so at Ts = 5 s it no longer binds.
     #[test]
     fn the_control_models_delay_is_bounded() {
-        let (p1, p2) = (0.997f32, 0.94f32);
-        let g = (1.0 - p1) * (1.0 - p2);
-        let truth = Model::second_order([-(p1 + p2), p1 * p2], [-30.0 * g, -10.0 * g], 9).unwrap();
+        let truth = two_lags(9);
         let mut c = Commissioning::new(CommissionConfig::DEFAULT, 10.0, 0.45).unwrap();
         run_on(&mut c, &truth, 0.45);
         let m = c.outcome().unwrap().unwrap();

@@ -203,19 +203,21 @@ impl Command {
 }
 
 /// `history`'s SINCE_S must be below this, record s.
-const HISTORY_SINCE_LIMIT_S: u32 = 4_000_000_000;
+pub const HISTORY_SINCE_LIMIT_S: u32 = 4_000_000_000;
 
 /// `history`'s SINCE_S: a decimal ≥ 0 of up to 10 whole digits, rounded up to the record's whole
 /// seconds (rows are stamped in them). Not [`parse_decimal`]: the record's time passes its 7
 /// digits after 116 days of service, and `history 10000000` was "not a decimal number".
 fn since_seconds(s: &str) -> Option<u32> {
-    let (whole, frac) = s.split_once('.').unwrap_or((s, ""));
-    let whole = parse_whole(whole)?;
-    if frac.len() > 6 || !frac.bytes().all(|b| b.is_ascii_digit()) || (s.contains('.') && frac.is_empty()) {
+    let (whole, frac) = match s.split_once('.') {
+        Some((_, "")) => return None,
+        Some((w, f)) => (w, f),
+        None => (s, ""),
+    };
+    if frac.len() > 6 || !frac.bytes().all(|b| b.is_ascii_digit()) {
         return None;
     }
-    let up = u32::from(frac.bytes().any(|b| b != b'0'));
-    whole.checked_add(up)
+    parse_whole(whole)?.checked_add(u32::from(frac.bytes().any(|b| b != b'0')))
 }
 
 fn parse_set(key: &str, value: &str) -> Result<SetRequest, Refusal> {
