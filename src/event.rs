@@ -75,11 +75,17 @@ pub enum EventKind {
     /// their window (excitation current or front end broken, VDDA out of range): the RTD
     /// reading is not trusted, a sensor fault.
     ReferenceOutOfRange,
+    /// Cold-chain log entries were lost before they reached flash: more than
+    /// [`crate::persist::PENDING_LOG`] waited for the write gate (the minute after a boot, or a
+    /// bad supply) and the oldest were dropped. Not a step event: the write queue puts it in
+    /// the record ([`crate::persist::PendingSaves`]) at the newest lost entry's time, before
+    /// the entries it kept, so the record shows where its hole is.
+    LogEntriesLost,
 }
 
 impl EventKind {
     /// Every kind, in declaration order (each reset cause and fail-safe stop its own kind).
-    pub const ALL: [EventKind; 29] = {
+    pub const ALL: [EventKind; 30] = {
         use crate::failsafe::StopKind;
         use crate::persist::ResetCause;
         [
@@ -112,6 +118,7 @@ impl EventKind {
             EventKind::FlashPageLost,
             EventKind::SupplySwitchShorted,
             EventKind::ReferenceOutOfRange,
+            EventKind::LogEntriesLost,
         ]
     };
 
@@ -169,6 +176,7 @@ impl EventKind {
             EventKind::FlashPageLost => "flash_page_lost",
             EventKind::SupplySwitchShorted => "supply_switch_shorted",
             EventKind::ReferenceOutOfRange => "reference_out_of_range",
+            EventKind::LogEntriesLost => "log_entries_lost",
         }
     }
 
@@ -202,6 +210,7 @@ impl EventKind {
             EventKind::FlashPageLost => 21,
             EventKind::SupplySwitchShorted => 22,
             EventKind::ReferenceOutOfRange => 23,
+            EventKind::LogEntriesLost => 24,
         }
     }
 }

@@ -73,6 +73,36 @@ fn history_is_a_csv_of_intervals_and_events_in_time_order() {
 }
 
 #[test]
+fn forty_settings_in_the_minute_after_a_boot_leave_a_marked_hole_in_the_history() {
+    let mut b = board();
+    // 40 accepted setpoints, each a new value, eight after each of the first five samples
+    // (0…40 s): all while the write gate holds its minute after the boot.
+    let sent: Vec<String> = (0..40).map(|i| format!("{:.2}", 2.5 + 0.1 * f64::from(i))).collect();
+    for chunk in sent.chunks(8) {
+        b.step().unwrap();
+        for sp in chunk {
+            assert_eq!(b.request(&format!("set setpoint_c {sp}")), "ok\r\n");
+        }
+    }
+    run(&mut b, 600.0);
+    let reply = b.request("history");
+    let rows: Vec<Vec<&str>> = reply.lines().skip(1).filter(|l| *l != "ok").map(|l| l.split(',').collect()).collect();
+    let events: Vec<(u32, &str)> =
+        rows.iter().filter(|r| !r[6].is_empty()).map(|r| (r[0].parse().unwrap(), r[6])).collect();
+    // The boot's `restarted` and the first 24 settings did not fit the gate's 16 places: one
+    // `log_entries_lost` at the newest lost one's time (setting 24, sent after the sample at
+    // 20 s: record time 21 s, the log starting at 1 s), then the 16 settings kept, in order.
+    assert_eq!(events[0], (21, "log_entries_lost"), "{events:?}");
+    let kept: Vec<String> = sent[24..].iter().map(|sp| format!("set:setpoint_c={sp}")).collect();
+    assert_eq!(events[1..=16].iter().map(|e| e.1.to_string()).collect::<Vec<_>>(), kept);
+    assert_eq!(events[1].0, 31, "setting 25 was sent after the sample at 30 s");
+    assert!(events.iter().all(|e| !e.1.starts_with("restarted")), "{events:?}");
+    let t: Vec<u32> = rows.iter().map(|r| r[0].parse().unwrap()).collect();
+    assert!(t.windows(2).all(|w| w[0] <= w[1]), "time order: {t:?}");
+    assert_eq!(b.write_errors, 0);
+}
+
+#[test]
 fn a_power_cut_inside_a_settings_write_leaves_the_old_or_the_new_setpoint_and_the_board_recovers() {
     let (mut saw_old, mut saw_new) = (0, 0);
     // Every cut point of the write, then one past its end.

@@ -199,11 +199,12 @@ pub fn verdict(r: &monitor_cmd::Report) -> (&'static str, &'static str) {
 
 /// Whether an event is a reset or a fault (what the header lists), by the library's event names
 /// (`hter::event::EventKind::name`; a board history may add `:detail`): restarts, board faults,
-/// sensor, SSR, supply, reference and flash faults. Settings, alarms (listed on their own) and
-/// recoveries are not.
+/// sensor, SSR, supply, reference and flash faults, and the record's own holes (a flash page
+/// lost, log entries lost while flash writes were held off). Settings, alarms (listed on their
+/// own) and recoveries are not.
 fn is_reset_or_fault(e: &Event) -> bool {
     let n = e.name.to_ascii_lowercase();
-    const PREFIXES: [&str; 9] = [
+    const PREFIXES: [&str; 10] = [
         "restart",
         "board_fault",
         "sensor_",
@@ -211,6 +212,7 @@ fn is_reset_or_fault(e: &Event) -> bool {
         "supply_",
         "reference_out_of_range",
         "flash_page_lost",
+        "log_entries_lost",
         "controller_non_finite",
         "freeze_guard_tripped",
     ];

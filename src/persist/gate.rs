@@ -13,9 +13,20 @@
 //! older one had), so a long closed gate costs no memory and a reopened one writes each kind
 //! once. A power-bounce loop therefore writes nothing, and the resets of a loop whose boots
 //! never stay up for the hold-off are not counted in the history.
+//!
+//! Cold-chain log entries are not whole states: each waits, in order, up to [`PENDING_LOG`] of
+//! them. Beyond that the oldest waiting entry is dropped (a pop at the queue's front: the
+//! cheapest in flash), and the record says so. The first log entry written when the gate opens
+//! is then one `log_entries_lost` event ([`EventKind::LogEntriesLost`]) stamped with the record
+//! time of the newest entry dropped, before the entries kept: the record stays in time order,
+//! and what it misses lies after the entry before that event, up to the event's time. Forty
+//! settings accepted in the minute after a boot, say, leave `log_entries_lost` at the 24th
+//! one's time, then the last sixteen (the boot's `restarted` event was among the lost).
 
+use super::log::LogEntry;
 use super::{HistoryRecord, ModelRecord};
 use crate::calib::TwoPoint;
+use crate::event::EventKind;
 
 /// How long the supply must have been good since boot (or since its last bad sample) before a
 /// write, ms: 60 s, six samples at Ts = 10 s, several times the seconds a brown-out or a plug
@@ -96,15 +107,18 @@ pub enum Save {
     /// Only builds with the holdover estimate keep it (the default firmware build has no room).
     #[cfg(feature = "holdover")]
     Cabinet(super::CabinetRecord),
-    /// An entry of the cold-chain log: every one is kept, in order.
-    Log(super::log::LogEntry),
+    /// An entry of the cold-chain log: kept in order, up to [`PENDING_LOG`] waiting (beyond
+    /// them a `log_entries_lost` event stands for the oldest, [`PendingSaves`]).
+    Log(LogEntry),
 }
 
 /// Log entries that may wait for the [`WriteGate`]: a little over an hour of intervals and
-/// events at a typical rate; beyond it the oldest waiting entry is dropped and counted.
+/// events at a typical rate; beyond it the oldest waiting entry is dropped, and the record gets
+/// a `log_entries_lost` event in its place ([`EventKind::LogEntriesLost`]).
 pub const PENDING_LOG: usize = 16;
 
-/// The newest record of each kind waiting for the [`WriteGate`], and every log entry (in order).
+/// The newest record of each kind waiting for the [`WriteGate`], and the log entries (in order;
+/// the newest [`PENDING_LOG`], after a `log_entries_lost` event when older ones were dropped).
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct PendingSaves {
     model: Option<ModelRecord>,
@@ -113,9 +127,10 @@ pub struct PendingSaves {
     #[cfg(feature = "holdover")]
     cabinet: Option<super::CabinetRecord>,
     history: Option<HistoryRecord>,
-    log: heapless::Deque<super::log::LogEntry, PENDING_LOG>,
-    /// Log entries dropped because [`PENDING_LOG`] were waiting.
-    pub log_dropped: u16,
+    log: heapless::Deque<LogEntry, PENDING_LOG>,
+    /// Record time of the newest log entry dropped (because [`PENDING_LOG`] were waiting) since
+    /// the last `log_entries_lost` event went out, s; `None` when none was.
+    log_lost_s: Option<u32>,
     /// The waiting history holds an alarm not yet stored (stays set when a newer history
     /// replaces it: the newer one counts the alarm too).
     alarm: bool,
@@ -131,7 +146,7 @@ impl PendingSaves {
         cabinet: None,
         history: None,
         log: heapless::Deque::new(),
-        log_dropped: 0,
+        log_lost_s: None,
         alarm: false,
     };
 
@@ -145,8 +160,9 @@ impl PendingSaves {
             Save::Cabinet(c) => self.cabinet = Some(c),
             Save::Log(e) => {
                 if self.log.is_full() {
-                    self.log.pop_front();
-                    self.log_dropped = self.log_dropped.saturating_add(1);
+                    if let Some(lost) = self.log.pop_front() {
+                        self.log_lost_s = Some(lost.t_s());
+                    }
                 }
                 let _ = self.log.push_back(e);
             }
@@ -169,11 +185,12 @@ impl PendingSaves {
             && self.settings.is_none()
             && self.history.is_none()
             && self.log.is_empty()
+            && self.log_lost_s.is_none()
     }
 
     /// The next record `gate` lets through at `now_ms`, removed from the queue: an alarm history
-    /// first, then settings (a person waits for them), the cabinet model, history, log entries,
-    /// calibration, model.
+    /// first, then settings (a person waits for them), the cabinet model, history, log entries
+    /// (a `log_entries_lost` event first if some were dropped), calibration, model.
     pub fn next(&mut self, gate: &WriteGate, now_ms: u64) -> Option<Save> {
         if self.alarm && gate.allows(now_ms, true) {
             self.alarm = false;
@@ -194,6 +211,10 @@ impl PendingSaves {
         if let Some(h) = self.history.take() {
             self.alarm = false;
             return Some(Save::History(h));
+        }
+        // Every dropped entry is older than every waiting one: the event goes first.
+        if let Some(t_s) = self.log_lost_s.take() {
+            return Some(Save::Log(LogEntry::Event { t_s, kind: EventKind::LogEntriesLost }));
         }
         if let Some(e) = self.log.pop_front() {
             return Some(Save::Log(e));
@@ -295,5 +316,92 @@ mod tests {
         assert_eq!(p.next(&gate, SUPPLY_HOLD_OFF_MS), Some(Save::Calibration(TwoPoint { gain: 1.01, offset_c: 0.1 })));
         assert_eq!(p.next(&gate, SUPPLY_HOLD_OFF_MS), None);
         assert!(p.is_empty());
+    }
+
+    /// The boot's `restarted` event at record time `t0_s`, then `n` accepted setpoints one
+    /// second apart.
+    fn boot_then_settings(t0_s: u32, n: u32) -> Vec<LogEntry> {
+        let restarted = LogEntry::Event { t_s: t0_s, kind: EventKind::Restarted(crate::persist::ResetCause::Other) };
+        let set = |i: u32| LogEntry::Setting {
+            t_s: t0_s + i,
+            key: crate::persist::log::SettingKey::Setpoint,
+            value: [2.5 + 0.1 * i as f32, 0.0],
+        };
+        core::iter::once(restarted).chain((1..=n).map(set)).collect()
+    }
+
+    /// Everything `gate` lets through at `now_ms`.
+    fn drain(p: &mut PendingSaves, gate: &WriteGate, now_ms: u64) -> Vec<Save> {
+        core::iter::from_fn(|| p.next(gate, now_ms)).collect()
+    }
+
+    fn lost(t_s: u32) -> Save {
+        Save::Log(LogEntry::Event { t_s, kind: EventKind::LogEntriesLost })
+    }
+
+    #[test]
+    fn a_flooded_log_queue_leaves_one_lost_event_before_the_entries_it_kept() {
+        let mut gate = WriteGate::firmware();
+        let mut p = PendingSaves::EMPTY;
+        // 40 settings in the minute after a boot: 41 entries for 16 places.
+        let entries = boot_then_settings(1, 40);
+        let mut t = 0;
+        for chunk in entries.chunks(7) {
+            gate.note_supply(t, true);
+            for e in chunk {
+                p.put(Save::Log(*e));
+            }
+            assert_eq!(p.next(&gate, t), None, "held off at {t} ms");
+            t += TS_MS;
+        }
+        gate.note_supply(SUPPLY_HOLD_OFF_MS, true);
+        let writes = drain(&mut p, &gate, SUPPLY_HOLD_OFF_MS);
+        // The boot's event and settings 1…24 were dropped: the event carries setting 24's time.
+        let kept = &entries[entries.len() - PENDING_LOG..];
+        assert_eq!(kept[0].t_s(), 26);
+        let want: Vec<Save> = core::iter::once(lost(25)).chain(kept.iter().map(|e| Save::Log(*e))).collect();
+        assert_eq!(writes, want);
+        assert!(p.is_empty());
+        let t_s: Vec<u32> =
+            writes.iter().map(|w| if let Save::Log(e) = w { e.t_s() } else { unreachable!() }).collect();
+        assert!(t_s.windows(2).all(|w| w[0] <= w[1]), "time order: {t_s:?}");
+
+        // Handed out once: a queue that fills without overflowing later has no event.
+        let more = boot_then_settings(100, PENDING_LOG as u32 - 1);
+        for e in &more {
+            p.put(Save::Log(*e));
+        }
+        let writes = drain(&mut p, &gate, SUPPLY_HOLD_OFF_MS);
+        assert_eq!(writes, more.iter().map(|e| Save::Log(*e)).collect::<Vec<_>>());
+
+        // A bad supply closes the gate again: a second flood gets its own event.
+        gate.note_supply(70_000, false);
+        let again = boot_then_settings(200, 20);
+        for e in &again {
+            p.put(Save::Log(*e));
+        }
+        assert_eq!(p.next(&gate, 70_000), None);
+        gate.note_supply(80_000, true);
+        gate.note_supply(80_000 + SUPPLY_HOLD_OFF_MS, true);
+        let writes = drain(&mut p, &gate, 80_000 + SUPPLY_HOLD_OFF_MS);
+        assert_eq!(writes.first(), Some(&lost(204)), "21 entries, 5 dropped: the newest at 204 s");
+        assert_eq!(writes[1..], again[5..].iter().map(|e| Save::Log(*e)).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn a_full_log_queue_that_did_not_overflow_has_no_lost_event() {
+        let mut gate = WriteGate::firmware();
+        let mut p = PendingSaves::EMPTY;
+        gate.note_supply(0, true);
+        let entries = boot_then_settings(1, PENDING_LOG as u32 - 1);
+        p.put(Save::History(history(1)));
+        for e in &entries {
+            p.put(Save::Log(*e));
+        }
+        gate.note_supply(SUPPLY_HOLD_OFF_MS, true);
+        let writes = drain(&mut p, &gate, SUPPLY_HOLD_OFF_MS);
+        let want: Vec<Save> =
+            core::iter::once(Save::History(history(1))).chain(entries.iter().map(|e| Save::Log(*e))).collect();
+        assert_eq!(writes, want);
     }
 }

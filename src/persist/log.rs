@@ -19,6 +19,13 @@
 //!
 //! `sequential-storage` checks each item with its own CRC; an entry this firmware cannot read
 //! (an unknown tag, a value out of range) decodes to an error and is skipped, never shown as data.
+//!
+//! Entries wait in RAM while flash writes are held off (the minute after a boot, a bad supply:
+//! [`crate::persist::WriteGate`]). When more than [`crate::persist::PENDING_LOG`] wait, the
+//! oldest are dropped, and the log gets one `log_entries_lost` event
+//! ([`EventKind::LogEntriesLost`]) at the newest lost entry's time, ahead of the entries kept
+//! ([`crate::persist::PendingSaves`]): a hole in the record is marked, never silent. What is
+//! missing lies between the entry before that event and the event's time.
 
 use crate::coldchain::AlarmKind;
 use crate::event::EventKind;
