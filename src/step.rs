@@ -187,6 +187,17 @@ impl<C: Controller> Carrier<C> {
         self.supervisor.observe_switched_rail_v(v);
     }
 
+    /// Gives the step the voltage across the modules — the SSR's load side, read in the
+    /// conversion window at the end of the PWM period, where the SSR is commanded off below full
+    /// duty — V, for the next sample. With it the step finds a shorted SSR within two samples,
+    /// whatever the load does ([`crate::supervisor::module`]). Without this call (the reference
+    /// board has no such sense; the buck drive has no window) there is no such check. Built
+    /// with the `module-sense` feature (the host's default; not the firmware's).
+    #[cfg(feature = "module-sense")]
+    pub fn observe_module_v(&mut self, v: f32) {
+        self.supervisor.observe_module_v(v);
+    }
+
     /// Gives the step the switched rail read at the end of the test pulse the previous output
     /// asked for ([`StepOutput::switch_test`]), V, for the next sample: reading powered, the
     /// switch is shorted.

@@ -88,6 +88,7 @@ fn gpc_on_its_own_arx_model_tracks_piecewise_without_offset() {
         ambient_c: 14.0,
         seed: 1,
         faults: vec![],
+        module_sense: false,
     })
     .unwrap();
     assert!(out.metrics.tracking.steady_state_error_c < 0.01, "{:?}", out.metrics);
@@ -139,6 +140,7 @@ fn self_tuning_gpc_stays_in_range_and_trusts_its_own_estimate() {
         ambient_c: 28.0,
         seed: 3,
         faults: vec![],
+        module_sense: false,
     })
     .unwrap();
     assert!(out.metrics.tracking.min_temp_c >= 2.0 && out.metrics.tracking.max_temp_c <= 8.0, "{:?}", out.metrics);
@@ -171,6 +173,7 @@ fn options(
         ambient_c,
         seed,
         faults: vec![],
+        module_sense: false,
     }
 }
 
@@ -378,6 +381,7 @@ fn self_tuning_laws_survive_a_plant_change_mid_run() {
             ambient_c: 28.0,
             seed: 5,
             faults: vec![],
+            module_sense: false,
         })
         .unwrap();
         let m = &out.metrics;
@@ -489,6 +493,7 @@ fn self_tuner_learns_the_plants_response_over_the_horizon_from_a_wrong_start() {
             ambient_c: 28.0,
             seed,
             faults: vec![],
+            module_sense: false,
         })
         .unwrap();
         let last = out.rows.last().unwrap();

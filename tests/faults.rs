@@ -28,6 +28,7 @@ fn with_fault(kind: Fault, controller: ControllerChoice) -> SimOutput {
         ambient_c: 28.0,
         seed: 11,
         faults: vec![(AT_S, kind)],
+        module_sense: false,
     })
     .unwrap()
 }
@@ -106,6 +107,7 @@ fn a_shorted_ssr_limps_home_within_2_to_8() {
                 ambient_c: 28.0,
                 seed: 11,
                 faults: vec![(AT_S, Fault::SsrStuckOn)],
+                module_sense: false,
             })
             .unwrap();
             let at = out
@@ -253,6 +255,36 @@ fn a_light_carrier_limps_home_without_cooling_its_load_to_near_freezing() {
     assert!(lowest > 1.7, "lowest in limp home {lowest:.2} °C");
 }
 
+/// A board that reads the modules' voltage in the conversion window (`--module-sense`,
+/// `hter::supervisor::module`) finds a shorted SSR within two samples, before the load has
+/// moved: campaign missions 10799, 28631 and 700212 (light H-TER I carriers; the reference board
+/// finds the short from the load's fall, 70–300 s later, and their loads reach 0.86, 0.58 and
+/// 1.25 °C) stay above 1.75 °C, 9515 above 2.3 °C. What is left below 2 °C is limp home's
+/// On-Off on these very light loads, not the short's detection.
+#[test]
+fn a_module_side_sense_finds_a_shorted_ssr_within_two_samples() {
+    use hal_sim::mission::Mission;
+    for (seed, floor_c) in [(10799, 1.75), (28631, 1.75), (700212, 2.8), (9515, 2.3)] {
+        let m = Mission::generate(seed);
+        let opts = m.options(ControllerSpec::new(ControllerChoice::Gpc));
+        let (at, _) = opts.faults.iter().copied().find(|f| f.1 == Fault::SsrStuckOn).expect("a shorted SSR");
+        let found = |o: &SimOutput| {
+            o.metrics.faults_detected.iter().find(|f| f.kind == Detected::Event(EventKind::SsrStuckOn)).map(|f| f.t_s)
+        };
+        let plain = run(&opts).unwrap();
+        let sensed = run(&SimOptions { module_sense: true, ..opts }).unwrap();
+        let (t_plain, t_sensed) = (found(&plain).expect("found"), found(&sensed).expect("found"));
+        // The first sample at or after the fault sees it, the next confirms it.
+        assert!(t_sensed - at <= 20.0 + 1e-9, "mission {seed}: found {} s after the short", t_sensed - at);
+        assert!(t_sensed < t_plain, "mission {seed}: {t_sensed} s with the sense, {t_plain} s without");
+        let (lo_plain, lo_sensed) = (plain.metrics.tracking.min_temp_c, sensed.metrics.tracking.min_temp_c);
+        assert!(
+            lo_sensed > floor_c && lo_sensed > lo_plain,
+            "mission {seed}: lowest {lo_sensed:.2} °C ({lo_plain:.2} without)"
+        );
+    }
+}
+
 /// Missions 281, 623 and 950 (`--seed 1`): a carrier at full duty for hours in a 42 °C heat,
 /// its load more than 1 °C above the setpoint. The lid detector's "overwhelmed" report re-armed
 /// on its duty averages, which at full duty do not part, and came every other sample: 68, 63 and
@@ -281,6 +313,9 @@ fn no_false_detections_without_faults() {
             for (plant, load) in plants {
                 for ambient_c in [20.0, 28.0, 35.0] {
                     let sc = Scenario::resolve(scenario).unwrap();
+                    // The module-side sense on the board too: the modules' own Seebeck voltage
+                    // in the conversion window is no short.
+                    let module_sense = c == ControllerChoice::Gpc;
                     let out = run(&SimOptions {
                         drive: Default::default(),
                         duration_s: sc.duration_s,
@@ -291,12 +326,13 @@ fn no_false_detections_without_faults() {
                         ambient_c,
                         seed: 5,
                         faults: vec![],
+                        module_sense,
                     });
                     // Every one of these runs exists: a failed run is a failure, not a case to skip.
                     let out = out.unwrap_or_else(|e| panic!("{c:?} {scenario} {plant:?} {load:?} {ambient_c}: {e}"));
                     assert!(
                         out.metrics.faults_detected.is_empty(),
-                        "{c:?} {scenario} {plant:?} {load:?} {ambient_c}: {:?}",
+                        "{c:?} {scenario} {plant:?} {load:?} {ambient_c} (module sense {module_sense}): {:?}",
                         out.metrics.faults_detected
                     );
                     assert_eq!(out.metrics.alarm_hw_first_s, None, "{c:?} {scenario} {plant:?} {load:?} {ambient_c}");

@@ -81,6 +81,7 @@ fn bless(g: &Golden) {
         ambient_c: 28.0,
         seed: 1,
         faults: g.faults.to_vec(),
+        module_sense: false,
     };
     let out = run(&opts).unwrap();
     let rows: Vec<(f32, u32, f32)> = out.rows.iter().map(|r| (r.t_s as f32, r.counts, r.setpoint_c as f32)).collect();

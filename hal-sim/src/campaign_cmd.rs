@@ -38,6 +38,11 @@ pub struct CampaignArgs {
     /// How the modules are driven: ssr (the default) or buck.
     #[arg(long, value_enum, default_value = "ssr")]
     pub drive: sim::Drive,
+    /// Run every mission on a board that reads the modules' voltage in the conversion window
+    /// (a board change the reference board does not have; SSR drive only): a shorted SSR is
+    /// found within two samples (`hter::supervisor::module`).
+    #[arg(long)]
+    pub module_sense: bool,
 }
 
 /// Detection figures of one injected fault kind.
@@ -77,6 +82,8 @@ pub struct CampaignSummary {
     pub controller: String,
     /// How the modules were driven (`ssr` or `buck`).
     pub drive: String,
+    /// The board read the modules' voltage (`--module-sense`).
+    pub module_sense: bool,
     /// Seed of the first mission.
     pub seed: u64,
     /// Total time with the load below 0 °C over all missions, min.
@@ -156,15 +163,17 @@ pub struct CampaignSummary {
     pub wall_s: f64,
 }
 
-/// The replay command of one mission: the same seed, controller and drive (`--drive` is named
-/// only when it is not the default SSR, so the SSR lines read as they always did).
-pub fn replay_command(seed: u64, controller: ControllerChoice, drive: sim::Drive) -> String {
+/// The replay command of one mission: the same seed, controller, drive and board (`--drive`
+/// and `--module-sense` are named only when they are not the reference board's, so its lines
+/// read as they always did).
+pub fn replay_command(seed: u64, controller: ControllerChoice, drive: sim::Drive, module_sense: bool) -> String {
     let c = clap::ValueEnum::to_possible_value(&controller).map_or("gpc".to_string(), |v| v.get_name().to_string());
     let d = match drive {
         sim::Drive::Ssr => String::new(),
         other => format!(" --drive {}", other.name()),
     };
-    format!("hter sim --mission-seed {seed} --controller {c}{d} --json")
+    let m = if module_sense { " --module-sense" } else { "" };
+    format!("hter sim --mission-seed {seed} --controller {c}{d}{m} --json")
 }
 
 /// Runs one mission and judges it.
@@ -174,8 +183,19 @@ pub fn run_mission(seed: u64, controller: ControllerChoice) -> Result<MissionRep
 
 /// Runs one mission with the modules on `drive` and judges it.
 pub fn run_mission_on(seed: u64, controller: ControllerChoice, drive: sim::Drive) -> Result<MissionReport> {
+    run_mission_board(seed, controller, drive, false)
+}
+
+/// Runs one mission with the modules on `drive`, on a board with the module-side sense if
+/// `module_sense`, and judges it.
+pub fn run_mission_board(
+    seed: u64,
+    controller: ControllerChoice,
+    drive: sim::Drive,
+    module_sense: bool,
+) -> Result<MissionReport> {
     let m = Mission::generate(seed);
-    let out = sim::run(&sim::SimOptions { drive, ..m.options(ControllerSpec::new(controller)) })?;
+    let out = sim::run(&sim::SimOptions { drive, module_sense, ..m.options(ControllerSpec::new(controller)) })?;
     Ok(mission::evaluate(&m, &out))
 }
 
@@ -184,6 +204,7 @@ pub fn summarize(
     reports: &[MissionReport],
     controller: ControllerChoice,
     drive: sim::Drive,
+    module_sense: bool,
     seed: u64,
     wall_s: f64,
 ) -> CampaignSummary {
@@ -215,7 +236,7 @@ pub fn summarize(
             details.push(FailureDetail {
                 seed: r.seed,
                 reasons: r.reasons.clone(),
-                replay: replay_command(r.seed, controller, drive),
+                replay: replay_command(r.seed, controller, drive, module_sense),
             });
         }
     }
@@ -233,6 +254,7 @@ pub fn summarize(
         missions: reports.len() as u64,
         controller: format!("{controller:?}").to_lowercase(),
         drive: drive.name().to_string(),
+        module_sense,
         seed,
         freeze_minutes: sum(&|r| r.freeze_s) / 60.0,
         freeze_missions: reports.iter().filter(|r| r.freeze_s > 0.0).count() as u64,
@@ -286,6 +308,9 @@ fn tally(keys: impl Iterator<Item = String>) -> BTreeMap<String, u64> {
 
 /// `hter campaign`.
 pub fn run(a: &CampaignArgs) -> Result<()> {
+    if a.module_sense && a.drive == sim::Drive::Buck {
+        bail!("{}", crate::sim_cmd::MODULE_SENSE_SSR_ONLY);
+    }
     if a.missions == 0 {
         bail!("--missions must be at least 1");
     }
@@ -309,13 +334,13 @@ pub fn run(a: &CampaignArgs) -> Result<()> {
     let reports: Vec<MissionReport> = (0..a.missions)
         .into_par_iter()
         .map(|i| {
-            let r = run_mission_on(a.seed + i, controller, a.drive);
+            let r = run_mission_board(a.seed + i, controller, a.drive, a.module_sense);
             pb.inc(1);
             r
         })
         .collect::<Result<_>>()?;
     pb.finish_and_clear();
-    let s = summarize(&reports, controller, a.drive, a.seed, start.elapsed().as_secs_f64());
+    let s = summarize(&reports, controller, a.drive, a.module_sense, a.seed, start.elapsed().as_secs_f64());
     if a.json {
         println!("{}", serde_json::to_string(&s)?);
         for f in &s.failure_details {
@@ -332,12 +357,13 @@ pub fn run(a: &CampaignArgs) -> Result<()> {
 
 fn print_table(s: &CampaignSummary) {
     println!(
-        "campaign: {} randomized 24 h missions (seeds {}…{}), controller {}, {} drive, {:.1} s wall",
+        "campaign: {} randomized 24 h missions (seeds {}…{}), controller {}, {} drive{}, {:.1} s wall",
         s.missions,
         s.seed,
         s.seed + s.missions - 1,
         s.controller,
         s.drive,
+        if s.module_sense { ", module-side sense" } else { "" },
         s.wall_s
     );
     println!();
@@ -419,12 +445,16 @@ mod tests {
     #[test]
     fn the_replay_command_names_the_drive_it_ran_on() {
         assert_eq!(
-            replay_command(116, ControllerChoice::Pi, sim::Drive::Ssr),
+            replay_command(116, ControllerChoice::Pi, sim::Drive::Ssr, false),
             "hter sim --mission-seed 116 --controller pi --json"
         );
         assert_eq!(
-            replay_command(7, ControllerChoice::Gpc, sim::Drive::Buck),
+            replay_command(7, ControllerChoice::Gpc, sim::Drive::Buck, false),
             "hter sim --mission-seed 7 --controller gpc --drive buck --json"
+        );
+        assert_eq!(
+            replay_command(9, ControllerChoice::Gpc, sim::Drive::Ssr, true),
+            "hter sim --mission-seed 9 --controller gpc --module-sense --json"
         );
     }
 }

@@ -35,6 +35,7 @@ pub fn run() -> Result<()> {
         duration: None,
         seed: 1,
         drive: crate::sim::Drive::Ssr,
+        module_sense: false,
         faults: Vec::new(),
         csv: None,
         plot: None,

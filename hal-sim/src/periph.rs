@@ -284,6 +284,23 @@ impl SimSsr {
         }
     }
 
+    /// The voltage across the modules in the conversion window at the end of a PWM period, with
+    /// the supply at `supply_v` and the modules' own Seebeck voltage `seebeck_v`, V: the supply
+    /// when the SSR conducts there (shorted, or commanded to full duty, whose period has no off
+    /// time) behind a conducting switch; else what the modules give back.
+    pub fn module_window_v(&self, supply_v: f64, seebeck_v: f64) -> f64 {
+        let on = match self.fault {
+            SsrFault::StuckOn => true,
+            SsrFault::StuckOff => false,
+            SsrFault::None => self.ticks >= Self::MAX_TICKS,
+        };
+        if on && self.switch_conducts() {
+            supply_v
+        } else {
+            seebeck_v.max(0.0)
+        }
+    }
+
     /// Opens or closes the supply-enable switch in series with the modules.
     pub fn set_supply_enabled(&mut self, on: bool) {
         self.supply_enabled = on;

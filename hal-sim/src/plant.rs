@@ -479,6 +479,12 @@ impl Plant {
         self.supply_v = v.max(0.0);
     }
 
+    /// The modules' Seebeck voltage, α (T_hot − T_cold), V: what a module gives back across its
+    /// terminals with no drive (the module-side sense's reading of a working, open SSR).
+    pub fn seebeck_v(&self) -> f64 {
+        self.p.alpha_v_per_k * (self.t[HOT] - self.t[COLD])
+    }
+
     /// Supply voltage, V.
     pub fn supply_v(&self) -> f64 {
         self.supply_v

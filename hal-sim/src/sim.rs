@@ -270,6 +270,10 @@ pub struct SimOptions {
     /// How the modules are driven (`--drive`; the SSR by default); ignored by an ideal ARX
     /// plant, which takes the duty as is.
     pub drive: Drive,
+    /// The board reads the modules' voltage in the conversion window (`--module-sense`), a
+    /// board change the reference board does not have ([`hter::supervisor::module`]); SSR
+    /// drive only.
+    pub module_sense: bool,
 }
 
 impl SimOptions {
@@ -286,6 +290,7 @@ impl SimOptions {
             seed: 1,
             faults: Vec::new(),
             drive: Drive::Ssr,
+            module_sense: false,
         }
     }
 }

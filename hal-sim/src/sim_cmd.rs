@@ -13,6 +13,11 @@ use crate::plot;
 use crate::scenario::Scenario;
 use crate::sim::{self, ControllerChoice, ControllerSpec, Drive, PlantChoice, SimOptions, SimOutput};
 
+/// Why `--module-sense` is refused with `--drive buck`: the sense reads the SSR's off time in
+/// the conversion window, and a buck's filtered output has none.
+pub const MODULE_SENSE_SSR_ONLY: &str =
+    "--module-sense needs --drive ssr: it reads the modules in the SSR's off time, and a buck's output has none";
+
 /// Arguments of `hter sim` (and the scenario and controller of `hter compare`).
 #[derive(clap::Args, Debug)]
 pub struct SimArgs {
@@ -86,6 +91,11 @@ pub struct SimArgs {
     /// (a synchronous buck with an LC filter: a smooth voltage, duty × supply).
     #[arg(long, value_enum, default_value = "ssr")]
     pub drive: Drive,
+    /// A board that reads the modules' voltage in the conversion window (a board change the
+    /// reference board does not have; SSR drive only): a shorted SSR is found within two
+    /// samples (`hter::supervisor::module`).
+    #[arg(long)]
+    pub module_sense: bool,
     /// Inject a hardware fault at a time, KIND@T_S (repeatable): sensor-open, sensor-short,
     /// sensor-stuck, sensor-spikes, sensor-offset, ssr-stuck-on, ssr-stuck-off, supply-sag,
     /// lid-open, brownout.
@@ -315,6 +325,12 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
         if a.drive == Drive::Buck {
             bail!("--drive buck needs a physical plant (hter1 or hter2): an ARX plant takes the duty as is");
         }
+        if a.module_sense {
+            bail!("--module-sense needs a physical plant (hter1 or hter2): an ARX plant has no modules to read");
+        }
+    }
+    if a.module_sense && a.drive == Drive::Buck {
+        bail!("{MODULE_SENSE_SSR_ONLY}");
     }
     if a.kp.is_some() || a.ti.is_some() {
         let mut pi = plant.default_pi();
@@ -343,7 +359,11 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
         controller.pi = Some(pi);
     }
     let mut opts = match a.mission_seed {
-        Some(seed) => SimOptions { drive: a.drive, ..crate::mission::Mission::generate(seed).options(controller) },
+        Some(seed) => SimOptions {
+            drive: a.drive,
+            module_sense: a.module_sense,
+            ..crate::mission::Mission::generate(seed).options(controller)
+        },
         None => SimOptions {
             scenario,
             controller,
@@ -354,6 +374,7 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
             seed: a.seed,
             faults: a.faults.iter().map(|f| sim::Fault::parse(f)).collect::<Result<_>>()?,
             drive: a.drive,
+            module_sense: a.module_sense,
         },
     };
     // A fault is injected at the first sample at or after its time: one after the last sample

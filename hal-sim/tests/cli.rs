@@ -676,8 +676,9 @@ fn f32_flags_are_checked_as_the_library_sees_them() {
     }
 }
 
-/// What a run would silently ignore is refused: a fault or the buck drive on an ideal ARX
-/// plant (as `--commission` already was), a fault after the run's last sample.
+/// What a run would silently ignore is refused: a fault, the buck drive or the module-side sense
+/// on an ideal ARX plant (as `--commission` already was), the sense on the buck drive (no off
+/// time to read the modules in), a fault after the run's last sample.
 #[test]
 fn flags_a_run_would_ignore_are_refused() {
     let arx = "arx:-0.99;-0.5;1";
@@ -686,6 +687,12 @@ fn flags_a_run_would_ignore_are_refused() {
         "--fault sensor-open@100 needs a physical plant",
     );
     assert_one_line_error(&["sim", "--plant", arx, "--drive", "buck"], "--drive buck needs a physical plant");
+    assert_one_line_error(&["sim", "--plant", arx, "--module-sense"], "--module-sense needs a physical plant");
+    assert_one_line_error(&["sim", "--drive", "buck", "--module-sense"], "--module-sense needs --drive ssr");
+    assert_one_line_error(
+        &["campaign", "--missions", "2", "--drive", "buck", "--module-sense"],
+        "--module-sense needs --drive ssr",
+    );
     assert_one_line_error(&["compare", "--plant", arx, "--fault", "lid-open@60"], "needs a physical plant");
     // `step` lasts 10 800 s, its last sample at 10 790 s.
     assert_one_line_error(&["sim", "--fault", "lid-open@10800"], "the run lasts 10800 s");

@@ -74,6 +74,8 @@
 
 pub mod freeze;
 pub mod lid;
+#[cfg(feature = "module-sense")]
+pub mod module;
 pub mod sensor;
 pub mod ssr;
 pub mod supply;
@@ -415,6 +417,9 @@ pub(crate) struct Supervisor {
     distrust_left: u16,
     freeze: FreezeGuard,
     ssr: SsrMonitor,
+    /// The module-side sense's check (a board with the sense only).
+    #[cfg(feature = "module-sense")]
+    module: module::ModuleSense,
     supply: SupplyMonitor,
     switch: SwitchCheck,
     lid: LidDetector,
@@ -432,6 +437,8 @@ impl Supervisor {
             distrust_left: 0,
             freeze: FreezeGuard::new(&cfg.freeze),
             ssr: SsrMonitor::new(&cfg.ssr, ts_s),
+            #[cfg(feature = "module-sense")]
+            module: module::ModuleSense::default(),
             supply: SupplyMonitor::new(&cfg.supply, ts_s),
             switch: SwitchCheck::new(&cfg.switch, ts_s),
             lid: LidDetector::new(&cfg.lid, ts_s),
@@ -451,6 +458,12 @@ impl Supervisor {
     /// The switched supply rail for the next sample, V.
     pub(crate) fn observe_switched_rail_v(&mut self, v: f32) {
         self.switch.observe(v);
+    }
+
+    /// The modules' voltage read in the conversion window, V, for the next sample ([`module`]).
+    #[cfg(feature = "module-sense")]
+    pub(crate) fn observe_module_v(&mut self, v: f32) {
+        self.module.observe(v);
     }
 
     /// The switched supply rail read at the end of a test pulse, V, for the next sample.
@@ -511,6 +524,11 @@ impl Supervisor {
         }
         self.supply.run(&cfg.supervisor.supply, emit);
         self.switch.check(&cfg.supervisor.switch, self.supply.v(), emit);
+        // Before the controller and whatever the reading: the modules' voltage needs no RTD.
+        #[cfg(feature = "module-sense")]
+        if self.module.shorted(&cfg.supervisor.switch, self.supply.v()) && !self.state.shorted() {
+            self.ssr_shorted(emit);
+        }
         reading
     }
 
@@ -561,6 +579,8 @@ impl Supervisor {
         self.lid.run(&cfg.lid, self.ts_s, &lid, emit);
         self.ssr.applied(&cfg.ssr, duty, requested, temp_c);
         let supply_enable = self.switch.note_enable(closed);
+        #[cfg(feature = "module-sense")]
+        self.module.note_output(closed, duty.get(), cfg.ssr.full_duty);
         Verdict { duty, supply_enable, switch_test, mode }
     }
 

@@ -58,7 +58,9 @@ impl Rig {
             },
         };
         let adc = SimAdc::new(opts.seed);
-        Ok((Rig::Physical { plant: Box::new(plant), adc, ssr: SimSsr::new(), board: Board::new() }, u0))
+        // The sense reads the SSR's off time in the conversion window: the buck has neither.
+        let board = Board { module_sense: opts.module_sense && params.drive == Drive::Ssr, ..Board::new() };
+        Ok((Rig::Physical { plant: Box::new(plant), adc, ssr: SimSsr::new(), board }, u0))
     }
 
     /// Samples the sensor and runs the step; returns its output and the counts it got.
@@ -70,6 +72,9 @@ impl Rig {
                 // The board's divider on the module supply rail, and the sense after the switch.
                 carrier.observe_supply_v(plant.supply_v() as f32);
                 carrier.observe_switched_rail_v(ssr.switched_rail_v(plant.supply_v()) as f32);
+                if board.module_sense {
+                    carrier.observe_module_v(ssr.module_window_v(plant.supply_v(), plant.seebeck_v()) as f32);
+                }
                 if let Some(v) = board.test_pulse(ssr, plant.supply_v()) {
                     carrier.observe_switch_test_v(v);
                 }
@@ -300,6 +305,8 @@ pub(super) struct Board {
     pulse_asked: bool,
     /// A pulse was taken at this sample: its drive cut is still to come.
     pulse_taken: bool,
+    /// The board has the module-side sense (`--module-sense`; not the reference board).
+    module_sense: bool,
 }
 
 /// A supply-switch test pulse's length, s.
@@ -313,6 +320,7 @@ impl Board {
             mono: Monostable::new(Monostable::TIMEOUT_S),
             pulse_asked: false,
             pulse_taken: false,
+            module_sense: false,
         }
     }
 
