@@ -12,9 +12,10 @@
 //! modules in the conversion window at the end of each PWM period, where the SSR is commanded
 //! off at every duty below full ([`crate::adc::SampleWindow`] keeps its edges out). There a
 //! working SSR leaves only the modules' own Seebeck voltage, α ΔT ≤ 0.053 V/K × 60 K ≈ 3.2 V;
-//! a shorted one leaves the supply. The reading counts as powered by the supply switch check's
-//! rule ([`super::switch::SwitchConfig`]: above half the measured supply, at least 2 V; 6 V
-//! without a supply measurement). Two powered readings in a row (one could be a glitch), each
+//! a shorted one leaves the supply. The reading counts as powered above half the measured supply
+//! (the supply switch check's fraction, [`super::switch::SwitchConfig`]) and never below
+//! [`SEEBECK_MAX_V`], so that a sagging supply does not bring the limit down to what the modules
+//! give back themselves; 6 V without a supply measurement. Two powered readings in a row (one could be a glitch), each
 //! after a sample whose output had the switch closed and the duty below full cooling
 //! ([`super::ssr::SsrConfig::full_duty`]), are a shorted SSR: the supervisor limps home. A board
 //! that never calls [`crate::step::Carrier::observe_module_v`] has no such check.
@@ -28,6 +29,11 @@ use crate::units::max_f32;
 
 /// Powered readings in a row that make a short.
 pub const CONFIRM_SAMPLES: u8 = 2;
+
+/// The least a powered reading must exceed, V: above the modules' own Seebeck voltage
+/// (0.053 V/K × 60 K ≈ 3.2 V across a TEC1-12706-class module), with margin. A shorted SSR on
+/// any supply that cools (≥ 5 V) reads more.
+pub const SEEBECK_MAX_V: f32 = 4.0;
 
 /// State of the module-side check.
 #[derive(Clone, Copy, Debug, Default)]
@@ -52,7 +58,7 @@ impl ModuleSense {
     pub(crate) fn shorted(&mut self, cfg: &SwitchConfig, supply_v: Option<f32>) -> bool {
         let Some(v) = self.v.take() else { return false };
         let limit = match supply_v {
-            Some(s) if s.is_finite() => max_f32(cfg.open_max_fraction * s, cfg.open_floor_v),
+            Some(s) if s.is_finite() => max_f32(cfg.open_max_fraction * s, SEEBECK_MAX_V),
             _ => cfg.open_max_v,
         };
         // NaN (a broken sense) is not powered: it fails `>`.
@@ -98,11 +104,18 @@ mod tests {
         for _ in 0..100 {
             assert!(!sample(&mut m, 3.2, true, 0.0));
         }
-        // A sagging supply lowers the limit with it, never below the 2 V floor.
-        m.observe(5.0);
+        // A sagging supply lowers the limit with it (9 V: 4.5 V), never below the Seebeck bound.
+        m.observe(4.4);
         assert!(!m.shorted(&CFG, Some(9.0)));
-        m.observe(1.9);
-        assert!(!m.shorted(&CFG, Some(1.0)));
+        m.observe(3.9);
+        assert!(!m.shorted(&CFG, Some(6.0)));
+        m.observe(3.9);
+        assert!(!m.shorted(&CFG, Some(2.0)));
+        // A short on a 6 V supply still reads above it: two readings in a row.
+        m.observe(5.9);
+        assert!(!m.shorted(&CFG, Some(6.0)));
+        m.observe(5.9);
+        assert!(m.shorted(&CFG, Some(6.0)));
     }
 
     #[test]
