@@ -257,14 +257,14 @@ fn a_light_carrier_limps_home_without_cooling_its_load_to_near_freezing() {
 
 /// A board that reads the modules' voltage in the conversion window (`--module-sense`,
 /// `hter::supervisor::module`) finds a shorted SSR within two samples, before the load has
-/// moved: campaign missions 10799, 28631 and 700212 (light H-TER I carriers; the reference board
-/// finds the short from the load's fall, 70–300 s later, and their loads reach 0.86, 0.58 and
-/// 1.25 °C) stay above 1.75 °C, 9515 above 2.3 °C. What is left below 2 °C is limp home's
-/// On-Off on these very light loads, not the short's detection.
+/// moved: campaign missions 10799, 28631, 700212 and 202055 (light H-TER I carriers; the
+/// reference board finds the short from the load's fall, 70–300 s later, and their loads reach
+/// 0.86, 0.58, 1.25 and 0.20 °C) stay above 1.4 °C, 9515 above 2.3 °C. What is left below 2 °C
+/// is limp home's On-Off on these very light loads, not the short's detection.
 #[test]
 fn a_module_side_sense_finds_a_shorted_ssr_within_two_samples() {
     use hal_sim::mission::Mission;
-    for (seed, floor_c) in [(10799, 1.75), (28631, 1.75), (700212, 2.8), (9515, 2.3)] {
+    for (seed, floor_c) in [(10799, 1.75), (28631, 1.75), (700212, 2.8), (9515, 2.3), (202055, 1.4)] {
         let m = Mission::generate(seed);
         let opts = m.options(ControllerSpec::new(ControllerChoice::Gpc));
         let (at, _) = opts.faults.iter().copied().find(|f| f.1 == Fault::SsrStuckOn).expect("a shorted SSR");
