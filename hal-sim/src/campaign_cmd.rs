@@ -176,19 +176,14 @@ pub fn replay_command(seed: u64, controller: ControllerChoice, drive: sim::Drive
     format!("hter sim --mission-seed {seed} --controller {c}{d}{m} --json")
 }
 
-/// Runs one mission and judges it.
+/// Runs one mission on the reference board and judges it.
 pub fn run_mission(seed: u64, controller: ControllerChoice) -> Result<MissionReport> {
-    run_mission_on(seed, controller, sim::Drive::Ssr)
-}
-
-/// Runs one mission with the modules on `drive` and judges it.
-pub fn run_mission_on(seed: u64, controller: ControllerChoice, drive: sim::Drive) -> Result<MissionReport> {
-    run_mission_board(seed, controller, drive, false)
+    run_mission_on(seed, controller, sim::Drive::Ssr, false)
 }
 
 /// Runs one mission with the modules on `drive`, on a board with the module-side sense if
 /// `module_sense`, and judges it.
-pub fn run_mission_board(
+pub fn run_mission_on(
     seed: u64,
     controller: ControllerChoice,
     drive: sim::Drive,
@@ -334,7 +329,7 @@ pub fn run(a: &CampaignArgs) -> Result<()> {
     let reports: Vec<MissionReport> = (0..a.missions)
         .into_par_iter()
         .map(|i| {
-            let r = run_mission_board(a.seed + i, controller, a.drive, a.module_sense);
+            let r = run_mission_on(a.seed + i, controller, a.drive, a.module_sense);
             pb.inc(1);
             r
         })

@@ -289,12 +289,7 @@ impl SimSsr {
     /// when the SSR conducts there (shorted, or commanded to full duty, whose period has no off
     /// time) behind a conducting switch; else what the modules give back.
     pub fn module_window_v(&self, supply_v: f64, seebeck_v: f64) -> f64 {
-        let on = match self.fault {
-            SsrFault::StuckOn => true,
-            SsrFault::StuckOff => false,
-            SsrFault::None => self.ticks >= Self::MAX_TICKS,
-        };
-        if on && self.switch_conducts() {
+        if self.effective_duty() >= 1.0 {
             supply_v
         } else {
             seebeck_v.max(0.0)

@@ -318,7 +318,7 @@ impl Plant {
     /// The module current, A, and its mean square over its mean squared, for excitation `x`.
     fn current_a(&self, x: Excitation) -> (f64, f64) {
         let p = &self.p;
-        let back_emf = p.alpha_v_per_k * (self.t[HOT] - self.t[COLD]);
+        let back_emf = self.seebeck_v();
         match x {
             Excitation::Off => (0.0, 1.0),
             Excitation::Full => (((self.supply_v - back_emf) / p.r_ohm).max(0.0), 1.0),

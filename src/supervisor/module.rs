@@ -12,20 +12,20 @@
 //! modules in the conversion window at the end of each PWM period, where the SSR is commanded
 //! off at every duty below full ([`crate::adc::SampleWindow`] keeps its edges out). There a
 //! working SSR leaves only the modules' own Seebeck voltage, α ΔT ≤ 0.053 V/K × 60 K ≈ 3.2 V;
-//! a shorted one leaves the supply. The reading counts as powered above half the measured supply
-//! (the supply switch check's fraction, [`super::switch::SwitchConfig`]) and never below
-//! [`SEEBECK_MAX_V`], so that a sagging supply does not bring the limit down to what the modules
-//! give back themselves; 6 V without a supply measurement. Two powered readings in a row (one could be a glitch), each
-//! after a sample whose output had the switch closed and the duty below full cooling
-//! ([`super::ssr::SsrConfig::full_duty`]), are a shorted SSR: the supervisor limps home. A board
-//! that never calls [`crate::step::Carrier::observe_module_v`] has no such check.
+//! a shorted one leaves the supply. The reading counts as powered by the supply switch check's
+//! rule ([`super::switch::SwitchConfig::powered_above_v`]: above half the measured supply, 6 V
+//! without a supply measurement) but never below [`SEEBECK_MAX_V`], so that a sagging supply
+//! does not bring the limit down to what the modules give back themselves. Two powered readings
+//! in a row (one could be a glitch), each after a sample whose output had the switch closed and
+//! the duty below full cooling ([`super::ssr::SsrConfig::full_duty`]), are a shorted SSR: the
+//! supervisor limps home. A board that never calls [`crate::step::Carrier::observe_module_v`]
+//! has no such check.
 //!
 //! Measured in the simulator, which models the modules' voltage (`hter campaign --module-sense`,
 //! the same 10 000 missions): 7.2 minutes below 2 °C after any hardware fault instead of 384,
 //! lowest 1.77 °C instead of 0.86 (what is left is limp home's On-Off on the lightest carriers).
 
 use super::switch::SwitchConfig;
-use crate::units::max_f32;
 
 /// Powered readings in a row that make a short.
 pub const CONFIRM_SAMPLES: u8 = 2;
@@ -57,10 +57,7 @@ impl ModuleSense {
     /// `supply_v` (the supply switch check's limits).
     pub(crate) fn shorted(&mut self, cfg: &SwitchConfig, supply_v: Option<f32>) -> bool {
         let Some(v) = self.v.take() else { return false };
-        let limit = match supply_v {
-            Some(s) if s.is_finite() => max_f32(cfg.open_max_fraction * s, SEEBECK_MAX_V),
-            _ => cfg.open_max_v,
-        };
+        let limit = cfg.powered_above_v(supply_v, SEEBECK_MAX_V);
         // NaN (a broken sense) is not powered: it fails `>`.
         self.run = if self.window_off && v > limit { self.run.saturating_add(1) } else { 0 };
         self.run >= CONFIRM_SAMPLES

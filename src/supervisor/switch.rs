@@ -75,6 +75,17 @@ impl SwitchConfig {
         settle_s: 20.0,
         test_interval_s: 7200.0,
     };
+
+    /// The reading above which a node behind the supply reads powered, V: [`Self::open_max_fraction`]
+    /// of the measured supply `supply_v` but never below `floor_v`, or [`Self::open_max_v`]
+    /// without a (finite) supply measurement. The switch check's floor is
+    /// [`Self::open_floor_v`]; the module-side sense's is above the modules' Seebeck voltage.
+    pub fn powered_above_v(&self, supply_v: Option<f32>, floor_v: f32) -> f32 {
+        match supply_v {
+            Some(v) if v.is_finite() => max_f32(self.open_max_fraction * v, floor_v),
+            _ => self.open_max_v,
+        }
+    }
 }
 
 /// State of the supply-switch check, counted in samples.
@@ -143,10 +154,7 @@ impl SwitchCheck {
             None => return,
         };
         self.since_check = 0;
-        let limit = match supply_v {
-            Some(v) if v.is_finite() => max_f32(cfg.open_max_fraction * v, cfg.open_floor_v),
-            _ => cfg.open_max_v,
-        };
+        let limit = cfg.powered_above_v(supply_v, cfg.open_floor_v);
         // NaN (a broken sense) is not a short: it fails `>`.
         if rail > limit && !self.reported {
             self.reported = true;
