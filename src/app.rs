@@ -101,6 +101,10 @@ pub struct SampleIn {
     /// The switched rail at the end of the test pulse the previous sample asked for
     /// ([`crate::step::StepOutput::switch_test`]), V, if one was taken.
     pub switch_test_v: Option<f32>,
+    /// The voltage across the modules read in the conversion window, V, on a board with the
+    /// module-side sense ([`crate::step::Carrier::observe_module_v`]); `None` if not read.
+    #[cfg(feature = "module-sense")]
+    pub module_v: Option<f32>,
 }
 
 /// What one sample decided.
@@ -414,6 +418,10 @@ impl App {
         }
         if let Some(v) = s.switch_test_v {
             self.carrier.observe_switch_test_v(v);
+        }
+        #[cfg(feature = "module-sense")]
+        if let Some(v) = s.module_v {
+            self.carrier.observe_module_v(v);
         }
         let input = StepInput { t_ms: s.t_ms, counts: s.counts, setpoint_c: self.settings.setpoint_c };
         let out =

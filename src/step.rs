@@ -192,7 +192,8 @@ impl<C: Controller> Carrier<C> {
     /// duty — V, for the next sample. With it the step finds a shorted SSR within two samples,
     /// whatever the load does ([`crate::supervisor::module`]). Without this call (the reference
     /// board has no such sense; the buck drive has no window) there is no such check. Built
-    /// with the `module-sense` feature (the host's default; not the firmware's).
+    /// with the `module-sense` feature (the host's default; the firmware's `module-sense`
+    /// build, which reads it on PC1).
     #[cfg(feature = "module-sense")]
     pub fn observe_module_v(&mut self, v: f32) {
         self.supervisor.observe_module_v(v);

@@ -7,8 +7,14 @@ use hal_sim::sim::virtual_board::{VirtualBoard, VirtualOptions};
 use hal_sim::sim::PlantChoice;
 
 fn board() -> VirtualBoard {
-    VirtualBoard::new(&VirtualOptions { plant: PlantChoice::Hter1, load: Load::Full, ambient_c: 28.0, seed: 1 })
-        .unwrap()
+    VirtualBoard::new(&VirtualOptions {
+        plant: PlantChoice::Hter1,
+        load: Load::Full,
+        ambient_c: 28.0,
+        seed: 1,
+        module_sense: false,
+    })
+    .unwrap()
 }
 
 fn run(b: &mut VirtualBoard, seconds: f64) {

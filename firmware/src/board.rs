@@ -14,6 +14,7 @@
 //! | supply enable | PB0 | A3 (CN8-4) | gate driver of a high-side P-MOSFET switch in series with the SSR and the modules; high = power allowed; pulled down, so a reset or a dead MCU removes power |
 //! | status LED | PA5 | LD2 (on board) | on while cooling is enabled |
 //! | switched rail | PC0 (ADC1_IN1) | A5 (CN8-6) | 47 kΩ from the modules' side of the supply-enable switch (after the P-MOSFET) to PC0, 10 kΩ to AGND, 100 nF across the 10 kΩ: reads the rail the modules really see, so a shorted switch shows as voltage while the switch is open |
+//! | modules' side of the SSR (`module-sense` build) | PC1 (ADC1_IN2) | A4 (CN8-5) | 47 kΩ from the SSR's load terminal (the modules' supply side) to PC1, 10 kΩ to AGND, 100 nF across the 10 kΩ (τ 0.8 ms: settled ≥ 20 ms before it is read), and a BAT54 Schottky from AGND (anode) to PC1: the modules' Seebeck voltage reverses when the load is warmer than the room (up to −0.56 V at the pin, past the −0.3 V the pin allows). Read in the conversion window after the RTD, where the SSR is off at every duty below full: a shorted SSR reads the supply (`hter::supervisor::module`, README "The module-side sense") |
 //! | alarm output | PC7 | D9 (CN5-2) | a buzzer or red lamp through a low-side NPN/N-MOSFET driver; high = alarm (`hter::alarm`); the second path to the buzzer beside the heartbeat |
 //! | heartbeat | PB5 | D4 (CN9-5) | toggled once per healthy control step (`hter::failsafe::Heartbeat`) into a retriggerable monostable (74HC123, timeout ≈ 15 s = 1.5·Ts): its output silences the buzzer only while edges arrive, and is ANDed into the supply-enable gate drive, so a reset, hung or dead MCU (pins Hi-Z) sounds the buzzer and opens the supply within 2·Ts without software (README, wiring) |
 //! | acknowledge button | PC13 | B1 (on board, blue) | pressed pulls low (the Nucleo's pull-up); clears a latched alarm |
@@ -298,6 +299,8 @@ pub fn init() -> Board {
         reference: p.PA1.degrade_adc(),
         supply: p.PA4.degrade_adc(),
         switched: p.PC0.degrade_adc(),
+        #[cfg(feature = "module-sense")]
+        module: p.PC1.degrade_adc(),
         vrefint,
     };
 
@@ -442,6 +445,9 @@ pub struct Analog {
     reference: AnyAdcChannel<'static, ADC1>,
     supply: AnyAdcChannel<'static, ADC1>,
     switched: AnyAdcChannel<'static, ADC1>,
+    /// The modules' side of the SSR (`module-sense` build).
+    #[cfg(feature = "module-sense")]
+    module: AnyAdcChannel<'static, ADC1>,
     vrefint: VrefInt,
 }
 
@@ -449,7 +455,8 @@ pub struct Analog {
 /// and the sampling capacitor settle fully, and VREFINT needs ≥ 4 µs) + 12.5 of conversion; 256
 /// of them take 2.1 ms at 80 MHz. embassy converts twice on the L4 and keeps the second (an L4
 /// ADC erratum: the first conversion after a pause longer than 1 ms may be corrupted), so each
-/// input takes ≈ 4.2 ms and the six conversions of a sample block the executor ≈ 25 ms every Ts.
+/// input takes ≈ 4.2 ms and the six conversions of a sample block the executor ≈ 25 ms every Ts
+/// (seven, ≈ 29 ms, in the `module-sense` build).
 const SAMPLE_TIME: SampleTime = SampleTime::CYCLES640_5;
 
 /// One sample of the analog inputs.
@@ -469,6 +476,10 @@ pub struct Conversion {
     /// The switched rail at the end of a supply-switch test pulse, V (`None`: none was asked
     /// for, or it could not be measured).
     pub switch_test_v: Option<f32>,
+    /// The modules' side of the SSR read in the conversion window, V (`None`: it could not be
+    /// measured, or the conversion did not end inside the window; `module-sense` build).
+    #[cfg(feature = "module-sense")]
+    pub module_v: Option<f32>,
     /// VDDA from VREFINT, V (`None` if it could not be measured).
     pub vdda_v: Option<f32>,
     /// The RTD conversion landed inside the sampling window of the SSR PWM period.
@@ -564,6 +575,8 @@ impl Analog {
             Ain::Reference => &mut self.reference,
             Ain::Supply => &mut self.supply,
             Ain::Switched => &mut self.switched,
+            #[cfg(feature = "module-sense")]
+            Ain::Module => &mut self.module,
         };
         u32::from(self.adc.blocking_read(ch, SAMPLE_TIME))
     }
@@ -591,6 +604,14 @@ impl Analog {
             if in_window || attempt >= SYNC_ATTEMPTS {
                 break (signal, before, after, in_window);
             }
+        };
+        // The modules, right after the RTD and still in the window (≈ 17 ms of its 30 with the
+        // four conversions), where the SSR has been off ≥ 10 ms at any duty below full. A
+        // conversion that ended in the next period may have seen the SSR's rising edge: none.
+        #[cfg(feature = "module-sense")]
+        let module = {
+            let counts = self.read(Ain::Module);
+            (in_window && !tim3_update_pending()).then_some(counts)
         };
         // Both references in their window and agreeing; their mean is the reference at the RTD
         // conversion's midpoint.
@@ -633,6 +654,8 @@ impl Analog {
             supply_v: config::SUPPLY.volts(supply, vrefint, cal),
             switched_v: config::SUPPLY.volts(switched, vrefint, cal),
             switch_test_v,
+            #[cfg(feature = "module-sense")]
+            module_v: module.and_then(|m| config::SUPPLY.volts(m, vrefint, cal)),
             vdda_v,
             in_window,
         }
@@ -646,6 +669,9 @@ enum Ain {
     Reference,
     Supply,
     Switched,
+    /// The modules' side of the SSR (`module-sense` build).
+    #[cfg(feature = "module-sense")]
+    Module,
 }
 
 /// Starts TIM3 as the `buck` build's sample clock: the SSR build's period (PSC + 1 = 1221,

@@ -24,6 +24,8 @@
     all(feature = "igmvc", feature = "identify"),
 ))]
 compile_error!("features `pi`, `onoff`, `igmvc` and `identify` each select a controller: enable at most one");
+#[cfg(all(feature = "module-sense", feature = "buck"))]
+compile_error!("feature `module-sense` reads the modules in the SSR's off time: the `buck` drive has none");
 
 use hter::adc::SupplySense;
 use hter::calib::TwoPoint;

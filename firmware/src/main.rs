@@ -76,6 +76,9 @@ struct Sample {
     switched_v: Option<f32>,
     /// The switched rail at the end of a supply-switch test pulse, V (`None`: none taken).
     switch_test_v: Option<f32>,
+    /// The modules' side of the SSR in the conversion window, V (`None`: not read in it).
+    #[cfg(feature = "module-sense")]
+    module_v: Option<f32>,
     /// VDD above the PVD level: flash may be written.
     supply_ok: bool,
 }
@@ -101,6 +104,9 @@ struct Telemetry {
     counts: u32,
     supply_v: Option<f32>,
     switched_v: Option<f32>,
+    /// The modules' side of the SSR in the conversion window, V (`None`: not read in it).
+    #[cfg(feature = "module-sense")]
+    module_v: Option<f32>,
     alarm: Indication,
     /// Estimator state of a self-tuning controller (θ, trace P, prediction error, mode).
     status: Option<ControllerStatus>,
@@ -212,6 +218,8 @@ async fn sample(mut analog: board::Analog) {
                 supply_v: c.supply_v,
                 switched_v: c.switched_v,
                 switch_test_v: c.switch_test_v,
+                #[cfg(feature = "module-sense")]
+                module_v: c.module_v,
                 supply_ok,
             })
             .await;
@@ -273,6 +281,10 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
         if let Some(v) = s.switch_test_v {
             carrier.observe_switch_test_v(v);
         }
+        #[cfg(feature = "module-sense")]
+        if let Some(v) = s.module_v {
+            carrier.observe_module_v(v);
+        }
         let input = hter::step::StepInput { t_ms: s.t_ms, counts: s.counts, setpoint_c: config::SETPOINT_C };
         let out = if s.reference_ok { carrier.step(&input) } else { carrier.step_with_reference_fault(&input) };
         let rec = recorder.push(s.t_ms, out.temp_c.0);
@@ -312,6 +324,8 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             counts: s.counts,
             supply_v: s.supply_v,
             switched_v: s.switched_v,
+            #[cfg(feature = "module-sense")]
+            module_v: s.module_v,
             alarm,
             status: out.status,
         };
@@ -390,6 +404,8 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             supply_v: s.supply_v,
             switched_v: s.switched_v,
             switch_test_v: s.switch_test_v,
+            #[cfg(feature = "module-sense")]
+            module_v: s.module_v,
         });
         let step = &out.step;
         ACTUATION.signal(Actuation {
@@ -422,6 +438,8 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             counts: s.counts,
             supply_v: s.supply_v,
             switched_v: s.switched_v,
+            #[cfg(feature = "module-sense")]
+            module_v: s.module_v,
             alarm: out.alarm,
             status: step.status,
             holdover_s: step.holdover_s.unwrap_or(f32::NAN),
@@ -576,6 +594,10 @@ async fn telemetry() {
             r.switched_v.unwrap_or(f32::NAN),
             r.alarm
         );
+        // The module-side sense's reading (NaN: not read in the window), on a line of its own so
+        // that `hter log2csv` (which keys on `temp=`) reads logs of either build alike.
+        #[cfg(feature = "module-sense")]
+        info!("module t={=u64:ms} v={}", r.t_ms, r.module_v.unwrap_or(f32::NAN));
         if let Some(st) = r.status {
             info!(
                 "est t={=u64:ms} ctl={} theta={} trace_p={} pe={} reset={}",

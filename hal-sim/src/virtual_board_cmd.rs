@@ -42,6 +42,11 @@ pub struct VirtualBoardArgs {
     /// Stop after this many simulated seconds (default: run until stopped).
     #[arg(long, allow_negative_numbers = true)]
     pub duration: Option<f64>,
+    /// The board of the `interface,module-sense` firmware build: the modules' voltage in the
+    /// conversion window goes to the step with each sample (README, "Fail-loud alarm, switch
+    /// sense and what is unverified").
+    #[arg(long)]
+    pub module_sense: bool,
 }
 
 /// Serves the virtual board until stopped (or `--duration`).
@@ -61,7 +66,13 @@ pub fn run(a: &VirtualBoardArgs) -> Result<()> {
         d => d,
     };
     let plant = PlantChoice::parse(&a.plant)?;
-    let mut board = VirtualBoard::new(&VirtualOptions { plant, load: a.load.into(), ambient_c, seed: a.seed })?;
+    let mut board = VirtualBoard::new(&VirtualOptions {
+        plant,
+        load: a.load.into(),
+        ambient_c,
+        seed: a.seed,
+        module_sense: a.module_sense,
+    })?;
     if let Some(ops) = a.cut_settings_write {
         board.cut_next_settings_write(ops);
     }

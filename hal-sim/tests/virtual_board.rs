@@ -217,7 +217,8 @@ fn after_a_reset_the_holdover_still_runs_on_the_cabinet_model() {
         let prefix = format!("{key}=");
         reply.lines().find_map(|l| l.strip_prefix(prefix.as_str())).map(str::to_string).unwrap()
     };
-    let opts = VirtualOptions { plant: PlantChoice::Hter1, load: Load::Full, ambient_c: 28.0, seed: 1 };
+    let opts =
+        VirtualOptions { plant: PlantChoice::Hter1, load: Load::Full, ambient_c: 28.0, seed: 1, module_sense: false };
     let mut b = VirtualBoard::new(&opts).unwrap();
     for _ in 0..360 {
         b.step().unwrap();
@@ -276,4 +277,43 @@ fn a_half_request_left_by_a_client_that_went_away_is_dropped() {
     std::thread::sleep(Duration::from_millis(300));
     let s = b.status();
     assert_eq!(s["setpoint_c"], 4.0, "{s}");
+}
+
+/// The `interface,module-sense` build on the virtual board: the sample `App::sample` gets
+/// carries the modules' voltage read in the conversion window (hal-sim's model: the modules'
+/// Seebeck voltage behind a working SSR, the supply through a shorted one). An hour of holding
+/// 4 °C reads no short; a shorted SSR is found at the second sample after it and the board
+/// limps home. The reference board (no sense) has not found it after those two samples: it
+/// waits for the load to fall.
+#[test]
+fn with_the_module_side_sense_the_interface_build_finds_a_shorted_ssr_at_the_second_sample() {
+    use hal_sim::fault::Fault;
+    use hal_sim::plant::Load;
+    use hal_sim::sim::virtual_board::{VirtualBoard, VirtualOptions};
+    use hal_sim::sim::PlantChoice;
+    use hter::event::EventKind;
+    let mut found = Vec::new();
+    for module_sense in [true, false] {
+        let opts =
+            VirtualOptions { plant: PlantChoice::Hter1, load: Load::Full, ambient_c: 28.0, seed: 1, module_sense };
+        let mut b = VirtualBoard::new(&opts).unwrap();
+        for _ in 0..360 {
+            let out = b.step().unwrap();
+            assert!(
+                out.step.events.iter().all(|e| e.kind != EventKind::SsrStuckOn),
+                "{module_sense}: {:?}",
+                out.step.events
+            );
+        }
+        b.inject(Fault::SsrStuckOn);
+        let at = (1..=60).find(|_| b.step().unwrap().step.events.iter().any(|e| e.kind == EventKind::SsrStuckOn));
+        if module_sense {
+            let status = b.request("status");
+            assert!(status.contains("mode=limp_home\r\n"), "{status}");
+        }
+        found.push((at, b.load_c()));
+    }
+    assert_eq!(found[0].0, Some(2), "with the sense");
+    assert!(found[1].0.is_none_or(|n| n > 2), "without the sense: {:?}", found[1]);
+    eprintln!("shorted SSR found at sample {:?} with the sense, {:?} without (sample, load °C)", found[0], found[1]);
 }

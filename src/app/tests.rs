@@ -45,12 +45,23 @@ struct Bench {
     /// Duties applied in the last 60 s, oldest first: the plant's dead time.
     pipe: std::collections::VecDeque<f32>,
     saves: Vec<Save>,
+    /// What the board's module-side sense reads each sample (`None`: the reference board).
+    #[cfg(feature = "module-sense")]
+    module_v: Option<f32>,
 }
 
 impl Bench {
     fn new(boot: &Boot) -> Bench {
         let hold = 24.0 / 43.0;
-        Bench { app: App::new(config(), boot), t_ms: 0, load_c: 4.0, pipe: [hold; 6].into(), saves: Vec::new() }
+        Bench {
+            app: App::new(config(), boot),
+            t_ms: 0,
+            load_c: 4.0,
+            pipe: [hold; 6].into(),
+            saves: Vec::new(),
+            #[cfg(feature = "module-sense")]
+            module_v: None,
+        }
     }
 
     fn run(&mut self, samples: usize) -> SampleOut {
@@ -63,6 +74,8 @@ impl Bench {
                 supply_v: None,
                 switched_v: None,
                 switch_test_v: None,
+                #[cfg(feature = "module-sense")]
+                module_v: self.module_v,
             });
             // 10 s of a τ = 1800 s plant: equilibrium 28 − 43·duty, the duty of 60 s ago.
             self.pipe.push_back(out.step.duty.get());
@@ -492,4 +505,29 @@ fn status_time_stays_exact_after_months_and_years() {
     b.t_ms = 250_000_000_000;
     b.run(1);
     assert_eq!(b.field("t_s"), "250000000.0");
+}
+
+/// The module-side sense reaches the step through the board's sample: the modules' own Seebeck
+/// voltage for an hour is no short; the supply across them in the window, twice, is one.
+#[cfg(feature = "module-sense")]
+#[test]
+fn the_apps_sample_carries_the_module_side_sense_to_the_step() {
+    let mut b = Bench::new(&boot());
+    // PI holds a steady duty on this bench's plant (the self-tuner, on a start model of another
+    // plant, swings it to full cooling, where the window tells nothing).
+    assert_eq!(b.send("set controller pi"), "ok\r\n");
+    b.module_v = Some(2.5);
+    for _ in 0..360 {
+        let out = b.run(1);
+        assert!(out.step.events.iter().all(|e| e.kind != EventKind::SsrStuckOn), "t = {} ms", b.t_ms);
+    }
+    // A shorted SSR: the supply (12 V, above the 6 V limit without a supply reading) in the window.
+    b.module_v = Some(12.0);
+    let first = b.run(1);
+    assert_eq!(first.step.mode, crate::step::Mode::Normal, "one reading is not a short");
+    assert!(first.step.supply_enable);
+    assert!(first.step.duty.get() < 0.9, "the SSR must be commanded off in the window: {:?}", first.step.duty);
+    let second = b.run(1);
+    assert!(second.step.events.iter().any(|e| e.kind == EventKind::SsrStuckOn), "{:?}", second.step.events);
+    assert_eq!(second.step.mode, crate::step::Mode::LimpHome);
 }

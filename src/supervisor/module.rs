@@ -8,7 +8,8 @@
 //! cold already stored in the cold plate does the rest).
 //!
 //! A board with a divider on the modules' side of the SSR (an ADC channel; the reference board
-//! has none, README "Fail-loud alarm, switch sense and what is unverified") can read the
+//! has none, the firmware's `module-sense` build reads it on PC1, README "Fail-loud alarm,
+//! switch sense and what is unverified") can read the
 //! modules in the conversion window at the end of each PWM period, where the SSR is commanded
 //! off at every duty below full ([`crate::adc::SampleWindow`] keeps its edges out). There a
 //! working SSR leaves only the modules' own Seebeck voltage, α ΔT ≤ 0.053 V/K × 60 K ≈ 3.2 V;

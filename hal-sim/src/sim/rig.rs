@@ -106,6 +106,9 @@ impl Rig {
                     supply_v: Some(plant.supply_v() as f32),
                     switched_v: Some(ssr.switched_rail_v(plant.supply_v()) as f32),
                     switch_test_v: board.test_pulse(ssr, plant.supply_v()),
+                    module_v: board
+                        .module_sense
+                        .then(|| ssr.module_window_v(plant.supply_v(), plant.seebeck_v()) as f32),
                 })
             }
             Rig::Arx(_) => None,

@@ -66,6 +66,9 @@ pub struct VirtualOptions {
     pub ambient_c: f64,
     /// Seed of the ADC noise.
     pub seed: u64,
+    /// The board has the module-side sense (the firmware's `interface,module-sense` build): the
+    /// modules' voltage in the conversion window goes to the step with each sample.
+    pub module_sense: bool,
 }
 
 /// The simulated carrier and its board.
@@ -111,6 +114,7 @@ impl VirtualBoard {
             load: opts.load,
             ambient_c: opts.ambient_c,
             seed: opts.seed,
+            module_sense: opts.module_sense,
             ..SimOptions::new(scenario, ControllerSpec::new(ControllerChoice::Gpc))
         };
         let (rig, _u0) = Rig::new(&sim)?;
@@ -163,6 +167,11 @@ impl VirtualBoard {
     /// erases); the board then restarts as after a brown-out and restores what flash holds.
     pub fn cut_next_settings_write(&mut self, ops: usize) {
         self.cut_settings = Some(ops);
+    }
+
+    /// Injects a hardware fault into the simulated carrier from the next sample on (for tests).
+    pub fn inject(&mut self, fault: crate::fault::Fault) {
+        self.rig.inject(fault);
     }
 
     /// Powers the board up from what its flash holds: scrub, restore, a new [`App`].
