@@ -96,9 +96,10 @@ fn forty_settings_in_the_minute_after_a_boot_leave_a_marked_hole_in_the_history(
     let events: Vec<(u32, &str)> =
         rows.iter().filter(|r| !r[6].is_empty()).map(|r| (r[0].parse().unwrap(), r[6])).collect();
     // The boot's `restarted` and the first 24 settings did not fit the gate's 16 places: one
-    // `log_entries_lost` at the newest lost one's time (setting 24, sent after the sample at
-    // 20 s: record time 21 s, the log starting at 1 s), then the 16 settings kept, in order.
-    assert_eq!(events[0], (21, "log_entries_lost"), "{events:?}");
+    // `log_entries_lost:25` (the 25 lost) at the newest lost one's time (setting 24, sent after
+    // the sample at 20 s: record time 21 s, the log starting at 1 s), then the 16 settings kept,
+    // in order.
+    assert_eq!(events[0], (21, "log_entries_lost:25"), "{events:?}");
     let kept: Vec<String> = sent[24..].iter().map(|sp| format!("set:setpoint_c={sp}")).collect();
     assert_eq!(events[1..=16].iter().map(|e| e.1.to_string()).collect::<Vec<_>>(), kept);
     assert_eq!(events[1].0, 31, "setting 25 was sent after the sample at 30 s");

@@ -281,8 +281,11 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
             }
             match (result, save) {
                 #[cfg(feature = "interface")]
-                (Ok(()), Save::Log(LogEntry::Event { t_s, kind: hter::event::EventKind::LogEntriesLost })) => {
-                    warn!("persist: log entries lost while writes waited, the newest at record time {} s", t_s)
+                (Ok(()), Save::Log(LogEntry::Lost { t_s, entries })) => {
+                    warn!(
+                        "persist: {} log entries lost while writes waited, the newest at record time {} s",
+                        entries, t_s
+                    )
                 }
                 (Ok(()), Save::Log(_)) => {}
                 (Ok(()), Save::Model(rec)) => info!("persist: model stored: theta={} k={}", rec.theta, rec.k),

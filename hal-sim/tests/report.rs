@@ -156,7 +156,7 @@ fn history() -> String {
         s.push_str(&format!("{t},{c:.2},{:.2},{:.2},0.40,normal,\n", c - 0.1, c + 0.1));
         match t {
             600 => s.push_str("600,4.00,3.90,4.10,,,set:setpoint_c=4.00\n"),
-            7500 => s.push_str("7600,12.00,11.90,12.10,,,restarted:brownout\n7650,,,,,,log_entries_lost\n"),
+            7500 => s.push_str("7600,12.00,11.90,12.10,,,restarted:brownout\n7650,,,,,,log_entries_lost:12\n"),
             // 10 h above 8 °C from 7200 s.
             43200 => s.push_str("43200,,,,,,alarm:heat_10h\n"),
             60000 => s.push_str("60100,4.00,3.90,4.10,,,sensor_open\n"),
@@ -178,7 +178,7 @@ fn a_board_history_gives_a_report_with_its_resets_and_faults() {
     let alarms = page_alarms(&page);
     assert_eq!(alarms, [("heat_10h".to_owned(), 7200.0, 43200.0)]);
     assert!(page.contains("restarted:brownout") && page.contains("sensor_open"), "resets and faults listed");
-    assert!(page.contains("<li>log_entries_lost"), "a hole in the record is listed with the faults");
+    assert!(page.contains("<li>log_entries_lost:12"), "a hole in the record is listed with the faults, with its size");
     assert!(!page.contains("<li>set:"), "a settings change is not a fault");
     // The event rows are not samples: 312 interval rows, and the one with empty temperatures is
     // no sensor fault to the monitor either.

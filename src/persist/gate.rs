@@ -17,16 +17,16 @@
 //! Cold-chain log entries are not whole states: each waits, in order, up to [`PENDING_LOG`] of
 //! them. Beyond that the oldest waiting entry is dropped (a pop at the queue's front: the
 //! cheapest in flash), and the record says so. The first log entry written when the gate opens
-//! is then one `log_entries_lost` event ([`EventKind::LogEntriesLost`]) stamped with the record
-//! time of the newest entry dropped, before the entries kept: the record stays in time order,
-//! and what it misses lies after the entry before that event, up to the event's time. Forty
-//! settings accepted in the minute after a boot, say, leave `log_entries_lost` at the 24th
-//! one's time, then the last sixteen (the boot's `restarted` event was among the lost).
+//! is then one `log_entries_lost` event ([`EventKind::LogEntriesLost`](crate::event::EventKind::LogEntriesLost), [`LogEntry::Lost`])
+//! stamped with the record time of the newest entry dropped and carrying how many were, before
+//! the entries kept: the record stays in time order, and what it misses lies after the entry
+//! before that event, up to the event's time. Forty settings accepted in the minute after a
+//! boot, say, leave `log_entries_lost:25` at the 24th one's time, then the last sixteen (the
+//! boot's `restarted` event was among the lost).
 
 use super::log::LogEntry;
 use super::{HistoryRecord, ModelRecord};
 use crate::calib::TwoPoint;
-use crate::event::EventKind;
 
 /// How long the supply must have been good since boot (or since its last bad sample) before a
 /// write, ms: 60 s, six samples at Ts = 10 s, several times the seconds a brown-out or a plug
@@ -114,7 +114,7 @@ pub enum Save {
 
 /// Log entries that may wait for the [`WriteGate`]: a little over an hour of intervals and
 /// events at a typical rate; beyond it the oldest waiting entry is dropped, and the record gets
-/// a `log_entries_lost` event in its place ([`EventKind::LogEntriesLost`]).
+/// a `log_entries_lost` event in its place ([`EventKind::LogEntriesLost`](crate::event::EventKind::LogEntriesLost)).
 pub const PENDING_LOG: usize = 16;
 
 /// The newest record of each kind waiting for the [`WriteGate`], and the log entries (in order;
@@ -129,8 +129,9 @@ pub struct PendingSaves {
     history: Option<HistoryRecord>,
     log: heapless::Deque<LogEntry, PENDING_LOG>,
     /// Record time of the newest log entry dropped (because [`PENDING_LOG`] were waiting) since
-    /// the last `log_entries_lost` event went out, s; `None` when none was.
-    log_lost_s: Option<u32>,
+    /// the last `log_entries_lost` event went out, s, and how many were (saturating); `None`
+    /// when none was.
+    log_lost: Option<(u32, u16)>,
     /// The waiting history holds an alarm not yet stored (stays set when a newer history
     /// replaces it: the newer one counts the alarm too).
     alarm: bool,
@@ -146,7 +147,7 @@ impl PendingSaves {
         cabinet: None,
         history: None,
         log: heapless::Deque::new(),
-        log_lost_s: None,
+        log_lost: None,
         alarm: false,
     };
 
@@ -161,7 +162,8 @@ impl PendingSaves {
             Save::Log(e) => {
                 if self.log.is_full() {
                     if let Some(lost) = self.log.pop_front() {
-                        self.log_lost_s = Some(lost.t_s());
+                        let before = self.log_lost.map_or(0, |(_, n)| n);
+                        self.log_lost = Some((lost.t_s(), before.saturating_add(1)));
                     }
                 }
                 let _ = self.log.push_back(e);
@@ -185,7 +187,7 @@ impl PendingSaves {
             && self.settings.is_none()
             && self.history.is_none()
             && self.log.is_empty()
-            && self.log_lost_s.is_none()
+            && self.log_lost.is_none()
     }
 
     /// The next record `gate` lets through at `now_ms`, removed from the queue: an alarm history
@@ -213,8 +215,8 @@ impl PendingSaves {
             return Some(Save::History(h));
         }
         // Every dropped entry is older than every waiting one: the event goes first.
-        if let Some(t_s) = self.log_lost_s.take() {
-            return Some(Save::Log(LogEntry::Event { t_s, kind: EventKind::LogEntriesLost }));
+        if let Some((t_s, entries)) = self.log_lost.take() {
+            return Some(Save::Log(LogEntry::Lost { t_s, entries }));
         }
         if let Some(e) = self.log.pop_front() {
             return Some(Save::Log(e));
@@ -229,6 +231,7 @@ impl PendingSaves {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::event::EventKind;
 
     const TS_MS: u64 = 10_000;
 
@@ -335,8 +338,8 @@ mod tests {
         core::iter::from_fn(|| p.next(gate, now_ms)).collect()
     }
 
-    fn lost(t_s: u32) -> Save {
-        Save::Log(LogEntry::Event { t_s, kind: EventKind::LogEntriesLost })
+    fn lost(t_s: u32, entries: u16) -> Save {
+        Save::Log(LogEntry::Lost { t_s, entries })
     }
 
     #[test]
@@ -356,10 +359,11 @@ mod tests {
         }
         gate.note_supply(SUPPLY_HOLD_OFF_MS, true);
         let writes = drain(&mut p, &gate, SUPPLY_HOLD_OFF_MS);
-        // The boot's event and settings 1…24 were dropped: the event carries setting 24's time.
+        // The boot's event and settings 1…24 were dropped: the event carries setting 24's time
+        // and their number.
         let kept = &entries[entries.len() - PENDING_LOG..];
         assert_eq!(kept[0].t_s(), 26);
-        let want: Vec<Save> = core::iter::once(lost(25)).chain(kept.iter().map(|e| Save::Log(*e))).collect();
+        let want: Vec<Save> = core::iter::once(lost(25, 25)).chain(kept.iter().map(|e| Save::Log(*e))).collect();
         assert_eq!(writes, want);
         assert!(p.is_empty());
         let t_s: Vec<u32> =
@@ -384,7 +388,7 @@ mod tests {
         gate.note_supply(80_000, true);
         gate.note_supply(80_000 + SUPPLY_HOLD_OFF_MS, true);
         let writes = drain(&mut p, &gate, 80_000 + SUPPLY_HOLD_OFF_MS);
-        assert_eq!(writes.first(), Some(&lost(204)), "21 entries, 5 dropped: the newest at 204 s");
+        assert_eq!(writes.first(), Some(&lost(204, 5)), "21 entries, 5 dropped: the newest at 204 s");
         assert_eq!(writes[1..], again[5..].iter().map(|e| Save::Log(*e)).collect::<Vec<_>>());
     }
 

@@ -12,7 +12,7 @@
 //! 0      1 … 4     5 … 15
 //! tag    t_s u32   payload (zero padded)
 //! 'I'  interval  mean, min, max: i16 centi-°C; duty: u16 /10 000; mode u8
-//! 'E'  event     EventKind::code u32
+//! 'E'  event     EventKind::code u32; for log_entries_lost, the entries lost u16 after it
 //! 'A'  alarm     AlarmKind index u8; start_s u32
 //! 'S'  setting   SettingKey u8; two f32 values
 //! ```
@@ -23,9 +23,12 @@
 //! Entries wait in RAM while flash writes are held off (the minute after a boot, a bad supply:
 //! [`crate::persist::WriteGate`]). When more than [`crate::persist::PENDING_LOG`] wait, the
 //! oldest are dropped, and the log gets one `log_entries_lost` event
-//! ([`EventKind::LogEntriesLost`]) at the newest lost entry's time, ahead of the entries kept
-//! ([`crate::persist::PendingSaves`]): a hole in the record is marked, never silent. What is
-//! missing lies between the entry before that event and the event's time.
+//! ([`EventKind::LogEntriesLost`], stored as [`LogEntry::Lost`] with how many were dropped) at
+//! the newest lost entry's time, ahead of the entries kept ([`crate::persist::PendingSaves`]):
+//! a hole in the record is marked and sized, never silent. What is missing lies between the
+//! entry before that event and the event's time. A count of 0 is a record written before the
+//! count was kept (the bytes after the code were zero then): entries were lost, how many is not
+//! known.
 
 use crate::coldchain::AlarmKind;
 use crate::event::EventKind;
@@ -121,6 +124,14 @@ pub enum LogEntry {
         /// What happened.
         kind: EventKind,
     },
+    /// Log entries lost before they reached flash ([`EventKind::LogEntriesLost`]): stored as
+    /// that event with the count after its code.
+    Lost {
+        /// The newest lost entry's record time, s.
+        t_s: u32,
+        /// How many entries were dropped (saturating; 0: a record from before the count).
+        entries: u16,
+    },
     /// A cold-chain alarm.
     Alarm {
         /// When it was raised, record s.
@@ -176,6 +187,7 @@ impl LogEntry {
         match *self {
             LogEntry::Interval { t_s, .. }
             | LogEntry::Event { t_s, .. }
+            | LogEntry::Lost { t_s, .. }
             | LogEntry::Alarm { t_s, .. }
             | LogEntry::Setting { t_s, .. } => t_s,
         }
@@ -186,7 +198,7 @@ impl LogEntry {
         let mut b = [0u8; ENTRY_LEN];
         let (tag, t_s) = match self {
             LogEntry::Interval { t_s, .. } => (b'I', *t_s),
-            LogEntry::Event { t_s, .. } => (b'E', *t_s),
+            LogEntry::Event { t_s, .. } | LogEntry::Lost { t_s, .. } => (b'E', *t_s),
             LogEntry::Alarm { t_s, .. } => (b'A', *t_s),
             LogEntry::Setting { t_s, .. } => (b'S', *t_s),
         };
@@ -202,6 +214,10 @@ impl LogEntry {
                 b[13] = i.mode as u8;
             }
             LogEntry::Event { kind, .. } => b[5..9].copy_from_slice(&kind.code().to_le_bytes()),
+            LogEntry::Lost { entries, .. } => {
+                b[5..9].copy_from_slice(&EventKind::LogEntriesLost.code().to_le_bytes());
+                b[9..11].copy_from_slice(&entries.to_le_bytes());
+            }
             LogEntry::Alarm { kind, start_s, .. } => {
                 b[5] = *kind as u8;
                 b[6..10].copy_from_slice(&start_s.to_le_bytes());
@@ -235,7 +251,11 @@ impl LogEntry {
             b'E' => {
                 let code = u32_at(5);
                 let kind = EventKind::ALL.into_iter().find(|k| k.code() == code).ok_or(EntryError::Unknown)?;
-                LogEntry::Event { t_s, kind }
+                if kind == EventKind::LogEntriesLost {
+                    LogEntry::Lost { t_s, entries: u16::from_le_bytes([b[9], b[10]]) }
+                } else {
+                    LogEntry::Event { t_s, kind }
+                }
             }
             b'A' => LogEntry::Alarm {
                 t_s,
@@ -345,6 +365,8 @@ pub fn write_csv_row(entry: &LogEntry, out: &mut impl core::fmt::Write) -> core:
             write!(out, "{t},,,,,,")?;
             match entry {
                 LogEntry::Event { kind, .. } => out.write_str(kind.name()),
+                LogEntry::Lost { entries: 0, .. } => out.write_str(EventKind::LogEntriesLost.name()),
+                LogEntry::Lost { entries, .. } => write!(out, "{}:{entries}", EventKind::LogEntriesLost.name()),
                 LogEntry::Alarm { kind, start_s, .. } => write!(out, "alarm:{}@{start_s}", kind.name()),
                 LogEntry::Setting { key, value, .. } => match key {
                     SettingKey::Setpoint => write!(out, "set:setpoint_c={}", Fixed(value[0], 2)),
@@ -383,6 +405,8 @@ mod tests {
                 interval: Interval { mean_c: 4.02, min_c: 3.87, max_c: -1.5, duty: 0.4567, mode: Mode::FreezeGuard },
             },
             LogEntry::Event { t_s: 7, kind: EventKind::Restarted(ResetCause::BrownOut) },
+            LogEntry::Lost { t_s: 8, entries: 1 },
+            LogEntry::Lost { t_s: 9, entries: u16::MAX },
             LogEntry::Alarm { t_s: 36_000, kind: AlarmKind::Heat10h, start_s: 0 },
             LogEntry::Setting { t_s: 12, key: SettingKey::CalWarm, value: [25.31, 25.02] },
         ];
@@ -399,7 +423,7 @@ mod tests {
                 _ => assert_eq!(e, back),
             }
         }
-        for ev in EventKind::ALL {
+        for ev in EventKind::ALL.into_iter().filter(|&k| k != EventKind::LogEntriesLost) {
             assert_eq!(
                 LogEntry::decode(&LogEntry::Event { t_s: 1, kind: ev }.encode()),
                 Ok(LogEntry::Event { t_s: 1, kind: ev })
@@ -435,6 +459,23 @@ mod tests {
         assert_eq!(interval.mode, Mode::Normal);
         let LogEntry::Interval { t_s, interval } = closed[1] else { panic!() };
         assert_eq!((t_s, interval.mode), (600, Mode::SensorFault), "sample 40 is at 405 s");
+    }
+
+    /// The lost-entry count sits after the event's code, where the bytes were zero before it was
+    /// kept: a record written then still reads, as a hole of unknown size.
+    #[test]
+    fn a_lost_entries_event_keeps_its_count_and_older_records_read_as_unknown() {
+        let bytes = LogEntry::Lost { t_s: 600, entries: 37 }.encode();
+        assert_eq!(&bytes[5..9], &EventKind::LogEntriesLost.code().to_le_bytes());
+        assert_eq!(&bytes[9..11], &37u16.to_le_bytes());
+        let older = LogEntry::Event { t_s: 600, kind: EventKind::LogEntriesLost }.encode();
+        assert_eq!(&older[9..], &[0u8; 7]);
+        assert_eq!(LogEntry::decode(&older), Ok(LogEntry::Lost { t_s: 600, entries: 0 }));
+        let mut s = String::new();
+        write_csv_row(&LogEntry::Lost { t_s: 600, entries: 37 }, &mut s).unwrap();
+        s.push('\n');
+        write_csv_row(&LogEntry::Lost { t_s: 900, entries: 0 }, &mut s).unwrap();
+        assert_eq!(s, "600,,,,,,log_entries_lost:37\n900,,,,,,log_entries_lost");
     }
 
     #[test]
