@@ -199,12 +199,13 @@ pub fn verdict(r: &monitor_cmd::Report) -> (&'static str, &'static str) {
 
 /// Whether an event is a reset or a fault (what the header lists), by the library's event names
 /// (`hter::event::EventKind::name`; a board history may add `:detail`): restarts, board faults,
-/// sensor, SSR, supply, reference and flash faults, and the record's own holes (a flash page
-/// lost, log entries lost while flash writes were held off). Settings, alarms (listed on their
-/// own) and recoveries are not.
+/// sensor, SSR, supply, reference and flash faults, a lid left open (each of the supervisor's
+/// detections sounds the alarm indicator), and the record's own holes (a flash page lost, log
+/// entries lost while flash writes were held off). Settings, alarms (listed on their own) and
+/// recoveries are not.
 fn is_reset_or_fault(e: &Event) -> bool {
     let n = e.name.to_ascii_lowercase();
-    const PREFIXES: [&str; 10] = [
+    const PREFIXES: [&str; 11] = [
         "restart",
         "board_fault",
         "sensor_",
@@ -215,6 +216,7 @@ fn is_reset_or_fault(e: &Event) -> bool {
         "log_entries_lost",
         "controller_non_finite",
         "freeze_guard_tripped",
+        "lid_open",
     ];
     PREFIXES.iter().any(|p| n.starts_with(p)) && !n.starts_with("sensor_recovered")
 }
@@ -371,7 +373,11 @@ pub fn html(path: &Path) -> Result<String> {
     } else {
         let mut s = format!("{}:<ul class=\"events\">", faults.len());
         for e in &faults {
-            let _ = write!(s, "<li>{} — {}</li>", esc(&e.name), when(e.t_s, t0));
+            let _ = write!(s, "<li>{} — {}", esc(&e.name), when(e.t_s, t0));
+            if let Some(m) = fault_meaning(&e.name) {
+                let _ = write!(s, ": {}", esc(&m));
+            }
+            s.push_str("</li>");
         }
         s.push_str("</ul>");
         s
@@ -442,6 +448,78 @@ pub fn html(path: &Path) -> Result<String> {
 }
 
 /// What an alarm kind means, for the table.
+/// What a reset or fault ([`is_reset_or_fault`]) means to the person reading the record, and
+/// what to do, by the library's event name (`hter::event::EventKind::name`; a board history's
+/// `restarted:brownout` spelling and `log_entries_lost:N` count too). `None` for a name the
+/// library does not have.
+fn fault_meaning(name: &str) -> Option<String> {
+    let n = name.to_ascii_lowercase();
+    let (base, detail) = n.split_once(':').unwrap_or((n.as_str(), ""));
+    let base = match (base, detail) {
+        ("restarted", "brownout") => "restarted_brownout",
+        ("restarted", "watchdog") => "restarted_watchdog",
+        _ => base,
+    };
+    const SERVICE: &str = "the carrier needs a service check";
+    let text = match base {
+        "restarted" => "the controller restarted (power switched on or reset); the record goes on from here, \
+                        the time it was off is not known"
+            .to_owned(),
+        "restarted_brownout" => "the controller restarted after its supply dropped too low (a weak battery or a \
+                                 loose supply lead); the time it was off is not known"
+            .to_owned(),
+        "restarted_watchdog" => format!(
+            "the controller stopped responding and its watchdog restarted it; cooling was off meanwhile; {SERVICE}"
+        ),
+        b if b.starts_with("board_fault") => format!(
+            "the controller stopped itself after an internal error, switched cooling off and restarted; {SERVICE}"
+        ),
+        "sensor_open" | "sensor_short" | "sensor_out_of_range" | "sensor_stuck" | "reference_out_of_range" => {
+            format!("the temperature probe or its circuit failed; cooling stays off until it reads again; {SERVICE}")
+        }
+        "sensor_spikes" => format!("the temperature probe gave erratic readings (a loose contact); {SERVICE}"),
+        "sensor_offset" => format!("the temperature probe's reading jumped and stayed (a damaged lead); {SERVICE}"),
+        "ssr_stuck_on" => format!(
+            "the cooling relay is stuck on; the controller now switches cooling on and off with its \
+             safety switch (coarser control; the freeze guard still protects the load); {SERVICE}"
+        ),
+        "ssr_stuck_off" => {
+            format!(
+                "cooling at full power did not cool: the relay or the cooling modules failed, or the lid \
+                 is open; {SERVICE}"
+            )
+        }
+        "supply_sag" => "the supply voltage is low (a weak battery, car socket or solar panel): cooling \
+                         power is reduced"
+            .to_owned(),
+        "supply_switch_shorted" => format!(
+            "the safety switch that cuts cooling is stuck closed: the second way to stop cooling is gone; {SERVICE}"
+        ),
+        "lid_open" => "the cooling needed rose suddenly: the lid left open or a warm load put in".to_owned(),
+        "freeze_guard_tripped" => {
+            "cooling was cut because the load came close to freezing (the vaccines were protected)".to_owned()
+        }
+        "controller_non_finite" => {
+            format!("the control law gave an invalid output and the controller went to its safe state; {SERVICE}")
+        }
+        "flash_page_lost" => {
+            "a record being written when power was cut was lost; the rest of the record is intact".to_owned()
+        }
+        "log_entries_lost" => match detail.parse::<u32>() {
+            Ok(count) => format!(
+                "{count} record entr{} lost while the controller waited to write them (just after a \
+                 start, or on a bad supply): the record has a gap before this time",
+                if count == 1 { "y was" } else { "ies were" }
+            ),
+            Err(_) => "record entries were lost while the controller waited to write them: the record has \
+                       a gap before this time"
+                .to_owned(),
+        },
+        _ => return None,
+    };
+    Some(text)
+}
+
 fn meaning(kind: &str) -> &'static str {
     match kind {
         "heat_10h" => "above +8 °C for 10 h without a break",
@@ -547,6 +625,20 @@ mod tests {
         assert_eq!(verdict(&r).0, "freeze");
         let r = monitor_cmd::report(&t, &[Some(4.0), Some(5.0), Some(4.0)]).unwrap();
         assert_eq!(verdict(&r).0, "ok");
+    }
+
+    /// Every reset and fault the library can record reads in plain words in the header.
+    #[test]
+    fn every_reset_and_fault_the_library_records_has_a_meaning() {
+        for k in hter::event::EventKind::ALL {
+            let e = Event { t_s: 0.0, name: k.name().to_owned() };
+            assert_eq!(is_reset_or_fault(&e), fault_meaning(k.name()).is_some(), "{}", k.name());
+        }
+        assert!(fault_meaning("restarted:brownout").unwrap().contains("supply dropped"));
+        assert!(fault_meaning("log_entries_lost:25").unwrap().starts_with("25 record entries were lost"));
+        assert!(fault_meaning("log_entries_lost:1").unwrap().starts_with("1 record entry was lost"));
+        assert!(fault_meaning("log_entries_lost").unwrap().starts_with("record entries were lost"));
+        assert_eq!(fault_meaning("no_such_event"), None);
     }
 
     #[test]

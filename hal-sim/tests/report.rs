@@ -179,6 +179,10 @@ fn a_board_history_gives_a_report_with_its_resets_and_faults() {
     assert_eq!(alarms, [("heat_10h".to_owned(), 7200.0, 43200.0)]);
     assert!(page.contains("restarted:brownout") && page.contains("sensor_open"), "resets and faults listed");
     assert!(page.contains("<li>log_entries_lost:12"), "a hole in the record is listed with the faults, with its size");
+    // Each in plain words for the supervisor who reads it.
+    assert!(page.contains("12 record entries were lost while the controller waited"), "the hole's size, in words");
+    assert!(page.contains("the temperature probe or its circuit failed"), "what sensor_open means");
+    assert!(page.contains("supply dropped too low"), "what a brown-out restart means");
     assert!(!page.contains("<li>set:"), "a settings change is not a fault");
     // The event rows are not samples: 312 interval rows, and the one with empty temperatures is
     // no sensor fault to the monitor either.
