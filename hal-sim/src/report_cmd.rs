@@ -318,6 +318,21 @@ pub fn html(path: &Path) -> Result<String> {
     w.push_str(STYLE);
     writeln!(w, "</head><body>")?;
     writeln!(w, "<div class=\"verdict {class}\" id=\"verdict\">{}</div>", esc(line))?;
+    // Loud beside the verdict: the load may be in range while the carrier needs a technician.
+    let service: Vec<&Event> =
+        events.iter().filter(|e| is_reset_or_fault(e) && fault_meaning(&e.name).is_some_and(|(_, s)| s)).collect();
+    if let Some(first) = service.first() {
+        writeln!(
+            w,
+            "<div class=\"verdict service\" id=\"service\">SERVICE NEEDED — {} fault{} that need{} \
+                a service check, the first {} at {} (below)</div>",
+            service.len(),
+            if service.len() == 1 { "" } else { "s" },
+            if service.len() == 1 { "s" } else { "" },
+            esc(&first.name),
+            when(first.t_s, t0)
+        )?;
+    }
     writeln!(w, "<h1>Cold-chain report</h1>")?;
     writeln!(w, "<table class=\"head\">")?;
     let row = |w: &mut String, k: &str, v: &str| writeln!(w, "<tr><th>{k}</th><td>{v}</td></tr>");
@@ -374,7 +389,7 @@ pub fn html(path: &Path) -> Result<String> {
         let mut s = format!("{}:<ul class=\"events\">", faults.len());
         for e in &faults {
             let _ = write!(s, "<li>{} — {}", esc(&e.name), when(e.t_s, t0));
-            if let Some(m) = fault_meaning(&e.name) {
+            if let Some((m, _)) = fault_meaning(&e.name) {
                 let _ = write!(s, ": {}", esc(&m));
             }
             s.push_str("</li>");
@@ -449,10 +464,10 @@ pub fn html(path: &Path) -> Result<String> {
 
 /// What an alarm kind means, for the table.
 /// What a reset or fault ([`is_reset_or_fault`]) means to the person reading the record, and
-/// what to do, by the library's event name (`hter::event::EventKind::name`; a board history's
-/// `restarted:brownout` spelling and `log_entries_lost:N` count too). `None` for a name the
-/// library does not have.
-fn fault_meaning(name: &str) -> Option<String> {
+/// whether the carrier needs a service check for it, by the library's event name
+/// (`hter::event::EventKind::name`; a board history's `restarted:brownout` spelling and
+/// `log_entries_lost:N` count too). `None` for a name the library does not have.
+fn fault_meaning(name: &str) -> Option<(String, bool)> {
     let n = name.to_ascii_lowercase();
     let (base, detail) = n.split_once(':').unwrap_or((n.as_str(), ""));
     let base = match (base, detail) {
@@ -460,64 +475,87 @@ fn fault_meaning(name: &str) -> Option<String> {
         ("restarted", "watchdog") => "restarted_watchdog",
         _ => base,
     };
-    const SERVICE: &str = "the carrier needs a service check";
-    let text = match base {
-        "restarted" => "the controller restarted (power switched on or reset); the record goes on from here, \
-                        the time it was off is not known"
-            .to_owned(),
-        "restarted_brownout" => "the controller restarted after its supply dropped too low (a weak battery or a \
-                                 loose supply lead); the time it was off is not known"
-            .to_owned(),
-        "restarted_watchdog" => format!(
-            "the controller stopped responding and its watchdog restarted it; cooling was off meanwhile; {SERVICE}"
+    let (text, service) = match base {
+        "restarted" => (
+            "the controller restarted (power switched on or reset); the record goes on from here, \
+                the time it was off is not known"
+                .to_owned(),
+            false,
         ),
-        b if b.starts_with("board_fault") => format!(
-            "the controller stopped itself after an internal error, switched cooling off and restarted; {SERVICE}"
+        "restarted_brownout" => (
+            "the controller restarted after its supply dropped too low (a weak battery or a loose \
+                supply lead); the time it was off is not known"
+                .to_owned(),
+            false,
+        ),
+        "restarted_watchdog" => (
+            "the controller stopped responding and its watchdog restarted it; cooling was off \
+                meanwhile"
+                .to_owned(),
+            true,
+        ),
+        b if b.starts_with("board_fault") => (
+            "the controller stopped itself after an internal error, switched cooling off and \
+                restarted"
+                .to_owned(),
+            true,
         ),
         "sensor_open" | "sensor_short" | "sensor_out_of_range" | "sensor_stuck" | "reference_out_of_range" => {
-            format!("the temperature probe or its circuit failed; cooling stays off until it reads again; {SERVICE}")
+            ("the temperature probe or its circuit failed; cooling stays off until it reads again".to_owned(), true)
         }
-        "sensor_spikes" => format!("the temperature probe gave erratic readings (a loose contact); {SERVICE}"),
-        "sensor_offset" => format!("the temperature probe's reading jumped and stayed (a damaged lead); {SERVICE}"),
-        "ssr_stuck_on" => format!(
+        "sensor_spikes" => ("the temperature probe gave erratic readings (a loose contact)".to_owned(), true),
+        "sensor_offset" => ("the temperature probe's reading jumped and stayed (a damaged lead)".to_owned(), true),
+        "ssr_stuck_on" => (
             "the cooling relay is stuck on; the controller now switches cooling on and off with its \
-             safety switch (coarser control; the freeze guard still protects the load); {SERVICE}"
+                safety switch (coarser control; the freeze guard still protects the load)"
+                .to_owned(),
+            true,
         ),
-        "ssr_stuck_off" => {
-            format!(
-                "cooling at full power did not cool: the relay or the cooling modules failed, or the lid \
-                 is open; {SERVICE}"
-            )
-        }
-        "supply_sag" => "the supply voltage is low (a weak battery, car socket or solar panel): cooling \
-                         power is reduced"
-            .to_owned(),
-        "supply_switch_shorted" => format!(
-            "the safety switch that cuts cooling is stuck closed: the second way to stop cooling is gone; {SERVICE}"
+        "ssr_stuck_off" => (
+            "cooling at full power did not cool: the relay or the cooling modules failed, or the \
+                lid is open"
+                .to_owned(),
+            true,
         ),
-        "lid_open" => "the cooling needed rose suddenly: the lid left open or a warm load put in".to_owned(),
+        "supply_sag" => (
+            "the supply voltage is low (a weak battery, car socket or solar panel): cooling power \
+                is reduced"
+                .to_owned(),
+            false,
+        ),
+        "supply_switch_shorted" => (
+            "the safety switch that cuts cooling is stuck closed: the second way to stop cooling \
+                is gone"
+                .to_owned(),
+            true,
+        ),
+        "lid_open" => ("the cooling needed rose suddenly: the lid left open or a warm load put in".to_owned(), false),
         "freeze_guard_tripped" => {
-            "cooling was cut because the load came close to freezing (the vaccines were protected)".to_owned()
+            ("cooling was cut because the load came close to freezing (the vaccines were protected)".to_owned(), false)
         }
         "controller_non_finite" => {
-            format!("the control law gave an invalid output and the controller went to its safe state; {SERVICE}")
+            ("the control law gave an invalid output and the controller went to its safe state".to_owned(), true)
         }
         "flash_page_lost" => {
-            "a record being written when power was cut was lost; the rest of the record is intact".to_owned()
+            ("a record being written when power was cut was lost; the rest of the record is intact".to_owned(), false)
         }
-        "log_entries_lost" => match detail.parse::<u32>() {
-            Ok(count) => format!(
-                "{count} record entr{} lost while the controller waited to write them (just after a \
-                 start, or on a bad supply): the record has a gap before this time",
-                if count == 1 { "y was" } else { "ies were" }
-            ),
-            Err(_) => "record entries were lost while the controller waited to write them: the record has \
-                       a gap before this time"
-                .to_owned(),
-        },
+        "log_entries_lost" => {
+            let what = match detail.parse::<u32>() {
+                Ok(1) => "1 record entry was lost".to_owned(),
+                Ok(count) => format!("{count} record entries were lost"),
+                Err(_) => "record entries were lost".to_owned(),
+            };
+            (
+                format!(
+                    "{what} while the controller waited to write them (just after a start, or on a \
+                bad supply): the record has a gap before this time"
+                ),
+                false,
+            )
+        }
         _ => return None,
     };
-    Some(text)
+    Some(if service { (format!("{text}; the carrier needs a service check"), true) } else { (text, false) })
 }
 
 fn meaning(kind: &str) -> &'static str {
@@ -535,6 +573,7 @@ body{font-family:'DejaVu Sans',Arial,sans-serif;margin:24px;max-width:1040px;col
 h1{margin:.3em 0}h2{margin-top:1.2em;border-bottom:1px solid #ccc}
 .verdict{font-size:1.5em;font-weight:bold;padding:12px 16px;border-radius:6px;color:#fff}
 .verdict.ok{background:#2e7d32}.verdict.excursion{background:#e65100}.verdict.freeze{background:#1565c0}
+.verdict.service{background:#b71c1c;margin-top:8px}.verdict .raw{color:#ffcdd2}
 table{border-collapse:collapse;margin:8px 0}th,td{border:1px solid #bbb;padding:4px 8px;text-align:left;vertical-align:top}
 table.head th{background:#f3f3f3;width:220px}tr.bad td{background:#fff3e0}.raw{color:#888;font-size:.85em}
 ul.events{margin:4px 0;padding-left:20px}.plot svg{max-width:100%;height:auto}.foot{color:#666;font-size:.85em}
@@ -633,11 +672,20 @@ mod tests {
         for k in hter::event::EventKind::ALL {
             let e = Event { t_s: 0.0, name: k.name().to_owned() };
             assert_eq!(is_reset_or_fault(&e), fault_meaning(k.name()).is_some(), "{}", k.name());
+            // Every hardware fault the supervisor detects but a weak supply and a lid left open
+            // asks for a technician.
+            if k.is_hardware_fault() {
+                let service = fault_meaning(k.name()).unwrap().1;
+                let expected = !matches!(k, hter::event::EventKind::SupplySag | hter::event::EventKind::LidOpen);
+                assert_eq!(service, expected, "{}", k.name());
+            }
         }
-        assert!(fault_meaning("restarted:brownout").unwrap().contains("supply dropped"));
-        assert!(fault_meaning("log_entries_lost:25").unwrap().starts_with("25 record entries were lost"));
-        assert!(fault_meaning("log_entries_lost:1").unwrap().starts_with("1 record entry was lost"));
-        assert!(fault_meaning("log_entries_lost").unwrap().starts_with("record entries were lost"));
+        let text = |n: &str| fault_meaning(n).unwrap().0;
+        assert!(text("restarted:brownout").contains("supply dropped"));
+        assert!(text("log_entries_lost:25").starts_with("25 record entries were lost"));
+        assert!(text("log_entries_lost:1").starts_with("1 record entry was lost"));
+        assert!(text("log_entries_lost").starts_with("record entries were lost"));
+        assert!(text("ssr_stuck_on").ends_with("; the carrier needs a service check"));
         assert_eq!(fault_meaning("no_such_event"), None);
     }
 

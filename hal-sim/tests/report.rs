@@ -119,6 +119,7 @@ fn a_hot_zone_run_gives_a_report_of_three_days_that_agrees_with_monitor_and_rend
     // hot-zone runs 72 h: three days, no alarm (the controller holds 4 °C at 43 °C ambient).
     assert_eq!(day_rows(&page), 3);
     assert!(page.contains("No alarm was raised") && page.contains("IN RANGE"));
+    assert!(!page.contains("id=\"service\""), "nothing for a technician on a clean run");
     assert!(page.contains("no calendar date"));
     render_check(&html, &d.join("r.png"));
 
@@ -183,6 +184,11 @@ fn a_board_history_gives_a_report_with_its_resets_and_faults() {
     assert!(page.contains("12 record entries were lost while the controller waited"), "the hole's size, in words");
     assert!(page.contains("the temperature probe or its circuit failed"), "what sensor_open means");
     assert!(page.contains("supply dropped too low"), "what a brown-out restart means");
+    // The load's verdict says nothing of the carrier: a second banner does.
+    assert!(
+        page.contains("SERVICE NEEDED — 1 fault that needs a service check, the first sensor_open"),
+        "the sensor fault asks for a technician; the restart and the lost entries do not"
+    );
     assert!(!page.contains("<li>set:"), "a settings change is not a fault");
     // The event rows are not samples: 312 interval rows, and the one with empty temperatures is
     // no sensor fault to the monitor either.
@@ -251,6 +257,7 @@ fn a_log2csv_output_lists_its_resets() {
     let page = report_agreeing_with_monitor(&csv, &d.join("c.html"));
     assert!(page.contains("<li>restarted_watchdog") && page.contains("<li>restarted: unknown"), "resets listed");
     assert!(page.contains("Resets and faults</th><td>3:"), "three boots, three resets");
+    assert!(page.contains("SERVICE NEEDED — 1 fault that needs a service check, the first restarted_watchdog"));
     assert!(page.contains("No reading (sensor fault)"));
     assert_eq!(day_rows(&page), 1);
     let _ = std::fs::remove_dir_all(&d);
