@@ -9,8 +9,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 
+use crate::fault::Fault;
 use crate::link::PtyLink;
-use crate::sim::virtual_board::{VirtualBoard, VirtualOptions};
+use crate::sim::virtual_board::{VirtualBoard, VirtualOptions, HANG_REFUSED};
 use crate::sim::PlantChoice;
 use crate::sim_cmd::{at_least, finite, whole, LoadArg};
 
@@ -47,6 +48,11 @@ pub struct VirtualBoardArgs {
     /// sense and what is unverified").
     #[arg(long)]
     pub module_sense: bool,
+    /// Inject a fault at a simulated time, KIND@T_S (repeatable; the names of `hter sim
+    /// --fault`, but not firmware-hang): to rehearse what `status`, the alarm and `history`
+    /// show when a probe, the relay or the supply fails.
+    #[arg(long = "fault")]
+    pub faults: Vec<String>,
 }
 
 /// Serves the virtual board until stopped (or `--duration`).
@@ -65,6 +71,13 @@ pub fn run(a: &VirtualBoardArgs) -> Result<()> {
         Some(d) if finite("duration", d)? <= 0.0 => bail!("--duration must be > 0 s, got {d}"),
         d => d,
     };
+    let mut faults = a.faults.iter().map(|f| Fault::parse(f)).collect::<Result<Vec<_>>>()?;
+    if faults.iter().any(|&(_, f)| f == Fault::FirmwareHang) {
+        bail!("--fault firmware-hang: {HANG_REFUSED}");
+    }
+    // Injected in time order, each at the first sample at or after its time.
+    faults.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut faults = faults.into_iter().peekable();
     let plant = PlantChoice::parse(&a.plant)?;
     let mut board = VirtualBoard::new(&VirtualOptions {
         plant,
@@ -91,6 +104,11 @@ pub fn run(a: &VirtualBoardArgs) -> Result<()> {
     loop {
         let now = Instant::now();
         if now >= next {
+            while let Some((t, f)) = faults.next_if(|&(t, _)| board.sim_s() >= t) {
+                board.inject(f)?;
+                restarts = board.restarts;
+                eprintln!("virtual board: fault {} injected at t = {} s (asked for {t} s)", f.name(), board.sim_s());
+            }
             if board.step().is_none() {
                 bail!("the virtual board's plant has no sensor to sample");
             }

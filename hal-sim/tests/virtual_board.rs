@@ -305,7 +305,7 @@ fn with_the_module_side_sense_the_interface_build_finds_a_shorted_ssr_at_the_sec
                 out.step.events
             );
         }
-        b.inject(Fault::SsrStuckOn);
+        b.inject(Fault::SsrStuckOn).unwrap();
         let at = (1..=60).find(|_| b.step().unwrap().step.events.iter().any(|e| e.kind == EventKind::SsrStuckOn));
         if module_sense {
             let status = b.request("status");
@@ -316,4 +316,32 @@ fn with_the_module_side_sense_the_interface_build_finds_a_shorted_ssr_at_the_sec
     assert_eq!(found[0].0, Some(2), "with the sense");
     assert!(found[1].0.is_none_or(|n| n > 2), "without the sense: {:?}", found[1]);
     eprintln!("shorted SSR found at sample {:?} with the sense, {:?} without (sample, load °C)", found[0], found[1]);
+}
+
+/// `--fault` rehearses a failure over the interface, as an engineer would before the field: a
+/// relay that shorts after an hour on a board with the module-side sense. `status` shows limp
+/// home and the alarm, `history` the event within two samples of the short. A hung control loop is
+/// refused in one line (the virtual board answers requests from its loop).
+#[test]
+fn a_fault_injected_on_the_virtual_board_shows_in_status_and_history() {
+    let b = Board::start("fault", &["--module-sense", "--fault", "ssr-stuck-on@3600"]);
+    let s = b.wait_for("limp home after the shorted relay", 60, |s| s["mode"] == "limp_home");
+    assert_ne!(s["alarm"], "off", "{s}");
+    let csv = tmp("fault.csv");
+    assert!(b.board(&["history", "--output", csv.to_str().unwrap()]).status.success());
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let found: Vec<f64> = text
+        .lines()
+        .filter(|l| l.ends_with(",ssr_stuck_on"))
+        .map(|l| l.split(',').next().unwrap().parse().unwrap())
+        .collect();
+    // Record time runs 1 s ahead of the board's clock (the log starts at 1 s).
+    assert_eq!(found.len(), 1, "{text}");
+    assert!((3601.0..=3631.0).contains(&found[0]), "found at {} s", found[0]);
+    let _ = std::fs::remove_file(&csv);
+
+    let link = tmp("hang");
+    let e = one_line_error(&hter(&["virtual-board", "--link", link.to_str().unwrap(), "--fault", "firmware-hang@10"]));
+    assert!(e.contains("firmware-hang"), "{e}");
+    assert!(!link.exists());
 }

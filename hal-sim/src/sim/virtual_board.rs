@@ -71,6 +71,10 @@ pub struct VirtualOptions {
     pub module_sense: bool,
 }
 
+/// Why [`VirtualBoard::inject`] refuses a hung control loop.
+pub const HANG_REFUSED: &str = "the virtual board serves requests from its control loop and cannot hang it \
+                                (`hter sim --fault firmware-hang@T` simulates one)";
+
 /// The simulated carrier and its board.
 pub struct VirtualBoard {
     rig: Rig,
@@ -169,9 +173,18 @@ impl VirtualBoard {
         self.cut_settings = Some(ops);
     }
 
-    /// Injects a hardware fault into the simulated carrier from the next sample on (for tests).
-    pub fn inject(&mut self, fault: crate::fault::Fault) {
-        self.rig.inject(fault);
+    /// Injects a fault into the simulated carrier from the next sample on (`hter virtual-board
+    /// --fault`, tests): a brown-out is a power cut between two samples ([`Self::power_cut`]);
+    /// a hung control loop is refused (the virtual board answers requests from its step: `hter
+    /// sim --fault firmware-hang` simulates it).
+    pub fn inject(&mut self, fault: crate::fault::Fault) -> Result<()> {
+        use crate::fault::Fault;
+        match fault {
+            Fault::FirmwareHang => bail!(HANG_REFUSED),
+            Fault::Brownout => self.power_cut(),
+            f => self.rig.inject(f),
+        }
+        Ok(())
     }
 
     /// Powers the board up from what its flash holds: scrub, restore, a new [`App`].
