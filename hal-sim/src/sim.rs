@@ -47,7 +47,7 @@ mod row;
 pub mod virtual_board;
 
 use rig::{step_clock_ms, Rig};
-pub use row::{Row, RowMode};
+pub use row::{BoardIn, Row, RowMode};
 
 /// SSR PWM period, s. The seed drove its SSR from a DAQ with a slow software PWM; 1 s gives 1 %
 /// duty resolution against Ts = 10 s and is far faster than the modules' thermal response.
@@ -516,7 +516,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             rows.push(Row::hung(t_s, w, last, duty, view));
             continue;
         }
-        let (out, counts) = rig.step(&mut carrier, t_s, w);
+        let (out, sensed) = rig.step(&mut carrier, t_s, w);
         if let Some(rec) = cadence.push(out.status.map(|st| st.mode), carrier.controller()) {
             persisted = Some(rec.encode());
             stores.push((t_s, Save::Model(rec)));
@@ -541,8 +541,8 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                 alarm_on_s += ts;
                 alarm_first_s.get_or_insert(t_s);
             }
-            rows.push(Row::stepped(t_s, w, &out, counts, d, indication, rig.view(t_s, opts.ambient_c)));
-            held = Some((out, counts, indication));
+            rows.push(Row::stepped(t_s, w, &out, sensed, d, indication, rig.view(t_s, opts.ambient_c)));
+            held = Some((out, sensed.0, indication));
             if sc.cut.is_some_and(|c| c.passed(t_s, rig.true_temp_c())) {
                 break;
             }

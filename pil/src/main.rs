@@ -246,13 +246,17 @@ fn run() -> Result<(), &'static str> {
         let take = (n - done).min(CHUNK);
         input.read_exact(&mut chunk[..SAMPLE_BYTES * take])?;
         for s in 0..take {
-            let inp: StepInput = proto::input_of(core::array::from_fn(|i| word(&chunk, proto::INPUT_WORDS * s + i)));
+            let (inp, board): (StepInput, proto::Board) =
+                proto::input_of(core::array::from_fn(|i| word(&chunk, proto::INPUT_WORDS * s + i)));
             let mut ticks = [0u32; proto::PARTS.len()];
             let ctrl_before: AnyController = carrier.controller().clone();
 
             // The measured per-sample work.
             let inp_b = black_box(inp);
+            let board_b = black_box(board);
+            // The readings handed over and the step: the control task's per-sample work.
             let t0 = now();
+            proto::feed(&mut carrier, &board_b);
             let o = step(&mut carrier, &inp_b);
             let t = since(t0, now());
             ticks[proto::PART_STEP] = t;

@@ -6,7 +6,9 @@
 //!
 //! Input file ([`INPUT_FILE`], little-endian u32 words):
 //! `MAGIC_IN, controller kind, n`, then n × [`INPUT_WORDS`] words from [`input_words`]:
-//! `t_ms low word, t_ms high word, counts, setpoint_c (f32 bits)`.
+//! `t_ms low word, t_ms high word, counts, setpoint_c (f32 bits)`, then the board's other
+//! readings as the firmware hands them to the step ([`Board`]: supply, switched rail, test
+//! pulse, modules; f32 bits, [`NO_READING`] for none).
 //!
 //! Output file ([`OUTPUT_FILE`]): `MAGIC_OUT`, the calibration (3 words, [`CAL_LOOP`]), n, then
 //! per sample: `duty (f32 bits)`, one SysTick count per entry of [`PARTS`], the number of event
@@ -95,17 +97,58 @@ pub fn monitor_push(monitor: &mut ColdChainMonitor, input: &StepInput, out: &Ste
 }
 
 /// Words per sample in the input file.
-pub const INPUT_WORDS: usize = 4;
+pub const INPUT_WORDS: usize = 8;
+
+/// What the board measured besides the RTD for a sample, V, each `None` where it took no
+/// reading: the modules' supply, the switched rail, the rail at the end of a test pulse, the
+/// modules in the conversion window (a board with the module-side sense). The firmware's
+/// control task hands them to the step before each sample ([`feed`]); they make the supply,
+/// switch and module checks run as on the board.
+pub type Board = [Option<f32>; 4];
+
+/// The word of a missing reading: a NaN with a payload no conversion gives (a measured NaN is
+/// a reading, and goes to the step as one).
+pub const NO_READING: u32 = 0x7fc0_dead;
 
 /// One sample's words in the input file (the u64 clock as low word, high word).
 #[allow(dead_code)] // the host writes the file, the runner only reads it
-pub fn input_words(i: &StepInput) -> [u32; INPUT_WORDS] {
-    [i.t_ms as u32, (i.t_ms >> 32) as u32, i.counts, i.setpoint_c.to_bits()]
+pub fn input_words(i: &StepInput, board: &Board) -> [u32; INPUT_WORDS] {
+    let r = |v: Option<f32>| v.map_or(NO_READING, f32::to_bits);
+    [
+        i.t_ms as u32,
+        (i.t_ms >> 32) as u32,
+        i.counts,
+        i.setpoint_c.to_bits(),
+        r(board[0]),
+        r(board[1]),
+        r(board[2]),
+        r(board[3]),
+    ]
 }
 
 /// The sample of [`input_words`].
-pub fn input_of(w: [u32; INPUT_WORDS]) -> StepInput {
-    StepInput { t_ms: u64::from(w[0]) | u64::from(w[1]) << 32, counts: w[2], setpoint_c: f32::from_bits(w[3]) }
+pub fn input_of(w: [u32; INPUT_WORDS]) -> (StepInput, Board) {
+    let r = |x: u32| (x != NO_READING).then(|| f32::from_bits(x));
+    let input =
+        StepInput { t_ms: u64::from(w[0]) | u64::from(w[1]) << 32, counts: w[2], setpoint_c: f32::from_bits(w[3]) };
+    (input, [r(w[4]), r(w[5]), r(w[6]), r(w[7])])
+}
+
+/// Hands the board's readings to the step for its next sample, in the firmware's order.
+pub fn feed(carrier: &mut Carrier<AnyController>, board: &Board) {
+    let [supply, switched, test, module] = *board;
+    if let Some(v) = supply {
+        carrier.observe_supply_v(v);
+    }
+    if let Some(v) = switched {
+        carrier.observe_switched_rail_v(v);
+    }
+    if let Some(v) = module {
+        carrier.observe_module_v(v);
+    }
+    if let Some(v) = test {
+        carrier.observe_switch_test_v(v);
+    }
 }
 
 /// Most `(code, value)` pairs [`event_words`] gives for one sample: two per step event, the
@@ -122,7 +165,7 @@ fn push_time(code: u32, t_ms: u64, push: &mut impl FnMut(u32, u32)) {
 /// `step` and `monitor` are the per-sample work; the others are the same computations run
 /// again on shadow copies, to split the figure.
 pub const PARTS: [&str; 10] = [
-    "step (Carrier::step)",
+    "step (board readings + Carrier::step)",
     "cold-chain monitor push",
     "controller update alone",
     "counts → °C (ratio + CVD)",

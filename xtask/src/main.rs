@@ -85,16 +85,19 @@ struct Case {
     duration_s: Option<f64>,
     kind: u32,
     faults: &'static [&'static str],
+    /// The board has the module-side sense (the firmware's `module-sense` build).
+    module_sense: bool,
     synthetic: Option<fn() -> Vec<StepInput>>,
 }
 
-const CASES: [Case; 6] = [
+const CASES: [Case; 7] = [
     Case {
         name: "piecewise, self-tuning GPC",
         scenario: "piecewise",
         duration_s: None,
         kind: proto::KIND_GPC,
         faults: &[],
+        module_sense: false,
         synthetic: None,
     },
     Case {
@@ -103,6 +106,7 @@ const CASES: [Case; 6] = [
         duration_s: None,
         kind: proto::KIND_GPC,
         faults: &["sensor-open@1500"],
+        module_sense: false,
         synthetic: None,
     },
     Case {
@@ -111,6 +115,16 @@ const CASES: [Case; 6] = [
         duration_s: None,
         kind: proto::KIND_GPC,
         faults: &["ssr-stuck-on@5400"],
+        module_sense: false,
+        synthetic: None,
+    },
+    Case {
+        name: "step, self-tuning GPC, module-side sense, SSR stuck on at 5400 s",
+        scenario: "step",
+        duration_s: None,
+        kind: proto::KIND_GPC,
+        faults: &["ssr-stuck-on@5400"],
+        module_sense: true,
         synthetic: None,
     },
     Case {
@@ -119,15 +133,25 @@ const CASES: [Case; 6] = [
         duration_s: Some(86_400.0),
         kind: proto::KIND_GPC,
         faults: &[],
+        module_sense: false,
         synthetic: None,
     },
-    Case { name: "step, PI", scenario: "step", duration_s: None, kind: proto::KIND_PI, faults: &[], synthetic: None },
+    Case {
+        name: "step, PI",
+        scenario: "step",
+        duration_s: None,
+        kind: proto::KIND_PI,
+        faults: &[],
+        module_sense: false,
+        synthetic: None,
+    },
     Case {
         name: "load falling through 3 °C, GPC at λ 200",
         scenario: "",
         duration_s: None,
         kind: proto::KIND_GPC_DAMPED,
         faults: &[],
+        module_sense: false,
         synthetic: Some(falling_through_3c),
     },
 ];
@@ -426,21 +450,31 @@ fn build_runner() -> Result<PathBuf> {
     Ok(target_dir().join(TARGET).join("release").join("pil"))
 }
 
-/// Runs the case's closed loop on the simulated plant; returns the step inputs it recorded.
-fn record(case: &Case) -> Result<Vec<StepInput>> {
+/// One sample as the firmware hands it to the library: the step's input and the board's other
+/// readings.
+type Sample = (StepInput, proto::Board);
+
+/// Runs the case's closed loop on the simulated plant; returns the step inputs and board
+/// readings it recorded (a synthetic case has no readings).
+fn record(case: &Case) -> Result<Vec<Sample>> {
     if let Some(make) = case.synthetic {
-        return Ok(make());
+        return Ok(make().into_iter().map(|i| (i, [None; 4])).collect());
     }
     let scenario = Scenario::resolve(case.scenario)?;
     let choice = if case.kind == proto::KIND_PI { ControllerChoice::Pi } else { ControllerChoice::Gpc };
     let mut opts = SimOptions::new(scenario, ControllerSpec::new(choice));
     opts.duration_s = case.duration_s.unwrap_or(opts.duration_s);
     opts.faults = case.faults.iter().map(|f| Fault::parse(f)).collect::<Result<_>>()?;
+    opts.module_sense = case.module_sense;
     let out = run(&opts)?;
     Ok(out
         .rows
         .iter()
-        .map(|r| StepInput { t_ms: sim_clock_ms(r.t_s), counts: r.counts, setpoint_c: r.setpoint_c as f32 })
+        .map(|r| {
+            let b = r.board_in;
+            let input = StepInput { t_ms: sim_clock_ms(r.t_s), counts: r.counts, setpoint_c: r.setpoint_c as f32 };
+            (input, [b.supply_v, b.switched_v, b.switch_test_v, b.module_v])
+        })
         .collect())
 }
 
@@ -455,14 +489,15 @@ type HostSample = (u32, Vec<(u32, u32)>);
 /// The same samples through the same library code on the host, and the samples on which GPC's
 /// soft floor moved the plan (the floor's count in [`proto::floor_samples`] changed; none for a
 /// controller without it).
-fn run_host(kind: u32, inputs: &[StepInput]) -> Result<(Vec<HostSample>, Vec<usize>)> {
+fn run_host(kind: u32, inputs: &[Sample]) -> Result<(Vec<HostSample>, Vec<usize>)> {
     let (mut carrier, mut monitor) = proto::carrier(kind).context("unknown controller kind")?;
     let mut seen = proto::floor_samples(&carrier);
     let mut floors = Vec::new();
     let samples = inputs
         .iter()
         .enumerate()
-        .map(|(i, inp)| {
+        .map(|(i, (inp, board))| {
+            proto::feed(&mut carrier, board);
             let o = carrier.step(inp);
             let now = proto::floor_samples(&carrier);
             if now != seen {
@@ -543,13 +578,13 @@ pub fn qemu(elf: &Path, dir: &Path, extra: &[&str], timeout: Duration) -> Result
     Ok(QemuRun { status, stdout, stderr })
 }
 
-fn run_target(elf: &Path, dir: &Path, kind: u32, inputs: &[StepInput]) -> Result<TargetRun> {
+fn run_target(elf: &Path, dir: &Path, kind: u32, inputs: &[Sample]) -> Result<TargetRun> {
     let mut bytes = Vec::with_capacity(12 + 4 * proto::INPUT_WORDS * inputs.len());
     for w in [proto::MAGIC_IN, kind, inputs.len() as u32] {
         bytes.extend_from_slice(&w.to_le_bytes());
     }
-    for i in inputs {
-        for w in proto::input_words(i) {
+    for (i, board) in inputs {
+        for w in proto::input_words(i, board) {
             bytes.extend_from_slice(&w.to_le_bytes());
         }
     }
@@ -684,16 +719,30 @@ mod tests {
         assert!(calibration(&[2, 2000, 4000]).is_err());
     }
 
+    /// The board's readings cross the file exactly: a missing one stays missing, a measured NaN
+    /// (a broken divider) stays a reading.
+    #[test]
+    fn the_input_words_carry_the_board_readings() {
+        let input = StepInput { t_ms: (7 << 32) + 5, counts: 49_000, setpoint_c: 4.5 };
+        for board in
+            [[None; 4], [Some(12.1), Some(0.0), None, Some(f32::NAN)], [Some(-0.3), None, Some(11.9), Some(2.5)]]
+        {
+            let (i, b) = proto::input_of(proto::input_words(&input, &board));
+            assert_eq!((i.t_ms, i.counts, i.setpoint_c), (input.t_ms, input.counts, input.setpoint_c));
+            let bits = |b: &proto::Board| b.map(|v| v.map(f32::to_bits));
+            assert_eq!(bits(&b), bits(&board));
+        }
+    }
+
     #[test]
     fn host_replay_records_the_steps_duties_and_events() {
         // 20 samples at 9 °C (cooling wanted), then an open sensor at sample 20 (t = 200 s).
         let cfg = proto::CARRIER.get();
         let warm = cfg.adc.counts(cfg.rtd.resistance(hter::units::Celsius(9.0)).unwrap());
-        let inputs: Vec<StepInput> = (0..30u32)
-            .map(|k| StepInput {
-                t_ms: 10_000 * u64::from(k),
-                counts: if k < 20 { warm + k % 3 } else { 65_535 },
-                setpoint_c: 4.0,
+        let inputs: Vec<Sample> = (0..30u32)
+            .map(|k| {
+                let t_ms = 10_000 * u64::from(k);
+                (StepInput { t_ms, counts: if k < 20 { warm + k % 3 } else { 65_535 }, setpoint_c: 4.0 }, [None; 4])
             })
             .collect();
         let (host, _) = run_host(proto::KIND_PI, &inputs).unwrap();
@@ -709,7 +758,7 @@ mod tests {
 
     #[test]
     fn the_floor_case_meets_the_soft_floor_at_both_tunings_after_the_fall_starts() {
-        let inputs = falling_through_3c();
+        let inputs: Vec<Sample> = falling_through_3c().into_iter().map(|i| (i, [None; 4])).collect();
         let floors = |kind| run_host(kind, &inputs).unwrap().1;
         let at = floors(proto::KIND_GPC_DAMPED);
         // The fall starts at sample 412; the floor can only act once the plan dips, after it.

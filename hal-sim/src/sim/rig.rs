@@ -9,7 +9,7 @@ use hter::hal::{apply_duty, RtdSampler};
 use hter::step::{Carrier, StepInput, StepOutput};
 use hter::units::Celsius;
 
-use super::row::RigView;
+use super::row::{BoardIn, RigView};
 use super::{PlantChoice, SimOptions, PWM_PERIOD_S};
 use crate::arx::ArxPlant;
 use crate::fault::Fault;
@@ -63,28 +63,30 @@ impl Rig {
         Ok((Rig::Physical { plant: Box::new(plant), adc, ssr: SimSsr::new(), board }, u0))
     }
 
-    /// Samples the sensor and runs the step; returns its output and the counts it got.
-    /// The step runs on the board's clock, [`step_clock_ms`].
-    pub(super) fn step<C: Controller>(&mut self, carrier: &mut Carrier<C>, t_s: f64, w: f64) -> (StepOutput, u32) {
+    /// Samples the sensor and runs the step; returns its output, the counts it got and the
+    /// board's other readings it was handed. The step runs on the board's clock, [`step_clock_ms`].
+    pub(super) fn step<C: Controller>(
+        &mut self,
+        carrier: &mut Carrier<C>,
+        t_s: f64,
+        w: f64,
+    ) -> (StepOutput, (u32, BoardIn)) {
         match self {
             Rig::Physical { plant, adc, ssr, board } => {
+                let board_in = board.readings(plant, ssr);
+                board_in.feed(carrier);
                 adc.set_temperature_c(plant.sensed_temp_c());
-                // The board's divider on the module supply rail, and the sense after the switch.
-                carrier.observe_supply_v(plant.supply_v() as f32);
-                carrier.observe_switched_rail_v(ssr.switched_rail_v(plant.supply_v()) as f32);
-                if board.module_sense {
-                    carrier.observe_module_v(ssr.module_window_v(plant.supply_v(), plant.seebeck_v()) as f32);
-                }
-                if let Some(v) = board.test_pulse(ssr, plant.supply_v()) {
-                    carrier.observe_switch_test_v(v);
-                }
                 let counts = match adc.sample() {
                     Ok(c) => c,
                     Err(never) => match never {},
                 };
-                (carrier.step(&StepInput { t_ms: step_clock_ms(t_s), counts, setpoint_c: w as f32 }), counts)
+                let out = carrier.step(&StepInput { t_ms: step_clock_ms(t_s), counts, setpoint_c: w as f32 });
+                (out, (counts, board_in))
             }
-            Rig::Arx(p) => (carrier.step_celsius(step_clock_ms(t_s), Celsius(p.temp_c() as f32), w as f32), 0),
+            Rig::Arx(p) => {
+                let out = carrier.step_celsius(step_clock_ms(t_s), Celsius(p.temp_c() as f32), w as f32);
+                (out, (0, BoardIn::default()))
+            }
         }
     }
 
@@ -94,6 +96,7 @@ impl Rig {
     pub(super) fn sample_in(&mut self, t_ms: u64) -> Option<hter::app::SampleIn> {
         match self {
             Rig::Physical { plant, adc, ssr, board } => {
+                let b = board.readings(plant, ssr);
                 adc.set_temperature_c(plant.sensed_temp_c());
                 let counts = match adc.sample() {
                     Ok(c) => c,
@@ -103,12 +106,10 @@ impl Rig {
                     t_ms,
                     counts,
                     reference_ok: true,
-                    supply_v: Some(plant.supply_v() as f32),
-                    switched_v: Some(ssr.switched_rail_v(plant.supply_v()) as f32),
-                    switch_test_v: board.test_pulse(ssr, plant.supply_v()),
-                    module_v: board
-                        .module_sense
-                        .then(|| ssr.module_window_v(plant.supply_v(), plant.seebeck_v()) as f32),
+                    supply_v: b.supply_v,
+                    switched_v: b.switched_v,
+                    switch_test_v: b.switch_test_v,
+                    module_v: b.module_v,
                 })
             }
             Rig::Arx(_) => None,
@@ -336,6 +337,18 @@ impl Board {
             self.pulse_taken = true;
             (if ssr.switch_shorted { supply_v } else { 0.0 }) as f32
         })
+    }
+
+    /// What the board reads besides the RTD for the next sample: the supply divider, the
+    /// switched rail after the supply switch, the test pulse's rail if the last output asked
+    /// for one, and the modules in the conversion window on a board with that sense.
+    fn readings(&mut self, plant: &Plant, ssr: &SimSsr) -> BoardIn {
+        BoardIn {
+            supply_v: Some(plant.supply_v() as f32),
+            switched_v: Some(ssr.switched_rail_v(plant.supply_v()) as f32),
+            switch_test_v: self.test_pulse(ssr, plant.supply_v()),
+            module_v: self.module_sense.then(|| ssr.module_window_v(plant.supply_v(), plant.seebeck_v()) as f32),
+        }
     }
 
     /// Whether the supply switch conducts at `t_s`: the MCU's pin, ANDed with the monostable.
