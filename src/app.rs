@@ -94,17 +94,8 @@ pub struct SampleIn {
     pub counts: u32,
     /// The reference conversions around it were in their windows.
     pub reference_ok: bool,
-    /// The modules' supply, V, if measured.
-    pub supply_v: Option<f32>,
-    /// The switched rail after the supply-enable switch, V, if measured.
-    pub switched_v: Option<f32>,
-    /// The switched rail at the end of the test pulse the previous sample asked for
-    /// ([`crate::step::StepOutput::switch_test`]), V, if one was taken.
-    pub switch_test_v: Option<f32>,
-    /// The voltage across the modules read in the conversion window, V, on a board with the
-    /// module-side sense ([`crate::step::Carrier::observe_module_v`]); `None` if not read.
-    #[cfg(feature = "module-sense")]
-    pub module_v: Option<f32>,
+    /// The board's other readings ([`crate::step::BoardReadings`]).
+    pub board: crate::step::BoardReadings,
 }
 
 /// What one sample decided.
@@ -410,19 +401,7 @@ impl App {
 
     /// Runs one sample.
     pub fn sample(&mut self, s: &SampleIn) -> SampleOut {
-        if let Some(v) = s.supply_v {
-            self.carrier.observe_supply_v(v);
-        }
-        if let Some(v) = s.switched_v {
-            self.carrier.observe_switched_rail_v(v);
-        }
-        if let Some(v) = s.switch_test_v {
-            self.carrier.observe_switch_test_v(v);
-        }
-        #[cfg(feature = "module-sense")]
-        if let Some(v) = s.module_v {
-            self.carrier.observe_module_v(v);
-        }
+        self.carrier.observe(&s.board);
         let input = StepInput { t_ms: s.t_ms, counts: s.counts, setpoint_c: self.settings.setpoint_c };
         let out =
             if s.reference_ok { self.carrier.step(&input) } else { self.carrier.step_with_reference_fault(&input) };

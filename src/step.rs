@@ -58,6 +58,24 @@ pub struct StepInput {
     pub setpoint_c: f32,
 }
 
+/// What a board measures besides the RTD for one sample, handed to the step before it
+/// ([`Carrier::observe`]): each `None` where the board has no such sense or took no reading.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BoardReadings {
+    /// The modules' supply ahead of the supply-enable switch, V ([`Carrier::observe_supply_v`]).
+    pub supply_v: Option<f32>,
+    /// The switched rail after the switch, V ([`Carrier::observe_switched_rail_v`]).
+    pub switched_v: Option<f32>,
+    /// The switched rail at the end of the test pulse the previous output asked for, V
+    /// ([`Carrier::observe_switch_test_v`]).
+    pub switch_test_v: Option<f32>,
+    /// The modules' voltage in the conversion window, V, on a board with the module-side sense
+    /// ([`Carrier::observe_module_v`]).
+    #[cfg(feature = "module-sense")]
+    pub module_v: Option<f32>,
+}
+
 /// What the step is doing about safety.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -169,6 +187,25 @@ impl<C: Controller> Carrier<C> {
     /// as [`EventKind::BoardFault`].
     pub fn note_board_fault(&mut self, kind: crate::failsafe::StopKind) {
         self.pending_stop = Some(kind);
+    }
+
+    /// Gives the step every reading the board took besides the RTD, for the next sample: what
+    /// the glue calls before [`Self::step`] (the firmware's control task, the board application
+    /// [`crate::app::App::sample`], the simulator and the processor-in-the-loop runner alike).
+    pub fn observe(&mut self, r: &BoardReadings) {
+        if let Some(v) = r.supply_v {
+            self.observe_supply_v(v);
+        }
+        if let Some(v) = r.switched_v {
+            self.observe_switched_rail_v(v);
+        }
+        #[cfg(feature = "module-sense")]
+        if let Some(v) = r.module_v {
+            self.observe_module_v(v);
+        }
+        if let Some(v) = r.switch_test_v {
+            self.observe_switch_test_v(v);
+        }
     }
 
     /// Gives the step the measured supply voltage of the Peltier modules, V, for the next

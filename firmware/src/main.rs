@@ -70,15 +70,10 @@ struct Sample {
     counts: u32,
     /// The reference conversions on both sides of the RTD's, and VDDA, were in their windows.
     reference_ok: bool,
-    /// The modules' supply ahead of the switch, V (`None` if it could not be measured).
-    supply_v: Option<f32>,
-    /// The switched rail after the supply-enable switch, V (`None` if it could not be measured).
-    switched_v: Option<f32>,
-    /// The switched rail at the end of a supply-switch test pulse, V (`None`: none taken).
-    switch_test_v: Option<f32>,
-    /// The modules' side of the SSR in the conversion window, V (`None`: not read in it).
-    #[cfg(feature = "module-sense")]
-    module_v: Option<f32>,
+    /// The modules' supply ahead of the switch, the switched rail after it, the rail at the end of
+    /// a test pulse, and (`module-sense`) the modules in the conversion window, V: each `None`
+    /// if it could not be measured or was not taken.
+    board: hter::step::BoardReadings,
     /// VDD above the PVD level: flash may be written.
     supply_ok: bool,
 }
@@ -215,11 +210,13 @@ async fn sample(mut analog: board::Analog) {
                 t_ms,
                 counts: c.counts,
                 reference_ok: c.reference_ok,
-                supply_v: c.supply_v,
-                switched_v: c.switched_v,
-                switch_test_v: c.switch_test_v,
-                #[cfg(feature = "module-sense")]
-                module_v: c.module_v,
+                board: hter::step::BoardReadings {
+                    supply_v: c.supply_v,
+                    switched_v: c.switched_v,
+                    switch_test_v: c.switch_test_v,
+                    #[cfg(feature = "module-sense")]
+                    module_v: c.module_v,
+                },
                 supply_ok,
             })
             .await;
@@ -272,19 +269,7 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
         let s = SAMPLES.receive().await;
         // Flash writes wait while VDD is under the PVD level.
         persist::note_supply(s.supply_ok);
-        if let Some(v) = s.supply_v {
-            carrier.observe_supply_v(v);
-        }
-        if let Some(v) = s.switched_v {
-            carrier.observe_switched_rail_v(v);
-        }
-        if let Some(v) = s.switch_test_v {
-            carrier.observe_switch_test_v(v);
-        }
-        #[cfg(feature = "module-sense")]
-        if let Some(v) = s.module_v {
-            carrier.observe_module_v(v);
-        }
+        carrier.observe(&s.board);
         let input = hter::step::StepInput { t_ms: s.t_ms, counts: s.counts, setpoint_c: config::SETPOINT_C };
         let out = if s.reference_ok { carrier.step(&input) } else { carrier.step_with_reference_fault(&input) };
         let rec = recorder.push(s.t_ms, out.temp_c.0);
@@ -322,10 +307,10 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             duty: out.duty.get(),
             mode: out.mode,
             counts: s.counts,
-            supply_v: s.supply_v,
-            switched_v: s.switched_v,
+            supply_v: s.board.supply_v,
+            switched_v: s.board.switched_v,
             #[cfg(feature = "module-sense")]
-            module_v: s.module_v,
+            module_v: s.board.module_v,
             alarm,
             status: out.status,
         };
@@ -397,16 +382,8 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             info!("alarm acknowledged t={=u64:ms}", s.t_ms);
             app.acknowledge();
         }
-        let out = app.sample(&SampleIn {
-            t_ms: s.t_ms,
-            counts: s.counts,
-            reference_ok: s.reference_ok,
-            supply_v: s.supply_v,
-            switched_v: s.switched_v,
-            switch_test_v: s.switch_test_v,
-            #[cfg(feature = "module-sense")]
-            module_v: s.module_v,
-        });
+        let out =
+            app.sample(&SampleIn { t_ms: s.t_ms, counts: s.counts, reference_ok: s.reference_ok, board: s.board });
         let step = &out.step;
         ACTUATION.signal(Actuation {
             duty: step.duty,
@@ -436,10 +413,10 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             duty: step.duty.get(),
             mode: step.mode,
             counts: s.counts,
-            supply_v: s.supply_v,
-            switched_v: s.switched_v,
+            supply_v: s.board.supply_v,
+            switched_v: s.board.switched_v,
             #[cfg(feature = "module-sense")]
-            module_v: s.module_v,
+            module_v: s.board.module_v,
             alarm: out.alarm,
             status: step.status,
             holdover_s: step.holdover_s.unwrap_or(f32::NAN),

@@ -47,7 +47,7 @@ mod row;
 pub mod virtual_board;
 
 use rig::{step_clock_ms, Rig};
-pub use row::{BoardIn, Row, RowMode};
+pub use row::{Row, RowMode};
 
 /// SSR PWM period, s. The seed drove its SSR from a DAQ with a slow software PWM; 1 s gives 1 %
 /// duty resolution against Ts = 10 s and is far faster than the modules' thermal response.

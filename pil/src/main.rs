@@ -256,7 +256,7 @@ fn run() -> Result<(), &'static str> {
             let board_b = black_box(board);
             // The readings handed over and the step: the control task's per-sample work.
             let t0 = now();
-            proto::feed(&mut carrier, &board_b);
+            carrier.observe(&board_b);
             let o = step(&mut carrier, &inp_b);
             let t = since(t0, now());
             ticks[proto::PART_STEP] = t;

@@ -20,7 +20,7 @@ use hter::control::fixed::Law;
 use hter::control::gpc::GpcConfig;
 use hter::control::AnyController;
 use hter::profile::{self, Kind};
-use hter::step::{Carrier, StepInput, StepOutput, ValidConfig};
+use hter::step::{BoardReadings, Carrier, StepInput, StepOutput, ValidConfig};
 
 /// Input file name in QEMU's working directory (NUL-terminated for semihosting `SYS_OPEN`).
 pub const INPUT_FILE: &str = "pil-in.bin\0";
@@ -99,12 +99,10 @@ pub fn monitor_push(monitor: &mut ColdChainMonitor, input: &StepInput, out: &Ste
 /// Words per sample in the input file.
 pub const INPUT_WORDS: usize = 8;
 
-/// What the board measured besides the RTD for a sample, V, each `None` where it took no
-/// reading: the modules' supply, the switched rail, the rail at the end of a test pulse, the
-/// modules in the conversion window (a board with the module-side sense). The firmware's
-/// control task hands them to the step before each sample ([`feed`]); they make the supply,
-/// switch and module checks run as on the board.
-pub type Board = [Option<f32>; 4];
+/// What the board measured besides the RTD for a sample ([`BoardReadings`]): the firmware's
+/// control task hands them to the step before each sample ([`Carrier::observe`]); they make the
+/// supply, switch and module checks run as on the board.
+pub type Board = BoardReadings;
 
 /// The word of a missing reading: a NaN with a payload no conversion gives (a measured NaN is
 /// a reading, and goes to the step as one).
@@ -119,10 +117,10 @@ pub fn input_words(i: &StepInput, board: &Board) -> [u32; INPUT_WORDS] {
         (i.t_ms >> 32) as u32,
         i.counts,
         i.setpoint_c.to_bits(),
-        r(board[0]),
-        r(board[1]),
-        r(board[2]),
-        r(board[3]),
+        r(board.supply_v),
+        r(board.switched_v),
+        r(board.switch_test_v),
+        r(board.module_v),
     ]
 }
 
@@ -131,24 +129,7 @@ pub fn input_of(w: [u32; INPUT_WORDS]) -> (StepInput, Board) {
     let r = |x: u32| (x != NO_READING).then(|| f32::from_bits(x));
     let input =
         StepInput { t_ms: u64::from(w[0]) | u64::from(w[1]) << 32, counts: w[2], setpoint_c: f32::from_bits(w[3]) };
-    (input, [r(w[4]), r(w[5]), r(w[6]), r(w[7])])
-}
-
-/// Hands the board's readings to the step for its next sample, in the firmware's order.
-pub fn feed(carrier: &mut Carrier<AnyController>, board: &Board) {
-    let [supply, switched, test, module] = *board;
-    if let Some(v) = supply {
-        carrier.observe_supply_v(v);
-    }
-    if let Some(v) = switched {
-        carrier.observe_switched_rail_v(v);
-    }
-    if let Some(v) = module {
-        carrier.observe_module_v(v);
-    }
-    if let Some(v) = test {
-        carrier.observe_switch_test_v(v);
-    }
+    (input, BoardReadings { supply_v: r(w[4]), switched_v: r(w[5]), switch_test_v: r(w[6]), module_v: r(w[7]) })
 }
 
 /// Most `(code, value)` pairs [`event_words`] gives for one sample: two per step event, the

@@ -71,11 +71,11 @@ impl Bench {
                 t_ms: self.t_ms,
                 counts: counts_at(self.load_c),
                 reference_ok: true,
-                supply_v: None,
-                switched_v: None,
-                switch_test_v: None,
-                #[cfg(feature = "module-sense")]
-                module_v: self.module_v,
+                board: crate::step::BoardReadings {
+                    #[cfg(feature = "module-sense")]
+                    module_v: self.module_v,
+                    ..Default::default()
+                },
             });
             // 10 s of a τ = 1800 s plant: equilibrium 28 − 43·duty, the duty of 60 s ago.
             self.pipe.push_back(out.step.duty.get());

@@ -458,7 +458,7 @@ type Sample = (StepInput, proto::Board);
 /// readings it recorded (a synthetic case has no readings).
 fn record(case: &Case) -> Result<Vec<Sample>> {
     if let Some(make) = case.synthetic {
-        return Ok(make().into_iter().map(|i| (i, [None; 4])).collect());
+        return Ok(make().into_iter().map(|i| (i, proto::Board::default())).collect());
     }
     let scenario = Scenario::resolve(case.scenario)?;
     let choice = if case.kind == proto::KIND_PI { ControllerChoice::Pi } else { ControllerChoice::Gpc };
@@ -471,9 +471,8 @@ fn record(case: &Case) -> Result<Vec<Sample>> {
         .rows
         .iter()
         .map(|r| {
-            let b = r.board_in;
             let input = StepInput { t_ms: sim_clock_ms(r.t_s), counts: r.counts, setpoint_c: r.setpoint_c as f32 };
-            (input, [b.supply_v, b.switched_v, b.switch_test_v, b.module_v])
+            (input, r.board_in)
         })
         .collect())
 }
@@ -497,7 +496,7 @@ fn run_host(kind: u32, inputs: &[Sample]) -> Result<(Vec<HostSample>, Vec<usize>
         .iter()
         .enumerate()
         .map(|(i, (inp, board))| {
-            proto::feed(&mut carrier, board);
+            carrier.observe(board);
             let o = carrier.step(inp);
             let now = proto::floor_samples(&carrier);
             if now != seen {
@@ -724,13 +723,22 @@ mod tests {
     #[test]
     fn the_input_words_carry_the_board_readings() {
         let input = StepInput { t_ms: (7 << 32) + 5, counts: 49_000, setpoint_c: 4.5 };
-        for board in
-            [[None; 4], [Some(12.1), Some(0.0), None, Some(f32::NAN)], [Some(-0.3), None, Some(11.9), Some(2.5)]]
-        {
-            let (i, b) = proto::input_of(proto::input_words(&input, &board));
+        let board = |s: Option<f32>, r: Option<f32>, t: Option<f32>, m: Option<f32>| proto::Board {
+            supply_v: s,
+            switched_v: r,
+            switch_test_v: t,
+            module_v: m,
+        };
+        for b in [
+            proto::Board::default(),
+            board(Some(12.1), Some(0.0), None, Some(f32::NAN)),
+            board(Some(-0.3), None, Some(11.9), Some(2.5)),
+        ] {
+            let (i, back) = proto::input_of(proto::input_words(&input, &b));
             assert_eq!((i.t_ms, i.counts, i.setpoint_c), (input.t_ms, input.counts, input.setpoint_c));
-            let bits = |b: &proto::Board| b.map(|v| v.map(f32::to_bits));
-            assert_eq!(bits(&b), bits(&board));
+            let bits =
+                |b: &proto::Board| [b.supply_v, b.switched_v, b.switch_test_v, b.module_v].map(|v| v.map(f32::to_bits));
+            assert_eq!(bits(&back), bits(&b));
         }
     }
 
@@ -742,7 +750,10 @@ mod tests {
         let inputs: Vec<Sample> = (0..30u32)
             .map(|k| {
                 let t_ms = 10_000 * u64::from(k);
-                (StepInput { t_ms, counts: if k < 20 { warm + k % 3 } else { 65_535 }, setpoint_c: 4.0 }, [None; 4])
+                (
+                    StepInput { t_ms, counts: if k < 20 { warm + k % 3 } else { 65_535 }, setpoint_c: 4.0 },
+                    proto::Board::default(),
+                )
             })
             .collect();
         let (host, _) = run_host(proto::KIND_PI, &inputs).unwrap();
@@ -758,7 +769,7 @@ mod tests {
 
     #[test]
     fn the_floor_case_meets_the_soft_floor_at_both_tunings_after_the_fall_starts() {
-        let inputs: Vec<Sample> = falling_through_3c().into_iter().map(|i| (i, [None; 4])).collect();
+        let inputs: Vec<Sample> = falling_through_3c().into_iter().map(|i| (i, proto::Board::default())).collect();
         let floors = |kind| run_host(kind, &inputs).unwrap().1;
         let at = floors(proto::KIND_GPC_DAMPED);
         // The fall starts at sample 412; the floor can only act once the plan dips, after it.

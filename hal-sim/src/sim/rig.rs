@@ -6,10 +6,10 @@ use anyhow::{bail, Result};
 use hter::control::Controller;
 use hter::failsafe::Heartbeat;
 use hter::hal::{apply_duty, RtdSampler};
-use hter::step::{Carrier, StepInput, StepOutput};
+use hter::step::{BoardReadings, Carrier, StepInput, StepOutput};
 use hter::units::Celsius;
 
-use super::row::{BoardIn, RigView};
+use super::row::RigView;
 use super::{PlantChoice, SimOptions, PWM_PERIOD_S};
 use crate::arx::ArxPlant;
 use crate::fault::Fault;
@@ -70,11 +70,11 @@ impl Rig {
         carrier: &mut Carrier<C>,
         t_s: f64,
         w: f64,
-    ) -> (StepOutput, (u32, BoardIn)) {
+    ) -> (StepOutput, (u32, BoardReadings)) {
         match self {
             Rig::Physical { plant, adc, ssr, board } => {
                 let board_in = board.readings(plant, ssr);
-                board_in.feed(carrier);
+                carrier.observe(&board_in);
                 adc.set_temperature_c(plant.sensed_temp_c());
                 let counts = match adc.sample() {
                     Ok(c) => c,
@@ -85,7 +85,7 @@ impl Rig {
             }
             Rig::Arx(p) => {
                 let out = carrier.step_celsius(step_clock_ms(t_s), Celsius(p.temp_c() as f32), w as f32);
-                (out, (0, BoardIn::default()))
+                (out, (0, BoardReadings::default()))
             }
         }
     }
@@ -96,21 +96,13 @@ impl Rig {
     pub(super) fn sample_in(&mut self, t_ms: u64) -> Option<hter::app::SampleIn> {
         match self {
             Rig::Physical { plant, adc, ssr, board } => {
-                let b = board.readings(plant, ssr);
+                let board = board.readings(plant, ssr);
                 adc.set_temperature_c(plant.sensed_temp_c());
                 let counts = match adc.sample() {
                     Ok(c) => c,
                     Err(never) => match never {},
                 };
-                Some(hter::app::SampleIn {
-                    t_ms,
-                    counts,
-                    reference_ok: true,
-                    supply_v: b.supply_v,
-                    switched_v: b.switched_v,
-                    switch_test_v: b.switch_test_v,
-                    module_v: b.module_v,
-                })
+                Some(hter::app::SampleIn { t_ms, counts, reference_ok: true, board })
             }
             Rig::Arx(_) => None,
         }
@@ -342,8 +334,8 @@ impl Board {
     /// What the board reads besides the RTD for the next sample: the supply divider, the
     /// switched rail after the supply switch, the test pulse's rail if the last output asked
     /// for one, and the modules in the conversion window on a board with that sense.
-    fn readings(&mut self, plant: &Plant, ssr: &SimSsr) -> BoardIn {
-        BoardIn {
+    fn readings(&mut self, plant: &Plant, ssr: &SimSsr) -> BoardReadings {
+        BoardReadings {
             supply_v: Some(plant.supply_v() as f32),
             switched_v: Some(ssr.switched_rail_v(plant.supply_v()) as f32),
             switch_test_v: self.test_pulse(ssr, plant.supply_v()),

@@ -3,43 +3,9 @@
 //! [`Indication::name`]), the spelling `hter log2csv` writes for the board's telemetry too.
 
 use hter::alarm::Indication;
-use hter::control::{AdaptiveMode, Controller};
-use hter::step::{Carrier, Mode, StepOutput};
+use hter::control::AdaptiveMode;
+use hter::step::{BoardReadings, Mode, StepOutput};
 use serde::Serialize;
-
-/// What the board measured besides the RTD at a sample, as the step was handed it (each
-/// `None` where the board has no such sense or took no reading): the supply ahead of the
-/// switch, the switched rail, the rail at the end of a test pulse, the modules in the
-/// conversion window. `cargo xtask pil` replays them on the emulated Cortex-M4F.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct BoardIn {
-    /// The modules' supply, V.
-    pub supply_v: Option<f32>,
-    /// The switched rail after the supply-enable switch, V.
-    pub switched_v: Option<f32>,
-    /// The switched rail at the end of the test pulse the previous output asked for, V.
-    pub switch_test_v: Option<f32>,
-    /// The modules' voltage in the conversion window (`--module-sense`), V.
-    pub module_v: Option<f32>,
-}
-
-impl BoardIn {
-    /// Hands the readings to the step for its next sample, as the firmware's control task does.
-    pub fn feed<C: Controller>(&self, carrier: &mut Carrier<C>) {
-        if let Some(v) = self.supply_v {
-            carrier.observe_supply_v(v);
-        }
-        if let Some(v) = self.switched_v {
-            carrier.observe_switched_rail_v(v);
-        }
-        if let Some(v) = self.module_v {
-            carrier.observe_module_v(v);
-        }
-        if let Some(v) = self.switch_test_v {
-            carrier.observe_switch_test_v(v);
-        }
-    }
-}
 
 /// The `mode` cell: the step's safety mode, or the step not being called at all.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -138,9 +104,10 @@ pub struct Row {
     /// switching disturbance, not rounded); not in the CSV.
     #[serde(skip)]
     pub ideal_counts: f64,
-    /// What the board measured besides the RTD, as handed to the step; not in the CSV.
+    /// What the board measured besides the RTD, as handed to the step ([`BoardReadings`]:
+    /// `cargo xtask pil` replays them on the emulated Cortex-M4F); not in the CSV.
     #[serde(skip)]
-    pub board_in: BoardIn,
+    pub board_in: BoardReadings,
 }
 
 /// What the simulated hardware shows at a sample, besides the step's output.
@@ -163,7 +130,7 @@ impl Row {
         t_s: f64,
         setpoint_c: f64,
         out: &StepOutput,
-        (counts, board_in): (u32, BoardIn),
+        (counts, board_in): (u32, BoardReadings),
         duty: f64,
         alarm: Indication,
         rig: RigView,
@@ -233,7 +200,7 @@ impl Row {
             holdover_s: None,
             reset_c: None,
             ideal_counts: rig.ideal_counts,
-            board_in: BoardIn::default(),
+            board_in: BoardReadings::default(),
         }
     }
 }
