@@ -83,18 +83,23 @@ fn a_brownout_stores_the_reset_and_restarts_both_counts() {
     let times = history_times(&out);
     let next = times.iter().find(|t| **t > RESET_S).unwrap();
     assert_eq!(*next, RESET_S + 359.0 * TS_S);
-    // So does the model's: the first store after the reset needs 1440 trusted samples of its
-    // own, where the count from before the reset would have been complete sooner.
+    // So does the model's: the first store after the reset needs 360 trusted samples of its
+    // own (a boot's first store comes after a quarter of the 1440, `ModelCadence`), where the
+    // count from before the reset would have been due at 1440 less what it carried; then every
+    // 1440 again.
     let stored = models(&out);
     let (before, after): (Vec<f64>, Vec<f64>) = stored.iter().map(|(t, _)| *t).partition(|t| *t < RESET_S);
     let last_before = *before.last().expect("a model stored before the reset");
     let carried = adaptive_rows(&out, last_before, RESET_S - TS_S);
     let trusted_after = |t: f64| adaptive_rows(&out, RESET_S - TS_S, t);
     match after.first() {
-        Some(&t) => assert_eq!(trusted_after(t), 1440, "first store after the reset at {t} s"),
-        None => assert!(trusted_after(f64::INFINITY) < 1440),
+        Some(&t) => assert_eq!(trusted_after(t), 360, "first store after the reset at {t} s"),
+        None => assert!(trusted_after(f64::INFINITY) < 360),
     }
-    assert!(carried + trusted_after(f64::INFINITY) >= 1440, "the run must tell the two counts apart");
+    assert_ne!(carried, 1440 - 360, "the run must tell the two counts apart");
+    if let [first, second, ..] = after[..] {
+        assert_eq!(adaptive_rows(&out, first, second), 1440, "then every 1440 trusted samples");
+    }
 }
 
 /// A brown-out in a long hold restarts the self-tuner from its stored model without a swing

@@ -345,3 +345,36 @@ fn a_fault_injected_on_the_virtual_board_shows_in_status_and_history() {
     assert!(e.contains("firmware-hang"), "{e}");
     assert!(!link.exists());
 }
+
+/// A supply that drops two hours after the board first started: the model the self-tuner learnt
+/// on this half-loaded carrier was stored after its first trusted hour, so the board restarts
+/// from it, not from the full-load start model (which swung the load 3.2–4.6 °C for a quarter
+/// of an hour when the first store waited for 4 h).
+#[test]
+fn a_brown_out_two_hours_in_restarts_from_the_learnt_model() {
+    use hal_sim::fault::Fault;
+    use hal_sim::plant::Load;
+    use hal_sim::sim::virtual_board::{VirtualBoard, VirtualOptions};
+    use hal_sim::sim::PlantChoice;
+    use hter::control::Controller;
+    let opts =
+        VirtualOptions { plant: PlantChoice::Hter1, load: Load::Half, ambient_c: 28.0, seed: 1, module_sense: false };
+    let mut b = VirtualBoard::new(&opts).unwrap();
+    for _ in 0..720 {
+        b.step().unwrap();
+    }
+    b.inject(Fault::Brownout).unwrap();
+    assert_eq!(b.restarts, 1);
+    // The self-tuner restarts from a stored model: the half load's, not the full-load start.
+    let restored = b.app().carrier().controller().status().expect("a self-tuner").theta;
+    let start = hter::profile::START_MODEL_HTER1;
+    let start_theta = [start.a()[0], start.a()[1], start.b()[0], start.b()[1]];
+    assert!(restored[..4].iter().zip(&start_theta).any(|(r, s)| (r - s).abs() > 1e-3), "{restored:?}");
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for _ in 0..360 {
+        b.step().unwrap();
+        lo = lo.min(b.load_c());
+        hi = hi.max(b.load_c());
+    }
+    assert!(lo > 3.85 && hi < 4.15, "the hour after the restart: {lo:.2}…{hi:.2} °C");
+}
