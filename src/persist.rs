@@ -1314,16 +1314,16 @@ mod tests {
         c.mode = Some(AdaptiveMode::Adaptive);
         assert_eq!(cadence.push(c.mode, &c), want);
         // Then every 12 trusted samples.
-        let mut twelve = || -> Vec<Option<ModelRecord>> { (0..12).map(|_| cadence.push(c.mode, &c)).collect() };
-        let stored_last = |v: Vec<Option<ModelRecord>>| v[..11].iter().all(Option::is_none) && v[11] == want;
-        assert!(stored_last(twelve()));
+        let twelve = |cadence: &mut ModelCadence, c: &Scripted| -> Vec<Option<ModelRecord>> {
+            (0..12).map(|_| cadence.push(c.mode, c)).collect()
+        };
+        let only_the_last = |v: &[Option<ModelRecord>]| v[..11].iter().all(Option::is_none) && v[11] == want;
+        assert!(only_the_last(&twelve(&mut cadence, &c)));
         // A model without a record (A not second order) is skipped, and the count restarts.
         c.trusted = Some(Model::new(&[-0.9], &[-0.5], &[], 3).unwrap());
-        let skipped: Vec<_> = (0..12).map(|_| cadence.push(c.mode, &c)).collect();
-        assert!(skipped.iter().all(Option::is_none));
+        assert!(twelve(&mut cadence, &c).iter().all(Option::is_none));
         c.trusted = Some(START_MODEL_HTER2);
-        let again: Vec<_> = (0..12).map(|_| cadence.push(c.mode, &c)).collect();
-        assert!(again[..11].iter().all(Option::is_none) && again[11] == want);
+        assert!(only_the_last(&twelve(&mut cadence, &c)));
         // A new boot stores its first after a quarter again; at least one sample between stores.
         let mut boot = ModelCadence::new(12);
         assert_eq!([boot.push(c.mode, &c), boot.push(c.mode, &c), boot.push(c.mode, &c)], [None, None, want]);

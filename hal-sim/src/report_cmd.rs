@@ -319,8 +319,11 @@ pub fn html(path: &Path) -> Result<String> {
     writeln!(w, "</head><body>")?;
     writeln!(w, "<div class=\"verdict {class}\" id=\"verdict\">{}</div>", esc(line))?;
     // Loud beside the verdict: the load may be in range while the carrier needs a technician.
+    // The resets and faults, each with what it means and whether it needs a technician.
+    let faults: Vec<(&Event, Option<(String, bool)>)> =
+        events.iter().filter(|e| is_reset_or_fault(e)).map(|e| (e, fault_meaning(&e.name))).collect();
     let service: Vec<&Event> =
-        events.iter().filter(|e| is_reset_or_fault(e) && fault_meaning(&e.name).is_some_and(|(_, s)| s)).collect();
+        faults.iter().filter(|(_, m)| m.as_ref().is_some_and(|(_, s)| *s)).map(|(e, _)| *e).collect();
     if let Some(first) = service.first() {
         writeln!(
             w,
@@ -378,7 +381,6 @@ pub fn html(path: &Path) -> Result<String> {
             &format!("{} ({} samples; counted neither in nor out of range)", dur(r.time_no_reading_s), r.fault_samples),
         )?;
     }
-    let faults: Vec<&Event> = events.iter().filter(|e| is_reset_or_fault(e)).collect();
     let listed = if faults.is_empty() {
         if events.is_empty() {
             "none recorded (the file has no event column)".to_owned()
@@ -387,10 +389,10 @@ pub fn html(path: &Path) -> Result<String> {
         }
     } else {
         let mut s = format!("{}:<ul class=\"events\">", faults.len());
-        for e in &faults {
+        for (e, meaning) in &faults {
             let _ = write!(s, "<li>{} — {}", esc(&e.name), when(e.t_s, t0));
-            if let Some((m, _)) = fault_meaning(&e.name) {
-                let _ = write!(s, ": {}", esc(&m));
+            if let Some((m, _)) = meaning {
+                let _ = write!(s, ": {}", esc(m));
             }
             s.push_str("</li>");
         }

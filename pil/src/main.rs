@@ -33,7 +33,7 @@ use hter::control::gpc::{GpcConfig, GpcStaged, GpcState};
 use hter::control::{AnyController, ControlInput, Controller};
 use hter::ident::rls::Rls;
 use hter::persist::{HistoryRecord, Recorder};
-use hter::step::{Carrier, StepInput, StepOutput};
+use hter::step::{BoardReadings, Carrier, StepInput, StepOutput};
 use nalgebra::SVector;
 
 /// Samples read from the host per semihosting call.
@@ -246,7 +246,7 @@ fn run() -> Result<(), &'static str> {
         let take = (n - done).min(CHUNK);
         input.read_exact(&mut chunk[..SAMPLE_BYTES * take])?;
         for s in 0..take {
-            let (inp, board): (StepInput, proto::Board) =
+            let (inp, board): (StepInput, BoardReadings) =
                 proto::input_of(core::array::from_fn(|i| word(&chunk, proto::INPUT_WORDS * s + i)));
             let mut ticks = [0u32; proto::PARTS.len()];
             let ctrl_before: AnyController = carrier.controller().clone();

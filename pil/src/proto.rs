@@ -7,8 +7,9 @@
 //! Input file ([`INPUT_FILE`], little-endian u32 words):
 //! `MAGIC_IN, controller kind, n`, then n × [`INPUT_WORDS`] words from [`input_words`]:
 //! `t_ms low word, t_ms high word, counts, setpoint_c (f32 bits)`, then the board's other
-//! readings as the firmware hands them to the step ([`Board`]: supply, switched rail, test
-//! pulse, modules; f32 bits, [`NO_READING`] for none).
+//! readings as the firmware hands them to the step ([`BoardReadings`], [`Carrier::observe`]:
+//! supply, switched rail, test pulse, modules; f32 bits, [`NO_READING`] for none), so that the
+//! supply, switch and module checks run as on the board.
 //!
 //! Output file ([`OUTPUT_FILE`]): `MAGIC_OUT`, the calibration (3 words, [`CAL_LOOP`]), n, then
 //! per sample: `duty (f32 bits)`, one SysTick count per entry of [`PARTS`], the number of event
@@ -99,18 +100,13 @@ pub fn monitor_push(monitor: &mut ColdChainMonitor, input: &StepInput, out: &Ste
 /// Words per sample in the input file.
 pub const INPUT_WORDS: usize = 8;
 
-/// What the board measured besides the RTD for a sample ([`BoardReadings`]): the firmware's
-/// control task hands them to the step before each sample ([`Carrier::observe`]); they make the
-/// supply, switch and module checks run as on the board.
-pub type Board = BoardReadings;
-
 /// The word of a missing reading: a NaN with a payload no conversion gives (a measured NaN is
 /// a reading, and goes to the step as one).
 pub const NO_READING: u32 = 0x7fc0_dead;
 
 /// One sample's words in the input file (the u64 clock as low word, high word).
 #[allow(dead_code)] // the host writes the file, the runner only reads it
-pub fn input_words(i: &StepInput, board: &Board) -> [u32; INPUT_WORDS] {
+pub fn input_words(i: &StepInput, board: &BoardReadings) -> [u32; INPUT_WORDS] {
     let r = |v: Option<f32>| v.map_or(NO_READING, f32::to_bits);
     [
         i.t_ms as u32,
@@ -125,7 +121,7 @@ pub fn input_words(i: &StepInput, board: &Board) -> [u32; INPUT_WORDS] {
 }
 
 /// The sample of [`input_words`].
-pub fn input_of(w: [u32; INPUT_WORDS]) -> (StepInput, Board) {
+pub fn input_of(w: [u32; INPUT_WORDS]) -> (StepInput, BoardReadings) {
     let r = |x: u32| (x != NO_READING).then(|| f32::from_bits(x));
     let input =
         StepInput { t_ms: u64::from(w[0]) | u64::from(w[1]) << 32, counts: w[2], setpoint_c: f32::from_bits(w[3]) };

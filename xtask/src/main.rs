@@ -43,7 +43,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use hal_sim::scenario::Scenario;
 use hal_sim::sim::{run, ControllerChoice, ControllerSpec, Fault, SimOptions};
-use hter::step::StepInput;
+use hter::step::{BoardReadings, StepInput};
 
 /// Worst-case instructions allowed for one sample (step + monitor) with self-tuning GPC.
 const BUDGET_INSN: f64 = 5000.0;
@@ -452,13 +452,13 @@ fn build_runner() -> Result<PathBuf> {
 
 /// One sample as the firmware hands it to the library: the step's input and the board's other
 /// readings.
-type Sample = (StepInput, proto::Board);
+type Sample = (StepInput, BoardReadings);
 
 /// Runs the case's closed loop on the simulated plant; returns the step inputs and board
 /// readings it recorded (a synthetic case has no readings).
 fn record(case: &Case) -> Result<Vec<Sample>> {
     if let Some(make) = case.synthetic {
-        return Ok(make().into_iter().map(|i| (i, proto::Board::default())).collect());
+        return Ok(make().into_iter().map(|i| (i, BoardReadings::default())).collect());
     }
     let scenario = Scenario::resolve(case.scenario)?;
     let choice = if case.kind == proto::KIND_PI { ControllerChoice::Pi } else { ControllerChoice::Gpc };
@@ -723,21 +723,22 @@ mod tests {
     #[test]
     fn the_input_words_carry_the_board_readings() {
         let input = StepInput { t_ms: (7 << 32) + 5, counts: 49_000, setpoint_c: 4.5 };
-        let board = |s: Option<f32>, r: Option<f32>, t: Option<f32>, m: Option<f32>| proto::Board {
+        let board = |s: Option<f32>, r: Option<f32>, t: Option<f32>, m: Option<f32>| BoardReadings {
             supply_v: s,
             switched_v: r,
             switch_test_v: t,
             module_v: m,
         };
         for b in [
-            proto::Board::default(),
+            BoardReadings::default(),
             board(Some(12.1), Some(0.0), None, Some(f32::NAN)),
             board(Some(-0.3), None, Some(11.9), Some(2.5)),
         ] {
             let (i, back) = proto::input_of(proto::input_words(&input, &b));
             assert_eq!((i.t_ms, i.counts, i.setpoint_c), (input.t_ms, input.counts, input.setpoint_c));
-            let bits =
-                |b: &proto::Board| [b.supply_v, b.switched_v, b.switch_test_v, b.module_v].map(|v| v.map(f32::to_bits));
+            let bits = |b: &BoardReadings| {
+                [b.supply_v, b.switched_v, b.switch_test_v, b.module_v].map(|v| v.map(f32::to_bits))
+            };
             assert_eq!(bits(&back), bits(&b));
         }
     }
@@ -752,7 +753,7 @@ mod tests {
                 let t_ms = 10_000 * u64::from(k);
                 (
                     StepInput { t_ms, counts: if k < 20 { warm + k % 3 } else { 65_535 }, setpoint_c: 4.0 },
-                    proto::Board::default(),
+                    BoardReadings::default(),
                 )
             })
             .collect();
@@ -769,7 +770,7 @@ mod tests {
 
     #[test]
     fn the_floor_case_meets_the_soft_floor_at_both_tunings_after_the_fall_starts() {
-        let inputs: Vec<Sample> = falling_through_3c().into_iter().map(|i| (i, proto::Board::default())).collect();
+        let inputs: Vec<Sample> = falling_through_3c().into_iter().map(|i| (i, BoardReadings::default())).collect();
         let floors = |kind| run_host(kind, &inputs).unwrap().1;
         let at = floors(proto::KIND_GPC_DAMPED);
         // The fall starts at sample 412; the floor can only act once the plan dips, after it.

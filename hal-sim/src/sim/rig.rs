@@ -71,21 +71,15 @@ impl Rig {
         t_s: f64,
         w: f64,
     ) -> (StepOutput, (u32, BoardReadings)) {
+        let t_ms = step_clock_ms(t_s);
         match self {
             Rig::Physical { plant, adc, ssr, board } => {
-                let board_in = board.readings(plant, ssr);
-                carrier.observe(&board_in);
-                adc.set_temperature_c(plant.sensed_temp_c());
-                let counts = match adc.sample() {
-                    Ok(c) => c,
-                    Err(never) => match never {},
-                };
-                let out = carrier.step(&StepInput { t_ms: step_clock_ms(t_s), counts, setpoint_c: w as f32 });
-                (out, (counts, board_in))
+                let (counts, readings) = board.sample(plant, adc, ssr);
+                carrier.observe(&readings);
+                (carrier.step(&StepInput { t_ms, counts, setpoint_c: w as f32 }), (counts, readings))
             }
             Rig::Arx(p) => {
-                let out = carrier.step_celsius(step_clock_ms(t_s), Celsius(p.temp_c() as f32), w as f32);
-                (out, (0, BoardReadings::default()))
+                (carrier.step_celsius(t_ms, Celsius(p.temp_c() as f32), w as f32), (0, BoardReadings::default()))
             }
         }
     }
@@ -96,12 +90,7 @@ impl Rig {
     pub(super) fn sample_in(&mut self, t_ms: u64) -> Option<hter::app::SampleIn> {
         match self {
             Rig::Physical { plant, adc, ssr, board } => {
-                let board = board.readings(plant, ssr);
-                adc.set_temperature_c(plant.sensed_temp_c());
-                let counts = match adc.sample() {
-                    Ok(c) => c,
-                    Err(never) => match never {},
-                };
+                let (counts, board) = board.sample(plant, adc, ssr);
                 Some(hter::app::SampleIn { t_ms, counts, reference_ok: true, board })
             }
             Rig::Arx(_) => None,
@@ -329,6 +318,18 @@ impl Board {
             self.pulse_taken = true;
             (if ssr.switch_shorted { supply_v } else { 0.0 }) as f32
         })
+    }
+
+    /// The board's sample for the next step: its other readings ([`Self::readings`]) and the
+    /// RTD's conversion of the sensed temperature.
+    fn sample(&mut self, plant: &Plant, adc: &mut SimAdc, ssr: &SimSsr) -> (u32, BoardReadings) {
+        let readings = self.readings(plant, ssr);
+        adc.set_temperature_c(plant.sensed_temp_c());
+        let counts = match adc.sample() {
+            Ok(c) => c,
+            Err(never) => match never {},
+        };
+        (counts, readings)
     }
 
     /// What the board reads besides the RTD for the next sample: the supply divider, the
