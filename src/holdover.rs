@@ -126,34 +126,52 @@ impl Holdover {
         let r = sweep.r;
         let [a1, a2] = sweep.a;
         let [b0, b1] = sweep.b;
-        let mut i = 0;
-        while i < self.steps {
-            let n = sweep.n + 1;
-            // Unit step at t = 0: u(t − k) = 1 from n = k on, u(t − k − 1) from n = k + 1.
-            let mut y = -a1 * sweep.h[0] - a2 * sweep.h[1];
-            if n >= sweep.k {
+        let k = sweep.k;
+        // This sample's steps end at `end`: `steps` more, or the horizon.
+        let end = sweep.n.saturating_add(self.steps).min(horizon);
+        let [mut h0, mut h1] = sweep.h;
+        let mut n = sweep.n;
+        let mut crossed = false;
+        // Unit step at t = 0: u(t − k) = 1 from n = k on, u(t − k − 1) from n = k + 1. The
+        // delay and the step's first sample, then the rest with both terms in: the same
+        // operations in the same order as one loop that tests n against k every step, with
+        // the tests out of the loop that runs nearly every step.
+        while n < end && n < k {
+            n += 1;
+            let mut y = -a1 * h0 - a2 * h1;
+            if n >= k {
                 y += b0;
             }
-            if n > sweep.k {
-                y += b1;
+            (h0, h1, crossed) = (y, h0, -y >= r);
+            if crossed {
+                break;
             }
-            let prev = -sweep.h[0];
-            sweep.h = [y, sweep.h[0]];
-            sweep.n = n;
-            if -y >= r || n >= horizon {
-                let at = if -y >= r {
-                    // Linear interpolation between the two steps around the crossing.
-                    let frac = (r - prev) / (-y - prev);
-                    (n as f32 - 1.0 + frac - sweep.k as f32) * ts_s
-                } else {
-                    HORIZON_S
-                };
-                self.sweep = None;
-                self.estimate_s = Some(min_f32(HORIZON_S, max_f32(0.0, at)));
-                return self.estimate_s;
-            }
-            i += 1;
         }
+        if !crossed {
+            while n < end {
+                n += 1;
+                let y = -a1 * h0 - a2 * h1 + b0 + b1;
+                (h0, h1, crossed) = (y, h0, -y >= r);
+                if crossed {
+                    break;
+                }
+            }
+        }
+        if crossed || n >= horizon {
+            let at = if crossed {
+                // Linear interpolation between the two steps around the crossing.
+                let prev = -h1;
+                let frac = (r - prev) / (-h0 - prev);
+                (n as f32 - 1.0 + frac - k as f32) * ts_s
+            } else {
+                HORIZON_S
+            };
+            self.sweep = None;
+            self.estimate_s = Some(min_f32(HORIZON_S, max_f32(0.0, at)));
+            return self.estimate_s;
+        }
+        sweep.h = [h0, h1];
+        sweep.n = n;
         self.sweep = Some(sweep);
         self.estimate_s
     }
@@ -254,6 +272,51 @@ mod tests {
         let exact_s = (hi - k as f64) * f64::from(ts);
         let est = settle(m, u as f32, t0 as f32, ts);
         assert!((f64::from(est) - exact_s).abs() <= 1.0, "estimate {est} s, closed form {exact_s} s");
+    }
+
+    #[test]
+    fn every_delay_and_both_b_terms_match_an_f64_simulation_of_the_step() {
+        // The crossing of −h(n) = r on the model's unit-step response, simulated in f64 one
+        // step at a time (h(n) = −a1 h(n−1) − a2 h(n−2) + b0 [n ≥ k] + b1 [n ≥ k + 1]) and
+        // interpolated between the two steps around it, as the estimate is. The sweep splits
+        // the same steps over samples, STEPS_PER_SAMPLE at a time, so a delay at, before and
+        // after a sample's boundary is covered.
+        let ts = 10.0f32;
+        for k in 1..=10usize {
+            for (p1, p2, b0, b1, u, t0) in [
+                (0.995f64, 0.7f64, -0.012f64, -0.018f64, 0.5f64, 4.0f64),
+                (0.99, 0.85, -0.02, -0.01, 0.3, 3.0),
+                (0.98, 0.5, -0.05, -0.08, 0.7, 5.0),
+            ] {
+                let (a1, a2) = (-(p1 + p2), p1 * p2);
+                let m = Model::second_order([a1 as f32, a2 as f32], [b0 as f32, b1 as f32], k).unwrap();
+                let (a1, a2) = (f64::from(m.a()[0]), f64::from(m.a()[1]));
+                let (b0, b1) = (f64::from(m.b()[0]), f64::from(m.b()[1]));
+                let r = (8.0 - t0) / u;
+                let (mut h0, mut h1, mut n) = (0.0f64, 0.0f64, 0usize);
+                let exact_s = loop {
+                    n += 1;
+                    let mut y = -a1 * h0 - a2 * h1;
+                    if n >= k {
+                        y += b0;
+                    }
+                    if n > k {
+                        y += b1;
+                    }
+                    if -y >= r {
+                        let frac = (r + h0) / (-y + h0);
+                        break (n as f64 - 1.0 + frac - k as f64) * f64::from(ts);
+                    }
+                    (h0, h1) = (y, h0);
+                    assert!(n < 100_000, "k {k}: no crossing");
+                };
+                let est = settle(m, u as f32, t0 as f32, ts);
+                assert!(
+                    (f64::from(est) - exact_s).abs() <= 0.5,
+                    "k {k}, poles {p1} {p2}: estimate {est} s, f64 simulation {exact_s} s"
+                );
+            }
+        }
     }
 
     #[test]

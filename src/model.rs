@@ -171,15 +171,17 @@ impl Model {
     }
 
     /// Ã = Δ·A = (1 − q⁻¹) A: coefficients ã_0 = 1, ã_1 … ã_{na+1}.
+    ///
+    /// ã_i = a_i − a_{i−1} (a_0 = 1) over the whole array: the unused a_i are zero (module
+    /// docs), so beyond na + 1 it gives 0 − 0 = +0 and at na + 1 it gives 0 − a_na, the values
+    /// a loop to na + 1 writes, bit for bit. A fixed length unrolls with no branch or bounds
+    /// check; the step computes Ã several times a sample (`cargo xtask pil`).
     pub fn atilde(&self) -> [f32; MAX_NA + 2] {
-        let mut at = [0.0f32; MAX_NA + 2];
-        at[0] = 1.0;
-        for i in 1..=self.na + 1 {
-            let ai = if i <= self.na { self.a[i - 1] } else { 0.0 };
-            let aim1 = if i == 1 { 1.0 } else { self.a[i - 2] };
-            at[i] = ai - aim1;
-        }
-        at
+        let a = |i: usize| match i {
+            0 => 1.0,
+            _ => self.a.get(i - 1).copied().unwrap_or(0.0),
+        };
+        core::array::from_fn(|i| if i == 0 { 1.0 } else { a(i) - a(i - 1) })
     }
 
     /// True if all roots of A lie strictly inside the unit circle (Jury's criterion for
@@ -267,6 +269,39 @@ fn schur_stable(a: &[f32; MAX_NA], n: usize) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn atilde_is_the_product_of_delta_and_a_bit_for_bit() {
+        // (1 − q⁻¹)·A by a plain convolution of [1, a_1 … a_na] with [1, −1], zeros beyond.
+        let conv = |a: &[f32]| {
+            let poly: Vec<f32> = core::iter::once(1.0).chain(a.iter().copied()).collect();
+            let mut out = [0.0f32; MAX_NA + 2];
+            for (i, p) in poly.iter().enumerate() {
+                out[i] += p;
+                out[i + 1] -= p;
+            }
+            out
+        };
+        let mut seed = 777u32;
+        let mut next = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 23) as f32 - 1.0
+        };
+        for na in 1..=MAX_NA {
+            for case in 0..200 {
+                let mut a: Vec<f32> = (0..na).map(|_| 2.0 * next()).collect();
+                if case == 0 {
+                    a.iter_mut().for_each(|x| *x = -0.0);
+                }
+                let m = Model::new(&a, &[-0.1], &[], 3).unwrap();
+                let want = conv(&a);
+                let got = m.atilde();
+                for i in 0..MAX_NA + 2 {
+                    assert_eq!(got[i].to_bits(), want[i].to_bits(), "na {na}, ã_{i}: {got:?} against {want:?}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn second_order_check_is_exact_against_f64() {

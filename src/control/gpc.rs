@@ -35,7 +35,7 @@
 #![allow(non_snake_case)]
 
 use crate::model::{Model, MAX_K, MAX_NA, MAX_NB, MAX_NC};
-use crate::numerics::{finite_probe, shift_in, sqrtf};
+use crate::numerics::{dot_from, finite_probe, shift_in, sqrtf};
 
 /// Largest prediction horizon N2.
 pub const MAX_N2: usize = 30;
@@ -276,7 +276,6 @@ impl GpcState {
         let mut incoming = self.du[..k.saturating_sub(2)].iter().rev();
         let mut res = [c[0] * e[0] + c[1] * e[1], c[1] * e[0]];
         let mut past: [f32; 4] = core::array::from_fn(|i| self.y[i]);
-        let mut probe = 0.0f32;
         for fj in f.iter_mut() {
             let mut v = 0.0;
             for (ai, yp) in at[1..4].iter().zip(&past) {
@@ -286,12 +285,13 @@ impl GpcState {
                 v += bi * ui;
             }
             v += res[0];
-            probe += finite_probe(v);
             shift_in(&mut past, v);
             shift_in(&mut res, 0.0);
             shift_in(&mut win, incoming.next().copied().unwrap_or(0.0));
             *fj = v;
         }
+        // The last value is finite only if every row is ([`recursion_probe`]).
+        let probe = recursion_probe(past[0]);
         (past, probe)
     }
 
@@ -1189,7 +1189,6 @@ fn step_response<const NA: usize, const NB: usize>(m: &Model, n2: usize, g: &mut
     // (Element by element: a run-time-length copy is a memcpy call on the M4.)
     let a: [f32; NA] = core::array::from_fn(|i| if i < na { m.a()[i] } else { 0.0 });
     let b: [f32; NB] = core::array::from_fn(|i| if i < nb { m.b()[i] } else { 0.0 });
-    let mut probe = 0.0f32;
     // Step response of q^−k B/A: y(j) = −Σ a_i y(j−i) + Σ b_i u(j−k−i), u = 1 from j = 0;
     // y(j ≤ 0) = 0. From j = k + nb − 1 on every b_i is in (the padded zeros add +0), so
     // that part needs no comparisons.
@@ -1207,7 +1206,6 @@ fn step_response<const NA: usize, const NB: usize>(m: &Model, n2: usize, g: &mut
                 v += bi;
             }
         }
-        probe += finite_probe(v);
         shift_in(&mut past, v);
         *gj = v;
     }
@@ -1219,12 +1217,23 @@ fn step_response<const NA: usize, const NB: usize>(m: &Model, n2: usize, g: &mut
         for bi in &b {
             v += bi;
         }
-        probe += finite_probe(v);
         shift_in(&mut past, v);
         *gj = v;
     }
+    // The last value is finite only if every g_j is ([`recursion_probe`]).
+    recursion_probe(past[0])
+}
 
-    probe
+/// The finiteness probe of a whole recursion from its last value: +0 when every value it made
+/// is finite, NaN otherwise, as the sum of every value's [`finite_probe`] would be. Each
+/// value of the recursions it serves enters the next one through a product with a finite
+/// coefficient (Ã's, A's, zero included) added to finite terms, and ±∞ or NaN times a finite
+/// number is ±∞ or NaN, and stays so through a sum: one non-finite value makes every later
+/// one non-finite, down to the last. One probe instead of one a row: 2 instructions a row, on
+/// the free response every sample (`cargo xtask pil`).
+#[inline(always)]
+fn recursion_probe(last: f32) -> f32 {
+    finite_probe(last)
 }
 
 /// The lower triangle of H = GᵀG + λI (all the Cholesky factorisation reads) for rows j = N1..N2 of
@@ -1271,9 +1280,7 @@ fn normal_matrix_into(g: &[f32; MAX_N2], cfg: &GpcConfig, lead: usize, h: &mut [
                 let mut s = if r == c { cfg.lambda } else { 0.0 };
                 let lo = n1.max(r + 1);
                 if lo <= n2 {
-                    for (x, y) in g[lo - r - 1..n2 - r].iter().zip(&g[lo - c - 1..n2 - c]) {
-                        s += x * y;
-                    }
+                    s = dot_from(s, &g[lo - r - 1..n2 - r], &g[lo - c - 1..n2 - c]);
                 }
                 h[r][c] = s;
             }
@@ -1568,6 +1575,35 @@ mod tests {
         // At rest at the setpoint the free response is flat and the increment is zero.
         assert!(d.f[..30].iter().all(|f| (f - 4.0).abs() < 1e-5));
         assert!(d.du.abs() < 1e-5);
+    }
+
+    #[test]
+    fn a_recursion_that_overflows_anywhere_is_refused_by_its_last_value() {
+        // An unstable A that reaches f32's range early (row 3 of 30) and then keeps every later
+        // row non-finite: ±∞, and NaN once ∞ − ∞ or 0·∞ meets it. The one probe of the last
+        // value must say what a probe of every row would.
+        for (a, b) in
+            [(vec![-1e20f32], vec![-1.0f32]), (vec![-1e20, 1e20], vec![-1.0, 2.0]), (vec![0.5, -1e25], vec![-0.1])]
+        {
+            let m = Model::new(&a, &b, &[], 1).unwrap();
+            let mut g = [0.0f32; MAX_N2];
+            let probe = step_response::<2, 4>(&m, 30, &mut g);
+            assert!(g[..30].iter().any(|x| !x.is_finite()), "a {a:?}: the test's model overflows");
+            assert!(probe.is_nan(), "a {a:?}: step response probe {probe}, g {:?}", &g[..6]);
+            let mut s = GpcState::new(0.0);
+            s.push_y(1.0, &m).unwrap();
+            let mut f = [0.0f32; 30];
+            let (_, probe) = s.free_window(&m, &mut f);
+            assert!(f.iter().any(|x| !x.is_finite()), "a {a:?}: the free response overflows");
+            assert!(probe.is_nan(), "a {a:?}: free response probe {probe}");
+        }
+        // Finite throughout: exactly +0.
+        let m = Model::second_order([-1.8, 0.81], [-0.05, -0.02], 3).unwrap();
+        let mut g = [0.0f32; MAX_N2];
+        assert_eq!(step_response::<2, 4>(&m, 30, &mut g).to_bits(), 0);
+        let mut s = GpcState::new(0.0);
+        s.push_y(4.0, &m).unwrap();
+        assert_eq!(s.free_window(&m, &mut [0.0f32; 30]).1.to_bits(), 0);
     }
 
     #[test]
