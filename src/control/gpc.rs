@@ -776,9 +776,10 @@ impl GpcStaged {
                         };
                     }
                 }
-                // Every level's gain row.
+                // Every level's gain row, and the guard row's weights.
                 let nb = &mut self.bank[next];
                 level_rows::<N>(&mz, &self.g, &mut nb.l, n1, n2, nb.start);
+                guard_row(&self.g, nb, nu);
             }
             _ => {
                 // Every level's folded tail (on the design's Ã, the one its samples' f runs on) and
@@ -850,7 +851,7 @@ fn soft_floor<const N: usize>(bk: &StagedBank, x: f32, xg: f32, v: &[f32; N], w:
 /// alone: beyond the head, f − w runs on Ã from the window's last three values) and the forced
 /// response's on the levels (`fd`: Σ_c g_{j−c}Δũ_c with Δũ = Dv is
 /// Σ_i (g_{j−i} − g_{j−i−1}) v_i, the last level held, g_{j−i} alone).
-#[inline(never)]
+#[inline(always)]
 fn floor_row(at: &[f32; MAX_NA + 2], g: &[f32; MAX_N2], bk: &mut StagedBank, n2: usize, nu: usize) {
     let split = bk.split;
     // (split ≤ N2 + 1: the row is at least split − 1, the window's last value.)
@@ -867,9 +868,18 @@ fn floor_row(at: &[f32; MAX_NA + 2], g: &[f32; MAX_N2], bk: &mut StagedBank, n2:
     }
     bk.fa = l;
     bk.fd = [0.0; MAX_NU];
-    bk.gd = [0.0; MAX_NU];
     add_forced_weights(g, j, nu, 1.0, &mut bk.fd);
-    // The guard row on rows split − 1 … split − 4 (a row ≤ 0 has no forced response).
+}
+
+/// The guard row's forced response's weights on the levels (`gd`), on rows split − 1 …
+/// split − 4 with [`GUARD_ROW_WEIGHTS`] (a row ≤ 0 has no forced response). Made at stage 2
+/// with the level rows, not with the floor row at stage 0: g and the split stay as stage 0
+/// left them until the design is complete, and stage 0 (the step response and the floor row)
+/// was the heaviest of the four (`cargo xtask pil`; the same values).
+#[inline(always)]
+fn guard_row(g: &[f32; MAX_N2], bk: &mut StagedBank, nu: usize) {
+    let split = bk.split;
+    bk.gd = [0.0; MAX_NU];
     for (r, wr) in GUARD_ROW_WEIGHTS.iter().enumerate() {
         add_forced_weights(g, split.wrapping_sub(r + 1), nu, *wr, &mut bk.gd);
     }
