@@ -429,7 +429,7 @@ impl GpcState {
 ///   head's last (its reading plus its smoothed slope times its 120 s look-ahead,
 ///   [`GUARD_ROW_WEIGHTS`] on the head's last four values), against [`GUARD_ROW_C`]: its
 ///   free response is the head's own values, and its weights on the levels are made once a
-///   design with the floor row's.
+///   design (at stage 2, with the level rows; the floor row's at stage 0).
 ///
 /// The row the plan falls further below enters the levels' problem: Q + ρddᵀ, whose inverse is
 /// P less a rank-one term (Sherman–Morrison), so the plan moves along Pd by the penalised
