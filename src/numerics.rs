@@ -90,6 +90,30 @@ mod tests {
     }
 
     #[test]
+    fn the_four_product_dot_is_the_plain_loop_bit_for_bit() {
+        // Every length around the four-product passes, unequal lengths, a start value, and
+        // terms of mixed sizes and signs so that the order of the additions shows in the bits.
+        let mut seed = 99u32;
+        let mut next = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            ((seed >> 8) as f32 / (1u32 << 23) as f32 - 1.0) * [1e-3f32, 1.0, 1e3][(seed >> 4) as usize % 3]
+        };
+        for n in 0..=13 {
+            for extra in 0..3 {
+                let x: Vec<f32> = (0..n + extra).map(|_| next()).collect();
+                let y: Vec<f32> = (0..n).map(|_| next()).collect();
+                let s0 = next();
+                let mut want = s0;
+                for (a, b) in x.iter().zip(&y) {
+                    want += a * b;
+                }
+                assert_eq!(dot_from(s0, &x, &y).to_bits(), want.to_bits(), "n {n}, x longer by {extra}");
+                assert_eq!(dot_from(s0, &y, &x).to_bits(), want.to_bits(), "n {n}, y longer by {extra}");
+            }
+        }
+    }
+
+    #[test]
     fn square_root_is_correctly_rounded() {
         assert_eq!(sqrtf(4.0), 2.0);
         assert_eq!(sqrtf(2.0).to_bits(), 2.0f32.sqrt().to_bits());
