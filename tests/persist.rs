@@ -504,16 +504,20 @@ fn wear_per_save() {
 /// erase cycles (datasheet DS10198, "NEND"), without and with the boot writes.
 #[test]
 fn wear_at_the_firmware_cadence() {
+    use hter::control::AdaptiveMode;
+    use hter::persist::ModelCadence;
     use hter::profile::{HISTORY_SAVE_S, MODEL_SAVE_S};
     const BOOTS_PER_DAY: u32 = 24;
     let days = 60;
+    // The board's own `ModelCadence`, pushed once an hour with every hour trusted (the most
+    // stores): a boot's first model after a quarter of MODEL_SAVE_S, then every MODEL_SAVE_S.
+    let learner = hter::profile::controller(hter::profile::Kind::Gpc, 10.0, 0.4).unwrap();
+    let cadence = || ModelCadence::new(MODEL_SAVE_S / HISTORY_SAVE_S);
     let years = |boots_per_day: u32| {
         let mut store = open(MockFlash::<2048>::blank(4), 4);
         let boot_every_s = 86_400 / boots_per_day.max(1);
         block_on(async {
-            // `ModelCadence`: a boot's first model after a quarter of MODEL_SAVE_S of trusted
-            // samples (every hour counted as trusted: the most stores), then every MODEL_SAVE_S.
-            let (mut trusted_s, mut first_done) = (0, false);
+            let mut models = cadence();
             for n in 0..days * 86_400 / HISTORY_SAVE_S {
                 let t_s = n * HISTORY_SAVE_S;
                 let h = HistoryRecord { recorded_s: t_s, excursions: t_s / (7 * 3600), ..HistoryRecord::EMPTY };
@@ -521,15 +525,14 @@ fn wear_at_the_firmware_cadence() {
                     let mut boot = h;
                     boot.note_reset(ResetCause::BrownOut);
                     store.save_history(&boot).await.unwrap();
-                    (trusted_s, first_done) = (0, false);
+                    models = cadence();
                 }
                 store.save_history(&h).await.unwrap();
-                trusted_s += HISTORY_SAVE_S;
-                if trusted_s >= if first_done { MODEL_SAVE_S } else { MODEL_SAVE_S / 4 } {
+                if models.push(Some(AdaptiveMode::Adaptive), &learner).is_some() {
+                    // A record that differs at every store, as a learning estimate's does.
                     let rec =
                         ModelRecord { theta: [-1.75 + 1e-5 * n as f32, 0.75, -0.027, -0.03, -0.01, -0.005], k: 5 };
                     store.save_model(&rec).await.unwrap();
-                    (trusted_s, first_done) = (0, true);
                 }
             }
         });
