@@ -60,9 +60,9 @@ pub fn read_cells(path: &Path, names: &[&str]) -> Result<Vec<Vec<Option<f64>>>> 
             }
             let v: f64 = cell
                 .parse()
-                .map_err(|_| anyhow!("'{shown}' line {line}, column '{name}': '{cell}' is not a number"))?;
+                .map_err(|_| anyhow!("'{shown}' line {line}, column '{name}': '{}' is not a number", clip(cell)))?;
             if !v.is_finite() {
-                bail!("'{shown}' line {line}, column '{name}': '{cell}' is not a finite number");
+                bail!("'{shown}' line {line}, column '{name}': '{}' is not a finite number", clip(cell));
             }
             cols[c].push(Some(v));
         }
@@ -90,12 +90,34 @@ pub fn read_text(path: &Path, name: &str) -> Result<Option<Vec<String>>> {
         .map(Some)
 }
 
+/// Whether the header of a CSV log has a column `name`.
+pub fn has_column(path: &Path, name: &str) -> Result<bool> {
+    let shown = path.display();
+    let file = std::fs::File::open(path).with_context(|| format!("cannot read '{shown}'"))?;
+    let mut rdr = csv::ReaderBuilder::new().has_headers(true).trim(csv::Trim::All).from_reader(file);
+    let headers = rdr.headers().map_err(|e| anyhow!("'{shown}' line 1: {e}"))?;
+    Ok(headers.iter().any(|h| h == name))
+}
+
 /// Checks that times strictly increase; names the first offending line.
 pub fn check_increasing(path: &Path, t: &[f64]) -> Result<()> {
     if let Some(i) = t.windows(2).position(|w| w[1] <= w[0]) {
         bail!("'{}' line {}: t_s = {} does not increase (previous {})", path.display(), i + 3, t[i + 1], t[i]);
     }
     Ok(())
+}
+
+/// Longest cell, in characters, an error message repeats whole.
+const CLIP_CHARS: usize = 40;
+
+/// A cell as an error message shows it: whole up to [`CLIP_CHARS`] characters, else its start
+/// and its length (a corrupt log can hold a megabyte in one cell).
+pub fn clip(cell: &str) -> String {
+    let n = cell.chars().count();
+    if n <= CLIP_CHARS {
+        return cell.to_owned();
+    }
+    format!("{}… ({n} characters)", cell.chars().take(CLIP_CHARS - 8).collect::<String>())
 }
 
 fn first_line(s: &str) -> &str {
@@ -110,6 +132,15 @@ mod tests {
         let p = std::env::temp_dir().join(format!("hter-log-{}-{name}.csv", std::process::id()));
         std::fs::write(&p, text).unwrap();
         p
+    }
+
+    #[test]
+    fn a_long_cell_is_clipped_in_a_message() {
+        assert_eq!(clip("4.5x"), "4.5x");
+        let long = "9".repeat(2_000_000);
+        let p = write("long", &format!("t_s,temp_c\n0,4\n10,{long}x\n"));
+        let e = read_columns(&p, &["t_s", "temp_c"]).unwrap_err().to_string();
+        assert!(e.len() < 200 && e.contains("… (2000001 characters)"), "{}", &e[..e.len().min(300)]);
     }
 
     #[test]

@@ -43,6 +43,7 @@ use hter::alarm::Indication;
 use hter::event::EventKind;
 use hter::failsafe::StopKind;
 use hter::persist::ResetCause;
+use hter::rtd::{T_MAX_C, T_MIN_C};
 use hter::step::Mode;
 
 /// Arguments of `hter log2csv`.
@@ -178,6 +179,9 @@ fn period_line(line: &str) -> Option<f64> {
 /// microsecond, and the CSV carried it.
 pub const MAX_CLOCK_S: f64 = u64::MAX as f64 / 1000.0;
 
+/// The keys of a telemetry line; each at most once.
+const KEYS: [&str; 10] = ["t_ms=", "t=", "temp=", "sp=", "duty=", "counts=", "supply=", "holdover=", "mode=", "alarm="];
+
 /// Parses one telemetry line; `None` for any other line.
 pub fn parse_line(line: &str) -> Option<Result<Sample>> {
     let (temp, sp, duty) = (field(line, "temp=")?, field(line, "sp=")?, field(line, "duty=")?);
@@ -200,6 +204,34 @@ pub fn parse_line(line: &str) -> Option<Result<Sample>> {
         }
     };
     Some((|| {
+        for key in KEYS {
+            if line.split_whitespace().filter(|w| w.starts_with(key)).count() > 1 {
+                bail!("'{}' appears twice", key.trim_end_matches('='));
+            }
+        }
+        // A temperature the firmware printed: a number a Pt100 can report, or NaN / inf for no
+        // reading; a number too long for an f64 is a corrupt line, not a fault.
+        let temp_c = match any("temp", temp)? {
+            c if c.is_finite() => {
+                if !(f64::from(T_MIN_C)..=f64::from(T_MAX_C)).contains(&c) {
+                    let c = crate::sim_cmd::shown(c);
+                    bail!("temp = {c} °C is outside what a Pt100 can report (IEC 60751: {T_MIN_C}…{T_MAX_C} °C)");
+                }
+                Some(c)
+            }
+            c if c.is_infinite() && !temp.trim_start_matches(['+', '-']).to_ascii_lowercase().starts_with("inf") => {
+                bail!("temp '{}' is too large a number", crate::log::clip(temp))
+            }
+            _ => None,
+        };
+        let duty = num("duty", duty)?;
+        if !(0.0..=1.0).contains(&duty) {
+            bail!("duty = {} is outside 0…1", crate::sim_cmd::shown(duty));
+        }
+        let setpoint_c = num("sp", sp)?;
+        if !(f64::from(T_MIN_C)..=f64::from(T_MAX_C)).contains(&setpoint_c) {
+            bail!("sp = {} °C is not a temperature a carrier can be set to", crate::sim_cmd::shown(setpoint_c));
+        }
         let t_s = match (t_ms, t) {
             (Some(ms), _) => {
                 ms.parse::<u64>().with_context(|| format!("t_ms '{ms}' is not a whole number of milliseconds"))? as f64
@@ -217,9 +249,9 @@ pub fn parse_line(line: &str) -> Option<Result<Sample>> {
             alarm: named_field(line, "alarm=", &Indication::ALL, Indication::name)?,
             t_s,
             // NaN or inf: no reading (the firmware holds the last good value once it has one).
-            temp_c: Some(any("temp", temp)?).filter(|c| c.is_finite()),
-            setpoint_c: num("sp", sp)?,
-            duty: num("duty", duty)?,
+            temp_c,
+            setpoint_c,
+            duty,
             counts: counts
                 .map(|c| c.parse::<u32>().with_context(|| format!("counts '{c}' is not a whole number")))
                 .transpose()?,
@@ -475,6 +507,21 @@ mod tests {
         assert!(e.to_string().contains("mode 'Limping' is none of Normal, SensorFault"), "{e}");
         let e = parse_line(&line("Normal", "On")).unwrap().unwrap_err();
         assert!(e.to_string().contains("alarm 'On'"), "{e}");
+    }
+
+    #[test]
+    fn a_line_the_firmware_cannot_have_printed_is_an_error() {
+        let l = "t=0 temp=4 sp=4 duty=0.5 mode=Normal counts=1 supply=12 alarm=Off";
+        let err = |from: &str, to: &str| parse_line(&l.replace(from, to)).unwrap().unwrap_err().to_string();
+        assert!(err("duty=0.5", "duty=7").contains("duty = 7 is outside 0…1"));
+        assert!(err("duty=0.5", "duty=-1").contains("duty = -1 is outside 0…1"));
+        assert!(err("temp=4", "temp=1e30").contains("outside what a Pt100 can report"));
+        assert!(err("temp=4", "temp=-300").contains("outside what a Pt100 can report"));
+        assert!(err("temp=4", &format!("temp=4{}", "0".repeat(400))).contains("is too large a number"));
+        assert!(err("sp=4", "sp=1e30").contains("sp = 1e30"));
+        assert!(err("temp=4", "temp=4 temp=5").contains("'temp' appears twice"));
+        assert!(err("alarm=Off", "alarm=Off alarm=Off").contains("'alarm' appears twice"));
+        assert!(parse_line(l).unwrap().is_ok());
     }
 
     #[test]

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::{anyhow, bail, Context, Result};
-use hter::coldchain::ColdChainMonitor;
+use hter::coldchain::{AlarmKind, ColdChainMonitor};
 use hter::rtd::{T_MAX_C, T_MIN_C};
 use serde::Serialize;
 
@@ -56,6 +56,14 @@ pub struct Report {
     pub fault_samples: u32,
     /// Number of excursions outside 2–8 °C.
     pub excursions: u32,
+    /// Intervals of a board history whose lowest or highest reading (`min_c`, `max_c`) left
+    /// 2–8 °C (0 for a log of samples). The times above are the interval means': a dip between
+    /// two readings of a mean is counted here, not there.
+    pub intervals_outside_2_8: u32,
+    /// Alarms the carrier recorded in a board history (`alarm:KIND@START` events, raised by the
+    /// firmware's monitor on every 10 s sample) that the readings of the file do not show in
+    /// [`Self::alarms`]: the file's 5-minute means can miss what the samples met.
+    pub carrier_alarms: Vec<AlarmOut>,
 }
 
 /// The library monitor fed on the record's time (the log's time less the gaps so far), on its
@@ -70,12 +78,21 @@ struct Record {
 }
 
 impl Record {
-    fn push(&mut self, record_t: f64, log_t: f64, c: f64) {
+    /// Gives the monitor one sample. Its clock counts whole milliseconds: a sample that does not
+    /// fall on a later millisecond than the one before would be dropped by it, so it is refused.
+    fn push(&mut self, record_t: f64, log_t: f64, c: f64) -> Result<()> {
         let record_ms = ((record_t - self.t0_s) * 1000.0).round().max(0.0) as u64;
+        if let Some(&(ms, prev)) = self.pushed.last().filter(|p| p.0 >= record_ms) {
+            bail!(
+                "t_s = {log_t} falls on the same millisecond as the sample at t_s = {prev} ({ms} ms of the record): \
+                 samples must be at least 1 ms apart"
+            );
+        }
         self.pushed.push((record_ms, log_t));
         for a in self.m.push(record_ms, c as f32).into_iter().flatten() {
             self.alarms.push((a.kind.name(), a.start_ms, a.trigger_ms));
         }
+        Ok(())
     }
 }
 
@@ -105,14 +122,14 @@ pub fn report(t: &[f64], temp: &[Option<f64>]) -> Result<Report> {
     let mut held = None;
     for (i, (&ts, &c)) in t.iter().zip(temp).enumerate() {
         if let Some(c) = c {
-            rec.push(ts - gaps_s, ts, c);
+            rec.push(ts - gaps_s, ts, c)?;
             held = Some(c);
             continue;
         }
         // A log that ends in faults: the last reading holds until the first of them (a gap
         // inside the log is closed by the reading after it).
         if let Some(c) = held.filter(|_| last_reading.is_some_and(|r| r + 1 == i)) {
-            rec.push(ts - gaps_s, ts, c);
+            rec.push(ts - gaps_s, ts, c)?;
         }
         fault_samples += 1;
         // The last sample has no interval after it.
@@ -140,7 +157,55 @@ pub fn report(t: &[f64], temp: &[Option<f64>]) -> Result<Report> {
         time_no_reading_s: no_reading_s,
         fault_samples,
         excursions: m.excursion_count(),
+        intervals_outside_2_8: 0,
+        carrier_alarms: Vec::new(),
     })
+}
+
+/// The cold-chain record of a log as read by [`read_input`]: [`report`] of its readings, then
+/// what a board history adds. The extremes of its intervals (`min_c`, `max_c`) widen `min_c`
+/// and `max_c` and count in [`Report::intervals_outside_2_8`]; its alarm events that the
+/// readings do not show are [`Report::carrier_alarms`]. A history's rows are 5-minute means:
+/// recomputed from them alone, a dip to −5 °C between two readings of a mean of 4 °C, or the
+/// carrier's own freeze alarm, would not be in the record a supervisor reads.
+pub fn record(input: &Input) -> Result<Report> {
+    let mut r = report(&input.t_s, &input.temp_c)?;
+    for &(lo, hi) in input.extremes.iter().flatten() {
+        r.min_c = r.min_c.min(lo);
+        r.max_c = r.max_c.max(hi);
+        if lo < 2.0 || hi > 8.0 {
+            r.intervals_outside_2_8 += 1;
+        }
+    }
+    r.carrier_alarms =
+        carrier_alarms(&input.events).into_iter().filter(|b| !r.alarms.iter().any(|a| same_alarm(a, b))).collect();
+    Ok(r)
+}
+
+/// How far apart, s, the carrier's trigger time and the one recomputed from a history's means
+/// may be for the two to be one alarm: the means lag the samples by up to an interval, and a
+/// run of means meets a threshold up to an interval later or earlier than the samples did.
+pub const SAME_ALARM_S: f64 = 3.0 * hter::persist::log::INTERVAL_S as f64;
+
+/// Whether a recomputed alarm and one the carrier recorded are the same.
+fn same_alarm(recomputed: &AlarmOut, carrier: &AlarmOut) -> bool {
+    recomputed.kind == carrier.kind && (recomputed.trigger_s - carrier.trigger_s).abs() <= SAME_ALARM_S
+}
+
+/// The alarm events of a board history: `alarm:KIND@START` (the firmware's spelling: raised at
+/// the row's `t_s`, its condition from record second START) or `alarm:KIND`. Names the library
+/// does not know are left with the other events.
+pub fn carrier_alarms(events: &[Event]) -> Vec<AlarmOut> {
+    events
+        .iter()
+        .filter_map(|e| {
+            let rest = e.name.strip_prefix("alarm:")?;
+            let (name, start) = rest.split_once('@').map_or((rest, None), |(n, s)| (n, Some(s)));
+            let kind = AlarmKind::ALL.into_iter().find(|k| k.name() == name)?.name();
+            let start_s = start.and_then(|s| s.parse::<f64>().ok()).filter(|s| s.is_finite() && *s <= e.t_s);
+            Some(AlarmOut { kind, start_s: start_s.unwrap_or(e.t_s), trigger_s: e.t_s })
+        })
+        .collect()
 }
 
 /// One event of a board history (`event` column) or a reset of a `hter log2csv` output
@@ -160,8 +225,14 @@ pub struct Input {
     pub t_s: Vec<f64>,
     /// Sample temperatures, °C (`None`: no reading).
     pub temp_c: Vec<Option<f64>>,
+    /// Each sample's interval extremes (`min_c`, `max_c`) when the file is a board history
+    /// (`None` for a sample without them, and for every sample of a file without the columns).
+    pub extremes: Vec<Option<(f64, f64)>>,
     /// Events, in time order (empty when the file has neither column).
     pub events: Vec<Event>,
+    /// Whether the file has an `event` or `reset_cause` column (a file without one cannot say
+    /// that nothing happened).
+    pub has_event_column: bool,
 }
 
 /// Reads a simulator CSV, a `hter log2csv` output or a board history (docs/interface.md): the
@@ -180,9 +251,28 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
     let (t_all, temp_all) = (cols.next().unwrap_or_default(), cols.next().unwrap_or_default());
     let event_col = log::read_text(path, "event")?;
     let reset_col = log::read_text(path, "reset_cause")?;
+    // A board history's interval extremes; a file with one of the two columns is not one.
+    let extremes = match (log::has_column(path, "min_c")?, log::has_column(path, "max_c")?) {
+        (true, true) => {
+            let mut c = log::read_cells(path, &["min_c", "max_c"])?.into_iter();
+            Some((c.next().unwrap_or_default(), c.next().unwrap_or_default()))
+        }
+        (false, false) => None,
+        (lo, _) => bail!(
+            "'{shown}': a column '{}' without '{}'",
+            if lo { "min_c" } else { "max_c" },
+            if lo { "max_c" } else { "min_c" }
+        ),
+    };
     let cell =
         |col: &Option<Vec<String>>, i: usize| col.as_ref().and_then(|c| c.get(i)).filter(|s| !s.is_empty()).cloned();
-    let mut input = Input { t_s: Vec::new(), temp_c: Vec::new(), events: Vec::new() };
+    let mut input = Input {
+        t_s: Vec::new(),
+        temp_c: Vec::new(),
+        extremes: Vec::new(),
+        events: Vec::new(),
+        has_event_column: event_col.is_some() || reset_col.is_some(),
+    };
     let mut last: Option<f64> = None;
     for (i, (t, c)) in t_all.into_iter().zip(temp_all).enumerate() {
         let line = i + 2;
@@ -207,6 +297,10 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
                 crate::sim_cmd::shown(c)
             );
         }
+        let span = extremes.as_ref().map_or(Ok(None), |(lo, hi)| {
+            extremes_of(lo.get(i).copied().flatten(), hi.get(i).copied().flatten(), c)
+                .map_err(|e| anyhow!("'{shown}' line {line}: {e}"))
+        })?;
         if let Some(cause) = cell(&reset_col, i) {
             // `hter log2csv` names the cause (`restarted_brownout`, …, or `unknown`).
             let name = if cause.starts_with("restarted") { cause } else { format!("restarted: {cause}") };
@@ -214,6 +308,7 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
         }
         input.t_s.push(t);
         input.temp_c.push(c);
+        input.extremes.push(span);
         last = Some(t);
     }
     if last.is_some_and(|t| t > 16_000_000.0) {
@@ -222,11 +317,44 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
     Ok(input)
 }
 
+/// How far, °C, an interval's mean may lie outside its extremes: the board writes all three
+/// rounded to 0.01 °C, and its f32 mean of equal readings can differ from them by an ulp.
+const MEAN_SLACK_C: f64 = 0.01;
+
+/// The extremes of a history's interval row with mean `mean`: both or neither (an interval
+/// with no reading), each a temperature a Pt100 can report, `min_c ≤ max_c`, the mean between
+/// them.
+fn extremes_of(lo: Option<f64>, hi: Option<f64>, mean: Option<f64>) -> Result<Option<(f64, f64)>> {
+    let pt100 = f64::from(T_MIN_C)..=f64::from(T_MAX_C);
+    let (lo, hi) = match (lo, hi) {
+        (None, None) => return Ok(None),
+        (Some(lo), Some(hi)) => (lo, hi),
+        (Some(_), None) => bail!("'min_c' without 'max_c'"),
+        (None, Some(_)) => bail!("'max_c' without 'min_c'"),
+    };
+    for (name, v) in [("min_c", lo), ("max_c", hi)] {
+        if !pt100.contains(&v) {
+            bail!(
+                "column '{name}': {} °C is outside what a Pt100 can report (IEC 60751: {T_MIN_C}…{T_MAX_C} °C)",
+                crate::sim_cmd::shown(v)
+            );
+        }
+    }
+    if lo > hi {
+        bail!("min_c {lo} °C is above max_c {hi} °C");
+    }
+    if let Some(m) = mean.filter(|&m| m < lo - MEAN_SLACK_C || m > hi + MEAN_SLACK_C) {
+        bail!("the mean temp_c {m} °C lies outside its interval's min_c … max_c ({lo} … {hi} °C)");
+    }
+    Ok(Some((lo, hi)))
+}
+
 /// `hter monitor`.
 pub fn run(args: &MonitorArgs) -> Result<()> {
     let shown = args.input.display();
-    let Input { t_s: t, temp_c: temp, .. } = read_input(&args.input)?;
-    let r = report(&t, &temp).with_context(|| format!("'{shown}'"))?;
+    let input = read_input(&args.input)?;
+    let r = record(&input).with_context(|| format!("'{shown}'"))?;
+    let t = &input.t_s;
     if args.json {
         println!("{}", serde_json::to_string(&r)?);
         return Ok(());
@@ -246,11 +374,23 @@ pub fn run(args: &MonitorArgs) -> Result<()> {
         );
     }
     println!("  excursions outside 2–8 °C {:7}", r.excursions);
-    if r.alarms.is_empty() {
+    if r.intervals_outside_2_8 > 0 {
+        println!(
+            "  intervals leaving 2–8 °C  {:7}  (their lowest or highest reading; the times above are the means')",
+            r.intervals_outside_2_8
+        );
+    }
+    if r.alarms.is_empty() && r.carrier_alarms.is_empty() {
         println!("  alarms                    none");
     }
     for a in &r.alarms {
         println!("  ALARM {:<14} started at {:.0} s, triggered at {:.0} s", a.kind, a.start_s, a.trigger_s);
+    }
+    for a in &r.carrier_alarms {
+        println!(
+            "  ALARM {:<14} started at {:.0} s, triggered at {:.0} s (recorded by the carrier; the means here do not show it)",
+            a.kind, a.start_s, a.trigger_s
+        );
     }
     Ok(())
 }
@@ -288,5 +428,54 @@ mod tests {
         assert_eq!((r.min_c, r.max_c, r.excursions), (5.0, 9.0, 1));
         let e = report(&[0.0, 10.0, 20.0], &[None, Some(4.0), None]).unwrap_err();
         assert!(e.to_string().contains("2 samples with a temperature, it has 1"), "{e}");
+    }
+
+    /// The library monitor's clock counts milliseconds: a sample 0.4 ms after the one before
+    /// would be dropped (a −3 °C reading vanished, and two samples 0.4 ms apart gave a NaN MKT).
+    #[test]
+    fn samples_on_the_same_millisecond_are_refused() {
+        let e = report(&[0.0, 10.0, 10.0004, 20.0], &[Some(4.0), Some(4.0), Some(-3.0), Some(4.0)]).unwrap_err();
+        assert!(e.to_string().contains("t_s = 10.0004 falls on the same millisecond as the sample at t_s = 10"), "{e}");
+        assert!(report(&[0.0, 0.0004], &[Some(4.0), Some(9.0)]).is_err());
+        // 1 ms apart is two samples.
+        let r = report(&[0.0, 10.0, 10.001, 20.0], &[Some(4.0), Some(4.0), Some(-3.0), Some(4.0)]).unwrap();
+        assert_eq!((r.min_c, r.excursions), (-3.0, 1));
+    }
+
+    #[test]
+    fn an_intervals_extremes_must_hold_its_mean() {
+        assert_eq!(extremes_of(None, None, Some(4.0)).unwrap(), None);
+        assert_eq!(extremes_of(Some(3.9), Some(4.1), Some(4.0)).unwrap(), Some((3.9, 4.1)));
+        // The board rounds all three to 0.01 °C.
+        assert!(extremes_of(Some(4.0), Some(4.0), Some(3.99)).is_ok());
+        let err = |lo, hi, m| extremes_of(lo, hi, m).unwrap_err().to_string();
+        assert!(err(Some(4.0), Some(4.0), Some(3.98)).contains("outside its interval's min_c … max_c"));
+        assert!(err(Some(4.2), Some(4.1), Some(4.15)).contains("min_c 4.2 °C is above max_c 4.1 °C"));
+        assert!(err(Some(3.9), None, Some(4.0)).contains("'min_c' without 'max_c'"));
+        assert!(err(Some(-300.0), Some(4.1), Some(4.0)).contains("Pt100"));
+    }
+
+    #[test]
+    fn the_carriers_alarm_events_that_the_means_do_not_show_are_its_own() {
+        let e = |t_s: f64, name: &str| Event { t_s, name: name.into() };
+        let events = [
+            e(28_800.0, "alarm:freeze_60min@25200"),
+            e(40_000.0, "alarm:heat_10h"),
+            e(50_000.0, "alarm:dancing@1"),
+            e(60_000.0, "set:setpoint_c=4.00"),
+        ];
+        let a = carrier_alarms(&events);
+        assert_eq!(
+            a,
+            [
+                AlarmOut { kind: "freeze_60min", start_s: 25_200.0, trigger_s: 28_800.0 },
+                AlarmOut { kind: "heat_10h", start_s: 40_000.0, trigger_s: 40_000.0 },
+            ]
+        );
+        // Recomputed from the means an interval later: the same alarm; hours later: another.
+        let means = AlarmOut { kind: "heat_10h", start_s: 4_300.0, trigger_s: 40_300.0 };
+        assert!(same_alarm(&means, &a[1]));
+        assert!(!same_alarm(&AlarmOut { trigger_s: 47_200.0, ..means.clone() }, &a[1]));
+        assert!(!same_alarm(&AlarmOut { kind: "freeze_60min", ..means }, &a[1]));
     }
 }

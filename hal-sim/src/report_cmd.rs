@@ -79,6 +79,9 @@ pub struct AlarmSpan {
     pub duration_s: f64,
     /// Whether the condition still held at the end of the record.
     pub ongoing: bool,
+    /// Recorded by the carrier (an alarm event of a board history) and not shown by the file's
+    /// readings: its end and duration are not known here.
+    pub carrier: bool,
 }
 
 /// The sample-and-hold intervals of a log with a reading: (from, to, °C).
@@ -100,7 +103,7 @@ pub fn alarm_spans(t: &[f64], temp: &[Option<f64>], alarms: Vec<AlarmOut>) -> Ve
                 let duration_s = hits.iter().map(|x| x.1 - x.0).sum();
                 let end_s = hits.last().map_or(alarm.trigger_s, |x| x.1);
                 let ongoing = temp.iter().rev().flatten().next().is_some_and(|&c| meets(c));
-                return AlarmSpan { alarm, end_s, duration_s, ongoing };
+                return AlarmSpan { alarm, end_s, duration_s, ongoing, carrier: false };
             }
             let mut duration_s = 0.0;
             let mut end = None;
@@ -116,13 +119,23 @@ pub fn alarm_spans(t: &[f64], temp: &[Option<f64>], alarms: Vec<AlarmOut>) -> Ve
             if end.is_none() {
                 end = last_reading.filter(|&(lt, c)| lt >= alarm.start_s && !meets(c)).map(|x| x.0);
             }
-            AlarmSpan { alarm, end_s: end.unwrap_or(end_of_record), duration_s, ongoing: end.is_none() }
+            AlarmSpan { alarm, end_s: end.unwrap_or(end_of_record), duration_s, ongoing: end.is_none(), carrier: false }
         })
         .collect()
 }
 
-/// The 24 h blocks of the record from its first sample, with the alarms under way in each.
-pub fn days(t: &[f64], temp: &[Option<f64>], alarms: &[AlarmSpan]) -> Vec<Day> {
+/// The carrier's own alarms ([`monitor_cmd::Report::carrier_alarms`]) as table rows.
+pub fn carrier_spans(alarms: &[AlarmOut]) -> Vec<AlarmSpan> {
+    alarms
+        .iter()
+        .map(|a| AlarmSpan { alarm: a.clone(), end_s: a.trigger_s, duration_s: 0.0, ongoing: false, carrier: true })
+        .collect()
+}
+
+/// The 24 h blocks of the record from its first sample, with the alarms under way in each. A
+/// board history's interval extremes (`extremes`, one per sample or empty) widen each day's
+/// min and max.
+pub fn days(t: &[f64], temp: &[Option<f64>], extremes: &[Option<(f64, f64)>], alarms: &[AlarmSpan]) -> Vec<Day> {
     let (Some(&t0), Some(&t1)) = (t.first(), t.last()) else {
         return Vec::new();
     };
@@ -140,10 +153,11 @@ pub fn days(t: &[f64], temp: &[Option<f64>], alarms: &[AlarmSpan]) -> Vec<Day> {
         })
         .collect();
     let index = |ts: f64| (((ts - t0) / DAY_S).floor().max(0.0) as usize).min(n - 1);
-    for (&ts, c) in t.iter().zip(temp) {
+    for (i, (&ts, c)) in t.iter().zip(temp).enumerate() {
         if let (Some(c), Some(d)) = (c, days.get_mut(index(ts))) {
-            d.min_c = Some(d.min_c.map_or(*c, |m| m.min(*c)));
-            d.max_c = Some(d.max_c.map_or(*c, |m| m.max(*c)));
+            let (lo, hi) = extremes.get(i).copied().flatten().unwrap_or((*c, *c));
+            d.min_c = Some(d.min_c.map_or(lo, |m| m.min(lo)));
+            d.max_c = Some(d.max_c.map_or(hi, |m| m.max(hi)));
         }
     }
     let mut weighted = vec![(0.0, 0.0); n];
@@ -181,14 +195,17 @@ pub fn days(t: &[f64], temp: &[Option<f64>], alarms: &[AlarmSpan]) -> Vec<Day> {
     days
 }
 
-/// The one-line verdict: freeze risk (a freeze alarm or a reading at or below −0.5 °C),
-/// excursions (any alarm, any time outside 2–8 °C, or MKT outside 2–8 °C), or in range.
+/// The one-line verdict: freeze risk (a freeze alarm, the file's or the carrier's, or a reading
+/// at or below −0.5 °C, an interval's lowest included), excursions (any alarm, any time outside
+/// 2–8 °C, any interval whose extremes left it, or MKT outside 2–8 °C), or in range.
 pub fn verdict(r: &monitor_cmd::Report) -> (&'static str, &'static str) {
-    if r.alarms.iter().any(|a| a.kind == "freeze_60min") || r.min_c <= -0.5 {
+    if r.alarms.iter().chain(&r.carrier_alarms).any(|a| a.kind == "freeze_60min") || r.min_c <= -0.5 {
         ("freeze", "FREEZE RISK — the vaccines may have frozen: check them (shake test) before use")
     } else if !r.alarms.is_empty()
+        || !r.carrier_alarms.is_empty()
         || r.time_below_2_s > 0.0
         || r.time_above_8_s > 0.0
+        || r.intervals_outside_2_8 > 0
         || !(2.0..=8.0).contains(&r.mkt_c)
     {
         ("excursion", "EXCURSIONS — the load left 2–8 °C: see the alarms and the days below")
@@ -270,27 +287,24 @@ fn envelope(points: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
 }
 
 /// The temperature against the 2 and 8 °C limits over `[from, to)` of the log, x in hours
-/// from `x0`.
-fn temp_plot(title: &str, t: &[f64], temp: &[Option<f64>], from: f64, to: f64, x0: f64) -> Result<String> {
+/// from `x0`; a board history's interval extremes as two more lines.
+fn temp_plot(title: &str, input: &Input, from: f64, to: f64, x0: f64) -> Result<String> {
     let h = |ts: f64| (ts - x0) / 3600.0;
-    let pts: Vec<(f64, f64)> = t
-        .iter()
-        .zip(temp)
-        .filter(|(&ts, _)| ts >= from && ts <= to)
-        .filter_map(|(&ts, c)| c.map(|c| (h(ts), c)))
-        .collect();
+    let within = || input.t_s.iter().enumerate().filter(|(_, &ts)| ts >= from && ts <= to);
+    let pts: Vec<(f64, f64)> = within().filter_map(|(i, &ts)| input.temp_c[i].map(|c| (h(ts), c))).collect();
+    let ext: Vec<(f64, (f64, f64))> =
+        within().filter_map(|(i, &ts)| input.extremes.get(i).copied().flatten().map(|e| (h(ts), e))).collect();
     let (a, b) = (pts.first().map_or(h(from), |p| p.0), pts.last().map_or(h(to), |p| p.0));
     let limit = |v: f64| vec![(a, v), (b, v)];
-    let panel = plot::Panel {
-        title: "Load temperature".into(),
-        y_label: "°C".into(),
-        series: vec![
-            plot::Series { name: "temperature".into(), points: envelope(pts) },
-            plot::Series { name: "8 °C limit".into(), points: limit(8.0) },
-            plot::Series { name: "2 °C limit".into(), points: limit(2.0) },
-        ],
-        y_range: None,
-    };
+    let mut series = vec![plot::Series { name: "temperature".into(), points: envelope(pts) }];
+    if !ext.is_empty() {
+        let side = |pick: fn((f64, f64)) -> f64| envelope(ext.iter().map(|&(x, e)| (x, pick(e))).collect());
+        series.push(plot::Series { name: "interval lowest".into(), points: side(|e| e.0) });
+        series.push(plot::Series { name: "interval highest".into(), points: side(|e| e.1) });
+    }
+    series.push(plot::Series { name: "8 °C limit".into(), points: limit(8.0) });
+    series.push(plot::Series { name: "2 °C limit".into(), points: limit(2.0) });
+    let panel = plot::Panel { title: "Load temperature".into(), y_label: "°C".into(), series, y_range: None };
     plot::panels_svg(1000, title, "hours from the first sample", &[panel])
 }
 
@@ -302,13 +316,15 @@ fn first_text(path: &Path, name: &str) -> Result<Option<String>> {
 /// Builds the report page of a log.
 pub fn html(path: &Path) -> Result<String> {
     let shown = path.display().to_string();
-    let Input { t_s: t, temp_c: temp, events } = monitor_cmd::read_input(path)?;
-    let r = monitor_cmd::report(&t, &temp).with_context(|| format!("'{shown}'"))?;
+    let input = monitor_cmd::read_input(path)?;
+    let r = monitor_cmd::record(&input).with_context(|| format!("'{shown}'"))?;
+    let Input { t_s: t, temp_c: temp, events, .. } = &input;
     let carrier = first_text(path, "carrier")?;
     let firmware = first_text(path, "firmware")?;
     let (t0, t1) = (t.first().copied().unwrap_or(0.0), t.last().copied().unwrap_or(0.0));
-    let spans = alarm_spans(&t, &temp, r.alarms.clone());
-    let days = days(&t, &temp, &spans);
+    let mut spans = alarm_spans(t, temp, r.alarms.clone());
+    spans.extend(carrier_spans(&r.carrier_alarms));
+    let days = days(t, temp, &input.extremes, &spans);
     let (class, line) = verdict(&r);
 
     let mut h = String::new();
@@ -374,6 +390,17 @@ pub fn html(path: &Path) -> Result<String> {
             if r.excursions == 1 { "" } else { "s" }
         ),
     )?;
+    if r.intervals_outside_2_8 > 0 {
+        row(
+            w,
+            "Intervals that left 2–8 °C",
+            &format!(
+                "<b id=\"intervals-outside\">{}</b> of the record's 5-minute intervals had a lowest reading below 2 °C \
+                 or a highest above 8 °C (the times above are from the intervals' means)",
+                r.intervals_outside_2_8
+            ),
+        )?;
+    }
     if r.fault_samples > 0 {
         row(
             w,
@@ -382,7 +409,7 @@ pub fn html(path: &Path) -> Result<String> {
         )?;
     }
     let listed = if faults.is_empty() {
-        if events.is_empty() {
+        if !input.has_event_column {
             "none recorded (the file has no event column)".to_owned()
         } else {
             "none".to_owned()
@@ -410,6 +437,20 @@ pub fn html(path: &Path) -> Result<String> {
         let mut sorted: Vec<&AlarmSpan> = spans.iter().collect();
         sorted.sort_by_key(|a| AlarmKind::ALL.iter().position(|k| k.name() == a.alarm.kind));
         for a in sorted {
+            if a.carrier {
+                writeln!(
+                    w,
+                    "<tr class=\"alarm-carrier\" data-kind=\"{}\" data-start-s=\"{}\" data-trigger-s=\"{}\"><td><b>{}</b></td><td>{}</td><td>{}</td><td>{}</td><td>recorded by the carrier, which checks every 10 s reading; the 5-minute means in this file do not show it</td></tr>",
+                    a.alarm.kind,
+                    a.alarm.start_s,
+                    a.alarm.trigger_s,
+                    a.alarm.kind,
+                    meaning(a.alarm.kind),
+                    when(a.alarm.start_s, t0),
+                    when(a.alarm.trigger_s, t0),
+                )?;
+                continue;
+            }
             let held =
                 if a.ongoing { "still on at the end".to_owned() } else { format!("until {}", when(a.end_s, t0)) };
             writeln!(
@@ -431,7 +472,8 @@ pub fn html(path: &Path) -> Result<String> {
     writeln!(w, "<h2>Day by day</h2>")?;
     writeln!(w, "<table id=\"days\"><tr><th>Day</th><th>Min °C</th><th>Max °C</th><th>Mean °C</th><th>Below 2 °C</th><th>Above 8 °C</th><th>Alarms</th></tr>")?;
     for d in &days {
-        let bad = !d.alarms.is_empty() || d.below_2_s > 0.0 || d.above_8_s > 0.0;
+        let left = d.min_c.is_some_and(|c| c < 2.0) || d.max_c.is_some_and(|c| c > 8.0);
+        let bad = !d.alarms.is_empty() || d.below_2_s > 0.0 || d.above_8_s > 0.0 || left;
         writeln!(
             w,
             "<tr class=\"day{}\"><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
@@ -448,10 +490,10 @@ pub fn html(path: &Path) -> Result<String> {
     writeln!(w, "</table>")?;
 
     writeln!(w, "<h2>Plots</h2>")?;
-    writeln!(w, "<div class=\"plot\">{}</div>", temp_plot("The whole period", &t, &temp, t0, t1, t0)?)?;
+    writeln!(w, "<div class=\"plot\">{}</div>", temp_plot("The whole period", &input, t0, t1, t0)?)?;
     for d in days.iter().filter(|d| !d.alarms.is_empty()) {
         let title = format!("Day {} (alarms: {})", d.number, d.alarms.join(", "));
-        writeln!(w, "<div class=\"plot\">{}</div>", temp_plot(&title, &t, &temp, d.start_s, d.start_s + DAY_S, t0)?)?;
+        writeln!(w, "<div class=\"plot\">{}</div>", temp_plot(&title, &input, d.start_s, d.start_s + DAY_S, t0)?)?;
     }
     writeln!(
         w,
@@ -646,7 +688,7 @@ mod tests {
         let spans = alarm_spans(&t, &temp, r.alarms.clone());
         // Eleven hourly intervals at 10 °C; the reading at hour 31 ends the run.
         assert_eq!((spans[0].end_s, spans[0].duration_s, spans[0].ongoing), (111_600.0, 39_600.0, false));
-        let d = days(&t, &temp, &spans);
+        let d = days(&t, &temp, &[], &spans);
         assert_eq!(d.len(), 2);
         // Hours 20–24 on day 1, 24–31 on day 2: the split adds up to the monitor's total.
         assert_eq!((d[0].above_8_s, d[1].above_8_s), (4.0 * 3600.0, 7.0 * 3600.0));

@@ -199,6 +199,72 @@ fn a_board_history_gives_a_report_with_its_resets_and_faults() {
     let _ = std::fs::remove_dir_all(&d);
 }
 
+/// A day of a board history at 4.0 ± 0.1 °C whose 5-minute means never leave 2–8 °C: in the
+/// interval ending at 6 h the load dipped to `dip` °C between readings (the mean stays 4.0),
+/// and, when `alarm` is given, the carrier recorded that alarm event at 8 h.
+fn history_with_a_dip(dip: f64, alarm: Option<&str>) -> String {
+    let mut s = String::from("t_s,temp_c,min_c,max_c,duty,mode,event\n");
+    for i in 1..=288 {
+        let t = 300 * i;
+        let lo = if t == 6 * 3600 { dip } else { 3.9 };
+        s.push_str(&format!("{t},4.00,{lo:.2},4.10,0.40,normal,\n"));
+        if let (Some(a), 28_800) = (alarm, t) {
+            s.push_str(&format!("{t},,,,,,{a}\n"));
+        }
+    }
+    s
+}
+
+#[test]
+fn a_history_reports_the_extremes_and_the_carriers_alarms_its_means_miss() {
+    let d = dir("extremes");
+    let html = d.join("r.html");
+    let read = |name: &str, text: &str| {
+        let csv = d.join(name);
+        std::fs::write(&csv, text).unwrap();
+        let page = report_agreeing_with_monitor(&csv, &html);
+        let out = hter(&["monitor", "--input", s(&csv), "--json"]);
+        (page, serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap())
+    };
+    let verdict = |page: &str| page.split("id=\"verdict\">").nth(1).unwrap().split('<').next().unwrap().to_owned();
+
+    // In range: the extremes inside 2–8 °C.
+    let (page, v) = read("clean.csv", &history_with_a_dip(3.0, None));
+    assert!(verdict(&page).starts_with("IN RANGE"), "{}", verdict(&page));
+    assert_eq!((v["min_c"].as_f64(), v["intervals_outside_2_8"].as_u64()), (Some(3.0), Some(0)));
+
+    // A dip to 1.5 °C inside one interval: an excursion, though every mean is 4.0.
+    let (page, v) = read("dip.csv", &history_with_a_dip(1.5, None));
+    assert!(verdict(&page).starts_with("EXCURSIONS"), "{}", verdict(&page));
+    assert_eq!((v["min_c"].as_f64(), v["intervals_outside_2_8"].as_u64()), (Some(1.5), Some(1)), "{v}");
+    assert_eq!(v["time_below_2_s"], 0.0, "the times stay the means'");
+    assert!(page.contains("id=\"intervals-outside\">1<"), "the interval is counted on the page");
+    assert!(page.contains("<tr class=\"day bad\"><td>1</td><td>1.5</td>"), "the day's min is the dip");
+
+    // A dip to −5 °C: the vaccines may have frozen.
+    let (page, _) = read("freeze.csv", &history_with_a_dip(-5.0, None));
+    assert!(verdict(&page).starts_with("FREEZE RISK"), "{}", verdict(&page));
+
+    // The carrier's own freeze alarm (it checks every 10 s sample), which the means do not
+    // show: listed, and the verdict is the alarm's.
+    let (page, v) = read("alarm.csv", &history_with_a_dip(3.0, Some("alarm:freeze_60min@25200")));
+    assert!(verdict(&page).starts_with("FREEZE RISK"), "{}", verdict(&page));
+    assert_eq!(v["alarms"].as_array().map(Vec::len), Some(0), "the means meet no alarm: {v}");
+    let carrier = &v["carrier_alarms"][0];
+    assert_eq!(
+        (carrier["kind"].as_str(), carrier["start_s"].as_f64(), carrier["trigger_s"].as_f64()),
+        (Some("freeze_60min"), Some(25_200.0), Some(28_800.0)),
+        "{v}"
+    );
+    assert!(page.contains("<tr class=\"alarm-carrier\" data-kind=\"freeze_60min\""), "listed on the page");
+
+    // Extremes that contradict their mean are a corrupt record.
+    let p = d.join("contradicts.csv");
+    std::fs::write(&p, history_with_a_dip(3.0, None).replace("300,4.00,3.90,4.10", "300,4.00,4.50,4.10")).unwrap();
+    assert_one_line_error(&["monitor", "--input", s(&p)], "line 2: min_c 4.5 °C is above max_c 4.1 °C");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
 fn assert_one_line_error(args: &[&str], needle: &str) {
     let out = hter(args);
     assert!(!out.status.success(), "{args:?} should fail");
