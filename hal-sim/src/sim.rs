@@ -216,12 +216,12 @@ pub enum PlantChoice {
 }
 
 impl PlantChoice {
-    /// Parses `hter1`, `hter2` or `arx:A;B;K` (a stable, cooling model: [`arx::carrier_model`]).
+    /// Parses `hter1`, `hter2` or `arx:A;B;K` (a stable, cooling model without C: [`arx::plant_model`]).
     pub fn parse(s: &str) -> Result<Self> {
         match s {
             "hter1" => Ok(PlantChoice::Hter1),
             "hter2" => Ok(PlantChoice::Hter2),
-            _ if s.starts_with("arx:") => Ok(PlantChoice::Arx(arx::carrier_model(s)?)),
+            _ if s.starts_with("arx:") => Ok(PlantChoice::Arx(arx::plant_model(s)?)),
             _ => bail!("unknown plant '{s}' (expected hter1, hter2 or arx:A;B;K)"),
         }
     }
