@@ -14,8 +14,13 @@ use crate::plant::Load;
 pub enum Start {
     /// Everything at ambient, cooling off: the carrier has just been switched on.
     Ambient,
-    /// Holding the load at this temperature, °C, with the controller already running
-    /// (the closed loop is pre-rolled for [`PREROLL_S`] before t = 0).
+    /// Holding the load at this temperature, °C: the run's first sample is at it, whatever the
+    /// first setpoint. At the first setpoint, on a physical plant, with the controller already
+    /// running (the closed loop is pre-rolled for [`PREROLL_S`] before t = 0); at any other
+    /// temperature, as on an ARX plant, from the plant's steady state at the duty that holds
+    /// it, the controller starting at that duty, which is where the bound starts too
+    /// (`crate::sim::prerolled`). A temperature no duty in [0, 1] holds (above the ambient) is
+    /// refused when the run starts.
     Holding(f64),
 }
 
