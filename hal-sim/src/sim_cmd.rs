@@ -547,7 +547,10 @@ pub fn print_summary(opts: &SimOptions, out: &SimOutput) {
         Some(s) => println!("{band:<28}{s:10.0} s"),
         None => println!("{band:<28}   never"),
     }
-    println!("max |error| after settling  {:10.2} °C", m.tracking.max_abs_error_after_settle_c);
+    match m.tracking.max_abs_error_after_settle_c {
+        Some(e) => println!("max |error| after settling  {e:10.2} °C"),
+        None => println!("max |error| after settling   not settled"),
+    }
     println!("steady-state |error|        {:10.2} °C", m.tracking.steady_state_error_c);
     println!("overshoot                   {:10.2} °C", m.tracking.overshoot_c);
     println!("min / max load temperature  {:6.2} / {:.2} °C", m.tracking.min_temp_c, m.tracking.max_temp_c);
