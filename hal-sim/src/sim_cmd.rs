@@ -270,16 +270,19 @@ pub const PR_WEIGHT_RANGE: (f64, f64) = (0.01, 100.0);
 /// α = 0.9) over a thousand times: a law that barely cools.
 pub const S_WEIGHT_MAX: f64 = 10.0;
 
+/// Whether a tuning flag applies to a controller (with `--model` given or not).
+type Applies = fn(ControllerChoice, bool) -> bool;
+
 /// The tuning flags of `hter sim` and `hter compare` that apply to some controllers only, given
-/// on this command line, each with the controllers it applies to (`with_model`: whether
-/// `--model` is given, which turns the self-tuning laws into fixed-model ones).
-fn tuning_flags(a: &SimArgs) -> Vec<(&'static str, &'static str, fn(ControllerChoice, bool) -> bool)> {
+/// on this command line, each with the controllers it applies to (the bool: whether `--model`
+/// is given, which turns the self-tuning laws into fixed-model ones).
+fn tuning_flags(a: &SimArgs) -> Vec<(&'static str, &'static str, Applies)> {
     use ControllerChoice::{Gmvc, Gpc, Igmvc, Pi};
-    let model_based: fn(ControllerChoice, bool) -> bool = |c, _| matches!(c, Gmvc | Igmvc | Gpc);
-    let gpc: fn(ControllerChoice, bool) -> bool = |c, _| c == Gpc;
-    let gmvc: fn(ControllerChoice, bool) -> bool = |c, _| c == Gmvc;
-    let pi: fn(ControllerChoice, bool) -> bool = |c, _| c == Pi;
-    let flags: [(bool, &str, &str, fn(ControllerChoice, bool) -> bool); 13] = [
+    let model_based: Applies = |c, _| matches!(c, Gmvc | Igmvc | Gpc);
+    let gpc: Applies = |c, _| c == Gpc;
+    let gmvc: Applies = |c, _| c == Gmvc;
+    let pi: Applies = |c, _| c == Pi;
+    let flags: [(bool, &str, &str, Applies); 13] = [
         (a.model.is_some(), "--model", "gmvc, igmvc and gpc", model_based),
         (a.n1.is_some(), "--n1", "gpc", gpc),
         (a.n2.is_some(), "--n2", "gpc", gpc),
