@@ -3,23 +3,25 @@
 //! `arx:-1.8,0.81;-0.02,-0.01;1` is A = 1 − 1.8 q⁻¹ + 0.81 q⁻², B = −0.02 − 0.01 q⁻¹, k = 1:
 //! `y(t) = 1.8 y(t−1) − 0.81 y(t−2) − 0.02 u(t−1) − 0.01 u(t−2)`, with y the temperature minus
 //! the ambient and u the duty in [0, 1]. An optional fourth field gives C for the controller's
-//! T-filter: `arx:A;B;K;C`.
+//! T-filter: `arx:A;B;K;C` (`--model` only: a plant has no C), with its roots strictly inside
+//! the unit circle (the filter divides by C).
 
 use anyhow::{anyhow, bail, Result};
 use hter::model::{Model, MAX_K, MAX_NA, MAX_NB, MAX_NC};
 
-/// Parses `arx:A;B;K[;C]`.
+/// Parses `arx:A;B;K[;C]`: every field given must have at least one number (a trailing `;`
+/// is an empty C, refused), and C, if given, must be stable ([`c_is_stable`]).
 pub fn parse(spec: &str) -> Result<Model> {
     let body = spec.strip_prefix("arx:").ok_or_else(|| anyhow!("model '{spec}' must start with 'arx:'"))?;
     let parts: Vec<&str> = body.split(';').collect();
     if !(3..=4).contains(&parts.len()) {
         bail!("model '{spec}' must be arx:A;B;K (coefficients comma-separated, K the delay in samples)");
     }
-    let coeffs = |name: &str, s: &str, max: usize, allow_empty: bool| -> Result<Vec<f32>> {
+    if let Some(i) = parts.iter().position(|p| p.trim().is_empty()) {
+        bail!("model '{spec}': field {} ({}) is empty", i + 1, ["A", "B", "K", "C"][i]);
+    }
+    let coeffs = |name: &str, s: &str, max: usize| -> Result<Vec<f32>> {
         let s = s.trim();
-        if s.is_empty() {
-            return if allow_empty { Ok(vec![]) } else { bail!("model '{spec}': {name} is empty") };
-        }
         let v = s
             .split(',')
             .map(|x| {
@@ -38,8 +40,8 @@ pub fn parse(spec: &str) -> Result<Model> {
         }
         Ok(v)
     };
-    let a = coeffs("A", parts[0], MAX_NA, false)?;
-    let b = coeffs("B", parts[1], MAX_NB, false)?;
+    let a = coeffs("A", parts[0], MAX_NA)?;
+    let b = coeffs("B", parts[1], MAX_NB)?;
     let k: usize = parts[2]
         .trim()
         .parse()
@@ -48,19 +50,45 @@ pub fn parse(spec: &str) -> Result<Model> {
         bail!("model '{spec}': delay K must be 1..={MAX_K}, got {k}");
     }
     let c = match parts.get(3) {
-        Some(s) => coeffs("C", s, MAX_NC, true)?,
+        Some(s) => coeffs("C", s, MAX_NC)?,
         None => vec![],
     };
+    if !c_is_stable(&c) {
+        bail!("model '{spec}': C (the T-filter, 1 + c1 q⁻¹ + …) must have its roots strictly inside the unit circle");
+    }
     Model::new(&a, &b, &c, k).map_err(|e| anyhow!("model '{spec}': {e:?}"))
 }
 
+/// Whether C = 1 + c1 q⁻¹ (+ c2 q⁻²) has its roots strictly inside the unit circle: the
+/// controller filters the data by 1/C, which grows without bound otherwise (C = 1 + 5 q⁻¹ +
+/// 6 q⁻², roots −2 and −3, ran). No C is C = 1.
+pub fn c_is_stable(c: &[f32]) -> bool {
+    match c {
+        [] => true,
+        [c1] => c1.abs() < 1.0,
+        [c1, c2] => hter::model::second_order_stable(*c1, *c2),
+        _ => false,
+    }
+}
+
+/// Parses the ideal plant of `--plant arx:A;B;K`: [`carrier_model`], without a C (a plant is
+/// A y = q⁻ᵏ B u; the C of `--model` only shapes the controller's T-filter).
+pub fn plant_model(spec: &str) -> Result<Model> {
+    let fields = spec.strip_prefix("arx:").map_or(0, |b| b.split(';').count());
+    if fields > 3 {
+        bail!("plant '{spec}' must be arx:A;B;K: a plant takes no fourth (C) field, only --model does");
+    }
+    carrier_model(spec)
+}
+
 /// Parses a model that stands for a carrier: a controller's fixed design model (`--model`) or
-/// the ideal plant (`--plant arx:…`). [`parse`], and the model must be one a cooler can have, as
-/// the board requires of any model it accepts (SPEC §8): a stable A and a cooling static gain,
-/// no more negative than the self-tuner's plausible range allows
-/// (`hter::profile::ADAPTIVE_GPC.gain_min_c_per_duty`, −1000 °C per unit duty): a plant of
-/// −3e38 °C per unit duty ran to −1e33 °C. Small gains stay allowed: they are valid ideal
-/// plants (the documented example's is −3), only unable to hold a setpoint far from ambient.
+/// the ideal plant (`--plant arx:…`, through [`plant_model`]). [`parse`], and the model must be
+/// one a cooler can have: a stable A and a static gain in [−1000, 0) °C per unit duty. The
+/// lower end is the most negative gain the self-tuner finds plausible
+/// (`hter::profile::ADAPTIVE_GPC.gain_min_c_per_duty`): a plant of −3e38 °C per unit duty ran to
+/// −1e33 °C. The self-tuner's other end (−10) is deliberately not enforced here: small gains are
+/// valid ideal plants (the documented example's is −3), only unable to hold a setpoint far from
+/// ambient, and `--model` is a research option; the messages say the rule that is enforced.
 /// Anything else is refused here, with why: any other design model runs the loop into a drive
 /// saturated for the whole scenario; an unstable plant drove the simulated
 /// temperature to ±10¹⁸⁰ °C and printed that as the run's IAE (`arx:1;2;3`, A written with its
@@ -79,10 +107,12 @@ pub fn carrier_model(spec: &str) -> Result<Model> {
     let gain_min = hter::profile::ADAPTIVE_GPC.gain_min_c_per_duty;
     match m.static_gain() {
         Some(g) if g < gain_min => bail!(
-            "model '{spec}': static gain {g:e} °C per unit duty is beyond what a carrier can have (at least {gain_min}, the self-tuner's plausible range)"
+            "model '{spec}': static gain {g:e} °C per unit duty is beyond what a carrier can have (it must be in [{gain_min}, 0) °C per unit duty)"
         ),
         Some(g) if g < 0.0 => Ok(m),
-        Some(g) => bail!("model '{spec}': static gain {g:.3} °C per unit duty does not cool (it must be < 0)"),
+        Some(g) => bail!(
+            "model '{spec}': static gain {g:.3} °C per unit duty does not cool (it must be in [{gain_min}, 0) °C per unit duty)"
+        ),
         None => bail!("model '{spec}': the static gain is not finite"),
     }
 }
@@ -155,6 +185,44 @@ mod tests {
         assert_eq!(&m.b()[..2], &[-0.02, -0.01]);
         let m = parse("arx:-0.9;0.1;2;0.5").unwrap();
         assert_eq!((m.k(), m.nc(), m.c()[0]), (2, 1, 0.5));
+        let m = parse("arx:-0.9;0.1;2;-1.2,0.4").unwrap();
+        assert_eq!(m.nc(), 2);
+    }
+
+    /// C = 1 + 5 q⁻¹ + 6 q⁻² (roots −2, −3) ran; 1 + 1.0 q⁻¹ has its root on the circle.
+    #[test]
+    fn an_unstable_c_is_refused() {
+        for bad in
+            ["arx:-1.8,0.81;-0.02,-0.01;1;5,6", "arx:-0.9;-0.1;1;1", "arx:-0.9;-0.1;1;-1.1", "arx:-0.9;-0.1;1;0,1"]
+        {
+            let e = parse(bad).unwrap_err().to_string();
+            assert!(e.contains("C (the T-filter") && e.contains("inside the unit circle"), "{bad}: {e}");
+        }
+        assert!(c_is_stable(&[-0.9]) && c_is_stable(&[-1.2, 0.4]) && c_is_stable(&[]));
+        assert!(!c_is_stable(&[5.0, 6.0]) && !c_is_stable(&[0.0, -1.0]));
+    }
+
+    /// A trailing `;` (an empty C) or any other empty field is refused, not read as "no C".
+    #[test]
+    fn an_empty_field_is_refused() {
+        for (bad, field) in [
+            ("arx:-0.9;-0.1;1;", "field 4 (C)"),
+            ("arx:-0.9;;1", "field 2 (B)"),
+            ("arx:-0.9;-0.1; ", "field 3 (K)"),
+            ("arx:;-0.1;1", "field 1 (A)"),
+        ] {
+            let e = parse(bad).unwrap_err().to_string();
+            assert!(e.contains(field) && e.contains("empty"), "{bad}: {e}");
+        }
+    }
+
+    /// `--plant arx:-0.9;-0.1;1;0.5` silently dropped the C: a plant takes A;B;K.
+    #[test]
+    fn a_plant_takes_no_c() {
+        let e = plant_model("arx:-0.9;-0.1;1;0.5").unwrap_err().to_string();
+        assert!(e.contains("no fourth (C) field"), "{e}");
+        assert!(plant_model("arx:-0.9;-0.1;1").is_ok());
+        assert!(carrier_model("arx:-0.9;-0.1;1;0.5").is_ok());
     }
 
     #[test]
@@ -193,7 +261,11 @@ mod tests {
     #[test]
     fn a_gain_beyond_any_carrier_is_refused() {
         let e = carrier_model("arx:-0.5;-3e38;1").unwrap_err().to_string();
-        assert!(e.contains("beyond what a carrier can have") && e.contains("-1000"), "{e}");
+        assert!(e.contains("beyond what a carrier can have") && e.contains("[-1000, 0)"), "{e}");
+        // The message states the rule it enforces, not a range it only half enforces.
+        assert!(!e.contains("plausible range"), "{e}");
+        let e = carrier_model("arx:-0.9;0.1;2").unwrap_err().to_string();
+        assert!(e.contains("[-1000, 0)"), "{e}");
         // A(1) = 0.5: B(1) = −500 is −1000 °C per unit duty, −500.5 is −1001.
         assert!(carrier_model("arx:-0.5;-500;1").is_ok());
         assert!(carrier_model("arx:-0.5;-500.5;1").is_err());

@@ -12,7 +12,8 @@ use crate::sim_cmd::{self, SimArgs};
 /// Arguments of `hter compare`.
 #[derive(clap::Args, Debug)]
 pub struct CompareArgs {
-    /// The scenario and plant, exactly as for `hter sim` (its --controller is ignored).
+    /// The scenario and plant, exactly as for `hter sim`; its --controller and --csv (one run's
+    /// trace) are refused here (--controllers; `hter sim --csv` per controller).
     #[command(flatten)]
     pub sim: SimArgs,
     /// Controllers to compare, comma-separated.
@@ -24,6 +25,21 @@ pub struct CompareArgs {
 pub fn run(a: &CompareArgs) -> Result<()> {
     if a.controllers.is_empty() {
         bail!("--controllers is empty");
+    }
+    // Per-run options compare has no single run for: refused, not silently ignored.
+    if a.sim.controller.is_some() {
+        bail!("--controller picks hter sim's one controller: compare runs --controllers (comma-separated)");
+    }
+    if let Some(p) = &a.sim.csv {
+        bail!(
+            "--csv '{}' is one run's trace and compare runs several: use hter sim --controller C --csv FILE for each",
+            p.display()
+        );
+    }
+    sim_cmd::check_tuning_applies(&a.sim, &a.controllers)?;
+    if let Some(p) = &a.sim.plot {
+        sim_cmd::check_paths(&sim_cmd::input_paths(&a.sim), &[("--plot", p)])?;
+        plot::check_path(p)?;
     }
     let base = sim_cmd::options(&a.sim)?;
     let mut runs = Vec::new();

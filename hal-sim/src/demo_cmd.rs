@@ -15,7 +15,7 @@ pub fn run() -> Result<()> {
     println!("PWM, RTD and ADC. The vaccines must stay within +2…+8 °C and never freeze.\n");
     let args = SimArgs {
         scenario: "step".into(),
-        controller: ControllerChoice::Gpc,
+        controller: Some(ControllerChoice::Gpc),
         plant: "hter1".into(),
         model: None,
         n1: None,

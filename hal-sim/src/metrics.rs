@@ -11,17 +11,20 @@
 //! instant minus the segment start (0 if the segment never leaves the band); a segment whose
 //! last sample is outside the band has not settled and makes `settle_time_s` null.
 //! `max_abs_error_after_settle_c` is the largest |T − w| from the settling instant to the end
-//! of the segment, which for a settled segment is within the band by construction; a segment
-//! that has not settled contributes its largest |T − w| from its first entry into the band
-//! (the error it came back to after arriving), or over the whole segment if it never entered
-//! it. The same rule applies to every controller; the overall figures are the worst over the
-//! segments. `steady_state_error_c` is the largest |T − w| over the last quarter of each
+//! of the segment, which for a settled segment is within the band by construction; like
+//! `settle_time_s` it is null if any segment has not settled (there is no "after settle" to
+//! measure: a 600 s pull-down from 28 °C reported 24 °C "after settle"). The same rule applies
+//! to every controller; the overall figures are the worst over the segments. `steady_state_error_c` is the largest |T − w| over the last quarter of each
 //! segment (a steady-state figure that excludes the transient).
 //!
-//! **Overshoot** is how far the load goes past the setpoint in the direction of travel of a
-//! setpoint change (or, for a run starting at ambient, of the pull-down), in °C, ≥ 0; a
-//! segment that starts within ±[`TRAVEL_MIN_C`] of its setpoint has no direction and no
-//! overshoot.
+//! **Overshoot** is how far the load goes past the setpoint in the direction of travel, in °C,
+//! ≥ 0. The direction of a segment is from the load's true temperature at its first sample
+//! towards its setpoint, not from the previous setpoint: a load still pulling down from 28 °C
+//! when the setpoint steps 4 → 6 °C travels down to 6 °C, and only going below 6 °C after
+//! arriving from above is overshoot (counting from the previous setpoint called the whole
+//! 20 °C it was still above 6 °C an "overshoot"). The load starts on the near side of the
+//! setpoint, so it can only go past it after reaching it. A segment that starts within
+//! ±[`TRAVEL_MIN_C`] of its setpoint has no direction and no overshoot.
 //!
 //! **IAE** is ∫|T − w| dt over the whole run in °C·s (rectangle rule at the sample period).
 //!
@@ -39,9 +42,9 @@ use serde::Serialize;
 /// requirement.
 pub const SETTLE_BAND_C: f64 = 0.2;
 
-/// The least move, °C, from the previous setpoint (or the initial temperature) that makes a
-/// segment a setpoint change with a direction of travel for the overshoot: a run that starts
-/// holding its setpoint, even in a ±0.3 °C On-Off limit cycle, has none.
+/// The least move, °C, from the load's temperature at the start of a segment to its setpoint
+/// that gives the segment a direction of travel for the overshoot: a run that starts holding
+/// its setpoint, even in a ±0.3 °C On-Off limit cycle, has none.
 pub const TRAVEL_MIN_C: f64 = 0.5;
 
 /// One sample of a run, as the metrics see it.
@@ -178,8 +181,8 @@ pub struct Holdover {
 pub struct TrackingFigures {
     /// Integral of absolute error, °C·s.
     pub iae: f64,
-    /// Worst |T − w| after settling, °C (see the module docs).
-    pub max_abs_error_after_settle_c: f64,
+    /// Worst |T − w| after settling, °C; null if a segment never settled (see the module docs).
+    pub max_abs_error_after_settle_c: Option<f64>,
     /// Worst |T − w| over the last quarter of each setpoint segment, °C.
     pub steady_state_error_c: f64,
     /// Worst overshoot, °C.
@@ -207,7 +210,7 @@ pub fn mean_power_w(energy_wh: f64, duration_s: f64) -> f64 {
 pub fn tracking(samples: &[Sample], ts_s: f64) -> TrackingFigures {
     let mut f = TrackingFigures {
         iae: 0.0,
-        max_abs_error_after_settle_c: 0.0,
+        max_abs_error_after_settle_c: Some(0.0),
         steady_state_error_c: 0.0,
         overshoot_c: 0.0,
         settle_time_s: Some(0.0),
@@ -229,8 +232,8 @@ pub fn tracking(samples: &[Sample], ts_s: f64) -> TrackingFigures {
         let w = samples[start].setpoint_c;
         let end = samples[start..].iter().position(|s| s.setpoint_c != w).map_or(samples.len(), |n| start + n);
         let seg = &samples[start..end];
-        // Direction of travel: from the previous setpoint, or from the initial temperature.
-        let from = if start > 0 { samples[start - 1].setpoint_c } else { seg[0].true_temp_c };
+        // Direction of travel: from where the load is when the segment starts (module docs).
+        let from = seg[0].true_temp_c;
         let dir = if (w - from).abs() <= TRAVEL_MIN_C { 0.0 } else { (w - from).signum() };
         if dir != 0.0 {
             let past = seg.iter().map(|s| dir * (s.true_temp_c - w)).fold(0.0f64, f64::max);
@@ -248,12 +251,11 @@ pub fn tracking(samples: &[Sample], ts_s: f64) -> TrackingFigures {
             Some(k) => {
                 let settle = seg[k].t_s - seg[0].t_s;
                 f.settle_time_s = f.settle_time_s.map(|x| x.max(settle));
-                f.max_abs_error_after_settle_c = f.max_abs_error_after_settle_c.max(max_from(k));
+                f.max_abs_error_after_settle_c = f.max_abs_error_after_settle_c.map(|x| x.max(max_from(k)));
             }
             None => {
                 f.settle_time_s = None;
-                let arrived = seg.iter().position(|s| err(s) <= SETTLE_BAND_C).unwrap_or(0);
-                f.max_abs_error_after_settle_c = f.max_abs_error_after_settle_c.max(max_from(arrived));
+                f.max_abs_error_after_settle_c = None;
             }
         }
         let tail = &seg[seg.len() * 3 / 4..];
@@ -284,7 +286,7 @@ mod tests {
         let f = run(&[(4.0, 10.0), (4.0, 7.0), (4.0, 4.4), (4.0, 3.2), (4.0, 3.9), (4.0, 4.1), (4.0, 4.0), (4.0, 4.0)]);
         assert_eq!(f.settle_time_s, Some(40.0));
         assert!((f.overshoot_c - 0.8).abs() < 1e-9);
-        assert!((f.max_abs_error_after_settle_c - 0.1).abs() < 1e-9);
+        assert!((f.max_abs_error_after_settle_c.unwrap() - 0.1).abs() < 1e-9);
         assert!((f.steady_state_error_c - 0.0).abs() < 1e-9);
         assert!((f.iae - 10.0 * (6.0 + 3.0 + 0.4 + 0.8 + 0.1 + 0.1)).abs() < 1e-9);
         assert_eq!(f.min_temp_c, 3.2);
@@ -299,27 +301,49 @@ mod tests {
         // excursion.
         let f = run(&[(6.0, 4.0), (6.0, 5.0), (6.0, 5.9), (6.0, 6.1), (6.0, 6.3), (6.0, 6.1), (6.0, 6.0), (6.0, 5.95)]);
         assert_eq!(f.settle_time_s, Some(50.0));
-        assert!((f.max_abs_error_after_settle_c - 0.1).abs() < 1e-9);
+        assert!((f.max_abs_error_after_settle_c.unwrap() - 0.1).abs() < 1e-9);
         assert!((f.overshoot_c - 0.3).abs() < 1e-9);
         // Each segment is timed from its own start: 4 °C held (settled at once), then a step to
         // 3 °C at t = 30 s reached at t = 50 s (3.15 after 3.4): 20 s, the worst of the two.
         let f =
             run(&[(4.0, 4.0), (4.0, 4.1), (4.0, 3.9), (3.0, 3.9), (3.0, 3.4), (3.0, 3.15), (3.0, 3.0), (3.0, 3.05)]);
         assert_eq!(f.settle_time_s, Some(20.0));
-        assert!((f.max_abs_error_after_settle_c - 0.15).abs() < 1e-9);
+        assert!((f.max_abs_error_after_settle_c.unwrap() - 0.15).abs() < 1e-9);
     }
 
     #[test]
     fn a_segment_that_ends_outside_the_band_has_not_settled() {
-        // Never arrives: the whole segment's error counts.
+        // Never arrives: no settling, so nothing "after settle" (it reported the 2 °C of the
+        // whole segment, and 24 °C for a 600 s pull-down).
         let f = run(&[(4.0, 4.0), (4.0, 4.0), (6.0, 4.0), (6.0, 4.5), (6.0, 5.0), (6.0, 5.2)]);
         assert_eq!(f.settle_time_s, None);
-        assert!((f.max_abs_error_after_settle_c - 2.0).abs() < 1e-9);
+        assert_eq!(f.max_abs_error_after_settle_c, None);
         assert_eq!(f.overshoot_c, 0.0);
         // Arrives at t = 20 s, then drifts out at the end (a limit cycle cut by the end of the
-        // run): not settled, and the worst error after the arrival is the 0.35 °C it left by.
+        // run): not settled either.
         let f = run(&[(4.0, 5.0), (4.0, 4.5), (4.0, 4.1), (4.0, 3.9), (4.0, 4.15), (4.0, 3.65)]);
         assert_eq!(f.settle_time_s, None);
-        assert!((f.max_abs_error_after_settle_c - 0.35).abs() < 1e-9);
+        assert_eq!(f.max_abs_error_after_settle_c, None);
+        // One settled segment and one not: both figures null, not the settled one's.
+        let f = run(&[(4.0, 4.0), (4.0, 4.0), (4.0, 4.0), (6.0, 4.0), (6.0, 5.0)]);
+        assert_eq!((f.settle_time_s, f.max_abs_error_after_settle_c), (None, None));
+    }
+
+    #[test]
+    fn overshoot_is_past_the_setpoint_from_where_the_load_was() {
+        // Still pulling down from 28 °C when the setpoint steps 4 → 6 °C: the load travels
+        // down to 6 °C, and the 14 °C it is still above it is not overshoot (it reported the
+        // distance above the new setpoint, 20.95 °C in `hter sim` of such a file).
+        let f = run(&[(4.0, 28.0), (4.0, 24.0), (6.0, 20.0), (6.0, 14.0), (6.0, 9.0), (6.0, 7.0), (6.0, 6.3)]);
+        assert_eq!(f.overshoot_c, 0.0);
+        // The same, then it does go past 6 °C from above: that is overshoot, 0.4 °C.
+        let f = run(&[(4.0, 28.0), (4.0, 24.0), (6.0, 20.0), (6.0, 9.0), (6.0, 5.6), (6.0, 5.9), (6.0, 6.0)]);
+        assert!((f.overshoot_c - 0.4).abs() < 1e-9, "{f:?}");
+        // A step up from a held 4 °C: past 6 °C upwards counts (0.3 °C), as before.
+        let f = run(&[(4.0, 4.0), (4.0, 4.0), (6.0, 4.0), (6.0, 5.5), (6.0, 6.3), (6.0, 6.1)]);
+        assert!((f.overshoot_c - 0.3).abs() < 1e-9, "{f:?}");
+        // A step that finds the load already within TRAVEL_MIN_C of it has no direction.
+        let f = run(&[(4.0, 5.8), (4.0, 5.9), (6.0, 5.9), (6.0, 6.3), (6.0, 5.7)]);
+        assert_eq!(f.overshoot_c, 0.0);
     }
 }

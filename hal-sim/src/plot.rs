@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use anyhow::{anyhow, bail, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -47,11 +47,38 @@ fn register_font() {
     });
 }
 
+/// Checks, before a run, that a plot can go to `path`: a `.png` or `.svg` name in a directory
+/// that exists (the run is not wasted on a plot that cannot be written, and `hter compare` does
+/// not print its table before failing). The error reads as `--csv`'s: the path and the OS's
+/// reason.
+pub fn check_path(path: &Path) -> Result<()> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    if !matches!(ext.as_deref(), Some("png" | "svg")) {
+        bail!("plot file '{}' must end in .png or .svg", path.display());
+    }
+    check_dir(path)
+}
+
+/// The directory `path` would be written in exists, or the OS's error with the path, as
+/// `cannot write 'PATH': No such file or directory (os error 2)`.
+pub fn check_dir(path: &Path) -> Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    std::fs::metadata(dir).map(|_| ()).with_context(|| format!("cannot write '{}'", path.display()))
+}
+
 /// Draws `panels` stacked vertically into `path` (`.png` or `.svg`), x axis labelled `x_label`.
 pub fn panels(path: &Path, title: &str, x_label: &str, panels: &[Panel]) -> Result<()> {
     register_font();
     let height = 300 * panels.len() as u32 + 60;
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    if matches!(ext.as_deref(), Some("png" | "svg")) {
+        // The file opened first, as `--csv` opens its own: the backends report a missing
+        // directory as "backend error: Drawing backend error: ImageError(IoError(Os { … }))".
+        std::fs::File::create(path).with_context(|| format!("cannot write '{}'", path.display()))?;
+    }
     match ext.as_deref() {
         Some("png") => {
             let root = BitMapBackend::new(path, (1100, height)).into_drawing_area();
@@ -126,4 +153,30 @@ where
             .map_err(err)?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A plot into a missing directory reads as `--csv`'s error does: the path and the OS's
+    /// reason, on one line, not the backend's debug dump.
+    #[test]
+    fn a_missing_directory_is_the_os_error() {
+        let path = std::env::temp_dir().join(format!("hter-plot-{}-no-dir/x.png", std::process::id()));
+        let panel = Panel {
+            title: "t".into(),
+            y_label: "y".into(),
+            series: vec![Series { name: "s".into(), points: vec![(0.0, 1.0), (1.0, 2.0)] }],
+            y_range: None,
+        };
+        let e = format!("{:#}", panels(&path, "title", "x", &[panel]).unwrap_err());
+        assert!(e.starts_with(&format!("cannot write '{}': ", path.display())), "{e}");
+        assert!(e.contains("os error 2") && !e.contains("backend") && !e.contains('\n'), "{e}");
+        // The check before a run says the same.
+        assert_eq!(format!("{:#}", check_path(&path).unwrap_err()), e);
+        assert!(check_path(&std::env::temp_dir().join("x.svg")).is_ok());
+        let e = check_path(&std::env::temp_dir().join("x.jpg")).unwrap_err().to_string();
+        assert!(e.contains("must end in .png or .svg"), "{e}");
+    }
 }

@@ -14,8 +14,13 @@ use crate::plant::Load;
 pub enum Start {
     /// Everything at ambient, cooling off: the carrier has just been switched on.
     Ambient,
-    /// Holding the load at this temperature, °C, with the controller already running
-    /// (the closed loop is pre-rolled for [`PREROLL_S`] before t = 0).
+    /// Holding the load at this temperature, °C: the run's first sample is at it, whatever the
+    /// first setpoint. At the first setpoint, on a physical plant, with the controller already
+    /// running (the closed loop is pre-rolled for [`PREROLL_S`] before t = 0); at any other
+    /// temperature, as on an ARX plant, from the plant's steady state at the duty that holds
+    /// it, the controller starting at that duty, which is where the bound starts too
+    /// (`crate::sim::prerolled`). A temperature no duty in [0, 1] holds (above the ambient) is
+    /// refused when the run starts.
     Holding(f64),
 }
 
@@ -297,6 +302,11 @@ pub const EXTRA_HEAT_MAX_W: f64 = 100.0;
 impl ScenarioFile {
     fn into_scenario(self, name: &str) -> Result<Scenario> {
         let finite = |v: &[(f64, f64)]| v.iter().all(|(a, b)| a.is_finite() && b.is_finite() && *a >= 0.0);
+        // The description is printed on one line of the summary: a newline or an escape
+        // sequence (`\x1b[2J`) in it would break the line or drive the terminal.
+        if let Some(c) = self.description.chars().find(|c| c.is_control()) {
+            bail!("scenario file '{name}': 'description' contains a control character ({c:?}); it must be one line of text");
+        }
         if self.setpoints.is_empty() {
             bail!("scenario file '{name}': 'setpoints' is empty");
         }
@@ -362,6 +372,22 @@ mod tests {
         assert_eq!(s.setpoint_at(200.0), 6.0);
         assert_eq!(s.setpoint_at(1320.0), 3.0);
         assert_eq!(s.setpoint_at(3599.0), 4.0);
+    }
+
+    fn file(json: &str) -> Result<Scenario> {
+        serde_json::from_str::<ScenarioFile>(json).unwrap().into_scenario("t.json")
+    }
+
+    #[test]
+    fn a_description_with_control_characters_is_refused() {
+        for d in [r"two\nlines", r"clear \u001b[2J screen", r"cr\r", r"tab\tbed"] {
+            let e = file(&format!(r#"{{"description":"{d}","setpoints":[[0,4]],"duration_s":100}}"#))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("'description' contains a control character") && !e.contains('\n'), "{e}");
+        }
+        let s = file(r#"{"description":"holding 4 °C — one line","setpoints":[[0,4]],"duration_s":100}"#).unwrap();
+        assert_eq!(s.description, "holding 4 °C — one line");
     }
 
     #[test]

@@ -216,12 +216,12 @@ pub enum PlantChoice {
 }
 
 impl PlantChoice {
-    /// Parses `hter1`, `hter2` or `arx:A;B;K` (a stable, cooling model: [`arx::carrier_model`]).
+    /// Parses `hter1`, `hter2` or `arx:A;B;K` (a stable, cooling model without C: [`arx::plant_model`]).
     pub fn parse(s: &str) -> Result<Self> {
         match s {
             "hter1" => Ok(PlantChoice::Hter1),
             "hter2" => Ok(PlantChoice::Hter2),
-            _ if s.starts_with("arx:") => Ok(PlantChoice::Arx(arx::carrier_model(s)?)),
+            _ if s.starts_with("arx:") => Ok(PlantChoice::Arx(arx::plant_model(s)?)),
             _ => bail!("unknown plant '{s}' (expected hter1, hter2 or arx:A;B;K)"),
         }
     }
@@ -444,10 +444,12 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
     let faults_pending = &opts.faults;
     let name = carrier.controller().name().to_string();
 
-    // Pre-roll: the loop has been holding the initial temperature for an hour.
+    // Pre-roll: the loop has been holding the initial temperature, its first setpoint, for an
+    // hour. A start at another temperature is the plant's steady state there, as the bound's
+    // ([`prerolled`]).
     let preroll = match (sc.start, opts.plant) {
         _ if sc.excitation => 0,
-        (Start::Holding(_), PlantChoice::Hter1 | PlantChoice::Hter2 | PlantChoice::Custom(_)) => {
+        (Start::Holding(_), PlantChoice::Hter1 | PlantChoice::Hter2 | PlantChoice::Custom(_)) if prerolled(sc) => {
             (PREROLL_S / ts).round() as i64
         }
         _ => 0,
@@ -569,6 +571,17 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
         holdover: sc.cut.map(|c| holdover(&rows, c)),
     };
     Ok(SimOutput { rows, metrics, ts_s: ts, stores })
+}
+
+/// Whether a run of `sc` on a physical plant starts from a closed-loop pre-roll: it starts
+/// holding its first setpoint ([`Start::Holding`] at `setpoint_at(0)`, every built-in that
+/// holds), so each controller starts from its own steady state. A start at another temperature
+/// (a scenario file's `start_c`) is the plant's steady state at the duty that holds it, the
+/// controller starting at that duty, as on an ARX plant: the pre-roll held the first setpoint,
+/// so `start_c` 20 with a 4 °C setpoint started at 4 °C, while the bound ([`crate::bound`])
+/// started from 20 °C and On-Off "beat" it. From that state the bound and the run start alike.
+pub fn prerolled(sc: &Scenario) -> bool {
+    matches!(sc.start, Start::Holding(t) if t == sc.setpoint_at(0.0))
 }
 
 /// The holdover of a power-cut run: the step's estimate at the last sample before the cut, and

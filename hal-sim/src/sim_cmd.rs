@@ -2,7 +2,7 @@
 //! model, with its summary, JSON metrics, CSV trace and plot. [`options`] turns the arguments
 //! into a checked [`SimOptions`]; `hter compare` and the demo reuse it.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
@@ -25,15 +25,19 @@ pub struct SimArgs {
     /// JSON scenario file.
     #[arg(long, default_value = "step")]
     pub scenario: String,
-    /// Controller (default: self-tuning GPC, the board's default build).
-    #[arg(long, value_enum, default_value = "gpc")]
-    pub controller: ControllerChoice,
+    /// Controller [default: gpc, self-tuning GPC, the board's default build]. The tuning
+    /// flags below name the controllers they apply to; one given for another controller is
+    /// refused, not ignored.
+    #[arg(long, value_enum)]
+    pub controller: Option<ControllerChoice>,
     /// Plant: hter1 (aluminium container), hter2 (stainless steel), or an ideal ARX model
-    /// arx:A;B;K (y = temperature − ambient, u = duty; refused unless A is stable and the static
-    /// gain cools).
+    /// arx:A;B;K (y = temperature − ambient, u = duty; no C field; refused unless A is stable
+    /// and the static gain is in [−1000, 0) °C per unit duty).
     #[arg(long, default_value = "hter1")]
     pub plant: String,
-    /// Fixed model for gmvc/igmvc/gpc, arx:A;B;K or arx:A;B;K;C (without it they are self-tuning); refused unless A is stable and the static gain cools.
+    /// Fixed model for gmvc/igmvc/gpc, arx:A;B;K or arx:A;B;K;C (without it they are
+    /// self-tuning); refused unless A is stable, the static gain is in [−1000, 0) °C per unit
+    /// duty and C (the T-filter) has its roots strictly inside the unit circle.
     #[arg(long)]
     pub model: Option<String>,
     /// GPC: first predicted sample in the cost.
@@ -48,13 +52,19 @@ pub struct SimArgs {
     /// GPC and IGMVC: weight on the control increment (≥ 0).
     #[arg(long, allow_negative_numbers = true)]
     pub lambda: Option<f64>,
-    /// GMVC: output weight P.
+    /// GMVC: output weight P(1), 0.01…100 (default 1). The law aims P·y at R·w and divides
+    /// by g0² + S² with g0 ∝ P, so only R/P and S/P matter: P ≤ 0 aims the load away from the
+    /// setpoint (−1 froze it), and four decades from the defaults S swamps g0 (1e-30 cools
+    /// nothing) or vanishes against it.
     #[arg(long, allow_negative_numbers = true)]
     pub p_weight: Option<f64>,
-    /// GMVC: reference weight R.
+    /// GMVC: reference weight R, 0.01…100 (default 1; R = P tracks w at steady state with S =
+    /// 0, other ratios aim at (R/P)·w); R ≤ 0 aims at 0 °C or below.
     #[arg(long, allow_negative_numbers = true)]
     pub r_weight: Option<f64>,
-    /// GMVC: control weight S (≥ 0).
+    /// GMVC: control weight S, °C per unit duty, 0…10 (default 0.05): the steady-state offset
+    /// grows with S, and above 10 S² outweighs g0² thousands of times at P = 1: the law
+    /// barely cools.
     #[arg(long, allow_negative_numbers = true)]
     pub s_weight: Option<f64>,
     /// GMVC and IGMVC: pole α of the output weight P = (1 − α q⁻¹)/(1 − α), 0 ≤ α < 1
@@ -247,6 +257,112 @@ pub const KP_RANGE_PER_C: (f64, f64) = (1e-3, 100.0);
 /// and both silently turned PI into P.
 pub const TI_RANGE_S: (f64, f64) = (1.0, 1e6);
 
+/// GMVC output weight range of `--p-weight` (and reference weight of `--r-weight`): the
+/// law (`hter::control::mv`) aims P·y at R·w and computes u = g0 (R w − F y − …)/(g0² + S²)
+/// with g0 ∝ P (P = A E + q^−k F, G = E B), so it depends on R/P and S/P only. A P or R ≤ 0 aims
+/// the load at −w or 0 °C (`--p-weight=-1` froze it); four decades from the defaults P = R = 1
+/// the default S = 0.05 swamps g0 (`--p-weight=1e-30` cooled nothing) or the weights leave the
+/// range the f32 law was tuned in.
+pub const PR_WEIGHT_RANGE: (f64, f64) = (0.01, 100.0);
+
+/// Largest GMVC control weight `--s-weight`, °C per unit duty: the steady-state offset grows
+/// with S (`hter::control::mv`), and at 10 S² outweighs the carrier's g0² (≈ 0.07 at P = 1,
+/// α = 0.9) over a thousand times: a law that barely cools.
+pub const S_WEIGHT_MAX: f64 = 10.0;
+
+/// Whether a tuning flag applies to a controller (with `--model` given or not).
+type Applies = fn(ControllerChoice, bool) -> bool;
+
+/// The tuning flags of `hter sim` and `hter compare` that apply to some controllers only, given
+/// on this command line, each with the controllers it applies to (the bool: whether `--model`
+/// is given, which turns the self-tuning laws into fixed-model ones).
+fn tuning_flags(a: &SimArgs) -> Vec<(&'static str, &'static str, Applies)> {
+    use ControllerChoice::{Gmvc, Gpc, Igmvc, Pi};
+    let model_based: Applies = |c, _| matches!(c, Gmvc | Igmvc | Gpc);
+    let gpc: Applies = |c, _| c == Gpc;
+    let gmvc: Applies = |c, _| c == Gmvc;
+    let pi: Applies = |c, _| c == Pi;
+    let flags: [(bool, &str, &str, Applies); 13] = [
+        (a.model.is_some(), "--model", "gmvc, igmvc and gpc", model_based),
+        (a.n1.is_some(), "--n1", "gpc", gpc),
+        (a.n2.is_some(), "--n2", "gpc", gpc),
+        (a.nu.is_some(), "--nu", "gpc", gpc),
+        (a.lambda.is_some(), "--lambda", "gpc and igmvc", |c, _| matches!(c, Gpc | Igmvc)),
+        (a.p_weight.is_some(), "--p-weight", "gmvc", gmvc),
+        (a.r_weight.is_some(), "--r-weight", "gmvc", gmvc),
+        (a.s_weight.is_some(), "--s-weight", "gmvc", gmvc),
+        (a.p_pole.is_some(), "--p-pole", "gmvc and igmvc", |c, _| matches!(c, Gmvc | Igmvc)),
+        (
+            a.t_pole.is_some(),
+            "--t-pole",
+            "igmvc and self-tuning gpc (gpc without --model: a fixed model's T-filter is its C)",
+            |c, m| c == Igmvc || (c == Gpc && !m),
+        ),
+        (a.no_approach_lead, "--no-approach-lead", "the self-tuning gmvc, igmvc and gpc (without --model)", |c, m| {
+            matches!(c, Gmvc | Igmvc | Gpc) && !m
+        }),
+        (a.kp.is_some(), "--kp", "pi", pi),
+        (a.ti.is_some(), "--ti", "pi", pi),
+    ];
+    flags.into_iter().filter(|f| f.0).map(|(_, name, who, applies)| (name, who, applies)).collect()
+}
+
+/// Refuses a tuning flag that applies to none of `controllers` (for `hter sim`, its one
+/// controller; for `hter compare`, at least one of those it runs must take each flag): such a
+/// flag was silently ignored.
+pub fn check_tuning_applies(a: &SimArgs, controllers: &[ControllerChoice]) -> Result<()> {
+    let with_model = a.model.is_some();
+    for (flag, who, applies) in tuning_flags(a) {
+        if !controllers.iter().any(|&c| applies(c, with_model)) {
+            let names: Vec<String> = controllers.iter().map(|c| controller_name(*c)).collect();
+            let what = if controllers.len() == 1 { "the controller" } else { "any of the controllers" };
+            bail!("{flag} does not apply to {what} {} (it applies to {who})", names.join(", "));
+        }
+    }
+    Ok(())
+}
+
+/// The `--controller` value naming `c`.
+fn controller_name(c: ControllerChoice) -> String {
+    use clap::ValueEnum;
+    c.to_possible_value().map_or_else(|| format!("{c:?}"), |v| v.get_name().to_string())
+}
+
+/// The path `p` stands for: canonical if it exists, else made absolute (so `x.csv` and
+/// `./x.csv` are one file).
+fn resolved(p: &Path) -> PathBuf {
+    std::fs::canonicalize(p).unwrap_or_else(|_| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf()))
+}
+
+/// Refuses an output that is an input or another output: `--csv sc.json --scenario sc.json`
+/// overwrote the scenario, `--csv x.svg --plot x.svg` replaced the trace with the plot and
+/// still said both were written. `inputs` and `outputs` are (flag, path).
+pub fn check_paths(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Result<()> {
+    for (i, (flag, path)) in outputs.iter().enumerate() {
+        let p = resolved(path);
+        for (other, q) in inputs.iter().chain(&outputs[..i]) {
+            if resolved(q) == p {
+                bail!(
+                    "{flag} '{}' is the same file as {other} '{}': it would overwrite it",
+                    path.display(),
+                    q.display()
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The files a `hter sim` or `hter compare` command line reads (a scenario file: a built-in
+/// name reads nothing).
+pub fn input_paths(a: &SimArgs) -> Vec<(&'static str, &Path)> {
+    if a.mission_seed.is_none() && Scenario::built_in(&a.scenario).is_none() {
+        vec![("--scenario", Path::new(&a.scenario))]
+    } else {
+        vec![]
+    }
+}
+
 /// The simulation a `hter sim` command line asks for: its arguments checked and resolved.
 pub fn options(a: &SimArgs) -> Result<SimOptions> {
     let scenario = Scenario::resolve(&a.scenario)?;
@@ -254,7 +370,7 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
         Some(d) => finite("duration", d)?,
         None => scenario.duration_s,
     };
-    let mut controller = ControllerSpec::new(a.controller);
+    let mut controller = ControllerSpec::new(a.controller.unwrap_or(ControllerChoice::Gpc));
     if let Some(m) = &a.model {
         controller.model = Some(crate::arx::carrier_model(m)?);
     }
@@ -282,21 +398,24 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
     if g.nu < 1 || g.nu > hter::control::gpc::MAX_NU || g.nu > g.n2 {
         bail!("GPC control horizon needs 1 ≤ Nu ≤ min(N2, {}), got Nu = {}", hter::control::gpc::MAX_NU, g.nu);
     }
-    if let Some(p) = a.p_weight {
-        controller.gmvc.p = single("p-weight", p)?;
-        if p == 0.0 {
-            bail!("--p-weight must not be 0");
+    let (w_lo, w_hi) = PR_WEIGHT_RANGE;
+    for (name, w, field) in
+        [("p-weight", a.p_weight, &mut controller.gmvc.p), ("r-weight", a.r_weight, &mut controller.gmvc.r)]
+    {
+        if let Some(w) = w {
+            let w = finite(name, w)?;
+            if !(w_lo..=w_hi).contains(&w) {
+                bail!("--{name} must be within {w_lo}…{w_hi} (positive: see --help), got {}", shown(w));
+            }
+            *field = single(name, w)?;
         }
-    }
-    if let Some(r) = a.r_weight {
-        controller.gmvc.r = single("r-weight", r)?;
     }
     if let Some(sw) = a.s_weight {
-        let sw = single("s-weight", sw)?;
-        if sw < 0.0 {
-            bail!("--s-weight must be ≥ 0, got {sw}");
+        let sw = finite("s-weight", sw)?;
+        if !(0.0..=S_WEIGHT_MAX).contains(&sw) {
+            bail!("--s-weight must be within 0…{S_WEIGHT_MAX} °C per unit duty, got {}", shown(sw));
         }
-        controller.gmvc.s = sw;
+        controller.gmvc.s = single("s-weight", sw)?;
     }
     if let Some(al) = a.p_pole {
         let al = finite("p-pole", al)?;
@@ -391,6 +510,17 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
             shown(opts.duration_s)
         );
     }
+    // A power cut after the last sample never happens: the run reported the holdover the step
+    // predicted for a cut it never saw.
+    if let Some(cut) = opts.scenario.cut.filter(|c| opts.duration_s >= ts && last_sample_s < c.at_s) {
+        bail!(
+            "--duration {}: the {} scenario cuts the supply at {} s, and the run's last sample is at {last_sample_s} s (it must last at least {} s)",
+            shown(opts.duration_s),
+            opts.scenario.name,
+            cut.at_s,
+            cut.at_s + ts
+        );
+    }
     if let Some(rule) = a.commission {
         let Some(params) = opts.plant_params() else { bail!("--commission needs a physical plant (hter1 or hter2)") };
         let ambient = match a.commission_ambient {
@@ -436,6 +566,18 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
 
 /// `hter sim`.
 pub fn run(a: &SimArgs) -> Result<()> {
+    check_tuning_applies(a, &[a.controller.unwrap_or(ControllerChoice::Gpc)])?;
+    let outputs: Vec<(&str, &Path)> = [("--csv", &a.csv), ("--plot", &a.plot)]
+        .into_iter()
+        .filter_map(|(f, p)| p.as_deref().map(|p| (f, p)))
+        .collect();
+    check_paths(&input_paths(a), &outputs)?;
+    if let Some(p) = &a.csv {
+        plot::check_dir(p)?;
+    }
+    if let Some(p) = &a.plot {
+        plot::check_path(p)?;
+    }
     let opts = options(a)?;
     let out = sim::run(&opts)?;
     if let Some(path) = &a.csv {
@@ -547,7 +689,10 @@ pub fn print_summary(opts: &SimOptions, out: &SimOutput) {
         Some(s) => println!("{band:<28}{s:10.0} s"),
         None => println!("{band:<28}   never"),
     }
-    println!("max |error| after settling  {:10.2} °C", m.tracking.max_abs_error_after_settle_c);
+    match m.tracking.max_abs_error_after_settle_c {
+        Some(e) => println!("max |error| after settling  {e:10.2} °C"),
+        None => println!("max |error| after settling   not settled"),
+    }
     println!("steady-state |error|        {:10.2} °C", m.tracking.steady_state_error_c);
     println!("overshoot                   {:10.2} °C", m.tracking.overshoot_c);
     println!("min / max load temperature  {:6.2} / {:.2} °C", m.tracking.min_temp_c, m.tracking.max_temp_c);

@@ -92,3 +92,44 @@ fn an_arx_run_starts_at_the_plants_steady_duty() {
         assert!(out.rows[..20].iter().all(|r| (r.true_temp_c - 4.0).abs() < 1e-3), "{:?}", controller.choice);
     }
 }
+
+/// A scenario file's `start_c` is where the run and the bound start, on the physical carrier
+/// too. The pre-roll held the schedule's first setpoint, so `start_c` 20 with a 4 °C setpoint
+/// started at 4.0 °C (any `start_c` 0–28 gave the same run) while the bound started at 20 °C,
+/// and On-Off and PI "beat" the physical bound (IAE ratios 0.04 and 0.00). The run now starts
+/// where the bound does, the plant's steady state holding `start_c` (20 °C, and 6 °C inside the
+/// board's setpoint range): the first sample and the bound's start agree with `start_c`, and no
+/// controller beats the bound.
+#[test]
+fn a_scenario_files_start_c_is_where_the_run_and_the_bound_start() {
+    use hal_sim::scenario::Start;
+    for start_c in [20.0, 6.0] {
+        let sc = Scenario {
+            start: Start::Holding(start_c),
+            setpoints: vec![(0.0, 4.0)],
+            changes: vec![],
+            duration_s: 300.0,
+            ..Scenario::resolve("piecewise").unwrap()
+        };
+        let base = SimOptions::new(sc, ControllerSpec::new(ControllerChoice::Gpc));
+        let b = bound(&base).unwrap();
+        assert_eq!(b.segments[0].from_c, start_c, "{b:?}");
+        assert!(b.iae > 0.0, "{b:?}");
+        for c in [ControllerChoice::Onoff, ControllerChoice::Pi, ControllerChoice::Gpc] {
+            let out = run(&SimOptions { controller: ControllerSpec::new(c), ..base.clone() }).unwrap();
+            // The steady state is found to the search's tolerance.
+            let first = out.rows[0].true_temp_c;
+            assert!((first - start_c).abs() < 0.01, "{c:?} from {start_c} °C: first sample at {first} °C");
+            assert!(
+                out.metrics.tracking.iae >= b.iae,
+                "{c:?} from {start_c} °C: IAE {} below the bound {}",
+                out.metrics.tracking.iae,
+                b.iae
+            );
+        }
+    }
+    // Above the ambient no duty holds it: refused by the run and the bound alike.
+    let sc = Scenario { start: Start::Holding(30.0), ..Scenario::resolve("piecewise").unwrap() };
+    let base = SimOptions::new(sc, ControllerSpec::new(ControllerChoice::Pi));
+    assert!(run(&base).is_err() && bound(&base).is_err());
+}

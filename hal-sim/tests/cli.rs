@@ -659,7 +659,10 @@ fn f32_flags_are_checked_as_the_library_sees_them() {
     assert_one_line_error(&["sim", "--controller", "pi", "--kp", "1e-300"], "--kp must be within 0.001…100");
     assert_one_line_error(&["sim", "--controller", "pi", "--kp", "1e39"], "--kp must be within");
     assert_one_line_error(&["sim", "--controller", "gpc", "--lambda", "1e39"], "--lambda = 1e39 is too large");
-    assert_one_line_error(&["sim", "--controller", "gmvc", "--p-weight", "1e-300"], "--p-weight = 1e-300 is too small");
+    assert_one_line_error(
+        &["sim", "--controller", "gmvc", "--p-weight", "1e-300"],
+        "--p-weight must be within 0.01…100",
+    );
     assert_one_line_error(&["identify", "--input", "/dev/null", "--forgetting", "1e-50"], "--forgetting");
     assert_one_line_error(
         &["identify", "--input", "/dev/null", "--forgetting", "0.1"],
@@ -762,4 +765,191 @@ fn log2csv_refuses_a_time_beyond_the_boards_clock() {
 fn an_arx_plant_beyond_any_carrier_is_refused() {
     assert_one_line_error(&["sim", "--plant", "arx:-0.5;-3e38;1"], "beyond what a carrier can have");
     assert_one_line_error(&["sim", "--model", "arx:-0.9;-101;1"], "beyond what a carrier can have");
+}
+
+/// A scratch directory for one test, removed by the caller.
+fn scratch(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("hter-cli-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// `hter compare` refuses what it would ignore: `--csv` (one run's trace: it exited 0 and wrote
+/// nothing, even into a missing directory) and `--controller` beside `--controllers`.
+#[test]
+fn compare_refuses_per_run_options_it_would_ignore() {
+    assert_one_line_error(&["compare", "--duration", "300", "--csv", "/nonexistent/dir/x.csv"], "--csv");
+    assert_one_line_error(&["compare", "--duration", "300", "--csv", "x.csv", "--controllers", "pi"], "hter sim");
+    assert_one_line_error(&["compare", "--controllers", "gpc", "--controller", "pi"], "--controller");
+    assert_one_line_error(&["compare", "--controller", "pi", "--duration", "300"], "--controllers");
+}
+
+/// The T-filter C must be stable, a plant takes no C, and no field may be empty.
+#[test]
+fn arx_fields_are_checked_on_the_command_line() {
+    assert_one_line_error(
+        &[
+            "sim",
+            "--json",
+            "--scenario",
+            "piecewise",
+            "--duration",
+            "1500",
+            "--model",
+            "arx:-1.8,0.81;-0.02,-0.01;1;5,6",
+        ],
+        "inside the unit circle",
+    );
+    assert_one_line_error(&["sim", "--plant", "arx:-0.9;-0.1;1;0.5"], "no fourth (C) field");
+    assert_one_line_error(&["sim", "--model", "arx:-1.8,0.81;-0.02,-0.01;1;"], "field 4 (C) is empty");
+    // The message states the rule it enforces.
+    assert_one_line_error(&["sim", "--model", "arx:-0.5;-3e38;1"], "[-1000, 0)");
+}
+
+/// `--p-weight=-1` froze the load, `1e-30` cooled nothing; R and S are held the same way.
+#[test]
+fn gmvc_weights_are_checked() {
+    for (flag, bad) in [
+        ("--p-weight", "-1"),
+        ("--p-weight", "1e-30"),
+        ("--p-weight", "1e9"),
+        ("--p-weight", "nan"),
+        ("--r-weight", "0"),
+        ("--r-weight", "-1"),
+        ("--r-weight", "inf"),
+        ("--s-weight", "-0.1"),
+        ("--s-weight", "1e6"),
+    ] {
+        let arg = format!("{flag}={bad}");
+        assert_one_line_error(&["sim", "--controller", "gmvc", "--duration", "300", &arg], flag);
+    }
+    // In range they run, and change the run.
+    let run = |extra: &[&str]| {
+        let mut args = vec!["sim", "--scenario", "piecewise", "--duration", "600", "--controller", "gmvc", "--json"];
+        args.extend_from_slice(extra);
+        json(&args)["iae"].as_f64().unwrap()
+    };
+    assert_ne!(run(&[]), run(&["--s-weight", "0.02", "--p-weight", "1.5", "--r-weight", "1.5"]));
+}
+
+/// A tuning flag the chosen controller does not take is refused, naming the flag and who takes
+/// it; `compare` needs at least one of its controllers to take each flag.
+#[test]
+fn tuning_flags_for_another_controller_are_refused() {
+    let m = "arx:-1.7493,0.7514;-0.02708,-0.02987;5";
+    for (args, needle) in [
+        (vec!["sim", "--controller", "pi", "--model", m], "--model does not apply to the controller pi"),
+        (vec!["sim", "--controller", "onoff", "--model", m], "--model"),
+        (vec!["sim", "--controller", "pi", "--lambda", "1"], "--lambda"),
+        (vec!["sim", "--controller", "pi", "--n1", "2"], "--n1"),
+        (vec!["sim", "--controller", "gpc", "--s-weight", "0.1"], "it applies to gmvc"),
+        (vec!["sim", "--controller", "gpc", "--p-pole", "0.5"], "--p-pole"),
+        (vec!["sim", "--p-pole", "0.5"], "--p-pole"),
+        (vec!["sim", "--controller", "gmvc", "--kp", "0.5"], "it applies to pi"),
+        (vec!["sim", "--controller", "gpc", "--model", m, "--t-pole", "0.5"], "--t-pole"),
+        (vec!["sim", "--controller", "gpc", "--model", m, "--no-approach-lead"], "--no-approach-lead"),
+        (vec!["compare", "--controllers", "onoff,pi", "--lambda", "1"], "any of the controllers onoff, pi"),
+        (vec!["compare", "--controllers", "gpc,pi", "--s-weight", "0.1"], "--s-weight"),
+    ] {
+        assert_one_line_error(&args, needle);
+    }
+    // Where it applies to some of compare's controllers it is taken (PI's grid: pi-grid.sh).
+    let v =
+        json(&["compare", "--controllers", "pi,onoff", "--kp", "0.4", "--ti", "550", "--duration", "600", "--json"]);
+    assert_eq!(v["controllers"].as_array().unwrap().len(), 2, "{v}");
+}
+
+/// "After settle" is null where a segment never settled, as settle_time_s is: a 600 s pull-down
+/// reported 24 °C after settling.
+#[test]
+fn a_run_that_never_settles_has_no_error_after_settle() {
+    let v = json(&["sim", "--duration", "600", "--json"]);
+    assert!(v["settle_time_s"].is_null() && v["max_abs_error_after_settle_c"].is_null(), "{v}");
+    let out = hter(&["sim", "--duration", "600"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("max |error| after settling   not settled"), "{text}");
+    // A step to 6 °C at 100 s while the load still pulls down from 28 °C: no overshoot (the
+    // load never reached 6 °C), not the 20.95 °C it is above it.
+    let dir = scratch("overshoot");
+    let up = dir.join("up.json");
+    std::fs::write(&up, r#"{"setpoints":[[0,4],[100,6]],"duration_s":600}"#).unwrap();
+    let v = json(&["sim", "--scenario", up.to_str().unwrap(), "--json"]);
+    let _ = std::fs::remove_dir_all(&dir);
+    assert_eq!(v["overshoot_c"].as_f64(), Some(0.0), "{v}");
+}
+
+/// A power-cut run that ends before the cut reported a holdover for a cut that never happened.
+#[test]
+fn a_power_cut_run_must_reach_the_cut() {
+    assert_one_line_error(
+        &["sim", "--scenario", "power-cut", "--duration", "600", "--json"],
+        "cuts the supply at 7200 s",
+    );
+    assert_one_line_error(&["sim", "--scenario", "power-cut", "--duration", "7200"], "at least 7210 s");
+    assert_one_line_error(&["compare", "--scenario", "power-cut", "--duration", "600"], "7200");
+}
+
+/// A plot into a missing directory reads as the `--csv` error does, in `sim` and `compare`.
+#[test]
+fn a_plot_into_a_missing_directory_is_the_os_error() {
+    for cmd in ["sim", "compare"] {
+        let args = [cmd, "--duration", "300", "--controllers", "pi", "--plot", "/tmp/hter-no-such-dir/x.png"];
+        let args = if cmd == "sim" { vec![cmd, "--duration", "300", "--plot", args[6]] } else { args.to_vec() };
+        assert_one_line_error(
+            &args,
+            "cannot write '/tmp/hter-no-such-dir/x.png': No such file or directory (os error 2)",
+        );
+        let out = hter(&args);
+        assert!(!String::from_utf8_lossy(&out.stderr).contains("backend"));
+        // Checked before the run: compare prints no table it then fails to plot.
+        assert!(out.stdout.is_empty(), "{}", String::from_utf8_lossy(&out.stdout));
+    }
+}
+
+/// Outputs never overwrite an input or each other.
+#[test]
+fn outputs_that_overwrite_inputs_or_each_other_are_refused() {
+    let dir = scratch("same-path");
+    let sc = dir.join("ok.json");
+    let text = r#"{"setpoints":[[0,4]],"duration_s":100}"#;
+    std::fs::write(&sc, text).unwrap();
+    let sc_s = sc.to_str().unwrap();
+    assert_one_line_error(&["sim", "--scenario", sc_s, "--csv", sc_s], "same file as --scenario");
+    // The same file by another spelling.
+    let other = format!("{}/./ok.json", dir.display());
+    assert_one_line_error(&["sim", "--scenario", sc_s, "--plot", &other], "same file as --scenario");
+    assert_eq!(std::fs::read_to_string(&sc).unwrap(), text, "the scenario is untouched");
+    let svg = dir.join("same.svg");
+    let svg_s = svg.to_str().unwrap();
+    assert_one_line_error(&["sim", "--duration", "100", "--csv", svg_s, "--plot", svg_s], "same file as --csv");
+    assert!(!svg.exists());
+    assert_one_line_error(&["compare", "--scenario", sc_s, "--plot", sc_s], "same file as --scenario");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A description with a newline or an escape sequence was printed raw in the summary.
+#[test]
+fn a_scenario_description_must_be_one_line_of_text() {
+    let dir = scratch("description");
+    let sc = dir.join("esc.json");
+    std::fs::write(&sc, r#"{"description":"a\nb \u001b[2J","setpoints":[[0,4]],"duration_s":100}"#).unwrap();
+    assert_one_line_error(&["sim", "--scenario", sc.to_str().unwrap()], "control character");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `start_c` on the command line: the run's first sample is there (it started at 4.0 °C).
+#[test]
+fn a_scenario_files_start_c_is_honoured_by_sim() {
+    let dir = scratch("start-c");
+    let sc = dir.join("st.json");
+    std::fs::write(&sc, r#"{"setpoints":[[0,4]],"duration_s":100,"start_c":20}"#).unwrap();
+    let csv = dir.join("st.csv");
+    let out = hter(&["sim", "--scenario", sc.to_str().unwrap(), "--csv", csv.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let first: f64 = column(&text, "true_temp_c")[0].parse().unwrap();
+    assert!((first - 20.0).abs() < 0.05, "first sample at {first} °C");
+    std::fs::write(&sc, r#"{"setpoints":[[0,4]],"duration_s":100,"start_c":30}"#).unwrap();
+    assert_one_line_error(&["sim", "--scenario", sc.to_str().unwrap()], "cannot hold 30 °C");
+    let _ = std::fs::remove_dir_all(&dir);
 }
