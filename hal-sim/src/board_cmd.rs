@@ -34,7 +34,7 @@ pub struct BoardArgs {
     #[arg(long)]
     pub port: String,
     /// Longest wait for the board's next byte, s.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = 5.0, allow_hyphen_values = true)]
     pub timeout: f64,
     /// The request.
     #[command(subcommand)]
@@ -404,6 +404,30 @@ fn history<P: Read + Write>(b: &mut Board<P>, output: &Path, since: Option<f64>)
     Ok(())
 }
 
+/// A value the board's parser (the same `hter::iface`) would refuse as "not a decimal number"
+/// is refused here, saying what the setting takes: the board's one reason covers a missing
+/// pair (`cal_ice 0.1`), a model with one A coefficient, an exponent and an eighth digit alike.
+/// Range and plausibility stay the board's to check, with its own words.
+fn explain_format(key: &str, value: &str) -> Result<()> {
+    use hter::iface::{num::MAX_DIGITS, Command, Why};
+    let Err(refusal) = Command::parse(&format!("set {key} {value}")) else { return Ok(()) };
+    if refusal.why != Why::NotDecimal {
+        return Ok(());
+    }
+    let plain = format!("plain decimals of at most {MAX_DIGITS} digits (no exponent, nan or inf)");
+    match key {
+        "setpoint_c" => bail!("setpoint_c takes a plain decimal number of at most {MAX_DIGITS} digits (no exponent, nan or inf) in °C, e.g. 4.5; got '{value}'"),
+        "cal_ice" | "cal_warm" => bail!(
+            "{key} takes MEASURED,TRUE in °C (the channel's reading, the reference thermometer's), two {plain}, e.g. {}; got '{value}'",
+            if key == "cal_ice" { "0.12,0.00" } else { "37.30,37.00" }
+        ),
+        "model" => bail!(
+            "model takes A1,A2;B0,B1;K: two A and two B coefficients, {plain}, and the delay K in samples, e.g. -1.8,0.81;-0.02,-0.01;1; got '{value}'"
+        ),
+        _ => Ok(()),
+    }
+}
+
 /// Checks what can be checked before the port is opened.
 pub fn check_command(cmd: &BoardCommand) -> Result<()> {
     match cmd {
@@ -412,7 +436,7 @@ pub fn check_command(cmd: &BoardCommand) -> Result<()> {
             if key.is_empty() || value.is_empty() || key.contains(' ') || value.contains(' ') {
                 bail!("set takes a KEY and a VALUE without spaces, got '{key}' '{value}'");
             }
-            Ok(())
+            explain_format(key, value)
         }
         BoardCommand::History { since: Some(s), .. }
             if !(s.is_finite() && *s >= 0.0 && *s < f64::from(hter::iface::HISTORY_SINCE_LIMIT_S)) =>

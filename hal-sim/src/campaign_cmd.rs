@@ -301,6 +301,13 @@ fn tally(keys: impl Iterator<Item = String>) -> BTreeMap<String, u64> {
     })
 }
 
+/// The seed of the last of `missions` missions from `seed` (seed + missions − 1), `None` when
+/// it does not fit 64 bits or there are no missions. (seed + missions overflowed one seed early:
+/// the last two seeds could not be run.)
+pub fn last_seed(seed: u64, missions: u64) -> Option<u64> {
+    seed.checked_add(missions.checked_sub(1)?)
+}
+
 /// `hter campaign`.
 pub fn run(a: &CampaignArgs) -> Result<()> {
     if a.module_sense && a.drive == sim::Drive::Buck {
@@ -312,8 +319,12 @@ pub fn run(a: &CampaignArgs) -> Result<()> {
     if a.missions > MAX_MISSIONS {
         bail!("--missions must be at most {MAX_MISSIONS}, got {}", a.missions);
     }
-    if a.seed.checked_add(a.missions).is_none() {
-        bail!("--seed {} + --missions {} overflows a 64-bit seed", a.seed, a.missions);
+    if last_seed(a.seed, a.missions).is_none() {
+        bail!(
+            "--seed {} with --missions {}: the last mission's seed (seed + missions − 1) overflows a 64-bit seed",
+            a.seed,
+            a.missions
+        );
     }
     let start = std::time::Instant::now();
     let pb = if a.json || !std::io::stderr().is_terminal() {
@@ -355,7 +366,7 @@ fn print_table(s: &CampaignSummary) {
         "campaign: {} randomized 24 h missions (seeds {}…{}), controller {}, {} drive{}, {:.1} s wall",
         s.missions,
         s.seed,
-        s.seed + s.missions - 1,
+        last_seed(s.seed, s.missions).unwrap_or(u64::MAX),
         s.controller,
         s.drive,
         if s.module_sense { ", module-side sense" } else { "" },
@@ -436,6 +447,16 @@ fn print_table(s: &CampaignSummary) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_last_seed_is_seed_plus_missions_minus_one() {
+        assert_eq!(last_seed(1, 3), Some(3));
+        assert_eq!(last_seed(u64::MAX, 1), Some(u64::MAX));
+        assert_eq!(last_seed(u64::MAX - 1, 2), Some(u64::MAX));
+        assert_eq!(last_seed(u64::MAX - 1, 3), None);
+        assert_eq!(last_seed(u64::MAX, 2), None);
+        assert_eq!(last_seed(5, 0), None);
+    }
 
     #[test]
     fn the_replay_command_names_the_drive_it_ran_on() {

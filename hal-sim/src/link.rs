@@ -132,7 +132,7 @@ impl PtyLink {
     }
 
     /// Waits up to `timeout` for a complete request line and returns it (trimmed, never
-    /// empty), or `None` if none came. Meanwhile it sends queued output and answers malformed
+    /// empty), or `None` if none came (or a signal arrived first). Meanwhile it sends queued output and answers malformed
     /// lines (`err line: …`) itself. `Duration::ZERO` only looks.
     pub fn poll_line(&mut self, timeout: Duration) -> io::Result<Option<String>> {
         // A crashed client's TIOCEXCL (module docs); harmless when not set. Not serialport's
@@ -147,6 +147,10 @@ impl PtyLink {
             }
             let left = deadline.saturating_duration_since(Instant::now());
             let ready = wait(&self.master, !self.out.is_empty(), left)?;
+            if ready.interrupted {
+                // The caller may have a stop request to look at (`hter virtual-board`'s Ctrl-C).
+                return Ok(None);
+            }
             if ready.hangup && !ready.readable {
                 // Nobody on the slave side (cannot happen while the link holds it): do not spin.
                 std::thread::sleep(left);
@@ -265,6 +269,8 @@ struct Ready {
     readable: bool,
     writable: bool,
     hangup: bool,
+    /// A signal ended the wait.
+    interrupted: bool,
 }
 
 /// poll(2) on one descriptor: readable, and writable if `want_write`, for up to `timeout`.
@@ -281,7 +287,7 @@ fn wait(f: &File, want_write: bool, timeout: Duration) -> io::Result<Ready> {
     if r < 0 {
         let e = io::Error::last_os_error();
         if e.kind() == io::ErrorKind::Interrupted {
-            return Ok(Ready { readable: false, writable: false, hangup: false });
+            return Ok(Ready { readable: false, writable: false, hangup: false, interrupted: true });
         }
         return Err(e);
     }
@@ -289,6 +295,7 @@ fn wait(f: &File, want_write: bool, timeout: Duration) -> io::Result<Ready> {
         readable: pfd.revents & libc::POLLIN != 0,
         writable: pfd.revents & libc::POLLOUT != 0,
         hangup: pfd.revents & (libc::POLLHUP | libc::POLLERR) != 0,
+        interrupted: false,
     })
 }
 

@@ -1,6 +1,7 @@
 //! The `hter` command line: the clap top level and the dispatch to one `*_cmd` module per
 //! command. `hter` alone runs a short demo.
 
+use std::io::Write;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
@@ -49,6 +50,7 @@ enum Command {
 
 fn main() -> ExitCode {
     restore_sigpipe();
+    report_a_full_stdout();
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {
@@ -74,13 +76,43 @@ fn main() -> ExitCode {
         Some(Command::Board(a)) => board_cmd::run(&a),
         Some(Command::VirtualBoard(a)) => virtual_board_cmd::run(&a),
     };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
+    // What is still buffered (a last line without its line end) goes out now, where a failed
+    // write can be reported; at exit it would be lost without a word.
+    let flushed = std::io::stdout().flush();
+    match (result, flushed) {
+        (Ok(()), Ok(())) => ExitCode::SUCCESS,
+        (Ok(()), Err(e)) => {
+            eprintln!("error: {STDOUT_UNWRITABLE}: {e}");
+            ExitCode::FAILURE
+        }
+        (Err(e), _) => {
             eprintln!("error: {}", format!("{e:#}").replace('\n', " "));
             ExitCode::FAILURE
         }
     }
+}
+
+/// The one-line error of output that cannot be written (a full disk, `> /dev/full`).
+const STDOUT_UNWRITABLE: &str = "cannot write to stdout";
+
+/// `println!` panics when stdout cannot be written ("failed printing to stdout: No space left
+/// on device"): exit 101 with a backtrace hint, as for a bug, though the user's disk is full.
+/// That panic, whichever command and thread printed, becomes the one-line error and exit 1;
+/// every other panic is still reported as the bug it is. (A closed pipe never gets here: the
+/// default SIGPIPE action of [`restore_sigpipe`] ends the process at the write.)
+fn report_a_full_stdout() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let payload = info.payload();
+        let msg =
+            payload.downcast_ref::<String>().map(String::as_str).or_else(|| payload.downcast_ref::<&str>().copied());
+        if let Some(why) = msg.and_then(|m| m.strip_prefix("failed printing to stdout: ")) {
+            // stderr may be full too: nothing more can be said then.
+            let _ = writeln!(std::io::stderr(), "error: {STDOUT_UNWRITABLE}: {why}");
+            std::process::exit(1);
+        }
+        default(info);
+    }));
 }
 
 /// clap's message on one line. clap spreads it over paragraphs: the problem, whose later lines

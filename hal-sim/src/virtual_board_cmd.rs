@@ -5,6 +5,7 @@
 //! (Ctrl-C). `hter board --port PATH …` cannot tell it from a board.
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicI32, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
@@ -13,7 +14,7 @@ use crate::fault::Fault;
 use crate::link::PtyLink;
 use crate::sim::virtual_board::{VirtualBoard, VirtualOptions, HANG_REFUSED};
 use crate::sim::PlantChoice;
-use crate::sim_cmd::{at_least, finite, whole, LoadArg};
+use crate::sim_cmd::{at_least, finite, shown, whole, LoadArg};
 
 /// `hter virtual-board` arguments.
 #[derive(clap::Args, Debug, Clone)]
@@ -67,17 +68,35 @@ pub fn run(a: &VirtualBoardArgs) -> Result<()> {
         bail!("--ambient must be within {lo}…{hi} °C, got {ambient_c}");
     }
     // A NaN duration compared false with the simulated time for ever: the board never stopped.
+    let ts = f64::from(hter::step::CarrierConfig::DEFAULT.ts_s);
     let duration_s = match a.duration {
         Some(d) if finite("duration", d)? <= 0.0 => bail!("--duration must be > 0 s, got {d}"),
+        // It ran one sample and stopped at once with exit 0, as if it had served.
+        Some(d) if d < ts => {
+            bail!("--duration {} s is shorter than one control sample (Ts = {ts} s)", shown(d))
+        }
         d => d,
     };
     let mut faults = a.faults.iter().map(|f| Fault::parse(f)).collect::<Result<Vec<_>>>()?;
     if faults.iter().any(|&(_, f)| f == Fault::FirmwareHang) {
         bail!("--fault firmware-hang: {HANG_REFUSED}");
     }
+    // A fault goes in before the first sample at or after its time; samples start at 0, Ts,
+    // 2 Ts, … while the simulated time is below the duration. One after the last never
+    // happens, and the board would serve a clean carrier the user thinks has failed.
+    if let Some(d) = duration_s {
+        let last_sample_s = ((d / ts).ceil() - 1.0) * ts;
+        if let Some((t, f)) = faults.iter().find(|(t, _)| *t > last_sample_s) {
+            bail!(
+                "--fault {}@{}: the board stops at {} s (last sample at {last_sample_s} s), the fault would never happen",
+                f.name(),
+                shown(*t),
+                shown(d)
+            );
+        }
+    }
     // Injected in time order, each at the first sample at or after its time.
     faults.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let mut faults = faults.into_iter().peekable();
     let plant = PlantChoice::parse(&a.plant)?;
     let mut board = VirtualBoard::new(&VirtualOptions {
         plant,
@@ -89,6 +108,8 @@ pub fn run(a: &VirtualBoardArgs) -> Result<()> {
     if let Some(ops) = a.cut_settings_write {
         board.cut_next_settings_write(ops);
     }
+    // Before the link exists: a Ctrl-C from then on is seen by the loop, which removes it.
+    catch_stop_signals();
     let mut link = PtyLink::open(&a.link).with_context(|| format!("--link {}", a.link.display()))?;
     eprintln!(
         "virtual board: {} {:?} load at {ambient_c} °C ambient, {speed}× real time, on {} ({}); Ctrl-C stops it",
@@ -97,11 +118,55 @@ pub fn run(a: &VirtualBoardArgs) -> Result<()> {
         a.link.display(),
         link.device().display()
     );
-    let ts = f64::from(hter::step::CarrierConfig::DEFAULT.ts_s);
     let period = Duration::from_secs_f64(ts / speed);
+    let served = serve(&mut board, &mut link, faults, period, duration_s);
+    // The symlink goes with the link, however the board stopped.
+    drop(link);
+    let sig = STOP.load(Ordering::Relaxed);
+    if sig != 0 {
+        // Stopped by the signal: end as it ends other programs (the shell's 130 for Ctrl-C).
+        // SAFETY: restoring a signal's default action and raising it; no handler runs.
+        unsafe {
+            libc::signal(sig, libc::SIG_DFL);
+            libc::raise(sig);
+        }
+    }
+    served
+}
+
+/// The signal that asked the board to stop (SIGINT, SIGTERM); 0 while none has.
+static STOP: AtomicI32 = AtomicI32::new(0);
+
+extern "C" fn on_stop(sig: libc::c_int) {
+    STOP.store(sig, Ordering::Relaxed);
+}
+
+/// Ctrl-C and `kill` (SIGTERM) stop the serving loop instead of the process, so the `--link`
+/// symlink is removed: it was left behind, pointing to a pty that no longer exists.
+fn catch_stop_signals() {
+    for sig in [libc::SIGINT, libc::SIGTERM] {
+        // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+        unsafe {
+            libc::signal(sig, on_stop as extern "C" fn(libc::c_int) as libc::sighandler_t);
+        }
+    }
+}
+
+/// The serving loop: samples on time, requests in between, until `duration_s` or a stop signal.
+fn serve(
+    board: &mut VirtualBoard,
+    link: &mut PtyLink,
+    faults: Vec<(f64, Fault)>,
+    period: Duration,
+    duration_s: Option<f64>,
+) -> Result<()> {
+    let mut faults = faults.into_iter().peekable();
     let mut next = Instant::now();
     let mut restarts = board.restarts;
     loop {
+        if STOP.load(Ordering::Relaxed) != 0 {
+            return Ok(());
+        }
         let now = Instant::now();
         if now >= next {
             while let Some((t, f)) = faults.next_if(|&(t, _)| board.sim_s() >= t) {

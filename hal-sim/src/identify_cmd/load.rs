@@ -9,6 +9,7 @@ use serde::Serialize;
 
 use super::args::OperatingPointChoice;
 use crate::log;
+use crate::sim_cmd::shown;
 
 /// The operating point removed.
 #[derive(Clone, Debug, Serialize)]
@@ -64,6 +65,28 @@ fn check_time_axis(path: &Path, t: &[f64]) -> Result<f64> {
         );
     }
     Ok(ts)
+}
+
+/// Refuses, with its line, a duty outside [0, 1] (the SSR's on-fraction: one row of 1e30 gave a
+/// fit and exit 0) and a temperature no Pt100 can report (outside IEC 60751's −200…850 °C) in
+/// an output column of °C (`*_c`; `--y-column` may name another quantity).
+fn check_physical(path: &Path, duty: &[f64], y_column: &str, y: &[f64]) -> Result<()> {
+    // Data row i is on line i + 2.
+    if let Some((i, d)) = duty.iter().enumerate().find(|(_, d)| !(0.0..=1.0).contains(*d)) {
+        bail!("'{}' line {}, column 'duty': {} is outside 0…1", path.display(), i + 2, shown(*d));
+    }
+    if y_column.ends_with("_c") {
+        let (lo, hi) = (f64::from(hter::rtd::T_MIN_C), f64::from(hter::rtd::T_MAX_C));
+        if let Some((i, t)) = y.iter().enumerate().find(|(_, t)| !(lo..=hi).contains(*t)) {
+            bail!(
+                "'{}' line {}, column '{y_column}': {} °C is outside the Pt100 range of IEC 60751 ({lo}…{hi} °C)",
+                path.display(),
+                i + 2,
+                shown(*t)
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Largest output drift during the initial constant-duty segment for the log to count as
@@ -141,8 +164,13 @@ pub fn load(
     }
     let filter_cfg = first_order_cfg("filter", filter)?;
     let prefilter_cfg = first_order_cfg("prefilter", prefilter)?;
+    // Opening a directory succeeds; reading it failed as "line 1: Is a directory".
+    if path.is_dir() {
+        bail!("cannot read '{}': is a directory", path.display());
+    }
     let cols = log::read_columns(path, &["t_s", "duty", y_column])?;
     let ts_raw = check_time_axis(path, &cols[0])?;
+    check_physical(path, &cols[1], y_column, &cols[2])?;
     // A record whose input or output never moves says nothing about the dynamics, yet output
     // error and RLS fitted it: gains of 1e12 °C per unit duty from a constant duty, a "stable"
     // model with no fit from a constant temperature.

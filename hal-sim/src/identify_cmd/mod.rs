@@ -92,7 +92,7 @@ mod report;
 #[cfg(test)]
 mod test_logs;
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use hter::ident::model::Structure;
 use hter::ident::oe_search::OeMemo;
 
@@ -159,13 +159,12 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
         chosen_order: cmp.chosen,
         reason: cmp.reason,
     };
-    if args.json {
-        use std::io::Write;
-        let _ = writeln!(std::io::stdout(), "{}", serde_json::to_string(&report)?);
-    } else {
-        report::print_report(args, &s, &report);
-    }
-    Ok(())
+    let text = if args.json { serde_json::to_string(&report)? + "\n" } else { report::report_text(args, &s, &report) };
+    // One write: a full disk is the one-line error `main` gives every command, not an exit 0
+    // with the report lost (a closed pipe ends the process at the write, as it ends `cat`).
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    out.write_all(text.as_bytes()).and_then(|()| out.flush()).context("cannot write to stdout")
 }
 
 #[cfg(test)]

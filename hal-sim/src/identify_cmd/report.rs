@@ -5,7 +5,7 @@ use hter::ident::validate::{self, Complex};
 use serde::Serialize;
 
 use super::args::{Delay, IdentifyArgs, Method, OperatingPointChoice};
-use super::fit::{is_real, is_real_lag, DelayRow, Fit, OrderRow, LAGS};
+use super::fit::{is_real, is_real_lag, DelayRow, Fit, OrderRow, LAGS, STABLE_ABS_BELOW};
 use super::load::OperatingPoint;
 
 /// A dominant time constant beyond this many record lengths is flagged in the text report: the
@@ -101,8 +101,8 @@ fn fmt_complex(p: &Complex) -> String {
 /// A pole with its modulus and what it means physically.
 fn describe_pole(p: &Complex, ts: f64) -> String {
     let m = validate::abs(*p);
-    let kind = if m >= 1.0 {
-        "on or outside the unit circle".to_string()
+    let kind = if m >= STABLE_ABS_BELOW {
+        "on or outside the unit circle: not stable".to_string()
     } else if is_real_lag(p) {
         format!("τ = {:.1} s", -ts / m.ln())
     } else if is_real(p) {
@@ -113,10 +113,9 @@ fn describe_pole(p: &Complex, ts: f64) -> String {
     format!("{} (|p| = {m:.5}, {kind})", fmt_complex(p))
 }
 
-/// Prints the text report to stdout in one write.
-pub(super) fn print_report(args: &IdentifyArgs, s: &Structure, r: &Report) {
+/// The text report, printed by the caller in one write.
+pub(super) fn report_text(args: &IdentifyArgs, s: &Structure, r: &Report) -> String {
     let mut out = String::new();
-    // One write at the end: a closed pipe (`| head`) is not worth a panic.
     macro_rules! line {
         ($($arg:tt)*) => {{
             out.push_str(&format!($($arg)*));
@@ -128,7 +127,7 @@ pub(super) fn print_report(args: &IdentifyArgs, s: &Structure, r: &Report) {
         "identification of {} ({} samples, Ts = {} s{})",
         args.input.display(),
         r.rows,
-        r.ts_s,
+        compact(r.ts_s),
         if r.decimate > 1 { format!(", {} raw samples averaged per sample", r.decimate) } else { String::new() }
     );
     let op = &r.operating_point;
@@ -166,7 +165,7 @@ pub(super) fn print_report(args: &IdentifyArgs, s: &Structure, r: &Report) {
         if args.auto_order { " (order chosen by the comparison)" } else { "" }
     );
     line!("    {}", poly("A", Some(1.0), &f.a));
-    line!("    {}   (delay nk = {} × Ts = {} s)", poly("B", None, &f.b), f.nk, r.dead_time_s);
+    line!("    {}   (delay nk = {} × Ts = {} s)", poly("B", None, &f.b), f.nk, compact(r.dead_time_s));
     line!("  delay               {}", r.delay_reason);
     if !f.c.is_empty() {
         line!("    {}", poly("C", Some(1.0), &f.c));
@@ -240,8 +239,15 @@ pub(super) fn print_report(args: &IdentifyArgs, s: &Structure, r: &Report) {
         );
     }
     line!("  chosen order: {} — {}", r.chosen_order, r.reason);
-    use std::io::Write;
-    let _ = std::io::stdout().write_all(out.as_bytes());
+    out
+}
+
+/// A time in seconds for people: 12 significant digits, which hides the binary rounding of a
+/// period taken from decimal timestamps (1e-5 s, not 0.000010000000000000026 s) and keeps every
+/// digit a log's period has; exponent form beyond everyday magnitudes.
+pub(super) fn compact(s: f64) -> String {
+    let rounded = format!("{s:.11e}").parse().unwrap_or(s);
+    crate::sim_cmd::shown(rounded)
 }
 
 /// A simulated fit for people: an unstable model's simulation diverges, and its "fit" of

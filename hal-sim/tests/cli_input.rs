@@ -1,0 +1,312 @@
+//! Input and output checks of the `hter` binary beyond the basics of `cli.rs`: a stdout that
+//! cannot be written, seeds at the end of the 64-bit range, `hter virtual-board`'s stop and
+//! run-length checks, `hter board set`'s format explanations, `hter rtd`'s wording and
+//! `hter identify`'s physical checks. Each runs the built binary as a user does.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn hter(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hter")).args(args).output().expect("run hter")
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn tmp(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("hter-cli-input-{}-{name}", std::process::id()))
+}
+
+/// The one stderr line of a failed run.
+fn one_line_error(args: &[&str]) -> String {
+    let out = hter(args);
+    let err = String::from_utf8_lossy(&out.stderr).trim_end().to_string();
+    assert!(!out.status.success(), "{args:?} should fail: {}", stdout(&out));
+    assert_eq!(err.lines().count(), 1, "{args:?}: not one line: {err}");
+    assert!(err.starts_with("error: ") && !err.contains("panicked"), "{args:?}: {err}");
+    err
+}
+
+fn assert_error(args: &[&str], needle: &str) {
+    let err = one_line_error(args);
+    assert!(err.contains(needle), "{args:?}: '{needle}' not in: {err}");
+}
+
+/// A `hter sim --scenario prbs` log (open loop, PRBS on the duty), made once per test.
+fn prbs_log(name: &str) -> PathBuf {
+    let csv = tmp(name);
+    let out = hter(&["sim", "--scenario", "prbs", "--csv", csv.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    csv
+}
+
+/// `log` with the cell of `column` on 1-based `line` replaced by `cell`.
+fn with_cell(log: &Path, name: &str, line: usize, column: &str, cell: &str) -> PathBuf {
+    let text = std::fs::read_to_string(log).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let j = header.iter().position(|h| *h == column).unwrap();
+    let lines: Vec<String> = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            if i + 1 != line {
+                return l.to_string();
+            }
+            let mut cells: Vec<&str> = l.split(',').collect();
+            cells[j] = cell;
+            cells.join(",")
+        })
+        .collect();
+    let p = tmp(name);
+    std::fs::write(&p, lines.join("\n") + "\n").unwrap();
+    p
+}
+
+/// A full disk (`> /dev/full`) is one line, `error: cannot write to stdout: …`, and exit 1 for
+/// every printing command: `println!` panicked with exit 101, and `identify` exited 0 with its
+/// report lost.
+#[test]
+fn a_stdout_that_cannot_be_written_is_a_one_line_error() {
+    if !Path::new("/dev/full").exists() {
+        eprintln!("no /dev/full here: skipped");
+        return;
+    }
+    let log = prbs_log("full.csv");
+    let log_s = log.to_str().unwrap();
+    let fast_fit = ["--method", "ls", "--na", "1", "--nb", "1", "--nk", "3"];
+    let identify: Vec<&str> = ["identify", "--input", log_s].iter().copied().chain(fast_fit).collect();
+    let identify_json: Vec<&str> = identify.iter().copied().chain(["--json"]).collect();
+    let cases: [&[&str]; 8] = [
+        &["rtd", "--ohms", "100"],
+        &["rtd", "--celsius", "4", "--json"],
+        &identify,
+        &identify_json,
+        &["monitor", "--input", log_s],
+        &["sim", "--duration", "600"],
+        &["compare", "--controllers", "pi", "--duration", "600"],
+        &["campaign", "--missions", "1", "--json"],
+    ];
+    for args in cases {
+        let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_hter"))
+            .args(args)
+            .stdout(Stdio::from(full))
+            .stderr(Stdio::piped())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+        assert!(err.starts_with("error: cannot write to stdout: No space left on device"), "{args:?}: {err}");
+    }
+    // The same commands to a writable stdout succeed: the error is the disk's, not theirs.
+    assert!(hter(&identify).status.success());
+    let _ = std::fs::remove_file(&log);
+}
+
+/// The last mission's seed is seed + missions − 1: the last two seeds of the 64-bit range were
+/// refused as "overflows".
+#[test]
+fn a_campaign_may_end_at_the_last_seed() {
+    for (missions, seed) in [("2", "18446744073709551614"), ("1", "18446744073709551615")] {
+        let out = hter(&["campaign", "--missions", missions, "--seed", seed, "--json"]);
+        assert!(out.status.success() || out.status.code() == Some(1), "{}", String::from_utf8_lossy(&out.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("the campaign's JSON");
+        assert_eq!(v["missions"].as_u64(), missions.parse().ok(), "{v}");
+    }
+    assert_error(&["campaign", "--missions", "3", "--seed", "18446744073709551614"], "overflows a 64-bit seed");
+}
+
+/// A `hter virtual-board` on a fresh link, stopped (SIGKILL) on drop if still running.
+struct Board {
+    child: std::process::Child,
+    link: PathBuf,
+}
+
+impl Board {
+    fn start(name: &str) -> Board {
+        let link = tmp(name);
+        let child = Command::new(env!("CARGO_BIN_EXE_hter"))
+            .args(["virtual-board", "--link", link.to_str().unwrap(), "--speed", "600"])
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let t0 = Instant::now();
+        while !link.exists() {
+            assert!(t0.elapsed() < Duration::from_secs(20), "the link did not appear");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        Board { child, link }
+    }
+
+    fn board(&self, args: &[&str]) -> Output {
+        let mut a = vec!["board", "--port", self.link.to_str().unwrap()];
+        a.extend_from_slice(args);
+        hter(&a)
+    }
+}
+
+impl Drop for Board {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Ctrl-C (SIGINT) or `kill` (SIGTERM) remove the `--link` symlink, which was left behind
+/// pointing to a pty that no longer existed, and the board ends by that signal.
+#[cfg(unix)]
+#[test]
+fn a_stopped_virtual_board_removes_its_link() {
+    use std::os::unix::process::ExitStatusExt;
+    for (name, sig) in [("int", libc::SIGINT), ("term", libc::SIGTERM)] {
+        let mut b = Board::start(&format!("stop-{name}"));
+        // It serves before it is stopped.
+        assert!(b.board(&["status"]).status.success());
+        // SAFETY: a signal to our own child, which has not been waited for.
+        assert_eq!(unsafe { libc::kill(b.child.id() as libc::pid_t, sig) }, 0);
+        let status = b.child.wait().unwrap();
+        assert_eq!(status.signal(), Some(sig), "{name}: {status:?}");
+        assert!(std::fs::symlink_metadata(&b.link).is_err(), "{name}: the link is left behind");
+    }
+}
+
+/// `--duration` shorter than one sample stopped at once with exit 0; a fault after the last
+/// sample of `--duration` was accepted and never happened (`hter sim` refuses both).
+#[test]
+fn a_virtual_board_run_that_would_not_happen_is_refused() {
+    let link = tmp("vb-refused");
+    let link = link.to_str().unwrap();
+    assert_error(&["virtual-board", "--link", link, "--duration", "5"], "shorter than one control sample");
+    assert_error(
+        &["virtual-board", "--link", link, "--duration", "100", "--fault", "sensor-open@1e30"],
+        "--fault sensor-open@1e30: the board stops at 100 s (last sample at 90 s)",
+    );
+    assert_error(&["virtual-board", "--link", link, "--duration", "100", "--fault", "sensor-open@95"], "never happen");
+    assert!(std::fs::symlink_metadata(link).is_err(), "no link for a refused run");
+    // The last sample's time is a time a fault can have: the run starts and ends by itself.
+    let out =
+        hter(&["virtual-board", "--link", link, "--duration", "100", "--speed", "1000", "--fault", "sensor-open@90"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::fs::symlink_metadata(link).is_err(), "the link is removed at the end");
+}
+
+/// `hter board set` says what a setting takes where the board says "not a decimal number"; the
+/// board's own refusals (range, plausibility) still come through verbatim, and valid values are
+/// still set.
+#[test]
+fn board_set_explains_the_format_of_a_value() {
+    let b = Board::start("set-format");
+    let port = b.link.to_str().unwrap();
+    let check = |key: &str, value: &str, needle: &str| {
+        let err = one_line_error(&["board", "--port", port, "set", key, value]);
+        assert!(err.contains(needle), "{key} {value}: {err}");
+        assert!(!err.contains("not a decimal number"), "{key} {value}: {err}");
+    };
+    check("cal_ice", "0.1", "cal_ice takes MEASURED,TRUE in °C");
+    check("cal_ice", "1e3", "cal_ice takes MEASURED,TRUE in °C");
+    check("cal_warm", "20", "cal_warm takes MEASURED,TRUE in °C");
+    check("model", "-0.9;-0.1;1", "model takes A1,A2;B0,B1;K");
+    check("setpoint_c", "4.00000000001", "at most 7 digits");
+    check("setpoint_c", "1e0", "setpoint_c takes a plain decimal number");
+    // The board's words for what it checks itself.
+    let out = b.board(&["set", "setpoint_c", "12"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("setpoint_c: 12.00 is outside 2.5…7.5"), "{out:?}");
+    let out = b.board(&["set", "model", "-1.8,0.81;-0.02,-0.01;1;2"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("usage: model A1,A2;B0,B1;K"), "{out:?}");
+    // Valid values go through.
+    let out = b.board(&["set", "setpoint_c", "4.5"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = b.board(&["set", "cal_ice", "0.12,0.00"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let get = stdout(&b.board(&["get"]));
+    assert!(get.contains("setpoint_c=4.50"), "{get}");
+}
+
+/// `hter rtd`'s messages and output: plain words, compact numbers, no −0, the JSON at the
+/// conversion's precision, hyphen values reaching the value checks.
+#[test]
+fn rtd_says_plainly_what_it_converted_or_refused() {
+    let err = one_line_error(&["rtd", "--ohms", "1e30"]);
+    assert_eq!(err, "error: 1e30 Ω is outside the Pt100 range of IEC 60751 (−200…850 °C)");
+    assert_error(&["rtd", "--celsius", "2000"], "outside the IEC 60751 range −200…850 °C");
+    assert!(!one_line_error(&["rtd", "--celsius", "2000"]).contains("OutOfRange"));
+    assert_error(&["rtd", "--counts", "65535"], "(an open circuit: open at");
+    assert_error(&["rtd", "--counts", "30000", "--r0", "1000"], "--r0 1000 does not apply");
+    assert_error(&["rtd", "--ohms", "-inf"], "--ohms must be a finite number, got -inf");
+    assert_error(&["rtd", "--celsius", "-inf"], "--celsius must be a finite number");
+    assert_error(&["board", "--port", "/no/such/port", "--timeout", "-1", "status"], "--timeout must be within");
+    let out = hter(&["rtd", "--celsius", "-0"]);
+    assert_eq!(stdout(&out), "Pt100: 100.000 Ω  ⇔  0.000 °C\n");
+    let out = hter(&["rtd", "--ohms", "99.99999"]);
+    assert!(stdout(&out).ends_with("⇔  0.000 °C\n"), "{}", stdout(&out));
+    let out = hter(&["rtd", "--celsius", "-0", "--json"]);
+    assert_eq!(stdout(&out).trim(), r#"{"celsius":0.0,"ohms":100.0}"#);
+    // 390 Ω: the f32 conversion's 848.35663 °C, not its f64 image 848.3566284179688.
+    let out = hter(&["rtd", "--ohms", "390", "--json"]);
+    let text = stdout(&out);
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let c = v["celsius"].as_f64().unwrap();
+    assert!((c - 848.3566).abs() < 1e-3, "{text}");
+    assert!(text.trim().len() < r#"{"celsius":848.35663,"ohms":390.0}"#.len() + 1, "{text}");
+    // The text output of an ordinary value is as it was.
+    assert_eq!(stdout(&hter(&["rtd", "--celsius", "4"])), "Pt100: 101.562 Ω  ⇔  4.000 °C\n");
+}
+
+/// `hter identify` refuses a duty outside [0, 1] and a temperature no Pt100 reports, with the
+/// line; says "is a directory"; calls a pole at |p| = 1 − 1e-14 not stable; formats a tiny Ts
+/// compactly; names `nk=auto` in the too-few-rows error.
+#[test]
+fn identify_refuses_impossible_data_and_reports_plainly() {
+    let log = prbs_log("id.csv");
+    let bad = |name: &str, column: &str, cell: &str| with_cell(&log, name, 50, column, cell);
+    for (name, column, cell, needle) in [
+        ("huge-duty.csv", "duty", "1e30", "line 50, column 'duty': 1e30 is outside 0…1"),
+        ("neg-duty.csv", "duty", "-3", "line 50, column 'duty': -3 is outside 0…1"),
+        ("two-duty.csv", "duty", "2", "line 50, column 'duty': 2 is outside 0…1"),
+        ("huge-temp.csv", "temp_c", "1e30", "line 50, column 'temp_c': 1e30 °C is outside the Pt100 range"),
+        ("cold-temp.csv", "temp_c", "-300", "line 50, column 'temp_c': -300 °C is outside the Pt100 range"),
+    ] {
+        let p = bad(name, column, cell);
+        assert_error(&["identify", "--input", p.to_str().unwrap()], needle);
+        let _ = std::fs::remove_file(&p);
+    }
+    // The ends of the ranges are data.
+    let p = bad("ends.csv", "duty", "1");
+    let out = hter(&["identify", "--input", p.to_str().unwrap(), "--method", "ls", "--nk", "3"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let _ = std::fs::remove_file(&p);
+    let dir = std::env::temp_dir();
+    assert_error(&["identify", "--input", dir.to_str().unwrap()], "is a directory");
+    assert!(!one_line_error(&["identify", "--input", dir.to_str().unwrap()]).contains("line 1"));
+    assert_error(
+        &["identify", "--input", log.to_str().unwrap(), "--decimate", "1000"],
+        "too few rows (2) for na=2 nb=2 nc=0 nk=auto",
+    );
+    // t_s against the duty: a ramp, fitted with a double pole at 1 − 1.6e-14.
+    let out = hter(&["identify", "--input", log.to_str().unwrap(), "--y-column", "t_s", "--method", "ls", "--nk", "1"]);
+    let text = stdout(&out);
+    assert!(text.contains("UNSTABLE") && !text.contains("stable (all poles inside"), "{text}");
+    // Ts = 1 µs from microsecond timestamps.
+    let text = std::fs::read_to_string(&log).unwrap();
+    let micro: String = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            if i == 0 {
+                return format!("{l}\n");
+            }
+            let (t, rest) = l.split_once(',').unwrap();
+            format!("{:.6},{rest}\n", t.parse::<f64>().unwrap() * 1e-7)
+        })
+        .collect();
+    let p = tmp("micro.csv");
+    std::fs::write(&p, micro).unwrap();
+    let out = hter(&["identify", "--input", p.to_str().unwrap(), "--method", "ls", "--nk", "2"]);
+    let text = stdout(&out);
+    assert!(text.contains("Ts = 0.000001 s)"), "{text}");
+    assert!(text.contains("nk = 2 × Ts = 0.000002 s)"), "{text}");
+    let _ = (std::fs::remove_file(&p), std::fs::remove_file(&log));
+}
