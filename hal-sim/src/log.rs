@@ -34,7 +34,7 @@ pub fn read_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>> {
 /// leaves `temp_c` empty on a sensor fault). Anything else in a cell must be a finite number.
 pub fn read_cells(path: &Path, names: &[&str]) -> Result<Vec<Vec<Option<f64>>>> {
     let shown = path.display();
-    let file = std::fs::File::open(path).with_context(|| format!("cannot read '{shown}'"))?;
+    let file = open(path)?;
     let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(false).trim(csv::Trim::All).from_reader(file);
     let headers = rdr.headers().map_err(|e| anyhow!("'{shown}' line 1: {e}"))?.clone();
     let idx: Vec<usize> = names
@@ -74,7 +74,7 @@ pub fn read_cells(path: &Path, names: &[&str]) -> Result<Vec<Vec<Option<f64>>>> 
 /// the header has no such column. Rows line up with [`read_cells`] of the same file.
 pub fn read_text(path: &Path, name: &str) -> Result<Option<Vec<String>>> {
     let shown = path.display();
-    let file = std::fs::File::open(path).with_context(|| format!("cannot read '{shown}'"))?;
+    let file = open(path)?;
     let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(false).trim(csv::Trim::All).from_reader(file);
     let headers = rdr.headers().map_err(|e| anyhow!("'{shown}' line 1: {e}"))?.clone();
     let Some(j) = headers.iter().position(|h| h == name) else {
@@ -93,7 +93,7 @@ pub fn read_text(path: &Path, name: &str) -> Result<Option<Vec<String>>> {
 /// Whether the header of a CSV log has a column `name`.
 pub fn has_column(path: &Path, name: &str) -> Result<bool> {
     let shown = path.display();
-    let file = std::fs::File::open(path).with_context(|| format!("cannot read '{shown}'"))?;
+    let file = open(path)?;
     let mut rdr = csv::ReaderBuilder::new().has_headers(true).trim(csv::Trim::All).from_reader(file);
     let headers = rdr.headers().map_err(|e| anyhow!("'{shown}' line 1: {e}"))?;
     Ok(headers.iter().any(|h| h == name))
@@ -105,6 +105,16 @@ pub fn check_increasing(path: &Path, t: &[f64]) -> Result<()> {
         bail!("'{}' line {}: t_s = {} does not increase (previous {})", path.display(), i + 3, t[i + 1], t[i]);
     }
     Ok(())
+}
+
+/// Opens a log to read; a directory is refused by name (opened, it failed only at the first
+/// read, as "line 1: Is a directory").
+fn open(path: &Path) -> Result<std::fs::File> {
+    let shown = path.display();
+    if path.is_dir() {
+        bail!("cannot read '{shown}': it is a directory");
+    }
+    std::fs::File::open(path).with_context(|| format!("cannot read '{shown}'"))
 }
 
 /// Longest cell, in characters, an error message repeats whole.
@@ -132,6 +142,14 @@ mod tests {
         let p = std::env::temp_dir().join(format!("hter-log-{}-{name}.csv", std::process::id()));
         std::fs::write(&p, text).unwrap();
         p
+    }
+
+    #[test]
+    fn a_directory_is_refused_by_name() {
+        let d = std::env::temp_dir();
+        let e = read_cells(&d, &["t_s"]).unwrap_err().to_string();
+        assert_eq!(e, format!("cannot read '{}': it is a directory", d.display()));
+        assert!(has_column(&d, "t_s").is_err() && read_text(&d, "t_s").is_err());
     }
 
     #[test]
