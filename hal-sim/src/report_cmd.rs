@@ -437,25 +437,21 @@ pub fn html(path: &Path) -> Result<String> {
         let mut sorted: Vec<&AlarmSpan> = spans.iter().collect();
         sorted.sort_by_key(|a| AlarmKind::ALL.iter().position(|k| k.name() == a.alarm.kind));
         for a in sorted {
-            if a.carrier {
-                writeln!(
-                    w,
-                    "<tr class=\"alarm-carrier\" data-kind=\"{}\" data-start-s=\"{}\" data-trigger-s=\"{}\"><td><b>{}</b></td><td>{}</td><td>{}</td><td>{}</td><td>recorded by the carrier, which checks every 10 s reading; the 5-minute means in this file do not show it</td></tr>",
-                    a.alarm.kind,
-                    a.alarm.start_s,
-                    a.alarm.trigger_s,
-                    a.alarm.kind,
-                    meaning(a.alarm.kind),
-                    when(a.alarm.start_s, t0),
-                    when(a.alarm.trigger_s, t0),
-                )?;
-                continue;
-            }
-            let held =
-                if a.ongoing { "still on at the end".to_owned() } else { format!("until {}", when(a.end_s, t0)) };
+            let (class, lasted) = if a.carrier {
+                (
+                    "alarm-carrier",
+                    "recorded by the carrier, which checks every 10 s reading; the 5-minute means in this file \
+                     do not show it"
+                        .to_owned(),
+                )
+            } else if a.ongoing {
+                ("alarm", format!("{} (still on at the end)", dur(a.duration_s)))
+            } else {
+                ("alarm", format!("{} (until {})", dur(a.duration_s), when(a.end_s, t0)))
+            };
             writeln!(
                 w,
-                "<tr class=\"alarm\" data-kind=\"{}\" data-start-s=\"{}\" data-trigger-s=\"{}\"><td><b>{}</b></td><td>{}</td><td>{}</td><td>{}</td><td>{} ({held})</td></tr>",
+                "<tr class=\"{class}\" data-kind=\"{}\" data-start-s=\"{}\" data-trigger-s=\"{}\"><td><b>{}</b></td><td>{}</td><td>{}</td><td>{}</td><td>{lasted}</td></tr>",
                 a.alarm.kind,
                 a.alarm.start_s,
                 a.alarm.trigger_s,
@@ -463,7 +459,6 @@ pub fn html(path: &Path) -> Result<String> {
                 meaning(a.alarm.kind),
                 when(a.alarm.start_s, t0),
                 when(a.alarm.trigger_s, t0),
-                dur(a.duration_s),
             )?;
         }
         writeln!(w, "</table>")?;
