@@ -424,6 +424,13 @@ impl App {
         }
         let alarm = self.annunciator.update(&out, &rec.raised);
         let t_s = self.record_s(t_ms);
+        // The interval this sample closes ended at or before it, so it is logged before the
+        // sample's events and alarms: the record stays in time order (a fault found on the
+        // sample that closed an interval was logged a second after the interval's end and
+        // before it, and `hter monitor` refused the history).
+        if let Some(e) = self.intervals.push(self.base_ms + t_ms, out.temp_c.0, out.duty.get(), out.mode) {
+            self.save(Save::Log(e));
+        }
         for e in out.events.iter() {
             if logged(e.kind) {
                 self.save(Save::Log(LogEntry::Event { t_s: self.record_s(e.t_ms), kind: e.kind }));
@@ -432,9 +439,6 @@ impl App {
         for a in rec.raised.iter().flatten() {
             let start_s = self.record_s(a.start_ms);
             self.save(Save::Log(LogEntry::Alarm { t_s, kind: a.kind, start_s }));
-        }
-        if let Some(e) = self.intervals.push(self.base_ms + t_ms, out.temp_c.0, out.duty.get(), out.mode) {
-            self.save(Save::Log(e));
         }
         if let Some(save) = self.recorder.due_save(&rec) {
             self.save(save);

@@ -78,6 +78,30 @@ fn history_is_a_csv_of_intervals_and_events_in_time_order() {
         .all(|l| l.split(',').next().unwrap().parse::<u32>().unwrap() >= 3600));
 }
 
+/// A fault found on the sample that closes an interval: its event (a second after the
+/// interval's end) comes after the interval's row, and `hter monitor` reads the history.
+#[test]
+fn an_event_on_the_sample_that_closes_an_interval_follows_its_row() {
+    let mut b = board();
+    // As `hter virtual-board --fault sensor-open@3000` does: from the sample at 3 000 s.
+    while b.sim_s() < 3000.0 {
+        b.step().unwrap();
+    }
+    b.inject(hal_sim::fault::Fault::parse("sensor-open@3000").unwrap().1).unwrap();
+    run(&mut b, 600.0);
+    let reply = b.request("history");
+    let rows: Vec<&str> = reply.split("\r\n").skip(1).filter(|l| !l.is_empty() && *l != "ok").collect();
+    let t: Vec<u32> = rows.iter().map(|r| r.split(',').next().unwrap().parse().unwrap()).collect();
+    assert!(t.windows(2).all(|w| w[0] <= w[1]), "time order: {rows:?}");
+    let open = rows.iter().position(|r| r.ends_with(",sensor_open")).expect("the fault is an event");
+    assert!(rows[open - 1].starts_with("3000,"), "the interval it closed is the row before: {rows:?}");
+    let dir = std::env::temp_dir().join(format!("hter-vb-order-{}.csv", std::process::id()));
+    std::fs::write(&dir, reply.trim_end_matches("ok\r\n").replace("\r\n", "\n")).unwrap();
+    let input = hal_sim::monitor_cmd::read_input(&dir);
+    let _ = std::fs::remove_file(&dir);
+    assert!(input.is_ok(), "{:?}", input.err());
+}
+
 #[test]
 fn forty_settings_in_the_minute_after_a_boot_leave_a_marked_hole_in_the_history() {
     let mut b = board();

@@ -5,7 +5,12 @@ use std::path::PathBuf;
 
 use anyhow::{anyhow, bail, Context, Result};
 use hter::coldchain::{AlarmKind, ColdChainMonitor};
+use hter::persist::log::INTERVAL_S as INTERVAL_S_U32;
 use hter::rtd::{T_MAX_C, T_MIN_C};
+use hter::step::Mode;
+
+/// A board history's interval, s.
+const INTERVAL_S: f64 = INTERVAL_S_U32 as f64;
 use serde::Serialize;
 
 use crate::log;
@@ -185,7 +190,7 @@ pub fn record(input: &Input) -> Result<Report> {
 /// How far apart, s, the carrier's trigger time and the one recomputed from a history's means
 /// may be for the two to be one alarm: the means lag the samples by up to an interval, and a
 /// run of means meets a threshold up to an interval later or earlier than the samples did.
-pub const SAME_ALARM_S: f64 = 3.0 * hter::persist::log::INTERVAL_S as f64;
+pub const SAME_ALARM_S: f64 = 3.0 * INTERVAL_S;
 
 /// Whether a recomputed alarm and one the carrier recorded are the same.
 fn same_alarm(recomputed: &AlarmOut, carrier: &AlarmOut) -> bool {
@@ -251,6 +256,7 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
     let (t_all, temp_all) = (cols.next().unwrap_or_default(), cols.next().unwrap_or_default());
     let event_col = log::read_text(path, "event")?;
     let reset_col = log::read_text(path, "reset_cause")?;
+    let mode_col = log::read_text(path, "mode")?;
     // A board history's interval extremes; a file with one of the two columns is not one.
     let extremes = match (log::has_column(path, "min_c")?, log::has_column(path, "max_c")?) {
         (true, true) => {
@@ -273,7 +279,8 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
         events: Vec::new(),
         has_event_column: event_col.is_some() || reset_col.is_some(),
     };
-    let mut last: Option<f64> = None;
+    // The newest sample row's time and the newest row's of any kind.
+    let (mut last_sample, mut last): (Option<f64>, Option<f64>) = (None, None);
     for (i, (t, c)) in t_all.into_iter().zip(temp_all).enumerate() {
         let line = i + 2;
         let t = t.ok_or_else(|| anyhow!("'{shown}' line {line}, column 't_s': empty"))?;
@@ -285,19 +292,25 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
             last = Some(t);
             continue;
         }
-        if let Some(&p) = input.t_s.last().filter(|&&p| t <= p) {
+        if let Some(p) = last_sample.filter(|&p| t <= p) {
             bail!("'{shown}' line {line}: t_s = {t} does not increase (previous {p})");
         }
-        if let Some(p) = last.filter(|&p| t < p) {
+        // Boards before the fix logged an event found on the sample that closed an interval
+        // (a second after its end) before the interval's row: a row up to one interval older
+        // than the event before it is that, not a clock that went back.
+        if let Some(p) = last.filter(|&p| t < p - INTERVAL_S) {
             bail!("'{shown}' line {line}: t_s = {t} goes back in time (previous {p})");
         }
+        // On a sensor fault the board holds its last good reading: the row's temperature is
+        // not a measurement, and the time is not known to be in range.
+        let c = c.filter(|_| cell(&mode_col, i).as_deref() != Some(Mode::SensorFault.name()));
         if let Some(c) = c.filter(|c| !(f64::from(T_MIN_C)..=f64::from(T_MAX_C)).contains(c)) {
             bail!(
                 "'{shown}' line {line}, column 'temp_c': {} °C is outside what a Pt100 can report (IEC 60751: {T_MIN_C}…{T_MAX_C} °C)",
                 crate::sim_cmd::shown(c)
             );
         }
-        let span = extremes.as_ref().map_or(Ok(None), |(lo, hi)| {
+        let span = extremes.as_ref().filter(|_| c.is_some()).map_or(Ok(None), |(lo, hi)| {
             extremes_of(lo.get(i).copied().flatten(), hi.get(i).copied().flatten(), c)
                 .map_err(|e| anyhow!("'{shown}' line {line}: {e}"))
         })?;
@@ -309,8 +322,11 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
         input.t_s.push(t);
         input.temp_c.push(c);
         input.extremes.push(span);
-        last = Some(t);
+        last_sample = Some(t);
+        last = Some(last.map_or(t, |p: f64| p.max(t)));
     }
+    // In time order (a stable sort: the file's order among events of one second).
+    input.events.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
     if last.is_some_and(|t| t > 16_000_000.0) {
         bail!("'{shown}': t_s beyond 16e6 s (185 days) is not supported");
     }

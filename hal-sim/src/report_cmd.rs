@@ -197,7 +197,8 @@ pub fn days(t: &[f64], temp: &[Option<f64>], extremes: &[Option<(f64, f64)>], al
 
 /// The one-line verdict: freeze risk (a freeze alarm, the file's or the carrier's, or a reading
 /// at or below −0.5 °C, an interval's lowest included), excursions (any alarm, any time outside
-/// 2–8 °C, any interval whose extremes left it, or MKT outside 2–8 °C), or in range.
+/// 2–8 °C, any interval whose extremes left it, or MKT outside 2–8 °C), not fully recorded
+/// (a sensor fault: no reading for a while, so "in range" cannot be claimed), or in range.
 pub fn verdict(r: &monitor_cmd::Report) -> (&'static str, &'static str) {
     if r.alarms.iter().chain(&r.carrier_alarms).any(|a| a.kind == "freeze_60min") || r.min_c <= -0.5 {
         ("freeze", "FREEZE RISK — the vaccines may have frozen: check them (shake test) before use")
@@ -209,6 +210,12 @@ pub fn verdict(r: &monitor_cmd::Report) -> (&'static str, &'static str) {
         || !(2.0..=8.0).contains(&r.mkt_c)
     {
         ("excursion", "EXCURSIONS — the load left 2–8 °C: see the alarms and the days below")
+    } else if r.fault_samples > 0 {
+        (
+            "unknown",
+            "NOT FULLY RECORDED — the probe gave no reading for part of the period (below): the record \
+             cannot show the load stayed within 2–8 °C then",
+        )
     } else {
         ("ok", "IN RANGE — the load stayed within 2–8 °C for the whole period")
     }
@@ -611,7 +618,7 @@ const STYLE: &str = "<style>
 body{font-family:'DejaVu Sans',Arial,sans-serif;margin:24px;max-width:1040px;color:#222}
 h1{margin:.3em 0}h2{margin-top:1.2em;border-bottom:1px solid #ccc}
 .verdict{font-size:1.5em;font-weight:bold;padding:12px 16px;border-radius:6px;color:#fff}
-.verdict.ok{background:#2e7d32}.verdict.excursion{background:#e65100}.verdict.freeze{background:#1565c0}
+.verdict.ok{background:#2e7d32}.verdict.excursion{background:#e65100}.verdict.freeze{background:#1565c0}.verdict.unknown{background:#6a1b9a}
 .verdict.service{background:#b71c1c;margin-top:8px}.verdict .raw{color:#ffcdd2}
 table{border-collapse:collapse;margin:8px 0}th,td{border:1px solid #bbb;padding:4px 8px;text-align:left;vertical-align:top}
 table.head th{background:#f3f3f3;width:220px}tr.bad td{background:#fff3e0}.raw{color:#888;font-size:.85em}

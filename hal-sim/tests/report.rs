@@ -258,6 +258,32 @@ fn a_history_reports_the_extremes_and_the_carriers_alarms_its_means_miss() {
     );
     assert!(page.contains("<tr class=\"alarm-carrier\" data-kind=\"freeze_60min\""), "listed on the page");
 
+    // Intervals the board ran on a sensor fault hold its last good reading (4.00 / 4.00 /
+    // 4.00): no reading, and no "in range" for the period.
+    let faulted: String = history_with_a_dip(3.0, None)
+        .lines()
+        .map(|l| {
+            let t: u32 = l.split(',').next().unwrap().parse().unwrap_or(0);
+            if (36_000..=43_200).contains(&t) {
+                format!("{t},4.00,4.00,4.00,0.00,sensor_fault,\n")
+            } else {
+                format!("{l}\n")
+            }
+        })
+        .collect();
+    let (page, v) = read("faulted.csv", &faulted);
+    assert!(verdict(&page).starts_with("NOT FULLY RECORDED"), "{}", verdict(&page));
+    assert_eq!(v["fault_samples"].as_u64(), Some(25), "{v}");
+    assert!(v["time_no_reading_s"].as_f64().unwrap() >= 7_200.0, "{v}");
+
+    // A board from before the fix logged an event found on the sample that closed an interval
+    // a second after its end and before the interval's row: read, the event in its place.
+    let early = history_with_a_dip(3.0, None).replace("\n3000,4.00", "\n3001,,,,,,sensor_offset\n3000,4.00");
+    assert!(early.contains("\n3001,,,,,,sensor_offset\n3000,4.00"));
+    let (page, v) = read("early.csv", &early);
+    assert_eq!(v["fault_samples"].as_u64(), Some(0), "{v}");
+    assert!(page.contains("<li>sensor_offset — day 1, 00:45"), "the event is listed");
+
     // Extremes that contradict their mean are a corrupt record.
     let p = d.join("contradicts.csv");
     std::fs::write(&p, history_with_a_dip(3.0, None).replace("300,4.00,3.90,4.10", "300,4.00,4.50,4.10")).unwrap();
