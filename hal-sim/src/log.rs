@@ -120,7 +120,7 @@ fn open(path: &Path) -> Result<std::fs::File> {
 /// Longest cell, in characters, an error message repeats whole.
 const CLIP_CHARS: usize = 40;
 
-/// A cell as an error message shows it: whole up to [`CLIP_CHARS`] characters, else its start
+/// A cell as an error message shows it: whole up to 40 characters, else its start
 /// and its length (a corrupt log can hold a megabyte in one cell).
 pub fn clip(cell: &str) -> String {
     let n = cell.chars().count();
