@@ -57,7 +57,7 @@ pub enum BoardCommand {
     Set {
         /// Setting name.
         key: String,
-        /// New value (e.g. 5, gpc, 0.12,0.00, or a model -1.8,0.81;-0.02,-0.01;1).
+        /// New value (e.g. 5, gpc, 0.12,0.00, or a model -1.7493,0.7514;-0.02708,-0.02987;5).
         #[arg(allow_hyphen_values = true)]
         value: String,
     },
@@ -422,7 +422,7 @@ fn explain_format(key: &str, value: &str) -> Result<()> {
             if key == "cal_ice" { "0.12,0.00" } else { "37.30,37.00" }
         ),
         "model" => bail!(
-            "model takes A1,A2;B0,B1;K: two A and two B coefficients, {plain}, and the delay K in samples, e.g. -1.8,0.81;-0.02,-0.01;1; got '{value}'"
+            "model takes A1,A2;B0,B1;K: two A and two B coefficients, {plain}, and the delay K in samples, e.g. -1.7493,0.7514;-0.02708,-0.02987;5; got '{value}'"
         ),
         _ => Ok(()),
     }
