@@ -17,7 +17,7 @@
 //!   [`OffsetConfig::max_comp_c`] in total.
 //!
 //! A change of the channel's calibration (`set cal_ice`, `set cal_warm`) is not a step of the
-//! sensor: [`SensorChecks::recalibrated`] carries every reading the checks hold over to the new
+//! sensor: `SensorChecks::recalibrated` carries every reading the checks hold over to the new
 //! line ([`crate::calib::Recalibration`]), so that the next reading continues them.
 //!
 //! `SensorChecks::reading` runs the last three in their order and feeds the measurement
