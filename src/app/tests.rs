@@ -73,7 +73,7 @@ impl Bench {
         for _ in 0..samples {
             let out = self.app.sample(&SampleIn {
                 t_ms: self.t_ms,
-                counts: counts_at(self.load_c) + u32::from(self.dither && self.t_ms % 20_000 != 0),
+                counts: counts_at(self.load_c) + u32::from(self.dither && !self.t_ms.is_multiple_of(20_000)),
                 reference_ok: true,
                 board: crate::step::BoardReadings {
                     #[cfg(feature = "module-sense")]
