@@ -97,6 +97,47 @@ impl TwoPoint {
     }
 }
 
+/// What replacing one calibration by another does to the readings: every reading the channel
+/// gives moves from `T_old` to `T_new = gain · T_old + shift_c`. Both lines are straight, so
+/// their composition is one:
+///
+/// ```text
+/// T_meas = (T_old − offset_old)/gain_old,   T_new = gain_new · T_meas + offset_new
+///        ⇒ gain = gain_new/gain_old,        shift_c = offset_new − gain · offset_old
+/// ```
+///
+/// A straight line also maps any weighted mean of readings whose weights sum to one (a
+/// first-order filter's value) onto the same mean of the mapped readings, and a difference of
+/// two readings onto `gain` times it: what was measured through the old line can be carried
+/// over to the new one exactly ([`crate::step::Carrier::set_calibration`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Recalibration {
+    /// Slope of the change, dimensionless (`gain_new/gain_old`).
+    pub gain: f32,
+    /// Offset of the change, °C.
+    pub shift_c: f32,
+}
+
+impl Recalibration {
+    /// The change from `old` to `new`; `None` if `old` cannot be inverted (a gain of zero, or a
+    /// line that is not finite: a [`TwoPoint`] made by [`TwoPoint::from_points`] never is).
+    pub fn between(old: &TwoPoint, new: &TwoPoint) -> Option<Recalibration> {
+        let gain = new.gain / old.gain;
+        let shift_c = new.offset_c - gain * old.offset_c;
+        (gain.is_finite() && gain > 0.0 && shift_c.is_finite()).then_some(Recalibration { gain, shift_c })
+    }
+
+    /// A temperature read through the old line, as the new one reads it, °C.
+    pub fn level(&self, t_c: f32) -> f32 {
+        self.gain * t_c + self.shift_c
+    }
+
+    /// A difference of two temperatures read through the old line, as the new one reads it, °C.
+    pub fn difference(&self, d_c: f32) -> f32 {
+        self.gain * d_c
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -117,6 +158,25 @@ mod tests {
         assert_eq!(TwoPoint::from_points(c(0.1), c(0.0), c(0.5), c(0.4)), Err(CalError::PointsTooClose));
         assert_eq!(TwoPoint::from_points(c(0.0), c(0.0), c(20.0), c(30.0)), Err(CalError::ImplausibleGain));
         assert_eq!(TwoPoint::from_points(c(f32::NAN), c(0.0), c(20.0), c(20.0)), Err(CalError::NonFinite));
+    }
+
+    #[test]
+    fn a_recalibration_maps_readings_through_the_old_line_onto_the_new_one() {
+        let c = Celsius;
+        let old = TwoPoint::from_points(c(0.3), c(0.0), c(25.6), c(25.0)).unwrap();
+        let new = TwoPoint::from_points(c(0.0), c(1.4), c(25.0), c(25.0)).unwrap();
+        let r = Recalibration::between(&old, &new).unwrap();
+        for m in [-5.0, 0.0, 4.0, 8.0, 30.0] {
+            let (t_old, t_new) = (old.apply(c(m)).0, new.apply(c(m)).0);
+            assert!((r.level(t_old) - t_new).abs() < 1e-5, "{m}: {} vs {t_new}", r.level(t_old));
+        }
+        let d = old.apply(c(5.0)).0 - old.apply(c(4.0)).0;
+        assert!((r.difference(d) - (new.apply(c(5.0)).0 - new.apply(c(4.0)).0)).abs() < 1e-6);
+        assert_eq!(
+            Recalibration::between(&TwoPoint::IDENTITY, &TwoPoint::IDENTITY),
+            Some(Recalibration { gain: 1.0, shift_c: 0.0 })
+        );
+        assert_eq!(Recalibration::between(&TwoPoint { gain: 0.0, offset_c: 0.0 }, &new), None);
     }
 
     /// The interface sweep's pair: each point was accepted with the other's default, together

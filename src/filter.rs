@@ -51,6 +51,15 @@ impl FirstOrder {
         self.y
     }
 
+    /// Carries the state onto another scale of the input, `f` a straight line (a new
+    /// calibration of the channel, [`crate::calib::Recalibration`]): a straight line commutes
+    /// with the filter, whose weights sum to one, so the output is what the filter would hold
+    /// had the input always been on the new scale — no transient, where restarting would lose
+    /// the smoothing and slewing into the new value would read as motion.
+    pub fn remap(&mut self, f: impl FnOnce(f32) -> f32) {
+        self.y = self.y.map(f);
+    }
+
     /// Forgets the state; the next sample re-initialises it.
     pub fn reset(&mut self) {
         self.y = None;

@@ -293,9 +293,24 @@ impl<C: Controller> Carrier<C> {
     /// Replaces the two-point calibration from the next sample on. A [`TwoPoint`] is checked
     /// when it is made ([`TwoPoint::from_points`]); nothing else in the configuration changes.
     ///
+    /// The reading steps by the calibration's change, which is neither the load moving nor the
+    /// sensor failing: the measurement filter and the supervisor's references (the sensor
+    /// checks, the freeze guard's slope, the SSR monitor's history) are carried over to the new
+    /// line ([`crate::calib::Recalibration`]), so that the reported temperature moves by the
+    /// change at once and no check takes it for a sensor offset, a fall or a warming (a bug
+    /// hunt against `hter virtual-board` found each `set cal_ice 0.0,1.4` measured as a sensor
+    /// offset and subtracted, undoing it, and alternating changes adding offsets up). An
+    /// offset subtracted for a real sensor step before stays ([`OffsetWatch`]'s
+    /// `recalibrated`). The controller is not told: the new reading is what it should now
+    /// drive to the setpoint. Reached from the board's interface only ([`crate::app::App`]),
+    /// so a build without it carries none of this.
+    ///
     /// [`TwoPoint`]: crate::calib::TwoPoint
     /// [`TwoPoint::from_points`]: crate::calib::TwoPoint::from_points
+    /// [`OffsetWatch`]: crate::supervisor::sensor
     pub fn set_calibration(&mut self, cal: crate::calib::TwoPoint) {
+        let old = self.cfg.cal;
+        self.supervisor.recalibrated(&self.cfg.supervisor, &old, &cal, &mut self.filter);
         self.cfg.cal = cal;
     }
 

@@ -211,3 +211,53 @@ fn identify_commissions_the_cabinet_on_the_board_and_continues_with_the_self_tun
     let h = b.request("history");
     assert!(h.contains("commissioning:started") && h.contains("commissioning:done"), "{h}");
 }
+
+/// Runs `samples` samples: the worst distance of the board's filtered reading from the load (the
+/// water) through its calibration, the probe's lag and noise included, °C, and the events.
+fn against_truth(b: &mut VirtualBoard, samples: usize) -> (f64, Vec<hter::event::EventKind>) {
+    let (mut worst, mut events) = (0.0f64, Vec::new());
+    for _ in 0..samples {
+        let line = b.app().settings().calibration().unwrap();
+        let truth = f64::from(line.apply(hter::units::Celsius(b.load_c() as f32)).0);
+        let out = b.step().unwrap();
+        worst = worst.max((f64::from(out.step.temp_c.0) - truth).abs());
+        events.extend(out.step.events.iter().map(|e| e.kind));
+    }
+    (worst, events)
+}
+
+#[test]
+fn a_calibration_change_is_no_sensor_offset_and_alternating_ones_add_up_nothing() {
+    // The bug hunt: at 4 °C `set cal_ice 0.0,1.4` was accepted but temp_c stayed 4.00, with a
+    // `sensor_offset` alarm; pairs of it and `set cal_ice 0,0` (36 and 48 samples apart at
+    // --speed 600) added offsets up until the board read 4.00 °C over a load at ≈ 9 °C.
+    let mut b = board();
+    run(&mut b, 3600.0);
+    let before: f64 = field(&mut b, "temp_c").parse().unwrap();
+    assert_eq!(b.request("set cal_ice 0.0,1.4"), "ok\r\n");
+    let out = b.step().unwrap();
+    let moved = f64::from(out.step.temp_c.0) - before;
+    // gain 0.944, offset 1.4: +1.18 °C at 4 °C.
+    assert!((moved - 1.18).abs() < 0.1, "the reading moved {moved}");
+    // The probe lags the water by ≈ 50 s: ≈ 0.5 °C while the controller pulls the load down
+    // to the new reading's setpoint; one offset taken for the sensor's would be 1.18 °C more.
+    let (worst, events) = against_truth(&mut b, 360);
+    assert!(worst < 0.8, "{worst}");
+    assert!(!events.contains(&hter::event::EventKind::SensorOffset), "{events:?}");
+    assert_eq!(field(&mut b, "alarm"), "off");
+    for pair in 0..20 {
+        for (ice, wait) in [("0,0", 48), ("0.0,1.4", 36)] {
+            assert_eq!(b.request(&format!("set cal_ice {ice}")), "ok\r\n");
+            let (worst, events) = against_truth(&mut b, wait);
+            assert!(worst < 0.8, "pair {pair}, {ice}: {worst}");
+            assert!(!events.contains(&hter::event::EventKind::SensorOffset), "pair {pair}: {events:?}");
+        }
+    }
+    assert_eq!(b.request("set cal_ice 0,0"), "ok\r\n");
+    run(&mut b, 1800.0);
+    let (worst, _) = against_truth(&mut b, 60);
+    assert!(worst < 0.2, "settled: {worst}");
+    assert!((b.load_c() - 4.0).abs() < 0.3, "the load at the setpoint: {}", b.load_c());
+    assert_eq!((field(&mut b, "mode"), field(&mut b, "alarm")), ("normal".into(), "off".into()));
+    assert!(!b.request("history").contains("sensor_offset"));
+}

@@ -45,6 +45,9 @@ struct Bench {
     /// Duties applied in the last 60 s, oldest first: the plant's dead time.
     pipe: std::collections::VecDeque<f32>,
     saves: Vec<Save>,
+    /// A count of noise on every other sample (a load at rest otherwise gives the same counts
+    /// sample after sample, which the stuck-converter check takes for a frozen front end).
+    dither: bool,
     /// What the board's module-side sense reads each sample (`None`: the reference board).
     #[cfg(feature = "module-sense")]
     module_v: Option<f32>,
@@ -59,6 +62,7 @@ impl Bench {
             load_c: 4.0,
             pipe: [hold; 6].into(),
             saves: Vec::new(),
+            dither: false,
             #[cfg(feature = "module-sense")]
             module_v: None,
         }
@@ -69,7 +73,7 @@ impl Bench {
         for _ in 0..samples {
             let out = self.app.sample(&SampleIn {
                 t_ms: self.t_ms,
-                counts: counts_at(self.load_c),
+                counts: counts_at(self.load_c) + u32::from(self.dither && !self.t_ms.is_multiple_of(20_000)),
                 reference_ok: true,
                 board: crate::step::BoardReadings {
                     #[cfg(feature = "module-sense")]
@@ -294,6 +298,80 @@ fn calibration_points_shift_the_reading_from_the_next_sample() {
     assert!((load - cal - 0.5).abs() < 0.02, "{cal} at {load}");
     let get = b.send("get");
     assert!(get.contains("cal_ice=0.50,0.00\r\n") && get.contains("cal_warm=25.50,25.00\r\n"), "{get}");
+}
+
+/// The line the app's settings give.
+fn line(b: &Bench) -> TwoPoint {
+    b.app.settings().calibration().unwrap()
+}
+
+/// Runs `samples` samples; every sample's reading against the load through the app's
+/// calibration: the worst difference of the offset-corrected reading, that of the filtered one
+/// (which lags a moving load by about a sample: ≤ 0.1 °C here, the load moving at most
+/// 0.1 °C a sample), °C, and the events. No alarm on any sample.
+fn run_against_truth(b: &mut Bench, samples: usize) -> (f32, f32, Vec<EventKind>) {
+    let (mut raw, mut filtered, mut events) = (0.0f32, 0.0f32, Vec::new());
+    for _ in 0..samples {
+        // The reading of this sample is of the load before the plant's step.
+        let truth = line(b).apply(crate::units::Celsius(b.load_c)).0;
+        let out = b.run(1);
+        events.extend(out.step.events.iter().map(|e| e.kind));
+        let Some(r) = out.step.raw_c else { panic!("no reading: {events:?}") };
+        raw = raw.max((r.0 - truth).abs());
+        filtered = filtered.max((out.step.temp_c.0 - truth).abs());
+        assert_eq!(out.alarm, Indication::Off, "{events:?}");
+    }
+    (raw, filtered, events)
+}
+
+#[test]
+fn a_calibration_change_moves_the_reading_by_its_change_and_is_no_sensor_offset() {
+    // `hter virtual-board` at 4 °C: `set cal_ice 0.0,1.4` was accepted, then the offset watch
+    // took the reading's step for a sensor offset, subtracted it (temp_c stayed 4.00) and
+    // raised `sensor_offset` with an alarm.
+    let mut b = Bench::new(&boot());
+    b.dither = true;
+    assert_eq!(b.send("set controller pi"), "ok\r\n");
+    b.run(360);
+    let before = b.run(1).step.temp_c.0;
+    let old = line(&b);
+    assert_eq!(b.send("set cal_ice 0.0,1.4"), "ok\r\n");
+    let change = line(&b).apply(crate::units::Celsius(b.load_c)).0 - old.apply(crate::units::Celsius(b.load_c)).0;
+    assert!(change > 1.0, "{change}");
+    // At once: the next sample's reading is the load through the new line.
+    let first = b.run(1).step.temp_c.0;
+    assert!((first - before - change).abs() < 0.03, "{before} → {first}, the line moved it {change}");
+    // And from then on, with the controller bringing the new reading to 4 °C.
+    let (raw, filtered, events) = run_against_truth(&mut b, 180);
+    assert!(raw < 0.03 && filtered < 0.15, "{raw} {filtered}");
+    assert!(!events.contains(&EventKind::SensorOffset), "{events:?}");
+    assert!(b.app.carrier().config().cal == line(&b));
+}
+
+#[test]
+fn alternating_calibration_changes_cannot_add_up_an_offset() {
+    // The bug hunt's pairs (`set cal_ice 0.0,1.4`, `set cal_ice 0,0`, 36 and 48 samples apart
+    // at --speed 600) left the board reading 4.00 °C for ≈ 9 h with the load at ≈ 9 °C; here
+    // every spacing from one sample to the offset watch's confirmation and beyond.
+    let mut b = Bench::new(&boot());
+    b.dither = true;
+    assert_eq!(b.send("set controller pi"), "ok\r\n");
+    b.run(360);
+    let mut all = Vec::new();
+    for k in 0..40 {
+        let (ice, wait) = if k % 2 == 0 { ("0.0,1.4", 1 + k % 7) } else { ("0,0", 1 + (k / 2) % 5) };
+        assert_eq!(b.send(&format!("set cal_ice {ice}")), "ok\r\n");
+        let (raw, filtered, events) = run_against_truth(&mut b, wait);
+        assert!(raw < 0.03 && filtered < 0.15, "change {k} ({ice}, {wait} samples): {raw} {filtered}");
+        all.extend(events);
+    }
+    let (raw, filtered, events) = run_against_truth(&mut b, 360);
+    assert!(raw < 0.03 && filtered < 0.15, "{raw} {filtered}");
+    all.extend(events);
+    assert!(!all.contains(&EventKind::SensorOffset), "{all:?}");
+    // The load is where the reading says, through the last line (`set cal_ice 0,0`: none).
+    let shown = b.run(1).step.temp_c.0;
+    assert!((shown - 4.0).abs() < 0.1 && (b.load_c - 4.0).abs() < 0.1, "shown {shown}, load {}", b.load_c);
 }
 
 #[test]

@@ -96,6 +96,13 @@ impl FreezeGuard {
         self.slope_c_per_s = 0.0;
     }
 
+    /// The channel's calibration changed by `r`: the last temperature and the slope as the new
+    /// line reads them, so that the next sample's is no fall or rise of the load.
+    pub(crate) fn recalibrated(&mut self, r: &crate::calib::Recalibration) {
+        self.last_temp_c = self.last_temp_c.map(|t| r.level(t));
+        self.slope_c_per_s = r.difference(self.slope_c_per_s);
+    }
+
     /// Takes this sample's filtered temperature (`ts_s`: the sample period, s).
     pub(crate) fn observe(&mut self, cfg: &FreezeConfig, ts_s: f32, temp_c: f32) -> Trend {
         let mut drop_c = 0.0;

@@ -481,6 +481,34 @@ impl Supervisor {
         self.sensor.stuck.run(counts)
     }
 
+    /// The channel's calibration changed from `old` to `new` (`Carrier::set_calibration`, the
+    /// board interface's `set cal_ice`/`cal_warm`; the next sample reads through `new`). A new
+    /// line is not a move of the load nor a step of the sensor: the sensor checks, the
+    /// measurement filter, the freeze guard's slope and the SSR monitor's history are carried
+    /// over to it ([`crate::calib::Recalibration`]), so that the next reading continues them.
+    /// The reported temperature moves by the calibration's change at once, and nothing takes
+    /// the change for a sensor offset, a spike, a fall or a warming. If `old` cannot be
+    /// inverted they restart instead, as after a sensor fault.
+    pub(crate) fn recalibrated(
+        &mut self,
+        cfg: &SupervisorConfig,
+        old: &crate::calib::TwoPoint,
+        new: &crate::calib::TwoPoint,
+        filter: &mut FirstOrder,
+    ) {
+        match crate::calib::Recalibration::between(old, new) {
+            Some(r) => {
+                let r = self.sensor.recalibrated(&cfg.sensor, &r, filter);
+                self.freeze.recalibrated(&r);
+                self.ssr.recalibrated(&r);
+            }
+            None => {
+                self.sensor.restart(filter);
+                self.freeze.restart();
+            }
+        }
+    }
+
     /// Steps 1–2, before the controller: the sensor (its fault state, offset and spikes, then
     /// the measurement filter), the supply and the supply switch. `raw` is this sample's
     /// calibrated reading or its fault; `sensor`: it came from the sensor (not an ideal plant).

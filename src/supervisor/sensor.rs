@@ -13,13 +13,19 @@
 //!   supervisor's `check`): nothing cools on it until the stuck check has had its time.
 //!   Several spikes within [`SpikeConfig::window_s`] are reported.
 //! - **Offset** (`OffsetWatch`): a step larger than physics allows that stays at its new level
-//!   is a sensor offset; it is reported, and an upward one is measured and subtracted.
+//!   is a sensor offset; it is reported, and an upward one is measured and subtracted, up to
+//!   [`OffsetConfig::max_comp_c`] in total.
+//!
+//! A change of the channel's calibration (`set cal_ice`, `set cal_warm`) is not a step of the
+//! sensor: `SensorChecks::recalibrated` carries every reading the checks hold over to the new
+//! line ([`crate::calib::Recalibration`]), so that the next reading continues them.
 //!
 //! `SensorChecks::reading` runs the last three in their order and feeds the measurement
 //! filter F_a.
 
 use super::{ms, samples_u16, samples_u8, since};
 use crate::adc::AdcError;
+use crate::calib::Recalibration;
 use crate::event::EventKind;
 use crate::filter::FirstOrder;
 use crate::step::CarrierConfig;
@@ -94,8 +100,15 @@ pub struct OffsetConfig {
     /// a step larger than [`Self::max_comp_c`], which is not compensated, only reported, and
     /// which three agreeing spikes in a row make by chance ([`SpikeConfig::jump_s`]).
     pub confirm_s: f32,
-    /// Largest upward offset that is measured and subtracted, °C (larger ones, and any step
-    /// down, are reported only).
+    /// Largest offset subtracted, in total, °C: an upward step is measured and subtracted only
+    /// while the offsets subtracted so far and it come to no more than this (a larger step, one
+    /// that would take the total beyond it, and any step down, are reported only). One
+    /// connector or lead fault is within 3 °C; the total is bounded because every compensation
+    /// is a correction the reading cannot verify, and an unbounded sum hides a warm load for
+    /// good: `hter virtual-board`, before a calibration change was carried over to the checks
+    /// (`Carrier::set_calibration`), took each `set cal_ice 0.0,1.4` for a 1.2 °C offset, and
+    /// alternating it with `set cal_ice 0,0` added one every other change until the board read
+    /// 4.00 °C for ≈ 9 h with the load at ≈ 9 °C, no alarm and a clean record.
     pub max_comp_c: f32,
 }
 
@@ -222,6 +235,12 @@ impl SpikeFilter {
         }
     }
 
+    /// The channel's calibration changed by `r`: the last spike's reading, which the next must
+    /// agree with to make a run, as the new line reads it.
+    pub(crate) fn recalibrated(&mut self, r: &Recalibration) {
+        self.last_c = r.level(self.last_c);
+    }
+
     /// Whether the reading `t` is a spike against the filtered value `filtered` (no spike
     /// without both).
     pub(crate) fn is_spike(cfg: &SpikeConfig, t: Option<Celsius>, filtered: Option<f32>) -> bool {
@@ -339,8 +358,10 @@ impl OffsetWatch {
                         // warm makes the controller overcool — the freezing side — while one
                         // too cold only under-cools, which the warm alarms catch, and which is
                         // also what a probe re-seated in a colder load looks like.
+                        // The total, not each step, is bounded: offsets that add up hide a warm
+                        // load as surely as one large one ([`OffsetConfig::max_comp_c`]).
                         let measured = raw - before;
-                        if measured > 0.0 && measured <= cfg.max_comp_c {
+                        if measured > 0.0 && self.offset_c + measured <= cfg.max_comp_c {
                             self.offset_c += measured;
                         }
                         self.pending = None;
@@ -380,6 +401,31 @@ impl OffsetWatch {
         self.last_good_c = Some(t);
         self.trend_c = 0.0;
         self.age = 0;
+    }
+
+    /// The channel's calibration changed by `r`: the reference, the trend and a step under
+    /// watch are carried over to the new line, so the next reading is compared with what the
+    /// new line reads and a step the sensor really made is still confirmed or dropped on its
+    /// merits. The offset in force stays: it was measured as a step of the sensor (a connector
+    /// or lead fault), which a new line through the channel does not mend, so it is carried over
+    /// as the same fault seen through the new gain (at most [`OffsetConfig::max_comp_c`]).
+    /// Clearing it would be the freezing side if the fault is still there (the reading too warm
+    /// by up to 3 °C, the controller and the freeze guard overcooling); keeping it is at worst
+    /// the warm side, if the new points were taken with the fault in the channel (the
+    /// uncalibrated counts of the log, README "Calibrating a board"), as the watch's own rule
+    /// for which steps it subtracts has it. Returns the change of the offset-corrected reading:
+    /// `r`, plus the part of the offset the bound did not carry over.
+    pub(crate) fn recalibrated(&mut self, cfg: &OffsetConfig, r: &Recalibration) -> Recalibration {
+        // corrected = T − offset through either line, so corrected_new = gain · corrected_old
+        // + shift_c + (gain · offset_old − offset_new).
+        let carried = r.difference(self.offset_c);
+        let offset_c = min_f32(carried, cfg.max_comp_c);
+        let r = Recalibration { gain: r.gain, shift_c: r.shift_c + (carried - offset_c) };
+        self.last_good_c = self.last_good_c.map(|t| r.level(t));
+        self.trend_c = r.difference(self.trend_c);
+        self.pending = self.pending.map(|(before, step, n)| (r.level(before), r.difference(step), n));
+        self.offset_c = offset_c;
+        r
     }
 
     /// No reading this sample: a step under watch, and the reference, are gone.
@@ -429,6 +475,31 @@ impl SensorChecks {
             spikes: SpikeFilter::new(&cfg.spike, ts_s),
             offset: OffsetWatch::new(&cfg.offset, ts_s),
         }
+    }
+
+    /// The channel's calibration changed by `r` (the next sample reads through the new line):
+    /// carries the offset watch's and the spike filter's readings, and the measurement filter's
+    /// value, over to it (the stuck check reads counts, which no calibration changes). Returns
+    /// the change of the offset-corrected reading, which the filter's value and every
+    /// detector's history of it take ([`OffsetWatch::recalibrated`]).
+    pub(crate) fn recalibrated(
+        &mut self,
+        cfg: &SensorConfig,
+        r: &Recalibration,
+        filter: &mut FirstOrder,
+    ) -> Recalibration {
+        let r = self.offset.recalibrated(&cfg.offset, r);
+        self.spikes.recalibrated(&r);
+        filter.remap(|y| r.level(y));
+        r
+    }
+
+    /// A calibration change that cannot be carried over ([`Recalibration::between`] found the
+    /// old line not invertible): the references are dropped, as after a sensor fault, and the
+    /// next reading starts them again.
+    pub(crate) fn restart(&mut self, filter: &mut FirstOrder) {
+        self.offset.forget();
+        filter.reset();
     }
 
     /// Takes this sample's conversion result `raw` (calibrated, `Err` on a fault) and feeds the
@@ -635,6 +706,73 @@ mod tests {
         w.keep_reference(4.0, 0.0);
         assert!(w.watch(&OFFSET, 7.0, &mut e) && w.watch(&OFFSET, 7.0, &mut e) && w.watch(&OFFSET, 7.0, &mut e));
         assert_eq!(w.offset_c(), 3.0);
+    }
+
+    #[test]
+    fn the_offsets_subtracted_never_add_up_to_more_than_max_comp_c() {
+        // Two upward steps of 2 °C, each within the 3 °C compensated: the first is subtracted,
+        // the second would take the total to 4 °C and is reported only.
+        let mut w = OffsetWatch::new(&OffsetConfig::DEFAULT, TS);
+        let mut events = Vec::new();
+        let mut read = |w: &mut OffsetWatch, t: f32| {
+            let offset = w.offset_c();
+            let corrected = t - offset;
+            w.watch(&OFFSET, corrected, &mut |k| events.push(k));
+            w.keep_reference(corrected, offset);
+        };
+        read(&mut w, 4.0);
+        (0..4).for_each(|_| read(&mut w, 6.0));
+        assert_eq!(w.offset_c(), 2.0);
+        (0..4).for_each(|_| read(&mut w, 8.0));
+        assert_eq!(w.offset_c(), 2.0, "4 °C in total is more than the 3 °C compensated");
+        // A third of 1 °C fits: 3 °C in total.
+        (0..4).for_each(|_| read(&mut w, 9.0));
+        assert_eq!(w.offset_c(), 3.0);
+        // And nothing more, however small and however many.
+        for k in 0..20 {
+            (0..4).for_each(|_| read(&mut w, 9.0 + 0.8 * (k + 1) as f32));
+        }
+        assert_eq!(w.offset_c(), 3.0);
+        assert_eq!(events.len(), 23, "every step reported: {events:?}");
+        assert!(events.iter().all(|k| *k == EventKind::SensorOffset));
+    }
+
+    #[test]
+    fn a_recalibration_carries_the_references_and_the_offset_over_to_the_new_line() {
+        let r = Recalibration { gain: 0.944, shift_c: 1.4 };
+        // At rest at 4 °C, with 1 °C subtracted: the reading through the new line continues the
+        // reference, no step.
+        let mut s = SensorChecks::new(&SensorConfig::DEFAULT, TS);
+        s.offset.offset_c = 1.0;
+        let mut f = FirstOrder::default();
+        let cfg = CarrierConfig::DEFAULT;
+        let mut none = |k: EventKind| panic!("reported {k:?}");
+        for k in 0..5 {
+            s.reading(&cfg, k * 10_000, Ok(Celsius(5.0)), true, &mut f, &mut none);
+        }
+        let rc = s.recalibrated(&SensorConfig::DEFAULT, &r, &mut f);
+        assert!((s.offset.offset_c() - 0.944).abs() < 1e-6, "the same fault through the new gain");
+        let new = r.level(5.0) - s.offset.offset_c();
+        assert!((rc.level(4.0) - new).abs() < 1e-5);
+        assert!((f.output().unwrap() - new).abs() < 1e-5, "the filter moved with the line");
+        for k in 5..15 {
+            let read = s.reading(&cfg, k * 10_000, Ok(Celsius(r.level(5.0))), true, &mut f, &mut none);
+            assert!((read.temp_c - new).abs() < 1e-5, "sample {k}: {}", read.temp_c);
+        }
+        // The offset carried over stays within the bound.
+        let mut w = OffsetWatch::new(&OffsetConfig::DEFAULT, TS);
+        w.offset_c = 2.9;
+        let rc = w.recalibrated(&OFFSET, &Recalibration { gain: 1.2, shift_c: 0.0 });
+        assert_eq!(w.offset_c(), 3.0);
+        assert!((rc.shift_c - 0.48).abs() < 1e-5, "{rc:?}");
+        // A step under watch is carried over and still confirmed.
+        let mut w = OffsetWatch::new(&OffsetConfig::DEFAULT, TS);
+        w.keep_reference(4.0, 0.0);
+        assert!(w.watch(&OFFSET, 5.5, &mut none));
+        w.recalibrated(&OFFSET, &Recalibration { gain: 1.0, shift_c: 1.0 });
+        assert!(w.watch(&OFFSET, 6.5, &mut none));
+        assert_eq!(kinds(|k| assert!(w.watch(&OFFSET, 6.5, &mut |x| k(x)))), [EventKind::SensorOffset]);
+        assert!((w.offset_c() - 1.5).abs() < 1e-6, "{}", w.offset_c());
     }
 
     #[test]

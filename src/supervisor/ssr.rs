@@ -408,6 +408,17 @@ impl SsrMonitor {
         found
     }
 
+    /// The channel's calibration changed by `r`: the temperatures the checks compare the next
+    /// ones with, as the new line reads them (a calibration change is no move of the load: not
+    /// a fall that keeps pace with the SSR off, nor a warming at full duty, nor a turn-up).
+    pub(crate) fn recalibrated(&mut self, r: &crate::calib::Recalibration) {
+        for t in &mut self.history {
+            *t = r.level(*t);
+        }
+        self.on_start_c = r.level(self.on_start_c);
+        self.last_drop_c = r.difference(self.last_drop_c);
+    }
+
     /// Puts this sample's filtered temperature in the ring (before the checks that read it).
     pub(crate) fn remember(&mut self, temp_c: f32) {
         if let Some(slot) = self.history.get_mut(self.history_head) {
