@@ -171,7 +171,9 @@ impl<C: Controller> Carrier<C> {
             adaptive_mode: None,
             pending_reset: None,
             pending_stop: None,
-            holdover: Holdover::new(0.0),
+            // The mean duty starts at full duty: until it settles it errs on the short side
+            // ([`crate::holdover`]).
+            holdover: Holdover::new(1.0),
             holdover_model: None,
         }
     }
@@ -354,7 +356,7 @@ impl<C: Controller> Carrier<C> {
         if trusted {
             self.controller.track(&ci, verdict.duty.get());
         }
-        let holdover_s = self.holdover(verdict.duty.get(), verdict.supply_enable, trusted, temp_c);
+        let holdover_s = self.holdover(verdict.duty.get(), verdict.supply_enable, verdict.mode, trusted, temp_c);
         StepOutput {
             raw_c: reading.raw_c,
             temp_c: Celsius(temp_c),
@@ -372,19 +374,24 @@ impl<C: Controller> Carrier<C> {
 
     /// The holdover estimate after this sample's actuation ([`crate::holdover`]).
     #[cfg(feature = "holdover")]
-    fn holdover(&mut self, duty: f32, supply_enable: bool, trusted: bool, temp_c: f32) -> Option<f32> {
+    fn holdover(&mut self, duty: f32, supply_enable: bool, mode: Mode, trusted: bool, temp_c: f32) -> Option<f32> {
         // What the modules got: nothing with the supply switch open.
         let applied = if supply_enable { duty } else { 0.0 };
         let start = match self.holdover.sweeping() {
             false if trusted => self.holdover_model.as_ref().map(|m| (m, temp_c)),
             _ => None,
         };
-        self.holdover.update(applied, start, self.cfg.ts_s)
+        // Only a controller holding the load gives the mean duty a meaning: a sensor fault or
+        // the freeze guard stops cooling, limp home's thermostat cycles full cooling on a
+        // cycle longer than the mean's memory (`hter sim --scenario power-cut --fault
+        // ssr-stuck-on@1800 --ambient 15`: the horizon for 12 minutes after limp home began,
+        // then 826–1539 s with the cycle against the 1360 s the load took).
+        self.holdover.update(applied, mode == Mode::Normal, start, self.cfg.ts_s)
     }
 
     /// Without the `holdover` feature: no estimate.
     #[cfg(not(feature = "holdover"))]
-    fn holdover(&mut self, _duty: f32, _supply_enable: bool, _trusted: bool, _temp_c: f32) -> Option<f32> {
+    fn holdover(&mut self, _duty: f32, _supply_enable: bool, _mode: Mode, _trusted: bool, _temp_c: f32) -> Option<f32> {
         None
     }
 
