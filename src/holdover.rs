@@ -63,8 +63,8 @@ pub const STEPS_PER_SAMPLE: u32 = 8;
 const DUTY_WEIGHT: f32 = 10.0 / 150.0;
 
 /// Samples of duty the mean ū averages before an estimate starts from it: 6 time constants
-/// (1/[`DUTY_WEIGHT`] samples) of each stage, 15 minutes at Ts = 10 s. What the two stages keep
-/// of their start after n samples is (1 − w)ⁿ (1 + n w/(1 − w)), w = [`DUTY_WEIGHT`]: 8.4 % at
+/// (15 samples, 1/w) of each stage, 15 minutes at Ts = 10 s. What the two stages keep of their
+/// start after n samples is (1 − w)ⁿ (1 + n w/(1 − w)), w = `DUTY_WEIGHT` = 1/15: 8.4 % at
 /// 60 samples (4 time constants, too much: an estimate 5–10 % off on ū alone), 1.5 % at 90.
 pub const SETTLE_SAMPLES: u32 = 90;
 

@@ -32,6 +32,7 @@
 use crate::control::{AdaptiveMode, ControlInput, Controller, ControllerStatus};
 use crate::event::{Event, EventKind, Events};
 use crate::filter::FirstOrder;
+#[cfg(feature = "holdover")]
 use crate::holdover::Holdover;
 use crate::supervisor::{sensor, Supervisor};
 use crate::units::{max_f32, min_f32, Celsius, Duty};
@@ -151,7 +152,9 @@ pub struct Carrier<C: Controller> {
     pending_reset: Option<crate::persist::ResetCause>,
     /// A fail-safe stop of the previous boot to report with the next sample.
     pending_stop: Option<crate::failsafe::StopKind>,
-    #[cfg_attr(not(feature = "holdover"), allow(dead_code))]
+    /// Only in builds with the estimate: the default firmware carries neither its state nor
+    /// its initialisation (≈ 350 B of its flash once the settling count was added).
+    #[cfg(feature = "holdover")]
     holdover: Holdover,
     /// The model the holdover runs on (the commissioned one); without it, no estimate.
     holdover_model: Option<crate::model::Model>,
@@ -171,6 +174,7 @@ impl<C: Controller> Carrier<C> {
             adaptive_mode: None,
             pending_reset: None,
             pending_stop: None,
+            #[cfg(feature = "holdover")]
             // The mean duty starts at full duty: until it settles it errs on the short side
             // ([`crate::holdover`]).
             holdover: Holdover::new(1.0),
