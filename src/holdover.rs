@@ -26,6 +26,17 @@
 //! the probe's lag): the water itself passes 8 °C about k samples before the probe reads it, so
 //! the estimate is the crossing minus k samples (the pessimistic side).
 //!
+//! The mean duty ū stands for the duty that holds the load (its heat leak), and it only does
+//! once it has averaged enough of the duty that holds it. At a start (every boot: after a power
+//! cut, a brown-out, a reset) it has averaged nothing, and the value it starts from is a guess:
+//! started at 0 it made the model's ambient T₀ − ū·G sit near the load, and the estimate
+//! showed the 48 h horizon for about 10 minutes after every boot, then thousands of seconds,
+//! before the right few hundred. So the estimator publishes nothing (`None`) until the mean has
+//! run [`SETTLE_SAMPLES`] samples, six time constants of each of its two stages, and the step
+//! starts it at full duty (the worst case: ū is too high, never too low, until it settles): what
+//! is left of that start then, at most 1.5 % of (1 − ū), errs on the short side. The first
+//! estimate comes one sweep later, ≈ 16 minutes after the start.
+//!
 //! The same f32 operations in the same order on host and board: the estimate is bit-equal.
 
 use crate::model::Model;
@@ -51,6 +62,12 @@ pub const STEPS_PER_SAMPLE: u32 = 8;
 /// 14.9 → 9.3 %, mean 3.3 → 2.6 %.
 const DUTY_WEIGHT: f32 = 10.0 / 150.0;
 
+/// Samples of duty the mean ū averages before an estimate starts from it: 6 time constants
+/// (15 samples, 1/w) of each stage, 15 minutes at Ts = 10 s. What the two stages keep of their
+/// start after n samples is (1 − w)ⁿ (1 + n w/(1 − w)), w = `DUTY_WEIGHT` = 1/15: 8.4 % at
+/// 60 samples (4 time constants, too much: an estimate 5–10 % off on ū alone), 1.5 % at 90.
+pub const SETTLE_SAMPLES: u32 = 90;
+
 /// A sweep of the model's unit-step response under way.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Sweep {
@@ -72,6 +89,8 @@ pub struct Holdover {
     /// [`STEPS_PER_SAMPLE`], as a field: a constant trip count is unrolled eight times at the
     /// library's opt-level 3, 1.2 KiB of the firmware's flash.
     steps: u32,
+    /// Samples the mean ū has averaged since the start, up to [`SETTLE_SAMPLES`].
+    held: u32,
     duty_avg: f32,
     /// The first stage of ū.
     duty_f: f32,
@@ -80,13 +99,14 @@ pub struct Holdover {
 }
 
 impl Holdover {
-    /// No estimate yet; the mean duty starts at `u0`.
+    /// No estimate yet; the mean duty starts at `u0` (the step starts it at full duty: see the
+    /// module docs) and holds no history: no estimate for [`SETTLE_SAMPLES`] samples.
     pub const fn new(u0: f32) -> Self {
-        Holdover { steps: STEPS_PER_SAMPLE, duty_avg: u0, duty_f: u0, sweep: None, estimate_s: None }
+        Holdover { steps: STEPS_PER_SAMPLE, held: 0, duty_avg: u0, duty_f: u0, sweep: None, estimate_s: None }
     }
 
-    /// The last estimate, s (at most [`HORIZON_S`]); `None` until a sweep has finished, or
-    /// when the step has no usable model.
+    /// The last estimate, s (at most [`HORIZON_S`]); `None` until the mean duty has settled
+    /// ([`SETTLE_SAMPLES`]) and a sweep has finished, or when the step has no usable model.
     pub fn estimate_s(&self) -> Option<f32> {
         self.estimate_s
     }
@@ -101,14 +121,26 @@ impl Holdover {
         self.duty_avg
     }
 
-    /// One sample: the duty the modules got this sample `duty`; `start`, when no sweep is
-    /// under way: the model and the temperature T₀ to start the next one from (`None` for a
+    /// One sample: the duty the modules got this sample `duty`; `holding`: the controller
+    /// drives (the step's [`crate::step::Mode::Normal`]; otherwise no estimate, and none for
+    /// [`SETTLE_SAMPLES`] samples after); `start`, when no sweep is under way: the model and the temperature T₀ to start the next one from (`None` for a
     /// controller without a model, or an untrusted reading: no sweep starts). Returns the
     /// estimate.
     #[inline(never)]
-    pub fn update(&mut self, duty: f32, start: Option<(&Model, f32)>, ts_s: f32) -> Option<f32> {
+    pub fn update(&mut self, duty: f32, holding: bool, start: Option<(&Model, f32)>, ts_s: f32) -> Option<f32> {
         self.duty_f += DUTY_WEIGHT * (duty - self.duty_f);
         self.duty_avg += DUTY_WEIGHT * (self.duty_f - self.duty_avg);
+        // Nothing rests on a mean that has not settled on a controller holding the load (the
+        // module docs).
+        if !holding {
+            self.held = 0;
+        }
+        if self.held < SETTLE_SAMPLES {
+            self.held += 1;
+            self.sweep = None;
+            self.estimate_s = None;
+            return None;
+        }
         let horizon = (HORIZON_S / ts_s) as u32;
         let mut sweep = match self.sweep {
             Some(s) => s,
@@ -209,11 +241,20 @@ mod tests {
     use super::*;
     extern crate std;
 
+    /// A holdover whose mean duty has settled at `u`.
+    fn settled(u: f32) -> Holdover {
+        let mut h = Holdover::new(u);
+        for _ in 0..SETTLE_SAMPLES {
+            assert_eq!(h.update(u, true, None, 10.0), None);
+        }
+        h
+    }
+
     /// Runs samples at a constant duty and temperature until a sweep publishes.
     fn settle(model: Model, u: f32, t0: f32, ts: f32) -> f32 {
-        let mut h = Holdover::new(u);
+        let mut h = settled(u);
         for _ in 0..100_000 {
-            let e = h.update(u, Some((&model, t0)), ts);
+            let e = h.update(u, true, Some((&model, t0)), ts);
             if h.sweep.is_none() {
                 return e.expect("a finished sweep publishes");
             }
@@ -320,6 +361,41 @@ mod tests {
     }
 
     #[test]
+    fn no_estimate_until_the_mean_duty_has_settled() {
+        // A carrier holding 4 °C at ū = 0.5 whose model passes 8 °C in minutes. The mean
+        // started at 0 (the step's start before) put the model's ambient below 8 °C and showed
+        // the horizon from the first sample; started anywhere, nothing is shown until it has
+        // run SETTLE_SAMPLES samples.
+        let m = Model::second_order([-1.9, 0.905], [-0.05, -0.05], 2).unwrap();
+        let right = settle(m, 0.5, 4.0, 10.0);
+        assert!(right < 3600.0, "{right}");
+        for u0 in [0.0, 1.0] {
+            let mut h = Holdover::new(u0);
+            for n in 1..=SETTLE_SAMPLES {
+                assert_eq!(h.update(0.5, true, Some((&m, 4.0)), 10.0), None, "u0 {u0}, sample {n}");
+                assert!(!h.sweeping());
+            }
+            // Then one sweep: the estimate, within 1.5 % of (1 − ū) of the settled one on ū,
+            // and from the full-duty start never longer.
+            let est = loop {
+                if let Some(e) = h.update(0.5, true, Some((&m, 4.0)), 10.0) {
+                    break e;
+                }
+            };
+            assert!((est - right).abs() <= 0.03 * right, "u0 {u0}: {est} s, settled {right} s");
+            if u0 == 1.0 {
+                assert!(est <= right, "{est} s, settled {right} s");
+            }
+            // A sample the controller does not drive (cooling off: the freeze guard, a sensor
+            // fault; limp home's thermostat): no estimate then nor for SETTLE_SAMPLES after.
+            assert_eq!(h.update(0.0, false, Some((&m, 4.0)), 10.0), None);
+            for n in 1..=SETTLE_SAMPLES {
+                assert_eq!(h.update(0.5, true, Some((&m, 4.0)), 10.0), None, "u0 {u0}, sample {n} after");
+            }
+        }
+    }
+
+    #[test]
     fn limits_horizon_and_unusable_models() {
         let m = Model::second_order([-1.9, 0.905], [-0.05, -0.05], 2).unwrap();
         // Already above the limit: no holdover.
@@ -330,18 +406,18 @@ mod tests {
         assert_eq!(settle(m, u, 4.0, 10.0), HORIZON_S);
         // A heating model, or none, gives no estimate.
         let heat = Model::second_order([-1.9, 0.905], [0.05, 0.05], 2).unwrap();
-        let mut h = Holdover::new(0.5);
-        assert_eq!(h.update(0.5, Some((&heat, 4.0)), 10.0), None);
-        assert_eq!(h.update(0.5, None, 10.0), None);
+        let mut h = settled(0.5);
+        assert_eq!(h.update(0.5, true, Some((&heat, 4.0)), 10.0), None);
+        assert_eq!(h.update(0.5, true, None, 10.0), None);
     }
 
     #[test]
     fn each_sample_runs_a_bounded_number_of_steps() {
         let m = Model::second_order([-1.9, 0.905], [-0.05, -0.05], 2).unwrap();
-        let mut h = Holdover::new(0.5);
-        h.update(0.5, Some((&m, 4.0)), 10.0);
+        let mut h = settled(0.5);
+        h.update(0.5, true, Some((&m, 4.0)), 10.0);
         assert_eq!(h.sweep.map(|s| s.n), Some(STEPS_PER_SAMPLE));
-        h.update(0.5, Some((&m, 4.0)), 10.0);
+        h.update(0.5, true, Some((&m, 4.0)), 10.0);
         assert_eq!(h.sweep.map(|s| s.n), Some(2 * STEPS_PER_SAMPLE));
     }
 }

@@ -32,6 +32,7 @@
 use crate::control::{AdaptiveMode, ControlInput, Controller, ControllerStatus};
 use crate::event::{Event, EventKind, Events};
 use crate::filter::FirstOrder;
+#[cfg(feature = "holdover")]
 use crate::holdover::Holdover;
 use crate::supervisor::{sensor, Supervisor};
 use crate::units::{max_f32, min_f32, Celsius, Duty};
@@ -151,7 +152,9 @@ pub struct Carrier<C: Controller> {
     pending_reset: Option<crate::persist::ResetCause>,
     /// A fail-safe stop of the previous boot to report with the next sample.
     pending_stop: Option<crate::failsafe::StopKind>,
-    #[cfg_attr(not(feature = "holdover"), allow(dead_code))]
+    /// Only in builds with the estimate: the default firmware carries neither its state nor
+    /// its initialisation (≈ 350 B of its flash once the settling count was added).
+    #[cfg(feature = "holdover")]
     holdover: Holdover,
     /// The model the holdover runs on (the commissioned one); without it, no estimate.
     holdover_model: Option<crate::model::Model>,
@@ -171,7 +174,10 @@ impl<C: Controller> Carrier<C> {
             adaptive_mode: None,
             pending_reset: None,
             pending_stop: None,
-            holdover: Holdover::new(0.0),
+            #[cfg(feature = "holdover")]
+            // The mean duty starts at full duty: until it settles it errs on the short side
+            // ([`crate::holdover`]).
+            holdover: Holdover::new(1.0),
             holdover_model: None,
         }
     }
@@ -369,7 +375,7 @@ impl<C: Controller> Carrier<C> {
         if trusted {
             self.controller.track(&ci, verdict.duty.get());
         }
-        let holdover_s = self.holdover(verdict.duty.get(), verdict.supply_enable, trusted, temp_c);
+        let holdover_s = self.holdover(verdict.duty.get(), verdict.supply_enable, verdict.mode, trusted, temp_c);
         StepOutput {
             raw_c: reading.raw_c,
             temp_c: Celsius(temp_c),
@@ -387,19 +393,24 @@ impl<C: Controller> Carrier<C> {
 
     /// The holdover estimate after this sample's actuation ([`crate::holdover`]).
     #[cfg(feature = "holdover")]
-    fn holdover(&mut self, duty: f32, supply_enable: bool, trusted: bool, temp_c: f32) -> Option<f32> {
+    fn holdover(&mut self, duty: f32, supply_enable: bool, mode: Mode, trusted: bool, temp_c: f32) -> Option<f32> {
         // What the modules got: nothing with the supply switch open.
         let applied = if supply_enable { duty } else { 0.0 };
         let start = match self.holdover.sweeping() {
             false if trusted => self.holdover_model.as_ref().map(|m| (m, temp_c)),
             _ => None,
         };
-        self.holdover.update(applied, start, self.cfg.ts_s)
+        // Only a controller holding the load gives the mean duty a meaning: a sensor fault or
+        // the freeze guard stops cooling, limp home's thermostat cycles full cooling on a
+        // cycle longer than the mean's memory (`hter sim --scenario power-cut --fault
+        // ssr-stuck-on@1800 --ambient 15`: the horizon for 12 minutes after limp home began,
+        // then 826–1539 s with the cycle against the 1360 s the load took).
+        self.holdover.update(applied, mode == Mode::Normal, start, self.cfg.ts_s)
     }
 
     /// Without the `holdover` feature: no estimate.
     #[cfg(not(feature = "holdover"))]
-    fn holdover(&mut self, _duty: f32, _supply_enable: bool, _trusted: bool, _temp_c: f32) -> Option<f32> {
+    fn holdover(&mut self, _duty: f32, _supply_enable: bool, _mode: Mode, _trusted: bool, _temp_c: f32) -> Option<f32> {
         None
     }
 

@@ -148,3 +148,32 @@ fn commissioned_with_the_boards_rule_h_ter_ii_is_within_15_percent_at_both_loads
         commissioned(SignRule::EveryCoefficient),
     );
 }
+
+/// After a brown-out's restart (a fresh step, as at every boot) the step shows no estimate until
+/// its mean duty has settled ([`hter::holdover::SETTLE_SAMPLES`] samples of `None`; the mean
+/// started at 0 gave the 48 h horizon there); settled, the estimate is minutes again and the one
+/// at the cut as right as without the restart.
+#[test]
+fn no_estimate_until_the_mean_duty_has_settled_after_a_boot_or_a_brownout() {
+    use hal_sim::fault::Fault;
+    use hter::holdover::{HORIZON_S, SETTLE_SAMPLES};
+    let settle = SETTLE_SAMPLES as usize;
+    let brownout_s = 1800.0;
+    let opts = SimOptions {
+        faults: vec![(brownout_s, Fault::Brownout)],
+        ..SimOptions::new(Scenario::resolve("power-cut").unwrap(), ControllerSpec::new(ControllerChoice::Gpc))
+    };
+    let out = run(&opts).unwrap();
+    let before_cut: Vec<(f64, Option<f64>)> =
+        out.rows.iter().take_while(|r| r.t_s < 7200.0).map(|r| (r.t_s, r.holdover_s)).collect();
+    assert!(before_cut.iter().all(|(_, h)| *h != Some(f64::from(HORIZON_S))), "the horizon shown while holding");
+    let restart = before_cut.iter().position(|(t, _)| *t >= brownout_s).unwrap();
+    let after: Vec<Option<f64>> = before_cut[restart..].iter().map(|(_, h)| *h).collect();
+    assert!(after[..settle].iter().all(Option::is_none), "an estimate before the mean settled: {:?}", &after[..settle]);
+    let first = after.iter().position(Option::is_some).expect("an estimate once settled");
+    assert!(first < settle + 20, "the first estimate only {first} samples after the restart");
+    assert!(after[first..].iter().all(|h| h.is_some_and(|h| (60.0..3600.0).contains(&h))), "{:?}", &after[first..]);
+    let h = out.metrics.holdover.unwrap();
+    let (predicted, actual) = (h.predicted_s.unwrap(), h.actual_s.unwrap());
+    assert!(((predicted - actual) / actual).abs() <= TOLERANCE, "{predicted} vs {actual} s");
+}
