@@ -172,16 +172,21 @@ fn status_has_every_field_of_the_contract_in_order() {
     assert_eq!(b.app.carrier().holdover_model(), Some(profile::START_MODEL_HTER1));
 }
 
+/// A bench booted with the PI, which holds this crude plant steadily.
+fn bench_under_pi() -> Bench {
+    Bench::new(&Boot {
+        settings: Some(SettingsRecord { law: Law::Pi, ..App::new(config(), &boot()).settings }),
+        ..boot()
+    })
+}
+
 #[test]
 #[cfg(feature = "holdover")]
 fn status_shows_no_holdover_until_the_mean_duty_has_settled_after_boot() {
     // Holding 4 °C from the first sample: the mean duty started at 0 showed 172800 (48 h, the
     // horizon) for the first ≈ 10 minutes, then thousands of seconds. Now `-` until the mean has
     // settled, then the estimate, minutes.
-    let mut b = Bench::new(&Boot {
-        settings: Some(SettingsRecord { law: Law::Pi, ..App::new(config(), &boot()).settings }),
-        ..boot()
-    });
+    let mut b = bench_under_pi();
     for n in 1..=crate::holdover::SETTLE_SAMPLES {
         b.run(1);
         assert_eq!(b.field("holdover_s"), "-", "sample {n}");
@@ -200,10 +205,7 @@ fn status_shows_no_holdover_until_the_mean_duty_has_settled_after_boot() {
 fn status_shows_the_holdover_estimate_as_a_number_that_follows_the_stored_model() {
     // Under the PI, which holds this crude plant steadily (the estimate runs on the stored
     // model whatever law drives).
-    let mut b = Bench::new(&Boot {
-        settings: Some(SettingsRecord { law: Law::Pi, ..App::new(config(), &boot()).settings }),
-        ..boot()
-    });
+    let mut b = bench_under_pi();
     // Holding 4 °C for 25 min: the mean duty has settled, sweeps have finished (and this
     // noiseless bench's readings do not yet repeat long enough to look stuck: a sensor fault,
     // no estimate then nor for 15 minutes after).
@@ -232,10 +234,7 @@ fn status_shows_the_holdover_estimate_as_a_number_that_follows_the_stored_model(
 fn an_accepted_setpoint_is_used_stored_and_logged_and_the_load_follows() {
     // Under the PI: the self-tuners follow on the physical plant (tests/virtual_board.rs); this
     // plant is too crude for their start model.
-    let mut b = Bench::new(&Boot {
-        settings: Some(SettingsRecord { law: Law::Pi, ..App::new(config(), &boot()).settings }),
-        ..boot()
-    });
+    let mut b = bench_under_pi();
     b.run(60);
     assert_eq!(b.send("set setpoint_c 5"), "ok\r\n");
     assert_eq!(b.settings_saves(), 1);
@@ -354,15 +353,22 @@ fn run_against_truth(b: &mut Bench, samples: usize) -> (f32, f32, Vec<EventKind>
     (raw, filtered, events)
 }
 
+/// A bench whose counts alternate by one (the stuck check never sees a repeat), switched to the
+/// PI and run for an hour (360 samples) holding 4 °C.
+fn holding_with_dither() -> Bench {
+    let mut b = Bench::new(&boot());
+    b.dither = true;
+    assert_eq!(b.send("set controller pi"), "ok\r\n");
+    b.run(360);
+    b
+}
+
 #[test]
 fn a_calibration_change_moves_the_reading_by_its_change_and_is_no_sensor_offset() {
     // `hter virtual-board` at 4 °C: `set cal_ice 0.0,1.4` was accepted, then the offset watch
     // took the reading's step for a sensor offset, subtracted it (temp_c stayed 4.00) and
     // raised `sensor_offset` with an alarm.
-    let mut b = Bench::new(&boot());
-    b.dither = true;
-    assert_eq!(b.send("set controller pi"), "ok\r\n");
-    b.run(360);
+    let mut b = holding_with_dither();
     let before = b.run(1).step.temp_c.0;
     let old = line(&b);
     assert_eq!(b.send("set cal_ice 0.0,1.4"), "ok\r\n");
@@ -383,10 +389,7 @@ fn alternating_calibration_changes_cannot_add_up_an_offset() {
     // The bug hunt's pairs (`set cal_ice 0.0,1.4`, `set cal_ice 0,0`, 36 and 48 samples apart
     // at --speed 600) left the board reading 4.00 °C for ≈ 9 h with the load at ≈ 9 °C; here
     // every spacing from one sample to the offset watch's confirmation and beyond.
-    let mut b = Bench::new(&boot());
-    b.dither = true;
-    assert_eq!(b.send("set controller pi"), "ok\r\n");
-    b.run(360);
+    let mut b = holding_with_dither();
     let mut all = Vec::new();
     for k in 0..40 {
         let (ice, wait) = if k % 2 == 0 { ("0.0,1.4", 1 + k % 7) } else { ("0,0", 1 + (k / 2) % 5) };
