@@ -483,6 +483,22 @@ pub fn run_on<P: Read + Write>(b: &mut Board<P>, cmd: &BoardCommand) -> Result<(
     Ok(())
 }
 
+/// Why the port could not be opened, in one line. serialport's "Unable to acquire exclusive
+/// lock on serial port" means another client holds it: most often a `hter board identify`
+/// still following a commissioning (hours on a board), which the user must stop to reach the
+/// board, and may, since the commissioning runs on the board.
+fn open_error(port: &str, why: &str) -> String {
+    if why.contains("exclusive lock") {
+        format!(
+            "cannot open '{port}': another program has it open (a 'hter board identify' still following a \
+             commissioning? Ctrl-C stops it, the commissioning goes on on the board; 'hter board --port {port} \
+             identify --abort' then stops that)"
+        )
+    } else {
+        format!("cannot open '{port}': {why}")
+    }
+}
+
 /// `hter board`.
 pub fn run(args: &BoardArgs) -> Result<()> {
     if !args.timeout.is_finite() || args.timeout <= 0.0 || args.timeout > 3600.0 {
@@ -496,8 +512,8 @@ pub fn run(args: &BoardArgs) -> Result<()> {
         .flow_control(serialport::FlowControl::None)
         .timeout(Duration::from_secs_f64(args.timeout))
         .open()
-        .map_err(|e| anyhow!("cannot open '{}': {}", args.port, e.description))?;
-    let opened = |e: serialport::Error| anyhow!("cannot open '{}': {}", args.port, e.description);
+        .map_err(|e| anyhow!("{}", open_error(&args.port, &e.description)))?;
+    let opened = |e: serialport::Error| anyhow!("{}", open_error(&args.port, &e.description));
     // Bytes from before this connection (the rest of a reply a killed client never read, a
     // person's typing) are not ours: drop what is buffered, then what still arrives until the
     // line is quiet (a board that is still streaming stops at our request; docs/interface.md).
@@ -654,6 +670,17 @@ mod tests {
         assert!(e.contains("no 't_s'"), "{e}");
         assert!(parse_kv(&["t_s=1".into(), "t_s=2".into()]).unwrap_err().to_string().contains("twice"));
         assert!(parse_kv(&["hello".into()]).unwrap_err().to_string().contains("not key=value"));
+    }
+
+    #[test]
+    fn a_port_another_client_holds_says_who_may_hold_it_and_what_to_do() {
+        let e = open_error("/dev/ttyACM0", "Unable to acquire exclusive lock on serial port");
+        assert!(e.contains("another program has it open") && e.contains("identify --abort"), "{e}");
+        assert!(!e.contains('\n'));
+        assert_eq!(
+            open_error("/dev/x", "No such file or directory"),
+            "cannot open '/dev/x': No such file or directory"
+        );
     }
 
     #[test]
