@@ -5,6 +5,7 @@
 use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
+use hter::rtd::{T_MAX_C, T_MIN_C};
 
 /// Reads the named columns of a CSV log, in the order asked. Rows must have finite numbers in
 /// those columns; an empty cell (a sensor-fault row of `hter log2csv`) is refused with its line.
@@ -105,6 +106,17 @@ pub fn check_increasing(path: &Path, t: &[f64]) -> Result<()> {
         bail!("'{}' line {}: t_s = {} does not increase (previous {})", path.display(), i + 3, t[i + 1], t[i]);
     }
     Ok(())
+}
+
+/// Why `c` is no temperature the carrier's Pt100 can report (IEC 60751, [`T_MIN_C`]…[`T_MAX_C`]):
+/// in a log, anything outside that is corruption, not a reading. `None` when it is one.
+pub fn outside_pt100(c: f64) -> Option<String> {
+    (!(f64::from(T_MIN_C)..=f64::from(T_MAX_C)).contains(&c)).then(|| {
+        format!(
+            "{} °C is outside what a Pt100 can report (IEC 60751: {T_MIN_C}…{T_MAX_C} °C)",
+            crate::sim_cmd::shown(c)
+        )
+    })
 }
 
 /// Opens a log to read; a directory is refused by name (opened, it failed only at the first

@@ -213,9 +213,8 @@ pub fn parse_line(line: &str) -> Option<Result<Sample>> {
         // reading; a number too long for an f64 is a corrupt line, not a fault.
         let temp_c = match any("temp", temp)? {
             c if c.is_finite() => {
-                if !(f64::from(T_MIN_C)..=f64::from(T_MAX_C)).contains(&c) {
-                    let c = crate::sim_cmd::shown(c);
-                    bail!("temp = {c} °C is outside what a Pt100 can report (IEC 60751: {T_MIN_C}…{T_MAX_C} °C)");
+                if let Some(why) = crate::log::outside_pt100(c) {
+                    bail!("temp = {why}");
                 }
                 Some(c)
             }

@@ -6,7 +6,6 @@ use std::path::PathBuf;
 use anyhow::{anyhow, bail, Context, Result};
 use hter::coldchain::{AlarmKind, ColdChainMonitor};
 use hter::persist::log::INTERVAL_S as INTERVAL_S_U32;
-use hter::rtd::{T_MAX_C, T_MIN_C};
 use hter::step::Mode;
 
 /// A board history's interval, s.
@@ -247,7 +246,7 @@ pub struct Input {
 /// strictly increase and no row may go back in time.
 ///
 /// A sample's temperature must lie in the range the carrier's Pt100 can report (IEC 60751,
-/// [`T_MIN_C`]…[`T_MAX_C`]): anything else is a corrupt log, not a reading. Unchecked, 1e39 °C
+/// [`crate::log::outside_pt100`]): anything else is a corrupt log, not a reading. Unchecked, 1e39 °C
 /// became infinite in the library monitor's f32 and was dropped, so `report` said "IN RANGE"
 /// over a day table showing hours above 8 °C, and −500 °C gave no mean kinetic temperature.
 pub fn read_input(path: &std::path::Path) -> Result<Input> {
@@ -304,11 +303,8 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
         // On a sensor fault the board holds its last good reading: the row's temperature is
         // not a measurement, and the time is not known to be in range.
         let c = c.filter(|_| cell(&mode_col, i).as_deref() != Some(Mode::SensorFault.name()));
-        if let Some(c) = c.filter(|c| !(f64::from(T_MIN_C)..=f64::from(T_MAX_C)).contains(c)) {
-            bail!(
-                "'{shown}' line {line}, column 'temp_c': {} °C is outside what a Pt100 can report (IEC 60751: {T_MIN_C}…{T_MAX_C} °C)",
-                crate::sim_cmd::shown(c)
-            );
+        if let Some(why) = c.and_then(log::outside_pt100) {
+            bail!("'{shown}' line {line}, column 'temp_c': {why}");
         }
         let span = extremes.as_ref().filter(|_| c.is_some()).map_or(Ok(None), |(lo, hi)| {
             extremes_of(lo.get(i).copied().flatten(), hi.get(i).copied().flatten(), c)
@@ -341,7 +337,6 @@ const MEAN_SLACK_C: f64 = 0.01;
 /// with no reading), each a temperature a Pt100 can report, `min_c ≤ max_c`, the mean between
 /// them.
 fn extremes_of(lo: Option<f64>, hi: Option<f64>, mean: Option<f64>) -> Result<Option<(f64, f64)>> {
-    let pt100 = f64::from(T_MIN_C)..=f64::from(T_MAX_C);
     let (lo, hi) = match (lo, hi) {
         (None, None) => return Ok(None),
         (Some(lo), Some(hi)) => (lo, hi),
@@ -349,11 +344,8 @@ fn extremes_of(lo: Option<f64>, hi: Option<f64>, mean: Option<f64>) -> Result<Op
         (None, Some(_)) => bail!("'max_c' without 'min_c'"),
     };
     for (name, v) in [("min_c", lo), ("max_c", hi)] {
-        if !pt100.contains(&v) {
-            bail!(
-                "column '{name}': {} °C is outside what a Pt100 can report (IEC 60751: {T_MIN_C}…{T_MAX_C} °C)",
-                crate::sim_cmd::shown(v)
-            );
+        if let Some(why) = log::outside_pt100(v) {
+            bail!("column '{name}': {why}");
         }
     }
     if lo > hi {
