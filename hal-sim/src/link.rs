@@ -8,6 +8,12 @@
 //! nothing else: [`PtyLink::poll_line`] gives complete request lines, answers malformed lines
 //! itself with `err line: …`, and [`PtyLink::send`] queues a reply with `\r\n` line ends.
 //!
+//! In order. The board frames and answers one line at a time, so its replies come in the order
+//! of the lines, however many came in one write. The link keeps what it read in that order, the
+//! requests and the refusals of malformed lines alike, and sends a refusal only once the lines
+//! before it have been handed out (and answered: the caller sends each reply before it polls
+//! again).
+//!
 //! Between clients. The link keeps its own descriptor of the slave open for its whole life.
 //! Without it, the master would read EIO and poll as hung up whenever no client has the port
 //! open. With it, two facts about Linux ptys need handling:
@@ -54,7 +60,7 @@ pub struct PtyLink {
     device: PathBuf,
     path: PathBuf,
     framer: LineFramer,
-    lines: VecDeque<String>,
+    received: VecDeque<Received>,
     out: VecDeque<u8>,
     dropped_bytes: u64,
 }
@@ -105,7 +111,7 @@ impl PtyLink {
             device,
             path: path.to_path_buf(),
             framer: LineFramer::new(),
-            lines: VecDeque::new(),
+            received: VecDeque::new(),
             out: VecDeque::new(),
             dropped_bytes: 0,
         })
@@ -132,8 +138,9 @@ impl PtyLink {
     }
 
     /// Waits up to `timeout` for a complete request line and returns it (trimmed, never
-    /// empty), or `None` if none came (or a signal arrived first). Meanwhile it sends queued output and answers malformed
-    /// lines (`err line: …`) itself. `Duration::ZERO` only looks.
+    /// empty), or `None` if none came (or a signal arrived first). Meanwhile it sends queued
+    /// output and answers malformed lines (`err line: …`) itself, each in its turn: after the
+    /// lines received before it were returned. `Duration::ZERO` only looks.
     pub fn poll_line(&mut self, timeout: Duration) -> io::Result<Option<String>> {
         // A crashed client's TIOCEXCL (module docs); harmless when not set. Not serialport's
         // `set_exclusive(false)`: that also takes a shared flock, which would lock clients out.
@@ -142,8 +149,11 @@ impl PtyLink {
         self.flush_out()?;
         let deadline = Instant::now() + timeout;
         loop {
-            if let Some(line) = self.lines.pop_front() {
-                return Ok(Some(line));
+            while let Some(r) = self.received.pop_front() {
+                match r {
+                    Received::Line(line) => return Ok(Some(line)),
+                    Received::Refused(why) => self.send(why)?,
+                }
             }
             let left = deadline.saturating_duration_since(Instant::now());
             let ready = wait(&self.master, !self.out.is_empty(), left)?;
@@ -162,7 +172,7 @@ impl PtyLink {
             if ready.readable {
                 self.read_in()?;
             }
-            if self.lines.is_empty() && Instant::now() >= deadline {
+            if self.received.is_empty() && Instant::now() >= deadline {
                 return Ok(None);
             }
         }
@@ -220,23 +230,31 @@ impl PtyLink {
                 Err(e) => return Err(e),
             };
             for &b in buf.iter().take(n) {
-                let (line, error) = match self.framer.push(b) {
+                let received = match self.framer.push(b) {
                     None => continue,
-                    Some(Frame::Line(l)) => (Some(l.to_string()), None),
-                    Some(f) => (None, f.error()),
+                    Some(Frame::Line(l)) => {
+                        // A new request supersedes what is left of the previous reply.
+                        self.dropped_bytes += self.out.len() as u64;
+                        self.out.clear();
+                        Received::Line(l.to_string())
+                    }
+                    Some(f) => match f.error() {
+                        Some(why) => Received::Refused(why),
+                        None => continue,
+                    },
                 };
-                if let Some(l) = line {
-                    // A new request supersedes what is left of the previous reply.
-                    self.dropped_bytes += self.out.len() as u64;
-                    self.out.clear();
-                    self.lines.push_back(l);
-                }
-                if let Some(e) = error {
-                    self.send(e)?;
-                }
+                self.received.push_back(received);
             }
         }
     }
+}
+
+/// What a line of input came to, kept in the order received.
+enum Received {
+    /// A request, for the caller.
+    Line(String),
+    /// A malformed line's refusal, which the link sends itself.
+    Refused(&'static str),
 }
 
 impl Drop for PtyLink {
@@ -377,6 +395,36 @@ mod tests {
             text.push_str(std::str::from_utf8(&buf[..n]).unwrap());
         }
         assert_eq!(text, format!("{}\r\n", Frame::TooLong.error().unwrap()));
+    }
+
+    /// Lines in one write, malformed ones among them: each is answered in its turn, as the
+    /// board does (it frames and answers one line at a time); the refusal of a malformed line
+    /// went out as soon as it was read, ahead of the replies to the lines before it.
+    #[test]
+    fn malformed_lines_are_refused_in_their_turn() {
+        let path = tmp_path("order");
+        let mut link = PtyLink::open(&path).unwrap();
+        let mut port =
+            serialport::new(path.to_string_lossy(), 115_200).timeout(Duration::from_secs(5)).open_native().unwrap();
+        port.write_all(b"get\n\x01\nhelp\nx\ty\n").unwrap();
+        let mut heard = Vec::new();
+        while heard.len() < 2 {
+            if let Some(l) = link.poll_line(Duration::from_millis(50)).unwrap() {
+                link.send(&format!("{l}=1\nok")).unwrap();
+                heard.push(l);
+            }
+        }
+        // The refusal after the last line goes out at the next poll.
+        assert_eq!(link.poll_line(Duration::ZERO).unwrap(), None);
+        let refused = Frame::NotPrintable.error().unwrap();
+        let want = format!("get=1\r\nok\r\n{refused}\r\nhelp=1\r\nok\r\n{refused}\r\n");
+        let mut text = String::new();
+        let mut buf = [0u8; 256];
+        while text.len() < want.len() {
+            let n = port.read(&mut buf).expect("reply");
+            text.push_str(std::str::from_utf8(&buf[..n]).unwrap());
+        }
+        assert_eq!((heard, text), (vec!["get".to_string(), "help".to_string()], want));
     }
 
     #[test]

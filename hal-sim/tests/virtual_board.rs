@@ -378,3 +378,43 @@ fn a_brown_out_two_hours_in_restarts_from_the_learnt_model() {
     }
     assert!(lo > 3.85 && hi < 4.15, "the hour after the restart: {lo:.2}…{hi:.2} °C");
 }
+
+/// Several requests in one write, malformed ones among them: the board frames and answers one
+/// line at a time, so each reply comes in the order of its line. The virtual board sent the
+/// refusal of a line as soon as it read it, ahead of the replies to the lines before it.
+#[test]
+fn lines_sent_in_one_write_are_answered_in_order() {
+    use std::io::{Read, Write};
+    let b = Board::start("order", &[]);
+    let mut port = serialport::new(b.port(), 115_200).timeout(Duration::from_secs(20)).open_native().unwrap();
+    let long = "z".repeat(hter::iface::MAX_LINE + 1);
+    port.write_all(format!("get\n\x01\nhelp\n{long}\nstatus\r\nx\ty\n").as_bytes()).unwrap();
+    // Six lines, six final lines (`ok` or `err …`).
+    let finals = |t: &str| t.lines().filter(|l| *l == "ok" || l.starts_with("err ")).count();
+    let mut text = String::new();
+    let mut buf = [0u8; 4096];
+    while finals(&text) < 6 || !text.ends_with('\n') {
+        let n = port.read(&mut buf).expect("the replies within 20 s");
+        text.push_str(std::str::from_utf8(&buf[..n]).unwrap());
+    }
+    // Each reply as (the key or text of its first line, its final line).
+    let mut replies = Vec::new();
+    let mut first: Option<String> = None;
+    for l in text.lines() {
+        let head = first.get_or_insert_with(|| l.split('=').next().unwrap_or(l).to_string()).clone();
+        if l == "ok" || l.starts_with("err ") {
+            replies.push((head, l.to_string()));
+            first = None;
+        }
+    }
+    let not_printable = "err line: a byte outside printable ASCII";
+    let too_long = "err line: too long (at most 96 bytes)";
+    let got: Vec<(&str, &str)> = replies.iter().map(|(a, b)| (a.as_str(), b.as_str())).collect();
+    assert_eq!(got.len(), 6, "{text}");
+    assert_eq!(got[0], ("setpoint_c", "ok"), "get first: {text}");
+    assert_eq!(got[1], (not_printable, not_printable), "{text}");
+    assert_eq!(got[2].1, "ok", "help: {text}");
+    assert_eq!(got[3], (too_long, too_long), "{text}");
+    assert_eq!(got[4], ("t_s", "ok"), "status: {text}");
+    assert_eq!(got[5], (not_printable, not_printable), "{text}");
+}
