@@ -5,10 +5,18 @@
 //!
 //! [`Board`] speaks the protocol over anything `Read + Write` (tested on scripted bytes);
 //! [`status_json`] maps `status`'s `key=value` lines to typed JSON; [`run`] is the command.
+//!
+//! Sharing the port. A client has the port to itself (serialport's `TIOCEXCL` and `flock`) while
+//! it has it open, so each command holds it only for its request: one that finds it held waits
+//! up to `--timeout` for it. `identify` follows a commissioning for hours (≈ 6 h on a board)
+//! with [`follow`]: it opens the port for each look at `status` ([`POLL`] apart) and closes it in
+//! between, so an engineer can check the status, acknowledge an alarm or save the record
+//! meanwhile; a look that finds the port held is skipped, and the watch gives up only when the
+//! board has not answered for [`LOST_TIMEOUTS`] × `--timeout` (unplugged, stopped).
 
 use std::io::{IsTerminal, Read, Write};
 use std::path::{Path, PathBuf};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
 use serde_json::{Map, Number, Value};
@@ -26,6 +34,16 @@ const MAX_REPLY_BYTES: usize = 64 << 20;
 const QUIET: Duration = Duration::from_millis(50);
 /// Longest drain of stale input: a board still streaming an old reply stops at our request.
 const MAX_DRAIN: Duration = Duration::from_secs(2);
+/// Wait between attempts to open a port another client holds: its request takes tens of ms.
+const BUSY_RETRY: Duration = Duration::from_millis(50);
+
+/// How often `identify` looks at the commissioning's progress (each look holds the port for
+/// ≈ 60 ms: the drain's quiet time and the `status` reply).
+pub const POLL: Duration = Duration::from_secs(1);
+/// `identify` stops following when the board has not answered for this many `--timeout` (30 s
+/// by default): a USB cable reseated or the ST-LINK's port re-enumerated is back within seconds;
+/// a board unplugged or switched off is reported instead of waited for in silence.
+pub const LOST_TIMEOUTS: f64 = 6.0;
 
 /// Arguments of `hter board`.
 #[derive(clap::Args, Debug)]
@@ -33,7 +51,8 @@ pub struct BoardArgs {
     /// Serial device: the board's port (e.g. /dev/ttyACM0) or the path of `hter virtual-board --link`.
     #[arg(long)]
     pub port: String,
-    /// Longest wait for the board's next byte, s.
+    /// Longest wait for the board's next byte, and for the port while another client has it,
+    /// s; `identify` stops following after six times this without an answer.
     #[arg(long, default_value_t = 5.0, allow_hyphen_values = true)]
     pub timeout: f64,
     /// The request.
@@ -73,7 +92,8 @@ pub enum BoardCommand {
         since: Option<f64>,
     },
     /// Start on-board commissioning (rest, PRBS, fit, check, store) and follow its progress
-    /// until it ends (Ctrl-C stops watching; the board carries on).
+    /// until it ends (Ctrl-C stops watching; the board carries on). The port is opened for each
+    /// look only: other commands get through meanwhile.
     Identify {
         /// Start it and return at once.
         #[arg(long)]
@@ -96,6 +116,19 @@ pub fn check_request(line: &str) -> Result<()> {
     Ok(())
 }
 
+/// The connection failed (a write, a read, no reply in time), as opposed to the board refusing
+/// a request: the watch of `identify` looks again at its next poll.
+#[derive(Debug)]
+pub struct LinkError(pub String);
+
+impl std::fmt::Display for LinkError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for LinkError {}
+
 /// One conversation with a board over `port`.
 pub struct Board<P> {
     port: P,
@@ -111,7 +144,8 @@ impl<P: Read + Write> Board<P> {
     }
 
     /// Sends `line` and reads the reply: its data lines if it ends in `ok`; an error whose
-    /// message is the board's `err …` line, verbatim, if it ends in `err`.
+    /// message is the board's `err …` line, verbatim, if it ends in `err`; a [`LinkError`] if
+    /// the connection failed.
     pub fn request(&mut self, line: &str) -> Result<Vec<String>> {
         check_request(line)?;
         // Ctrl-U first: it drops whatever a client that went away mid-line left in the board's
@@ -119,7 +153,7 @@ impl<P: Read + Write> Board<P> {
         self.port
             .write_all(format!("{}{line}\n", char::from(hter::iface::line::LINE_KILL)).as_bytes())
             .and_then(|()| self.port.flush())
-            .with_context(|| format!("cannot write to '{}'", self.name))?;
+            .map_err(|e| LinkError(format!("cannot write to '{}': {e}", self.name)))?;
         let mut data = Vec::new();
         let mut bytes = 0usize;
         loop {
@@ -150,17 +184,20 @@ impl<P: Read + Write> Board<P> {
                 return Ok(text.trim_end().to_string());
             }
             let mut chunk = [0u8; 4096];
-            match self.port.read(&mut chunk) {
-                Ok(0) => bail!("'{}' closed the connection in the middle of the reply to '{request}'", self.name),
-                Ok(n) => self.buf.extend_from_slice(chunk.get(..n).unwrap_or_default()),
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => bail!(
+            let failed = match self.port.read(&mut chunk) {
+                Ok(0) => format!("'{}' closed the connection in the middle of the reply to '{request}'", self.name),
+                Ok(n) => {
+                    self.buf.extend_from_slice(chunk.get(..n).unwrap_or_default());
+                    continue;
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => format!(
                     "no reply from '{}' to '{request}' within {} s (is it the board, and is nothing else using the port?)",
-                    self.name,
-                    self.timeout_s
+                    self.name, self.timeout_s
                 ),
-                Err(e) => bail!("cannot read '{}': {e}", self.name),
-            }
+                Err(e) => format!("cannot read '{}': {e}", self.name),
+            };
+            return Err(LinkError(failed).into());
         }
     }
 }
@@ -299,14 +336,53 @@ fn field<'a>(kv: &'a [(String, String)], key: &str) -> Result<&'a str> {
         .ok_or_else(|| anyhow!("the board's status has no '{key}'"))
 }
 
-fn identify<P: Read + Write>(b: &mut Board<P>, no_wait: bool) -> Result<()> {
-    for l in b.request("identify")? {
-        println!("{l}");
+/// What one look at the board during `identify`'s watch came to.
+#[derive(Debug)]
+pub enum Poll {
+    /// The board's status, `key=value` pairs in order.
+    Status(Vec<(String, String)>),
+    /// Another client has the port now: look again at the next poll.
+    Busy,
+    /// No answer (the port is gone, or nothing answers on it): why, in one line.
+    NoAnswer(String),
+}
+
+/// How [`follow`] paces itself.
+#[derive(Clone, Copy, Debug)]
+pub struct Watch {
+    /// Between two looks.
+    pub every: Duration,
+    /// Without an answer for this long (looks at a busy port count as reaching it), it gives up.
+    pub lost_after: Duration,
+}
+
+/// One look at `status` for the watch, on a connection of its own, closed before it returns. A
+/// port held by another client is waited for until the next look is due (commands run back
+/// to back from another shell would otherwise have it at most looks).
+fn poll_status(port: &str, timeout_s: f64) -> Result<Poll> {
+    let p = match open_waiting(port, timeout_s, POLL) {
+        Ok(p) => p,
+        Err(e) if busy(&e) => return Ok(Poll::Busy),
+        Err(e) => return Ok(Poll::NoAnswer(format!("cannot open '{port}': {}", e.description))),
+    };
+    match Board::new(p, port, timeout_s).request("status") {
+        Ok(lines) => Ok(Poll::Status(parse_kv(&lines)?)),
+        Err(e) if e.is::<LinkError>() => Ok(Poll::NoAnswer(e.to_string())),
+        Err(e) => Err(e),
     }
-    if no_wait {
-        println!("commissioning started; follow it with 'hter board --port {} status'", b.name);
-        return Ok(());
-    }
+}
+
+/// Seconds as a person reads them: to a tenth, without a trailing `.0`.
+fn secs(d: Duration) -> String {
+    format!("{}", (d.as_secs_f64() * 10.0).round() / 10.0)
+}
+
+/// Follows a commissioning the board has accepted until it ends, looking with `poll` every
+/// `watch.every`: progress on stderr as a bar on a terminal, else one line per new state on
+/// stdout. Gives the final status when it is done; an error in one line when it failed, is not
+/// running, or the board did not answer for `watch.lost_after`. A look at a port another client
+/// holds is skipped; one without an answer is tried again until then.
+pub fn follow(watch: &Watch, port: &str, mut poll: impl FnMut() -> Result<Poll>) -> Result<Vec<(String, String)>> {
     let bar = if std::io::stderr().is_terminal() {
         let pb = indicatif::ProgressBar::new(100);
         pb.set_style(
@@ -317,12 +393,48 @@ fn identify<P: Read + Write>(b: &mut Board<P>, no_wait: bool) -> Result<()> {
     } else {
         None
     };
+    let give_up = |why: String| {
+        bar.as_ref().map(indicatif::ProgressBar::abandon);
+        anyhow!("{why}")
+    };
     let (mut last, mut idle) = (String::new(), 0u32);
-    let kv = loop {
-        std::thread::sleep(Duration::from_secs(1));
-        let kv = status_kv(b)?;
-        let value = field(&kv, "commissioning")?.to_string();
-        let state = Commissioning::parse(&value)?;
+    // The last look that reached the port, and since when it has been held by another client.
+    let (mut reached, mut held_since, mut held_said) = (Instant::now(), None::<Instant>, false);
+    loop {
+        std::thread::sleep(watch.every);
+        let kv = match poll().map_err(|e| give_up(e.to_string()))? {
+            Poll::Status(kv) => kv,
+            Poll::Busy => {
+                reached = Instant::now();
+                let since = *held_since.get_or_insert(reached);
+                if !held_said && since.elapsed() >= watch.lost_after {
+                    let note = format!(
+                        "'{port}' has been held by another program for {} s; following again when it is free",
+                        secs(since.elapsed())
+                    );
+                    match &bar {
+                        Some(pb) => pb.println(note),
+                        None => eprintln!("{note}"),
+                    }
+                    held_said = true;
+                }
+                continue;
+            }
+            Poll::NoAnswer(why) => {
+                held_since = None;
+                if reached.elapsed() >= watch.lost_after {
+                    return Err(give_up(format!(
+                        "no answer from the board for {} s ({why}); stopped following the commissioning, which \
+                         goes on on the board while it has power: 'hter board --port {port} status' shows it",
+                        secs(watch.lost_after)
+                    )));
+                }
+                continue;
+            }
+        };
+        (reached, held_since, held_said) = (Instant::now(), None, false);
+        let value = field(&kv, "commissioning").map_err(|e| give_up(e.to_string()))?.to_string();
+        let state = Commissioning::parse(&value).map_err(|e| give_up(e.to_string()))?;
         match (&state, &bar) {
             (Commissioning::Running(phase, pct), Some(pb)) => {
                 pb.set_message(phase.clone());
@@ -337,21 +449,23 @@ fn identify<P: Read + Write>(b: &mut Board<P>, no_wait: bool) -> Result<()> {
             Commissioning::Idle => {
                 idle += 1;
                 if idle >= IDLE_POLLS {
-                    bar.as_ref().map(indicatif::ProgressBar::abandon);
-                    bail!("commissioning is not running (the board says idle)");
+                    return Err(give_up("commissioning is not running (the board says idle)".into()));
                 }
             }
-            Commissioning::Done => break kv,
+            Commissioning::Done => {
+                bar.as_ref().map(indicatif::ProgressBar::finish_and_clear);
+                return Ok(kv);
+            }
             Commissioning::Failed(why) => {
-                bar.as_ref().map(indicatif::ProgressBar::abandon);
-                bail!("commissioning failed: {why} (the previous model stays)");
+                return Err(give_up(format!("commissioning failed: {why} (the previous model stays)")));
             }
         }
-    };
-    if let Some(pb) = bar {
-        pb.finish_and_clear();
     }
-    let show = |k: &str| field(&kv, k).unwrap_or("?").to_string();
+}
+
+/// The models and the law a finished commissioning left, in one line.
+fn print_done(kv: &[(String, String)]) {
+    let show = |k: &str| field(kv, k).unwrap_or("?").to_string();
     println!(
         "commissioning done: control model a={} b={} k={}; cabinet model a={} b={} k={}; controller {} ({})",
         show("model_a"),
@@ -363,7 +477,6 @@ fn identify<P: Read + Write>(b: &mut Board<P>, no_wait: bool) -> Result<()> {
         show("controller"),
         show("adaptive")
     );
-    Ok(())
 }
 
 /// Checks the history CSV (what `hter monitor` needs of it) and counts interval and event rows.
@@ -447,7 +560,8 @@ pub fn check_command(cmd: &BoardCommand) -> Result<()> {
     }
 }
 
-/// Runs one `hter board` command on an open connection.
+/// Runs one `hter board` command on an open connection; for `identify` (without `--abort`),
+/// starts the commissioning, which [`run`] then follows on connections of its own.
 pub fn run_on<P: Read + Write>(b: &mut Board<P>, cmd: &BoardCommand) -> Result<()> {
     match cmd {
         BoardCommand::Status { json: true } => {
@@ -478,25 +592,79 @@ pub fn run_on<P: Read + Write>(b: &mut Board<P>, cmd: &BoardCommand) -> Result<(
             b.request("identify abort")?.iter().for_each(|l| println!("{l}"));
             println!("ok: commissioning aborted; the previous model stays");
         }
-        BoardCommand::Identify { no_wait, .. } => identify(b, *no_wait)?,
+        BoardCommand::Identify { no_wait, .. } => {
+            b.request("identify")?.iter().for_each(|l| println!("{l}"));
+            if *no_wait {
+                println!("commissioning started; follow it with 'hter board --port {} status'", b.name);
+            }
+        }
     }
     Ok(())
 }
 
-/// Why the port could not be opened, in one line. serialport's "Unable to acquire exclusive
-/// lock on serial port" means another client holds it: most often a `hter board identify`
-/// still following a commissioning (hours on a board), which the user must stop to reach the
-/// board, and may, since the commissioning runs on the board.
-fn open_error(port: &str, why: &str) -> String {
-    if why.contains("exclusive lock") {
+/// Another client has the port. serialport reports both of its locks as `NoDevice`: the tty's
+/// `TIOCEXCL` (EBUSY at open, what a non-root user meets) and its `flock` ("Unable to acquire
+/// exclusive lock", what root meets, and anyone on a pty whose flag the virtual board cleared).
+fn busy(e: &serialport::Error) -> bool {
+    e.kind() == serialport::ErrorKind::NoDevice
+}
+
+/// Why the port could not be opened, in one line; `waited_s` is how long a held port was waited
+/// for. No `hter board` command holds it for long (`identify` only for each look at the
+/// commissioning), except a history download over a real board's line (≈ 35 s for 30 days).
+fn open_error(port: &str, e: &serialport::Error, waited_s: f64) -> String {
+    if busy(e) {
         format!(
-            "cannot open '{port}': another program has it open (a 'hter board identify' still following a \
-             commissioning? Ctrl-C stops it, the commissioning goes on on the board; 'hter board --port {port} \
-             identify --abort' then stops that)"
+            "cannot open '{port}': another program has held it for {waited_s} s (a terminal such as picocom or \
+             screen, or another 'hter board' command such as a history download); close it or try again, or \
+             wait longer with --timeout"
         )
     } else {
-        format!("cannot open '{port}': {why}")
+        format!("cannot open '{port}': {}", e.description)
     }
+}
+
+/// Opens `port` as the interface wants it (115200 8N1, no flow control, reads waiting up to
+/// `timeout_s`) and drops the input from before this connection; one attempt.
+fn open_port(port: &str, timeout_s: f64) -> serialport::Result<Box<dyn serialport::SerialPort>> {
+    let timeout = Duration::from_secs_f64(timeout_s);
+    let mut p = serialport::new(port, BAUD)
+        .data_bits(serialport::DataBits::Eight)
+        .parity(serialport::Parity::None)
+        .stop_bits(serialport::StopBits::One)
+        .flow_control(serialport::FlowControl::None)
+        .timeout(timeout)
+        .open()?;
+    // Bytes from before this connection (the rest of a reply a killed client never read, a
+    // person's typing) are not ours: drop what is buffered, then what still arrives until the
+    // line is quiet (a board that is still streaming stops at our request; docs/interface.md).
+    p.clear(serialport::ClearBuffer::Input)?;
+    p.set_timeout(QUIET)?;
+    let start = Instant::now();
+    let mut stale = [0u8; 4096];
+    while start.elapsed() < MAX_DRAIN && p.read(&mut stale).is_ok_and(|n| n > 0) {}
+    p.set_timeout(timeout)?;
+    Ok(p)
+}
+
+/// [`open_port`], waiting up to `wait` while another client holds the port.
+fn open_waiting(port: &str, timeout_s: f64, wait: Duration) -> serialport::Result<Box<dyn serialport::SerialPort>> {
+    let start = Instant::now();
+    loop {
+        match open_port(port, timeout_s) {
+            Err(e) if busy(&e) && start.elapsed() < wait => std::thread::sleep(BUSY_RETRY),
+            opened => return opened,
+        }
+    }
+}
+
+/// A connection to the board at `port`; a port another client holds is waited for up to
+/// `timeout_s` (its request takes tens of milliseconds; `identify`'s watch holds it that long
+/// once a second).
+fn connect(port: &str, timeout_s: f64) -> Result<Board<Box<dyn serialport::SerialPort>>> {
+    open_waiting(port, timeout_s, Duration::from_secs_f64(timeout_s))
+        .map(|p| Board::new(p, port, timeout_s))
+        .map_err(|e| anyhow!("{}", open_error(port, &e, timeout_s)))
 }
 
 /// `hter board`.
@@ -505,25 +673,15 @@ pub fn run(args: &BoardArgs) -> Result<()> {
         bail!("--timeout must be within (0, 3600] s, got {}", args.timeout);
     }
     check_command(&args.command)?;
-    let mut port = serialport::new(&args.port, BAUD)
-        .data_bits(serialport::DataBits::Eight)
-        .parity(serialport::Parity::None)
-        .stop_bits(serialport::StopBits::One)
-        .flow_control(serialport::FlowControl::None)
-        .timeout(Duration::from_secs_f64(args.timeout))
-        .open()
-        .map_err(|e| anyhow!("{}", open_error(&args.port, &e.description)))?;
-    let opened = |e: serialport::Error| anyhow!("{}", open_error(&args.port, &e.description));
-    // Bytes from before this connection (the rest of a reply a killed client never read, a
-    // person's typing) are not ours: drop what is buffered, then what still arrives until the
-    // line is quiet (a board that is still streaming stops at our request; docs/interface.md).
-    port.clear(serialport::ClearBuffer::Input).map_err(opened)?;
-    port.set_timeout(QUIET).map_err(opened)?;
-    let start = std::time::Instant::now();
-    let mut stale = [0u8; 4096];
-    while start.elapsed() < MAX_DRAIN && port.read(&mut stale).is_ok_and(|n| n > 0) {}
-    port.set_timeout(Duration::from_secs_f64(args.timeout)).map_err(opened)?;
-    run_on(&mut Board::new(port, &args.port, args.timeout), &args.command)
+    let mut b = connect(&args.port, args.timeout)?;
+    run_on(&mut b, &args.command)?;
+    if let BoardCommand::Identify { no_wait: false, abort: false } = args.command {
+        // The port is free between the watch's looks.
+        drop(b);
+        let watch = Watch { every: POLL, lost_after: Duration::from_secs_f64(LOST_TIMEOUTS * args.timeout) };
+        print_done(&follow(&watch, &args.port, || poll_status(&args.port, args.timeout))?);
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -674,13 +832,65 @@ mod tests {
 
     #[test]
     fn a_port_another_client_holds_says_who_may_hold_it_and_what_to_do() {
-        let e = open_error("/dev/ttyACM0", "Unable to acquire exclusive lock on serial port");
-        assert!(e.contains("another program has it open") && e.contains("identify --abort"), "{e}");
+        use serialport::{Error, ErrorKind};
+        for held in [
+            Error::new(ErrorKind::NoDevice, "Unable to acquire exclusive lock on serial port"),
+            Error::new(ErrorKind::NoDevice, "EBUSY: Device or resource busy"),
+        ] {
+            assert!(busy(&held));
+            let e = open_error("/dev/ttyACM0", &held, 5.0);
+            assert!(e.contains("another program has held it for 5 s") && e.contains("--timeout"), "{e}");
+            assert!(!e.contains('\n') && !e.contains("identify"), "the watch no longer holds it: {e}");
+        }
+        let gone = Error::new(ErrorKind::Io(std::io::ErrorKind::NotFound), "No such file or directory");
+        assert!(!busy(&gone));
+        assert_eq!(open_error("/dev/x", &gone, 5.0), "cannot open '/dev/x': No such file or directory");
+    }
+
+    #[test]
+    fn a_failed_connection_is_told_from_a_refusal() {
+        let e = board(&[b"t_s=1\r\n"]).request("status").unwrap_err();
+        assert!(e.is::<LinkError>() && e.to_string().contains("no reply"), "{e}");
+        let e = board(&[b"err status: busy\r\n"]).request("status").unwrap_err();
+        assert!(!e.is::<LinkError>(), "{e}");
+    }
+
+    /// Plays `polls` back, then `rest` for ever.
+    fn scripted(polls: Vec<Poll>, rest: fn() -> Poll) -> impl FnMut() -> Result<Poll> {
+        let mut polls = std::collections::VecDeque::from(polls);
+        move || Ok(polls.pop_front().unwrap_or_else(rest))
+    }
+
+    fn at(state: &str) -> Poll {
+        Poll::Status(kv(&["t_s=1", &format!("commissioning={state}")]))
+    }
+
+    #[test]
+    fn the_watch_skips_a_held_port_and_rides_out_missed_answers() {
+        let hour = Watch { every: Duration::ZERO, lost_after: Duration::from_secs(3600) };
+        let gone = || Poll::NoAnswer("cannot open '/dev/x': No such file or directory".into());
+        let polls = vec![Poll::Busy, at("excite:10"), gone(), Poll::Busy, gone(), at("fit:90"), at("done")];
+        let kv = follow(&hour, "/dev/x", scripted(polls, || unreachable!())).unwrap();
+        assert_eq!(field(&kv, "commissioning").unwrap(), "done");
+        // A held port is never the board gone, however long it is held.
+        let now = Watch { lost_after: Duration::ZERO, ..hour };
+        let polls = (0..20).map(|_| Poll::Busy).chain([at("done")]).collect();
+        assert!(follow(&now, "/dev/x", scripted(polls, || unreachable!())).is_ok());
+    }
+
+    #[test]
+    fn the_watch_gives_up_on_a_board_that_does_not_answer_in_one_line() {
+        let soon = Watch { every: Duration::from_millis(1), lost_after: Duration::from_millis(20) };
+        let gone = || Poll::NoAnswer("cannot open '/dev/x': No such file or directory".into());
+        let e = follow(&soon, "/dev/x", scripted(vec![at("excite:10")], gone)).unwrap_err().to_string();
+        assert!(e.starts_with("no answer from the board for "), "{e}");
+        assert!(e.contains("No such file") && e.contains("'hter board --port /dev/x status'"), "{e}");
         assert!(!e.contains('\n'));
-        assert_eq!(
-            open_error("/dev/x", "No such file or directory"),
-            "cannot open '/dev/x': No such file or directory"
-        );
+        // What the board says ends the watch at once.
+        let e = follow(&soon, "/dev/x", scripted(vec![at("failed:no_excitation")], || unreachable!()));
+        assert!(e.unwrap_err().to_string().contains("commissioning failed: no_excitation"));
+        let refused = || -> Result<Poll> { bail!("err status: nope") };
+        assert_eq!(follow(&soon, "/dev/x", refused).unwrap_err().to_string(), "err status: nope");
     }
 
     #[test]

@@ -418,3 +418,112 @@ fn lines_sent_in_one_write_are_answered_in_order() {
     assert_eq!(got[4], ("t_s", "ok"), "status: {text}");
     assert_eq!(got[5], (not_printable, not_printable), "{text}");
 }
+
+/// A `hter board … identify` following a commissioning in the background, stopped on drop.
+struct Watcher(Child);
+
+impl Watcher {
+    fn start(args: &[&str]) -> Watcher {
+        let child = Command::new(env!("CARGO_BIN_EXE_hter"))
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        Watcher(child)
+    }
+
+    fn running(&mut self) -> bool {
+        self.0.try_wait().unwrap().is_none()
+    }
+
+    /// Waits for it to end (wall time limit): its exit status, stdout and stderr.
+    fn finish(&mut self, limit_s: u64) -> (std::process::ExitStatus, String, String) {
+        use std::io::Read;
+        let t0 = Instant::now();
+        let status = loop {
+            if let Some(st) = self.0.try_wait().unwrap() {
+                break st;
+            }
+            assert!(t0.elapsed() < Duration::from_secs(limit_s), "the watch did not end");
+            std::thread::sleep(Duration::from_millis(200));
+        };
+        let (mut out, mut err) = (String::new(), String::new());
+        self.0.stdout.take().unwrap().read_to_string(&mut out).unwrap();
+        self.0.stderr.take().unwrap().read_to_string(&mut err).unwrap();
+        (status, out, err)
+    }
+}
+
+impl Drop for Watcher {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// `identify` follows a commissioning for hours (≈ 6.2 h on a board, 37 s here): meanwhile an
+/// engineer checks the status, acknowledges an alarm and saves the record from another shell.
+/// The watch opens the port for each poll only; a poll that finds the port held by another
+/// client tries again at the next one. The watch held the port for the whole commissioning,
+/// and every other `hter board` command was refused.
+#[test]
+fn while_identify_follows_the_commissioning_other_commands_get_through() {
+    let b = Board::start("follow", &[]);
+    b.wait_for("an hour at 4 °C", 60, |s| s["t_s"].as_f64().is_some_and(|t| t > 3600.0));
+    let mut watch = Watcher::start(&["board", "--port", b.port(), "identify"]);
+    let running = |s: &serde_json::Value| s["commissioning"].as_str().is_some_and(|c| c != "idle" && c != "done");
+    b.wait_for("the commissioning runs", 60, running);
+    for _ in 0..3 {
+        let s = b.status();
+        assert!(running(&s), "{s}");
+        assert!(watch.running(), "the watch still follows");
+    }
+    let o = b.board(&["ack"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = b.board(&["set", "ack", "1"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = tmp("follow.csv");
+    let o = b.board(&["history", "--output", csv.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let _ = std::fs::remove_file(&csv);
+    // Another client holds the port for a few of the watch's polls (a terminal program left
+    // open, a long history download): the watch tries again and carries on.
+    let t0 = Instant::now();
+    let held = loop {
+        match serialport::new(b.port(), 115_200).open_native() {
+            Ok(p) => break p,
+            Err(e) => assert!(t0.elapsed() < Duration::from_secs(30), "the port stays held: {e}"),
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    std::thread::sleep(Duration::from_secs(3));
+    drop(held);
+    assert!(watch.running(), "a held port ended the watch");
+    let (status, out, err) = watch.finish(180);
+    assert!(status.success(), "{out} / {err}");
+    assert!(out.contains("commissioning done: control model"), "{out}");
+    assert_eq!(b.status()["commissioning"], "done");
+}
+
+/// A board that goes away while `identify` follows it (unplugged; here the virtual board
+/// stopped, which removes its link): the watch gives up after six --timeout without an answer,
+/// in one line that says the commissioning may go on and how to look; not at the first missed
+/// poll (a cable reseated comes back), not never.
+#[test]
+fn a_board_that_goes_away_while_identify_follows_ends_the_watch_in_one_line() {
+    let mut b = Board::start("gone", &[]);
+    b.wait_for("an hour at 4 °C", 60, |s| s["t_s"].as_f64().is_some_and(|t| t > 3600.0));
+    let mut watch = Watcher::start(&["board", "--port", b.port(), "--timeout", "1", "identify"]);
+    b.wait_for("the commissioning runs", 60, |s| s["commissioning"].as_str().is_some_and(|c| c != "idle"));
+    // SIGTERM: the virtual board removes its link as it stops.
+    // SAFETY: a signal to the child this test started.
+    assert_eq!(unsafe { libc::kill(b.child.id() as libc::pid_t, libc::SIGTERM) }, 0);
+    b.child.wait().unwrap();
+    assert!(!b.link.exists());
+    let (status, _, err) = watch.finish(120);
+    assert!(!status.success());
+    assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+    assert!(err.contains(b.port()) && err.contains("no answer") && err.contains("6 s"), "{err}");
+    assert!(err.contains("status"), "says how to look: {err}");
+}
