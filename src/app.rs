@@ -467,7 +467,7 @@ impl App {
         Handled::Done
     }
 
-    fn run(&mut self, cmd: Command, out: &mut impl Write) -> Result<(), Refusal> {
+    fn run(&mut self, cmd: Command, out: &mut impl Write) -> Result<(), Refusal<'static>> {
         match cmd {
             Command::Help => {
                 for l in HELP {
@@ -519,7 +519,7 @@ impl App {
         self.last.map_or(self.cfg.adaptive.fallback.bias, |o| o.step.duty.get())
     }
 
-    fn set(&mut self, req: SetRequest) -> Result<(), Refusal> {
+    fn set(&mut self, req: SetRequest) -> Result<(), Refusal<'static>> {
         let t_s = self.record_s(self.last_t_ms);
         let mut next = self.settings;
         let (key, value) = match req {
@@ -580,7 +580,7 @@ impl App {
     /// commissioned one is ([`cabinet_plausible`]); if the self-tuner would trust it too (every
     /// b_i ≤ 0, [`plausible_model`]) the self-tuner restarts from it and it is stored as the
     /// model record as well.
-    fn set_model(&mut self, m: Model, t_s: u32) -> Result<(), Refusal> {
+    fn set_model(&mut self, m: Model, t_s: u32) -> Result<(), Refusal<'static>> {
         let refuse = |why| Err(Refusal { what: "model", why: Why::Model(why) });
         if !m.a_is_stable() {
             return refuse("A is not stable (a root on or outside the unit circle)");
@@ -615,7 +615,7 @@ impl App {
     }
 
     /// The refusal of setting `what` while a commissioning runs.
-    fn not_while_commissioning(&self, what: &'static str) -> Result<(), Refusal> {
+    fn not_while_commissioning(&self, what: &'static str) -> Result<(), Refusal<'static>> {
         if self.commissioning() {
             return Err(Refusal { what, why: Why::NotNow("commissioning is running (identify abort)") });
         }
@@ -629,7 +629,7 @@ impl App {
     }
 
     /// `identify`: the law hands over to a commissioning that rests at the recent mean duty.
-    fn start_commissioning(&mut self) -> Result<(), Refusal> {
+    fn start_commissioning(&mut self) -> Result<(), Refusal<'static>> {
         let refuse = |why| Err(Refusal { what: "identify", why: Why::NotNow(why) });
         if self.commissioning() {
             return refuse("a commissioning is already running (identify abort stops it)");

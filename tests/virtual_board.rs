@@ -39,7 +39,7 @@ fn the_load_follows_an_accepted_setpoint_and_refused_ones_change_nothing() {
     run(&mut b, 1800.0);
     assert_eq!(field(&mut b, "mode"), "normal");
     assert!((b.load_c() - 4.0).abs() < 0.3, "holds 4 °C: {}", b.load_c());
-    assert_eq!(b.request("set setpoint_c 12"), "err setpoint_c: 12.00 is outside 2.5…7.5\r\n");
+    assert_eq!(b.request("set setpoint_c 12"), "err setpoint_c: 12 is outside 2.5…7.5\r\n");
     assert_eq!(b.request("set setpoint_c nan"), "err setpoint_c: not a decimal number\r\n");
     assert_eq!(field(&mut b, "setpoint_c"), "4.00");
     assert_eq!(field(&mut b, "settings_version"), "0");

@@ -519,17 +519,18 @@ fn history<P: Read + Write>(b: &mut Board<P>, output: &Path, since: Option<f64>)
 
 /// A value the board's parser (the same `hter::iface`) would refuse as "not a decimal number"
 /// is refused here, saying what the setting takes: the board's one reason covers a missing
-/// pair (`cal_ice 0.1`), a model with one A coefficient, an exponent and an eighth digit alike.
-/// Range and plausibility stay the board's to check, with its own words.
+/// pair (`cal_ice 0.1`), a model with one A coefficient, an exponent and a `nan` alike.
+/// Range, step, digits and plausibility stay the board's to check, with its own words.
 fn explain_format(key: &str, value: &str) -> Result<()> {
-    use hter::iface::{num::MAX_DIGITS, Command, Why};
-    let Err(refusal) = Command::parse(&format!("set {key} {value}")) else { return Ok(()) };
+    use hter::iface::{Command, Why};
+    let request = format!("set {key} {value}");
+    let Err(refusal) = Command::parse(&request) else { return Ok(()) };
     if refusal.why != Why::NotDecimal {
         return Ok(());
     }
-    let plain = format!("plain decimals of at most {MAX_DIGITS} digits (no exponent, nan or inf)");
+    let plain = "plain decimals (no exponent, nan or inf)";
     match key {
-        "setpoint_c" => bail!("setpoint_c takes a plain decimal number of at most {MAX_DIGITS} digits (no exponent, nan or inf) in °C, e.g. 4.5; got '{value}'"),
+        "setpoint_c" => bail!("setpoint_c takes a plain decimal number (no exponent, nan or inf) in °C, e.g. 4.5; got '{value}'"),
         "cal_ice" | "cal_warm" => bail!(
             "{key} takes MEASURED,TRUE in °C (the channel's reading, the reference thermometer's), two {plain}, e.g. {}; got '{value}'",
             if key == "cal_ice" { "0.12,0.00" } else { "37.30,37.00" }

@@ -209,11 +209,13 @@ fn board_set_explains_the_format_of_a_value() {
     check("cal_ice", "1e3", "cal_ice takes MEASURED,TRUE in °C");
     check("cal_warm", "20", "cal_warm takes MEASURED,TRUE in °C");
     check("model", "-0.9;-0.1;1", "model takes A1,A2;B0,B1;K");
-    check("setpoint_c", "4.00000000001", "at most 7 digits");
     check("setpoint_c", "1e0", "setpoint_c takes a plain decimal number");
-    // The board's words for what it checks itself.
+    // The board's words for what it checks itself: range, step and digits.
     let out = b.board(&["set", "setpoint_c", "12"]);
-    assert!(String::from_utf8_lossy(&out.stderr).contains("setpoint_c: 12.00 is outside 2.5…7.5"), "{out:?}");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("setpoint_c: 12 is outside 2.5…7.5"), "{out:?}");
+    let out = b.board(&["set", "setpoint_c", "4.00000000001"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("setpoint_c: 4.00000000001 is finer than the 0.01 °C step (at most 2 decimals)"), "{out:?}");
     let out = b.board(&["set", "model", "-1.8,0.81;-0.02,-0.01;1;2"]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("usage: model A1,A2;B0,B1;K"), "{out:?}");
     // Valid values go through.

@@ -164,6 +164,38 @@ fn a_power_cut_in_the_middle_of_a_settings_write_keeps_the_old_setting_and_the_b
     let _ = std::fs::remove_file(&csv);
 }
 
+/// The bug hunt's `set` answers, as `hter board` prints them: a refused value is quoted as typed
+/// (`2.4999` was "2.50 is outside 2.5…7.5"), a value finer than its setting's step is refused
+/// naming the step (`5.001` was accepted and read 5.00), a model's K must be a whole number,
+/// and zeros that change nothing are no digits.
+#[test]
+fn board_set_answers_say_exactly_what_is_wrong() {
+    let b = Board::start("refuse", &[]);
+    let stderr = |o: &Output| String::from_utf8_lossy(&o.stderr).trim_end().to_string();
+    for (args, want) in [
+        (["setpoint_c", "2.4999"], "err setpoint_c: 2.4999 is outside 2.5…7.5"),
+        (["setpoint_c", "5.001"], "err setpoint_c: 5.001 is finer than the 0.01 °C step (at most 2 decimals)"),
+        (["cal_ice", "0.125,0.00"], "err cal_ice: 0.125 is finer than the 0.01 °C step (at most 2 decimals)"),
+        (
+            ["model", "-1.859405,0.859802;-0.014713,-0.003021;5.5"],
+            "err model: K must be a whole number of samples in 1…10, not 5.5",
+        ),
+        (
+            ["model", "-1.859405,0.859802;-0.0147131,-0.003021;8"],
+            "err model: -0.0147131 is finer than the 0.000001 step (at most 6 decimals)",
+        ),
+    ] {
+        let o = b.board(&["set", args[0], args[1]]);
+        assert_eq!(one_line_error(&o), format!("error: {want}"), "{args:?}");
+    }
+    let s = b.status();
+    assert_eq!((s["setpoint_c"].as_f64(), s["settings_version"].as_u64()), (Some(4.0), Some(0)), "nothing changed");
+    // Eight digits, but only one that counts.
+    let o = b.board(&["set", "setpoint_c", "5.00000000"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(String::from_utf8_lossy(&o.stdout), "ok: setpoint_c = 5.00000000\n");
+}
+
 #[test]
 fn a_missing_port_is_one_line_and_non_zero() {
     let e = one_line_error(&hter(&["board", "--port", Path::new("/nonexistent/tty").to_str().unwrap(), "status"]));

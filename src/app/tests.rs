@@ -254,7 +254,7 @@ fn a_refused_value_changes_nothing_stores_nothing_and_says_why_in_one_line() {
     let before = *b.app.settings();
     let saves = b.saves.len();
     for (line, reply) in [
-        ("set setpoint_c 12", "err setpoint_c: 12.00 is outside 2.5…7.5\r\n"),
+        ("set setpoint_c 12", "err setpoint_c: 12 is outside 2.5…7.5\r\n"),
         ("set setpoint_c nan", "err setpoint_c: not a decimal number\r\n"),
         ("set setpoint_c -inf", "err setpoint_c: not a decimal number\r\n"),
         ("set controller igmvc", "err controller: not a law this build links (see status: controllers)\r\n"),
@@ -641,4 +641,108 @@ fn the_apps_sample_carries_the_module_side_sense_to_the_step() {
     let second = b.run(1);
     assert!(second.step.events.iter().any(|e| e.kind == EventKind::SsrStuckOn), "{:?}", second.step.events);
     assert_eq!(second.step.mode, crate::step::Mode::LimpHome);
+}
+
+/// What a refusal quotes is the value as it was typed: `2.4999` was answered "2.50 is outside
+/// 2.5…7.5", a value the range accepts.
+#[test]
+fn a_refusal_quotes_the_value_as_it_was_typed() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    let before = *b.app.settings();
+    for (line, reply) in [
+        ("set setpoint_c 2.4999", "err setpoint_c: 2.4999 is outside 2.5…7.5\r\n"),
+        ("set setpoint_c 7.5001", "err setpoint_c: 7.5001 is outside 2.5…7.5\r\n"),
+        ("set setpoint_c 2.4", "err setpoint_c: 2.4 is outside 2.5…7.5\r\n"),
+        ("set setpoint_c -0.5", "err setpoint_c: -0.5 is outside 2.5…7.5\r\n"),
+        ("set cal_ice 0.00,-50.004", "err cal_ice: -50.004 is outside -50.0…100.0\r\n"),
+        ("set cal_warm 100.001,100", "err cal_warm: 100.001 is outside -50.0…100.0\r\n"),
+    ] {
+        assert_eq!(b.send(line), reply, "{line}");
+    }
+    assert_eq!(*b.app.settings(), before);
+    assert!(b.setting_logs().is_empty());
+}
+
+/// The model's delay K is a whole number of samples: `5.5` was answered "outside 1.0…10.0".
+#[test]
+fn a_model_delay_that_is_not_a_whole_number_of_samples_is_refused_as_such() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    let m = "-1.859405,0.859802;-0.014713,-0.003021";
+    let k = |k: &str| format!("err model: K must be a whole number of samples in 1…10, not {k}\r\n");
+    for bad in ["5.5", "0", "11", "-3", "0.5", "x", "1e1"] {
+        assert_eq!(b.send(&format!("set model {m};{bad}")), k(bad), "{bad}");
+    }
+    assert!(b.setting_logs().is_empty());
+    // A whole number written with zeros after the point is one.
+    assert_eq!(b.send(&format!("set model {m};8.00")), "ok\r\n");
+    assert_eq!(b.field("model_k"), "8");
+}
+
+/// Seven digits were a limit on how a value was written, not on the value: `5.00000000` (eight)
+/// and `004.5` were "not a decimal number". Zeros before the first significant digit and after
+/// the last decimal are no digits; more than seven significant digits is refused saying so.
+#[test]
+fn zeros_that_change_nothing_do_not_count_and_the_digit_limit_is_named() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    assert_eq!(b.send("set setpoint_c 5.00000000"), "ok\r\n");
+    assert_eq!(b.app.settings().setpoint_c, 5.0);
+    assert_eq!(b.send("set setpoint_c 0004.50"), "ok\r\n");
+    assert_eq!(b.app.settings().setpoint_c, 4.5);
+    assert_eq!(b.send("set cal_ice 0.500000000,0000.00000"), "ok\r\n");
+    assert_eq!(b.send("set model -1.8594050000,0.859802;-0.014713,-0.0030210000;8"), "ok\r\n");
+    assert_eq!(b.field("model_a"), "-1.859405,0.859802");
+    assert_eq!(b.field("cabinet_b"), "-0.014713,-0.003021");
+    let saves = b.saves.len();
+    assert_eq!(
+        b.send("set model -1.859405,0.859802;-12.345678,-0.003021;8"),
+        "err model: -12.345678 has more than 7 significant digits\r\n"
+    );
+    assert_eq!(b.saves.len(), saves);
+}
+
+/// A value finer than its setting is shown and recorded was accepted and invisible: `set
+/// setpoint_c 5.001` ran 5.001 °C while `status`, `get` and the record's event said 5.00. Every
+/// numeric setting refuses decimals past its step, naming the step, and changes nothing.
+#[test]
+fn a_value_finer_than_its_settings_step_is_refused_naming_the_step() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    let before = *b.app.settings();
+    let model_before = (b.field("model_a"), b.field("model_b"), b.field("cabinet_a"));
+    for (line, reply) in [
+        ("set setpoint_c 5.001", "err setpoint_c: 5.001 is finer than the 0.01 °C step (at most 2 decimals)\r\n"),
+        (
+            "set setpoint_c 4.0000001",
+            "err setpoint_c: 4.0000001 is finer than the 0.01 °C step (at most 2 decimals)\r\n",
+        ),
+        ("set cal_ice 0.125,0.00", "err cal_ice: 0.125 is finer than the 0.01 °C step (at most 2 decimals)\r\n"),
+        ("set cal_warm 25.00,25.005", "err cal_warm: 25.005 is finer than the 0.01 °C step (at most 2 decimals)\r\n"),
+        (
+            "set model -1.8594051,0.859802;-0.014713,-0.003021;8",
+            "err model: -1.8594051 is finer than the 0.000001 step (at most 6 decimals)\r\n",
+        ),
+        (
+            "set model -1.859405,0.859802;-0.014713,-0.0030214;8",
+            "err model: -0.0030214 is finer than the 0.000001 step (at most 6 decimals)\r\n",
+        ),
+    ] {
+        assert_eq!(b.send(line), reply, "{line}");
+    }
+    assert_eq!(*b.app.settings(), before);
+    assert!(b.setting_logs().is_empty(), "nothing recorded");
+    assert_eq!((b.field("model_a"), b.field("model_b"), b.field("cabinet_a")), model_before);
+    // At the step: used, shown and recorded as typed.
+    assert_eq!(b.send("set setpoint_c 4.01"), "ok\r\n");
+    b.run(1);
+    assert_eq!(b.field("setpoint_c"), "4.01");
+    assert!(b.send("get").contains("setpoint_c=4.01\r\n"));
+    let Some(Save::Log(e)) = b.saves.iter().rev().find(|s| matches!(s, Save::Log(LogEntry::Setting { .. }))) else {
+        panic!("the setting is logged")
+    };
+    let mut row = String::new();
+    crate::persist::log::write_csv_row(e, &mut row).unwrap();
+    assert!(row.contains("set:setpoint_c=4.01"), "{row}");
 }

@@ -13,7 +13,7 @@ pub mod line;
 pub mod num;
 
 use crate::model::{Model, MAX_K};
-use num::{parse_decimal, parse_list, parse_whole};
+use num::{parse_decimal, parse_list, parse_whole, Decimal, MAX_DIGITS};
 
 /// Longest request line, bytes (docs/interface.md).
 pub const MAX_LINE: usize = 96;
@@ -93,18 +93,19 @@ pub enum Command {
 }
 
 /// Why a request was refused: the key (or `line`, or the command) and the reason, printed as
-/// the final line `err <what>: <why>`.
+/// the final line `err <what>: <why>`. A value it quotes is the request's own text (`'a`), as
+/// the user typed it.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Refusal {
+pub struct Refusal<'a> {
     /// What was refused.
     pub what: &'static str,
     /// Why.
-    pub why: Why,
+    pub why: Why<'a>,
 }
 
 /// The reasons a request is refused.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Why {
+pub enum Why<'a> {
     /// Not a command this board knows.
     UnknownCommand,
     /// `set` of a key this board does not have.
@@ -113,8 +114,17 @@ pub enum Why {
     Usage(&'static str),
     /// The value is not a plain decimal number (or list of them).
     NotDecimal,
-    /// A number outside its range: the value and the bounds.
-    OutOfRange(f32, f32, f32),
+    /// A number outside its range: the value as typed and the bounds.
+    OutOfRange(&'a str, f32, f32),
+    /// A number with more decimals than its setting keeps: the value as typed, the step (with
+    /// its unit) and the decimals kept. Rounded, it would be used as typed but shown, recorded
+    /// and stored as another value.
+    Finer(&'a str, &'static str, u8),
+    /// A number with more than [`MAX_DIGITS`] significant digits (an f32 holds no more): the
+    /// value as typed.
+    Digits(&'a str),
+    /// A model's delay that is not a whole number of samples in 1…[`MAX_K`]: as typed.
+    Delay(&'a str),
     /// A law this build does not link.
     NotInBuild,
     /// The calibration points fail [`crate::calib::TwoPoint::from_points`].
@@ -127,7 +137,7 @@ pub enum Why {
     Line(&'static str),
 }
 
-impl core::fmt::Display for Refusal {
+impl core::fmt::Display for Refusal<'_> {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         use num::Fixed;
         write!(f, "err {}: ", self.what)?;
@@ -136,7 +146,10 @@ impl core::fmt::Display for Refusal {
             Why::UnknownKey => f.write_str("unknown setting (setpoint_c, controller, cal_ice, cal_warm, model, ack)"),
             Why::Usage(u) => write!(f, "usage: {u}"),
             Why::NotDecimal => f.write_str("not a decimal number"),
-            Why::OutOfRange(x, lo, hi) => write!(f, "{} is outside {}…{}", Fixed(x, 2), Fixed(lo, 1), Fixed(hi, 1)),
+            Why::OutOfRange(x, lo, hi) => write!(f, "{x} is outside {}…{}", Fixed(lo, 1), Fixed(hi, 1)),
+            Why::Finer(x, step, n) => write!(f, "{x} is finer than the {step} step (at most {n} decimals)"),
+            Why::Digits(x) => write!(f, "{x} has more than {MAX_DIGITS} significant digits"),
+            Why::Delay(k) => write!(f, "K must be a whole number of samples in 1…{MAX_K}, not {k}"),
             Why::NotInBuild => f.write_str("not a law this build links (see status: controllers)"),
             Why::Calibration(e) => f.write_str(match e {
                 crate::calib::CalError::NonFinite => "a point is not finite",
@@ -155,14 +168,17 @@ impl core::fmt::Display for Refusal {
 /// 0.5 °C to either limit.
 pub const SETPOINT_RANGE_C: (f32, f32) = (2.5, 7.5);
 
-fn refuse<T>(what: &'static str, why: Why) -> Result<T, Refusal> {
+fn refuse<'a, T>(what: &'static str, why: Why<'a>) -> Result<T, Refusal<'a>> {
     Err(Refusal { what, why })
 }
 
 impl Command {
     /// Parses one line (without its line end). `Ok(None)` for an empty line, which gets no
     /// reply.
-    pub fn parse(line: &str) -> Result<Option<Command>, Refusal> {
+    // Out of line: inlined, it was copied into the board's control task (with the step and digit
+    // checks the interface build was 1.2 KB larger).
+    #[inline(never)]
+    pub fn parse(line: &str) -> Result<Option<Command>, Refusal<'_>> {
         if line.len() > MAX_LINE {
             return refuse("line", Why::Line("longer than 96 bytes"));
         }
@@ -220,31 +236,59 @@ fn since_seconds(s: &str) -> Option<u32> {
     parse_whole(whole)?.checked_add(u32::from(frac.bytes().any(|b| b != b'0')))
 }
 
-fn parse_set(key: &str, value: &str) -> Result<SetRequest, Refusal> {
+/// How a numeric setting is kept: the range it takes and its step, the decimals it is stored,
+/// shown (`status`, `get`) and recorded (`history`) with. A value finer than the step is
+/// refused rather than rounded: rounded, the board would show and record one value and run
+/// another (`5.001` ran as 5.001 °C and read 5.00 everywhere).
+#[derive(Clone, Copy)]
+struct Kept {
+    /// Lowest and highest value taken, if the key has a range of its own.
+    range: Option<(f32, f32)>,
+    /// Decimals kept.
+    decimals: u8,
+    /// The step, as the refusal names it.
+    step: &'static str,
+}
+
+/// `setpoint_c`: SPEC §8's range; `status`, `get` and the record show 2 decimals.
+const SETPOINT: Kept = Kept { range: Some(SETPOINT_RANGE_C), decimals: 2, step: "0.01 °C" };
+/// Either value of a calibration point: `get` and the record show 2 decimals.
+const CAL_POINT: Kept = Kept { range: Some((-50.0, 100.0)), decimals: 2, step: "0.01 °C" };
+/// A model coefficient: `status` shows 6 decimals; its range is the model's plausibility,
+/// checked by the board.
+const COEFFICIENT: Kept = Kept { range: None, decimals: 6, step: "0.000001" };
+
+/// A value of a setting kept as `kept` says: in its range, no finer than its step, of at most
+/// [`MAX_DIGITS`] significant digits; otherwise refused quoting `text`.
+fn number<'a>(what: &'static str, text: &'a str, d: Decimal, kept: &Kept) -> Result<f32, Refusal<'a>> {
+    let why = match kept.range {
+        Some((lo, hi)) if !(lo..=hi).contains(&d.value) => Why::OutOfRange(text, lo, hi),
+        _ if d.decimals > kept.decimals => Why::Finer(text, kept.step, kept.decimals),
+        _ if d.digits > MAX_DIGITS => Why::Digits(text),
+        _ => return Ok(d.value),
+    };
+    refuse(what, why)
+}
+
+/// Two comma-separated values of a setting kept as `kept` says ([`number`]): both plain decimals,
+/// then each checked in turn.
+fn pair<'a>(what: &'static str, text: &'a str, kept: &Kept) -> Result<[f32; 2], Refusal<'a>> {
+    let [(t0, d0), (t1, d1)] = parse_list::<2>(text).ok_or(Refusal { what, why: Why::NotDecimal })?;
+    Ok([number(what, t0, d0, kept)?, number(what, t1, d1, kept)?])
+}
+
+fn parse_set<'a>(key: &str, value: &'a str) -> Result<SetRequest, Refusal<'a>> {
     match key {
         "setpoint_c" => {
-            let x = parse_decimal(value).ok_or(Refusal { what: "setpoint_c", why: Why::NotDecimal })?;
-            let (lo, hi) = SETPOINT_RANGE_C;
-            if (lo..=hi).contains(&x) {
-                Ok(SetRequest::Setpoint(x))
-            } else {
-                refuse("setpoint_c", Why::OutOfRange(x, lo, hi))
-            }
+            let d = parse_decimal(value).ok_or(Refusal { what: "setpoint_c", why: Why::NotDecimal })?;
+            number("setpoint_c", value, d, &SETPOINT).map(SetRequest::Setpoint)
         }
         "controller" => match Law::from_name(value) {
             Some(l) => Ok(SetRequest::Controller(l)),
             None => refuse("controller", Why::NotInBuild),
         },
-        "cal_ice" | "cal_warm" => {
-            let what = if key == "cal_ice" { "cal_ice" } else { "cal_warm" };
-            let p = parse_list::<2>(value).ok_or(Refusal { what, why: Why::NotDecimal })?;
-            for x in p {
-                if !(-50.0..=100.0).contains(&x) {
-                    return refuse(what, Why::OutOfRange(x, -50.0, 100.0));
-                }
-            }
-            Ok(if what == "cal_ice" { SetRequest::CalIce(p) } else { SetRequest::CalWarm(p) })
-        }
+        "cal_ice" => pair("cal_ice", value, &CAL_POINT).map(SetRequest::CalIce),
+        "cal_warm" => pair("cal_warm", value, &CAL_POINT).map(SetRequest::CalWarm),
         "model" => parse_model(value).map(SetRequest::Model),
         // `set ack 0` must not read as "do not acknowledge" and acknowledge.
         "ack" if value == "1" => Ok(SetRequest::Ack),
@@ -254,19 +298,17 @@ fn parse_set(key: &str, value: &str) -> Result<SetRequest, Refusal> {
 }
 
 /// `A1,A2;B0,B1;K`: the structure of a model; its plausibility is the board's to check.
-fn parse_model(value: &str) -> Result<Model, Refusal> {
+fn parse_model(value: &str) -> Result<Model, Refusal<'_>> {
     let bad = Refusal { what: "model", why: Why::Usage("model A1,A2;B0,B1;K") };
     let mut parts = value.split(';');
     let (Some(a), Some(b), Some(k), None) = (parts.next(), parts.next(), parts.next(), parts.next()) else {
         return Err(bad);
     };
-    let (Some(a), Some(b)) = (parse_list::<2>(a), parse_list::<2>(b)) else {
-        return refuse("model", Why::NotDecimal);
-    };
+    let a = pair("model", a, &COEFFICIENT)?;
+    let b = pair("model", b, &COEFFICIENT)?;
     let k = match parse_decimal(k) {
-        Some(k) if k == (k as u32) as f32 && k >= 1.0 && k <= MAX_K as f32 => k as usize,
-        Some(k) => return refuse("model", Why::OutOfRange(k, 1.0, MAX_K as f32)),
-        None => return refuse("model", Why::NotDecimal),
+        Some(d) if d.decimals == 0 && d.value >= 1.0 && d.value <= MAX_K as f32 => d.value as usize,
+        _ => return refuse("model", Why::Delay(k)),
     };
     Model::second_order(a, b, k).map_err(|_| Refusal { what: "model", why: Why::Model("not a second-order model") })
 }
@@ -275,7 +317,7 @@ fn parse_model(value: &str) -> Result<Model, Refusal> {
 pub const HELP: &[&str] = &[
     "status                   what the carrier is doing now",
     "get                      every setting",
-    "set setpoint_c V         setpoint, 2.5...7.5 C",
+    "set setpoint_c V         setpoint, 2.5...7.5 C, step 0.01",
     "set controller NAME      a law of this build (status: controllers)",
     "set cal_ice M,R          ice-bath point: channel reading, reference (C)",
     "set cal_warm M,R         second point: channel reading, reference (C)",
@@ -324,10 +366,10 @@ mod tests {
 
     #[test]
     fn a_bad_value_is_refused_in_one_line_that_names_the_key() {
-        assert_eq!(refusal("set setpoint_c 12"), "err setpoint_c: 12.00 is outside 2.5…7.5");
+        assert_eq!(refusal("set setpoint_c 12"), "err setpoint_c: 12 is outside 2.5…7.5");
         assert_eq!(refusal("set setpoint_c nan"), "err setpoint_c: not a decimal number");
         assert_eq!(refusal("set setpoint_c 1e1"), "err setpoint_c: not a decimal number");
-        assert_eq!(refusal("set setpoint_c 2.4"), "err setpoint_c: 2.40 is outside 2.5…7.5");
+        assert_eq!(refusal("set setpoint_c 2.4"), "err setpoint_c: 2.4 is outside 2.5…7.5");
         assert_eq!(
             refusal("set controller fuzzy"),
             "err controller: not a law this build links (see status: controllers)"
@@ -342,7 +384,7 @@ mod tests {
         assert_eq!(refusal("set model -1.8,0.81;-0.02;9"), "err model: not a decimal number");
         assert_eq!(
             refusal("set model -1.8,0.81;-0.02,-0.01;0"),
-            "err model: 0.00 is outside 1.0…16.0".replace("16", &MAX_K.to_string())
+            "err model: K must be a whole number of samples in 1…16, not 0".replace("16", &MAX_K.to_string())
         );
         assert_eq!(refusal("set cal_ice 0.1"), "err cal_ice: not a decimal number");
         assert_eq!(refusal("stat\u{7}us"), "err line: not printable ASCII");
