@@ -500,7 +500,13 @@ impl App {
                 let _ = out.write_str("no alarm\r\n");
                 Ok(())
             }
-            Command::Set(req) => self.set(req),
+            Command::Set(req) => {
+                self.set(req)?;
+                if req == SetRequest::Controller(Law::OnOff) {
+                    self.warn_on_off(out);
+                }
+                Ok(())
+            }
             Command::Identify => self.start_commissioning(),
             Command::IdentifyAbort => match self.carrier.controller_mut() {
                 BoardController::Commission(c) => {
@@ -512,6 +518,22 @@ impl App {
             },
             Command::History { .. } => Ok(()),
         }
+    }
+
+    /// The data line before `ok` that accepts On-Off (SPEC §8 has it settable): it is the
+    /// comparison baseline, not a law for the field. Its limit cycle leaves 2–8 °C: `hter sim
+    /// --controller onoff`, 12 h holding a setpoint, the water's swing after the first 3 h: H-TER I
+    /// full 2.3–2.4 °C peak to peak (down to 1.71 °C at setpoint 3.5 °C and 15 °C ambient, up to
+    /// 8.16 °C at 6.5 °C and 43 °C), half loaded 3.0 °C (1.09 °C, 8.77 °C); H-TER II 1.7–2.2 °C. A
+    /// data line, not a second final line: `hter board` and any client reading to `ok`/`err` see
+    /// an accepted setting with a line to show.
+    fn warn_on_off(&self, out: &mut impl Write) {
+        let field = self.cfg.laws.iter().copied().find(|l| matches!(l, Law::Gpc | Law::Igmvc)).unwrap_or(Law::Gpc);
+        let _ = out.write_str(
+            "warning: onoff is a comparison baseline: it swings up to 3 °C peak to peak and can leave 2-8 °C; ",
+        );
+        let _ = out.write_str(field.name());
+        let _ = out.write_str(" is the field controller\r\n");
     }
 
     /// The applied duty of the last sample (a switched law starts from it).

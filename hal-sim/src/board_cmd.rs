@@ -576,6 +576,10 @@ pub fn run_on<P: Read + Write>(b: &mut Board<P>, cmd: &BoardCommand) -> Result<(
         }
         BoardCommand::Set { key, value } => {
             let data = b.request(&format!("set {key} {value}"))?;
+            // The board's warnings on an accepted value (`set controller onoff`) go where
+            // warnings go; the acceptance is still said on stdout.
+            let (warnings, data): (Vec<_>, Vec<_>) = data.iter().partition(|l| l.starts_with("warning:"));
+            warnings.iter().for_each(|l| eprintln!("{l}"));
             data.iter().for_each(|l| println!("{l}"));
             if data.is_empty() {
                 println!("ok: {key} = {value}");

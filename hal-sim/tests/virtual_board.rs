@@ -167,9 +167,9 @@ fn a_power_cut_in_the_middle_of_a_settings_write_keeps_the_old_setting_and_the_b
 /// The bug hunt's `set` answers, as `hter board` prints them: a refused value is quoted as typed
 /// (`2.4999` was "2.50 is outside 2.5…7.5"), a value finer than its setting's step is refused
 /// naming the step (`5.001` was accepted and read 5.00), a model's K must be a whole number,
-/// and zeros that change nothing are no digits.
+/// zeros that change nothing are no digits, and On-Off is accepted with a warning on stderr.
 #[test]
-fn board_set_answers_say_exactly_what_is_wrong() {
+fn board_set_answers_say_exactly_what_is_wrong_and_warn_of_on_off() {
     let b = Board::start("refuse", &[]);
     let stderr = |o: &Output| String::from_utf8_lossy(&o.stderr).trim_end().to_string();
     for (args, want) in [
@@ -194,6 +194,18 @@ fn board_set_answers_say_exactly_what_is_wrong() {
     let o = b.board(&["set", "setpoint_c", "5.00000000"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(String::from_utf8_lossy(&o.stdout), "ok: setpoint_c = 5.00000000\n");
+    // On-Off: accepted (exit 0, `ok` on stdout), its warning one line on stderr.
+    let o = b.board(&["set", "controller", "onoff"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(String::from_utf8_lossy(&o.stdout), "ok: controller = onoff\n");
+    let warning = stderr(&o);
+    assert_eq!(warning.lines().count(), 1, "{warning}");
+    assert!(warning.starts_with("warning: onoff is a comparison baseline") && warning.contains("2-8 °C"), "{warning}");
+    assert!(warning.contains("gpc is the field controller"), "{warning}");
+    assert_eq!(b.status()["controller"], "onoff");
+    // Back to the field controller: no warning.
+    let o = b.board(&["set", "controller", "gpc"]);
+    assert!(o.status.success() && o.stderr.is_empty(), "{}", stderr(&o));
 }
 
 #[test]

@@ -294,7 +294,10 @@ fn switching_the_law_is_bumpless_and_every_law_of_the_build_runs() {
     // is within its ±0.3 °C band.
     for law in ["onoff", "pi", "gpc"] {
         let before = b.run(1).step.duty.get();
-        assert_eq!(b.send(&format!("set controller {law}")), "ok\r\n");
+        let reply = b.send(&format!("set controller {law}"));
+        // On-Off's acceptance carries its warning (switching_to_on_off_is_accepted_with_a_warning_line).
+        let warned = law == "onoff" && reply.starts_with("warning: ") && reply.ends_with("\r\nok\r\n");
+        assert!(reply == "ok\r\n" || warned, "{law}: {reply}");
         assert_eq!(b.field("controller"), law);
         if law != "onoff" {
             // The new law starts from the applied duty.
@@ -745,4 +748,24 @@ fn a_value_finer_than_its_settings_step_is_refused_naming_the_step() {
     let mut row = String::new();
     crate::persist::log::write_csv_row(e, &mut row).unwrap();
     assert!(row.contains("set:setpoint_c=4.01"), "{row}");
+}
+
+/// On-Off is settable (SPEC §8) but no field controller: its limit cycle on these carriers is
+/// up to 3 °C peak to peak and leaves 2–8 °C (1.71 °C at setpoint 3.5 °C and 15 °C ambient).
+/// Its acceptance says so in a data line before `ok`, which a host passes on.
+#[test]
+fn switching_to_on_off_is_accepted_with_a_warning_line() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    let reply = b.send("set controller onoff");
+    let lines: Vec<&str> = reply.split("\r\n").collect();
+    assert_eq!(lines.len(), 3, "{reply}");
+    assert!(lines[0].starts_with("warning: onoff is a comparison baseline"), "{reply}");
+    assert!(lines[0].contains("can leave 2-8 °C") && lines[0].contains("gpc is the field controller"), "{reply}");
+    assert_eq!(&lines[1..], ["ok", ""]);
+    assert_eq!(b.field("controller"), "onoff");
+    assert_eq!(b.setting_logs(), [SettingKey::Controller]);
+    // The other laws say nothing more than `ok`.
+    assert_eq!(b.send("set controller pi"), "ok\r\n");
+    assert_eq!(b.send("set controller gpc"), "ok\r\n");
 }
