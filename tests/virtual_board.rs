@@ -1,6 +1,6 @@
 //! The virtual board in-process: the library's App, its interface and its flash in front of the
 //! simulated carrier (`hter virtual-board` serves exactly this on a pseudo-terminal; the
-//! end-to-end test through the pty and `hter board` is `tests/board_cli.rs`).
+//! end-to-end tests through the pty and `hter board` are in `hal-sim/tests/virtual_board.rs`).
 
 use hal_sim::plant::Load;
 use hal_sim::sim::virtual_board::{VirtualBoard, VirtualOptions};
