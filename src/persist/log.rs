@@ -1,5 +1,5 @@
 //! The cold-chain log: what a 30-day temperature recorder keeps, as fixed 16-byte entries in a
-//! `sequential-storage` queue ([`crate::persist::flash::LogStore`]) — an interval summary every
+//! `sequential-storage` queue (`persist::flash::LogStore`, feature `persist-flash`) — an interval summary every
 //! [`INTERVAL_S`] seconds, and every event, alarm and accepted setting.
 //!
 //! Time is **record time**, seconds: the board's clock counts from boot, so at boot the record
