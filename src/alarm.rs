@@ -87,7 +87,7 @@ impl Annunciator {
             self.latched = true;
         }
         let t = out.temp_c.0;
-        if matches!(out.mode, Mode::SensorFault | Mode::LimpHome) {
+        if out.mode.not_in_control() {
             Indication::NotInControl
         } else if !(2.0..=8.0).contains(&t) {
             Indication::OutOfRange
