@@ -18,7 +18,7 @@
 
 use crate::coldchain::Raised;
 use crate::event::EventKind;
-use crate::step::{Mode, StepOutput};
+use crate::step::StepOutput;
 
 /// Whether an event asks for a person: a hardware fault ([`EventKind::is_hardware_fault`]), a
 /// controller that produced no number, or a watchdog restart.
@@ -87,7 +87,7 @@ impl Annunciator {
             self.latched = true;
         }
         let t = out.temp_c.0;
-        if matches!(out.mode, Mode::SensorFault | Mode::LimpHome) {
+        if out.mode.not_in_control() {
             Indication::NotInControl
         } else if !(2.0..=8.0).contains(&t) {
             Indication::OutOfRange
@@ -114,6 +114,7 @@ mod tests {
     use super::*;
     use crate::coldchain::{Alarm, AlarmKind};
     use crate::event::{Event, Events};
+    use crate::step::Mode;
     use crate::units::{Celsius, Duty};
 
     fn out(temp_c: f32, mode: Mode, events: &[EventKind]) -> StepOutput {

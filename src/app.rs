@@ -734,13 +734,24 @@ impl App {
         // From the integer clock: through f32 the tenths went wrong after 48 days (8025510.4 on a
         // 10 s grid) and the whole value became `-` after 6 years.
         write!(out, "t_s={}.{}\r\n", self.last_t_ms / 1000, self.last_t_ms % 1000 / 100)?;
-        let (temp, sp, duty, mode, alarm) = match last {
-            Some(o) => (o.step.temp_c.0, o.step.setpoint_c.0, o.step.duty.get(), o.step.mode.name(), o.alarm.name()),
-            None => (f32::NAN, self.settings.setpoint_c, f32::NAN, "-", "-"),
+        let (temp, duty, mode, alarm) = match last {
+            Some(o) => (o.step.temp_c.0, o.step.duty.get(), o.step.mode.name(), o.alarm.name()),
+            None => (f32::NAN, f32::NAN, "-", "-"),
         };
+        // The setpoint in force: an accepted `set` at once, not the last sample's (up to Ts
+        // old), clamped as the step clamps it.
+        let c = self.cfg.carrier.get();
+        let sp =
+            crate::units::min_f32(crate::units::max_f32(self.settings.setpoint_c, c.setpoint_min_c), c.setpoint_max_c);
         write!(out, "temp_c={}\r\nsetpoint_c={}\r\nduty={}\r\n", Fixed(temp, 2), Fixed(sp, 2), Fixed(duty, 3))?;
-        write!(out, "mode={mode}\r\nalarm={alarm}\r\ncontroller={}\r\n", self.carrier.controller().name())?;
-        let status = self.carrier.controller().status();
+        // No law while the step holds the outputs (a sensor fault: cooling off, the law not run;
+        // limp home: the supply switch's On-Off): `get` says which law resumes.
+        let law = match last {
+            Some(o) if o.step.mode.not_in_control() => None,
+            _ => Some(self.carrier.controller()),
+        };
+        write!(out, "mode={mode}\r\nalarm={alarm}\r\ncontroller={}\r\n", law.map_or("-", |l| l.name()))?;
+        let status = law.and_then(|l| l.status());
         write!(out, "adaptive={}\r\ncontrollers=", status.map_or("-", |s| s.mode.name()))?;
         for (i, l) in self.cfg.laws.iter().enumerate() {
             write!(out, "{}{}", if i == 0 { "" } else { "," }, l.name())?;
@@ -752,11 +763,14 @@ impl App {
         });
         write_model(out, "model", model)?;
         write_model(out, "cabinet", self.cabinet)?;
+        // The record counts every boot by its cause, the one that began it too (a power-on, or
+        // the pin reset after flashing): the restarts are the boots after that one.
         let h = self.recorder.history();
-        let resets: u32 = [ResetCause::Watchdog, ResetCause::BrownOut, ResetCause::Other]
+        let boots: u32 = [ResetCause::Watchdog, ResetCause::BrownOut, ResetCause::Other]
             .into_iter()
             .map(|c| u32::from(h.resets_by(c)))
             .sum();
+        let resets = boots.saturating_sub(1);
         let holdover = last.and_then(|o| o.step.holdover_s).unwrap_or(f32::NAN);
         write!(out, "holdover_s={}\r\nresets={resets}\r\nfirmware={}\r\n", Fixed(holdover, 0), self.cfg.firmware)?;
         out.write_str("commissioning=")?;

@@ -22,8 +22,9 @@ pub enum EventKind {
     /// shorted. Until reset the step limps home: the supply-enable switch does the On-Off
     /// control the SSR no longer can ([`crate::step::Mode::LimpHome`]).
     SsrStuckOn,
-    /// The load warms although the SSR has been commanded fully on for minutes: the SSR or the
-    /// modules are open, or the cabinet is open.
+    /// The load warms although the SSR has been commanded fully on for minutes, or a warm load
+    /// does not cool at all ([`crate::supervisor::ssr::StuckOffConfig::stalled_on_s`]): the SSR
+    /// or the modules are open, or the cabinet is open.
     SsrStuckOff,
     /// The reading stepped by more than physics allows in one sample and stayed at the new level
     /// (a drifting reference, a damaged lead, a probe pulled out of the load). A step up of at

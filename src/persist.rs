@@ -541,7 +541,8 @@ impl From<&StopInfo> for LastStop {
 pub struct HistoryRecord {
     /// Alarms raised, per kind, in [`AlarmKind`] declaration order.
     pub alarms: [u16; 4],
-    /// Resets seen: watchdog, brown-out, other.
+    /// Boots seen, by the reset that started them: watchdog, brown-out, other. The boot that
+    /// began the record is counted too (`status` shows the restarts: these less that one).
     pub resets: [u16; 3],
     /// Coldest sample, °C.
     pub min_c: Option<f32>,

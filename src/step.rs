@@ -106,6 +106,13 @@ impl Mode {
             Mode::LimpHome => "limp_home",
         }
     }
+
+    /// The step, not the law, decides the outputs for as long as this mode lasts: a sensor
+    /// fault (cooling held off, the law not run) or limp home (the supply switch's On-Off). The
+    /// alarm indicator shows `not_in_control` ([`crate::alarm`]) and `status` names no law.
+    pub fn not_in_control(self) -> bool {
+        matches!(self, Mode::SensorFault | Mode::LimpHome)
+    }
 }
 
 /// One sample's output.

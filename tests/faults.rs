@@ -166,6 +166,52 @@ fn an_open_ssr_is_detected() {
     check(Fault::SsrStuckOff, 1800.0);
 }
 
+/// An SSR (or the modules) dead before the pull-down: the load stays at the ambient, at full
+/// duty, neither warming (the SSR checks' warming tests) nor falling. Found once full duty has
+/// held a load above every healthy carrier's full-cooling floor for 10 min without taking 0.5 °C
+/// off it (`StuckOffConfig::stalled_on_s`); before, nothing until the 10 h heat alarm, with the
+/// status `normal` and no event in the record. The module-side sense cannot see it (it reads the
+/// modules only in the window where the SSR is commanded off).
+#[test]
+fn an_ssr_dead_before_the_pull_down_is_detected_within_eleven_minutes() {
+    let plants = [
+        (PlantChoice::Hter1, Load::Full),
+        (PlantChoice::Hter1, Load::Half),
+        (PlantChoice::Hter2, Load::Full),
+        (PlantChoice::Hter2, Load::Half),
+    ];
+    for c in [ControllerChoice::Gpc, ControllerChoice::Pi, ControllerChoice::Onoff] {
+        for (plant, load) in plants {
+            for ambient_c in [20.0, 28.0, 43.0] {
+                let sc = Scenario::resolve("step").unwrap();
+                let module_sense = c == ControllerChoice::Gpc;
+                let out = run(&SimOptions {
+                    drive: Default::default(),
+                    duration_s: 7200.0,
+                    scenario: sc,
+                    controller: ControllerSpec::new(c),
+                    plant,
+                    load,
+                    ambient_c,
+                    seed: 5,
+                    faults: vec![(0.0, Fault::SsrStuckOff)],
+                    module_sense,
+                })
+                .unwrap();
+                let m = &out.metrics;
+                let case = format!("{c:?} {plant:?} {load:?} {ambient_c} °C");
+                let found = m.faults_detected.iter().find(|f| f.kind == Detected::Event(EventKind::SsrStuckOff));
+                let found = found.unwrap_or_else(|| panic!("{case}: never reported: {:?}", m.faults_detected));
+                assert!(found.t_s <= 660.0, "{case}: found at {} s", found.t_s);
+                assert!(
+                    out.rows.iter().all(|r| r.mode == RowMode::Step(Mode::Normal)),
+                    "{case}: mode normal throughout"
+                );
+            }
+        }
+    }
+}
+
 /// Missions that `hter campaign` once failed, each for a reason since fixed in the step:
 /// 230 and 588 (a heavy carrier's slow coast after pull-down taken for a shorted SSR), 11338 (a
 /// light carrier's coast, seen through the sensor lag, tripping the freeze guard's shorted-SSR

@@ -164,7 +164,7 @@ fn status_has_every_field_of_the_contract_in_order() {
     assert_eq!(b.field("controller"), "gpc");
     assert_eq!(b.field("controllers"), "gpc,pi,onoff");
     assert_eq!(b.field("mode"), "normal");
-    assert_eq!(b.field("resets"), "1", "the boot counts its own reset");
+    assert_eq!(b.field("resets"), "0", "a new board's first boot begins the record: no reset");
     assert_eq!(b.field("t_s"), "290.0");
     assert_eq!(b.field("model_k"), profile::START_MODEL_HTER1.k().to_string());
     // Never commissioned: no cabinet model; the holdover runs on the build's start model.
@@ -526,6 +526,71 @@ fn the_log_gets_intervals_events_and_continues_its_record_time_after_a_reset() {
     // Record time starts at 86 401 s; intervals end on multiples of 300 s.
     assert_eq!(intervals, [86_700, 87_000, 87_300]);
     assert!(log.windows(2).all(|w| w[0].t_s() <= w[1].t_s()), "in time order");
+}
+
+#[test]
+fn status_shows_an_accepted_setpoint_at_once() {
+    let mut b = bench_under_pi();
+    b.run(30);
+    assert_eq!(b.send("set setpoint_c 5.5"), "ok\r\n");
+    // Before the next sample (up to Ts later): the setpoint in force, as `get` shows it.
+    assert_eq!(b.field("setpoint_c"), "5.50");
+    b.run(1);
+    assert_eq!(b.field("setpoint_c"), "5.50");
+}
+
+#[test]
+fn status_names_no_law_while_the_step_holds_the_outputs() {
+    let mut b = Bench::new(&boot());
+    b.run(30);
+    assert_eq!((b.field("controller").as_str(), b.field("mode").as_str()), ("gpc", "normal"));
+    assert_ne!(b.field("adaptive"), "-");
+    // A sensor fault (the reference conversions out of their window): cooling held off, no law
+    // runs.
+    for _ in 0..3 {
+        let counts = counts_at(b.load_c);
+        b.app.sample(&SampleIn { t_ms: b.t_ms, counts, reference_ok: false, board: Default::default() });
+        b.t_ms += 10_000;
+    }
+    assert_eq!(b.field("mode"), "sensor_fault");
+    assert_eq!(b.field("alarm"), "not_in_control");
+    assert_eq!((b.field("controller").as_str(), b.field("adaptive").as_str()), ("-", "-"));
+    // The setting is unchanged: `get` says which law resumes.
+    assert!(b.send("get").contains("controller=gpc\r\n"));
+    b.run(3);
+    assert_eq!(b.field("mode"), "normal");
+    assert_eq!(b.field("controller"), "gpc");
+    assert_ne!(b.field("adaptive"), "-");
+}
+
+#[test]
+fn resets_counts_the_restarts_after_the_boot_that_began_the_record() {
+    // A new board: its first boot (a power-on; the pin reset after flashing) is no reset.
+    for reset in [ResetCause::Other, ResetCause::BrownOut] {
+        let mut b = Bench::new(&Boot { reset, ..boot() });
+        b.run(1);
+        assert_eq!(b.field("resets"), "0", "{reset:?}");
+    }
+    // The record it stored at boot counts that boot; each later boot is a restart.
+    let mut b = Bench::new(&boot());
+    b.run(1);
+    let stored = b
+        .saves
+        .iter()
+        .rev()
+        .find_map(|s| match s {
+            Save::History(h) => Some(*h),
+            _ => None,
+        })
+        .expect("the boot stores the history");
+    let mut b = Bench::new(&Boot { history: stored, reset: ResetCause::BrownOut, ..boot() });
+    b.run(1);
+    assert_eq!(b.field("resets"), "1");
+    let mut again = stored;
+    again.note_reset(ResetCause::BrownOut);
+    let mut b = Bench::new(&Boot { history: again, reset: ResetCause::Watchdog, ..boot() });
+    b.run(1);
+    assert_eq!(b.field("resets"), "2");
 }
 
 #[test]

@@ -144,7 +144,7 @@ impl SupervisorConfig {
         }
         let (s, on, off, p) = (&self.sensor, &self.ssr.stuck_on, &self.ssr.stuck_off, &self.ssr.probe);
         // (seconds, largest count its counter holds, field)
-        let counted: [(f32, u32, &'static str); 12] = [
+        let counted: [(f32, u32, &'static str); 13] = [
             (s.stuck_s, u16::MAX as u32, "sensor.stuck_s"),
             (s.spike.jump_s, u8::MAX as u32, "sensor.spike.jump_s"),
             (s.offset.confirm_s, u8::MAX as u32, "sensor.offset.confirm_s"),
@@ -152,6 +152,7 @@ impl SupervisorConfig {
             (on.off_s, u16::MAX as u32, "ssr.stuck_on.off_s"),
             (off.on_s, u16::MAX as u32, "ssr.stuck_off.on_s"),
             (off.slow_on_s, u16::MAX as u32, "ssr.stuck_off.slow_on_s"),
+            (off.stalled_on_s, u16::MAX as u32, "ssr.stuck_off.stalled_on_s"),
             (p.unrequested_s, u16::MAX as u32, "ssr.probe.unrequested_s"),
             (self.lid.overwhelmed_s, u16::MAX as u32, "lid.overwhelmed_s"),
             (self.supply.sag_s, u8::MAX as u32, "supply.sag_s"),

@@ -34,7 +34,9 @@
 //!   as a short does, but not on cue twice.
 //! - **Stuck off** (`SsrMonitor::warms_at_full_duty`): full duty for 5 min and the load
 //!   warmed (fast), or for 15 min and it is warmer than when full duty began and still rising
-//!   (slow, a cool day).
+//!   (slow, a cool day), or for 10 min and a load warmer than any healthy carrier's
+//!   full-cooling floor has not fallen (stalled: an SSR dead before the pull-down began leaves
+//!   the load at the ambient, where it neither warms nor falls).
 //! - **Limp home** ([`LimpConfig`]): after a shorted SSR, On-Off through the supply switch.
 //!
 //! The checks read `off_run`/`on_run`/`req_off_run`, the runs of the applied duty at 0 and at
@@ -146,11 +148,37 @@ pub struct StuckOffConfig {
     /// …the load higher than when full duty began by more than this, °C, and still rising over
     /// the last [`Self::on_s`]. A working SSR has turned the load around long before.
     pub slow_rise_c: f32,
+    /// Stalled (no cooling at all: an SSR or modules dead before a pull-down began, the load
+    /// at the ambient, neither warming nor falling, and found by neither test above until the
+    /// 10 h heat alarm): full duty for this long, s (10 min)…
+    pub stalled_on_s: f32,
+    /// …the load fell by less than this since full duty began, °C…
+    ///
+    /// Every healthy carrier falls more: the campaign's carriers (H-TER I and II, each heat
+    /// capacity and conductance ×0.5…1.5, 3 000 of them), pulled down from an ambient of
+    /// 15–43 °C at full duty on a 9–12 V supply, fell ≥ 1.89 °C in the filtered reading in
+    /// their first 10 min (the least: 15 °C ambient, 9 V), and above 15 °C each 5 min of full
+    /// duty after the first 10 took ≥ 0.39 °C off (`hal-sim/src/plant.rs`). A dead SSR
+    /// leaves the load at the ambient: 0.
+    pub stalled_fall_c: f32,
+    /// …and the load is warmer than this, °C: above every healthy carrier's full-cooling floor,
+    /// where full duty that holds the load still is a carrier at its capacity, not a dead one.
+    /// The highest floor of those carriers at 43 °C: 10.9 °C on 9.5 V (a mission's sag), 11.5 °C
+    /// on 9 V (`--fault supply-sag`); the nominal H-TER I and II: −3.4 and −2.8 °C on 12 V.
+    pub stalled_above_c: f32,
 }
 
 impl StuckOffConfig {
     /// The reference board's settings.
-    pub const DEFAULT: StuckOffConfig = StuckOffConfig { on_s: 300.0, rise_c: 0.5, slow_on_s: 900.0, slow_rise_c: 0.3 };
+    pub const DEFAULT: StuckOffConfig = StuckOffConfig {
+        on_s: 300.0,
+        rise_c: 0.5,
+        slow_on_s: 900.0,
+        slow_rise_c: 0.3,
+        stalled_on_s: 600.0,
+        stalled_fall_c: 0.5,
+        stalled_above_c: 15.0,
+    };
 }
 
 /// Settings of the supply probe.
@@ -280,6 +308,7 @@ struct Limits {
     window: usize,
     stuck_off: u16,
     slow: u16,
+    stalled: u16,
     probe_unrequested: u16,
     probe_fall: usize,
     probe_turn_up: usize,
@@ -336,6 +365,7 @@ impl SsrMonitor {
             window: samples_u16(on.window_s, ts_s) as usize,
             stuck_off: samples_u16(off.on_s, ts_s),
             slow: samples_u16(off.slow_on_s, ts_s),
+            stalled: samples_u16(off.stalled_on_s, ts_s),
             probe_unrequested: samples_u16(p.unrequested_s, ts_s),
             probe_fall: samples_u16(p.fall_window_s, ts_s) as usize,
             probe_turn_up: samples_u16(p.turn_up_window_s, ts_s) as usize,
@@ -482,7 +512,11 @@ impl SsrMonitor {
                 } else {
                     let fast = temp_c - past > c.rise_c;
                     let slow = self.on_run >= self.n.slow && temp_c - self.on_start_c > c.slow_rise_c && temp_c > past;
-                    if fast || slow {
+                    // After a report the start is INFINITY: never stalled.
+                    let stalled = self.on_run >= self.n.stalled
+                        && temp_c > c.stalled_above_c
+                        && self.on_start_c - temp_c < c.stalled_fall_c;
+                    if fast || slow || stalled {
                         self.off_reported = true;
                         found = true;
                     }
@@ -576,7 +610,7 @@ mod tests {
     #[test]
     fn the_windows_are_todays_sample_counts() {
         let n = monitor().n;
-        assert_eq!((n.unrequested, n.off, n.window, n.stuck_off, n.slow), (6, 24, 12, 30, 90));
+        assert_eq!((n.unrequested, n.off, n.window, n.stuck_off, n.slow, n.stalled), (6, 24, 12, 30, 90, 60));
         assert_eq!((n.probe_unrequested, n.probe_fall, n.probe_turn_up), (60, 30, 3));
         assert_eq!((n.trip_window_ms, n.probe_open_ms, n.probe_interval_ms), (1_800_000, 300_000, 3_600_000));
         // Every window fits the ring.
@@ -841,6 +875,35 @@ mod tests {
         // An SSR that dies while the supply was open: the load keeps warming 0.02 °C a sample
         // (0.6 °C in 5 min) at full duty. Reported at 10 min, and not before.
         assert_eq!(stuck_off_after(&at(0.0), &dead), [60]);
+    }
+
+    /// The samples of full duty at which a monitor reports stuck off on a load that starts at
+    /// `start_c` and changes by `rate_c` a sample.
+    fn stuck_off_on_a_ramp(start_c: f32, rate_c: f32, samples: u16) -> Vec<u16> {
+        let mut m = monitor();
+        let mut found = Vec::new();
+        for k in 0..samples {
+            let t = start_c + rate_c * f32::from(k);
+            m.remember(t);
+            if m.warms_at_full_duty(&CFG.stuck_off, t) {
+                found.push(k);
+            }
+            m.applied(&CFG, Duty::FULL, 1.0, t);
+        }
+        found
+    }
+
+    #[test]
+    fn stuck_off_when_full_duty_leaves_a_warm_load_where_it_is() {
+        // An SSR dead before the pull-down: the load stays at the ambient (30 °C), full duty
+        // for ever. Neither warming test sees it; stalled at 10 min, once.
+        assert_eq!(stuck_off_on_a_ramp(30.0, 0.0, 400), [60]);
+        // The same drifting down less than 0.5 °C in 10 min (the ambient falling at night).
+        assert_eq!(stuck_off_on_a_ramp(30.0, -0.008, 400), [60]);
+        // A healthy pull-down from 15.5 °C at its slowest, 0.39 °C in 5 min: not stalled.
+        assert_eq!(stuck_off_on_a_ramp(15.5, -0.013, 100), []);
+        // A carrier at its capacity, full duty holding 12 °C on a hot day: not a dead SSR.
+        assert_eq!(stuck_off_on_a_ramp(12.0, 0.0, 400), []);
     }
 
     #[test]
