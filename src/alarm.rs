@@ -15,6 +15,9 @@
 //! restarts (the STM32L4 flags both alike), freeze-guard actions, mode changes of the
 //! self-tuner and setpoint clamps are not alarms: they are the supervisor doing its job, and
 //! they are in the log.
+//!
+//! [`Mode::SensorFault`]: crate::step::Mode::SensorFault
+//! [`Mode::LimpHome`]: crate::step::Mode::LimpHome
 
 use crate::coldchain::Raised;
 use crate::event::EventKind;
