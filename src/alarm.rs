@@ -11,7 +11,9 @@
 //!   carries the box may not have been there when it happened.
 //!
 //! Acknowledging (the board's user button) clears the latch; what is still true now keeps the
-//! indicator on. A watchdog restart latches too (the loop hung). Power-on and brown-out
+//! indicator on. A watchdog restart latches too (the loop hung), and so does a fail-safe stop
+//! of the previous boot ([`EventKind::BoardFault`]: a panic, a fault, or the loop stalled,
+//! which the stall check caught before the watchdog would have). Power-on and brown-out
 //! restarts (the STM32L4 flags both alike), freeze-guard actions, mode changes of the
 //! self-tuner and setpoint clamps are not alarms: they are the supervisor doing its job, and
 //! they are in the log.
@@ -21,7 +23,7 @@ use crate::event::EventKind;
 use crate::step::StepOutput;
 
 /// Whether an event asks for a person: a hardware fault ([`EventKind::is_hardware_fault`]), a
-/// controller that produced no number, or a watchdog restart.
+/// controller that produced no number, a watchdog restart or a fail-safe stop.
 pub fn needs_attention(kind: EventKind) -> bool {
     kind.is_hardware_fault()
         || matches!(
@@ -30,6 +32,11 @@ pub fn needs_attention(kind: EventKind) -> bool {
                 // A watchdog bite is a hung loop: minutes without control. A brown-out is not
                 // here: the L4 flags every power-on as one, and switching the box on is no alarm.
                 | EventKind::Restarted(crate::persist::ResetCause::Watchdog)
+                // The previous boot stopped on its fail-safe path: a hung loop the stall check
+                // caught (the watchdog bite's case, found sooner; its reset is a software one),
+                // a panic or a fault. Quiet, a control stall was no alarm where the same hang
+                // caught by the watchdog was one.
+                | EventKind::BoardFault(_)
         )
 }
 
@@ -83,7 +90,10 @@ impl Annunciator {
 
     /// Takes one sample's step output and the cold-chain alarms it raised.
     pub fn update(&mut self, out: &StepOutput, raised: &Raised) -> Indication {
-        if out.events.iter().any(|e| needs_attention(e.kind)) || raised.iter().any(Option::is_some) {
+        for e in out.events.iter() {
+            self.latched |= needs_attention(e.kind);
+        }
+        if raised.iter().any(Option::is_some) {
             self.latched = true;
         }
         let t = out.temp_c.0;
@@ -168,7 +178,8 @@ mod tests {
     }
 
     #[test]
-    fn exactly_the_faults_and_a_watchdog_bite_ask_for_attention() {
+    fn exactly_the_faults_a_watchdog_bite_and_a_fail_safe_stop_ask_for_attention() {
+        use crate::failsafe::StopKind;
         use crate::persist::ResetCause;
         use EventKind::*;
         let attention = [
@@ -186,9 +197,32 @@ mod tests {
             LidOpen,
             ControllerNonFinite,
             Restarted(ResetCause::Watchdog),
+            BoardFault(StopKind::Panic),
+            BoardFault(StopKind::HardFault),
+            BoardFault(StopKind::Nmi),
+            BoardFault(StopKind::UnexpectedInterrupt),
+            BoardFault(StopKind::ControlStall),
         ];
         for k in EventKind::ALL {
             assert_eq!(needs_attention(k), attention.contains(&k), "{k:?}");
+        }
+    }
+
+    /// A control stall is the hung loop a watchdog bite is, caught sooner by the stall check
+    /// and followed by a software reset: the first sample of the next boot reports it, and the
+    /// indicator latches as it does for the bite (it stayed off).
+    #[test]
+    fn a_fail_safe_stop_of_the_previous_boot_latches() {
+        use crate::failsafe::StopKind;
+        use crate::persist::ResetCause;
+        let none: Raised = [None; 4];
+        for kind in StopKind::ALL {
+            let mut a = Annunciator::new();
+            let first = [EventKind::Restarted(ResetCause::Other), EventKind::BoardFault(kind)];
+            assert_eq!(a.update(&out(4.0, Mode::Normal, &first), &none), Indication::Unacknowledged, "{kind:?}");
+            assert_eq!(a.update(&out(4.0, Mode::Normal, &[]), &none), Indication::Unacknowledged, "{kind:?}");
+            a.acknowledge();
+            assert_eq!(a.update(&out(4.0, Mode::Normal, &[]), &none), Indication::Off, "{kind:?}");
         }
     }
 

@@ -834,3 +834,19 @@ fn switching_to_on_off_is_accepted_with_a_warning_line() {
     assert_eq!(b.send("set controller pi"), "ok\r\n");
     assert_eq!(b.send("set controller gpc"), "ok\r\n");
 }
+
+/// A boot after a fail-safe stop (here the stall check's, which resets by software: the reset
+/// flags say `Other`) shows the indicator until someone acknowledges it, as a boot after a
+/// watchdog bite does; a plain power-on does not.
+#[test]
+fn a_boot_after_a_fail_safe_stop_latches_the_indicator() {
+    use crate::failsafe::{StopInfo, StopKind};
+    let stall = StopInfo::new(StopKind::ControlStall, 0, 0, 25_000);
+    let mut b = Bench::new(&Boot { fault: Some(stall), ..boot() });
+    assert_eq!(b.run(1).alarm, Indication::Unacknowledged);
+    assert_eq!(b.run(30).alarm, Indication::Unacknowledged);
+    assert_eq!(b.send("ack"), "ok\r\n");
+    assert_eq!(b.run(1).alarm, Indication::Off);
+    let mut b = Bench::new(&Boot { reset: ResetCause::BrownOut, ..boot() });
+    assert_eq!(b.run(30).alarm, Indication::Off);
+}
