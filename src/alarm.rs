@@ -4,7 +4,9 @@
 //! The indicator is on while
 //! - the load is outside +2…+8 °C now (the vaccines are at risk this minute), or
 //! - the step is not in control: a sensor fault (cooling is off) or limping home on a shorted
-//!   SSR ([`Mode::SensorFault`], [`Mode::LimpHome`]), or
+//!   SSR ([`Mode::SensorFault`], [`Mode::LimpHome`]; a shorted SSR for the rest of the boot, as
+//!   the supervisor's limp home lasts: while the freeze guard holds the step reports
+//!   [`Mode::FreezeGuard`], and an acknowledged indicator went off there), or
 //! - something was detected since the last acknowledgement: a cold-chain alarm
 //!   (`heat_10h`, `freeze_60min`, …) or a hardware fault event (sensor, SSR, supply, lid,
 //!   offset). These latch: a fault that cleared by itself still needs a look, and the one who
@@ -80,24 +82,28 @@ impl Indication {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Annunciator {
     latched: bool,
+    /// The SSR was found shorted ([`EventKind::SsrStuckOn`]): the step limps home until reset,
+    /// and its freeze guard's holds report [`crate::step::Mode::FreezeGuard`], not limp home.
+    shorted: bool,
 }
 
 impl Annunciator {
     /// Nothing latched.
     pub const fn new() -> Self {
-        Annunciator { latched: false }
+        Annunciator { latched: false, shorted: false }
     }
 
     /// Takes one sample's step output and the cold-chain alarms it raised.
     pub fn update(&mut self, out: &StepOutput, raised: &Raised) -> Indication {
         for e in out.events.iter() {
             self.latched |= needs_attention(e.kind);
+            self.shorted |= e.kind == EventKind::SsrStuckOn;
         }
         if raised.iter().any(Option::is_some) {
             self.latched = true;
         }
         let t = out.temp_c.0;
-        if out.mode.not_in_control() {
+        if out.mode.not_in_control() || self.shorted {
             Indication::NotInControl
         } else if !(2.0..=8.0).contains(&t) {
             Indication::OutOfRange
@@ -206,6 +212,34 @@ mod tests {
         for k in EventKind::ALL {
             assert_eq!(needs_attention(k), attention.contains(&k), "{k:?}");
         }
+    }
+
+    /// Limp home lasts until reset, but while its freeze guard holds cooling off the step
+    /// reports `freeze_guard` (`hter sim --fault ssr-stuck-on@1000`: limp_home and freeze_guard
+    /// alternate every few minutes): acknowledged, the indicator went off there with the SSR
+    /// still shorted.
+    #[test]
+    fn a_shorted_ssr_stays_not_in_control_through_the_freeze_guards_holds() {
+        let mut a = Annunciator::new();
+        let none: Raised = [None; 4];
+        // Found shorted on the sample the guard trips (path 1): the step reports freeze_guard.
+        let found = [EventKind::FreezeGuardTripped, EventKind::SsrStuckOn];
+        assert_eq!(a.update(&out(2.6, Mode::FreezeGuard, &found), &none), Indication::NotInControl);
+        a.acknowledge();
+        assert_eq!(a.update(&out(2.6, Mode::FreezeGuard, &[]), &none), Indication::NotInControl);
+        assert_eq!(
+            a.update(&out(3.0, Mode::LimpHome, &[EventKind::FreezeGuardReleased]), &none),
+            Indication::NotInControl
+        );
+        a.acknowledge();
+        assert_eq!(
+            a.update(&out(2.7, Mode::FreezeGuard, &[EventKind::FreezeGuardTripped]), &none),
+            Indication::NotInControl
+        );
+        assert_eq!(a.update(&out(3.1, Mode::LimpHome, &[]), &none), Indication::NotInControl);
+        // A freeze guard's hold without a short is the supervisor doing its job.
+        let mut b = Annunciator::new();
+        assert_eq!(b.update(&out(2.6, Mode::FreezeGuard, &[EventKind::FreezeGuardTripped]), &none), Indication::Off);
     }
 
     /// A control stall is the hung loop a watchdog bite is, caught sooner by the stall check
