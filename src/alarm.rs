@@ -93,6 +93,12 @@ impl Annunciator {
         Annunciator { latched: false, shorted: false }
     }
 
+    /// After a restart: latched as the stored history says
+    /// ([`crate::persist::HistoryRecord::unacknowledged`]), so a restart does not acknowledge.
+    pub const fn restored(latched: bool) -> Self {
+        Annunciator { latched, shorted: false }
+    }
+
     /// Takes one sample's step output and the cold-chain alarms it raised.
     pub fn update(&mut self, out: &StepOutput, raised: &Raised) -> Indication {
         for e in out.events.iter() {

@@ -324,7 +324,7 @@ impl App {
             settings,
             adaptive,
             recorder,
-            annunciator: Annunciator::new(),
+            annunciator: Annunciator::restored(boot.history.unacknowledged),
             cadence: ModelCadence::new(cfg.model_save_samples),
             intervals: IntervalLog::new(),
             base_ms,
@@ -418,11 +418,12 @@ impl App {
         self.duty_mean.push(out.duty.get());
         self.last_t_ms = t_ms;
         self.commission_step(out.mode);
-        let rec = self.recorder.push(t_ms, out.temp_c.0);
+        let mut rec = self.recorder.push(t_ms, out.temp_c.0);
         if core::mem::take(&mut self.ack_pending) {
             self.annunciator.acknowledge();
         }
         let alarm = self.annunciator.update(&out, &rec.raised);
+        self.recorder.note_latched(&mut rec, self.annunciator.latched());
         let t_s = self.record_s(t_ms);
         // The interval this sample closes ended at or before it, so it is logged before the
         // sample's events and alarms: the record stays in time order (a fault found on the
