@@ -497,8 +497,16 @@ impl App {
             // Nothing to acknowledge (or an `ack` already waiting for the next sample): said,
             // and neither applied nor recorded, so that a repeated `ack` (a script in a loop, a
             // key held down) cannot fill the record's ring with events and push out its days.
+            // With the indicator on for what is true now (the load outside 2…8 °C, the step not in
+            // control), it says so: `no alarm` under a sounding buzzer told the health worker the
+            // carrier was fine.
             Command::Set(SetRequest::Ack) if !self.annunciator.latched() || self.ack_pending => {
-                let _ = out.write_str("no alarm\r\n");
+                let _ = match self.last.map(|o| o.alarm) {
+                    Some(a @ (Indication::OutOfRange | Indication::NotInControl)) => {
+                        write!(out, "alarm={} stays on while it lasts\r\n", a.name())
+                    }
+                    _ => out.write_str("no alarm\r\n"),
+                };
                 Ok(())
             }
             Command::Set(req) => {

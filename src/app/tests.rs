@@ -890,3 +890,18 @@ fn a_restart_keeps_an_unacknowledged_alarm_on() {
     third.load_c = load;
     assert_eq!(third.run(30).alarm, Indication::Off);
 }
+
+/// An `ack` with nothing latched while the indicator is on for what is true now says so: it
+/// said `no alarm` with `status` at `alarm=not_in_control` (a sensor fault) or
+/// `alarm=out_of_range`.
+#[test]
+fn an_ack_under_a_present_danger_says_the_alarm_stays() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    b.load_c = 400.0;
+    assert_eq!(b.run(3).alarm, Indication::NotInControl);
+    assert_eq!(b.send("ack"), "ok\r\n");
+    assert_eq!(b.run(1).alarm, Indication::NotInControl);
+    assert_eq!(b.send("ack"), "alarm=not_in_control stays on while it lasts\r\nok\r\n");
+    assert_eq!(b.setting_logs(), [SettingKey::Ack], "recorded once");
+}
