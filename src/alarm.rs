@@ -4,14 +4,18 @@
 //! The indicator is on while
 //! - the load is outside +2…+8 °C now (the vaccines are at risk this minute), or
 //! - the step is not in control: a sensor fault (cooling is off) or limping home on a shorted
-//!   SSR ([`Mode::SensorFault`], [`Mode::LimpHome`]), or
+//!   SSR ([`Mode::SensorFault`], [`Mode::LimpHome`]; a shorted SSR for the rest of the boot, as
+//!   the supervisor's limp home lasts: while the freeze guard holds the step reports
+//!   [`Mode::FreezeGuard`], and an acknowledged indicator went off there), or
 //! - something was detected since the last acknowledgement: a cold-chain alarm
 //!   (`heat_10h`, `freeze_60min`, …) or a hardware fault event (sensor, SSR, supply, lid,
 //!   offset). These latch: a fault that cleared by itself still needs a look, and the one who
 //!   carries the box may not have been there when it happened.
 //!
 //! Acknowledging (the board's user button) clears the latch; what is still true now keeps the
-//! indicator on. A watchdog restart latches too (the loop hung). Power-on and brown-out
+//! indicator on. A watchdog restart latches too (the loop hung), and so does a fail-safe stop
+//! of the previous boot ([`EventKind::BoardFault`]: a panic, a fault, or the loop stalled,
+//! which the stall check caught before the watchdog would have). Power-on and brown-out
 //! restarts (the STM32L4 flags both alike), freeze-guard actions, mode changes of the
 //! self-tuner and setpoint clamps are not alarms: they are the supervisor doing its job, and
 //! they are in the log.
@@ -24,7 +28,7 @@ use crate::event::EventKind;
 use crate::step::StepOutput;
 
 /// Whether an event asks for a person: a hardware fault ([`EventKind::is_hardware_fault`]), a
-/// controller that produced no number, or a watchdog restart.
+/// controller that produced no number, a watchdog restart or a fail-safe stop.
 pub fn needs_attention(kind: EventKind) -> bool {
     kind.is_hardware_fault()
         || matches!(
@@ -33,6 +37,11 @@ pub fn needs_attention(kind: EventKind) -> bool {
                 // A watchdog bite is a hung loop: minutes without control. A brown-out is not
                 // here: the L4 flags every power-on as one, and switching the box on is no alarm.
                 | EventKind::Restarted(crate::persist::ResetCause::Watchdog)
+                // The previous boot stopped on its fail-safe path: a hung loop the stall check
+                // caught (the watchdog bite's case, found sooner; its reset is a software one),
+                // a panic or a fault. Quiet, a control stall was no alarm where the same hang
+                // caught by the watchdog was one.
+                | EventKind::BoardFault(_)
         )
 }
 
@@ -76,21 +85,34 @@ impl Indication {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Annunciator {
     latched: bool,
+    /// The SSR was found shorted ([`EventKind::SsrStuckOn`]): the step limps home until reset,
+    /// and its freeze guard's holds report [`crate::step::Mode::FreezeGuard`], not limp home.
+    shorted: bool,
 }
 
 impl Annunciator {
     /// Nothing latched.
     pub const fn new() -> Self {
-        Annunciator { latched: false }
+        Annunciator { latched: false, shorted: false }
+    }
+
+    /// After a restart: latched as the stored history says
+    /// ([`crate::persist::HistoryRecord::unacknowledged`]), so a restart does not acknowledge.
+    pub const fn restored(latched: bool) -> Self {
+        Annunciator { latched, shorted: false }
     }
 
     /// Takes one sample's step output and the cold-chain alarms it raised.
     pub fn update(&mut self, out: &StepOutput, raised: &Raised) -> Indication {
-        if out.events.iter().any(|e| needs_attention(e.kind)) || raised.iter().any(Option::is_some) {
+        for e in out.events.iter() {
+            self.latched |= needs_attention(e.kind);
+            self.shorted |= e.kind == EventKind::SsrStuckOn;
+        }
+        if raised.iter().any(Option::is_some) {
             self.latched = true;
         }
         let t = out.temp_c.0;
-        if out.mode.not_in_control() {
+        if out.mode.not_in_control() || self.shorted {
             Indication::NotInControl
         } else if !(2.0..=8.0).contains(&t) {
             Indication::OutOfRange
@@ -171,7 +193,8 @@ mod tests {
     }
 
     #[test]
-    fn exactly_the_faults_and_a_watchdog_bite_ask_for_attention() {
+    fn exactly_the_faults_a_watchdog_bite_and_a_fail_safe_stop_ask_for_attention() {
+        use crate::failsafe::StopKind;
         use crate::persist::ResetCause;
         use EventKind::*;
         let attention = [
@@ -189,9 +212,60 @@ mod tests {
             LidOpen,
             ControllerNonFinite,
             Restarted(ResetCause::Watchdog),
+            BoardFault(StopKind::Panic),
+            BoardFault(StopKind::HardFault),
+            BoardFault(StopKind::Nmi),
+            BoardFault(StopKind::UnexpectedInterrupt),
+            BoardFault(StopKind::ControlStall),
         ];
         for k in EventKind::ALL {
             assert_eq!(needs_attention(k), attention.contains(&k), "{k:?}");
+        }
+    }
+
+    /// Limp home lasts until reset, but while its freeze guard holds cooling off the step
+    /// reports `freeze_guard` (`hter sim --fault ssr-stuck-on@1000`: limp_home and freeze_guard
+    /// alternate every few minutes): acknowledged, the indicator went off there with the SSR
+    /// still shorted.
+    #[test]
+    fn a_shorted_ssr_stays_not_in_control_through_the_freeze_guards_holds() {
+        let mut a = Annunciator::new();
+        let none: Raised = [None; 4];
+        // Found shorted on the sample the guard trips (path 1): the step reports freeze_guard.
+        let found = [EventKind::FreezeGuardTripped, EventKind::SsrStuckOn];
+        assert_eq!(a.update(&out(2.6, Mode::FreezeGuard, &found), &none), Indication::NotInControl);
+        a.acknowledge();
+        assert_eq!(a.update(&out(2.6, Mode::FreezeGuard, &[]), &none), Indication::NotInControl);
+        assert_eq!(
+            a.update(&out(3.0, Mode::LimpHome, &[EventKind::FreezeGuardReleased]), &none),
+            Indication::NotInControl
+        );
+        a.acknowledge();
+        assert_eq!(
+            a.update(&out(2.7, Mode::FreezeGuard, &[EventKind::FreezeGuardTripped]), &none),
+            Indication::NotInControl
+        );
+        assert_eq!(a.update(&out(3.1, Mode::LimpHome, &[]), &none), Indication::NotInControl);
+        // A freeze guard's hold without a short is the supervisor doing its job.
+        let mut b = Annunciator::new();
+        assert_eq!(b.update(&out(2.6, Mode::FreezeGuard, &[EventKind::FreezeGuardTripped]), &none), Indication::Off);
+    }
+
+    /// A control stall is the hung loop a watchdog bite is, caught sooner by the stall check
+    /// and followed by a software reset: the first sample of the next boot reports it, and the
+    /// indicator latches as it does for the bite (it stayed off).
+    #[test]
+    fn a_fail_safe_stop_of_the_previous_boot_latches() {
+        use crate::failsafe::StopKind;
+        use crate::persist::ResetCause;
+        let none: Raised = [None; 4];
+        for kind in StopKind::ALL {
+            let mut a = Annunciator::new();
+            let first = [EventKind::Restarted(ResetCause::Other), EventKind::BoardFault(kind)];
+            assert_eq!(a.update(&out(4.0, Mode::Normal, &first), &none), Indication::Unacknowledged, "{kind:?}");
+            assert_eq!(a.update(&out(4.0, Mode::Normal, &[]), &none), Indication::Unacknowledged, "{kind:?}");
+            a.acknowledge();
+            assert_eq!(a.update(&out(4.0, Mode::Normal, &[]), &none), Indication::Off, "{kind:?}");
         }
     }
 

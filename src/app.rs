@@ -324,7 +324,7 @@ impl App {
             settings,
             adaptive,
             recorder,
-            annunciator: Annunciator::new(),
+            annunciator: Annunciator::restored(boot.history.unacknowledged),
             cadence: ModelCadence::new(cfg.model_save_samples),
             intervals: IntervalLog::new(),
             base_ms,
@@ -418,11 +418,12 @@ impl App {
         self.duty_mean.push(out.duty.get());
         self.last_t_ms = t_ms;
         self.commission_step(out.mode);
-        let rec = self.recorder.push(t_ms, out.temp_c.0);
+        let mut rec = self.recorder.push(t_ms, out.temp_c.0);
         if core::mem::take(&mut self.ack_pending) {
             self.annunciator.acknowledge();
         }
         let alarm = self.annunciator.update(&out, &rec.raised);
+        self.recorder.note_latched(&mut rec, self.annunciator.latched());
         let t_s = self.record_s(t_ms);
         // The interval this sample closes ended at or before it, so it is logged before the
         // sample's events and alarms: the record stays in time order (a fault found on the
@@ -496,8 +497,16 @@ impl App {
             // Nothing to acknowledge (or an `ack` already waiting for the next sample): said,
             // and neither applied nor recorded, so that a repeated `ack` (a script in a loop, a
             // key held down) cannot fill the record's ring with events and push out its days.
+            // With the indicator on for what is true now (the load outside 2…8 °C, the step not in
+            // control), it says so: `no alarm` under a sounding buzzer told the health worker the
+            // carrier was fine.
             Command::Set(SetRequest::Ack) if !self.annunciator.latched() || self.ack_pending => {
-                let _ = out.write_str("no alarm\r\n");
+                let _ = match self.last.map(|o| o.alarm) {
+                    Some(a @ (Indication::OutOfRange | Indication::NotInControl)) => {
+                        write!(out, "alarm={} stays on while it lasts\r\n", a.name())
+                    }
+                    _ => out.write_str("no alarm\r\n"),
+                };
                 Ok(())
             }
             Command::Set(req) => {

@@ -564,6 +564,11 @@ pub struct HistoryRecord {
     pub flash_pages_lost: u16,
     /// The newest fail-safe stop.
     pub last_stop: Option<LastStop>,
+    /// The alarm indicator's latch ([`crate::alarm::Annunciator`]): a cold-chain alarm or a
+    /// fault not yet acknowledged. The next boot starts from it: RAM alone lost it at every
+    /// restart, and a brown-out silenced an alarm nobody had seen
+    /// ([`Recorder::note_latched`] stores every change).
+    pub unacknowledged: bool,
 }
 
 impl Default for HistoryRecord {
@@ -602,11 +607,13 @@ impl HistoryRecord {
     /// Kind tag.
     pub const TAG: u8 = b'H';
     /// Layout version written by this firmware.
-    pub const VERSION: u8 = 3;
+    pub const VERSION: u8 = 4;
     /// Length of a v2 record (still read), bytes.
     pub const LEN_V2: usize = 2 + 4 * 2 + 3 * 2 + 2 * 4 + 4 * 4 + HISTORY_EXCURSIONS * 13 + 4;
+    /// Length of a v3 record (still read: the v4 one without the indicator's latch), bytes.
+    pub const LEN_V3: usize = Self::LEN_V2 + StopKind::ALL.len() * 2 + 2 + 1 + 3 * 4;
     /// Encoded length, bytes.
-    pub const LEN: usize = Self::LEN_V2 + StopKind::ALL.len() * 2 + 2 + 1 + 3 * 4;
+    pub const LEN: usize = Self::LEN_V3 + 1;
     /// Nothing seen yet.
     pub const EMPTY: HistoryRecord = HistoryRecord {
         alarms: [0; 4],
@@ -621,6 +628,7 @@ impl HistoryRecord {
         stops: [0; StopKind::ALL.len()],
         flash_pages_lost: 0,
         last_stop: None,
+        unacknowledged: false,
     };
 
     /// Counts an alarm.
@@ -730,20 +738,23 @@ impl HistoryRecord {
             }
             None => w.put(&[0; 13]),
         }
+        w.put(&[u8::from(self.unacknowledged)]);
         w.finish();
         buf
     }
 
     /// Parses and range-checks stored bytes: extremes within −60 … 100 °C (or absent) and
     /// min ≤ max; excursions with a known side, 0 ≤ start ≤ end and a finite extreme in range;
-    /// a known stop kind. A v2 record decodes with no board faults.
+    /// a known stop kind. A v2 record decodes with no board faults, v2 and v3 with nothing
+    /// unacknowledged.
     pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
-        let v2 = bytes.len() == Self::LEN_V2 && bytes.get(1) == Some(&2);
-        let mut r = if v2 {
-            open_frame(bytes, Self::LEN_V2, Self::TAG, 2)?
-        } else {
-            open_frame(bytes, Self::LEN, Self::TAG, Self::VERSION)?
+        let (len, version) = match (bytes.len(), bytes.get(1)) {
+            (Self::LEN_V2, Some(2)) => (Self::LEN_V2, 2),
+            (Self::LEN_V3, Some(3)) => (Self::LEN_V3, 3),
+            _ => (Self::LEN, Self::VERSION),
         };
+        let v2 = version == 2;
+        let mut r = open_frame(bytes, len, Self::TAG, version)?;
         let mut rec = HistoryRecord::EMPTY;
         for n in rec.alarms.iter_mut().chain(rec.resets.iter_mut()) {
             *n = r.u16();
@@ -801,6 +812,8 @@ impl HistoryRecord {
                 Some(LastStop { kind: StopKind::from_code(code).ok_or(DecodeError::OutOfRange)?, pc, addr, detail })
             }
         };
+        // A v3 frame ends here: its reader reads 0, nothing unacknowledged.
+        rec.unacknowledged = r.u8() != 0;
         Ok(rec)
     }
 }
@@ -812,8 +825,11 @@ impl HistoryRecord {
 pub struct Recorded {
     /// Alarms this sample raised (at most one per kind).
     pub raised: Raised,
-    /// Store the history now: after an alarm, and every `save_every_samples` samples.
+    /// Store the history now: after an alarm, after a change of the indicator's latch
+    /// ([`Recorder::note_latched`]), and every `save_every_samples` samples.
     pub save_due: bool,
+    /// …and past the write gate's hold-off: an alarm was raised or the latch was set.
+    pub urgent: bool,
 }
 
 /// The carrier's cold-chain record across power cycles: the history carried in at boot, this
@@ -878,14 +894,29 @@ impl Recorder {
         if save_due {
             self.since_save = 0;
         }
-        Recorded { raised, save_due }
+        Recorded { raised, save_due, urgent: alarm }
+    }
+
+    /// Takes the alarm indicator's latch after the sample `r` recorded
+    /// ([`crate::alarm::Annunciator::latched`]), before [`Self::due_save`]: a change is stored
+    /// with the history, at once when the latch was set (a fault or alarm nobody has seen yet
+    /// must survive a power cut that follows it), behind the write gate's hold-off when an
+    /// acknowledgement cleared it (lost to a cut, the indicator comes back on: the safe side).
+    #[inline(never)]
+    pub fn note_latched(&mut self, r: &mut Recorded, latched: bool) {
+        if self.boot.unacknowledged != latched {
+            self.boot.unacknowledged = latched;
+            self.since_save = 0;
+            r.save_due = true;
+            r.urgent |= latched;
+        }
     }
 
     /// What to store after the sample `r` recorded: the history at once when it raised an alarm
-    /// ([`Save::AlarmHistory`], which skips the write gate's hold-off), or when the periodic
-    /// store is due ([`Save::History`]).
+    /// or set the indicator's latch ([`Save::AlarmHistory`], which skips the write gate's
+    /// hold-off), or when the periodic store is due ([`Save::History`]).
     pub fn due_save(&self, r: &Recorded) -> Option<Save> {
-        if r.raised.iter().flatten().next().is_some() {
+        if r.urgent {
             Some(Save::AlarmHistory(self.history()))
         } else if r.save_due {
             Some(Save::History(self.history()))
@@ -1345,7 +1376,7 @@ mod tests {
         assert_eq!(h.last_stop, Some(LastStop { kind: StopKind::Panic, pc: 0, addr: 0, detail: 417 }));
         let bytes = h.encode();
         assert_eq!(bytes.len(), HistoryRecord::LEN);
-        assert_eq!(&bytes[..2], &[b'H', 3]);
+        assert_eq!(&bytes[..2], &[b'H', 4]);
         assert_eq!(HistoryRecord::decode(&bytes), Ok(h));
 
         // A v2 record: the v3 bytes before the board-fault fields, version 2, its own CRC.
@@ -1373,10 +1404,55 @@ mod tests {
         // An unknown stop kind code, re-framed with a valid CRC.
         let mut b = h.encode();
         let n = HistoryRecord::LEN - 4;
-        b[n - 13] = 9;
+        b[n - 14] = 9;
         let crc = crc32(&b[..n]);
         b[n..].copy_from_slice(&crc.to_le_bytes());
         assert_eq!(HistoryRecord::decode(&b), Err(DecodeError::OutOfRange));
+    }
+
+    /// The indicator's latch is stored with the history (v4) and every change of it is handed
+    /// over at once, a set one past the write gate's hold-off; a v3 record reads as nothing
+    /// unacknowledged.
+    #[test]
+    fn the_indicators_latch_is_stored_and_v3_records_migrate() {
+        let mut rec = Recorder::new(HistoryRecord::EMPTY, 360);
+        let _ = rec.note_reset(ResetCause::BrownOut);
+        let mut quiet = rec.push(0, 4.0);
+        rec.note_latched(&mut quiet, false);
+        assert_eq!(rec.due_save(&quiet), None);
+        let mut set = rec.push(10_000, 4.0);
+        rec.note_latched(&mut set, true);
+        let h = rec.history();
+        assert!(h.unacknowledged);
+        assert_eq!(rec.due_save(&set), Some(Save::AlarmHistory(h)));
+        let mut again = rec.push(20_000, 4.0);
+        rec.note_latched(&mut again, true);
+        assert_eq!(rec.due_save(&again), None, "stored once");
+        assert_eq!(HistoryRecord::decode(&h.encode()), Ok(h));
+        let mut cleared = rec.push(30_000, 4.0);
+        rec.note_latched(&mut cleared, false);
+        assert_eq!(rec.due_save(&cleared), Some(Save::History(rec.history())));
+        assert!(!rec.history().unacknowledged);
+        // Carried into the next boot's record.
+        let mut next = Recorder::new(h, 360);
+        assert!(next.note_reset(ResetCause::BrownOut).unacknowledged);
+
+        // A v3 record: the v4 bytes before the latch, version 3, its own CRC.
+        let v4 = h.encode();
+        let mut v3 = [0u8; HistoryRecord::LEN_V3];
+        let body = HistoryRecord::LEN_V3 - 4;
+        v3[..body].copy_from_slice(&v4[..body]);
+        v3[1] = 3;
+        let crc = crc32(&v3[..body]);
+        v3[body..].copy_from_slice(&crc.to_le_bytes());
+        assert_eq!(HistoryRecord::decode(&v3), Ok(HistoryRecord { unacknowledged: false, ..h }));
+        // Any latch byte but 0 reads as latched (the safe side), re-framed with a valid CRC.
+        let mut b = HistoryRecord { unacknowledged: false, ..h }.encode();
+        let n = HistoryRecord::LEN - 4;
+        b[n - 1] = 2;
+        let crc = crc32(&b[..n]);
+        b[n..].copy_from_slice(&crc.to_le_bytes());
+        assert_eq!(HistoryRecord::decode(&b), Ok(h));
     }
 
     #[test]

@@ -581,3 +581,31 @@ fn guard_trips_count_the_control_s_own_trips_not_a_fault_s() {
         assert_eq!(r.guard_trips, counted, "mission {seed}");
     }
 }
+
+/// A restart is no acknowledgement: spikes found an hour before a brown-out keep the indicator
+/// on through it (the latch restarts from the stored history); it went `off` at the restart,
+/// and on again only if the sensor spiked anew (`hter sim --fault sensor-spikes@1000
+/// --fault brownout@8000`: off from 8000 to 8660 s).
+#[test]
+fn an_unacknowledged_alarm_survives_a_brownout() {
+    let scenario = Scenario::resolve("disturbance").unwrap();
+    let out = run(&SimOptions {
+        drive: Default::default(),
+        duration_s: scenario.duration_s,
+        scenario,
+        controller: ControllerSpec::new(ControllerChoice::Gpc),
+        plant: PlantChoice::Hter1,
+        load: Load::Full,
+        ambient_c: 28.0,
+        seed: 11,
+        faults: vec![(AT_S, Fault::SensorSpikes), (AT_S + 3600.0, Fault::Brownout)],
+        module_sense: false,
+    })
+    .unwrap();
+    let found = out.metrics.faults_detected.iter().find(|f| f.kind == Detected::Event(EventKind::SensorSpikes));
+    let found = found.expect("the spikes are reported").t_s;
+    assert!(found < AT_S + 3600.0, "before the brown-out: {found} s");
+    let after: Vec<_> = out.rows.iter().filter(|r| r.t_s >= found).collect();
+    assert!(after.iter().any(|r| r.t_s >= AT_S + 3600.0), "the run goes past the brown-out");
+    assert!(after.iter().all(|r| r.alarm != Indication::Off), "the indicator went off");
+}

@@ -259,7 +259,8 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
     }
     // Waits for the write gate: a power-bounce loop does not write at every boot.
     persist::request(persist::Save::History(history));
-    let mut annunciator = hter::alarm::Annunciator::new();
+    // A restart does not acknowledge: the latch is in the stored history.
+    let mut annunciator = hter::alarm::Annunciator::restored(history.unacknowledged);
     let mut heartbeat = Heartbeat::new();
     info!("controller: {}", carrier.controller().name());
     let mut model_cadence = hter::persist::ModelCadence::new(config::MODEL_SAVE_SAMPLES);
@@ -272,12 +273,13 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
         carrier.observe(&s.board);
         let input = hter::step::StepInput { t_ms: s.t_ms, counts: s.counts, setpoint_c: config::SETPOINT_C };
         let out = if s.reference_ok { carrier.step(&input) } else { carrier.step_with_reference_fault(&input) };
-        let rec = recorder.push(s.t_ms, out.temp_c.0);
+        let mut rec = recorder.push(s.t_ms, out.temp_c.0);
         if ACKNOWLEDGE.try_take().is_some() {
             info!("alarm acknowledged t={=u64:ms}", s.t_ms);
             annunciator.acknowledge();
         }
         let alarm = annunciator.update(&out, &rec.raised);
+        recorder.note_latched(&mut rec, annunciator.latched());
         ACTUATION.signal(Actuation {
             duty: out.duty,
             supply_enable: out.supply_enable,

@@ -493,8 +493,9 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                     carrier.note_reset(ResetCause::BrownOut);
                     cadence = model_cadence();
                     stores.push((t_s, Save::History(recorder.note_reset(ResetCause::BrownOut))));
-                    // The indicator's latch is RAM too.
-                    annunciator = Annunciator::new();
+                    // The indicator's latch restarts from the stored history (every change of it
+                    // is stored at once, `Recorder::note_latched`).
+                    annunciator = Annunciator::restored(recorder.history().unacknowledged);
                 } else {
                     rig.inject(f);
                 }
@@ -530,15 +531,16 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             }
             let trips = out.events.iter().filter(|e| e.kind == EventKind::FreezeGuardTripped).count();
             freeze_guard_trips = freeze_guard_trips.saturating_add(trips as u32);
-            let recorded = recorder.push(step_clock_ms(t_s), out.temp_c.0);
-            if let Some(save) = recorder.due_save(&recorded) {
-                stores.push((t_s, save));
-            }
+            let mut recorded = recorder.push(step_clock_ms(t_s), out.temp_c.0);
             let raised = recorded.raised;
             for a in raised.iter().flatten() {
                 alarms.push(Stamped { kind: a.kind, t_s: a.trigger_s() - PREROLL_S });
             }
             let indication = annunciator.update(&out, &raised);
+            recorder.note_latched(&mut recorded, annunciator.latched());
+            if let Some(save) = recorder.due_save(&recorded) {
+                stores.push((t_s, save));
+            }
             if indication.is_on() {
                 alarm_on_s += ts;
                 alarm_first_s.get_or_insert(t_s);

@@ -78,8 +78,10 @@ fn firmware_log(modes: &[&str], indications: &[&str]) -> String {
 #[test]
 fn sim_and_log2csv_spell_every_mode_and_event_as_the_library() {
     let d = dir();
-    // A shorted SSR (freeze guard, then limp home), then an open sensor: all four modes of the
-    // step and all four indications in one run.
+    // A supply sag (a fault that latches while the step stays in control), a shorted SSR
+    // (freeze guard, then limp home), then an open sensor: all four modes of the step and all
+    // four indications in one run. (Without the sag, `unacknowledged` came only from limp
+    // home's freeze-guard holds, which an acknowledgement silenced: `hter::alarm`.)
     let sim_csv = d.join("sim.csv");
     let out = hter(&[
         "sim",
@@ -87,6 +89,8 @@ fn sim_and_log2csv_spell_every_mode_and_event_as_the_library() {
         "step",
         "--controller",
         "gpc",
+        "--fault",
+        "supply-sag@1800",
         "--fault",
         "ssr-stuck-on@3600",
         "--fault",
@@ -110,7 +114,7 @@ fn sim_and_log2csv_spell_every_mode_and_event_as_the_library() {
     assert!(sim_adaptive.is_subset(&adaptive_names) && sim_adaptive.len() >= 2, "{sim_adaptive:?}");
     let kinds: Vec<&str> =
         json["faults_detected"].as_array().unwrap().iter().map(|f| f["kind"].as_str().unwrap()).collect();
-    assert_eq!(kinds, ["ssr_stuck_on", "sensor_open"]);
+    assert_eq!(kinds, ["supply_sag", "ssr_stuck_on", "sensor_open"]);
     assert!(kinds.iter().all(|k| event_names.contains(*k)), "{kinds:?}");
 
     // The firmware's spelling of each mode and indication, in `Mode::ALL` / `Indication::ALL`

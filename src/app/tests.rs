@@ -834,3 +834,74 @@ fn switching_to_on_off_is_accepted_with_a_warning_line() {
     assert_eq!(b.send("set controller pi"), "ok\r\n");
     assert_eq!(b.send("set controller gpc"), "ok\r\n");
 }
+
+/// A boot after a fail-safe stop (here the stall check's, which resets by software: the reset
+/// flags say `Other`) shows the indicator until someone acknowledges it, as a boot after a
+/// watchdog bite does; a plain power-on does not.
+#[test]
+fn a_boot_after_a_fail_safe_stop_latches_the_indicator() {
+    use crate::failsafe::{StopInfo, StopKind};
+    let stall = StopInfo::new(StopKind::ControlStall, 0, 0, 25_000);
+    let mut b = Bench::new(&Boot { fault: Some(stall), ..boot() });
+    assert_eq!(b.run(1).alarm, Indication::Unacknowledged);
+    assert_eq!(b.run(30).alarm, Indication::Unacknowledged);
+    assert_eq!(b.send("ack"), "ok\r\n");
+    assert_eq!(b.run(1).alarm, Indication::Off);
+    let mut b = Bench::new(&Boot { reset: ResetCause::BrownOut, ..boot() });
+    assert_eq!(b.run(30).alarm, Indication::Off);
+}
+
+/// The newest history the bench's app handed over for flash.
+fn stored_history(b: &Bench) -> HistoryRecord {
+    b.saves
+        .iter()
+        .rev()
+        .find_map(|s| match s {
+            Save::History(h) | Save::AlarmHistory(h) => Some(*h),
+            _ => None,
+        })
+        .expect("a history was stored")
+}
+
+/// A restart is no acknowledgement: a fault nobody has seen (a sensor that failed and came
+/// back) keeps the indicator on after a brown-out, from the history the boot reads; the boot
+/// after an `ack` is quiet. The latch was RAM alone, and the first sample after the restart
+/// showed `off`.
+#[test]
+fn a_restart_keeps_an_unacknowledged_alarm_on() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    let load = b.load_c;
+    b.load_c = 400.0;
+    b.run(3);
+    b.load_c = load;
+    assert_eq!(b.run(30).alarm, Indication::Unacknowledged);
+    let stored = stored_history(&b);
+    assert!(stored.unacknowledged);
+    let mut again = Bench::new(&Boot { history: stored, reset: ResetCause::BrownOut, log_last_s: 430, ..boot() });
+    again.load_c = load;
+    assert_eq!(again.run(1).alarm, Indication::Unacknowledged);
+    assert_eq!(again.run(30).alarm, Indication::Unacknowledged);
+    assert_eq!(again.send("ack"), "ok\r\n");
+    assert_eq!(again.run(1).alarm, Indication::Off);
+    let acked = stored_history(&again);
+    assert!(!acked.unacknowledged);
+    let mut third = Bench::new(&Boot { history: acked, reset: ResetCause::BrownOut, log_last_s: 760, ..boot() });
+    third.load_c = load;
+    assert_eq!(third.run(30).alarm, Indication::Off);
+}
+
+/// An `ack` with nothing latched while the indicator is on for what is true now says so: it
+/// said `no alarm` with `status` at `alarm=not_in_control` (a sensor fault) or
+/// `alarm=out_of_range`.
+#[test]
+fn an_ack_under_a_present_danger_says_the_alarm_stays() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    b.load_c = 400.0;
+    assert_eq!(b.run(3).alarm, Indication::NotInControl);
+    assert_eq!(b.send("ack"), "ok\r\n");
+    assert_eq!(b.run(1).alarm, Indication::NotInControl);
+    assert_eq!(b.send("ack"), "alarm=not_in_control stays on while it lasts\r\nok\r\n");
+    assert_eq!(b.setting_logs(), [SettingKey::Ack], "recorded once");
+}
