@@ -22,6 +22,7 @@
 //!
 //! [`Mode::SensorFault`]: crate::step::Mode::SensorFault
 //! [`Mode::LimpHome`]: crate::step::Mode::LimpHome
+//! [`Mode::FreezeGuard`]: crate::step::Mode::FreezeGuard
 
 use crate::coldchain::Raised;
 use crate::event::EventKind;
