@@ -16,6 +16,43 @@ use hter::step::Mode;
 
 const AT_S: f64 = 3600.0;
 
+/// Both carriers, full and half loaded.
+const PLANTS: [(PlantChoice, Load); 4] = [
+    (PlantChoice::Hter1, Load::Full),
+    (PlantChoice::Hter1, Load::Half),
+    (PlantChoice::Hter2, Load::Full),
+    (PlantChoice::Hter2, Load::Half),
+];
+
+/// `c` on `plant` with `load` at `ambient_c` through `sc` for `duration_s` with `faults`, seed 5;
+/// GPC with the module-side sense on the board too (the modules' own Seebeck voltage in the
+/// conversion window is no short), the other laws without.
+fn on_the_plants_board(
+    c: ControllerChoice,
+    plant: PlantChoice,
+    load: Load,
+    ambient_c: f64,
+    sc: Scenario,
+    duration_s: f64,
+    faults: Vec<(f64, Fault)>,
+) -> SimOutput {
+    // Every one of these runs exists: a failed run is a failure, not a case to skip.
+    let case = format!("{c:?} {} {plant:?} {load:?} {ambient_c} °C", sc.name);
+    run(&SimOptions {
+        drive: Default::default(),
+        duration_s,
+        scenario: sc,
+        controller: ControllerSpec::new(c),
+        plant,
+        load,
+        ambient_c,
+        seed: 5,
+        faults,
+        module_sense: c == ControllerChoice::Gpc,
+    })
+    .unwrap_or_else(|e| panic!("{case}: {e}"))
+}
+
 fn with_fault(kind: Fault, controller: ControllerChoice) -> SimOutput {
     let scenario = Scenario::resolve("disturbance").unwrap();
     run(&SimOptions {
@@ -174,30 +211,11 @@ fn an_open_ssr_is_detected() {
 /// modules only in the window where the SSR is commanded off).
 #[test]
 fn an_ssr_dead_before_the_pull_down_is_detected_within_eleven_minutes() {
-    let plants = [
-        (PlantChoice::Hter1, Load::Full),
-        (PlantChoice::Hter1, Load::Half),
-        (PlantChoice::Hter2, Load::Full),
-        (PlantChoice::Hter2, Load::Half),
-    ];
     for c in [ControllerChoice::Gpc, ControllerChoice::Pi, ControllerChoice::Onoff] {
-        for (plant, load) in plants {
+        for (plant, load) in PLANTS {
             for ambient_c in [20.0, 28.0, 43.0] {
                 let sc = Scenario::resolve("step").unwrap();
-                let module_sense = c == ControllerChoice::Gpc;
-                let out = run(&SimOptions {
-                    drive: Default::default(),
-                    duration_s: 7200.0,
-                    scenario: sc,
-                    controller: ControllerSpec::new(c),
-                    plant,
-                    load,
-                    ambient_c,
-                    seed: 5,
-                    faults: vec![(0.0, Fault::SsrStuckOff)],
-                    module_sense,
-                })
-                .unwrap();
+                let out = on_the_plants_board(c, plant, load, ambient_c, sc, 7200.0, vec![(0.0, Fault::SsrStuckOff)]);
                 let m = &out.metrics;
                 let case = format!("{c:?} {plant:?} {load:?} {ambient_c} °C");
                 let found = m.faults_detected.iter().find(|f| f.kind == Detected::Event(EventKind::SsrStuckOff));
@@ -348,37 +366,17 @@ fn an_overwhelmed_carrier_is_reported_once_not_every_other_sample() {
 /// No detector fires on healthy hardware across the baseline scenarios, controllers and plants.
 #[test]
 fn no_false_detections_without_faults() {
-    let plants = [
-        (PlantChoice::Hter1, Load::Full),
-        (PlantChoice::Hter1, Load::Half),
-        (PlantChoice::Hter2, Load::Full),
-        (PlantChoice::Hter2, Load::Half),
-    ];
     for c in [ControllerChoice::Onoff, ControllerChoice::Pi, ControllerChoice::Gpc, ControllerChoice::Igmvc] {
         for scenario in ["step", "piecewise", "disturbance"] {
-            for (plant, load) in plants {
+            for (plant, load) in PLANTS {
                 for ambient_c in [20.0, 28.0, 35.0] {
                     let sc = Scenario::resolve(scenario).unwrap();
-                    // The module-side sense on the board too: the modules' own Seebeck voltage
-                    // in the conversion window is no short.
-                    let module_sense = c == ControllerChoice::Gpc;
-                    let out = run(&SimOptions {
-                        drive: Default::default(),
-                        duration_s: sc.duration_s,
-                        scenario: sc,
-                        controller: ControllerSpec::new(c),
-                        plant,
-                        load,
-                        ambient_c,
-                        seed: 5,
-                        faults: vec![],
-                        module_sense,
-                    });
-                    // Every one of these runs exists: a failed run is a failure, not a case to skip.
-                    let out = out.unwrap_or_else(|e| panic!("{c:?} {scenario} {plant:?} {load:?} {ambient_c}: {e}"));
+                    let duration_s = sc.duration_s;
+                    let out = on_the_plants_board(c, plant, load, ambient_c, sc, duration_s, vec![]);
                     assert!(
                         out.metrics.faults_detected.is_empty(),
-                        "{c:?} {scenario} {plant:?} {load:?} {ambient_c} (module sense {module_sense}): {:?}",
+                        "{c:?} {scenario} {plant:?} {load:?} {ambient_c} (module sense {}): {:?}",
+                        c == ControllerChoice::Gpc,
                         out.metrics.faults_detected
                     );
                     assert_eq!(out.metrics.alarm_hw_first_s, None, "{c:?} {scenario} {plant:?} {load:?} {ambient_c}");

@@ -654,17 +654,22 @@ fn repeated_acks_and_unchanged_settings_leave_the_record_alone() {
     assert_eq!(b.setting_logs(), [SettingKey::Setpoint]);
 }
 
-/// With an alarm latched, `ack` acknowledges it and is recorded, once: a second `ack` before the
-/// next sample has nothing left to acknowledge.
-#[test]
-fn an_ack_with_an_alarm_latched_is_applied_and_recorded_once() {
+/// A bench 10 samples in, whose sensor broke for 3 samples and came back: the indicator latched.
+fn bench_with_a_latched_sensor_fault() -> Bench {
     let mut b = Bench::new(&boot());
     b.run(10);
-    // A broken sensor for a few samples latches the indicator.
     let load = b.load_c;
     b.load_c = 400.0;
     b.run(3);
     b.load_c = load;
+    b
+}
+
+/// With an alarm latched, `ack` acknowledges it and is recorded, once: a second `ack` before the
+/// next sample has nothing left to acknowledge.
+#[test]
+fn an_ack_with_an_alarm_latched_is_applied_and_recorded_once() {
+    let mut b = bench_with_a_latched_sensor_fault();
     let out = b.run(30);
     assert_eq!(out.alarm, Indication::Unacknowledged, "{out:?}");
     assert_eq!(b.send("ack"), "ok\r\n");
@@ -869,12 +874,8 @@ fn stored_history(b: &Bench) -> HistoryRecord {
 /// showed `off`.
 #[test]
 fn a_restart_keeps_an_unacknowledged_alarm_on() {
-    let mut b = Bench::new(&boot());
-    b.run(10);
+    let mut b = bench_with_a_latched_sensor_fault();
     let load = b.load_c;
-    b.load_c = 400.0;
-    b.run(3);
-    b.load_c = load;
     assert_eq!(b.run(30).alarm, Indication::Unacknowledged);
     let stored = stored_history(&b);
     assert!(stored.unacknowledged);

@@ -879,18 +879,10 @@ mod tests {
 
     /// The samples of full duty at which a monitor reports stuck off on a load that starts at
     /// `start_c` and changes by `rate_c` a sample.
-    fn stuck_off_on_a_ramp(start_c: f32, rate_c: f32, samples: u16) -> Vec<u16> {
-        let mut m = monitor();
-        let mut found = Vec::new();
-        for k in 0..samples {
-            let t = start_c + rate_c * f32::from(k);
-            m.remember(t);
-            if m.warms_at_full_duty(&CFG.stuck_off, t) {
-                found.push(k);
-            }
-            m.applied(&CFG, Duty::FULL, 1.0, t);
-        }
-        found
+    fn stuck_off_on_a_ramp(start_c: f32, rate_c: f32, samples: u16) -> Vec<usize> {
+        // The same monitor as `stuck_off_after`'s, from no readings before full duty.
+        let ramp: Vec<f32> = (0..samples).map(|k| start_c + rate_c * f32::from(k)).collect();
+        stuck_off_after(&[], &ramp)
     }
 
     #[test]
@@ -901,9 +893,9 @@ mod tests {
         // The same drifting down less than 0.5 °C in 10 min (the ambient falling at night).
         assert_eq!(stuck_off_on_a_ramp(30.0, -0.008, 400), [60]);
         // A healthy pull-down from 15.5 °C at its slowest, 0.39 °C in 5 min: not stalled.
-        assert_eq!(stuck_off_on_a_ramp(15.5, -0.013, 100), []);
+        assert_eq!(stuck_off_on_a_ramp(15.5, -0.013, 100), [0usize; 0]);
         // A carrier at its capacity, full duty holding 12 °C on a hot day: not a dead SSR.
-        assert_eq!(stuck_off_on_a_ramp(12.0, 0.0, 400), []);
+        assert_eq!(stuck_off_on_a_ramp(12.0, 0.0, 400), [0usize; 0]);
     }
 
     #[test]
