@@ -749,9 +749,7 @@ impl App {
         };
         // The setpoint in force: an accepted `set` at once, not the last sample's (up to Ts
         // old), clamped as the step clamps it.
-        let c = self.cfg.carrier.get();
-        let sp =
-            crate::units::min_f32(crate::units::max_f32(self.settings.setpoint_c, c.setpoint_min_c), c.setpoint_max_c);
+        let sp = self.cfg.carrier.get().setpoint_in_force(self.settings.setpoint_c);
         write!(out, "temp_c={}\r\nsetpoint_c={}\r\nduty={}\r\n", Fixed(temp, 2), Fixed(sp, 2), Fixed(duty, 3))?;
         // No law while the step holds the outputs (a sensor fault: cooling off, the law not run;
         // limp home: the supply switch's On-Off): `get` says which law resumes.

@@ -35,15 +35,11 @@ use crate::filter::FirstOrder;
 #[cfg(feature = "holdover")]
 use crate::holdover::Holdover;
 use crate::supervisor::{sensor, Supervisor};
-use crate::units::{max_f32, min_f32, Celsius, Duty};
+use crate::units::{Celsius, Duty};
 
 pub use config::{CarrierConfig, ConfigError, ValidConfig};
 
 mod config;
-
-/// Setpoint used when the requested one is not a number, °C (before clamping): the middle of
-/// the lower half of 2–8 °C.
-const FALLBACK_SETPOINT_C: f32 = 4.0;
 
 /// One sample's input.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -423,14 +419,7 @@ impl<C: Controller> Carrier<C> {
 
     /// The setpoint clamped to the accepted range; a clamp is reported when it begins.
     fn setpoint(&mut self, setpoint_c: f32, emit: &mut impl FnMut(EventKind)) -> f32 {
-        let (lo, hi) = (self.cfg.setpoint_min_c, self.cfg.setpoint_max_c);
-        // Not `f32::clamp`: it panics when min > max, and a panic path costs the firmware
-        // ~15 KiB of formatting code. Not `f32::max`/`min` either: calls on the M4F.
-        let w = if setpoint_c.is_finite() {
-            min_f32(max_f32(setpoint_c, lo), hi)
-        } else {
-            min_f32(max_f32(lo, FALLBACK_SETPOINT_C), hi)
-        };
+        let w = self.cfg.setpoint_in_force(setpoint_c);
         let clamped = w != setpoint_c;
         if clamped && !self.setpoint_clamped {
             emit(EventKind::SetpointClamped);

@@ -6,6 +6,11 @@ use crate::calib::TwoPoint;
 use crate::filter::FirstOrderConfig;
 use crate::rtd::Rtd;
 use crate::supervisor::{SupervisorConfig, WindowError};
+use crate::units::{max_f32, min_f32};
+
+/// Setpoint used when the requested one is not a number, °C (before clamping): the middle of
+/// the lower half of 2–8 °C.
+const FALLBACK_SETPOINT_C: f32 = 4.0;
 
 /// Everything the step needs to know that does not change while it runs.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -84,6 +89,20 @@ impl core::fmt::Display for ConfigError {
 }
 
 impl CarrierConfig {
+    /// The setpoint the step runs on when `setpoint_c` is asked for: clamped to the accepted
+    /// range, 4 °C (clamped) for one that is not a number. The step and the board's `status`
+    /// both use it, so `status` shows what the next sample will run on.
+    pub fn setpoint_in_force(&self, setpoint_c: f32) -> f32 {
+        let (lo, hi) = (self.setpoint_min_c, self.setpoint_max_c);
+        // Not `f32::clamp`: it panics when min > max, and a panic path costs the firmware
+        // ~15 KiB of formatting code. Not `f32::max`/`min` either: calls on the M4F.
+        if setpoint_c.is_finite() {
+            min_f32(max_f32(setpoint_c, lo), hi)
+        } else {
+            min_f32(max_f32(lo, FALLBACK_SETPOINT_C), hi)
+        }
+    }
+
     /// Checks what the step relies on: a sample period, a stable filter, a setpoint range the
     /// plausibility check does not cut into, and supervisor windows that fit their counters
     /// ([`SupervisorConfig::validate`]).
