@@ -1002,6 +1002,18 @@ mod tests {
         assert_eq!(ResetCause::from_stm32l4_csr(0), ResetCause::Other);
     }
 
+    /// A history record as an older `version` of `N` bytes wrote it: the current encoding's
+    /// first `N` − 4 bytes (each version appended its fields), that version's number, its CRC.
+    fn older_history<const N: usize>(current: &[u8], version: u8) -> [u8; N] {
+        let mut old = [0u8; N];
+        let body = N - 4;
+        old[..body].copy_from_slice(&current[..body]);
+        old[1] = version;
+        let crc = crc32(&old[..body]);
+        old[body..].copy_from_slice(&crc.to_le_bytes());
+        old
+    }
+
     #[test]
     fn crc32_check_value() {
         // The catalogue check value of CRC-32/ISO-HDLC.
@@ -1384,17 +1396,12 @@ mod tests {
         carried.note_alarm(AlarmKind::Heat10h);
         carried.note_reset(ResetCause::BrownOut);
         carried.note_stop(&StopInfo::new(StopKind::Nmi, 1, 2, 3));
-        let v3 = carried.encode();
-        let mut v2 = [0u8; HistoryRecord::LEN_V2];
-        let body = HistoryRecord::LEN_V2 - 4;
-        v2[..body].copy_from_slice(&v3[..body]);
-        v2[1] = 2;
-        let crc = crc32(&v2[..body]);
-        v2[body..].copy_from_slice(&crc.to_le_bytes());
+        let current = carried.encode();
+        let v2: [u8; HistoryRecord::LEN_V2] = older_history(&current, 2);
         let migrated = HistoryRecord::decode(&v2).expect("v2 is read");
         assert_eq!(migrated, HistoryRecord { stops: [0; 5], last_stop: None, ..carried });
-        // A v2 version byte on a v3-length record, and a v3 byte on a v2-length one, are not.
-        let mut b = v3;
+        // A v2 version byte on a current-length record, and a v3 byte on a v2-length one, are not.
+        let mut b = current;
         b[1] = 2;
         assert_eq!(HistoryRecord::decode(&b), Err(DecodeError::Crc));
         let mut b = v2;
@@ -1438,13 +1445,7 @@ mod tests {
         assert!(next.note_reset(ResetCause::BrownOut).unacknowledged);
 
         // A v3 record: the v4 bytes before the latch, version 3, its own CRC.
-        let v4 = h.encode();
-        let mut v3 = [0u8; HistoryRecord::LEN_V3];
-        let body = HistoryRecord::LEN_V3 - 4;
-        v3[..body].copy_from_slice(&v4[..body]);
-        v3[1] = 3;
-        let crc = crc32(&v3[..body]);
-        v3[body..].copy_from_slice(&crc.to_le_bytes());
+        let v3: [u8; HistoryRecord::LEN_V3] = older_history(&h.encode(), 3);
         assert_eq!(HistoryRecord::decode(&v3), Ok(HistoryRecord { unacknowledged: false, ..h }));
         // Any latch byte but 0 reads as latched (the safe side), re-framed with a valid CRC.
         let mut b = HistoryRecord { unacknowledged: false, ..h }.encode();
