@@ -23,6 +23,16 @@ fn run(b: &mut VirtualBoard, seconds: f64) {
     }
 }
 
+/// Runs `b` to the fault's time and injects it, as `hter virtual-board --fault KIND@T_S` does:
+/// from the first sample at or after T_S.
+fn inject_at(b: &mut VirtualBoard, fault: &str) {
+    let (at_s, fault) = hal_sim::fault::Fault::parse(fault).unwrap();
+    while b.sim_s() < at_s {
+        b.step().unwrap();
+    }
+    b.inject(fault).unwrap();
+}
+
 fn status(b: &mut VirtualBoard) -> Vec<(String, String)> {
     let reply = b.request("status");
     assert!(reply.ends_with("ok\r\n"), "{reply}");
@@ -83,11 +93,7 @@ fn history_is_a_csv_of_intervals_and_events_in_time_order() {
 #[test]
 fn an_event_on_the_sample_that_closes_an_interval_follows_its_row() {
     let mut b = board();
-    // As `hter virtual-board --fault sensor-open@3000` does: from the sample at 3 000 s.
-    while b.sim_s() < 3000.0 {
-        b.step().unwrap();
-    }
-    b.inject(hal_sim::fault::Fault::parse("sensor-open@3000").unwrap().1).unwrap();
+    inject_at(&mut b, "sensor-open@3000");
     run(&mut b, 600.0);
     let reply = b.request("history");
     let rows: Vec<&str> = reply.split("\r\n").skip(1).filter(|l| !l.is_empty() && *l != "ok").collect();
@@ -284,10 +290,7 @@ fn events(b: &mut VirtualBoard) -> Vec<(u32, String)> {
 #[test]
 fn a_dead_ssr_is_reported_while_the_load_warms_and_again_after_a_restart_at_the_ambient() {
     let mut b = board();
-    while b.sim_s() < 1800.0 {
-        b.step().unwrap();
-    }
-    b.inject(hal_sim::fault::Fault::parse("ssr-stuck-off@1800").unwrap().1).unwrap();
+    inject_at(&mut b, "ssr-stuck-off@1800");
     run(&mut b, 900.0);
     assert_eq!(field(&mut b, "mode"), "normal");
     assert_ne!(field(&mut b, "alarm"), "off");
