@@ -325,26 +325,42 @@ mod tests {
         std::env::temp_dir().join(format!("hter-link-{}-{name}", std::process::id()))
     }
 
-    /// A client as `hter board` opens the port: send `request`, the board answers `reply`, the
-    /// client reads until `ok`; gives the line the board got and the text the client got.
-    fn client_request(path: &Path, link: &mut PtyLink, request: &str, reply: &str) -> (String, String) {
-        let mut port = serialport::new(path.to_string_lossy(), 115_200)
+    /// A client on the link's port, as `hter board` opens it.
+    fn client(path: &Path) -> serialport::TTYPort {
+        serialport::new(path.to_string_lossy(), 115_200)
             .timeout(Duration::from_secs(5))
             .open_native()
-            .expect("open the link");
-        port.write_all(request.as_bytes()).unwrap();
-        let got = loop {
+            .expect("open the link")
+    }
+
+    /// The next request line the link hands out, waiting for it.
+    fn next_line(link: &mut PtyLink) -> String {
+        loop {
             if let Some(l) = link.poll_line(Duration::from_millis(50)).unwrap() {
                 break l;
             }
-        };
-        link.send(reply).unwrap();
+        }
+    }
+
+    /// What the client reads until `done` says the text is complete.
+    fn read_until(port: &mut serialport::TTYPort, done: impl Fn(&str) -> bool) -> String {
         let mut text = String::new();
         let mut buf = [0u8; 256];
-        while !text.ends_with("ok\r\n") {
+        while !done(&text) {
             let n = port.read(&mut buf).expect("reply");
             text.push_str(std::str::from_utf8(&buf[..n]).unwrap());
         }
+        text
+    }
+
+    /// A client as `hter board` opens the port: send `request`, the board answers `reply`, the
+    /// client reads until `ok`; gives the line the board got and the text the client got.
+    fn client_request(path: &Path, link: &mut PtyLink, request: &str, reply: &str) -> (String, String) {
+        let mut port = client(path);
+        port.write_all(request.as_bytes()).unwrap();
+        let got = next_line(link);
+        link.send(reply).unwrap();
+        let text = read_until(&mut port, |t| t.ends_with("ok\r\n"));
         (got, text)
     }
 
@@ -379,21 +395,11 @@ mod tests {
     fn answers_framing_errors_itself() {
         let path = tmp_path("framing");
         let mut link = PtyLink::open(&path).unwrap();
-        let mut port =
-            serialport::new(path.to_string_lossy(), 115_200).timeout(Duration::from_secs(5)).open_native().unwrap();
+        let mut port = client(&path);
         port.write_all(format!("{}\nget\n", "z".repeat(200)).as_bytes()).unwrap();
-        let got = loop {
-            if let Some(l) = link.poll_line(Duration::from_millis(50)).unwrap() {
-                break l;
-            }
-        };
+        let got = next_line(&mut link);
         assert_eq!(got, "get");
-        let mut text = String::new();
-        let mut buf = [0u8; 256];
-        while !text.ends_with("\r\n") {
-            let n = port.read(&mut buf).unwrap();
-            text.push_str(std::str::from_utf8(&buf[..n]).unwrap());
-        }
+        let text = read_until(&mut port, |t| t.ends_with("\r\n"));
         assert_eq!(text, format!("{}\r\n", Frame::TooLong.error().unwrap()));
     }
 
@@ -404,8 +410,7 @@ mod tests {
     fn malformed_lines_are_refused_in_their_turn() {
         let path = tmp_path("order");
         let mut link = PtyLink::open(&path).unwrap();
-        let mut port =
-            serialport::new(path.to_string_lossy(), 115_200).timeout(Duration::from_secs(5)).open_native().unwrap();
+        let mut port = client(&path);
         port.write_all(b"get\n\x01\nhelp\nx\ty\n").unwrap();
         let mut heard = Vec::new();
         while heard.len() < 2 {
@@ -418,12 +423,7 @@ mod tests {
         assert_eq!(link.poll_line(Duration::ZERO).unwrap(), None);
         let refused = Frame::NotPrintable.error().unwrap();
         let want = format!("get=1\r\nok\r\n{refused}\r\nhelp=1\r\nok\r\n{refused}\r\n");
-        let mut text = String::new();
-        let mut buf = [0u8; 256];
-        while text.len() < want.len() {
-            let n = port.read(&mut buf).expect("reply");
-            text.push_str(std::str::from_utf8(&buf[..n]).unwrap());
-        }
+        let text = read_until(&mut port, |t| t.len() >= want.len());
         assert_eq!((heard, text), (vec!["get".to_string(), "help".to_string()], want));
     }
 
@@ -455,14 +455,9 @@ mod tests {
         let big: String = row.repeat(20_000); // ~1.2 MB, more than a pty holds
         link.send(&big).unwrap();
         assert!(link.pending_bytes() > 0, "the pty took everything");
-        let mut port =
-            serialport::new(path.to_string_lossy(), 115_200).timeout(Duration::from_secs(5)).open_native().unwrap();
+        let mut port = client(&path);
         port.write_all(b"status\n").unwrap();
-        let got = loop {
-            if let Some(l) = link.poll_line(Duration::from_millis(50)).unwrap() {
-                break l;
-            }
-        };
+        let got = next_line(&mut link);
         assert_eq!((got.as_str(), link.pending_bytes()), ("status", 0));
         assert!(link.dropped_bytes() > 0);
     }
