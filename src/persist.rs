@@ -118,29 +118,38 @@ struct Reader<'a> {
 }
 
 impl Reader<'_> {
-    fn bytes<const N: usize>(&mut self) -> [u8; N] {
-        let mut out = [0u8; N];
-        if let Some((head, tail)) = self.rest.split_at_checked(N) {
-            out.copy_from_slice(head);
+    /// The next `n` (≤ 4) bytes as a little-endian word; 0, consuming nothing, if fewer are
+    /// left. Out of line, one copy for every width: inlined, each of the decoders' ≈ 60 reads
+    /// carried its own slice split and copy (≈ 300 B of the firmware's flash, for code that
+    /// runs at boot).
+    #[inline(never)]
+    fn word(&mut self, n: usize) -> u32 {
+        let Some((head, tail)) = self.rest.split_at_checked(n) else { return 0 };
+        self.rest = tail;
+        head.iter().rev().fold(0, |w, &b| w << 8 | u32::from(b))
+    }
+
+    /// Skips `n` bytes (none if fewer are left, as a read would).
+    fn skip(&mut self, n: usize) {
+        if let Some(tail) = self.rest.get(n..) {
             self.rest = tail;
         }
-        out
     }
 
     fn u8(&mut self) -> u8 {
-        self.bytes::<1>()[0]
+        self.word(1) as u8
     }
 
     fn u16(&mut self) -> u16 {
-        u16::from_le_bytes(self.bytes())
+        self.word(2) as u16
     }
 
     fn u32(&mut self) -> u32 {
-        u32::from_le_bytes(self.bytes())
+        self.word(4)
     }
 
     fn f32(&mut self) -> f32 {
-        f32::from_le_bytes(self.bytes())
+        f32::from_bits(self.word(4))
     }
 
     /// A finite f32 within `range`.
@@ -785,7 +794,7 @@ impl HistoryRecord {
         for slot in rec.last.iter_mut() {
             let side = match r.u8() {
                 0 => {
-                    let _ = r.bytes::<12>();
+                    r.skip(12);
                     continue;
                 }
                 1 => Side::Cold,
