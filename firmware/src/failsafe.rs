@@ -43,11 +43,47 @@ impl SafeOutputs for BoardOutputs {
     }
 }
 
-/// Outputs safe, then the reason `info` builds, recorded, then reset.
-fn halt(info: impl FnOnce() -> StopInfo) -> ! {
+/// Why a stop path stops: what its reason is built from once the outputs are safe.
+enum Why<'a> {
+    /// The control loop stalled for this many ms.
+    Stall(u32),
+    /// A panic at this file and line (`None`: no location). Not the `PanicInfo` itself: handed
+    /// out of line, its message would keep `core::fmt` linked (several KiB of flash).
+    Panic(Option<(&'a str, u32)>),
+    /// A HardFault and its stacked frame (the fault registers are read in [`halt`]).
+    HardFault(&'a ExceptionFrame),
+    /// An NMI with FLASH_ECCR's value (0: another source).
+    Nmi(u32),
+    /// An interrupt without a handler.
+    Interrupt(i16),
+}
+
+/// Outputs safe, then the reason built from `why`, recorded, then reset. One copy for every stop
+/// path (one `failsafe::stop` with the reasons in one match; a closure per path instantiated it
+/// five times).
+#[inline(never)]
+fn halt(why: Why) -> ! {
     // SAFETY: this path does not return, and a fault inside it escalates to a lockup, which the
     // watchdog resets: no second holder of the record runs after this one.
-    failsafe::stop(&mut BoardOutputs, unsafe { reason() }, info);
+    failsafe::stop(&mut BoardOutputs, unsafe { reason() }, || match why {
+        Why::Stall(since_ms) => StopInfo::new(StopKind::ControlStall, 0, 0, since_ms),
+        // Records the location only: formatting the message would link `core::fmt` (several KiB
+        // of flash) into a binary at its budget. defmt's own panics (`unwrap!`,
+        // `defmt::assert!`) have already logged their message over RTT when they get here.
+        Why::Panic(at) => match at {
+            Some((file, line)) => failsafe::panic_info(file, line),
+            None => StopInfo::new(StopKind::Panic, 0, 0, 0),
+        },
+        Why::HardFault(frame) => {
+            // SAFETY: reads of the System Control Block's fault status and address registers.
+            let scb = unsafe { &*cortex_m::peripheral::SCB::PTR };
+            failsafe::hard_fault_info(frame.pc(), scb.cfsr.read(), scb.bfar.read(), scb.mmfar.read())
+        }
+        // cortex-m-rt hands the NMI no exception frame: the PC is not recorded (0); FLASH_ECCR
+        // (or 0 for another source such as the clock security system) names the cause.
+        Why::Nmi(eccr) => failsafe::nmi_info(0, eccr),
+        Why::Interrupt(irqn) => failsafe::unexpected_interrupt_info(irqn),
+    });
     cortex_m::peripheral::SCB::sys_reset()
 }
 
@@ -60,27 +96,18 @@ pub fn take_reason() -> Option<StopInfo> {
 
 /// The control loop stalled for `since_ms` (called from the stall check's interrupt).
 pub fn stall(since_ms: u32) -> ! {
-    halt(|| StopInfo::new(StopKind::ControlStall, 0, 0, since_ms))
+    halt(Why::Stall(since_ms))
 }
 
-/// Records the location only: formatting the message would link `core::fmt` (several KiB of
-/// flash) into a binary at its budget. defmt's own panics (`unwrap!`, `defmt::assert!`) have
-/// already logged their message over RTT when they get here.
+/// The reason records the location only ([`halt`]).
 #[panic_handler]
 fn panic(info: &PanicInfo) -> ! {
-    halt(|| match info.location() {
-        Some(at) => failsafe::panic_info(at.file(), at.line()),
-        None => StopInfo::new(StopKind::Panic, 0, 0, 0),
-    })
+    halt(Why::Panic(info.location().map(|at| (at.file(), at.line()))))
 }
 
 #[exception]
 unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
-    halt(|| {
-        // SAFETY: reads of the System Control Block's fault status and address registers.
-        let scb = unsafe { &*cortex_m::peripheral::SCB::PTR };
-        failsafe::hard_fault_info(frame.pc(), scb.cfsr.read(), scb.bfar.read(), scb.mmfar.read())
-    })
+    halt(Why::HardFault(frame))
 }
 
 /// Flash bank size of the STM32L476RG, bytes: FLASH_ECCR's ADDR_ECC is the offset within the
@@ -102,12 +129,10 @@ unsafe fn NonMaskableInt() {
             return;
         }
     }
-    // cortex-m-rt hands the NMI no exception frame: the PC is not recorded (0); FLASH_ECCR
-    // (or 0 for another source such as the clock security system) names the cause.
-    halt(|| failsafe::nmi_info(0, if eccr.eccd() { eccr.0 } else { 0 }))
+    halt(Why::Nmi(if eccr.eccd() { eccr.0 } else { 0 }))
 }
 
 #[exception]
 unsafe fn DefaultHandler(irqn: i16) -> ! {
-    halt(|| failsafe::unexpected_interrupt_info(irqn))
+    halt(Why::Interrupt(irqn))
 }
