@@ -330,17 +330,22 @@ impl ColdChainMonitor {
         self.above_8_ms
     }
 
-    /// [`Self::recorded_ms`] as f32 seconds (the history record's form).
+    /// [`Self::recorded_ms`] as f32 seconds (the history record's form). This and the next two
+    /// are out of line: read by the hourly merge and summary only, inlined each carried its own
+    /// copy of the conversion (−64 B of firmware flash); the per-sample `push` keeps its own.
+    #[inline(never)]
     pub fn recorded_s(&self) -> f32 {
         crate::units::secs_f32(self.elapsed_ms)
     }
 
     /// [`Self::time_below_2_ms`] as f32 seconds.
+    #[inline(never)]
     pub fn time_below_2_s(&self) -> f32 {
         crate::units::secs_f32(self.below_2_ms)
     }
 
     /// [`Self::time_above_8_ms`] as f32 seconds.
+    #[inline(never)]
     pub fn time_above_8_s(&self) -> f32 {
         crate::units::secs_f32(self.above_8_ms)
     }
