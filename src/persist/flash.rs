@@ -467,7 +467,7 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
 
     /// The stored model record as the self-tuner would take it, not yet checked for plausibility.
     pub async fn load_model_record(&mut self) -> Result<ModelRecord, LoadStatus> {
-        self.load(key::MODEL, ModelRecord::decode).await
+        model_from(self.fetch(key::MODEL).await)
     }
 
     /// `cfg` resumed from the stored model ([`AdaptiveConfig::resumed_from`]) if one is stored
@@ -476,10 +476,7 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
     /// LLVM makes a `memmove` call, and one such call links `compiler_builtins`' 1.5 KB
     /// `memmove` into the firmware.
     pub async fn load_adaptive(&mut self, cfg: &AdaptiveConfig) -> Loaded<AdaptiveConfig> {
-        match self.load_model_record().await.and_then(|rec| rec.restore(cfg).map_err(LoadStatus::Invalid)) {
-            Ok(value) => Loaded { value, status: LoadStatus::Restored },
-            Err(status) => Loaded { value: *cfg, status },
-        }
+        adaptive_from(model_from(self.fetch(key::MODEL).await), cfg)
     }
 
     /// Stores the calibration.
@@ -489,10 +486,7 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
 
     /// The stored calibration, or [`TwoPoint::IDENTITY`].
     pub async fn load_calibration(&mut self) -> Loaded<TwoPoint> {
-        match self.load(key::CALIBRATION, CalibrationRecord::decode).await {
-            Ok(rec) => Loaded { value: rec.cal, status: LoadStatus::Restored },
-            Err(status) => Loaded { value: TwoPoint::IDENTITY, status },
-        }
+        calibration_from(self.fetch(key::CALIBRATION).await)
     }
 
     /// Stores the history.
@@ -502,10 +496,7 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
 
     /// The stored history, or [`HistoryRecord::EMPTY`].
     pub async fn load_history(&mut self) -> Loaded<HistoryRecord> {
-        match self.load(key::HISTORY, HistoryRecord::decode).await {
-            Ok(value) => Loaded { value, status: LoadStatus::Restored },
-            Err(status) => Loaded { value: HistoryRecord::EMPTY, status },
-        }
+        history_from(self.fetch(key::HISTORY).await)
     }
 
     /// Stores the cabinet model's record.
@@ -528,6 +519,36 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
     /// The stored settings, if a valid record is stored.
     pub async fn load_settings(&mut self) -> Result<SettingsRecord, LoadStatus> {
         self.load(key::SETTINGS, SettingsRecord::decode).await
+    }
+}
+
+/// The calibration from a fetch of its key, or [`TwoPoint::IDENTITY`] and why not.
+fn calibration_from(fetched: Result<&[u8], LoadStatus>) -> Loaded<TwoPoint> {
+    match fetched.and_then(|b| CalibrationRecord::decode(b).map_err(LoadStatus::Invalid)) {
+        Ok(rec) => Loaded { value: rec.cal, status: LoadStatus::Restored },
+        Err(status) => Loaded { value: TwoPoint::IDENTITY, status },
+    }
+}
+
+/// The history from a fetch of its key, or [`HistoryRecord::EMPTY`] and why not.
+fn history_from(fetched: Result<&[u8], LoadStatus>) -> Loaded<HistoryRecord> {
+    match fetched.and_then(|b| HistoryRecord::decode(b).map_err(LoadStatus::Invalid)) {
+        Ok(value) => Loaded { value, status: LoadStatus::Restored },
+        Err(status) => Loaded { value: HistoryRecord::EMPTY, status },
+    }
+}
+
+/// The model record from a fetch of its key, not yet checked for plausibility.
+fn model_from(fetched: Result<&[u8], LoadStatus>) -> Result<ModelRecord, LoadStatus> {
+    fetched.and_then(|b| ModelRecord::decode(b).map_err(LoadStatus::Invalid))
+}
+
+/// `cfg` resumed from the loaded model record if it is plausible under `cfg`'s limits
+/// ([`Store::load_adaptive`]); otherwise `cfg` and why not.
+fn adaptive_from(rec: Result<ModelRecord, LoadStatus>, cfg: &AdaptiveConfig) -> Loaded<AdaptiveConfig> {
+    match rec.and_then(|rec| rec.restore(cfg).map_err(LoadStatus::Invalid)) {
+        Ok(value) => Loaded { value, status: LoadStatus::Restored },
+        Err(status) => Loaded { value: *cfg, status },
     }
 }
 
@@ -775,22 +796,31 @@ pub async fn restore_records<F: NorFlash, E: EccErrors>(
 ) -> Restored {
     // A scrub that fails leaves the loads to repair what they read.
     let _ = store.scrub().await;
-    let settings = Err(LoadStatus::Missing);
-    #[cfg(feature = "holdover")]
-    let cabinet = Err(LoadStatus::Missing);
-    let calibration = store.load_calibration().await;
-    let history = store.load_history().await;
-    let adaptive = match adaptive {
-        Some(cfg) => Some(store.load_adaptive(cfg).await),
-        None => None,
-    };
+    let mut calibration = Restored::NOTHING.calibration;
+    let mut history = Restored::NOTHING.history;
+    let mut model = Err(LoadStatus::Missing);
+    // The loads of `load_calibration`, `load_history` and `load_adaptive`, in that order, through
+    // one fetch: each awaited load was a future of its own inside the caller's (≈ 0.3 KiB of the
+    // firmware's flash). The model's plausibility is checked after the loop, so that only its
+    // record, not the configuration, is kept across the fetches.
+    for key in [key::CALIBRATION, key::HISTORY, key::MODEL] {
+        if key == key::MODEL && adaptive.is_none() {
+            break;
+        }
+        let fetched = store.fetch(key).await;
+        match key {
+            key::CALIBRATION => calibration = calibration_from(fetched),
+            key::HISTORY => history = history_from(fetched),
+            _ => model = model_from(fetched),
+        }
+    }
     Restored {
-        settings,
+        settings: Err(LoadStatus::Missing),
         #[cfg(feature = "holdover")]
-        cabinet,
+        cabinet: Err(LoadStatus::Missing),
         calibration,
         history,
-        adaptive,
+        adaptive: adaptive.map(|cfg| adaptive_from(model, cfg)),
         log_last_s: Ok(0),
         repairs: store.repairs(),
     }
