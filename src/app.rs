@@ -295,6 +295,8 @@ impl App {
         let ts_s = cfg.carrier.get().ts_s;
         let controller = build(settings.law, &adaptive, ts_s, cfg.adaptive.fallback.bias);
         let mut carrier = Carrier::new(cfg.carrier.with_calibration(cal), controller);
+        // The sensor fault the previous boot compensated is still in the channel.
+        carrier.restore_sensor_offset(boot.history.sensor_offset);
         #[cfg(feature = "holdover")]
         let cabinet = boot.cabinet;
         #[cfg(not(feature = "holdover"))]
@@ -423,7 +425,7 @@ impl App {
             self.annunciator.acknowledge();
         }
         let alarm = self.annunciator.update(&out, &rec.raised);
-        self.recorder.note_latched(&mut rec, self.annunciator.latched());
+        self.recorder.note_carried(&mut rec, self.annunciator.latched(), self.carrier.sensor_offset());
         let t_s = self.record_s(t_ms);
         // The interval this sample closes ended at or before it, so it is logged before the
         // sample's events and alarms: the record stays in time order (a fault found on the
@@ -584,6 +586,19 @@ impl App {
             SetRequest::Ack => {
                 self.acknowledge();
                 self.save(Save::Log(LogEntry::Setting { t_s, key: SettingKey::Ack, value: [0.0; 2] }));
+                return Ok(());
+            }
+            SetRequest::ClearSensorOffset => {
+                // The commissioning's record is of readings with the offset subtracted: clearing
+                // it mid-run is a step the fit would take for the carrier's.
+                self.not_while_commissioning("sensor_offset_c")?;
+                let was = self.carrier.sensor_offset_c();
+                if was != 0.0 {
+                    // The next sample stores the history without it (`Recorder::note_carried`).
+                    self.carrier.clear_sensor_offset();
+                    let value = [was, 0.0];
+                    self.save(Save::Log(LogEntry::Setting { t_s, key: SettingKey::SensorOffset, value }));
+                }
                 return Ok(());
             }
         };
@@ -750,7 +765,11 @@ impl App {
         // The setpoint in force: an accepted `set` at once, not the last sample's (up to Ts
         // old), clamped as the step clamps it.
         let sp = self.cfg.carrier.get().setpoint_in_force(self.settings.setpoint_c);
-        write!(out, "temp_c={}\r\nsetpoint_c={}\r\nduty={}\r\n", Fixed(temp, 2), Fixed(sp, 2), Fixed(duty, 3))?;
+        // What is subtracted from the reading: a lead fault the offset watch measured (kept
+        // across restarts), which an engineer must see to service it.
+        let offset = self.carrier.sensor_offset_c();
+        write!(out, "temp_c={}\r\nsensor_offset_c={}\r\n", Fixed(temp, 2), Fixed(offset, 2))?;
+        write!(out, "setpoint_c={}\r\nduty={}\r\n", Fixed(sp, 2), Fixed(duty, 3))?;
         // No law while the step holds the outputs (a sensor fault: cooling off, the law not run;
         // limp home: the supply switch's On-Off): `get` says which law resumes.
         let law = match last {

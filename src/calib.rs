@@ -42,6 +42,9 @@ pub enum CalError {
 /// docs: the channel's own errors are about a degree).
 pub const MAX_CORRECTION_C: f32 = 1.5;
 
+/// The lowest gain a fit accepts ([`CalError::ImplausibleGain`] below it).
+pub const MIN_GAIN: f32 = 0.9;
+
 /// A straight-line correction `T_cal = gain · T_meas + offset_c`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -79,7 +82,7 @@ impl TwoPoint {
             return Err(CalError::PointsTooClose);
         }
         let gain = (r1 - r0) / (m1 - m0);
-        if !(gain >= 0.9 && gain <= 1.1) {
+        if !(gain >= MIN_GAIN && gain <= 1.1) {
             return Err(CalError::ImplausibleGain);
         }
         let offset_c = r0 - gain * m0;

@@ -529,19 +529,54 @@ impl From<&StopInfo> for LastStop {
     }
 }
 
+/// The sensor offset the step subtracts from every reading ([`crate::step::Carrier::sensor_offset`]:
+/// a lead or connector fault the offset watch measured), as the history keeps it: in the channel's
+/// own terms (the calibration's gain divided out, so that a calibration stored after it, and a
+/// power cut before the next history, still restore it right), in whole steps of
+/// [`Self::STEP_C`], up to [`Self::MAX_C`]. Forgotten at a restart, the fault it compensated read
+/// up to 3 °C warm again, and the controller held the load that much colder (the freezing side).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SensorOffset(u8);
+
+impl SensorOffset {
+    /// No offset.
+    pub const NONE: SensorOffset = SensorOffset(0);
+    /// One step, °C: a restored offset is within half of it of the one subtracted.
+    pub const STEP_C: f32 = 0.03;
+    /// Steps the record's 7 bits hold.
+    const MAX_STEPS: u8 = 127;
+    /// Largest offset kept, °C (3.81 °C: [`crate::supervisor::sensor::OffsetConfig::max_comp_c`]
+    /// through the lowest calibration gain a fit accepts, 3.0 °C / 0.9, fits).
+    pub const MAX_C: f32 = Self::MAX_STEPS as f32 * Self::STEP_C;
+
+    /// `offset_c` to the nearest step, within 0 … [`Self::MAX_C`] (NaN is none).
+    pub fn from_c(offset_c: f32) -> Self {
+        // `as` saturates: a negative or NaN offset is 0 steps.
+        SensorOffset(((offset_c * (1.0 / Self::STEP_C) + 0.5) as u8).min(Self::MAX_STEPS))
+    }
+
+    /// The offset, °C.
+    pub fn c(self) -> f32 {
+        f32::from(self.0) * Self::STEP_C
+    }
+}
+
 /// Cold-chain history summary, reset counts and board faults, accumulated over power cycles.
 ///
-/// Layout v3, 121 bytes: `'H'`, 3; alarm counts (4 × u16, in [`AlarmKind`] order heat_10h,
+/// Layout v4, 122 bytes: `'H'`, 4; alarm counts (4 × u16, in [`AlarmKind`] order heat_10h,
 /// freeze_60min, ship_45c_1h, ship_30c_10h); reset counts (3 × u16: watchdog, brown-out, other);
 /// min_c, max_c (f32, NaN = no sample yet); time below 2 °C, time above 8 °C, excursion count,
 /// recorded time (4 × u32, seconds and count); [`HISTORY_EXCURSIONS`] × (side u8: 0 none,
 /// 1 cold, 2 warm; start_s, end_s, extreme_c f32); fail-safe stops (5 × u16, in
 /// [`StopKind::ALL`] order); flash pages lost (u16); last stop (kind code u8, 0 = none; pc, addr,
-/// detail u32); CRC-32. Excursion times are on the record's own clock: seconds of recorded time
+/// detail u32); the carried byte (v4: bit 0 the indicator's latch, bits 1–7 the
+/// [`SensorOffset`]'s steps); CRC-32. Excursion times are on the record's own clock: seconds of recorded time
 /// since the first boot (each boot's samples start where the previous boot's record ended), so
 /// they stay in order across power cycles.
 ///
-/// v2 (96 bytes: v3 without the board-fault fields) is still read, with no faults counted: it is
+/// v3 (121 bytes: v4 without the carried byte) is still read, with nothing unacknowledged and no
+/// offset, and v2 (96 bytes: v3 without the board-fault fields) with no faults counted either: it is
 /// the carrier's cold-chain record, and a firmware update must not erase the alarms and
 /// excursions the vaccines have been through. (v1 had no recorded time and stamped excursions
 /// with seconds since their own boot; it is not read.)
@@ -576,8 +611,12 @@ pub struct HistoryRecord {
     /// The alarm indicator's latch ([`crate::alarm::Annunciator`]): a cold-chain alarm or a
     /// fault not yet acknowledged. The next boot starts from it: RAM alone lost it at every
     /// restart, and a brown-out silenced an alarm nobody had seen
-    /// ([`Recorder::note_latched`] stores every change).
+    /// ([`Recorder::note_carried`] stores every change).
     pub unacknowledged: bool,
+    /// The sensor offset the step subtracted ([`Recorder::note_carried`] stores every change at
+    /// once; the next boot subtracts it again from its first sample,
+    /// [`crate::step::Carrier::restore_sensor_offset`]).
+    pub sensor_offset: SensorOffset,
 }
 
 impl Default for HistoryRecord {
@@ -638,6 +677,7 @@ impl HistoryRecord {
         flash_pages_lost: 0,
         last_stop: None,
         unacknowledged: false,
+        sensor_offset: SensorOffset::NONE,
     };
 
     /// Counts an alarm.
@@ -747,7 +787,7 @@ impl HistoryRecord {
             }
             None => w.put(&[0; 13]),
         }
-        w.put(&[u8::from(self.unacknowledged)]);
+        w.put(&[u8::from(self.unacknowledged) | self.sensor_offset.0 << 1]);
         w.finish();
         buf
     }
@@ -755,7 +795,7 @@ impl HistoryRecord {
     /// Parses and range-checks stored bytes: extremes within −60 … 100 °C (or absent) and
     /// min ≤ max; excursions with a known side, 0 ≤ start ≤ end and a finite extreme in range;
     /// a known stop kind. A v2 record decodes with no board faults, v2 and v3 with nothing
-    /// unacknowledged.
+    /// unacknowledged and no sensor offset.
     pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
         let (len, version) = match (bytes.len(), bytes.get(1)) {
             (Self::LEN_V2, Some(2)) => (Self::LEN_V2, 2),
@@ -821,8 +861,11 @@ impl HistoryRecord {
                 Some(LastStop { kind: StopKind::from_code(code).ok_or(DecodeError::OutOfRange)?, pc, addr, detail })
             }
         };
-        // A v3 frame ends here: its reader reads 0, nothing unacknowledged.
-        rec.unacknowledged = r.u8() != 0;
+        // A v3 frame ends here: its reader reads 0, nothing unacknowledged and no offset (as the
+        // v4 records written before the offset was kept, whose byte is 0 or 1).
+        let carried = r.u8();
+        rec.unacknowledged = carried & 1 != 0;
+        rec.sensor_offset = SensorOffset(carried >> 1);
         Ok(rec)
     }
 }
@@ -834,8 +877,8 @@ impl HistoryRecord {
 pub struct Recorded {
     /// Alarms this sample raised (at most one per kind).
     pub raised: Raised,
-    /// Store the history now: after an alarm, after a change of the indicator's latch
-    /// ([`Recorder::note_latched`]), and every `save_every_samples` samples.
+    /// Store the history now: after an alarm, after a change of the indicator's latch or the sensor
+    /// offset ([`Recorder::note_carried`]), and every `save_every_samples` samples.
     pub save_due: bool,
     /// …and past the write gate's hold-off: an alarm was raised or the latch was set.
     pub urgent: bool,
@@ -906,18 +949,23 @@ impl Recorder {
         Recorded { raised, save_due, urgent: alarm }
     }
 
-    /// Takes the alarm indicator's latch after the sample `r` recorded
-    /// ([`crate::alarm::Annunciator::latched`]), before [`Self::due_save`]: a change is stored
-    /// with the history, at once when the latch was set (a fault or alarm nobody has seen yet
-    /// must survive a power cut that follows it), behind the write gate's hold-off when an
-    /// acknowledgement cleared it (lost to a cut, the indicator comes back on: the safe side).
+    /// Takes what the next boot carries on from this one, after the sample `r` recorded and
+    /// before [`Self::due_save`]: the alarm indicator's latch
+    /// ([`crate::alarm::Annunciator::latched`]) and the sensor offset the step subtracts
+    /// ([`crate::step::Carrier::sensor_offset`]). A change is stored with the history: at once
+    /// when the latch was set (a fault or alarm nobody has seen yet must survive a power cut
+    /// that follows it) or the offset changed (forgotten, the load is held colder by it);
+    /// behind the write gate's hold-off when an acknowledgement cleared the latch (lost to a
+    /// cut, the indicator comes back on: the safe side).
     #[inline(never)]
-    pub fn note_latched(&mut self, r: &mut Recorded, latched: bool) {
-        if self.boot.unacknowledged != latched {
+    pub fn note_carried(&mut self, r: &mut Recorded, latched: bool, offset: SensorOffset) {
+        let moved = self.boot.sensor_offset != offset;
+        if self.boot.unacknowledged != latched || moved {
             self.boot.unacknowledged = latched;
+            self.boot.sensor_offset = offset;
             self.since_save = 0;
             r.save_due = true;
-            r.urgent |= latched;
+            r.urgent |= latched | moved;
         }
     }
 
@@ -1434,19 +1482,19 @@ mod tests {
         let mut rec = Recorder::new(HistoryRecord::EMPTY, 360);
         let _ = rec.note_reset(ResetCause::BrownOut);
         let mut quiet = rec.push(0, 4.0);
-        rec.note_latched(&mut quiet, false);
+        rec.note_carried(&mut quiet, false, SensorOffset::NONE);
         assert_eq!(rec.due_save(&quiet), None);
         let mut set = rec.push(10_000, 4.0);
-        rec.note_latched(&mut set, true);
+        rec.note_carried(&mut set, true, SensorOffset::NONE);
         let h = rec.history();
         assert!(h.unacknowledged);
         assert_eq!(rec.due_save(&set), Some(Save::AlarmHistory(h)));
         let mut again = rec.push(20_000, 4.0);
-        rec.note_latched(&mut again, true);
+        rec.note_carried(&mut again, true, SensorOffset::NONE);
         assert_eq!(rec.due_save(&again), None, "stored once");
         assert_eq!(HistoryRecord::decode(&h.encode()), Ok(h));
         let mut cleared = rec.push(30_000, 4.0);
-        rec.note_latched(&mut cleared, false);
+        rec.note_carried(&mut cleared, false, SensorOffset::NONE);
         assert_eq!(rec.due_save(&cleared), Some(Save::History(rec.history())));
         assert!(!rec.history().unacknowledged);
         // Carried into the next boot's record.
@@ -1456,13 +1504,60 @@ mod tests {
         // A v3 record: the v4 bytes before the latch, version 3, its own CRC.
         let v3: [u8; HistoryRecord::LEN_V3] = older_history(&h.encode(), 3);
         assert_eq!(HistoryRecord::decode(&v3), Ok(HistoryRecord { unacknowledged: false, ..h }));
-        // Any latch byte but 0 reads as latched (the safe side), re-framed with a valid CRC.
-        let mut b = HistoryRecord { unacknowledged: false, ..h }.encode();
+    }
+
+    /// The sensor offset the step subtracts is stored with the history in the carried byte's
+    /// bits 1–7 (bit 0 the latch), each change at once; a v4 record written before the offset
+    /// was kept (its byte 0 or 1) reads as no offset.
+    #[test]
+    fn the_sensor_offset_is_stored_with_the_history() {
+        // Steps of 0.03 °C, to the nearest, within 0 … 3.81 °C; negative and NaN are none.
+        for (c, steps) in [(0.0, 0), (0.014, 0), (0.016, 1), (1.5, 50), (3.0, 100), (3.81, 127)] {
+            assert_eq!(SensorOffset::from_c(c), SensorOffset(steps), "{c} °C");
+        }
+        for c in [-1.0, f32::NAN] {
+            assert_eq!(SensorOffset::from_c(c), SensorOffset::NONE, "{c} °C");
+        }
+        assert_eq!(SensorOffset::from_c(50.0).c(), SensorOffset::MAX_C);
+        assert!((SensorOffset::from_c(1.5).c() - 1.5).abs() < 1e-6);
+
+        let mut rec = Recorder::new(HistoryRecord::EMPTY, 360);
+        let mut quiet = rec.push(0, 4.0);
+        rec.note_carried(&mut quiet, false, SensorOffset::NONE);
+        assert_eq!(rec.due_save(&quiet), None);
+        // A new offset is stored at once, past the hold-off, with the latch as it stands.
+        let offset = SensorOffset::from_c(1.47);
+        let mut found = rec.push(10_000, 4.0);
+        rec.note_carried(&mut found, false, offset);
+        let h = rec.history();
+        assert_eq!((h.sensor_offset, h.unacknowledged), (offset, false));
+        assert_eq!(rec.due_save(&found), Some(Save::AlarmHistory(h)));
+        let mut same = rec.push(20_000, 4.0);
+        rec.note_carried(&mut same, false, offset);
+        assert_eq!(rec.due_save(&same), None, "stored once");
+        // Offset and latch side by side in one byte, both read back.
+        for latched in [false, true] {
+            let both = HistoryRecord { unacknowledged: latched, sensor_offset: SensorOffset::from_c(3.81), ..h };
+            assert_eq!(HistoryRecord::decode(&both.encode()), Ok(both));
+        }
+        // An offset that goes is stored at once too (a recalibration can lower it).
+        let mut gone = rec.push(30_000, 4.0);
+        rec.note_carried(&mut gone, false, SensorOffset::NONE);
+        assert!(matches!(rec.due_save(&gone), Some(Save::AlarmHistory(_))));
+        // Carried into the next boot's record.
+        let mut next = Recorder::new(h, 360);
+        assert_eq!(next.note_reset(ResetCause::BrownOut).sensor_offset, offset);
+
+        // The v4 bytes before the offset was kept: 0 or 1, the latch alone.
         let n = HistoryRecord::LEN - 4;
-        b[n - 1] = 2;
-        let crc = crc32(&b[..n]);
-        b[n..].copy_from_slice(&crc.to_le_bytes());
-        assert_eq!(HistoryRecord::decode(&b), Ok(h));
+        for (byte, latched) in [(0u8, false), (1, true)] {
+            let mut b = h.encode();
+            b[n - 1] = byte;
+            let crc = crc32(&b[..n]);
+            b[n..].copy_from_slice(&crc.to_le_bytes());
+            let old = HistoryRecord { unacknowledged: latched, sensor_offset: SensorOffset::NONE, ..h };
+            assert_eq!(HistoryRecord::decode(&b), Ok(old));
+        }
     }
 
     #[test]

@@ -323,6 +323,41 @@ impl<C: Controller> Carrier<C> {
         self.cfg.cal = cal;
     }
 
+    /// The sensor offset the step subtracts from every reading (a lead or connector fault the
+    /// offset watch measured, `sensor_offset` in the event log), as the history keeps it: in
+    /// the channel's own terms, the calibration's gain divided out
+    /// ([`crate::persist::SensorOffset`]). The glue hands it to the cold-chain record after every
+    /// sample ([`crate::persist::Recorder::note_carried`]), which stores each change at once.
+    pub fn sensor_offset(&self) -> crate::persist::SensorOffset {
+        crate::persist::SensorOffset::from_c(self.supervisor.sensor_offset_c() / self.cfg.cal.gain)
+    }
+
+    /// The sensor offset the step subtracts from every reading, °C, through the calibration in
+    /// force (`status`'s `sensor_offset_c`; 0 for none).
+    pub fn sensor_offset_c(&self) -> f32 {
+        self.supervisor.sensor_offset_c()
+    }
+
+    /// Stops subtracting the sensor offset, from the next sample (`set sensor_offset_c 0`, after
+    /// the lead fault it compensated was repaired). The reading moves up by it at once, which is
+    /// neither the load moving nor the sensor stepping: the checks, the filter, the freeze
+    /// guard's slope and the SSR monitor's history are carried over, as for a new calibration
+    /// ([`Self::set_calibration`]). If the fault is still there, the reading is that much warm
+    /// and the load is held that much colder: the engineer clears it after the repair only.
+    pub fn clear_sensor_offset(&mut self) {
+        self.supervisor.clear_sensor_offset(&self.cfg.supervisor, &mut self.filter);
+    }
+
+    /// Subtracts again, from the first sample on, the sensor offset a previous boot subtracted
+    /// (the stored history's [`crate::persist::HistoryRecord::sensor_offset`], through the
+    /// calibration in force; at most [`crate::supervisor::sensor::OffsetConfig::max_comp_c`]).
+    /// What the glue calls at boot, after the calibration is set and before the first sample:
+    /// the fault the offset compensated does not go away with a restart, and forgotten, it read
+    /// warm again and the controller held the load that much colder (the freezing side).
+    pub fn restore_sensor_offset(&mut self, offset: crate::persist::SensorOffset) {
+        self.supervisor.restore_sensor_offset(&self.cfg.supervisor, offset.c() * self.cfg.cal.gain);
+    }
+
     /// Runs one sample from raw ADC counts (the firmware's and the simulator's entry).
     pub fn step(&mut self, input: &StepInput) -> StepOutput {
         let stuck = self.supervisor.counts_stuck(input.counts);

@@ -244,6 +244,8 @@ fn new_carrier(boot: &Boot) -> hter::step::Carrier<config::Ctl> {
 #[embassy_executor::task]
 async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
     let mut carrier = new_carrier(&boot);
+    // The sensor fault the previous boot compensated is still in the channel.
+    carrier.restore_sensor_offset(boot.history.sensor_offset);
     carrier.note_reset(boot.reset);
     let mut recorder = hter::persist::Recorder::new(boot.history, config::HISTORY_SAVE_SAMPLES);
     let mut history = recorder.note_reset(boot.reset);
@@ -279,7 +281,7 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             annunciator.acknowledge();
         }
         let alarm = annunciator.update(&out, &rec.raised);
-        recorder.note_latched(&mut rec, annunciator.latched());
+        recorder.note_carried(&mut rec, annunciator.latched(), carrier.sensor_offset());
         ACTUATION.signal(Actuation {
             duty: out.duty,
             supply_enable: out.supply_enable,

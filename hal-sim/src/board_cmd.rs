@@ -216,7 +216,8 @@ pub fn parse_kv(lines: &[String]) -> Result<Vec<(String, String)>> {
 }
 
 /// `status` keys whose values are numbers (docs/interface.md § status fields).
-const NUMERIC: [&str; 7] = ["t_s", "temp_c", "setpoint_c", "duty", "holdover_s", "resets", "settings_version"];
+const NUMERIC: [&str; 8] =
+    ["t_s", "temp_c", "sensor_offset_c", "setpoint_c", "duty", "holdover_s", "resets", "settings_version"];
 
 /// The SPEC §8 fields `status --json` must have.
 const REQUIRED: [&str; 13] = [

@@ -493,9 +493,11 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                     carrier.note_reset(ResetCause::BrownOut);
                     cadence = model_cadence();
                     stores.push((t_s, Save::History(recorder.note_reset(ResetCause::BrownOut))));
-                    // The indicator's latch restarts from the stored history (every change of it
-                    // is stored at once, `Recorder::note_latched`).
-                    annunciator = Annunciator::restored(recorder.history().unacknowledged);
+                    // The indicator's latch and the sensor offset restart from the stored history
+                    // (every change of either is stored at once, `Recorder::note_carried`).
+                    let stored = recorder.history();
+                    annunciator = Annunciator::restored(stored.unacknowledged);
+                    carrier.restore_sensor_offset(stored.sensor_offset);
                 } else {
                     rig.inject(f);
                 }
@@ -537,7 +539,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                 alarms.push(Stamped { kind: a.kind, t_s: a.trigger_s() - PREROLL_S });
             }
             let indication = annunciator.update(&out, &raised);
-            recorder.note_latched(&mut recorded, annunciator.latched());
+            recorder.note_carried(&mut recorded, annunciator.latched(), carrier.sensor_offset());
             if let Some(save) = recorder.due_save(&recorded) {
                 stores.push((t_s, save));
             }

@@ -265,7 +265,7 @@ fn run() -> Result<(), &'static str> {
             ticks[proto::PART_BOARD] = timed(|| {
                 let mut rec = recorder.push(inp_b.t_ms, o.temp_c.0);
                 let alarm = annunciator.update(&o, &rec.raised);
-                recorder.note_latched(&mut rec, annunciator.latched());
+                recorder.note_carried(&mut rec, annunciator.latched(), carrier.sensor_offset());
                 if rec.save_due {
                     // What the control task hands the persist task (its queue copies it once).
                     black_box(recorder.history());

@@ -68,6 +68,9 @@ pub enum SetRequest {
     Model(Model),
     /// `ack`.
     Ack,
+    /// `sensor_offset_c 0`: the sensor offset the board subtracts is cleared (after the lead
+    /// fault it compensated was repaired).
+    ClearSensorOffset,
 }
 
 /// One request line.
@@ -293,6 +296,15 @@ fn parse_set<'a>(key: &str, value: &'a str) -> Result<SetRequest, Refusal<'a>> {
         // `set ack 0` must not read as "do not acknowledge" and acknowledge.
         "ack" if value == "1" => Ok(SetRequest::Ack),
         "ack" => refuse("ack", Why::Usage("set ack 1, or ack")),
+        // The board measures the offset; a person can only clear it (`0`, `0.00`, …).
+        "sensor_offset_c" => match parse_decimal(value) {
+            Some(d) if d.value == 0.0 => Ok(SetRequest::ClearSensorOffset),
+            Some(_) => refuse(
+                "sensor_offset_c",
+                Why::Usage("set sensor_offset_c 0 (only 0: it clears the offset the board measured)"),
+            ),
+            None => refuse("sensor_offset_c", Why::NotDecimal),
+        },
         _ => refuse("set", Why::UnknownKey),
     }
 }
@@ -322,6 +334,7 @@ pub const HELP: &[&str] = &[
     "set cal_ice M,R          ice-bath point: channel reading, reference (C)",
     "set cal_warm M,R         second point: channel reading, reference (C)",
     "set model A1,A2;B0,B1;K  start model of the self-tuner (checked)",
+    "set sensor_offset_c 0    clear the sensor offset, after the RTD lead's repair",
     "ack                      acknowledge the alarm",
     "history [SINCE_S]        the cold-chain record as CSV",
     "identify [abort]         commission the cabinet (rest, PRBS, fit, store)",

@@ -77,10 +77,12 @@ pub enum SettingKey {
     Identify,
     /// Commissioning finished: value 0 = 1 done, 0 failed; value 1 = the failure's code.
     IdentifyEnd,
+    /// `sensor_offset_c 0`: the sensor offset cleared (value 0: the offset it had, °C).
+    SensorOffset,
 }
 
 impl SettingKey {
-    const ALL: [SettingKey; 8] = [
+    const ALL: [SettingKey; 9] = [
         SettingKey::Setpoint,
         SettingKey::Controller,
         SettingKey::CalIce,
@@ -89,6 +91,7 @@ impl SettingKey {
         SettingKey::Ack,
         SettingKey::Identify,
         SettingKey::IdentifyEnd,
+        SettingKey::SensorOffset,
     ];
 
     /// The key's wire name.
@@ -102,6 +105,7 @@ impl SettingKey {
             SettingKey::Ack => "ack",
             SettingKey::Identify => "identify",
             SettingKey::IdentifyEnd => "identify_end",
+            SettingKey::SensorOffset => "sensor_offset_c",
         }
     }
 }
@@ -379,6 +383,7 @@ pub fn write_csv_row(entry: &LogEntry, out: &mut impl core::fmt::Write) -> core:
                     }
                     SettingKey::Model => write!(out, "set:model=gain {};k {}", Fixed(value[0], 1), Fixed(value[1], 0)),
                     SettingKey::Ack => out.write_str("ack"),
+                    SettingKey::SensorOffset => write!(out, "set:sensor_offset_c=0.00;was {}", Fixed(value[0], 2)),
                     SettingKey::Identify => out.write_str("commissioning:started"),
                     SettingKey::IdentifyEnd if value[0] > 0.5 => out.write_str("commissioning:done"),
                     SettingKey::IdentifyEnd => {

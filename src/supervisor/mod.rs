@@ -137,7 +137,8 @@ impl SupervisorConfig {
     /// sample and shorter than the history it keeps ([`ssr::HISTORY`] samples): a longer window
     /// never has its sample, and its check would never fire. And that the supply probe's
     /// [`ssr::ProbeConfig::yield_within_c`] is a finite, non-negative temperature and
-    /// [`ssr::StuckOnConfig::unrequested_duty`] a duty in [0, 1).
+    /// [`ssr::StuckOnConfig::unrequested_duty`] a duty in [0, 1), and that the most the offset
+    /// watch subtracts, [`sensor::OffsetConfig::max_comp_c`], is one the history can restore.
     pub const fn validate(&self, ts_s: f32) -> Result<(), WindowError> {
         if !(ts_s.is_finite() && ts_s > 0.0) {
             return Err(WindowError("ts_s"));
@@ -213,6 +214,14 @@ impl SupervisorConfig {
         let u = on.unrequested_duty;
         if !(u >= 0.0 && u < 1.0) {
             return Err(WindowError("ssr.stuck_on.unrequested_duty"));
+        }
+        // The history keeps the offset subtracted in the channel's terms, up to
+        // `SensorOffset::MAX_C`: the most the watch subtracts must fit it through the lowest
+        // calibration gain, or a restart would restore less than was subtracted (the freezing
+        // side; a NaN would compare false and subtract nothing).
+        let m = s.offset.max_comp_c;
+        if !(m >= 0.0 && m <= crate::calib::MIN_GAIN * crate::persist::SensorOffset::MAX_C) {
+            return Err(WindowError("sensor.offset.max_comp_c"));
         }
         Ok(())
     }
@@ -475,6 +484,27 @@ impl Supervisor {
     /// Holds the supply switch's periodic test pulses off, or lets them resume.
     pub(crate) fn hold_switch_tests(&mut self, held: bool) {
         self.switch.hold_tests(held);
+    }
+
+    /// The sensor offset subtracted from every reading, °C (calibrated).
+    pub(crate) fn sensor_offset_c(&self) -> f32 {
+        self.sensor.offset_c()
+    }
+
+    /// Restores the sensor offset a previous boot subtracted, °C (calibrated).
+    pub(crate) fn restore_sensor_offset(&mut self, cfg: &SupervisorConfig, offset_c: f32) {
+        self.sensor.restore_offset(&cfg.sensor, offset_c);
+    }
+
+    /// Clears the sensor offset: the offset-corrected reading moves up by it, which every check
+    /// and the filter take over as a new line through the channel (the checks carry what they
+    /// hold over to it, as for [`Self::recalibrated`]).
+    pub(crate) fn clear_sensor_offset(&mut self, cfg: &SupervisorConfig, filter: &mut FirstOrder) {
+        let shift = crate::calib::Recalibration { gain: 1.0, shift_c: self.sensor.offset_c() };
+        let r = self.sensor.recalibrated(&cfg.sensor, &shift, filter);
+        self.freeze.recalibrated(&r);
+        self.ssr.recalibrated(&r);
+        self.sensor.restore_offset(&cfg.sensor, 0.0);
     }
 
     /// The stuck-converter check on this sample's raw counts: whether they are stuck.

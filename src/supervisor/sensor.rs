@@ -14,7 +14,9 @@
 //!   Several spikes within [`SpikeConfig::window_s`] are reported.
 //! - **Offset** (`OffsetWatch`): a step larger than physics allows that stays at its new level
 //!   is a sensor offset; it is reported, and an upward one is measured and subtracted, up to
-//!   [`OffsetConfig::max_comp_c`] in total.
+//!   [`OffsetConfig::max_comp_c`] in total (the history keeps it across restarts). A step down
+//!   by the offset subtracted, within [`OffsetConfig::hold_fraction`] of it, is its fault going
+//!   away (a lead repaired): the subtraction ends.
 //!
 //! A change of the channel's calibration (`set cal_ice`, `set cal_warm`) is not a step of the
 //! sensor: `SensorChecks::recalibrated` carries every reading the checks hold over to the new
@@ -363,6 +365,11 @@ impl OffsetWatch {
                         let measured = raw - before;
                         if measured > 0.0 && self.offset_c + measured <= cfg.max_comp_c {
                             self.offset_c += measured;
+                        } else if (measured + self.offset_c).abs() <= cfg.hold_fraction * self.offset_c {
+                            // A step down by the offset subtracted: the fault it compensated went
+                            // away (a lead re-seated or repaired). Kept across restarts, the
+                            // offset would otherwise read the load that much cold for good.
+                            self.offset_c = 0.0;
                         }
                         self.pending = None;
                         emit(EventKind::SensorOffset);
@@ -426,6 +433,13 @@ impl OffsetWatch {
         self.pending = self.pending.map(|(before, step, n)| (r.level(before), r.difference(step), n));
         self.offset_c = offset_c;
         r
+    }
+
+    /// The offset a previous boot subtracted (restored from the history, before the first
+    /// sample; not negative), at most `max_comp_c`: the fault it measured is still in the
+    /// channel.
+    pub(crate) fn restore(&mut self, cfg: &OffsetConfig, offset_c: f32) {
+        self.offset_c = min_f32(offset_c, cfg.max_comp_c);
     }
 
     /// No reading this sample: a step under watch, and the reference, are gone.
@@ -492,6 +506,16 @@ impl SensorChecks {
         self.spikes.recalibrated(&r);
         filter.remap(|y| r.level(y));
         r
+    }
+
+    /// The offset the watch subtracts from every reading, °C.
+    pub(crate) fn offset_c(&self) -> f32 {
+        self.offset.offset_c()
+    }
+
+    /// Restores the offset a previous boot subtracted ([`OffsetWatch::restore`]).
+    pub(crate) fn restore_offset(&mut self, cfg: &SensorConfig, offset_c: f32) {
+        self.offset.restore(&cfg.offset, offset_c);
     }
 
     /// A calibration change that cannot be carried over ([`Recalibration::between`] found the
