@@ -580,26 +580,32 @@ fn guard_trips_count_the_control_s_own_trips_not_a_fault_s() {
     }
 }
 
-/// A restart is no acknowledgement: spikes found an hour before a brown-out keep the indicator
-/// on through it (the latch restarts from the stored history); it went `off` at the restart,
-/// and on again only if the sensor spiked anew (`hter sim --fault sensor-spikes@1000
-/// --fault brownout@8000`: off from 8000 to 8660 s).
-#[test]
-fn an_unacknowledged_alarm_survives_a_brownout() {
+/// Self-tuning GPC on a full H-TER I at 28 °C through the `disturbance` scenario (seed 11), with
+/// `faults`, for `duration_s` (the scenario's own when `None`).
+fn gpc_disturbance(faults: &[(f64, Fault)], duration_s: Option<f64>) -> SimOutput {
     let scenario = Scenario::resolve("disturbance").unwrap();
-    let out = run(&SimOptions {
+    run(&SimOptions {
         drive: Default::default(),
-        duration_s: scenario.duration_s,
+        duration_s: duration_s.unwrap_or(scenario.duration_s),
         scenario,
         controller: ControllerSpec::new(ControllerChoice::Gpc),
         plant: PlantChoice::Hter1,
         load: Load::Full,
         ambient_c: 28.0,
         seed: 11,
-        faults: vec![(AT_S, Fault::SensorSpikes), (AT_S + 3600.0, Fault::Brownout)],
+        faults: faults.to_vec(),
         module_sense: false,
     })
-    .unwrap();
+    .unwrap()
+}
+
+/// A restart is no acknowledgement: spikes found an hour before a brown-out keep the indicator
+/// on through it (the latch restarts from the stored history); it went `off` at the restart,
+/// and on again only if the sensor spiked anew (`hter sim --fault sensor-spikes@1000
+/// --fault brownout@8000`: off from 8000 to 8660 s).
+#[test]
+fn an_unacknowledged_alarm_survives_a_brownout() {
+    let out = gpc_disturbance(&[(AT_S, Fault::SensorSpikes), (AT_S + 3600.0, Fault::Brownout)], None);
     let found = out.metrics.faults_detected.iter().find(|f| f.kind == Detected::Event(EventKind::SensorSpikes));
     let found = found.expect("the spikes are reported").t_s;
     assert!(found < AT_S + 3600.0, "before the brown-out: {found} s");
@@ -615,21 +621,9 @@ fn an_unacknowledged_alarm_survives_a_brownout() {
 /// restart, 2.50 °C for a reading of 3.98 °C at the end).
 #[test]
 fn a_sensor_offset_stays_compensated_through_a_brownout() {
-    let scenario = Scenario::resolve("disturbance").unwrap();
     let brownout_s = AT_S + 3600.0;
-    let out = run(&SimOptions {
-        drive: Default::default(),
-        duration_s: brownout_s + 3.0 * 3600.0,
-        scenario,
-        controller: ControllerSpec::new(ControllerChoice::Gpc),
-        plant: PlantChoice::Hter1,
-        load: Load::Full,
-        ambient_c: 28.0,
-        seed: 11,
-        faults: vec![(AT_S, Fault::SensorOffset), (brownout_s, Fault::Brownout)],
-        module_sense: false,
-    })
-    .unwrap();
+    let out =
+        gpc_disturbance(&[(AT_S, Fault::SensorOffset), (brownout_s, Fault::Brownout)], Some(brownout_s + 3.0 * 3600.0));
     let found = out.metrics.faults_detected.iter().find(|f| f.kind == Detected::Event(EventKind::SensorOffset));
     assert!(found.expect("the offset is reported").t_s < brownout_s);
     // From an hour after the restart, the reading is the load, and the load is on target.
