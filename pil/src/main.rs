@@ -6,7 +6,9 @@
 //! `cargo xtask pil` writes the counts to `pil-in.bin`, starts QEMU in that directory, and
 //! compares what this runner writes to `pil-out.bin` with the same samples run on the host
 //! ([`proto`] holds what both sides share). Host files are read and written through ARM
-//! semihosting; the exit status says whether the run completed.
+//! semihosting; the exit status says whether the run completed. It builds this runner twice:
+//! with `pil/Cargo.toml`'s release profile (this crate at opt-level 3, the budgeted figures) and
+//! with its `board` profile (this crate at "z", as the firmware crate: the firmware's step).
 //!
 //! Per sample the runner times the real work — `Carrier::step` and the cold-chain monitor's
 //! `push` — and then, on shadow copies that do not touch the real state, the parts of it:
