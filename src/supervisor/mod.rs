@@ -501,10 +501,17 @@ impl Supervisor {
     /// hold over to it, as for [`Self::recalibrated`]).
     pub(crate) fn clear_sensor_offset(&mut self, cfg: &SupervisorConfig, filter: &mut FirstOrder) {
         let shift = crate::calib::Recalibration { gain: 1.0, shift_c: self.sensor.offset_c() };
-        let r = self.sensor.recalibrated(&cfg.sensor, &shift, filter);
+        self.carry_over(cfg, &shift, filter);
+        self.sensor.restore_offset(&cfg.sensor, 0.0);
+    }
+
+    /// The reading moves by `r` and is neither the load moving nor the sensor stepping: the
+    /// sensor checks, the measurement filter, the freeze guard's slope and the SSR monitor's
+    /// history are carried over to it (a new calibration, a cleared offset).
+    fn carry_over(&mut self, cfg: &SupervisorConfig, r: &crate::calib::Recalibration, filter: &mut FirstOrder) {
+        let r = self.sensor.recalibrated(&cfg.sensor, r, filter);
         self.freeze.recalibrated(&r);
         self.ssr.recalibrated(&r);
-        self.sensor.restore_offset(&cfg.sensor, 0.0);
     }
 
     /// The stuck-converter check on this sample's raw counts: whether they are stuck.
@@ -528,11 +535,7 @@ impl Supervisor {
         filter: &mut FirstOrder,
     ) {
         match crate::calib::Recalibration::between(old, new) {
-            Some(r) => {
-                let r = self.sensor.recalibrated(&cfg.sensor, &r, filter);
-                self.freeze.recalibrated(&r);
-                self.ssr.recalibrated(&r);
-            }
+            Some(r) => self.carry_over(cfg, &r, filter),
             None => {
                 self.sensor.restart(filter);
                 self.freeze.restart();
