@@ -1060,15 +1060,21 @@ mod tests {
         assert_eq!(ResetCause::from_stm32l4_csr(0), ResetCause::Other);
     }
 
+    /// Writes the CRC of a frame's bytes before its last four into them: a frame edited by a
+    /// test, framed again so that only the edit is checked.
+    fn reframe(frame: &mut [u8]) {
+        let n = frame.len() - 4;
+        let crc = crc32(&frame[..n]);
+        frame[n..].copy_from_slice(&crc.to_le_bytes());
+    }
+
     /// A history record as an older `version` of `N` bytes wrote it: the current encoding's
     /// first `N` − 4 bytes (each version appended its fields), that version's number, its CRC.
     fn older_history<const N: usize>(current: &[u8], version: u8) -> [u8; N] {
         let mut old = [0u8; N];
-        let body = N - 4;
-        old[..body].copy_from_slice(&current[..body]);
+        old[..N - 4].copy_from_slice(&current[..N - 4]);
         old[1] = version;
-        let crc = crc32(&old[..body]);
-        old[body..].copy_from_slice(&crc.to_le_bytes());
+        reframe(&mut old);
         old
     }
 
@@ -1217,9 +1223,7 @@ mod tests {
             let mut b = bytes;
             b[0] = tag;
             b[1] = ver;
-            let n = ModelRecord::LEN - 4;
-            let crc = crc32(&b[..n]);
-            b[n..].copy_from_slice(&crc.to_le_bytes());
+            reframe(&mut b);
             b
         };
         assert_eq!(ModelRecord::decode(&reframe(b'M', 3)), Err(DecodeError::Version));
@@ -1468,10 +1472,8 @@ mod tests {
 
         // An unknown stop kind code, re-framed with a valid CRC.
         let mut b = h.encode();
-        let n = HistoryRecord::LEN - 4;
-        b[n - 14] = 9;
-        let crc = crc32(&b[..n]);
-        b[n..].copy_from_slice(&crc.to_le_bytes());
+        b[HistoryRecord::LEN - 4 - 14] = 9;
+        reframe(&mut b);
         assert_eq!(HistoryRecord::decode(&b), Err(DecodeError::OutOfRange));
     }
 
@@ -1554,8 +1556,7 @@ mod tests {
         for (byte, latched) in [(0u8, false), (1, true)] {
             let mut b = h.encode();
             b[n - 1] = byte;
-            let crc = crc32(&b[..n]);
-            b[n..].copy_from_slice(&crc.to_le_bytes());
+            reframe(&mut b);
             let old = HistoryRecord { unacknowledged: latched, sensor_offset: SensorOffset::NONE, ..h };
             assert_eq!(HistoryRecord::decode(&b), Ok(old));
         }
@@ -1575,9 +1576,7 @@ mod tests {
         // An unknown side byte, re-framed with a valid CRC.
         let mut b = HistoryRecord::EMPTY.encode();
         b[2 + 14 + 8 + 16] = 3;
-        let n = HistoryRecord::LEN - 4;
-        let crc = crc32(&b[..n]);
-        b[n..].copy_from_slice(&crc.to_le_bytes());
+        reframe(&mut b);
         assert_eq!(HistoryRecord::decode(&b), Err(DecodeError::OutOfRange));
     }
 }
