@@ -73,9 +73,12 @@ impl Rtd {
         if !(ratio(T_MIN_C) - 1e-4..=ratio(T_MAX_C) + 1e-4).contains(&w) {
             return Err(RtdError::OutOfRange);
         }
-        // Positive root of B·T² + A·T + (1 − W) = 0, written to avoid cancellation.
+        // Positive root of B·T² + A·T + (1 − W) = 0, written to avoid cancellation. The root
+        // through `numerics::sqrtf` (the FPU's instruction on the board, the same correctly
+        // rounded value as `libm::sqrtf`): `libm`'s software root and its 256-byte table were
+        // linked into the firmware for this one call.
         let disc = A * A - 4.0 * B * (1.0 - w);
-        let mut t = 2.0 * (w - 1.0) / (A + libm::sqrtf(disc));
+        let mut t = 2.0 * (w - 1.0) / (A + crate::numerics::sqrtf(disc));
         if w < 1.0 {
             for _ in 0..2 {
                 let f = ratio(t) - w;
