@@ -735,17 +735,17 @@ impl HistoryRecord {
             ring[oldest] = Some(Excursion { start_s: base + e.start_s, end_s: base + e.end_s, ..*e });
             oldest = (oldest + 1) % HISTORY_EXCURSIONS;
         }
-        let last = core::array::from_fn(|i| ring[(oldest + i) % HISTORY_EXCURSIONS]);
-        HistoryRecord {
-            min_c: pick(self.min_c, monitor.min_c(), f32::min),
-            max_c: pick(self.max_c, monitor.max_c(), f32::max),
-            below_2_s: self.below_2_s.saturating_add(secs(monitor.time_below_2_s())),
-            above_8_s: self.above_8_s.saturating_add(secs(monitor.time_above_8_s())),
-            excursions: self.excursions.saturating_add(monitor.excursion_count()),
-            recorded_s: self.recorded_s.saturating_add(secs(monitor.recorded_s())),
-            last,
-            ..*self
-        }
+        // Set field by field on one copy: a struct literal with `..*self` built the record beside
+        // the copy and moved it (≈ 90 B more flash for the same values).
+        let mut rec = *self;
+        rec.last = core::array::from_fn(|i| ring[(oldest + i) % HISTORY_EXCURSIONS]);
+        rec.min_c = pick(self.min_c, monitor.min_c(), f32::min);
+        rec.max_c = pick(self.max_c, monitor.max_c(), f32::max);
+        rec.below_2_s = self.below_2_s.saturating_add(secs(monitor.time_below_2_s()));
+        rec.above_8_s = self.above_8_s.saturating_add(secs(monitor.time_above_8_s()));
+        rec.excursions = self.excursions.saturating_add(monitor.excursion_count());
+        rec.recorded_s = self.recorded_s.saturating_add(secs(monitor.recorded_s()));
+        rec
     }
 
     /// The bytes to store.
