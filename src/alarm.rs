@@ -182,8 +182,12 @@ mod tests {
         assert_eq!(a.update(&out(8.3, Mode::Normal, &[]), &none), Indication::OutOfRange);
         assert_eq!(a.update(&out(7.9, Mode::Normal, &[]), &none), Indication::Off);
         // A cold-chain alarm latches.
-        let raised: Raised =
-            [Some(Alarm { kind: AlarmKind::Heat10h, start_ms: 0, trigger_ms: 36_000_000 }), None, None, None];
+        let raised: Raised = [
+            Some(Alarm { kind: AlarmKind::Heat10h, start_ms: 0, trigger_ms: 36_000_000, carried_s: 0 }),
+            None,
+            None,
+            None,
+        ];
         assert_eq!(a.update(&out(7.9, Mode::Normal, &[]), &raised), Indication::Unacknowledged);
         assert!(a.update(&out(5.0, Mode::Normal, &[]), &none).is_on());
         // A shorted SSR: limp home is not in control, even acknowledged.

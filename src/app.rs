@@ -440,7 +440,9 @@ impl App {
             }
         }
         for a in rec.raised.iter().flatten() {
-            let start_s = self.record_s(a.start_ms);
+            // A run carried through a restart began that much recorded time before this boot's
+            // part of it.
+            let start_s = self.record_s(a.start_ms).saturating_sub(a.carried_s);
             self.save(Save::Log(LogEntry::Alarm { t_s, kind: a.kind, start_s }));
         }
         if let Some(save) = self.recorder.due_save(&rec) {

@@ -109,6 +109,10 @@ pub struct Alarm {
     pub start_ms: u64,
     /// Sample at which it triggered, ms.
     pub trigger_ms: u64,
+    /// A continuous run carried in from before this boot ([`ColdChainMonitor::resumed`]): its
+    /// time before `start_ms`, whole seconds of recorded time (0 for a run of this boot alone,
+    /// and for the cumulative kind, whose `start_ms` is this boot's first qualifying sample).
+    pub carried_s: u32,
 }
 
 impl Alarm {
@@ -156,8 +160,34 @@ pub const EXCURSION_LOG: usize = 16;
 #[derive(Clone, Copy, Debug, Default)]
 struct Tracker {
     start: Option<u64>,
+    /// The cumulative kind's sum; a continuous kind's time carried in from before this boot
+    /// ([`ColdChainMonitor::resumed`]), which its run adds to.
     acc_ms: u64,
     fired: bool,
+    /// A continuous kind's carried time in whole seconds, for its alarm's
+    /// [`Alarm::carried_s`] (worked out once, at [`ColdChainMonitor::resumed`]).
+    carried_s: u32,
+}
+
+/// Each kind's run, in [`AlarmKind::ALL`] order, as one boot hands it to the next through the
+/// stored history ([`crate::persist::HistoryRecord::runs`]): 0 when none is under way;
+/// otherwise bits 0–30 its time toward the alarm's duration in ms plus one (at most
+/// [`RUN_MAX_MS`]: every duration is far shorter) and bit 31 set when it has raised its alarm.
+/// A continuous kind's run is the one under way at the last sample, the cumulative kind's the
+/// sum over the record.
+pub type Runs = [u32; 4];
+
+/// The longest time a [`Runs`] entry keeps, ms (24.8 days).
+pub const RUN_MAX_MS: u64 = 0x7FFF_FFFE;
+
+/// A [`Runs`] entry's raised flag.
+const RUN_FIRED: u32 = 1 << 31;
+
+/// The number of alarm kinds, hidden from the optimiser: the loops over the runs, which run at
+/// a boot and a store, stay loops (the library's opt-level unrolls each of them fourfold, at
+/// ≈ 100 B of flash each).
+fn kinds() -> usize {
+    core::hint::black_box(AlarmKind::ALL.len())
 }
 
 /// The monitor's state and results.
@@ -193,7 +223,7 @@ impl ColdChainMonitor {
     /// An empty record.
     pub const fn new() -> Self {
         Self {
-            trackers: [Tracker { start: None, acc_ms: 0, fired: false }; 4],
+            trackers: [Tracker { start: None, acc_ms: 0, fired: false, carried_s: 0 }; 4],
             last: None,
             elapsed_ms: 0,
             mkt_mean: 0.0,
@@ -252,14 +282,16 @@ impl ColdChainMonitor {
                 }
                 if !tr.fired && tr.acc_ms >= kind.duration_ms() {
                     tr.fired = true;
-                    raised[i] = Some(Alarm { kind, start_ms: tr.start.unwrap_or(t_ms), trigger_ms: t_ms });
+                    let start_ms = tr.start.unwrap_or(t_ms);
+                    raised[i] = Some(Alarm { kind, start_ms, trigger_ms: t_ms, carried_s: 0 });
                 }
             } else if meets {
                 let t0 = *tr.start.get_or_insert(t_ms);
-                // t0 ≤ t_ms: times only increase past the guard above.
-                if !tr.fired && t_ms - t0 >= kind.duration_ms() {
+                // t0 ≤ t_ms: times only increase past the guard above. `acc_ms`: the part of the
+                // run before this boot.
+                if !tr.fired && t_ms - t0 + tr.acc_ms >= kind.duration_ms() {
                     tr.fired = true;
-                    raised[i] = Some(Alarm { kind, start_ms: t0, trigger_ms: t_ms });
+                    raised[i] = Some(Alarm { kind, start_ms: t0, trigger_ms: t_ms, carried_s: tr.carried_s });
                 }
             } else {
                 *tr = Tracker::default();
@@ -267,6 +299,55 @@ impl ColdChainMonitor {
         }
         self.log_excursion(t_ms, temp_c);
         raised
+    }
+
+    /// Continues the runs a previous boot handed over ([`Self::runs`] of its last sample, from
+    /// the stored history), before the first sample. A continuous kind's run goes on if the
+    /// first sample meets its condition and ends otherwise; the time the board was off is not
+    /// on the record's clock, as in `hter monitor`, which reads the record as one clock across
+    /// restarts. The cumulative kind's sum goes on. A run that has raised its alarm does not
+    /// raise it again. Out of line: it runs once a boot.
+    #[inline(never)]
+    pub fn resumed(runs: &Runs) -> Self {
+        let mut m = Self::new();
+        m.resume(runs);
+        m
+    }
+
+    /// [`Self::resumed`]'s continuation, on a monitor with no sample yet.
+    fn resume(&mut self, runs: &Runs) {
+        for ((tr, &r), kind) in self.trackers.iter_mut().zip(runs).zip(AlarmKind::ALL) {
+            if r != 0 {
+                let ms = (r & !RUN_FIRED).saturating_sub(1);
+                tr.acc_ms = u64::from(ms);
+                tr.fired = r & RUN_FIRED != 0;
+                if !kind.cumulative() {
+                    tr.carried_s = ms / 1000;
+                }
+            }
+        }
+    }
+
+    /// Each kind's run at the last sample, for the next boot ([`Self::resumed`]); before this
+    /// boot's first sample, the runs it was resumed with. Out of line: the history's merge and
+    /// the recorder's check of ended runs both call it.
+    #[inline(never)]
+    pub fn runs(&self) -> Runs {
+        let last_ms = self.last.map_or(0, |(t, _)| t);
+        let mut runs = [0; 4];
+        for i in 0..kinds() {
+            if let (Some(r), Some(tr), Some(kind)) = (runs.get_mut(i), self.trackers.get(i), AlarmKind::ALL.get(i)) {
+                let open = match tr.start {
+                    Some(t0) if !kind.cumulative() => last_ms - t0,
+                    _ => 0,
+                };
+                let ms = tr.acc_ms + open;
+                if tr.fired || tr.start.is_some() || ms > 0 {
+                    *r = (ms.min(RUN_MAX_MS) as u32 + 1) | if tr.fired { RUN_FIRED } else { 0 };
+                }
+            }
+        }
+        runs
     }
 
     fn log_excursion(&mut self, t_ms: u64, temp_c: f32) {

@@ -21,7 +21,7 @@
 //! samples.
 
 use crate::calib::TwoPoint;
-use crate::coldchain::{AlarmKind, ColdChainMonitor, Excursion, Raised, Side};
+use crate::coldchain::{AlarmKind, ColdChainMonitor, Excursion, Raised, Runs, Side};
 use crate::control::adaptive::{model_from_theta, plausible_model_cold, AdaptiveConfig, ESTIMATED_NB};
 use crate::control::{AdaptiveMode, Controller};
 use crate::failsafe::{StopInfo, StopKind};
@@ -565,19 +565,19 @@ impl SensorOffset {
 
 /// Cold-chain history summary, reset counts and board faults, accumulated over power cycles.
 ///
-/// Layout v4, 122 bytes: `'H'`, 4; alarm counts (4 × u16, in [`AlarmKind`] order heat_10h,
+/// Layout v5, 138 bytes: `'H'`, 5; alarm counts (4 × u16, in [`AlarmKind`] order heat_10h,
 /// freeze_60min, ship_45c_1h, ship_30c_10h); reset counts (3 × u16: watchdog, brown-out, other);
 /// min_c, max_c (f32, NaN = no sample yet); time below 2 °C, time above 8 °C, excursion count,
 /// recorded time (4 × u32, seconds and count); [`HISTORY_EXCURSIONS`] × (side u8: 0 none,
 /// 1 cold, 2 warm; start_s, end_s, extreme_c f32); fail-safe stops (5 × u16, in
 /// [`StopKind::ALL`] order); flash pages lost (u16); last stop (kind code u8, 0 = none; pc, addr,
-/// detail u32); the carried byte (v4: bit 0 the indicator's latch, bits 1–7 the
-/// [`SensorOffset`]'s steps); CRC-32. Excursion times are on the record's own clock: seconds of recorded time
+/// detail u32); the carried byte (bit 0 the indicator's latch, bits 1–7 the
+/// [`SensorOffset`]'s steps); the alarms' runs (4 × u32, [`Runs`]); CRC-32. Excursion times are on the record's own clock: seconds of recorded time
 /// since the first boot (each boot's samples start where the previous boot's record ended), so
 /// they stay in order across power cycles.
 ///
-/// v3 (121 bytes: v4 without the carried byte) is still read, with nothing unacknowledged and no
-/// offset, and v2 (96 bytes: v3 without the board-fault fields) with no faults counted either: it is
+/// v4 (122 bytes: v5 without the runs) is still read, with no run under way; v3 (121 bytes: v4
+/// without the carried byte) with nothing unacknowledged and no offset either; and v2 (96 bytes: v3 without the board-fault fields) with no faults counted either: it is
 /// the carrier's cold-chain record, and a firmware update must not erase the alarms and
 /// excursions the vaccines have been through. (v1 had no recorded time and stamped excursions
 /// with seconds since their own boot; it is not read.)
@@ -618,6 +618,11 @@ pub struct HistoryRecord {
     /// once; the next boot subtracts it again from its first sample,
     /// [`crate::step::Carrier::restore_sensor_offset`]).
     pub sensor_offset: SensorOffset,
+    /// The cold-chain alarms' runs under way at the last sample, which the next boot continues
+    /// ([`ColdChainMonitor::resumed`]): without them the board started every run over at each
+    /// boot, and 6 h of heat and a brown-out raised `heat_10h` 10 h after the restart instead of
+    /// 4 h, as `hter monitor` does from the same record.
+    pub runs: Runs,
 }
 
 impl Default for HistoryRecord {
@@ -656,13 +661,15 @@ impl HistoryRecord {
     /// Kind tag.
     pub const TAG: u8 = b'H';
     /// Layout version written by this firmware.
-    pub const VERSION: u8 = 4;
+    pub const VERSION: u8 = 5;
     /// Length of a v2 record (still read), bytes.
     pub const LEN_V2: usize = 2 + 4 * 2 + 3 * 2 + 2 * 4 + 4 * 4 + HISTORY_EXCURSIONS * 13 + 4;
     /// Length of a v3 record (still read: the v4 one without the indicator's latch), bytes.
     pub const LEN_V3: usize = Self::LEN_V2 + StopKind::ALL.len() * 2 + 2 + 1 + 3 * 4;
+    /// Length of a v4 record (still read: the v5 one without the alarms' runs), bytes.
+    pub const LEN_V4: usize = Self::LEN_V3 + 1;
     /// Encoded length, bytes.
-    pub const LEN: usize = Self::LEN_V3 + 1;
+    pub const LEN: usize = Self::LEN_V4 + 4 * 4;
     /// Nothing seen yet.
     pub const EMPTY: HistoryRecord = HistoryRecord {
         alarms: [0; 4],
@@ -679,6 +686,7 @@ impl HistoryRecord {
         last_stop: None,
         unacknowledged: false,
         sensor_offset: SensorOffset::NONE,
+        runs: [0; 4],
     };
 
     /// Counts an alarm.
@@ -745,6 +753,7 @@ impl HistoryRecord {
         rec.above_8_s = self.above_8_s.saturating_add(secs(monitor.time_above_8_s()));
         rec.excursions = self.excursions.saturating_add(monitor.excursion_count());
         rec.recorded_s = self.recorded_s.saturating_add(secs(monitor.recorded_s()));
+        rec.runs = monitor.runs();
         rec
     }
 
@@ -789,6 +798,9 @@ impl HistoryRecord {
             None => w.put(&[0; 13]),
         }
         w.put(&[u8::from(self.unacknowledged) | self.sensor_offset.0 << 1]);
+        for r in self.runs {
+            w.u32(r);
+        }
         w.finish();
         buf
     }
@@ -796,11 +808,12 @@ impl HistoryRecord {
     /// Parses and range-checks stored bytes: extremes within −60 … 100 °C (or absent) and
     /// min ≤ max; excursions with a known side, 0 ≤ start ≤ end and a finite extreme in range;
     /// a known stop kind. A v2 record decodes with no board faults, v2 and v3 with nothing
-    /// unacknowledged and no sensor offset.
+    /// unacknowledged and no sensor offset, v2 to v4 with no alarm run under way.
     pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
         let (len, version) = match (bytes.len(), bytes.get(1)) {
             (Self::LEN_V2, Some(2)) => (Self::LEN_V2, 2),
             (Self::LEN_V3, Some(3)) => (Self::LEN_V3, 3),
+            (Self::LEN_V4, Some(4)) => (Self::LEN_V4, 4),
             _ => (Self::LEN, Self::VERSION),
         };
         let v2 = version == 2;
@@ -867,6 +880,10 @@ impl HistoryRecord {
         let carried = r.u8();
         rec.unacknowledged = carried & 1 != 0;
         rec.sensor_offset = SensorOffset(carried >> 1);
+        // A v4 frame ends here: no run under way. Every value of a run is one.
+        for run in rec.runs.iter_mut() {
+            *run = r.u32();
+        }
         Ok(rec)
     }
 }
@@ -895,6 +912,17 @@ pub struct Recorder {
     monitor: ColdChainMonitor,
     save_every_samples: u32,
     since_save: u32,
+    /// The kinds whose alarm run was under way in the history last handed over (bit i:
+    /// [`AlarmKind::ALL`]`[i]`): when one of them ends, the history is due, or the next boot
+    /// would carry on a run that had ended (and raise its alarm early).
+    runs_stored: u8,
+}
+
+/// The kinds with a run under way in `runs`, as bits in [`AlarmKind::ALL`] order. Out of line:
+/// three callers.
+#[inline(never)]
+fn run_bits(runs: &Runs) -> u8 {
+    runs.iter().enumerate().fold(0, |b, (i, r)| b | u8::from(*r != 0) << i)
 }
 
 impl Recorder {
@@ -903,9 +931,11 @@ impl Recorder {
     pub fn new(boot: HistoryRecord, save_every_samples: u32) -> Self {
         Recorder {
             boot,
-            monitor: ColdChainMonitor::new(),
+            // The alarms' runs go on where the stored history left them.
+            monitor: ColdChainMonitor::resumed(&boot.runs),
             save_every_samples: save_every_samples.max(1),
             since_save: 0,
+            runs_stored: run_bits(&boot.runs),
         }
     }
 
@@ -943,7 +973,11 @@ impl Recorder {
             alarm = true;
         }
         self.since_save = self.since_save.saturating_add(1);
-        let save_due = alarm || self.since_save >= self.save_every_samples;
+        let runs = run_bits(&self.monitor.runs());
+        // A run the stored history has under way ended: stored behind the hold-off (at most
+        // one store a kind between two periodic ones).
+        let ended = self.runs_stored & !runs != 0;
+        let save_due = alarm || ended || self.since_save >= self.save_every_samples;
         if save_due {
             self.since_save = 0;
         }
@@ -973,14 +1007,14 @@ impl Recorder {
     /// What to store after the sample `r` recorded: the history at once when it raised an alarm
     /// or set the indicator's latch ([`Save::AlarmHistory`], which skips the write gate's
     /// hold-off), or when the periodic store is due ([`Save::History`]).
-    pub fn due_save(&self, r: &Recorded) -> Option<Save> {
-        if r.urgent {
-            Some(Save::AlarmHistory(self.history()))
-        } else if r.save_due {
-            Some(Save::History(self.history()))
-        } else {
-            None
+    pub fn due_save(&mut self, r: &Recorded) -> Option<Save> {
+        if !r.save_due {
+            return None;
         }
+        let h = self.history();
+        // The runs this store hands on: when one of them ends, the next store is due.
+        self.runs_stored = run_bits(&h.runs);
+        Some(if r.urgent { Save::AlarmHistory(h) } else { Save::History(h) })
     }
 
     /// This boot's monitor (MKT, extremes, excursions since boot).
@@ -1450,7 +1484,7 @@ mod tests {
         assert_eq!(h.last_stop, Some(LastStop { kind: StopKind::Panic, pc: 0, addr: 0, detail: 417 }));
         let bytes = h.encode();
         assert_eq!(bytes.len(), HistoryRecord::LEN);
-        assert_eq!(&bytes[..2], &[b'H', 4]);
+        assert_eq!(&bytes[..2], &[b'H', 5]);
         assert_eq!(HistoryRecord::decode(&bytes), Ok(h));
 
         // A v2 record: the v3 bytes before the board-fault fields, version 2, its own CRC.
@@ -1472,7 +1506,8 @@ mod tests {
 
         // An unknown stop kind code, re-framed with a valid CRC.
         let mut b = h.encode();
-        b[HistoryRecord::LEN - 4 - 14] = 9;
+        // The stop's kind: before the last stop's three words, the carried byte and the runs.
+        b[HistoryRecord::LEN_V4 - 4 - 14] = 9;
         reframe(&mut b);
         assert_eq!(HistoryRecord::decode(&b), Err(DecodeError::OutOfRange));
     }
@@ -1552,14 +1587,76 @@ mod tests {
         assert_eq!(next.note_reset(ResetCause::BrownOut).sensor_offset, offset);
 
         // The v4 bytes before the offset was kept: 0 or 1, the latch alone.
-        let n = HistoryRecord::LEN - 4;
+        let n = HistoryRecord::LEN_V4 - 4;
         for (byte, latched) in [(0u8, false), (1, true)] {
-            let mut b = h.encode();
-            b[n - 1] = byte;
-            reframe(&mut b);
+            let mut current = h.encode();
+            current[n - 1] = byte;
+            let b: [u8; HistoryRecord::LEN_V4] = older_history(&current, 4);
             let old = HistoryRecord { unacknowledged: latched, sensor_offset: SensorOffset::NONE, ..h };
             assert_eq!(HistoryRecord::decode(&b), Ok(old));
         }
+    }
+
+    /// A [`Runs`] entry as its documented layout reads: (ms toward the duration, raised), `None`
+    /// for no run.
+    fn run_read(r: u32) -> Option<(u32, bool)> {
+        (r != 0).then(|| ((r & 0x7FFF_FFFF) - 1, r >> 31 == 1))
+    }
+
+    /// The alarms' runs under way are stored with the history (v5) and the next boot's monitor
+    /// continues them; a run the stored history has under way that ends makes the history due;
+    /// a v4 record reads as no run.
+    #[test]
+    fn the_alarm_runs_are_stored_and_continued_and_v4_records_migrate() {
+        // 5 h above 8 °C, a sample a minute.
+        let mut rec = Recorder::new(HistoryRecord::EMPTY, 60);
+        for k in 0..=300 {
+            rec.push(k * 60_000, 9.0);
+        }
+        let h = rec.history();
+        assert_eq!(run_read(h.runs[0]), Some((5 * 3_600_000, false)), "heat_10h");
+        assert_eq!(h.runs[1..3], [0, 0], "freeze_60min and ship_45c_1h");
+        // ship_30c_10h's sum: never above 30 °C, yet its tracker has nothing under way.
+        assert_eq!(run_read(h.runs[3]), None);
+        assert_eq!(HistoryRecord::decode(&h.encode()), Ok(h));
+        // The next boot's run goes on: heat_10h 5 h later, not 10 h, and its alarm carries the
+        // 5 h before the boot.
+        let mut next = Recorder::new(h, 60);
+        assert_eq!(next.history().runs, h.runs, "handed on before the first sample");
+        let raised_at = (0..=400u64).find_map(|k| next.push(k * 60_000, 9.0).raised[0].map(|a| (k, a)));
+        let (k, alarm) = raised_at.expect("heat_10h raised");
+        assert_eq!((k, alarm.start_ms, alarm.carried_s), (300, 0, 5 * 3600));
+        assert_eq!(run_read(next.history().runs[0]), Some((10 * 3_600_000, true)));
+        // Raised, it is not raised again after another restart; a first sample in range ends it.
+        let fired = next.history();
+        let mut again = Recorder::new(fired, 60);
+        assert!((0..100).all(|k| again.push(k * 60_000, 9.0).raised[0].is_none()));
+        let mut cooled = Recorder::new(fired, 60);
+        cooled.push(0, 5.0);
+        assert_eq!(cooled.history().runs[0], 0);
+        // The cumulative kind's sum goes on: 6 h above 30 °C, a restart, 4 h more raise it.
+        let mut hot = Recorder::new(HistoryRecord::EMPTY, 60);
+        for k in 0..=360 {
+            hot.push(k * 60_000, 31.0);
+        }
+        let mut hot_next = Recorder::new(hot.history(), 60);
+        let raised = (0..=300u64).find(|k| hot_next.push(k * 60_000, 31.0).raised[3].is_some());
+        assert_eq!(raised, Some(240), "6 h carried, 4 h more");
+        // A stored run that ends makes the history due at once, behind the hold-off, and once.
+        let mut ends = Recorder::new(h, 3600);
+        assert!(!ends.push(0, 9.0).save_due);
+        let r = ends.push(60_000, 5.0);
+        assert!(r.save_due && !r.urgent);
+        assert!(matches!(ends.due_save(&r), Some(Save::History(s)) if s.runs[0] == 0));
+        assert!(!ends.push(120_000, 5.0).save_due, "once");
+        // A run the stored history does not have (a flicker above 8 °C between two stores) ends
+        // without a store.
+        for (k, c) in [(3, 9.0), (4, 5.0), (5, 9.0), (6, 5.0)] {
+            assert!(!ends.push(k * 60_000, c).save_due, "minute {k}");
+        }
+        // v4: no run.
+        let v4: [u8; HistoryRecord::LEN_V4] = older_history(&h.encode(), 4);
+        assert_eq!(HistoryRecord::decode(&v4), Ok(HistoryRecord { runs: [0; 4], ..h }));
     }
 
     #[test]

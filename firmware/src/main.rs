@@ -298,7 +298,13 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             warn!("{} events of this step did not fit the step's list", out.events.dropped());
         }
         for a in rec.raised.iter().flatten() {
-            error!("ALARM {} t={=u64:ms} (condition since t={=u64:ms})", a.kind.name(), a.trigger_ms, a.start_ms);
+            error!(
+                "ALARM {} t={=u64:ms} (condition since t={=u64:ms}, and {=u32}s before this boot)",
+                a.kind.name(),
+                a.trigger_ms,
+                a.start_ms,
+                a.carried_s
+            );
         }
         // An alarm's history is stored as soon as the supply allows, without the boot's hold-off.
         if let Some(save) = recorder.due_save(&rec) {
@@ -405,7 +411,13 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             warn!("{} events of this step did not fit the step's list", step.events.dropped());
         }
         for a in out.raised.iter().flatten() {
-            error!("ALARM {} t={=u64:ms} (condition since t={=u64:ms})", a.kind.name(), a.trigger_ms, a.start_ms);
+            error!(
+                "ALARM {} t={=u64:ms} (condition since t={=u64:ms}, and {=u32}s before this boot)",
+                a.kind.name(),
+                a.trigger_ms,
+                a.start_ms,
+                a.carried_s
+            );
         }
         while let Some(save) = app.next_save() {
             persist::request(save);

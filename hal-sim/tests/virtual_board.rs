@@ -423,6 +423,39 @@ fn a_brown_out_two_hours_in_restarts_from_the_learnt_model() {
     assert!(lo > 3.85 && hi < 4.15, "the hour after the restart: {lo:.2}…{hi:.2} °C");
 }
 
+/// A heat run goes on through a brown-out, on the board's whole path (the history stored to the
+/// mock flash, the boot that restores it): a cabinet that cannot cool (`ssr-stuck-off`) warms
+/// past 8 °C, the power goes 6 h in, and `heat_10h` comes 10 h after the load crossed 8 °C,
+/// late by at most the hour the last store missed. The board started the run over at the
+/// restart and raised it 10 h after that, 15–16 h after the crossing.
+#[test]
+fn a_heat_run_goes_on_through_a_brown_out() {
+    use hal_sim::fault::Fault;
+    use hal_sim::plant::Load;
+    use hal_sim::sim::virtual_board::{VirtualBoard, VirtualOptions};
+    use hal_sim::sim::PlantChoice;
+    use hter::coldchain::AlarmKind;
+    let opts =
+        VirtualOptions { plant: PlantChoice::Hter1, load: Load::Full, ambient_c: 28.0, seed: 1, module_sense: false };
+    let mut b = VirtualBoard::new(&opts).unwrap();
+    b.step().unwrap();
+    b.inject(Fault::SsrStuckOff).unwrap();
+    let mut warm_since = None;
+    let raised = |b: &VirtualBoard| b.app().recorder().history().alarms_of(AlarmKind::Heat10h);
+    while raised(&b) == 0 {
+        if b.sim_s() >= 6.0 * 3600.0 && b.restarts == 0 {
+            b.inject(Fault::Brownout).unwrap();
+        }
+        b.step().unwrap();
+        if b.load_c() > 8.0 {
+            warm_since.get_or_insert(b.sim_s());
+        }
+        assert!(b.sim_s() < 20.0 * 3600.0, "no heat_10h in 20 h");
+    }
+    let run_h = (b.sim_s() - warm_since.expect("the load warmed past 8 °C")) / 3600.0;
+    assert!((10.0..=11.0).contains(&run_h), "heat_10h {run_h:.2} h after the load crossed 8 °C");
+}
+
 /// Several requests in one write, malformed ones among them: the board frames and answers one
 /// line at a time, so each reply comes in the order of its line. The virtual board sent the
 /// refusal of a line as soon as it read it, ahead of the replies to the lines before it.

@@ -51,6 +51,8 @@ struct Bench {
     /// The RTD lead's own error, °C: the sensor reads the load this much warm (a lead or
     /// connector fault, which the offset watch measures and subtracts).
     lead_c: f32,
+    /// The load held at this temperature whatever the duty (a cabinet that cannot cool).
+    pinned_c: Option<f32>,
     /// What the board's module-side sense reads each sample (`None`: the reference board).
     #[cfg(feature = "module-sense")]
     module_v: Option<f32>,
@@ -67,6 +69,7 @@ impl Bench {
             saves: Vec::new(),
             dither: false,
             lead_c: 0.0,
+            pinned_c: None,
             #[cfg(feature = "module-sense")]
             module_v: None,
         }
@@ -91,6 +94,9 @@ impl Bench {
             let duty = self.pipe.pop_front().unwrap();
             let eq = 28.0 - 43.0 * duty;
             self.load_c += (eq - self.load_c) * (10.0 / 1800.0);
+            if let Some(c) = self.pinned_c {
+                self.load_c = c;
+            }
             self.t_ms += 10_000;
             self.drain();
             last = Some(out);
@@ -1042,4 +1048,43 @@ fn set_sensor_offset_0_clears_it_after_a_repair_with_the_lead_unplugged() {
     let logs = b.setting_logs().len();
     assert_eq!(b.send("set sensor_offset_c 0"), "ok\r\n");
     assert_eq!(b.setting_logs().len(), logs);
+}
+
+/// A heat run under way at a restart goes on from the stored history: `heat_10h` comes 10 h
+/// into the run on the record's clock, as `hter monitor` raises it from the same record, and
+/// the alarm's log entry gives the run's start before the restart. The board started every run
+/// over at each boot: 6 h of heat, a brown-out, and the alarm came 10 h after the restart.
+#[test]
+fn a_heat_run_goes_on_through_a_restart() {
+    let warm = |boot: &Boot| {
+        let mut b = Bench::new(boot);
+        (b.pinned_c, b.dither, b.load_c) = (Some(9.0), true, 9.0);
+        b
+    };
+    let mut b = warm(&boot());
+    b.run(6 * 360);
+    let stored = stored_history(&b);
+    // The hourly store's: 5 h of run at least (its documented layout: ms + 1, not raised).
+    let run_s = (stored.runs[0] - 1) / 1000;
+    assert!(stored.runs[0] >> 31 == 0 && (5 * 3600 - 20..=6 * 3600).contains(&run_s), "{run_s} s");
+    let boot = Boot { history: stored, reset: ResetCause::BrownOut, log_last_s: 6 * 3600, ..boot() };
+    let mut again = warm(&boot);
+    let mut samples = 0u32;
+    let start_s = loop {
+        again.run(1);
+        samples += 1;
+        let raised = again.saves.iter().find_map(|s| match s {
+            Save::Log(LogEntry::Alarm { kind: crate::coldchain::AlarmKind::Heat10h, start_s, .. }) => Some(*start_s),
+            _ => None,
+        });
+        if let Some(start_s) = raised {
+            break start_s;
+        }
+        assert!(samples < 10 * 360, "no heat_10h in 10 h after the restart");
+    };
+    // 10 h of run: the carried part, then the rest (to the sample).
+    assert_eq!(samples, (10 * 3600 - run_s) / 10 + 1);
+    // The run's start on the record's clock: the restart's record continues at the log's last
+    // second, and the run before it is `run_s` long.
+    assert_eq!(start_s, 6 * 3600 + 1 - run_s);
 }
