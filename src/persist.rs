@@ -572,13 +572,13 @@ impl SensorOffset {
 /// 1 cold, 2 warm; start_s, end_s, extreme_c f32); fail-safe stops (5 × u16, in
 /// [`StopKind::ALL`] order); flash pages lost (u16); last stop (kind code u8, 0 = none; pc, addr,
 /// detail u32); the carried byte (bit 0 the indicator's latch, bits 1–7 the
-/// [`SensorOffset`]'s steps); the alarms' runs (4 × u32, [`Runs`]); CRC-32. Excursion times are on the record's own clock: seconds of recorded time
-/// since the first boot (each boot's samples start where the previous boot's record ended), so
-/// they stay in order across power cycles.
+/// [`SensorOffset`]'s steps); the alarms' runs (4 × u32, [`Runs`]); CRC-32. Excursion times are
+/// on the record's own clock: seconds of recorded time since the first boot (each boot's samples
+/// start where the previous boot's record ended), so they stay in order across power cycles.
 ///
 /// v4 (122 bytes: v5 without the runs) is still read, with no run under way; v3 (121 bytes: v4
-/// without the carried byte) with nothing unacknowledged and no offset either; and v2 (96 bytes: v3 without the board-fault fields) with no faults counted either: it is
-/// the carrier's cold-chain record, and a firmware update must not erase the alarms and
+/// without the carried byte) with nothing unacknowledged and no offset either; and v2 (96
+/// bytes: v3 without the board-fault fields) with no faults counted either: it is the carrier's cold-chain record, and a firmware update must not erase the alarms and
 /// excursions the vaccines have been through. (v1 had no recorded time and stamped excursions
 /// with seconds since their own boot; it is not read.)
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -896,7 +896,8 @@ pub struct Recorded {
     /// Alarms this sample raised (at most one per kind).
     pub raised: Raised,
     /// Store the history now: after an alarm, after a change of the indicator's latch or the sensor
-    /// offset ([`Recorder::note_carried`]), and every `save_every_samples` samples.
+    /// offset ([`Recorder::note_carried`]), when an alarm's run the last store handed on ended
+    /// (the next boot would carry it on), and every `save_every_samples` samples.
     pub save_due: bool,
     /// …and past the write gate's hold-off: an alarm was raised or the latch was set.
     pub urgent: bool,
@@ -1006,7 +1007,8 @@ impl Recorder {
 
     /// What to store after the sample `r` recorded: the history at once when it raised an alarm
     /// or set the indicator's latch ([`Save::AlarmHistory`], which skips the write gate's
-    /// hold-off), or when the periodic store is due ([`Save::History`]).
+    /// hold-off), or when the periodic store is due or a run the last store handed on ended
+    /// ([`Save::History`]). It notes the runs the store hands on.
     pub fn due_save(&mut self, r: &Recorded) -> Option<Save> {
         if !r.save_due {
             return None;
@@ -1616,7 +1618,7 @@ mod tests {
         let h = rec.history();
         assert_eq!(run_read(h.runs[0]), Some((5 * 3_600_000, false)), "heat_10h");
         assert_eq!(h.runs[1..3], [0, 0], "freeze_60min and ship_45c_1h");
-        // ship_30c_10h's sum: never above 30 °C, yet its tracker has nothing under way.
+        // ship_30c_10h: never above 30 °C, no sum.
         assert_eq!(run_read(h.runs[3]), None);
         assert_eq!(HistoryRecord::decode(&h.encode()), Ok(h));
         // The next boot's run goes on: heat_10h 5 h later, not 10 h, and its alarm carries the
