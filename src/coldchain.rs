@@ -440,6 +440,11 @@ impl ColdChainMonitor {
     pub fn excursion_count(&self) -> u32 {
         self.excursions
     }
+
+    /// Whether the last sample was outside 2…8 °C: an excursion is under way.
+    pub fn in_excursion(&self) -> bool {
+        matches!(self.log.get(self.head), Some(Some(_)))
+    }
 }
 
 #[cfg(test)]

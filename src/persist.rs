@@ -897,16 +897,22 @@ pub struct Recorded {
     pub raised: Raised,
     /// Store the history now: after an alarm, after a change of the indicator's latch or the sensor
     /// offset ([`Recorder::note_carried`]), when an alarm's run the last store handed on ended
-    /// (the next boot would carry it on), and every `save_every_samples` samples.
+    /// (the next boot would carry it on), and every `save_every_samples` samples
+    /// ([`EXCURSION_SAVES`] times as often during an excursion).
     pub save_due: bool,
     /// …and past the write gate's hold-off: an alarm was raised or the latch was set.
     pub urgent: bool,
 }
 
+/// How many times as often the [`Recorder`] stores the history while an excursion is under way:
+/// every 10 minutes at the board's hourly period.
+pub const EXCURSION_SAVES: u32 = 6;
+
 /// The carrier's cold-chain record across power cycles: the history carried in at boot, this
 /// boot's [`ColdChainMonitor`], and when to store their merge. The firmware feeds it every
 /// step's output and stores what it hands back; a power cut loses at most the samples since
-/// the last store (an hour by default), never an alarm.
+/// the last store (an hour by default, 10 minutes while the load is outside 2…8 °C), never an
+/// alarm.
 #[derive(Clone, Debug)]
 pub struct Recorder {
     boot: HistoryRecord,
@@ -978,7 +984,16 @@ impl Recorder {
         // A run the stored history has under way ended: stored behind the hold-off (at most
         // one store a kind between two periodic ones).
         let ended = self.runs_stored & !runs != 0;
-        let save_due = alarm || ended || self.since_save >= self.save_every_samples;
+        // During an excursion (every alarm's run is part of one) the history is stored
+        // [`EXCURSION_SAVES`] times as often: a supply that drops more often than the periodic
+        // store would lose every excursion it cut short, and a carried run would be up to the
+        // whole period short.
+        let every = if self.monitor.in_excursion() {
+            self.save_every_samples / EXCURSION_SAVES
+        } else {
+            self.save_every_samples
+        };
+        let save_due = alarm || ended || self.since_save >= every;
         if save_due {
             self.since_save = 0;
         }
@@ -1659,6 +1674,23 @@ mod tests {
         // v4: no run.
         let v4: [u8; HistoryRecord::LEN_V4] = older_history(&h.encode(), 4);
         assert_eq!(HistoryRecord::decode(&v4), Ok(HistoryRecord { runs: [0; 4], ..h }));
+    }
+
+    /// The history is due six times as often while the load is outside 2…8 °C (a supply that
+    /// drops more often than the periodic store would lose the excursion otherwise).
+    #[test]
+    fn an_excursion_stores_the_history_six_times_as_often() {
+        let mut rec = Recorder::new(HistoryRecord::EMPTY, 60);
+        let mut k = 0;
+        let mut hour = |rec: &mut Recorder, c: f32| {
+            let due = (k..k + 60).filter(|i| rec.push(i * 60_000, c).save_due).count();
+            k += 60;
+            due
+        };
+        assert_eq!(hour(&mut rec, 5.0), 1, "in range: hourly");
+        // 1 °C: below 2 °C, no alarm's run (freeze_60min is at −0.5 °C).
+        assert_eq!(hour(&mut rec, 1.0), 6, "cold: every 10 minutes");
+        assert_eq!(hour(&mut rec, 5.0), 1, "in range again");
     }
 
     #[test]

@@ -119,13 +119,14 @@ pub const ADAPTIVE_IGMVC: AdaptiveConfig = adaptive(Law::Igmvc(IgmvcConfig::DEFA
 /// build links it).
 pub const ADAPTIVE_GMVC: AdaptiveConfig = adaptive(Law::Gmvc(GmvcConfig::DEFAULT));
 
-/// Store the cold-chain history every hour (and at once at an alarm): a power cut loses at most
-/// that hour of statistics, never an alarm.
+/// Store the cold-chain history every hour (every 10 minutes while the load is outside 2…8 °C,
+/// `persist::EXCURSION_SAVES`, and at once at an alarm): a power cut loses at most that hour of
+/// statistics (those 10 minutes of an excursion), never an alarm.
 pub const HISTORY_SAVE_S: u32 = 3600;
 
 /// Store the trusted model after every 4 h of samples with a trusted, freshly updated estimate:
 /// power lost within 4 h of learning loses at most those 4 h. With the hourly history this
-/// erases each of the four 2 KiB persist pages every 2.3 days, ≈ 64 years of the L4's 10 000
+/// erases each of the four 2 KiB persist pages every 2.1 days, ≈ 56 years of the L4's 10 000
 /// cycles (`tests/persist.rs`, `wear_at_the_firmware_cadence`).
 pub const MODEL_SAVE_S: u32 = 4 * 3600;
 

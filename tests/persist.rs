@@ -499,9 +499,10 @@ fn wear_per_save() {
 /// The board's cadence (`hter::profile`): the history every `HISTORY_SAVE_S` (an hour), the
 /// model every `MODEL_SAVE_S` (4 h) of trusted learning and a boot's first after 1 h, plus the
 /// history each boot stores once its write gate opens (`BOOTS_PER_DAY`, a pessimistic field
-/// use: a carrier unplugged and replugged every hour, each boot storing its model too: 29
-/// years). Prints and checks how long the four pages last at the L4's 10 000
-/// erase cycles (datasheet DS10198, "NEND"), without and with the boot writes.
+/// use: a carrier unplugged and replugged every hour, each boot storing its model too), and the
+/// history every 10 minutes while the load is outside 2…8 °C (`persist::EXCURSION_SAVES`: a
+/// carrier that never gets back into range). Prints and checks how long the four pages last at
+/// the L4's 10 000 erase cycles (datasheet DS10198, "NEND") in each case.
 #[test]
 fn wear_at_the_firmware_cadence() {
     use hter::control::AdaptiveMode;
@@ -513,13 +514,13 @@ fn wear_at_the_firmware_cadence() {
     // stores): a boot's first model after a quarter of MODEL_SAVE_S, then every MODEL_SAVE_S.
     let learner = hter::profile::controller(hter::profile::Kind::Gpc, 10.0, 0.4).unwrap();
     let cadence = || ModelCadence::new(MODEL_SAVE_S / HISTORY_SAVE_S);
-    let years = |boots_per_day: u32| {
+    let years = |boots_per_day: u32, history_every_s: u32| {
         let mut store = open(MockFlash::<2048>::blank(4), 4);
         let boot_every_s = 86_400 / boots_per_day.max(1);
         block_on(async {
             let mut models = cadence();
-            for n in 0..days * 86_400 / HISTORY_SAVE_S {
-                let t_s = n * HISTORY_SAVE_S;
+            for n in 0..days * 86_400 / history_every_s {
+                let t_s = n * history_every_s;
                 let h = HistoryRecord { recorded_s: t_s, excursions: t_s / (7 * 3600), ..HistoryRecord::EMPTY };
                 if boots_per_day > 0 && t_s.is_multiple_of(boot_every_s) {
                     let mut boot = h;
@@ -528,7 +529,8 @@ fn wear_at_the_firmware_cadence() {
                     models = cadence();
                 }
                 store.save_history(&h).await.unwrap();
-                if models.push(Some(AdaptiveMode::Adaptive), &learner).is_some() {
+                let hourly = t_s.is_multiple_of(HISTORY_SAVE_S);
+                if hourly && models.push(Some(AdaptiveMode::Adaptive), &learner).is_some() {
                     // A record that differs at every store, as a learning estimate's does.
                     let rec =
                         ModelRecord { theta: [-1.75 + 1e-5 * n as f32, 0.75, -0.027, -0.03, -0.01, -0.005], k: 5 };
@@ -541,15 +543,17 @@ fn wear_at_the_firmware_cadence() {
         let days_per_page_erase = (days * 4) as f64 / erases as f64;
         let years = 10_000.0 * days_per_page_erase / 365.25;
         println!(
-            "{days} days, {boots_per_day} boots a day: {erases} page erases, each page erased every \
-             {days_per_page_erase:.1} days: {years:.0} years to 10 000 cycles"
+            "{days} days, {boots_per_day} boots a day, the history every {history_every_s} s: {erases} page \
+             erases, each page erased every {days_per_page_erase:.1} days: {years:.0} years to 10 000 cycles"
         );
         years
     };
-    let quiet = years(0);
-    let booting = years(BOOTS_PER_DAY);
+    let quiet = years(0, HISTORY_SAVE_S);
+    let booting = years(BOOTS_PER_DAY, HISTORY_SAVE_S);
+    let excursion = years(0, HISTORY_SAVE_S / hter::persist::EXCURSION_SAVES);
     assert!(quiet >= 50.0, "{quiet:.0} years");
     assert!(booting >= 25.0 && booting < quiet, "{booting:.0} years with {BOOTS_PER_DAY} boots a day");
+    assert!(excursion >= 8.0 && excursion < quiet, "{excursion:.0} years out of range");
 }
 
 // ---- The settings record and the cold-chain log (issue 16) ----
