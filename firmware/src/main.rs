@@ -224,6 +224,18 @@ async fn sample(mut analog: board::Analog) {
     }
 }
 
+/// A cold-chain alarm on the log, with the part of its run before this boot (a run carried
+/// through a restart, `Alarm::carried_s`).
+fn log_alarm(a: &hter::coldchain::Alarm) {
+    error!(
+        "ALARM {} t={=u64:ms} (condition since t={=u64:ms}, and {=u32}s before this boot)",
+        a.kind.name(),
+        a.trigger_ms,
+        a.start_ms,
+        a.carried_s
+    );
+}
+
 /// The step, built from the constant profile, so that its derived sample counts fold at compile
 /// time; only the calibration (and the self-tuner's start model) come from flash. Out of line:
 /// inlined into the control task, its constants were stored field by field into the task's
@@ -298,13 +310,7 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             warn!("{} events of this step did not fit the step's list", out.events.dropped());
         }
         for a in rec.raised.iter().flatten() {
-            error!(
-                "ALARM {} t={=u64:ms} (condition since t={=u64:ms}, and {=u32}s before this boot)",
-                a.kind.name(),
-                a.trigger_ms,
-                a.start_ms,
-                a.carried_s
-            );
+            log_alarm(a);
         }
         // An alarm's history is stored as soon as the supply allows, without the boot's hold-off.
         if let Some(save) = recorder.due_save(&rec) {
@@ -411,13 +417,7 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             warn!("{} events of this step did not fit the step's list", step.events.dropped());
         }
         for a in out.raised.iter().flatten() {
-            error!(
-                "ALARM {} t={=u64:ms} (condition since t={=u64:ms}, and {=u32}s before this boot)",
-                a.kind.name(),
-                a.trigger_ms,
-                a.start_ms,
-                a.carried_s
-            );
+            log_alarm(a);
         }
         while let Some(save) = app.next_save() {
             persist::request(save);
