@@ -980,10 +980,10 @@ impl Recorder {
             alarm = true;
         }
         self.since_save = self.since_save.saturating_add(1);
-        let runs = run_bits(&self.monitor.runs());
         // A run the stored history has under way ended: stored behind the hold-off (at most
-        // one store a kind between two periodic ones).
-        let ended = self.runs_stored & !runs != 0;
+        // one store a kind between two periodic ones). The runs are packed only when the last
+        // store had one under way, not on every sample in range.
+        let ended = self.runs_stored != 0 && self.runs_stored & !run_bits(&self.monitor.runs()) != 0;
         // During an excursion (every alarm's run is part of one) the history is stored
         // [`EXCURSION_SAVES`] times as often: a supply that drops more often than the periodic
         // store would lose every excursion it cut short, and a carried run would be up to the
