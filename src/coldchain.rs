@@ -164,9 +164,6 @@ struct Tracker {
     /// ([`ColdChainMonitor::resumed`]), which its run adds to.
     acc_ms: u64,
     fired: bool,
-    /// A continuous kind's carried time in whole seconds, for its alarm's
-    /// [`Alarm::carried_s`] (worked out once, at [`ColdChainMonitor::resumed`]).
-    carried_s: u32,
 }
 
 /// Each kind's run, in [`AlarmKind::ALL`] order, as one boot hands it to the next through the
@@ -222,7 +219,7 @@ impl ColdChainMonitor {
     /// An empty record.
     pub const fn new() -> Self {
         Self {
-            trackers: [Tracker { start: None, acc_ms: 0, fired: false, carried_s: 0 }; 4],
+            trackers: [Tracker { start: None, acc_ms: 0, fired: false }; 4],
             last: None,
             elapsed_ms: 0,
             mkt_mean: 0.0,
@@ -290,7 +287,8 @@ impl ColdChainMonitor {
                 // run before this boot.
                 if !tr.fired && t_ms - t0 + tr.acc_ms >= kind.duration_ms() {
                     tr.fired = true;
-                    raised[i] = Some(Alarm { kind, start_ms: t0, trigger_ms: t_ms, carried_s: tr.carried_s });
+                    let carried_s = (tr.acc_ms / 1000) as u32;
+                    raised[i] = Some(Alarm { kind, start_ms: t0, trigger_ms: t_ms, carried_s });
                 }
             } else {
                 *tr = Tracker::default();
@@ -315,14 +313,10 @@ impl ColdChainMonitor {
 
     /// [`Self::resumed`]'s continuation, on a monitor with no sample yet.
     fn resume(&mut self, runs: &Runs) {
-        for ((tr, &r), kind) in self.trackers.iter_mut().zip(runs).zip(AlarmKind::ALL) {
+        for (tr, &r) in self.trackers.iter_mut().zip(runs) {
             if r != 0 {
-                let ms = (r & !RUN_FIRED).saturating_sub(1);
-                tr.acc_ms = u64::from(ms);
+                tr.acc_ms = u64::from((r & !RUN_FIRED).saturating_sub(1));
                 tr.fired = r & RUN_FIRED != 0;
-                if !kind.cumulative() {
-                    tr.carried_s = ms / 1000;
-                }
             }
         }
     }
