@@ -578,8 +578,9 @@ impl SensorOffset {
 ///
 /// v4 (122 bytes: v5 without the runs) is still read, with no run under way; v3 (121 bytes: v4
 /// without the carried byte) with nothing unacknowledged and no offset either; and v2 (96
-/// bytes: v3 without the board-fault fields) with no faults counted either: it is the carrier's cold-chain record, and a firmware update must not erase the alarms and
-/// excursions the vaccines have been through. (v1 had no recorded time and stamped excursions
+/// bytes: v3 without the board-fault fields) with no faults counted either: it is the carrier's
+/// cold-chain record, and a firmware update must not erase the alarms and excursions the
+/// vaccines have been through. (v1 had no recorded time and stamped excursions
 /// with seconds since their own boot; it is not read.)
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -1270,15 +1271,15 @@ mod tests {
         assert_eq!(ModelRecord::decode(&[0xFF; ModelRecord::LEN]), Err(DecodeError::Crc));
         assert_eq!(CalibrationRecord::decode(&bytes[..14]), Err(DecodeError::Crc));
         // Re-frame with a good CRC: wrong version, then wrong kind.
-        let reframe = |tag: u8, ver: u8| {
+        let with_header = |tag: u8, ver: u8| {
             let mut b = bytes;
             b[0] = tag;
             b[1] = ver;
             reframe(&mut b);
             b
         };
-        assert_eq!(ModelRecord::decode(&reframe(b'M', 3)), Err(DecodeError::Version));
-        assert_eq!(ModelRecord::decode(&reframe(b'C', 2)), Err(DecodeError::Kind));
+        assert_eq!(ModelRecord::decode(&with_header(b'M', 3)), Err(DecodeError::Version));
+        assert_eq!(ModelRecord::decode(&with_header(b'C', 2)), Err(DecodeError::Kind));
     }
 
     #[test]
