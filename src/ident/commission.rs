@@ -122,6 +122,7 @@ use crate::control::adaptive::{plausible_model, AdaptiveConfig};
 use crate::control::{ControlError, ControlInput, Controller};
 use crate::ident::prbs::{Prbs, PrbsConfig};
 use crate::model::Model;
+use crate::numerics::sqrtf;
 use crate::step::Mode;
 
 /// Most samples the record holds (rest + one PRBS period): the default 60 + 127·12 = 1584 fit.
@@ -804,8 +805,8 @@ fn overall_best(best: &[Candidate; MAX_DELAY]) -> Candidate {
 /// tolerance kept: 1.40–1.45 ×, `tests/commission.rs::gpc_by_delay`).
 fn preferred(best: &[Candidate; MAX_DELAY]) -> Candidate {
     let top = overall_best(best);
-    let limit = libm::sqrtf(top.v) * (1.0 + DELAY_TOLERANCE);
-    best.iter().rev().find(|c| c.v.is_finite() && libm::sqrtf(c.v) <= limit).copied().unwrap_or(top)
+    let limit = sqrtf(top.v) * (1.0 + DELAY_TOLERANCE);
+    best.iter().rev().find(|c| c.v.is_finite() && sqrtf(c.v) <= limit).copied().unwrap_or(top)
 }
 
 /// The best candidate of delay `k`.
@@ -860,7 +861,7 @@ pub fn cabinet_plausible(cfg: &AdaptiveConfig, m: &Model) -> Result<(), Implausi
     if !(a1 <= 0.0 && a2 >= 0.0 && disc >= -1e-6 * a1 * a1) {
         return Err(Implausibility::NotMonotone);
     }
-    let p1 = 0.5 * (-a1 + libm::sqrtf(crate::units::max_f32(disc, 0.0)));
+    let p1 = 0.5 * (-a1 + sqrtf(crate::units::max_f32(disc, 0.0)));
     // The fit holds r1 ≤ 0 exactly in its modal form; in (b0, b1) that is 0 up to rounding.
     let slack = 1e-4 * (b0.abs() * p1 + b1.abs());
     if !(b0 <= 0.0 && b0 * p1 + b1 <= slack) {
@@ -1056,7 +1057,7 @@ impl Commissioning {
             self.state = State::Excite;
         } else if len == self.cfg.record_samples() {
             let n = self.cfg.prbs_samples() as f32;
-            if libm::sqrtf(self.excite_ss / n) < self.cfg.min_response_c {
+            if sqrtf(self.excite_ss / n) < self.cfg.min_response_c {
                 return self.fail(CommissionError::NoExcitation);
             }
             self.state = State::Fit(FitStage::Grid(0));
@@ -1199,8 +1200,8 @@ impl Commissioning {
                 xx.flush();
             }
         });
-        let fit = 100.0 * (1.0 - libm::sqrtf(num.get() / den.get()));
-        (fit, libm::sqrtf(xx.get() / n.max(1) as f32))
+        let fit = 100.0 * (1.0 - sqrtf(num.get() / den.get()));
+        (fit, sqrtf(xx.get() / n.max(1) as f32))
     }
 
     /// One sample of the fit phase: exactly one pass over the record.
@@ -1419,7 +1420,7 @@ mod tests {
         // determined by a PRBS held 12 samples (the host's OE tests say the same), its sum is not.
         let roots = |m: &Model| {
             let (s, p) = (-m.a()[0], m.a()[1]);
-            let r = libm::sqrtf(s * s - 4.0 * p);
+            let r = sqrtf(s * s - 4.0 * p);
             [(s + r) / 2.0, (s - r) / 2.0]
         };
         let (got, want) = (roots(&m), roots(&truth));
