@@ -4,8 +4,9 @@
 
 use hal_sim::scenario::Scenario;
 use hal_sim::sim::{run, ControllerChoice, ControllerSpec, Fault, SimOptions, SimOutput};
+use hter::coldchain::AlarmKind;
 use hter::control::AdaptiveMode;
-use hter::persist::{ModelRecord, ResetCause, Save};
+use hter::persist::{HistoryRecord, ModelRecord, ResetCause, Save};
 use hter::profile::{samples, HISTORY_SAVE_S, MODEL_SAVE_S};
 
 const TS_S: f64 = 10.0;
@@ -124,4 +125,41 @@ fn a_brownout_in_a_hold_resumes_from_the_stored_model_without_a_swing() {
     // few samples: 44 mode changes in 20 minutes, each a logged event.
     let changes = after.windows(2).filter(|w| w[0].adaptive_mode != w[1].adaptive_mode).count();
     assert!(changes <= 2, "{changes} mode changes after the restart");
+}
+
+/// A brown-out loses what the board's RAM held, as on the board: the record restarts from the
+/// history last stored, so the samples between that store and the cut are not in it, and a WHO
+/// alarm's run goes on from where the store left it. A dead SSR (the load warms from 600 s)
+/// and a cut 6 h later: `heat_10h` comes as late as the store was before the cut, and the day's
+/// time above 8 °C is short by as much.
+#[test]
+fn a_brownout_restarts_the_record_from_the_last_store() {
+    const RESET_S: f64 = 21_600.0;
+    let kept = day(&["ssr-stuck-off@600"]);
+    let cut = day(&["ssr-stuck-off@600", "brownout@21600"]);
+    let heat = |out: &SimOutput| {
+        let a: Vec<f64> = out.metrics.alarms.iter().filter(|a| a.kind == AlarmKind::Heat10h).map(|a| a.t_s).collect();
+        assert_eq!(a.len(), 1, "{:?}", out.metrics.alarms);
+        a[0]
+    };
+    let stored_before = history_times(&cut).into_iter().filter(|t| *t < RESET_S).fold(f64::NAN, f64::max);
+    let lost = RESET_S - stored_before;
+    // The load is outside 2…8 °C from well before the cut, so the history is stored every
+    // 10 minutes (`persist::EXCURSION_SAVES`): at most that much is lost.
+    assert!(lost > 0.0 && lost <= 600.0, "last store {stored_before} s before the cut at {RESET_S} s");
+    assert_eq!(heat(&cut), heat(&kept) + lost);
+    // The last store of the day, and what it holds: the cut's record misses the lost span.
+    let last = |out: &SimOutput| {
+        let Some((t, Save::History(h))) = out.stores.iter().rev().find(|(_, s)| matches!(s, Save::History(_))) else {
+            panic!("no history stored")
+        };
+        (*t, *h)
+    };
+    let ((tk, k), (tc, c)) = (last(&kept), last(&cut));
+    assert_eq!((k.resets_by(ResetCause::BrownOut), c.resets_by(ResetCause::BrownOut)), (0, 1));
+    // Time the record does not cover by the store, and time above 8 °C it misses (the load is
+    // above 8 °C throughout after the first hours).
+    let unrecorded = |t: f64, h: &HistoryRecord| t - f64::from(h.recorded_s);
+    assert_eq!(unrecorded(tc, &c) - unrecorded(tk, &k), lost);
+    assert_eq!((tc - f64::from(c.above_8_s)) - (tk - f64::from(k.above_8_s)), lost);
 }

@@ -31,7 +31,8 @@ pub enum Fault {
     SupplySag,
     /// Lid left open: 15 W extra heat.
     LidOpen,
-    /// The MCU resets: all controller state is lost and the step restarts.
+    /// The MCU resets: all controller state is lost and the step restarts from what flash
+    /// holds (the model last stored; the cold-chain record as the history last stored left it).
     Brownout,
     /// The supply-enable switch shorts: it conducts whatever it is told.
     SupplySwitchShort,

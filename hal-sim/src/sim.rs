@@ -336,6 +336,19 @@ pub struct SimOutput {
     pub stores: Vec<(f64, Save)>,
 }
 
+/// The history the board's flash holds after `stores`: the last one stored (an alarm's
+/// or a periodic store), or none yet.
+fn last_history(stores: &[(f64, Save)]) -> HistoryRecord {
+    stores
+        .iter()
+        .rev()
+        .find_map(|(_, s)| match s {
+            Save::History(h) | Save::AlarmHistory(h) => Some(*h),
+            _ => None,
+        })
+        .unwrap_or(HistoryRecord::EMPTY)
+}
+
 /// The one-line error of a refused carrier configuration.
 fn config_refused(e: hter::step::ConfigError) -> anyhow::Error {
     anyhow!("the carrier configuration is refused: {e}")
@@ -462,10 +475,11 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
     let mut next_change = 0;
     let mut energy0_wh = 0.0;
     // The carrier's own record and alarm indicator, fed as the firmware feeds them: the
-    // monitor sees what the sensor saw. A brown-out counts the reset in the record and stores
-    // it, as the board's boot does; the simulated monitor runs on through it, where the board's
-    // restarts from the stored history.
-    let mut recorder = Recorder::new(HistoryRecord::EMPTY, profile::samples(profile::HISTORY_SAVE_S, cfg.ts_s));
+    // monitor sees what the sensor saw. A brown-out restarts the record from the history last
+    // stored, as the board's boot does (what came after that store is lost with the RAM; an
+    // alarm's run goes on from where the store left it), then counts the reset and stores it.
+    let history_every = profile::samples(profile::HISTORY_SAVE_S, cfg.ts_s);
+    let mut recorder = Recorder::new(HistoryRecord::EMPTY, history_every);
     let mut alarms = Vec::new();
     let mut annunciator = Annunciator::new();
     let (mut alarm_on_s, mut alarm_first_s) = (0.0, None);
@@ -492,9 +506,9 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                     // What the firmware reads from RCC_CSR at boot after a brown-out.
                     carrier.note_reset(ResetCause::BrownOut);
                     cadence = model_cadence();
+                    recorder = Recorder::new(last_history(&stores), history_every);
                     stores.push((t_s, Save::History(recorder.note_reset(ResetCause::BrownOut))));
-                    // The indicator's latch and the sensor offset restart from the stored history
-                    // (every change of either is stored at once, `Recorder::note_carried`).
+                    // The indicator's latch and the sensor offset restart from the stored history.
                     let stored = recorder.history();
                     annunciator = Annunciator::restored(stored.unacknowledged);
                     carrier.restore_sensor_offset(stored.sensor_offset);
