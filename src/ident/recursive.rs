@@ -44,7 +44,7 @@ impl<const N: usize> Rels<N> {
     /// [`Regressor::push`] once u(t) is known.
     ///
     /// Returns the a-priori error ε(t) (scaled deviation units), `Ok(None)` while the regressor
-    /// is filling, or the estimator's error (state unchanged). `N` must be na + nb + nc.
+    /// is filling, or the estimator's error (θ unchanged; [`EstError`]). `N` must be na + nb + nc.
     pub fn update<const NA: usize, const NB: usize, const NC: usize>(
         &mut self,
         cfg: &RlsConfig,

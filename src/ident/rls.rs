@@ -48,13 +48,14 @@
 use crate::numerics::finite_probe;
 use nalgebra::{SMatrix, SVector};
 
-/// Why an update was refused (the state is unchanged).
+/// Why an update was refused: θ is unchanged either way.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum EstError {
-    /// φ or y contained NaN or infinity.
+    /// φ or y contained NaN or infinity: nothing changed.
     NonFinite,
-    /// The update produced a non-finite or non-positive factor (numerical breakdown).
+    /// The update produced a non-finite or non-positive factor (numerical breakdown): θ kept,
+    /// P restarted at p0·I.
     Diverged,
 }
 
@@ -85,6 +86,18 @@ impl RlsConfig {
     }
 }
 
+impl RlsConfig {
+    /// p0, or the default's where p0 is not finite and positive.
+    fn start_variance(&self) -> f32 {
+        // Positive and finite (NaN fails both), in two comparisons.
+        if self.p0 > 0.0 && self.p0 < f32::INFINITY {
+            self.p0
+        } else {
+            RlsConfig::DEFAULT.p0
+        }
+    }
+}
+
 /// The variance [`Rls::hold`] leaves a held parameter with.
 pub const HELD_VARIANCE: f32 = 1e-9;
 
@@ -105,7 +118,7 @@ pub struct Rls<const N: usize> {
 impl<const N: usize> Rls<N> {
     /// Starts at `theta0` with P = p0·I.
     pub fn new(cfg: &RlsConfig, theta0: SVector<f32, N>) -> Self {
-        let p0 = if cfg.p0 > 0.0 && cfg.p0.is_finite() { cfg.p0 } else { RlsConfig::DEFAULT.p0 };
+        let p0 = cfg.start_variance();
         Self {
             theta: theta0,
             u: SMatrix::identity(),
@@ -200,6 +213,22 @@ impl<const N: usize> Rls<N> {
         self.updates = updates;
     }
 
+    /// After a breakdown in [`Self::update`], U is no longer the factor of a covariance: θ as
+    /// it was, P from p0·I. Out of line: it never runs on a sample with sane data.
+    /// The same state as [`Self::reset_covariance`] (≈ 250 B of flash as the inlined
+    /// constructor, unrolled).
+    #[cold]
+    #[inline(never)]
+    fn break_down(&mut self, cfg: &RlsConfig) {
+        let p0 = cfg.start_variance();
+        self.u.fill(0.0);
+        self.u.fill_diagonal(1.0);
+        self.d.fill(p0);
+        self.trace = N as f32 * p0;
+        self.eps = 0.0;
+        self.eps_post = 0.0;
+    }
+
     /// Projects θ onto the half-space cᵀθ ≥ `c0` if it lies outside: θ ← θ + P c (c0 − cᵀθ) /
     /// (cᵀ P c), the point of the boundary nearest θ in the metric of P⁻¹ (the information the
     /// data have given), so the move is along the directions the data determine least (Goodwin
@@ -278,6 +307,13 @@ impl<const N: usize> Rls<N> {
     /// one sum of x − x (+0 for a finite x, NaN otherwise): every sample of the self-tuning
     /// controller runs this on the M4F. The floating-point operations and their order are
     /// those of Bierman's algorithm as written in the comments.
+    ///
+    /// Non-finite data are refused before anything changes ([`EstError::NonFinite`]). U is
+    /// updated in place (a copy of it to fall back on was two 196-byte copies a sample for
+    /// seven parameters, ≈ 400 instructions on the board's build), so an update whose result
+    /// is not a covariance (α ≤ 0, a d ≤ 0, or a value that overflowed, which finite data can
+    /// reach only by overflowing f32) keeps θ and restarts P at p0·I, as
+    /// [`Self::reset_covariance`] does ([`EstError::Diverged`]).
     pub fn update(&mut self, cfg: &RlsConfig, phi: &SVector<f32, N>, y: f32) -> Result<f32, EstError> {
         let mut probe = finite_probe(y);
         for x in phi.iter() {
@@ -290,7 +326,7 @@ impl<const N: usize> Rls<N> {
         let eps = y - self.predict(phi);
 
         // Bierman's measurement update with noise variance λ_f (Bierman 1977, p. 100).
-        let mut u = self.u;
+        let u = &mut self.u;
         let mut d = [0.0f32; N];
         let mut f = [0.0f32; N]; // f = Uᵀ φ
         let mut g = [0.0f32; N]; // g = D f
@@ -330,10 +366,10 @@ impl<const N: usize> Rls<N> {
             }
         }
         if !(alpha > 0.0) || probe != 0.0 || d.iter().any(|x| !(*x > 0.0)) {
+            self.break_down(cfg);
             return Err(EstError::Diverged);
         }
         self.theta = theta;
-        self.u = u;
         self.d = SVector::from(d);
         let tr = self.trace_of_factors();
         self.trace = if tr > cfg.trace_max {
@@ -433,6 +469,38 @@ mod tests {
         assert_eq!(r.update(&cfg, &nalgebra::Vector2::new(f32::NAN, 1.0), 1.0), Err(EstError::NonFinite));
         assert_eq!(r.update(&cfg, &nalgebra::Vector2::new(1.0, 1.0), f32::INFINITY), Err(EstError::NonFinite));
         assert_eq!(r, before);
+    }
+
+    #[test]
+    fn a_breakdown_keeps_theta_and_restarts_the_covariance() {
+        // Finite data that overflow f32 in φᵀPφ: α becomes infinite and every d with it 0.
+        let cfg = RlsConfig { forgetting: 0.98, p0: 100.0, trace_max: 1e9 };
+        let mut r = Rls::<3>::new(&cfg, SVector::from([0.5, -1.0, 2.0]));
+        let mut seed = 99u32;
+        for _ in 0..40 {
+            let mut phi = [0.0f32; 3];
+            for x in phi.iter_mut() {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                *x = (seed >> 8) as f32 / (1u32 << 24) as f32 - 0.5;
+            }
+            let y = 0.4 * phi[0] - 0.9 * phi[1] + 2.1 * phi[2];
+            r.update(&cfg, &SVector::from(phi), y).unwrap();
+        }
+        let (u_before, _) = r.factors();
+        assert!((0..3).any(|j| (0..j).any(|i| u_before[(i, j)] != 0.0)), "U has been updated");
+        let theta = *r.theta();
+        let updates = r.updates();
+        let huge = SVector::from([1e30f32, -1e30, 1e30]);
+        assert_eq!(r.update(&cfg, &huge, 0.0), Err(EstError::Diverged));
+        // θ as it was; P = p0·I (U's updated entries did not survive).
+        assert_eq!(*r.theta(), theta);
+        assert_eq!(r.covariance(), SMatrix::<f32, 3, 3>::identity() * 100.0);
+        assert_eq!((r.trace_p(), r.updates()), (300.0, updates));
+        // It goes on learning from there.
+        let mut fresh = Rls::<3>::new(&cfg, theta);
+        let phi = SVector::from([0.3f32, -0.2, 0.1]);
+        assert_eq!(r.update(&cfg, &phi, 1.0), fresh.update(&cfg, &phi, 1.0));
+        assert_eq!(r.theta(), fresh.theta());
     }
 
     #[test]
