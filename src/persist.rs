@@ -672,23 +672,30 @@ impl HistoryRecord {
     /// Encoded length, bytes.
     pub const LEN: usize = Self::LEN_V4 + 4 * 4;
     /// Nothing seen yet.
-    pub const EMPTY: HistoryRecord = HistoryRecord {
-        alarms: [0; 4],
-        resets: [0; 3],
-        min_c: None,
-        max_c: None,
-        below_2_s: 0,
-        above_8_s: 0,
-        excursions: 0,
-        recorded_s: 0,
-        last: [None; HISTORY_EXCURSIONS],
-        stops: [0; StopKind::ALL.len()],
-        flash_pages_lost: 0,
-        last_stop: None,
-        unacknowledged: false,
-        sensor_offset: SensorOffset::NONE,
-        runs: [0; 4],
-    };
+    pub const EMPTY: HistoryRecord = HistoryRecord::empty();
+
+    /// [`HistoryRecord::EMPTY`], built in place where it is called: a use of the constant copies
+    /// its 176 bytes (nearly all zero) from flash, where they sat once per use.
+    #[inline(never)]
+    pub const fn empty() -> Self {
+        HistoryRecord {
+            alarms: [0; 4],
+            resets: [0; 3],
+            min_c: None,
+            max_c: None,
+            below_2_s: 0,
+            above_8_s: 0,
+            excursions: 0,
+            recorded_s: 0,
+            last: [None; HISTORY_EXCURSIONS],
+            stops: [0; StopKind::ALL.len()],
+            flash_pages_lost: 0,
+            last_stop: None,
+            unacknowledged: false,
+            sensor_offset: SensorOffset::NONE,
+            runs: [0; 4],
+        }
+    }
 
     /// Counts an alarm.
     pub fn note_alarm(&mut self, kind: AlarmKind) {
@@ -819,7 +826,7 @@ impl HistoryRecord {
         };
         let v2 = version == 2;
         let mut r = open_frame(bytes, len, Self::TAG, version)?;
-        let mut rec = HistoryRecord::EMPTY;
+        let mut rec = HistoryRecord::empty();
         for n in rec.alarms.iter_mut().chain(rec.resets.iter_mut()) {
             *n = r.u16();
         }

@@ -230,7 +230,7 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
     #[cfg(feature = "interface")]
     let (Ok(mut store), Ok(mut log)) = (store, log) else {
         warn!("persist: flash regions unusable: nothing is restored or saved");
-        send_booted(Restored::NOTHING);
+        send_booted(Restored::nothing());
         loop {
             HISTORY.wait().await;
             HISTORY_PIPE.write_all(b"err history: no flash\r\n").await;
@@ -240,7 +240,7 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
     let Ok(mut store) = store
     else {
         warn!("persist: flash region unusable: nothing is restored or saved");
-        send_booted(Restored::NOTHING);
+        send_booted(Restored::nothing());
         return;
     };
     #[cfg(feature = "interface")]
