@@ -95,21 +95,26 @@ impl StopInfo {
         StopInfo { kind, pc, addr, detail, text: [0; STOP_TEXT], text_len: 0 }
     }
 
-    /// Appends `s` to the text, truncating at [`STOP_TEXT`] bytes (on a UTF-8 boundary).
+    /// Appends `s` to the text, truncating at [`STOP_TEXT`] bytes. The text is ASCII: each byte
+    /// of `s` outside it is kept as `?` (a panic's file and message are ASCII in this code; an
+    /// ASCII check at the next boot is a few bytes of flash, where `core::str::from_utf8` linked
+    /// ≈ 500 B for it).
     pub fn push_text(&mut self, s: &str) {
-        let room = STOP_TEXT - usize::from(self.text_len);
-        let mut n = s.len().min(room);
-        while n > 0 && !s.is_char_boundary(n) {
-            n -= 1;
-        }
-        let at = usize::from(self.text_len);
-        if let (Some(dst), Some(src)) = (self.text.get_mut(at..at + n), s.as_bytes().get(..n)) {
-            dst.copy_from_slice(src);
-            self.text_len += n as u8;
-        }
+        self.push_bytes(s.as_bytes());
     }
 
-    /// The recorded text's bytes (UTF-8; the board logs them without decoding).
+    /// [`Self::push_text`] of bytes (a cut anywhere in a multi-byte character is fine).
+    fn push_bytes(&mut self, s: &[u8]) {
+        let at = usize::from(self.text_len);
+        let room = self.text.get_mut(at..).unwrap_or(&mut []);
+        let n = s.len().min(room.len());
+        for (dst, src) in room.iter_mut().zip(s) {
+            *dst = if src.is_ascii() { *src } else { b'?' };
+        }
+        self.text_len += n as u8;
+    }
+
+    /// The recorded text's bytes (ASCII; the board logs them without decoding).
     pub fn text_bytes(&self) -> &[u8] {
         self.text.get(..usize::from(self.text_len)).unwrap_or(&[])
     }
@@ -206,8 +211,7 @@ impl ReasonRecord {
         let kind = StopKind::from_code(u8::try_from(self.kind).ok()?)?;
         let text_len = u8::try_from(self.text_len).ok().filter(|n| usize::from(*n) <= STOP_TEXT)?;
         let info = StopInfo { kind, pc: self.pc, addr: self.addr, detail: self.detail, text: self.text, text_len };
-        core::str::from_utf8(info.text.get(..usize::from(text_len))?).ok()?;
-        Some(info)
+        info.text.get(..usize::from(text_len))?.is_ascii().then_some(info)
     }
 }
 
@@ -236,11 +240,8 @@ pub fn stop<O: SafeOutputs + ?Sized>(
 /// text (the end of a path names the module; its start is the same for every file).
 pub fn panic_info(file: &str, line: u32) -> StopInfo {
     let mut info = StopInfo::new(StopKind::Panic, 0, 0, line);
-    let mut from = file.len().saturating_sub(STOP_TEXT);
-    while from < file.len() && !file.is_char_boundary(from) {
-        from += 1;
-    }
-    info.push_text(file.get(from..).unwrap_or(""));
+    let from = file.len().saturating_sub(STOP_TEXT);
+    info.push_bytes(file.as_bytes().get(from..).unwrap_or(&[]));
     info
 }
 
@@ -368,16 +369,25 @@ mod tests {
     }
 
     #[test]
-    fn text_truncates_on_a_char_boundary() {
+    fn text_is_ascii_and_truncated() {
         let mut info = StopInfo::new(StopKind::Panic, 0, 0, 1);
+        info.push_text("x = é");
+        assert_eq!(info.text(), "x = ??", "each byte outside ASCII kept as ?");
         info.push_text(&"é".repeat(40)); // 80 bytes of 2-byte chars
         assert_eq!(info.text().len(), STOP_TEXT);
+        assert_eq!(&info.text()[..8], "x = ????");
         info.push_text("more");
         assert_eq!(info.text().len(), STOP_TEXT);
-        let mut odd = StopInfo::new(StopKind::Panic, 0, 0, 1);
-        odd.push_text("x");
-        odd.push_text(&"é".repeat(40));
-        assert_eq!(odd.text().len(), STOP_TEXT - 1, "never half a character");
+        // A record whose text is not ASCII (one written by hand; the CRC is right) is no record.
+        let mut r = ReasonRecord::EMPTY;
+        r.write(&StopInfo::new(StopKind::Panic, 0, 0, 7));
+        r.text[0] = 0xC3;
+        r.text_len = 1;
+        r.crc = r.crc();
+        assert_eq!(r.peek(), None);
+        r.text[0] = b'A';
+        r.crc = r.crc();
+        assert_eq!(r.peek().map(|i| i.detail), Some(7));
     }
 
     #[test]
@@ -398,6 +408,9 @@ mod tests {
         assert_eq!(p.detail, 77);
         assert!(p.text().ends_with("src/base/matrix.rs") && p.text().len() <= STOP_TEXT, "{}", p.text());
         assert_eq!(panic_info("src/step.rs", 9).text(), "src/step.rs");
+        // A path cut inside a character keeps the rest, its bytes outside ASCII as ?.
+        let long = format!("é{}/x.rs", "d".repeat(STOP_TEXT - 6));
+        assert_eq!(panic_info(&long, 1).text(), format!("?{}/x.rs", "d".repeat(STOP_TEXT - 6)));
         assert_eq!(unexpected_interrupt_info(-1).detail, u32::MAX);
     }
 
