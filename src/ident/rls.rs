@@ -84,9 +84,7 @@ impl RlsConfig {
             && self.trace_max.is_finite()
             && self.trace_max >= self.p0
     }
-}
 
-impl RlsConfig {
     /// p0, or the default's where p0 is not finite and positive.
     fn start_variance(&self) -> f32 {
         // Positive and finite (NaN fails both), in two comparisons.
@@ -206,20 +204,13 @@ impl<const N: usize> Rls<N> {
         }
     }
 
-    /// Resets P to p0·I, keeping θ (after a detected plant change, or a breakdown).
-    pub fn reset_covariance(&mut self, cfg: &RlsConfig) {
-        let updates = self.updates;
-        *self = Self::new(cfg, self.theta);
-        self.updates = updates;
-    }
-
-    /// After a breakdown in [`Self::update`], U is no longer the factor of a covariance: θ as
-    /// it was, P from p0·I. Out of line: it never runs on a sample with sane data.
-    /// The same state as [`Self::reset_covariance`] (≈ 250 B of flash as the inlined
-    /// constructor, unrolled).
+    /// Resets P to p0·I, keeping θ and the update count, as [`Self::new`] starts it (after a
+    /// detected plant change, or a breakdown in [`Self::update`], which leaves U no longer the
+    /// factor of a covariance). Out of line and cold: it never runs on a sample with sane data,
+    /// and written as fills (≈ 250 B of flash less than the constructor, inlined and unrolled).
     #[cold]
     #[inline(never)]
-    fn break_down(&mut self, cfg: &RlsConfig) {
+    pub fn reset_covariance(&mut self, cfg: &RlsConfig) {
         let p0 = cfg.start_variance();
         self.u.fill(0.0);
         self.u.fill_diagonal(1.0);
@@ -366,7 +357,7 @@ impl<const N: usize> Rls<N> {
             }
         }
         if !(alpha > 0.0) || probe != 0.0 || d.iter().any(|x| !(*x > 0.0)) {
-            self.break_down(cfg);
+            self.reset_covariance(cfg);
             return Err(EstError::Diverged);
         }
         self.theta = theta;
@@ -496,6 +487,8 @@ mod tests {
         assert_eq!(*r.theta(), theta);
         assert_eq!(r.covariance(), SMatrix::<f32, 3, 3>::identity() * 100.0);
         assert_eq!((r.trace_p(), r.updates()), (300.0, updates));
+        // The whole state is the constructor's, but for the update count.
+        assert_eq!(r, Rls { updates, ..Rls::new(&cfg, theta) });
         // It goes on learning from there.
         let mut fresh = Rls::<3>::new(&cfg, theta);
         let phi = SVector::from([0.3f32, -0.2, 0.1]);

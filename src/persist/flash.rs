@@ -802,6 +802,7 @@ pub async fn restore_records<F: NorFlash, E: EccErrors>(
 ) -> Restored {
     // A scrub that fails leaves the loads to repair what they read.
     let _ = store.scrub().await;
+    // [`Restored::nothing`]'s two fields, built alone (taking them from the whole value: +48 B).
     let mut calibration = Loaded { value: TwoPoint::IDENTITY, status: LoadStatus::Missing };
     let mut history = Loaded { value: HistoryRecord::empty(), status: LoadStatus::Missing };
     let mut model = Err(LoadStatus::Missing);
