@@ -180,20 +180,6 @@ impl<const N: usize> Rls<N> {
         self.trace
     }
 
-    /// trace(P) = Σ_k d_k Σ_{i≤k} U_ik² (U_kk = 1).
-    fn trace_of_factors(&self) -> f32 {
-        let mut t = 0.0;
-        for k in 0..N {
-            let mut col = 0.0;
-            for i in 0..k {
-                col += self.u[(i, k)] * self.u[(i, k)];
-            }
-            col += 1.0f32 * 1.0f32;
-            t += self.d[k] * col;
-        }
-        t
-    }
-
     fn uu(&self, i: usize, j: usize) -> f32 {
         if i == j {
             1.0
@@ -294,21 +280,26 @@ impl<const N: usize> Rls<N> {
 
     /// One update with regressor `phi` and output `y`; returns the a-priori error ε(t).
     ///
-    /// Plain loops over the factors (no temporaries), and the finiteness checks folded into
-    /// one sum of x − x (+0 for a finite x, NaN otherwise): every sample of the self-tuning
-    /// controller runs this on the M4F. The floating-point operations and their order are
-    /// those of Bierman's algorithm as written in the comments.
+    /// Two passes over U (Uᵀφ, then the update, which also sums the trace) and the finiteness
+    /// checks folded into one sum of x − x (+0 for a finite x, NaN otherwise) over θ and the
+    /// trace: every sample of the self-tuning controller runs this on the M4F. The
+    /// floating-point operations and their order are those of Bierman's algorithm as written
+    /// in the comments. Until 2026-12-06 the update, the forgetting with the checks, and the
+    /// trace were three more passes over U: the same bits, ≈ 500 instructions more in the
+    /// worst sample of the board's build (`cargo xtask pil`).
     ///
     /// Non-finite data are refused before anything changes ([`EstError::NonFinite`]). U is
     /// updated in place (a copy of it to fall back on was two 196-byte copies a sample for
     /// seven parameters, ≈ 400 instructions on the board's build), so an update whose result
-    /// is not a covariance (α ≤ 0, a d ≤ 0, or a value that overflowed, which finite data can
-    /// reach only by overflowing f32) keeps θ and restarts P at p0·I, as
+    /// is not a covariance (α ≤ 0, a d ≤ 0, or a value that overflowed, trace(P) included,
+    /// which finite data can reach only by overflowing f32) keeps θ and restarts P at p0·I, as
     /// [`Self::reset_covariance`] does ([`EstError::Diverged`]).
     pub fn update(&mut self, cfg: &RlsConfig, phi: &SVector<f32, N>, y: f32) -> Result<f32, EstError> {
+        // An index loop, not nalgebra's iterator: built for size (the firmware's "z"), each
+        // of its steps can be an out-of-line call.
         let mut probe = finite_probe(y);
-        for x in phi.iter() {
-            probe += finite_probe(*x);
+        for j in 0..N {
+            probe += finite_probe(phi[j]);
         }
         if probe != 0.0 {
             return Err(EstError::NonFinite);
@@ -316,53 +307,61 @@ impl<const N: usize> Rls<N> {
         let lambda = if cfg.forgetting > 0.0 && cfg.forgetting <= 1.0 { cfg.forgetting } else { 1.0 };
         let eps = y - self.predict(phi);
 
-        // Bierman's measurement update with noise variance λ_f (Bierman 1977, p. 100).
+        // Bierman's measurement update with noise variance λ_f (Bierman 1977, p. 100): f = Uᵀφ
+        // on U before the update, then one pass over U's columns with g_j = d_j f_j, the
+        // forgetting P ← P / λ_f on each d_j as it is made, and trace(P) = Σ_j d_j (1 + Σ_i
+        // U_ij²) summed from each column as it is written.
         let u = &mut self.u;
-        let mut d = [0.0f32; N];
-        let mut f = [0.0f32; N]; // f = Uᵀ φ
-        let mut g = [0.0f32; N]; // g = D f
+        let mut f = [0.0f32; N];
         for j in 0..N {
             let mut s = phi[j];
             for i in 0..j {
                 s += u[(i, j)] * phi[i];
             }
             f[j] = s;
-            d[j] = self.d[j];
-            g[j] = s * d[j];
         }
+        let mut d = self.d;
         let mut b = [0.0f32; N];
         let mut alpha = lambda;
+        let mut tr = 0.0f32;
+        let mut positive = true;
         for j in 0..N {
+            let g = f[j] * d[j];
             let beta = alpha;
-            alpha += f[j] * g[j];
+            alpha += f[j] * g;
             let p = -f[j] / beta;
             d[j] *= beta / alpha;
+            d[j] /= lambda;
+            positive &= d[j] > 0.0;
+            let mut col = 0.0f32;
             for i in 0..j {
                 let uij = u[(i, j)];
-                u[(i, j)] = uij + b[i] * p;
-                b[i] += g[j] * uij;
+                let v = uij + b[i] * p;
+                u[(i, j)] = v;
+                col += v * v;
+                b[i] += g * uij;
             }
-            b[j] = g[j];
+            b[j] = g;
+            col += 1.0f32 * 1.0f32;
+            tr += d[j] * col;
         }
-        // K = b / α, θ ← θ + K ε; forgetting: P ← P / λ_f.
+        // K = b / α, θ ← θ + K ε.
         let mut theta = self.theta;
         let mut probe = 0.0f32;
         for j in 0..N {
             theta[j] += (b[j] / alpha) * eps;
-            d[j] /= lambda;
             probe += finite_probe(theta[j]);
-            probe += finite_probe(d[j]);
-            for i in 0..j {
-                probe += finite_probe(u[(i, j)]);
-            }
         }
-        if !(alpha > 0.0) || probe != 0.0 || d.iter().any(|x| !(*x > 0.0)) {
+        // Every term of the trace is d_j (1 + Σ U_ij²) ≥ 0 once every d_j > 0, so a finite
+        // trace means every d_j and U_ij is finite (a NaN or an infinity anywhere makes it
+        // non-finite), and one that overflowed is a breakdown too.
+        probe += finite_probe(tr);
+        if !(positive && alpha > 0.0) || probe != 0.0 {
             self.reset_covariance(cfg);
             return Err(EstError::Diverged);
         }
         self.theta = theta;
-        self.d = SVector::from(d);
-        let tr = self.trace_of_factors();
+        self.d = d;
         self.trace = if tr > cfg.trace_max {
             let scale = cfg.trace_max / tr;
             self.d *= scale;
@@ -494,6 +493,18 @@ mod tests {
         let phi = SVector::from([0.3f32, -0.2, 0.1]);
         assert_eq!(r.update(&cfg, &phi, 1.0), fresh.update(&cfg, &phi, 1.0));
         assert_eq!(r.theta(), fresh.theta());
+    }
+
+    #[test]
+    fn a_trace_that_overflows_is_a_breakdown() {
+        // Every factor finite, their trace not: before the check on the trace, the clip scaled
+        // D by trace_max / ∞ = 0 and the estimator stopped learning without a word.
+        let cfg = RlsConfig { forgetting: 1.0, p0: 2e38, trace_max: 1e9 };
+        let mut r = Rls::<3>::new(&cfg, SVector::from([0.5, -1.0, 2.0]));
+        let phi = SVector::from([1e-30f32, 0.0, 0.0]);
+        assert_eq!(r.update(&cfg, &phi, 0.0), Err(EstError::Diverged));
+        assert_eq!(*r.theta(), SVector::from([0.5, -1.0, 2.0]));
+        assert_eq!(r.factors().1, SVector::from([2e38f32; 3]));
     }
 
     #[test]
