@@ -285,8 +285,8 @@ impl<const N: usize> Rls<N> {
     /// trace: every sample of the self-tuning controller runs this on the M4F. The
     /// floating-point operations and their order are those of Bierman's algorithm as written
     /// in the comments. Until 2026-12-06 the update, the forgetting with the checks, and the
-    /// trace were three more passes over U: the same bits, ≈ 500 instructions more in the
-    /// worst sample of the board's build (`cargo xtask pil`).
+    /// trace were three passes over U after Uᵀφ: the same bits, ≈ 500 instructions more in
+    /// the worst sample of the board's build (`cargo xtask pil`).
     ///
     /// Non-finite data are refused before anything changes ([`EstError::NonFinite`]). U is
     /// updated in place (a copy of it to fall back on was two 196-byte copies a sample for
