@@ -342,7 +342,7 @@ impl<const N: usize> Rls<N> {
                 b[i] += g * uij;
             }
             b[j] = g;
-            col += 1.0f32 * 1.0f32;
+            col += 1.0; // U_jj² (U is unit upper triangular)
             tr += d[j] * col;
         }
         // K = b / α, θ ← θ + K ε.
