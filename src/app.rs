@@ -280,7 +280,11 @@ impl App {
     pub fn new(cfg: AppConfig, boot: &Boot) -> App {
         let default_law = cfg.laws.first().copied().unwrap_or(Law::Gpc);
         let settings = match boot.settings {
-            Some(s) if cfg.laws.contains(&s.law) && s.calibration().is_ok() => s,
+            // A law this build does not link (a record of another build) is refused as `set
+            // controller` refuses it: the build's default runs, the setpoint and calibration stay.
+            Some(s) if s.calibration().is_ok() => {
+                SettingsRecord { law: if cfg.laws.contains(&s.law) { s.law } else { default_law }, ..s }
+            }
             _ => SettingsRecord {
                 seq: 0,
                 setpoint_c: cfg.setpoint_c,

@@ -528,6 +528,27 @@ fn stored_settings_come_back_at_the_next_boot_and_bad_ones_do_not() {
     assert_eq!(SettingsRecord::decode(&bytes), Err(crate::persist::DecodeError::Crc));
 }
 
+/// A settings record stored by a build that links another law (the `igmvc` interface build's,
+/// restored by the default one): the law this build does not link falls back to its default,
+/// and the rest of the record, the setpoint and the ice-bath calibration, still applies. It
+/// used to be dropped whole, and the board then read through the identity calibration (not even
+/// the calibration the boot found), 0.5 °C off here.
+#[test]
+fn stored_settings_with_a_law_this_build_does_not_link_keep_their_setpoint_and_calibration() {
+    let stored =
+        SettingsRecord { seq: 7, setpoint_c: 6.5, law: Law::Igmvc, cal_ice: [0.5, 0.0], cal_warm: [25.5, 25.0] };
+    assert!(!LAWS.contains(&stored.law));
+    let back = SettingsRecord::decode(&stored.encode()).expect("a valid record");
+    let mut b = Bench::new(&Boot { settings: Some(back), ..boot() });
+    b.run(10);
+    assert_eq!(b.field("controller"), "gpc", "the build's default law");
+    assert_eq!(b.app.settings().setpoint_c, 6.5);
+    assert_eq!(b.app.settings().calibration(), stored.calibration());
+    let load = b.load_c;
+    let cal = b.run(1).step.raw_c.unwrap().0;
+    assert!((load - cal - 0.5).abs() < 0.02, "the stored calibration applies: {cal} at {load}");
+}
+
 #[test]
 fn the_log_gets_intervals_events_and_continues_its_record_time_after_a_reset() {
     let mut b = Bench::new(&Boot { log_last_s: 86_400, reset: ResetCause::BrownOut, ..boot() });
