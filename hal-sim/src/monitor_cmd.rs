@@ -326,6 +326,19 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
     if last.is_some_and(|t| t > 16_000_000.0) {
         bail!("'{shown}': t_s beyond 16e6 s (185 days) is not supported");
     }
+    // The record's clock counts from the first sample, or from 0 if that is earlier
+    // ([`report`]): a first sample at t_s = −1e300 made a record of 1e300 s (1.8e16 s in range
+    // once in the monitor's milliseconds), and `report` laid it out day by day until it ran
+    // out of memory.
+    if let (Some(&first), Some(&end)) = (input.t_s.first(), input.t_s.last()) {
+        if end - first.min(0.0) > 16_000_000.0 {
+            bail!(
+                "'{shown}': the record runs from t_s = {} to {} s, more than 16e6 s (185 days), which is not supported",
+                crate::sim_cmd::shown(first.min(0.0)),
+                crate::sim_cmd::shown(end)
+            );
+        }
+    }
     Ok(input)
 }
 

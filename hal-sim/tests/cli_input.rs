@@ -312,3 +312,30 @@ fn identify_refuses_impossible_data_and_reports_plainly() {
     assert!(text.contains("nk = 2 × Ts = 0.000002 s)"), "{text}");
     let _ = (std::fs::remove_file(&p), std::fs::remove_file(&log));
 }
+
+/// A record whose first sample lies far before 0 is as long as one that ends far after it:
+/// `t_s = -1e300` then `0` gave `monitor` 1.8e16 s in range with exit 0, and `report` a panic
+/// (capacity overflow), `-1e12` a report that never finished. A record of 10e6 s that starts
+/// before 0 is still read.
+#[test]
+fn a_record_that_starts_long_before_zero_is_refused() {
+    for (name, first) in [("neg-huge.csv", "-1e300"), ("neg-long.csv", "-1e12"), ("neg-span.csv", "-15000000")] {
+        let p = tmp(name);
+        std::fs::write(&p, format!("t_s,temp_c\n{first},4\n1000001,4\n")).unwrap();
+        let html = tmp(&format!("{name}.html"));
+        for args in [
+            vec!["monitor", "--input", p.to_str().unwrap(), "--json"],
+            vec!["report", "--input", p.to_str().unwrap(), "--output", html.to_str().unwrap()],
+        ] {
+            assert_error(&args, "more than 16e6 s (185 days)");
+        }
+        assert!(!html.exists());
+        let _ = std::fs::remove_file(&p);
+    }
+    let p = tmp("neg-ok.csv");
+    std::fs::write(&p, "t_s,temp_c\n-20000000,4\n-10000000,4\n").unwrap();
+    let out = hter(&["monitor", "--input", p.to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout(&out).contains("\"time_in_range_s\":10000000.0"), "{}", stdout(&out));
+    let _ = std::fs::remove_file(&p);
+}
