@@ -243,6 +243,12 @@ pub fn parse_line(line: &str) -> Option<Result<Sample>> {
             let t = crate::sim_cmd::shown(t_s);
             bail!("t = {t} s is beyond the board's 64-bit millisecond clock (at most {MAX_CLOCK_S:e} s)");
         }
+        // The board's clock counts from 0 at its boot: `t=-1e300` was written to the CSV as
+        // 301 digits, and `monitor` then counted 1.8e16 s in range.
+        if t_s < 0.0 {
+            let t = crate::sim_cmd::shown(t_s);
+            bail!("t = {t} s is before the board's clock starts (0 s at its boot)");
+        }
         Ok(Sample {
             mode: named_field(line, "mode=", &Mode::ALL, Mode::name)?,
             alarm: named_field(line, "alarm=", &Indication::ALL, Indication::name)?,
@@ -627,5 +633,18 @@ t=10 temp=8 sp=4 duty=0.5 mode=Normal
         // Two one-sample boots and no boot line: nothing says how far apart the samples are.
         let e = convert(lines("t=5 temp=4 sp=4 duty=0 mode=Normal\nt=5 temp=4 sp=4 duty=0 mode=Normal\n")).unwrap_err();
         assert!(e.to_string().contains("no sample period"), "{e}");
+    }
+
+    /// The board's clock starts at 0: a negative `t=` is a corrupt line, named, not a sample
+    /// (`t=-1e300` was written as 301 digits). `t=-0` and `t=0` are the boot's first sample.
+    #[test]
+    fn a_time_before_the_boot_is_refused() {
+        for t in ["-5", "-1e300", "-0.001"] {
+            let log = format!("t=0 temp=4 sp=4 duty=0\nt={t} temp=4 sp=4 duty=0\n");
+            let e = format!("{:#}", convert(lines(&log)).unwrap_err());
+            assert!(e.contains("line 2") && e.contains("before the board's clock starts"), "{t}: {e}");
+            assert!(e.len() < 150, "{e}");
+        }
+        assert!(convert(lines("t=-0 temp=4 sp=4 duty=0\nt=10 temp=4 sp=4 duty=0\n")).is_ok());
     }
 }
