@@ -42,6 +42,15 @@ pub fn run(a: &CompareArgs) -> Result<()> {
         plot::check_path(p)?;
     }
     let base = sim_cmd::options(&a.sim)?;
+    // Every run of it is the same PRBS: five identical rows named "prbs", none of the
+    // controllers asked for.
+    if base.scenario.excitation {
+        bail!(
+            "the {} scenario runs no controller (open loop, a PRBS on the SSR): there is nothing to compare (hter sim --scenario {} runs it)",
+            base.scenario.name,
+            base.scenario.name
+        );
+    }
     let mut runs = Vec::new();
     for &c in &a.controllers {
         let mut opts = base.clone();

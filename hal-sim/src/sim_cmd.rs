@@ -366,6 +366,17 @@ pub fn input_paths(a: &SimArgs) -> Vec<(&'static str, &Path)> {
 /// The simulation a `hter sim` command line asks for: its arguments checked and resolved.
 pub fn options(a: &SimArgs) -> Result<SimOptions> {
     let scenario = Scenario::resolve(&a.scenario)?;
+    // The identification run drives the SSR with its PRBS: a controller or its tuning was
+    // silently replaced by it (`--controller pi --kp 1` ran the PRBS and said "controller prbs").
+    if scenario.excitation && a.mission_seed.is_none() {
+        let flag = a.controller.map(|c| format!("--controller {}", controller_name(c)));
+        if let Some(flag) = flag.or_else(|| tuning_flags(a).first().map(|f| f.0.to_string())) {
+            bail!(
+                "{flag} does not apply to the {} scenario: it runs no controller (open loop, a PRBS on the SSR)",
+                scenario.name
+            );
+        }
+    }
     let duration_s = match a.duration {
         Some(d) => finite("duration", d)?,
         None => scenario.duration_s,

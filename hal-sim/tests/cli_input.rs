@@ -339,3 +339,20 @@ fn a_record_that_starts_long_before_zero_is_refused() {
     assert!(stdout(&out).contains("\"time_in_range_s\":10000000.0"), "{}", stdout(&out));
     let _ = std::fs::remove_file(&p);
 }
+
+/// The `prbs` scenario drives the SSR open loop: `compare --scenario prbs` printed five
+/// identical rows named "prbs" for the five controllers asked for, and `sim --scenario prbs
+/// --controller pi --kp 1` ran the PRBS, silently ignoring both flags.
+#[test]
+fn the_open_loop_scenario_refuses_controllers() {
+    assert_error(&["compare", "--scenario", "prbs", "--duration", "100"], "runs no controller");
+    assert_error(&["compare", "--scenario", "prbs", "--controllers", "pi", "--duration", "100"], "nothing to compare");
+    assert_error(
+        &["sim", "--scenario", "prbs", "--controller", "pi", "--duration", "100"],
+        "--controller pi does not apply to the prbs scenario",
+    );
+    assert_error(&["sim", "--scenario", "prbs", "--n2", "5", "--duration", "100"], "--n2 does not apply to the prbs");
+    let out = hter(&["sim", "--scenario", "prbs", "--duration", "100", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout(&out).contains("\"controller\":\"prbs\""), "{}", stdout(&out));
+}
