@@ -320,10 +320,14 @@ impl App {
         let base_ms = (u64::from(boot.log_last_s) + 1) * 1000;
         for _ in 0..boot.pages_lost {
             history = recorder.note_flash_page_lost();
+        }
+        // The history before the events: more pages lost than the outbox holds drop events (the
+        // history counts them all), never the boot's history.
+        let _ = app_saves.push_back(Save::History(history));
+        for _ in 0..boot.pages_lost {
             let _ = app_saves
                 .push_back(Save::Log(LogEntry::Event { t_s: (base_ms / 1000) as u32, kind: EventKind::FlashPageLost }));
         }
-        let _ = app_saves.push_back(Save::History(history));
         App {
             cfg,
             carrier,

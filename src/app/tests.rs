@@ -549,6 +549,25 @@ fn stored_settings_with_a_law_this_build_does_not_link_keep_their_setpoint_and_c
     assert!((load - cal - 0.5).abs() < 0.02, "the stored calibration applies: {cal} at {load}");
 }
 
+/// A boot that repaired more torn pages than the outbox holds events still hands over its
+/// history (this boot's reset, the previous boot's fault, the pages lost): the events filled
+/// the outbox first and the history, pushed last, was dropped, so none of it reached flash
+/// before the next hourly store.
+#[test]
+fn a_boot_with_many_repaired_pages_still_stores_its_history() {
+    let fault = crate::failsafe::StopInfo::new(crate::failsafe::StopKind::HardFault, 0x0800_1234, 0, 0);
+    let mut b = Bench::new(&Boot { pages_lost: 20, fault: Some(fault), ..boot() });
+    b.drain();
+    let h = b.saves.iter().find_map(|s| match s {
+        Save::History(h) => Some(*h),
+        _ => None,
+    });
+    let h = h.expect("the boot's history is handed over");
+    assert_eq!(h.flash_pages_lost, 20);
+    assert_eq!(h.stops_of(crate::failsafe::StopKind::HardFault), 1);
+    assert_eq!(h.resets_by(ResetCause::Other), 1);
+}
+
 #[test]
 fn the_log_gets_intervals_events_and_continues_its_record_time_after_a_reset() {
     let mut b = Bench::new(&Boot { log_last_s: 86_400, reset: ResetCause::BrownOut, ..boot() });
