@@ -210,6 +210,23 @@ pub fn single(name: &str, x: f64) -> Result<f32> {
     Ok(v)
 }
 
+/// A pole in [0, 1) as the f32 the library computes with, or a one-line error naming the flag
+/// `--name`: 0.999999999 is in range as typed but 1 in f32, and the library refused it as
+/// "Gmvc: configuration refused (Law(Config))".
+fn pole(name: &str, x: f64) -> Result<f32> {
+    let v = x as f32;
+    if !(0.0..1.0).contains(&x) {
+        bail!("--{name} must be in [0, 1), got {x}");
+    }
+    if v >= 1.0 {
+        bail!(
+            "--{name} must be in [0, 1), got {x}, which is {v} in the library's f32 arithmetic (at most {})",
+            1.0 - f32::EPSILON / 2.0
+        );
+    }
+    Ok(v)
+}
+
 /// A clap value parser of a whole-number flag within `lo..=hi` whose message says what the
 /// flag is and its range (clap names the flag and the value). With `allow_negative_numbers` on
 /// the flag, `--seed -1` is this error instead of clap's "unexpected argument '-1' found".
@@ -430,19 +447,15 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
     }
     if let Some(al) = a.p_pole {
         let al = finite("p-pole", al)?;
-        if !(0.0..1.0).contains(&al) {
-            bail!("--p-pole must be in [0, 1), got {al}");
-        }
-        controller.gmvc.p_pole = al as f32;
-        controller.igmvc.p_pole = al as f32;
+        let al = pole("p-pole", al)?;
+        controller.gmvc.p_pole = al;
+        controller.igmvc.p_pole = al;
     }
     if let Some(tp) = a.t_pole {
         let tp = finite("t-pole", tp)?;
-        if !(0.0..1.0).contains(&tp) {
-            bail!("--t-pole must be in [0, 1), got {tp}");
-        }
-        controller.igmvc.t_pole = tp as f32;
-        controller.gpc_t_filter = tp as f32;
+        let tp = pole("t-pole", tp)?;
+        controller.igmvc.t_pole = tp;
+        controller.gpc_t_filter = tp;
     }
     controller.approach_lead = !a.no_approach_lead;
     let plant = PlantChoice::parse(&a.plant)?;

@@ -356,3 +356,19 @@ fn the_open_loop_scenario_refuses_controllers() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(stdout(&out).contains("\"controller\":\"prbs\""), "{}", stdout(&out));
 }
+
+/// A pole in [0, 1) as typed that is 1 in the library's f32 is refused as what it becomes:
+/// `--p-pole 0.999999999` said "Gmvc: configuration refused (Law(Config))", `--t-pole` "…
+/// (TFilter)". The largest f32 below 1 still runs.
+#[test]
+fn a_pole_that_rounds_to_one_is_refused_by_name() {
+    for (controller, flag) in [("gmvc", "--p-pole"), ("igmvc", "--p-pole"), ("igmvc", "--t-pole"), ("gpc", "--t-pole")]
+    {
+        let args = ["sim", "--controller", controller, flag, "0.999999999", "--duration", "100"];
+        let err = one_line_error(&args);
+        assert!(err.contains(&format!("{flag} must be in [0, 1), got 0.999999999, which is 1 in")), "{err}");
+        let out = hter(&["sim", "--controller", controller, flag, "0.99999994", "--duration", "100"]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    }
+    assert_error(&["sim", "--controller", "gmvc", "--p-pole", "1", "--duration", "100"], "got 1");
+}
