@@ -32,6 +32,14 @@ pub fn parse(spec: &str) -> Result<Model> {
                 if !v.is_finite() {
                     bail!("model '{spec}': {name} has a non-finite coefficient");
                 }
+                // The model is f32: 1e39 became inf there, refused as "NonFinite".
+                if !(v as f32).is_finite() {
+                    bail!(
+                        "model '{spec}': {name} coefficient {} is too large for the library's f32 arithmetic (at most {:e})",
+                        crate::sim_cmd::shown(v),
+                        f32::MAX
+                    );
+                }
                 Ok(v as f32)
             })
             .collect::<Result<Vec<f32>>>()?;
@@ -200,6 +208,15 @@ mod tests {
         }
         assert!(c_is_stable(&[-0.9]) && c_is_stable(&[-1.2, 0.4]) && c_is_stable(&[]));
         assert!(!c_is_stable(&[5.0, 6.0]) && !c_is_stable(&[0.0, -1.0]));
+    }
+
+    /// A finite coefficient beyond f32 is refused by name, not as the library's "NonFinite".
+    #[test]
+    fn a_coefficient_beyond_f32_is_refused_by_name() {
+        for (bad, field) in [("arx:-0.9;-1e39;1", "B"), ("arx:1e39;-0.1;1", "A"), ("arx:-0.9;-0.1;1;-1e300", "C")] {
+            let e = parse(bad).unwrap_err().to_string();
+            assert!(e.contains(&format!("{field} coefficient")) && e.contains("too large"), "{bad}: {e}");
+        }
     }
 
     /// A trailing `;` (an empty C) or any other empty field is refused, not read as "no C".
