@@ -402,6 +402,8 @@ pub fn csv_text(rows: &[Row]) -> String {
 
 /// `hter log2csv`.
 pub fn run(args: &Log2CsvArgs) -> Result<()> {
+    // `--output carrier.log` replaced the log with its CSV.
+    crate::sim_cmd::check_paths(&[("--input", &args.input)], &[("--output", &args.output)])?;
     let shown = args.input.display();
     let f = std::fs::File::open(&args.input).with_context(|| format!("cannot read '{shown}'"))?;
     let c = convert(std::io::BufReader::new(f).lines()).with_context(|| format!("'{shown}'"))?;

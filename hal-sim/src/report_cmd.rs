@@ -649,6 +649,8 @@ fn print_pdf(html_path: &Path, pdf: &Path) -> Result<()> {
 
 /// `hter report`.
 pub fn run(args: &ReportArgs) -> Result<()> {
+    // The page replaced the log it was made from.
+    crate::sim_cmd::check_paths(&[("--input", &args.input)], &[("--output", &args.output)])?;
     let ext = args.output.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     let page = html(&args.input)?;
     let out = args.output.display();

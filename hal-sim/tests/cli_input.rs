@@ -372,3 +372,23 @@ fn a_pole_that_rounds_to_one_is_refused_by_name() {
     }
     assert_error(&["sim", "--controller", "gmvc", "--p-pole", "1", "--duration", "100"], "got 1");
 }
+
+/// An output that is the input is refused, the input left as it was: `log2csv --input
+/// carrier.log --output carrier.log` replaced the log with its CSV, and `report` a log with
+/// the page made from it.
+#[test]
+fn log2csv_and_report_refuse_to_overwrite_their_input() {
+    let log = tmp("same.log");
+    let text = "t=0 temp=4 sp=4 duty=0.5\nt=10 temp=4 sp=4 duty=0.5\n";
+    std::fs::write(&log, text).unwrap();
+    let s = log.to_str().unwrap();
+    assert_error(&["log2csv", "--input", s, "--output", s], "is the same file as --input");
+    assert_eq!(std::fs::read_to_string(&log).unwrap(), text);
+    let csv = tmp("same.html");
+    let text = "t_s,temp_c\n0,4\n10,4\n";
+    std::fs::write(&csv, text).unwrap();
+    let s = csv.to_str().unwrap();
+    assert_error(&["report", "--input", s, "--output", s], "is the same file as --input");
+    assert_eq!(std::fs::read_to_string(&csv).unwrap(), text);
+    let _ = (std::fs::remove_file(&log), std::fs::remove_file(&csv));
+}
