@@ -81,9 +81,10 @@ pub struct IdentifyArgs {
     /// Estimator: oe (output error, the default), ls, iv, rls or rels.
     #[arg(long, value_enum, default_value = "oe")]
     pub method: Method,
-    /// Forgetting factor λ_f of rls/rels, in [0.5, 1].
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
-    pub forgetting: f64,
+    /// Forgetting factor λ_f of rls/rels, in [0.5, 1] (default 1; refused with another
+    /// method, which has none).
+    #[arg(long, allow_negative_numbers = true)]
+    pub forgetting: Option<f64>,
     /// First-order filter parameter F_a in [0, 1) applied to the output first.
     #[arg(long, allow_negative_numbers = true)]
     pub filter: Option<f64>,

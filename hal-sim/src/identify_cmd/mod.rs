@@ -112,9 +112,16 @@ pub const FORGETTING_MIN: f32 = 0.5;
 /// `hter identify`.
 pub fn run(args: &IdentifyArgs) -> Result<()> {
     // The estimator runs in f32: checked as it will run (1e-50 was 0 there, and then 1).
-    let forgetting = crate::sim_cmd::single("forgetting", args.forgetting)?;
+    let forgetting_arg = args.forgetting.unwrap_or(1.0);
+    let forgetting = crate::sim_cmd::single("forgetting", forgetting_arg)?;
     if !(FORGETTING_MIN..=1.0).contains(&forgetting) {
-        bail!("--forgetting must be in [{FORGETTING_MIN}, 1], got {}", crate::sim_cmd::shown(args.forgetting));
+        bail!("--forgetting must be in [{FORGETTING_MIN}, 1], got {}", crate::sim_cmd::shown(forgetting_arg));
+    }
+    // The batch methods forget nothing: `--forgetting 0.9` was ignored, and the JSON still
+    // said "forgetting": 0.9.
+    if args.forgetting.is_some() && !matches!(args.method, Method::Rls | Method::Rels) {
+        let m = format!("{:?}", args.method).to_lowercase();
+        bail!("--forgetting applies to --method rls and rels only: --method {m} has no forgetting");
     }
     let nc = if args.method == Method::Rels && args.nc == 0 { 1 } else { args.nc };
     let nk_check = match args.nk {
@@ -127,12 +134,12 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
     }
     let d = load(&args.input, &args.y_column, args.filter, args.prefilter, args.decimate, args.operating_point)?;
     let mut memo = OeMemo::default();
-    let cmp = compare(&d, args.nk, nc, args.method, args.forgetting, &mut memo);
+    let cmp = compare(&d, args.nk, nc, args.method, forgetting_arg, &mut memo);
     let (na, nb) = if args.auto_order && cmp.chosen > 0 { (cmp.chosen, cmp.chosen) } else { (args.na, args.nb) };
     let done = cmp.fits.iter().find(|(order, _, _)| na == nb && *order == na);
     let (f, scan) = match done {
         Some((_, f, scan)) => (f.clone(), scan.clone()),
-        None => fit_delay(&d, na, nb, nc, args.nk, args.method, args.forgetting, &mut memo)?,
+        None => fit_delay(&d, na, nb, nc, args.nk, args.method, forgetting_arg, &mut memo)?,
     };
     let s = Structure::new(na, nb, nc, f.nk).map_err(|_| orders_error(na, nb, nc, f.nk))?;
     if let Some(p) = &args.plot {
@@ -144,7 +151,7 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
         na: s.na,
         nb: s.nb,
         method: args.method,
-        forgetting: args.forgetting,
+        forgetting: forgetting_arg,
         ts_s: d.ts_s,
         dead_time_s: s.nk as f64 * d.ts_s,
         nk_choice: if scan.is_empty() { "given" } else { "auto" },
@@ -207,14 +214,20 @@ mod tests {
         let ok = write("params", &synthetic_log(200));
         for bad in [0.0, 1.5, -0.5, 0.49] {
             let mut a = args(ok.clone());
-            a.forgetting = bad;
+            a.forgetting = Some(bad);
             assert!(err(&a).contains("--forgetting must be in [0.5, 1]"), "{bad}");
         }
         // Not a number, or one the estimator's f32 cannot hold (1e-50 was 0 there).
         for (bad, why) in [(f64::NAN, "finite"), (1e-50, "too small"), (1e39, "too large")] {
             let mut a = args(ok.clone());
-            a.forgetting = bad;
+            a.forgetting = Some(bad);
             assert!(err(&a).contains(why), "{bad}");
+        }
+        // A batch method has no forgetting to apply: 0.9 was ignored, and the JSON said 0.9.
+        for method in [Method::Ls, Method::Iv, Method::Oe] {
+            let mut a = args(ok.clone());
+            (a.method, a.forgetting) = (method, Some(0.9));
+            assert!(err(&a).contains("--forgetting applies to --method rls and rels only"), "{method:?}");
         }
         for bad in [1.0, -0.1, 2.0] {
             let mut a = args(ok.clone());

@@ -21,7 +21,7 @@ pub(super) fn args(input: PathBuf) -> IdentifyArgs {
         nc: 0,
         nk: Delay::Samples(1),
         method: Method::Ls,
-        forgetting: 1.0,
+        forgetting: None,
         filter: None,
         prefilter: None,
         y_column: "temp_c".into(),
