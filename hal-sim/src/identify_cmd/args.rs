@@ -81,8 +81,8 @@ pub struct IdentifyArgs {
     /// Estimator: oe (output error, the default), ls, iv, rls or rels.
     #[arg(long, value_enum, default_value = "oe")]
     pub method: Method,
-    /// Forgetting factor λ_f of rls/rels, in [0.5, 1] (default 1; refused with another
-    /// method, which has none).
+    /// Forgetting factor λ_f of rls/rels, in [0.5, 1] (default 1; below 1 refused with another
+    /// method, which forgets nothing).
     #[arg(long, allow_negative_numbers = true)]
     pub forgetting: Option<f64>,
     /// First-order filter parameter F_a in [0, 1) applied to the output first.

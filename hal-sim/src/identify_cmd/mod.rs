@@ -118,8 +118,8 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
         bail!("--forgetting must be in [{FORGETTING_MIN}, 1], got {}", crate::sim_cmd::shown(forgetting_arg));
     }
     // The batch methods forget nothing: `--forgetting 0.9` was ignored, and the JSON still
-    // said "forgetting": 0.9.
-    if args.forgetting.is_some() && !matches!(args.method, Method::Rls | Method::Rels) {
+    // said "forgetting": 0.9. 1 (no forgetting) is what they do, and stays accepted.
+    if args.forgetting.is_some_and(|f| f != 1.0) && !matches!(args.method, Method::Rls | Method::Rels) {
         let m = format!("{:?}", args.method).to_lowercase();
         bail!("--forgetting applies to --method rls and rels only: --method {m} has no forgetting");
     }
@@ -229,6 +229,11 @@ mod tests {
             (a.method, a.forgetting) = (method, Some(0.9));
             assert!(err(&a).contains("--forgetting applies to --method rls and rels only"), "{method:?}");
         }
+        // 1 is no forgetting, what a batch method does: accepted (SPEC §3's `--method ls
+        // --forgetting L`).
+        let mut a = args(ok.clone());
+        a.forgetting = Some(1.0);
+        assert!(run(&a).is_ok());
         for bad in [1.0, -0.1, 2.0] {
             let mut a = args(ok.clone());
             a.filter = Some(bad);
