@@ -126,7 +126,32 @@ fn open(path: &Path) -> Result<std::fs::File> {
     if path.is_dir() {
         bail!("cannot read '{shown}': it is a directory");
     }
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read '{shown}'"))?;
+    if let Some(line) = blank_line_inside(&bytes) {
+        bail!("'{shown}' line {line}: a blank line inside the data; remove it (rows are counted one a line)");
+    }
     std::fs::File::open(path).with_context(|| format!("cannot read '{shown}'"))
+}
+
+/// The 1-based number of the first blank (or all-blank) line that has a non-blank line after it.
+/// Every error names a row by its line, counted as the header's line 1 and one line a row (`i + 2`
+/// for the `i`-th row, here and in the commands that check the columns); the CSV reader skips
+/// blank lines, so one inside the data shifted every later number by one (`t_s,temp_c`, `0,4`,
+/// a blank line, `10,warm` reported "line 3" for the bad row on line 4). Blank lines at the end
+/// are harmless and allowed.
+fn blank_line_inside(bytes: &[u8]) -> Option<usize> {
+    let blank = |l: &[u8]| l.iter().all(u8::is_ascii_whitespace);
+    let mut first_blank = None;
+    for (i, l) in bytes.split(|&b| b == b'\n').enumerate() {
+        if !blank(l) {
+            if first_blank.is_some() {
+                return first_blank;
+            }
+        } else if first_blank.is_none() {
+            first_blank = Some(i + 1);
+        }
+    }
+    None
 }
 
 /// Longest cell, in characters, an error message repeats whole.

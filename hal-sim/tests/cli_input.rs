@@ -392,3 +392,18 @@ fn log2csv_and_report_refuse_to_overwrite_their_input() {
     assert_eq!(std::fs::read_to_string(&csv).unwrap(), text);
     let _ = (std::fs::remove_file(&log), std::fs::remove_file(&csv));
 }
+
+/// Every "line N" names the line a user opens the file at. The CSV reader skips blank lines, so a
+/// blank line inside the data shifted them by one (the bad row on line 4 was "line 3"): a blank
+/// line inside the data is refused by its line. Blank lines at the end are still read.
+#[test]
+fn a_blank_line_inside_the_data_is_refused_at_its_real_line() {
+    let p = tmp("blank.csv");
+    std::fs::write(&p, "t_s,temp_c\n0,4\n\n10,warm\n").unwrap();
+    let e = one_line_error(&["monitor", "--input", p.to_str().unwrap(), "--json"]);
+    assert!(e.contains("line 3") && e.contains("blank line"), "{e}");
+    std::fs::write(&p, "t_s,temp_c\n0,4\n10,4\n\n\n").unwrap();
+    let out = hter(&["monitor", "--input", p.to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let _ = std::fs::remove_file(&p);
+}
