@@ -146,10 +146,13 @@ impl ArxPlant {
         } else if b1.abs() > 1e-12 {
             y_ss * a1 / b1
         } else {
-            bail!("the ARX plant has zero static gain and cannot hold {temp_c} °C at {ambient_c} °C ambient");
+            let t = crate::sim_cmd::shown(temp_c);
+            bail!("the ARX plant has zero static gain and cannot hold {t} °C at {ambient_c} °C ambient");
         };
         if !(0.0..=1.0).contains(&u_ss) {
-            bail!("the ARX plant cannot hold {temp_c} °C at {ambient_c} °C ambient: steady duty would be {u_ss:.3}");
+            let t = crate::sim_cmd::shown(temp_c);
+            let u = if u_ss.abs() < 1e6 { format!("{u_ss:.3}") } else { crate::sim_cmd::shown(u_ss) };
+            bail!("the ARX plant cannot hold {t} °C at {ambient_c} °C ambient: steady duty would be {u}");
         }
         Ok(ArxPlant { model, ambient_c, y: vec![y_ss; model.na() + 1], u: vec![u_ss; model.nb() + model.k()] })
     }

@@ -556,7 +556,10 @@ pub fn check_command(cmd: &BoardCommand) -> Result<()> {
         BoardCommand::History { since: Some(s), .. }
             if !(s.is_finite() && *s >= 0.0 && *s < f64::from(hter::iface::HISTORY_SINCE_LIMIT_S)) =>
         {
-            bail!("--since must be a time ≥ 0 s and below 4e9 s (the record's clock), got {s}")
+            bail!(
+                "--since must be a time ≥ 0 s and below 4e9 s (the record's clock), got {}",
+                crate::sim_cmd::shown(*s)
+            )
         }
         _ => Ok(()),
     }
@@ -676,7 +679,7 @@ fn connect(port: &str, timeout_s: f64) -> Result<Board<Box<dyn serialport::Seria
 /// `hter board`.
 pub fn run(args: &BoardArgs) -> Result<()> {
     if !args.timeout.is_finite() || args.timeout <= 0.0 || args.timeout > 3600.0 {
-        bail!("--timeout must be within (0, 3600] s, got {}", args.timeout);
+        bail!("--timeout must be within (0, 3600] s, got {}", crate::sim_cmd::shown(args.timeout));
     }
     check_command(&args.command)?;
     let mut b = connect(&args.port, args.timeout)?;

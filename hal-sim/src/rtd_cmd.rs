@@ -72,7 +72,7 @@ pub fn run(a: &RtdArgs) -> Result<()> {
         (Some(r), _) => {
             let r = finite("ohms", r)?;
             if r <= 0.0 {
-                bail!("--ohms must be positive, got {r}");
+                bail!("--ohms must be positive, got {}", crate::sim_cmd::shown(r));
             }
             // (NonFinite too: only a value far out of range overflows the f32.)
             let t = rtd.temperature(Ohms(r as f32)).map_err(|_| {

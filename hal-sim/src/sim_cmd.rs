@@ -177,7 +177,7 @@ pub fn finite(name: &str, x: f64) -> Result<f64> {
     if x.is_finite() {
         Ok(x)
     } else {
-        bail!("--{name} must be a finite number, got {x}")
+        bail!("--{name} must be a finite number, got {}", shown(x))
     }
 }
 
@@ -216,7 +216,7 @@ pub fn single(name: &str, x: f64) -> Result<f32> {
 fn pole(name: &str, x: f64) -> Result<f32> {
     let v = x as f32;
     if !(0.0..1.0).contains(&x) {
-        bail!("--{name} must be in [0, 1), got {x}");
+        bail!("--{name} must be in [0, 1), got {}", shown(x));
     }
     if v >= 1.0 {
         bail!(
@@ -414,7 +414,7 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
     if let Some(l) = a.lambda {
         let l = single("lambda", l)?;
         if l < 0.0 {
-            bail!("--lambda must be ≥ 0, got {l}");
+            bail!("--lambda must be ≥ 0, got {}", shown(f64::from(l)));
         }
         controller.gpc.lambda = l;
         controller.igmvc.lambda = l;
@@ -480,7 +480,7 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
         if let Some(kp) = a.kp {
             let kp = finite("kp", kp)?;
             if kp <= 0.0 {
-                bail!("--kp must be > 0 (duty per °C), got {kp}");
+                bail!("--kp must be > 0 (duty per °C), got {}", shown(kp));
             }
             let (lo, hi) = KP_RANGE_PER_C;
             if !(lo..=hi).contains(&kp) {
@@ -491,7 +491,7 @@ pub fn options(a: &SimArgs) -> Result<SimOptions> {
         if let Some(ti) = a.ti {
             let ti = finite("ti", ti)?;
             if ti <= 0.0 {
-                bail!("--ti must be > 0 (s), got {ti}");
+                bail!("--ti must be > 0 (s), got {}", shown(ti));
             }
             let (lo, hi) = TI_RANGE_S;
             if !(lo..=hi).contains(&ti) {

@@ -60,17 +60,17 @@ pub struct VirtualBoardArgs {
 pub fn run(a: &VirtualBoardArgs) -> Result<()> {
     let speed = finite("speed", a.speed)?;
     if !(0.01..=100_000.0).contains(&speed) {
-        bail!("--speed must be within 0.01…100000, got {speed}");
+        bail!("--speed must be within 0.01…100000, got {}", crate::sim_cmd::shown(speed));
     }
     let ambient_c = finite("ambient", a.ambient)?;
     let (lo, hi) = crate::scenario::AMBIENT_RANGE_C;
     if !(lo..=hi).contains(&ambient_c) {
-        bail!("--ambient must be within {lo}…{hi} °C, got {ambient_c}");
+        bail!("--ambient must be within {lo}…{hi} °C, got {}", crate::sim_cmd::shown(ambient_c));
     }
     // A NaN duration compared false with the simulated time for ever: the board never stopped.
     let ts = f64::from(hter::step::CarrierConfig::DEFAULT.ts_s);
     let duration_s = match a.duration {
-        Some(d) if finite("duration", d)? <= 0.0 => bail!("--duration must be > 0 s, got {d}"),
+        Some(d) if finite("duration", d)? <= 0.0 => bail!("--duration must be > 0 s, got {}", crate::sim_cmd::shown(d)),
         // It ran one sample and stopped at once with exit 0, as if it had served.
         Some(d) if d < ts => {
             bail!("--duration {} s is shorter than one control sample (Ts = {ts} s)", shown(d))

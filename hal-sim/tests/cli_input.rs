@@ -407,3 +407,21 @@ fn a_blank_line_inside_the_data_is_refused_at_its_real_line() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let _ = std::fs::remove_file(&p);
 }
+
+/// A huge number in a one-line error is shown in the short exponent form, not as 301 digits.
+#[test]
+fn a_huge_number_in_an_error_is_shown_short() {
+    let sc = tmp("huge-start.json");
+    std::fs::write(&sc, r#"{"start_c": 1e300, "setpoints": [[0, 4]], "duration_s": 100}"#).unwrap();
+    let cases: [Vec<&str>; 4] = [
+        vec!["board", "--port", "/dev/null", "--timeout", "1e300", "status"],
+        vec!["virtual-board", "--link", "/tmp/x", "--speed", "1e300"],
+        vec!["sim", "--scenario", sc.to_str().unwrap()],
+        vec!["sim", "--controller", "pi", "--kp", "-1e300"],
+    ];
+    for args in cases {
+        let e = one_line_error(&args);
+        assert!(e.contains("1e300") && e.len() < 200, "{args:?}: {e}");
+    }
+    let _ = std::fs::remove_file(&sc);
+}

@@ -137,7 +137,7 @@ fn first_order_cfg(flag: &str, fa: Option<f64>) -> Result<Option<FirstOrderConfi
             if fa.is_finite() && f64::from(single) != fa && (0.0..1.0).contains(&fa) {
                 anyhow!("--{flag} must be in [0, 1), got {fa}, which is {single} in the filter's f32 arithmetic (at most {})", 1.0 - f32::EPSILON / 2.0)
             } else {
-                anyhow!("--{flag} must be in [0, 1), got {fa}")
+                anyhow!("--{flag} must be in [0, 1), got {}", shown(fa))
             }
         })
     })

@@ -54,7 +54,7 @@ impl Rig {
             Start::Ambient => (Plant::at_ambient(params, opts.ambient_c), 0.0),
             Start::Holding(t) => match Plant::at_load_temperature(params, opts.ambient_c, t) {
                 Some(p) => p,
-                None => bail!("the plant cannot hold {t} °C at {} °C ambient", opts.ambient_c),
+                None => bail!("the plant cannot hold {} °C at {} °C ambient", crate::sim_cmd::shown(t), opts.ambient_c),
             },
         };
         let adc = SimAdc::new(opts.seed);
