@@ -285,13 +285,25 @@ impl App {
             Some(s) if s.calibration().is_ok() => {
                 SettingsRecord { law: if cfg.laws.contains(&s.law) { s.law } else { default_law }, ..s }
             }
-            _ => SettingsRecord {
-                seq: 0,
-                setpoint_c: cfg.setpoint_c,
-                law: default_law,
-                cal_ice: [0.0, 0.0],
-                cal_warm: [25.0, 25.0],
-            },
+            _ => {
+                // No settings yet: the points of the line the board booted with (the build's
+                // constant, an older firmware's record; identity: 0,0 and 25,25), so that `get`
+                // shows it and a setting stored later keeps it. With identity points instead, the
+                // first accepted setting replaced it and its record brought identity back at
+                // every boot.
+                let c = boot.calibration;
+                let from_boot = SettingsRecord {
+                    seq: 0,
+                    setpoint_c: cfg.setpoint_c,
+                    law: default_law,
+                    cal_ice: [0.0, c.offset_c],
+                    cal_warm: [25.0, c.gain * 25.0 + c.offset_c],
+                };
+                match from_boot.calibration() {
+                    Ok(_) => from_boot,
+                    Err(_) => SettingsRecord { cal_ice: [0.0, 0.0], cal_warm: [25.0, 25.0], ..from_boot },
+                }
+            }
         };
         let cal =
             if boot.settings.is_some() { settings.calibration().unwrap_or(boot.calibration) } else { boot.calibration };
@@ -565,6 +577,8 @@ impl App {
     fn set(&mut self, req: SetRequest) -> Result<(), Refusal<'static>> {
         let t_s = self.record_s(self.last_t_ms);
         let mut next = self.settings;
+        // Only a new calibration point changes the line in force.
+        let mut recalibrated = None;
         let (key, value) = match req {
             SetRequest::Setpoint(x) => {
                 next.setpoint_c = x;
@@ -589,7 +603,7 @@ impl App {
                 } else {
                     next.cal_warm = p;
                 }
-                next.calibration().map_err(|e| Refusal { what, why: Why::Calibration(e) })?;
+                recalibrated = Some(next.calibration().map_err(|e| Refusal { what, why: Why::Calibration(e) })?);
                 (key, p)
             }
             SetRequest::Model(m) => return self.set_model(m, t_s),
@@ -623,7 +637,7 @@ impl App {
             let ctl = build(next.law, &self.adaptive, self.cfg.carrier.get().ts_s, self.applied());
             *self.carrier.controller_mut() = ctl;
         }
-        if let Ok(cal) = next.calibration() {
+        if let Some(cal) = recalibrated {
             self.carrier.set_calibration(cal);
         }
         self.settings = next;

@@ -1128,3 +1128,39 @@ fn a_heat_run_goes_on_through_a_restart() {
     // second, and the run before it is `run_s` long.
     assert_eq!(start_s, 6 * 3600 + 1 - run_s);
 }
+
+/// A board calibrated before it stored any settings (the firmware's `CALIBRATION` constant, or
+/// an older firmware's calibration record: `Boot::calibration`): the first accepted setting of
+/// any key replaced its line by the default settings' identity points (the reading moved by the
+/// calibration's correction), `get` showed those points, and the settings record stored with
+/// them brought identity back at every later boot.
+#[test]
+fn a_setting_keeps_the_calibration_the_board_booted_with() {
+    use crate::units::Celsius;
+    // The channel reads 0.5 °C high.
+    let cal = TwoPoint::from_points(Celsius(0.5), Celsius(0.0), Celsius(25.5), Celsius(25.0)).unwrap();
+    let error = |b: &mut Bench| {
+        let load = b.load_c;
+        b.run(1).step.raw_c.unwrap().0 - load
+    };
+    let mut b = Bench::new(&Boot { calibration: cal, ..boot() });
+    b.lead_c = 0.5;
+    b.run(10);
+    assert!(error(&mut b).abs() < 0.02, "{}", error(&mut b));
+    assert_eq!(b.send("set setpoint_c 4.5"), "ok\r\n");
+    let after = error(&mut b);
+    assert!(after.abs() < 0.02, "a setpoint change dropped the calibration: the reading is {after} °C off");
+    assert_eq!(b.send("get").lines().filter(|l| l.starts_with("cal_")).count(), 2);
+    let shown = line(&b);
+    assert!((shown.gain - cal.gain).abs() < 1e-6 && (shown.offset_c - cal.offset_c).abs() < 1e-5, "{shown:?}");
+    // The next boot from the settings it stored (the firmware then passes no calibration).
+    let Some(Save::Settings(rec)) = b.saves.iter().rev().find(|s| matches!(s, Save::Settings(_))).copied() else {
+        panic!("the setting is stored")
+    };
+    let back = SettingsRecord::decode(&rec.encode()).unwrap();
+    let mut again = Bench::new(&Boot { settings: Some(back), ..boot() });
+    again.lead_c = 0.5;
+    again.run(10);
+    let restarted = error(&mut again);
+    assert!(restarted.abs() < 0.02, "the restart dropped the calibration: the reading is {restarted} °C off");
+}
