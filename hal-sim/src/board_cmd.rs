@@ -32,8 +32,13 @@ const MAX_REPLY_BYTES: usize = 64 << 20;
 
 /// Silence that ends the drain of stale input after opening the port.
 const QUIET: Duration = Duration::from_millis(50);
-/// Longest drain of stale input: a board still streaming an old reply stops at our request.
-const MAX_DRAIN: Duration = Duration::from_secs(2);
+/// Longest drain of stale input. The board answers requests in the order they come
+/// (docs/interface.md): one that is still streaming an old reply (a `history` whose client was
+/// stopped: a 30-day history, ≈ 0.4 MB, takes ≈ 35 s at 115 200 baud) goes on until its final
+/// line, and a request sent before then is answered after it. So the drain waits the stream out:
+/// with 2 s, the rest of the history and its final `ok` were read as the reply to the next
+/// request (`hter board set …` said nothing and exited 0, its own reply, maybe a refusal, unread).
+const MAX_DRAIN: Duration = Duration::from_secs(60);
 /// Wait between attempts to open a port another client holds: its request takes tens of ms.
 const BUSY_RETRY: Duration = Duration::from_millis(50);
 
@@ -646,14 +651,32 @@ fn open_port(port: &str, timeout_s: f64) -> serialport::Result<Box<dyn serialpor
         .open()?;
     // Bytes from before this connection (the rest of a reply a killed client never read, a
     // person's typing) are not ours: drop what is buffered, then what still arrives until the
-    // line is quiet (a board that is still streaming stops at our request; docs/interface.md).
+    // line is quiet (a board still streaming an old reply finishes it first: [`MAX_DRAIN`]).
     p.clear(serialport::ClearBuffer::Input)?;
     p.set_timeout(QUIET)?;
-    let start = Instant::now();
-    let mut stale = [0u8; 4096];
-    while start.elapsed() < MAX_DRAIN && p.read(&mut stale).is_ok_and(|n| n > 0) {}
+    if !drain(&mut p, MAX_DRAIN) {
+        return Err(serialport::Error::new(
+            serialport::ErrorKind::Unknown,
+            format!("it is still sending after {} s (a reply nobody read, or not the board)", MAX_DRAIN.as_secs()),
+        ));
+    }
     p.set_timeout(timeout)?;
     Ok(p)
+}
+
+/// Reads and drops what `p` sends until a read finds the line quiet (the port's timeout); `false`
+/// if it was still sending after `max`.
+fn drain<P: Read + ?Sized>(p: &mut P, max: Duration) -> bool {
+    let start = Instant::now();
+    let mut stale = [0u8; 4096];
+    loop {
+        if !p.read(&mut stale).is_ok_and(|n| n > 0) {
+            return true;
+        }
+        if start.elapsed() >= max {
+            return false;
+        }
+    }
 }
 
 /// [`open_port`], waiting up to `wait` while another client holds the port.
@@ -731,6 +754,28 @@ mod tests {
         fn flush(&mut self) -> std::io::Result<()> {
             Ok(())
         }
+    }
+
+    /// The drain waits out a stream however long it lasts, up to its limit, and longer than a
+    /// 30-day history takes at the line's speed (it gave up after 2 s, and the rest of an
+    /// abandoned `history` was read as the next request's reply).
+    #[test]
+    fn the_drain_waits_out_a_stream_up_to_its_limit() {
+        let mut quiet = Scripted::new(&[b"t_s,temp_c\r\n", b"0,4.00\r\n", b"ok\r\n"]);
+        assert!(drain(&mut quiet, MAX_DRAIN));
+        assert!(quiet.chunks.is_empty());
+        /// A port that never stops sending.
+        struct Endless;
+        impl Read for Endless {
+            fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+                std::thread::sleep(Duration::from_millis(1));
+                buf[0] = b'x';
+                Ok(1)
+            }
+        }
+        assert!(!drain(&mut Endless, Duration::from_millis(20)));
+        let history_s = 400_000.0 / (f64::from(BAUD) / 10.0);
+        assert!(MAX_DRAIN.as_secs_f64() > 1.5 * history_s, "{history_s} s");
     }
 
     fn board(chunks: &[&[u8]]) -> Board<Scripted> {
