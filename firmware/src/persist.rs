@@ -243,8 +243,11 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
         send_booted(Restored::nothing());
         return;
     };
+    // The interface build links the self-tuning laws whatever its default law (`set controller
+    // gpc` on the `interface,pi` build): its models are restored with the self-tuner it would run,
+    // `config::APP`'s (with `config::ADAPTIVE`, `None` there, they were lost at every restart).
     #[cfg(feature = "interface")]
-    let restored = flash::restore(&mut store, &mut log, config::ADAPTIVE).await;
+    let restored = flash::restore(&mut store, &mut log, Some(config::APP.adaptive)).await;
     #[cfg(not(feature = "interface"))]
     let restored = flash::restore_records(&mut store, config::ADAPTIVE.as_ref()).await;
     report(&restored);
