@@ -378,19 +378,17 @@ fn a_pole_that_rounds_to_one_is_refused_by_name() {
 /// the page made from it.
 #[test]
 fn log2csv_and_report_refuse_to_overwrite_their_input() {
-    let log = tmp("same.log");
-    let text = "t=0 temp=4 sp=4 duty=0.5\nt=10 temp=4 sp=4 duty=0.5\n";
-    std::fs::write(&log, text).unwrap();
-    let s = log.to_str().unwrap();
-    assert_error(&["log2csv", "--input", s, "--output", s], "is the same file as --input");
-    assert_eq!(std::fs::read_to_string(&log).unwrap(), text);
-    let csv = tmp("same.html");
-    let text = "t_s,temp_c\n0,4\n10,4\n";
-    std::fs::write(&csv, text).unwrap();
-    let s = csv.to_str().unwrap();
-    assert_error(&["report", "--input", s, "--output", s], "is the same file as --input");
-    assert_eq!(std::fs::read_to_string(&csv).unwrap(), text);
-    let _ = (std::fs::remove_file(&log), std::fs::remove_file(&csv));
+    for (command, name, text) in [
+        ("log2csv", "same.log", "t=0 temp=4 sp=4 duty=0.5\nt=10 temp=4 sp=4 duty=0.5\n"),
+        ("report", "same.html", "t_s,temp_c\n0,4\n10,4\n"),
+    ] {
+        let path = tmp(name);
+        std::fs::write(&path, text).unwrap();
+        let s = path.to_str().unwrap();
+        assert_error(&[command, "--input", s, "--output", s], "is the same file as --input");
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), text, "{command}");
+        let _ = std::fs::remove_file(&path);
+    }
 }
 
 /// Every "line N" names the line a user opens the file at. The CSV reader skips blank lines, so a
