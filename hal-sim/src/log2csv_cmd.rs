@@ -261,11 +261,25 @@ pub fn parse_line(line: &str) -> Option<Result<Sample>> {
                 .map(|c| c.parse::<u32>().with_context(|| format!("counts '{c}' is not a whole number")))
                 .transpose()?,
             // NaN is how the firmware says "not measured".
-            supply_v: supply.map(|v| any("supply", v)).transpose()?.filter(|v| v.is_finite()),
+            supply_v: supply.map(|v| measured("supply", v, "V")).transpose()?.flatten(),
             // NaN: no estimate (no model, or none finished yet).
-            holdover_s: holdover.map(|v| any("holdover", v)).transpose()?.filter(|v| v.is_finite()),
+            holdover_s: holdover.map(|v| measured("holdover", v, "s")).transpose()?.flatten(),
         })
     })())
+}
+
+/// A measurement the firmware prints as a number ≥ 0, or NaN for none (`None`). Anything else is
+/// a corrupt line: `supply=1e400` (inf once parsed) was read as "not measured", and a negative
+/// voltage or holdover went into the CSV as if the board had measured it.
+fn measured(name: &str, v: &str, unit: &str) -> Result<Option<f64>> {
+    let x: f64 = v.parse().with_context(|| format!("{name} '{}' is not a number", crate::log::clip(v)))?;
+    if x.is_nan() {
+        return Ok(None);
+    }
+    if !(x.is_finite() && x >= 0.0) {
+        bail!("{name} = {} {unit} is not what the board prints (a number ≥ 0, or NaN for none)", crate::log::clip(v));
+    }
+    Ok(Some(x))
 }
 
 /// Median of the positive intervals between consecutive samples of one boot (times since the
@@ -635,6 +649,25 @@ t=10 temp=8 sp=4 duty=0.5 mode=Normal
         // Two one-sample boots and no boot line: nothing says how far apart the samples are.
         let e = convert(lines("t=5 temp=4 sp=4 duty=0 mode=Normal\nt=5 temp=4 sp=4 duty=0 mode=Normal\n")).unwrap_err();
         assert!(e.to_string().contains("no sample period"), "{e}");
+    }
+
+    /// A supply voltage or holdover the board cannot print (negative, or too large for a number)
+    /// is a corrupt line, named; NaN is "none", as the firmware prints it.
+    #[test]
+    fn a_measurement_the_board_cannot_print_is_refused() {
+        let line = |supply: &str, holdover: &str| {
+            format!("t=0 temp=4 sp=4 duty=0.5 mode=Normal counts=1 supply={supply} alarm=Off holdover={holdover}")
+        };
+        for (supply, holdover, what) in
+            [("1e400", "10", "supply"), ("-12", "10", "supply"), ("12", "-5", "holdover"), ("12", "inf", "holdover")]
+        {
+            let e = format!("{:#}", parse_line(&line(supply, holdover)).unwrap().unwrap_err());
+            assert!(e.contains(what) && e.contains("not what the board prints"), "{supply} {holdover}: {e}");
+        }
+        let ok = parse_line(&line("NaN", "NaN")).unwrap().unwrap();
+        assert_eq!((ok.supply_v, ok.holdover_s), (None, None));
+        let ok = parse_line(&line("12.04", "0")).unwrap().unwrap();
+        assert_eq!((ok.supply_v, ok.holdover_s), (Some(12.04), Some(0.0)));
     }
 
     /// The board's clock starts at 0: a negative `t=` is a corrupt line, named, not a sample
