@@ -24,7 +24,8 @@
 //! ```
 //!
 //! evaluated as an offset from a 5 °C reference so the exponentials stay near 1 in f32, with a
-//! running mean (no growing sum to lose precision over a 30-day record).
+//! compensated running mean (no growing sum to lose precision over a 30-day record, and no
+//! step dropped for being below half an ulp of the mean late in it).
 //!
 //! The per-sample exponential is libm's correctly rounded `expf`. micromath's fast `exp` was
 //! measured in its place and rejected: on the Cortex-M4F it costs more, not less (the
@@ -193,6 +194,8 @@ pub struct ColdChainMonitor {
     last: Option<(u64, f32)>,
     elapsed_ms: u64,
     mkt_mean: f32,
+    /// The rounding error of `mkt_mean`'s last step, taken off the next one.
+    mkt_lost: f32,
     min_c: f32,
     max_c: f32,
     below_2_ms: u64,
@@ -223,6 +226,7 @@ impl ColdChainMonitor {
             last: None,
             elapsed_ms: 0,
             mkt_mean: 0.0,
+            mkt_lost: 0.0,
             min_c: f32::INFINITY,
             max_c: f32::NEG_INFINITY,
             below_2_ms: 0,
@@ -253,7 +257,12 @@ impl ColdChainMonitor {
             // The weight in seconds, as f32: the ratio is all that matters, and whole seconds
             // stay exact this way.
             let (dt_s, elapsed_s) = (crate::units::secs_f32(dt), crate::units::secs_f32(self.elapsed_ms));
-            self.mkt_mean += (x - self.mkt_mean) * dt_s / elapsed_s;
+            // Compensated (Kahan): late in a long record the step is below half an ulp of the
+            // mean, and a plain f32 sum dropped it (90 days at 10 s: MKT off by 0.05 °C).
+            let step = (x - self.mkt_mean) * dt_s / elapsed_s - self.mkt_lost;
+            let sum = self.mkt_mean + step;
+            self.mkt_lost = (sum - self.mkt_mean) - step;
+            self.mkt_mean = sum;
             if c_prev < 2.0 {
                 self.below_2_ms += dt;
             }
@@ -679,6 +688,31 @@ mod tests {
         let day: std::vec::Vec<f64> =
             (0..8640).map(|i| 5.0 + 2.9 * (f64::from(i) / 1375.0).sin() + 0.1 * (f64::from(i) * 1.7).sin()).collect();
         check(&day, 0.001);
+    }
+
+    /// A long record at the 10 s sample period: late in it, one interval's weight is ~4e-6 (30
+    /// days) to ~1.3e-6 (90 days) of the whole, and an f32 running mean dropped each sample's
+    /// small step whole (it is below half an ulp of the mean) or rounded it by tens of percent.
+    /// References (Python, f64; equal time at each temperature, K = 83 144 / 8.314):
+    /// `K / -ln((exp(-K/(a+273.15)) + exp(-K/(b+273.15))) / 2) - 273.15`
+    /// - 15 days at 8.1 °C then 15 days at 7.9 °C: 8.0006 °C (outside 2–8 °C); the f32 running
+    ///   mean gave 7.9959 (within);
+    /// - 45 days at 7.95 °C then 45 days at 8.05 °C: 8.00015 °C; it gave 7.9500, the second
+    ///   half of the record ignored;
+    /// - 45 days at 1.8 °C then 45 days at 2.2 °C: 2.0025 °C (within); it gave 1.9836.
+    #[test]
+    fn mkt_of_a_long_record_keeps_every_samples_weight() {
+        for (days, a, b, want) in
+            [(30u64, 8.1f32, 7.9f32, 8.000597f64), (90, 7.95, 8.05, 8.000149), (90, 1.8, 2.2, 2.002496)]
+        {
+            let n = days * 8_640;
+            let mut m = ColdChainMonitor::new();
+            for i in 0..=n {
+                m.push(i * 10_000, if i < n / 2 { a } else { b });
+            }
+            let got = f64::from(m.mkt_c().unwrap());
+            assert!((got - want).abs() < 1e-3, "{days} days, {a} then {b} °C: MKT {got}, want {want}");
+        }
     }
 
     #[test]
