@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{anyhow, bail, Context, Result};
 use hter::coldchain::{AlarmKind, ColdChainMonitor};
+use hter::event::EventKind;
 use hter::persist::log::INTERVAL_S as INTERVAL_S_U32;
 use hter::step::Mode;
 
@@ -243,7 +244,9 @@ pub struct Input {
 /// `t_s` and `temp_c` columns; when an `event` column exists, a row with a non-empty `event` is
 /// an event, not a sample (its temperature cells only repeat the last interval's mean, or are
 /// empty); a non-empty `reset_cause` is a reset event at that (sample) row. Sample times must
-/// strictly increase and no row may go back in time.
+/// strictly increase and no row may go back in time. After a `log_entries_lost` event, the time
+/// from one interval past the sample row before it to the next sample row is no reading (a
+/// sample with no temperature is added there): those rows never reached flash.
 ///
 /// A sample's temperature must lie in the range the carrier's Pt100 can report (IEC 60751,
 /// [`crate::log::outside_pt100`]): anything else is a corrupt log, not a reading. Unchecked, 1e39 °C
@@ -280,6 +283,9 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
     };
     // The newest sample row's time and the newest row's of any kind.
     let (mut last_sample, mut last): (Option<f64>, Option<f64>) = (None, None);
+    // A `log_entries_lost` event since the last sample row: the rows after that one, up to the
+    // event, were dropped before they reached flash.
+    let mut lost = false;
     for (i, (t, c)) in t_all.into_iter().zip(temp_all).enumerate() {
         let line = i + 2;
         let t = t.ok_or_else(|| anyhow!("'{shown}' line {line}, column 't_s': empty"))?;
@@ -287,6 +293,7 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
             if let Some(p) = last.filter(|&p| t < p) {
                 bail!("'{shown}' line {line}: t_s = {t} goes back in time (previous {p})");
             }
+            lost |= name.starts_with(EventKind::LogEntriesLost.name());
             input.events.push(Event { t_s: t, name });
             last = Some(t);
             continue;
@@ -310,6 +317,14 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
             extremes_of(lo.get(i).copied().flatten(), hi.get(i).copied().flatten(), c)
                 .map_err(|e| anyhow!("'{shown}' line {line}: {e}"))
         })?;
+        // Entries lost before this row: the last row before them holds its own interval, and
+        // what follows it up to this row was not recorded (no reading, as on a sensor fault).
+        let after_loss = std::mem::take(&mut lost);
+        if let Some(hole) = last_sample.map(|p| p + INTERVAL_S).filter(|&h| after_loss && h < t) {
+            input.t_s.push(hole);
+            input.temp_c.push(None);
+            input.extremes.push(None);
+        }
         if let Some(cause) = cell(&reset_col, i) {
             // `hter log2csv` names the cause (`restarted_brownout`, …, or `unknown`).
             let name = if cause.starts_with("restarted") { cause } else { format!("restarted: {cause}") };
@@ -461,6 +476,31 @@ mod tests {
         // 1 ms apart is two samples.
         let r = report(&[0.0, 10.0, 10.001, 20.0], &[Some(4.0), Some(4.0), Some(-3.0), Some(4.0)]).unwrap();
         assert_eq!((r.min_c, r.excursions), (-3.0, 1));
+    }
+
+    /// A board history with a hole: 5.00 °C rows every 300 s to 3 600 s, then
+    /// `log_entries_lost:72` at 25 200 s (the 72 oldest waiting entries, 6 h of rows, dropped
+    /// while the write gate was held), then rows again from 25 500 s to 30 000 s. The 6 h were
+    /// not measured in the file: like a sensor fault's rows, they are no reading. By hand, on the
+    /// reader's rule (a row holds over the interval to the next one): the row at 3 600 s holds
+    /// its one interval, to 3 900 s; from there to the next row at 25 500 s there is no reading,
+    /// 21 600 s; in range 3 900 − 300 + 30 000 − 25 500 = 8 100 s. Before, the 5.00 °C row held
+    /// across the hole: 29 700 s in range, none unread, and `hter report` said "IN RANGE — the
+    /// load stayed within 2–8 °C for the whole period".
+    #[test]
+    fn lost_log_entries_are_no_reading() {
+        let mut csv = String::from("t_s,temp_c,min_c,max_c,duty,mode,event\n");
+        let row = |t: u32| format!("{t},5.00,4.90,5.10,0.400,normal,\n");
+        (300..=3600).step_by(300).for_each(|t| csv.push_str(&row(t)));
+        csv.push_str("25200,,,,,,log_entries_lost:72\n");
+        (25_500..=30_000).step_by(300).for_each(|t| csv.push_str(&row(t)));
+        let p = std::env::temp_dir().join(format!("hter-monitor-{}-hole.csv", std::process::id()));
+        std::fs::write(&p, csv).unwrap();
+        let input = read_input(&p);
+        std::fs::remove_file(&p).unwrap();
+        let r = record(&input.unwrap()).unwrap();
+        assert_eq!((r.time_no_reading_s, r.time_in_range_s, r.fault_samples), (21_600.0, 8_100.0, 1));
+        assert_eq!(crate::report_cmd::verdict(&r).0, "unknown");
     }
 
     #[test]
