@@ -539,6 +539,7 @@ impl Supervisor {
             None => {
                 self.sensor.restart(filter);
                 self.freeze.restart();
+                self.ssr.restart();
             }
         }
     }
@@ -566,10 +567,11 @@ impl Supervisor {
             Some(Diagnosis::Recovered) => {
                 emit(EventKind::SensorRecovered);
                 self.state.sensor_recovered();
-                // The filter and the slope predate the fault; start afresh from the first good
-                // reading.
+                // The filter, the slope and the SSR checks' history predate the fault; start
+                // afresh from the first good reading.
                 filter.reset();
                 self.freeze.restart();
+                self.ssr.restart();
             }
             None => {}
         }

@@ -449,6 +449,13 @@ impl SsrMonitor {
         self.last_drop_c = r.difference(self.last_drop_c);
     }
 
+    /// Forgets the temperature history (the reading restarts after a sensor fault): the last
+    /// samples before the fault are no window of the load's motion after it, and a drift
+    /// across the gap read as a fall that keeps pace with the SSR off (path 3).
+    pub(crate) fn restart(&mut self) {
+        self.history_len = 0;
+    }
+
     /// Puts this sample's filtered temperature in the ring (before the checks that read it).
     pub(crate) fn remember(&mut self, temp_c: f32) {
         if let Some(slot) = self.history.get_mut(self.history_head) {
@@ -1131,5 +1138,32 @@ mod tests {
         assert!(l.supply_on(true, 3.51, 4.0));
         assert!(!l.supply_on(true, 3.5, 4.0));
         assert!(!l.supply_on(false, 4.5, 4.0));
+    }
+}
+
+/// The SSR checks as the step runs them.
+#[cfg(test)]
+mod carrier {
+    use crate::event::EventKind;
+    use crate::step::tests::{counts_at, pi_carrier};
+    use crate::step::{Mode, StepInput};
+
+    /// A load below its setpoint drifting down toward a cold ambient, nothing asked: 0.003 °C a
+    /// sample, a tenth of path 3's 0.3 °C in two minutes. A loose sensor lead reads open for
+    /// half an hour in between; the load went on drifting (0.54 °C) meanwhile. The first
+    /// readings after the fault are no fall that keeps pace with an SSR off: the checks'
+    /// history does not span the gap.
+    #[test]
+    fn a_sensor_fault_in_a_cold_ambient_is_no_shorted_ssr() {
+        let mut c = pi_carrier();
+        let temp = |k: u64| 3.8 - 0.003 * k as f32;
+        let mut events = Vec::new();
+        for k in 0..400u64 {
+            let counts = if (100..280).contains(&k) { 65_535 } else { counts_at(temp(k)) + (k % 2) as u32 };
+            let out = c.step(&StepInput { t_ms: k * 10_000, counts, setpoint_c: 4.0 });
+            events.extend(out.events.iter().map(|e| (k, e.kind)));
+            assert_ne!(out.mode, Mode::LimpHome, "sample {k}: {events:?}");
+        }
+        assert_eq!(events, [(100, EventKind::SensorOpen), (280, EventKind::SensorRecovered)]);
     }
 }
