@@ -586,8 +586,11 @@ impl SsrMonitor {
             self.on_start_c = temp_c;
         }
         self.on_run = if full { self.on_run.saturating_add(1) } else { 0 };
-        self.req_off_run =
-            if requested <= cfg.stuck_on.unrequested_duty { self.req_off_run.saturating_add(1) } else { 0 };
+        // A request that is not a number (a failed law) asked for nothing, and the step applied
+        // nothing: no cooling requested (`<=` would take it for cooling, and a law failing
+        // every sample would keep stuck-on paths 1 and 2 and the probe from ever looking).
+        let asked = requested > cfg.stuck_on.unrequested_duty;
+        self.req_off_run = if asked { 0 } else { self.req_off_run.saturating_add(1) };
     }
 }
 
@@ -1165,5 +1168,46 @@ mod carrier {
             assert_ne!(out.mode, Mode::LimpHome, "sample {k}: {events:?}");
         }
         assert_eq!(events, [(100, EventKind::SensorOpen), (280, EventKind::SensorRecovered)]);
+    }
+
+    /// A law that always asks for `0` (`Ok(0.0)`: no cooling) or has no answer (`Err`: the step
+    /// applies no cooling and says so).
+    struct Asks(Result<f32, crate::control::ControlError>);
+
+    impl crate::control::Controller for Asks {
+        fn update(&mut self, _: &crate::control::ControlInput) -> Result<f32, crate::control::ControlError> {
+            self.0
+        }
+        fn track(&mut self, _: &crate::control::ControlInput, _: f32) {}
+        fn name(&self) -> &'static str {
+            "asks"
+        }
+    }
+
+    /// The sample at which the freeze guard trips on a load falling faster every sample with no
+    /// cooling applied (a shorted SSR), and the events of that sample.
+    fn trip<C: crate::control::Controller>(mut c: crate::step::Carrier<C>) -> (u64, Vec<EventKind>) {
+        for k in 0..60u64 {
+            let t = 4.0 - 0.004 * (k * k) as f32;
+            let out = c.step(&StepInput { t_ms: k * 10_000, counts: counts_at(t), setpoint_c: 4.0 });
+            assert_eq!(out.duty, crate::units::Duty::OFF, "sample {k}");
+            let kinds: Vec<EventKind> = out.events.iter().map(|e| e.kind).collect();
+            if kinds.contains(&EventKind::FreezeGuardTripped) {
+                return (k, kinds);
+            }
+        }
+        panic!("the guard never tripped");
+    }
+
+    /// A request that is not a number asked for no cooling (the step applied none): the SSR
+    /// checks' "nothing requested for a minute" runs on, and the trip is the short's, as under a
+    /// law that asks for nothing.
+    #[test]
+    fn a_failed_laws_request_is_no_cooling_requested() {
+        let asks = |r| crate::step::Carrier::new(crate::step::ValidConfig::DEFAULT, Asks(r));
+        let (k, kinds) = trip(asks(Ok(0.0)));
+        assert!(kinds.contains(&EventKind::SsrStuckOn), "nothing asked, sample {k}: {kinds:?}");
+        let (k, kinds) = trip(asks(Err(crate::control::ControlError::NonFinite)));
+        assert!(kinds.contains(&EventKind::SsrStuckOn), "a failed law, sample {k}: {kinds:?}");
     }
 }
