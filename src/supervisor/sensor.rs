@@ -350,6 +350,13 @@ impl OffsetWatch {
     /// fall in limp home from reading as a step across the spike).
     pub(crate) fn watch(&mut self, cfg: &OffsetConfig, raw: f32, emit: &mut impl FnMut(EventKind)) -> bool {
         self.age = self.age.saturating_add(1);
+        // A reference from before a run of spikes longer than the slowest confirmation is gone,
+        // as after a missing reading: carried that far, the trend is the front end's noise
+        // (±0.01 °C a sample: 2.4 °C over a 200-sample burst, measured and subtracted as an
+        // offset), not the load's motion.
+        if u16::from(self.age) > u16::from(self.confirm_n) << 1 {
+            self.last_good_c = None;
+        }
         match (self.pending, self.last_good_c) {
             (Some((before, step, n)), reference) => {
                 if (raw - (before + step)).abs() <= min_f32(cfg.hold_fraction * step.abs(), cfg.hold_max_c) {
@@ -853,6 +860,20 @@ mod tests {
         // fall then slows to a level that holds.
         let (ev, offset) = through_checks(&[6.4, 6.0, 5.6, 5.2, 45.0, 4.4, 4.3, 4.25, 4.22, 4.2]);
         assert!(ev.is_empty(), "{ev:?}");
+        assert_eq!(offset, 0.0);
+    }
+
+    #[test]
+    fn a_long_burst_of_spikes_makes_no_offset_of_the_noise() {
+        // A load at rest at 4 °C, its last two readings 0.012 °C apart (the front end's noise),
+        // then a failing contact: 200 readings in a row each far off and none agreeing with the
+        // one before (33 minutes), then the load again, where it was. The noise's "trend"
+        // carried over 200 samples is no level the load left.
+        let mut readings = vec![4.0, 4.012, 4.0, 3.988];
+        readings.extend((0..200).map(|k| if k % 2 == 0 { 30.0 } else { 10.0 }));
+        readings.extend([4.0; 10]);
+        let (ev, offset) = through_checks(&readings);
+        assert!(ev.iter().all(|(_, e)| *e == EventKind::SensorSpikes), "{ev:?}");
         assert_eq!(offset, 0.0);
     }
 
