@@ -260,6 +260,13 @@ fn clocks() -> embassy_stm32::Config {
 
 /// Initialises the chip and returns the board.
 pub fn init() -> Board {
+    // The flash's data cache off for good (it is on from reset, FLASH_ACR = 0x600): the program
+    // runs from bank 1 while the persist task erases and writes bank 2, and the L4's data cache
+    // can be corrupted by such a read-while-write (errata ES0335, "Data cache might be corrupted
+    // during flash memory read-while-write operation"); a cached line of an erased page would
+    // also still read as before. embassy-stm32 0.6's L4 flash driver does neither (embassy fixed
+    // it later, commit 1b9e614). Never enabled again, so its stale lines need no DCRST.
+    pac::FLASH.acr().modify(|w| w.set_dcen(false));
     let p = embassy_stm32::init(clocks());
 
     // 12-bit conversions, ×256 hardware oversampling, shifted right by 4: a 16-bit result
