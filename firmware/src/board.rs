@@ -16,7 +16,7 @@
 //! | switched rail | PC0 (ADC1_IN1) | A5 (CN8-6) | 47 kΩ from the modules' side of the supply-enable switch (after the P-MOSFET) to PC0, 10 kΩ to AGND, 100 nF across the 10 kΩ: reads the rail the modules really see, so a shorted switch shows as voltage while the switch is open |
 //! | modules' side of the SSR (`module-sense` build) | PC1 (ADC1_IN2) | A4 (CN8-5) | 47 kΩ from the SSR's load terminal (the modules' supply side) to PC1, 10 kΩ to AGND, 100 nF across the 10 kΩ (τ 0.8 ms: settled ≥ 20 ms before it is read), and a BAT54 Schottky from AGND (anode) to PC1: the modules' Seebeck voltage reverses when the load is warmer than the room (up to −0.56 V at the pin, past the −0.3 V the pin allows). Read in the conversion window after the RTD, where the SSR is off at every duty below full: a shorted SSR reads the supply (`hter::supervisor::module`, README "The module-side sense") |
 //! | alarm output | PC7 | D9 (CN5-2) | a buzzer or red lamp through a low-side NPN/N-MOSFET driver; high = alarm (`hter::alarm`); the second path to the buzzer beside the heartbeat |
-//! | heartbeat | PB5 | D4 (CN9-5) | toggled once per healthy control step (`hter::failsafe::Heartbeat`) into a retriggerable monostable (74HC123, timeout ≈ 15 s = 1.5·Ts): its output silences the buzzer only while edges arrive, and is ANDed into the supply-enable gate drive, so a reset, hung or dead MCU (pins Hi-Z) sounds the buzzer and opens the supply within 2·Ts without software (README, wiring) |
+//! | heartbeat | PB5 | D4 (CN9-5) | one 10 µs high pulse per healthy control step ([`heartbeat_pulse`]; a rising edge every Ts, where a toggled level gave the 74HC123's one trigger edge every 2·Ts, past its 15 s) into a retriggerable monostable (74HC123, timeout ≈ 15 s = 1.5·Ts): its output silences the buzzer only while edges arrive, and is ANDed into the supply-enable gate drive, so a reset, hung or dead MCU (pins Hi-Z) sounds the buzzer and opens the supply within 2·Ts without software (README, wiring) |
 //! | acknowledge button | PC13 | B1 (on board, blue) | pressed pulls low (the Nucleo's pull-up); clears a latched alarm |
 //! | settings interface TX | PA2 (USART2_TX, AF7) | ST-LINK VCP (on board) | the ST-LINK's virtual COM port (UM1724: SB13/SB14 closed and SB62/SB63 open, as shipped; then PA2/PA3 are not on CN9 D1/D0); 115200 8N1 ([`serial_config`]) |
 //! | settings interface RX | PA3 (USART2_RX, AF7) | ST-LINK VCP (on board) | as TX |
@@ -417,6 +417,18 @@ pub fn start_stall_check() {
     // SAFETY: the handler below touches only TIM7 and an atomic; no critical section relies on
     // TIM7 being masked.
     unsafe { interrupt::TIM7.enable() };
+}
+
+/// One heartbeat: PB5 high for ≈ 10 µs (800 cycles at 80 MHz, ≫ the 74HC123's minimum trigger
+/// width of tens of ns), then low again. A 74HC123 retriggers on one edge polarity only (B
+/// rising with A low, or A falling with B high; its function table): a level toggled once per
+/// step would give it one trigger every 2·Ts = 20 s against its 15 s timeout, and the healthy
+/// board's supply would open and its buzzer sound 5 s in every 20. A pulse gives a rising edge
+/// every step; a hung or reset MCU (PB5 stuck, or Hi-Z and pulled down) gives none.
+pub fn heartbeat_pulse(pin: &mut Output<'static>) {
+    pin.set_high();
+    cortex_m::asm::delay(800);
+    pin.set_low();
 }
 
 /// A control step completed.

@@ -55,7 +55,6 @@ use hter::app::Handled;
 use hter::app::{App, SampleIn};
 use hter::control::{Controller, ControllerStatus};
 use hter::event::Event;
-use hter::failsafe::Heartbeat;
 use hter::hal::apply_duty;
 use hter::persist::ResetCause;
 use hter::step::Mode;
@@ -275,7 +274,6 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
     persist::request(persist::Save::History(history));
     // A restart does not acknowledge: the latch is in the stored history.
     let mut annunciator = hter::alarm::Annunciator::restored(history.unacknowledged);
-    let mut heartbeat = Heartbeat::new();
     info!("controller: {}", carrier.controller().name());
     let mut model_cadence = hter::persist::ModelCadence::new(config::MODEL_SAVE_SAMPLES);
     let mut samples = 0u32;
@@ -353,7 +351,7 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
         // Healthy = the step completed: the monostable also gates the modules' supply, so a beat
         // that stopped at every alarm would stop cooling at a heat alarm. The alarm pin sounds
         // the buzzer through the OR in the wiring (README) instead.
-        heartbeat_pin.set_level(heartbeat.beat(true).into());
+        board::heartbeat_pulse(&mut heartbeat_pin);
         board::note_step();
         board::pet_watchdog();
     }
@@ -370,7 +368,6 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
         warn!("{} flash pages were torn by a power cut and repaired", boot.pages_lost);
     }
     info!("controller: {}", app.carrier().controller().name());
-    let mut heartbeat = Heartbeat::new();
     let mut samples = 0u32;
     board::start_stall_check();
     loop {
@@ -457,7 +454,7 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
         // Healthy = the step completed: the monostable also gates the modules' supply, so a beat
         // that stopped at every alarm would stop cooling at a heat alarm. The alarm pin sounds
         // the buzzer through the OR in the wiring (README) instead.
-        heartbeat_pin.set_level(heartbeat.beat(true).into());
+        board::heartbeat_pulse(&mut heartbeat_pin);
         board::note_step();
         board::pet_watchdog();
     }
