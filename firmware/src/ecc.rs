@@ -9,6 +9,8 @@
 
 use core::sync::atomic::{AtomicU32, Ordering};
 
+use embassy_stm32::pac::FLASH;
+
 /// No ECC error pending.
 const NONE: u32 = u32::MAX;
 
@@ -19,8 +21,19 @@ pub fn note(addr: u32) {
     ECC_ADDR.store(addr, Ordering::SeqCst);
 }
 
-/// The pending ECC error's absolute flash address, if any, clearing it.
+/// The pending ECC error's absolute flash address, if any, clearing it. Also clears a corrected
+/// single error (ECCC) the read left behind: while it stands, FLASH_ECCR keeps its address and
+/// latches none for a later double error (RM0351 "Error code correction"), so the NMI handler
+/// would name the corrected word instead of the torn one (a torn write leaves single errors too).
 pub fn take() -> Option<u32> {
+    let eccr = FLASH.eccr().read();
+    if eccr.eccc() {
+        // Write-1-to-clear; ECCD written 0 (the NMI handler owns it), ECCIE kept.
+        FLASH.eccr().write(|w| {
+            w.set_eccc(true);
+            w.set_eccie(eccr.eccie());
+        });
+    }
     match ECC_ADDR.swap(NONE, Ordering::SeqCst) {
         NONE => None,
         addr => Some(addr),

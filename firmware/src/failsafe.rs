@@ -123,9 +123,14 @@ unsafe fn NonMaskableInt() {
     if eccr.eccd() {
         let addr = board::FLASH_BASE + if eccr.bk_ecc() { BANK_SIZE } else { 0 } + eccr.addr_ecc();
         if board::PERSIST_ADDRESSES.contains(&addr) {
-            // ECCD is write-1-to-clear; ECCC is too and is written 0 (left alone), ECCIE kept.
+            // ECCD and ECCC are write-1-to-clear, and both are cleared (ECCIE kept): while
+            // either is set the flash latches no new address (RM0351 "Error code correction":
+            // "When ECCC or ECCD is set, ADDR_ECC and BK_ECC are not updated if a new ECC error
+            // occurs"), so a corrected error left standing would name its own address for the
+            // next double error, and the store would repair the wrong word.
             FLASH.eccr().write(|w| {
                 w.set_eccd(true);
+                w.set_eccc(true);
                 w.set_eccie(eccr.eccie());
             });
             crate::ecc::note(addr);
