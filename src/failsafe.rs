@@ -275,40 +275,6 @@ pub fn unexpected_interrupt_info(irqn: i16) -> StopInfo {
     StopInfo::new(StopKind::UnexpectedInterrupt, 0, 0, irqn as i32 as u32)
 }
 
-/// The heartbeat of the fail-loud alarm: a level that toggles once per *completed* control
-/// step and holds still otherwise. The board drives it into a retriggerable monostable (README,
-/// wiring) whose output, only while edges keep arriving, silences the buzzer and allows the
-/// modules' supply: a hung, reset or dead MCU stops the edges, the buzzer sounds and cooling
-/// stops, whatever state its pins are left in.
-///
-/// "Healthy" is the glue's verdict that the step completed. It is not withheld for an alarm:
-/// the monostable also gates the supply, and a heat alarm must not stop cooling. The firmware's
-/// own alarm pin is ORed into the buzzer for the alarms the step raises.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Heartbeat {
-    level: bool,
-}
-
-impl Heartbeat {
-    /// A heartbeat at low level.
-    pub const fn new() -> Self {
-        Heartbeat { level: false }
-    }
-
-    /// The level after a step: toggled if the step was healthy, unchanged otherwise.
-    pub fn beat(&mut self, healthy: bool) -> bool {
-        if healthy {
-            self.level = !self.level;
-        }
-        self.level
-    }
-
-    /// The present level.
-    pub fn level(&self) -> bool {
-        self.level
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -388,14 +354,6 @@ mod tests {
         r.text[0] = b'A';
         r.crc = r.crc();
         assert_eq!(r.peek().map(|i| i.detail), Some(7));
-    }
-
-    #[test]
-    fn heartbeat_stops_with_the_loop() {
-        let mut hb = Heartbeat::new();
-        let healthy: [bool; 6] = [true, true, true, false, false, true];
-        let levels: [bool; 6] = healthy.map(|h| hb.beat(h));
-        assert_eq!(levels, [true, false, true, true, true, false]);
     }
 
     #[test]

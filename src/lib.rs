@@ -18,8 +18,8 @@
 //!   for the firmware, the processor-in-the-loop runner and the simulator.
 //! - [`ident`]: ARX/ARMAX structures, LS/RLS/RELS estimators, PRBS, validation.
 //! - [`event`]: timestamped events the step reports (sensor faults, guard actions, mode changes).
-//! - [`failsafe`]: the safe-outputs seam, the reset-surviving reason record and the heartbeat
-//!   of the fail-loud alarm.
+//! - [`failsafe`]: the safe-outputs seam and the reset-surviving reason record (the fail-loud
+//!   alarm's heartbeat is the firmware's `board::heartbeat_pulse`, simulated by `hal-sim`).
 //! - [`hal`]: the small hardware seams the firmware and `hal-sim` implement.
 //! - [`step`]: the per-sample application step: convert, check, control, guard, actuate.
 //! - [`supervisor`]: the safety supervisor the step runs: its mode, and one detector per file

@@ -319,9 +319,12 @@ impl SimSsr {
     }
 }
 
-/// The board's heartbeat watchdog: a retriggerable monostable (a 74HC123-style one-shot) fed
-/// by the heartbeat output, which a healthy control loop toggles once per step
-/// ([`hter::failsafe::Heartbeat`]). Each edge retriggers it; while it runs its output closes
+/// The board's heartbeat watchdog: a retriggerable monostable (a 74HC123 on its B input) fed
+/// by the heartbeat output, which a healthy control loop pulses once per step (the firmware's
+/// `board::heartbeat_pulse`). Only a rising edge retriggers it, as the 74HC123's function table
+/// has it (B rising with A low): a level toggled once per step gave it a trigger every 2·Ts,
+/// past its timeout, where a pulse gives one every Ts ([`Monostable::input`]). While it runs its
+/// output closes
 /// the supply-enable switch's gate (in series with the MCU's supply-enable pin) and keeps the
 /// alarm hardware silent. When the edges stop it expires: the switch opens (cooling stops
 /// whatever duty the hung MCU's timer still drives) and the alarm sounds (powered and driven
@@ -332,6 +335,8 @@ pub struct Monostable {
     /// Pulse length, s.
     pub timeout_s: f64,
     last_trigger_s: Option<f64>,
+    /// The trigger input's level (low at power-up: the pull-down).
+    level: bool,
 }
 
 impl Monostable {
@@ -342,12 +347,22 @@ impl Monostable {
 
     /// Not yet triggered.
     pub fn new(timeout_s: f64) -> Self {
-        Monostable { timeout_s, last_trigger_s: None }
+        Monostable { timeout_s, last_trigger_s: None, level: false }
     }
 
-    /// A heartbeat edge at `t_s`.
-    pub fn trigger(&mut self, t_s: f64) {
-        self.last_trigger_s = Some(t_s);
+    /// The trigger input goes to `level` at `t_s`: a rising edge retriggers the pulse, a falling
+    /// one does nothing.
+    pub fn input(&mut self, level: bool, t_s: f64) {
+        if level && !self.level {
+            self.last_trigger_s = Some(t_s);
+        }
+        self.level = level;
+    }
+
+    /// One heartbeat pulse at `t_s` (the firmware's ≈ 10 µs high, then low): one rising edge.
+    pub fn pulse(&mut self, t_s: f64) {
+        self.input(true, t_s);
+        self.input(false, t_s);
     }
 
     /// Whether the pulse is still running at `t_s` (supply gate closed, alarm silent).
@@ -445,11 +460,29 @@ mod tests {
         let mut m = Monostable::new(Monostable::TIMEOUT_S);
         assert!(!m.is_running(0.0), "not triggered at power-up");
         for k in 0..10 {
-            m.trigger(k as f64 * 10.0);
+            m.pulse(k as f64 * 10.0);
             assert!(m.is_running(k as f64 * 10.0 + 9.99));
         }
         assert!(m.is_running(104.9) && !m.is_running(105.0));
         assert_eq!(m.expiry_s(), Some(105.0));
+    }
+
+    /// A 74HC123 triggers on one edge polarity: a level toggled once per 10 s step (the old
+    /// heartbeat) rises every 20 s, and the 15 s pulse lapses for 5 s of every 20 (the healthy
+    /// board's supply opened and its buzzer sounded); a pin stuck high gives no edge at all.
+    #[test]
+    fn a_toggled_level_lets_the_monostable_lapse() {
+        let mut m = Monostable::new(Monostable::TIMEOUT_S);
+        let mut level = false;
+        let mut lapsed_s = 0;
+        for k in 0..100u32 {
+            level = !level;
+            m.input(level, f64::from(k) * 10.0);
+            lapsed_s += (0..10).filter(|s| !m.is_running(f64::from(k * 10 + s))).count();
+        }
+        assert_eq!(lapsed_s, 50 * 5, "5 s of every 20");
+        m.input(true, 1000.0);
+        assert!(!m.is_running(1020.0), "a pin stuck high gives no edge");
     }
 
     #[test]

@@ -10,8 +10,8 @@
 //! The board around the step is simulated too: the duty is cleared of the ADC's conversion
 //! window ([`hter::adc::SampleWindow::clear_duty`]) and the RTD is converted at that fixed
 //! phase ([`SamplePhase`]); the supply divider and the switched-rail sense are read every
-//! sample; the heartbeat ([`hter::failsafe::Heartbeat`]) toggles once per step into the
-//! board's [`crate::periph::Monostable`], whose expiry opens the supply switch and sounds the
+//! sample; the heartbeat pulses once per completed step (the firmware's `board::heartbeat_pulse`)
+//! into the board's [`crate::periph::Monostable`], whose expiry opens the supply switch and sounds the
 //! alarm hardware (`alarm_hw`): the only thing that stops cooling when the step stops being
 //! called (`--fault firmware-hang@T`).
 //!

@@ -4,7 +4,6 @@
 
 use anyhow::{bail, Result};
 use hter::control::Controller;
-use hter::failsafe::Heartbeat;
 use hter::hal::{apply_duty, RtdSampler};
 use hter::step::{BoardReadings, Carrier, StepInput, StepOutput};
 use hter::units::Celsius;
@@ -111,7 +110,7 @@ impl Rig {
                 let _ = apply_duty(ssr, duty);
                 board.supply_pin = out.supply_enable;
                 board.pulse_asked = out.switch_test && out.supply_enable;
-                // A completed step: the heartbeat toggles, the monostable restarts.
+                // A completed step: the heartbeat pulses, the monostable restarts.
                 board.beat(t_s);
                 ssr.set_supply_enabled(board.supply_on(t_s));
                 ssr.effective_duty()
@@ -279,12 +278,11 @@ impl Rig {
     }
 }
 
-/// The board's fail-safe hardware around the MCU: the supply-enable pin's last level, the
-/// heartbeat output and the monostable it feeds, which gates the supply switch.
+/// The board's fail-safe hardware around the MCU: the supply-enable pin's last level and the
+/// monostable the heartbeat pulses feed, which gates the supply switch.
 #[derive(Clone, Debug)]
 pub(super) struct Board {
     supply_pin: bool,
-    heartbeat: Heartbeat,
     mono: Monostable,
     /// The last output asked for a supply-switch test pulse (with the switch closed).
     pulse_asked: bool,
@@ -301,7 +299,6 @@ impl Board {
     fn new() -> Self {
         Board {
             supply_pin: true,
-            heartbeat: Heartbeat::new(),
             mono: Monostable::new(Monostable::TIMEOUT_S),
             pulse_asked: false,
             pulse_taken: false,
@@ -349,11 +346,8 @@ impl Board {
         self.supply_pin && self.mono.is_running(t_s)
     }
 
-    /// One healthy step at `t_s`: the heartbeat toggles, and its edge retriggers the monostable.
+    /// One healthy step at `t_s`: the heartbeat's pulse retriggers the monostable.
     fn beat(&mut self, t_s: f64) {
-        let before = self.heartbeat.level();
-        if self.heartbeat.beat(true) != before {
-            self.mono.trigger(t_s);
-        }
+        self.mono.pulse(t_s);
     }
 }
