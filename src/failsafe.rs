@@ -275,6 +275,20 @@ pub fn unexpected_interrupt_info(irqn: i16) -> StopInfo {
     StopInfo::new(StopKind::UnexpectedInterrupt, 0, 0, irqn as i32 as u32)
 }
 
+/// RCC_CSR's OBLRSTF (RM0351, RCC_CSR bit 25): the reset was the option-byte loader's.
+pub const CSR_OBLRSTF: u32 = 1 << 25;
+
+/// Whether the boot should program the brown-out level into the option bytes (which reloads them
+/// and resets the chip): the level is below the one the board needs, the supply is above the
+/// PVD level (a write cut by a brown-out can leave the option bytes inconsistent), and this boot
+/// is not the reset that very load caused (`csr` is RCC_CSR as read at boot, [`CSR_OBLRSTF`]).
+/// After a load that did not take (option bytes write-protected, a programming error), trying
+/// again at every boot would be a boot loop that never cools and writes the option bytes each
+/// time; the board runs at the level it has and the boot log says so.
+pub fn program_bor_level(level: u8, needed: u8, supply_ok: bool, csr: u32) -> bool {
+    level < needed && supply_ok && csr & CSR_OBLRSTF == 0
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -354,6 +368,18 @@ mod tests {
         r.text[0] = b'A';
         r.crc = r.crc();
         assert_eq!(r.peek().map(|i| i.detail), Some(7));
+    }
+
+    /// The brown-out level is programmed once: not below the PVD level, not when it is already
+    /// high enough, and not again on the reset its own option-byte load caused (a load that did
+    /// not take looped the boot for ever, never cooling).
+    #[test]
+    fn the_brown_out_level_is_programmed_once() {
+        const PIN_RESET: u32 = 1 << 26;
+        assert!(program_bor_level(0, 3, true, PIN_RESET));
+        assert!(!program_bor_level(0, 3, false, PIN_RESET), "supply below the PVD level");
+        assert!(!program_bor_level(3, 3, true, PIN_RESET) && !program_bor_level(4, 3, true, 0));
+        assert!(!program_bor_level(0, 3, true, CSR_OBLRSTF | PIN_RESET), "after its own load");
     }
 
     #[test]

@@ -340,9 +340,11 @@ pub struct PowerCheck {
 
 /// Enables the PVD at [`config::PVD_LEVEL`] and checks the brown-out level; a board below
 /// [`config::BOR_LEVEL`] has its option bytes reprogrammed, which reloads them and resets (so
-/// this returns only when the level is right, or when the supply is too low to program now).
-/// Call after `init` (PWR's clock) and before the flash store is opened.
-pub fn power_check() -> PowerCheck {
+/// this returns only when the level is right, when the supply is too low to program now, when
+/// the programming failed, or on the reset of a load that did not take:
+/// `hter::failsafe::program_bor_level`, `csr` is RCC_CSR as read at boot). Call after `init`
+/// (PWR's clock) and before the flash store is opened.
+pub fn power_check(csr: u32) -> PowerCheck {
     pac::RCC.apb1enr1().modify(|w| w.set_pwren(true));
     pac::PWR.cr2().modify(|w| {
         w.set_pls(pac::pwr::vals::Pls::from_bits(config::PVD_LEVEL));
@@ -353,7 +355,7 @@ pub fn power_check() -> PowerCheck {
     cortex_m::asm::delay(80_000);
     let bor_level = pac::FLASH.optr().read().bor_lev();
     let supply_ok = supply_ok();
-    if bor_level < config::BOR_LEVEL && supply_ok {
+    if hter::failsafe::program_bor_level(bor_level, config::BOR_LEVEL, supply_ok, csr) {
         defmt::warn!(
             "brown-out level {} below {}: programming the option bytes (resets)",
             bor_level,
@@ -388,6 +390,18 @@ fn program_bor_level(level: u8) {
     flash.optr().modify(|w| w.set_bor_lev(level));
     flash.cr().modify(|w| w.set_optstrt(true));
     while flash.sr().read().bsy() {}
+    // A refused or failed write (write protection, a programming error): no load, which would
+    // reset into the same state; lock again and boot at the level there is (`power_check`'s
+    // caller logs it).
+    if flash.sr().read().0 & 0x0000_C3FA != 0 {
+        flash.sr().write_value(pac::flash::regs::Sr(0x0000_C3FA));
+        flash.cr().modify(|w| {
+            w.set_optlock(true);
+            w.set_lock(true);
+        });
+        defmt::warn!("brown-out level: the option bytes were not programmed; running at the old level");
+        return;
+    }
     flash.cr().modify(|w| w.set_obl_launch(true));
     // OBL_LAUNCH resets the chip; should it not, the watchdog does.
     loop {

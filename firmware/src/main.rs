@@ -124,18 +124,18 @@ async fn main(spawner: Spawner) {
     // Why we (re)started; the flags are cleared so the next boot reads its own. The step reports
     // it with the first sample and the history counts it (a brown-out or watchdog bite shows in
     // the log and the cold-chain record as a gap, not as silence).
-    let reset = {
+    let (reset, csr) = {
         let rcc = embassy_stm32::pac::RCC;
         let csr = rcc.csr().read().0;
         rcc.csr().modify(|w| w.set_rmvf(true));
-        ResetCause::from_stm32l4_csr(csr)
+        (ResetCause::from_stm32l4_csr(csr), csr)
     };
     let fault = failsafe::take_reason();
     let b = board::init();
     if let Some(f) = &fault {
         error!("board fault: {}", f);
     }
-    let power = board::power_check();
+    let power = board::power_check(csr);
     let watchdog = if board::watchdog_is_hardware() { "hardware (option byte)" } else { "software" };
     // One boot line (the reset, the watchdog, the power check, the firmware's settings): each
     // defmt call costs flash, and the 64 KiB builds have none to spare.
