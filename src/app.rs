@@ -404,6 +404,23 @@ impl App {
         self.cabinet
     }
 
+    /// The records region was erased (the storage layer found it corrupt and the persist task
+    /// wiped it to write again): queues once more what nothing stores on a cadence — the
+    /// settings when any were stored, the cabinet model — and the history now rather than at
+    /// its next hourly store. Without it a corrupt region lost the setpoint, the calibration
+    /// and the cabinet model for good (they are written only when they change). The model
+    /// record comes back with the self-tuner's next store.
+    pub fn records_erased(&mut self) {
+        if self.settings.seq != 0 {
+            self.save(Save::Settings(self.settings));
+        }
+        #[cfg(feature = "holdover")]
+        if let Some(rec) = self.cabinet.as_ref().and_then(crate::persist::CabinetRecord::from_model) {
+            self.save(Save::Cabinet(rec));
+        }
+        self.save(Save::History(self.recorder.history()));
+    }
+
     fn save(&mut self, save: Save) {
         if self.outbox.is_full() {
             self.outbox.pop_front();

@@ -416,6 +416,10 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
         for a in out.raised.iter().flatten() {
             log_alarm(a);
         }
+        if persist::RECORDS_ERASED.swap(false, Ordering::Relaxed) {
+            warn!("flash records region erased: settings and models stored again");
+            app.records_erased();
+        }
         while let Some(save) = app.next_save() {
             persist::request(save);
         }

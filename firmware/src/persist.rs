@@ -138,6 +138,11 @@ fn with_pending<R>(f: impl FnOnce(&mut PendingSaves, &mut WriteGate) -> R) -> R 
 
 static WAKE: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
+/// The records region was erased after the storage layer found it corrupt: the control task
+/// hands the application's records over again ([`hter::app::App::records_erased`]).
+#[cfg(feature = "interface")]
+pub static RECORDS_ERASED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+
 /// What the boot restored: the persist task sends it once, `main` waits for it. A one-slot
 /// channel, not a `Signal`: a signal's empty state is a niche value inside `Restored`, which
 /// puts all 324 bytes of it in `.data` (flash); the channel's empty state is all zeros (`.bss`):
@@ -214,8 +219,9 @@ fn report(r: &Restored) {
 
 /// Restores, then stores each requested record the write gate lets through (and, with the
 /// interface, streams the log for `history`). A region the storage layer finds corrupt is
-/// erased once and written again (what it held is lost either way; the next requests rewrite
-/// the rest).
+/// erased once and written again (what it held is lost either way): the model and the history
+/// come back with their next stores, and in the interface build the settings and the cabinet
+/// model, which are stored only when they change, are handed over again ([`RECORDS_ERASED`]).
 #[embassy_executor::task]
 pub async fn persist(flash: Peri<'static, FLASH>) {
     let flash = RefCell::new(Flash::new_blocking(flash));
@@ -276,6 +282,11 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
                 if result.is_ok() {
                     #[cfg(feature = "interface")]
                     {
+                        // The settings and the cabinet model went with the region: the control
+                        // task queues them again (`App::records_erased`).
+                        if !matches!(save, Save::Log(_)) {
+                            RECORDS_ERASED.store(true, core::sync::atomic::Ordering::Relaxed);
+                        }
                         result = flash::write(&mut store, &mut log, &save).await;
                     }
                     #[cfg(not(feature = "interface"))]

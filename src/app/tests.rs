@@ -568,6 +568,32 @@ fn a_boot_with_many_repaired_pages_still_stores_its_history() {
     assert_eq!(h.resets_by(ResetCause::Other), 1);
 }
 
+/// A records region erased because the storage layer found it corrupt: the settings and the
+/// cabinet model, which nothing stores again unless they change, are queued once more with the
+/// history; a board that never stored settings stores none.
+#[test]
+fn an_erased_records_region_gets_the_settings_and_models_back() {
+    let mut b = Bench::new(&boot());
+    b.run(1);
+    b.saves.clear();
+    b.app.records_erased();
+    b.drain();
+    assert!(matches!(b.saves[..], [Save::History(_)]), "nothing set yet: {:?}", b.saves);
+    assert_eq!(b.send("set setpoint_c 5.5"), "ok\r\n");
+    assert_eq!(b.send("set model -1.904667,0.904945;-0.012378,-0.0001;6"), "ok\r\n");
+    b.saves.clear();
+    b.app.records_erased();
+    b.drain();
+    let settings = b.saves.iter().find_map(|s| match s {
+        Save::Settings(s) => Some(*s),
+        _ => None,
+    });
+    assert_eq!(settings.map(|s| s.setpoint_c), Some(5.5), "{:?}", b.saves);
+    #[cfg(feature = "holdover")]
+    assert!(b.saves.iter().any(|s| matches!(s, Save::Cabinet(_))), "{:?}", b.saves);
+    assert!(b.saves.iter().any(|s| matches!(s, Save::History(_))));
+}
+
 #[test]
 fn the_log_gets_intervals_events_and_continues_its_record_time_after_a_reset() {
     let mut b = Bench::new(&Boot { log_last_s: 86_400, reset: ResetCause::BrownOut, ..boot() });
