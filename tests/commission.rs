@@ -448,3 +448,35 @@ fn the_control_model_delay_is_bounded_by_the_sensor_chain() {
         assert_eq!(out.metrics.freeze_guard_trips, 0);
     }
 }
+
+/// Commissioning drives the duty open loop for hours: started with the load at an edge of the
+/// setpoint range (2.5 or 7.5 °C), the PRBS took H-TER I's full load to 1.64 °C (114 samples
+/// below 2 °C until the freeze guard tripped) or to 9.2 °C (540 samples above 8 °C, and the run
+/// ended `done`); an ambient rise of 10 °C 50 minutes in held the load above 8 °C for 3.9 h. The
+/// run now ends on the first reading outside 2–8 °C, and the law takes over.
+#[test]
+fn a_run_that_takes_the_load_out_of_2_to_8_c_ends_there() {
+    let cfg = CommissionConfig::DEFAULT;
+    let want = Some(Err(CommissionError::Fault(FaultKind::OutOfBand)));
+    for (load_c, ambient_step) in [(2.5, None), (7.5, None), (4.0, Some(38.0)), (4.0, Some(18.0))] {
+        let mut bench = Bench::holding(PlantParams::hter1(Load::Full), 28.0, load_c, cfg);
+        let mut seen = Vec::new();
+        for n in 0..cfg.max_total_samples() {
+            if n == 300 {
+                if let Some(a) = ambient_step {
+                    bench.plant.set_ambient_c(a);
+                }
+            }
+            let ((_, _, y), mode) = bench.sample();
+            seen.push((y, mode));
+            if bench.commissioning().outcome().is_some() {
+                break;
+            }
+        }
+        let what = format!("held at {load_c} °C, ambient to {ambient_step:?}");
+        assert_eq!(bench.commissioning().outcome(), want, "{what}");
+        let (last, before) = seen.split_last().unwrap();
+        assert!(before.iter().all(|(y, m)| (2.0..=8.0).contains(y) && *m == Mode::Normal), "{what}");
+        assert!(!(2.0..=8.0).contains(&last.0) && last.1 == Mode::Normal, "{what}: {last:?}");
+    }
+}

@@ -15,6 +15,7 @@
 //!    │                       │  └─output did not move─────────────▶ Failed(no excitation)
 //!    │                       │                      └─check fails─▶ Failed(reason)
 //!    └───────────────────────┴──── abort(reason) at any time ─────▶ Failed(reason)
+//!    └─── the load outside 2…8 °C in any phase (BAND_LOW_C, BAND_HIGH_C) ─▶ Failed(out of band)
 //! ```
 //!
 //! - **Rest**: holds `u0` (the duty the board applied when commissioning began) for
@@ -127,6 +128,12 @@ use crate::step::Mode;
 
 /// Most samples the record holds (rest + one PRBS period): the default 60 + 127·12 = 1584 fit.
 pub const CAPACITY: usize = 1600;
+
+/// The vaccine band, °C: a run ends ([`FaultKind::OutOfBand`]) on the first trusted reading
+/// outside it, in any phase (the annunciator's out-of-range test, [`crate::alarm`]).
+pub const BAND_LOW_C: f32 = 2.0;
+/// The band's upper edge, °C ([`BAND_LOW_C`]).
+pub const BAND_HIGH_C: f32 = 8.0;
 
 /// Delays scanned, samples (as `hter identify --nk auto`: 1…10).
 pub const MAX_DELAY: usize = 10;
@@ -281,6 +288,10 @@ pub enum FaultKind {
     Overridden,
     /// The temperature left the record's range (±32 °C around its first sample) or was not finite.
     OutputRange,
+    /// The load left the vaccine band [`BAND_LOW_C`]…[`BAND_HIGH_C`]: the run drives the duty
+    /// open loop (the rest, the PRBS, the fit's hold), so a load it takes out of the band (a
+    /// start near an edge, an ambient change, a lid opening) is handed back to the law at once.
+    OutOfBand,
 }
 
 /// Why commissioning gave no model.
@@ -303,7 +314,7 @@ pub enum CommissionError {
 
 impl CommissionError {
     /// Every failure, in the order of their codes ([`CommissionError::code`]).
-    pub const ALL: [CommissionError; 21] = [
+    pub const ALL: [CommissionError; 22] = [
         CommissionError::Config(ConfigProblem::Rest),
         CommissionError::Config(ConfigProblem::Prbs),
         CommissionError::Config(ConfigProblem::Amplitude),
@@ -326,6 +337,7 @@ impl CommissionError {
         CommissionError::Aborted,
         // Appended: the codes above are in logs already written.
         CommissionError::Implausible(Implausibility::NotMonotone),
+        CommissionError::Fault(FaultKind::OutOfBand),
     ];
 
     /// A stable number for the failure (the cold-chain log's entry): its index in [`Self::ALL`].
@@ -361,6 +373,7 @@ impl CommissionError {
                 FaultKind::LimpHome => "fault_limp_home",
                 FaultKind::Overridden => "fault_overridden",
                 FaultKind::OutputRange => "fault_output_range",
+                FaultKind::OutOfBand => "fault_out_of_band",
             },
             CommissionError::Aborted => "aborted",
         }
@@ -400,6 +413,7 @@ impl CommissionError {
                 FaultKind::LimpHome => "fault during the run: SSR shorted, limp home",
                 FaultKind::Overridden => "fault during the run: the excitation was overridden too often",
                 FaultKind::OutputRange => "fault during the run: temperature out of the record's range",
+                FaultKind::OutOfBand => "fault during the run: the load left 2-8 °C",
             },
             CommissionError::Aborted => "aborted on request",
         }
@@ -1362,6 +1376,12 @@ impl Controller for Commissioning {
     }
 
     fn track(&mut self, input: &ControlInput, applied: f32) {
+        // Open loop in every phase: a load outside the band goes back to the law now (a
+        // non-finite reading is the record's `OutputRange`).
+        let running = matches!(self.state, State::Rest | State::Excite | State::Fit(_));
+        if running && input.y_c.is_finite() && !(BAND_LOW_C..=BAND_HIGH_C).contains(&input.y_c) {
+            return self.fail(CommissionError::Fault(FaultKind::OutOfBand));
+        }
         if matches!(self.state, State::Rest | State::Excite) {
             self.record(input.y_c, applied);
         }
@@ -1381,10 +1401,16 @@ mod tests {
     /// Runs `c` on the ideal plant `m` (deviation y around 4 °C, u around u0), applying the
     /// duty as asked, until it finishes; returns the samples it took.
     fn run_on(c: &mut Commissioning, m: &Model, u0: f32) -> usize {
+        run_from(c, m, u0, 4.0, |_| 0.0)
+    }
+
+    /// [`run_on`] around `base_c`, with `drift(t)` °C added to the output at sample t (an
+    /// ambient change the model does not explain).
+    fn run_from(c: &mut Commissioning, m: &Model, u0: f32, base_c: f32, drift: impl Fn(usize) -> f32) -> usize {
         let mut y = [0.0f32; 2];
         let mut u = [0.0f32; 16];
         for t in 0..5000usize {
-            let yt = 4.0 + y[0];
+            let yt = base_c + y[0] + drift(t);
             let input = ControlInput { y_c: yt, ..INPUT };
             let d = c.update(&input).unwrap();
             c.track(&input, d);
@@ -1497,6 +1523,28 @@ mod tests {
         c.abort(CommissionError::Aborted);
         assert_eq!(c.phase(), Phase::Failed(CommissionError::Fault(FaultKind::FreezeGuard)));
         assert_eq!(c.update(&INPUT), Ok(0.4));
+    }
+
+    /// The run drives the duty open loop: a load it takes out of 2…8 °C ends it on that
+    /// sample, in the excitation (a start near an edge: from 2.5 °C the PRBS took H-TER I's
+    /// full load to 1.64 °C, 19 minutes below 2 °C until the freeze guard tripped; from 7.5 °C to
+    /// 9.2 °C for 1.5 h, and the run ended `done`) and in the fit's hold (an ambient rise).
+    #[test]
+    fn a_load_leaving_the_band_ends_the_run_in_any_phase() {
+        let truth = two_lags(5);
+        let out_of_band = Some(Err(CommissionError::Fault(FaultKind::OutOfBand)));
+        for base in [2.5f32, 7.5] {
+            let mut c = Commissioning::new(CommissionConfig::DEFAULT, 10.0, 0.45).unwrap();
+            let n = run_from(&mut c, &truth, 0.45, base, |_| 0.0);
+            assert_eq!(c.outcome(), out_of_band, "from {base} °C");
+            assert!(n < CommissionConfig::DEFAULT.record_samples(), "{n}");
+        }
+        // The record is fine; the load warms past 8 °C while the fit holds u0.
+        let record = CommissionConfig::DEFAULT.record_samples();
+        let mut c = Commissioning::new(CommissionConfig::DEFAULT, 10.0, 0.45).unwrap();
+        let n = run_from(&mut c, &truth, 0.45, 4.0, |t| if t > record + 20 { 5.0 } else { 0.0 });
+        assert_eq!(c.outcome(), out_of_band);
+        assert_eq!(n, record + 22);
     }
 
     #[test]
