@@ -383,9 +383,11 @@ impl App {
     }
 
     /// `m` (checked by the caller with [`plausible_model`]) becomes the model the self-tuner
-    /// starts from (the caller stores it in the model record).
+    /// starts from (the caller stores it in the model record), with the start's P(0): a board
+    /// booted from its record runs `resumed_from` it (P(0) = `RESUMED_P0`), which a
+    /// commissioned or uploaded model must not inherit.
     fn adopt_control(&mut self, m: Model) {
-        self.adaptive = self.adaptive.restored_from(m);
+        self.adaptive = AdaptiveConfig { rls: self.cfg.adaptive.rls, ..self.adaptive }.restored_from(m);
     }
 
     /// `m` (checked by the caller with [`cabinet_plausible`]) becomes the cabinet model: the

@@ -1190,3 +1190,33 @@ fn a_setting_keeps_the_calibration_the_board_booted_with() {
     let restarted = error(&mut again);
     assert!(restarted.abs() < 0.02, "the restart dropped the calibration: the reading is {restarted} °C off");
 }
+
+/// A board that booted from its stored model record runs the self-tuner resumed from it, with
+/// P(0) = `RESUMED_P0`·I (0.01: the record is a model that self-tuner trusted). A commissioned
+/// model starts the self-tuner with the start's P(0) (`control::adaptive`, "Resumed from a
+/// stored model"), whether the board booted with a record or not; the commissioned model took
+/// the boot's 0.01 instead, and adapted 100× slower than on a blank board.
+#[test]
+fn a_commissioned_model_starts_the_self_tuner_with_the_starts_p0_after_a_resumed_boot() {
+    let mut resumed = boot();
+    resumed.adaptive = Some(profile::ADAPTIVE_GPC.resumed_from(profile::START_MODEL_HTER1));
+    let start_p0 = profile::ADAPTIVE_GPC.rls.p0;
+    assert_ne!(resumed.adaptive.unwrap().rls.p0, start_p0);
+    let mut b = Bench::new(&resumed);
+    b.dither = true;
+    b.run(400);
+    assert_eq!(b.send("identify"), "ok\r\n");
+    let mut n = 0;
+    while b.field("commissioning") != "done" {
+        b.run(20);
+        n += 20;
+        assert!(n < 3000, "commissioning={}", b.field("commissioning"));
+    }
+    assert_eq!(b.app.adaptive.initial.map(|m| m.k()), b.field("model_k").parse().ok());
+    assert_eq!(b.app.adaptive.rls.p0, start_p0);
+    // `set model` restarts the self-tuner from the model it uploads in the same way.
+    let mut b = Bench::new(&resumed);
+    b.run(10);
+    assert_eq!(b.send("set model -1.859405,0.859802;-0.014713,-0.003021;8"), "ok\r\n");
+    assert_eq!(b.app.adaptive.rls.p0, start_p0);
+}
