@@ -68,6 +68,12 @@ const DUTY_WEIGHT: f32 = 10.0 / 150.0;
 /// 60 samples (4 time constants, too much: an estimate 5–10 % off on ū alone), 1.5 % at 90.
 pub const SETTLE_SAMPLES: u32 = 90;
 
+/// A sweep under way aims again at the present crossing when the present r = (8 − T₀)/ū is
+/// below this fraction of the sweep's: the ripple of ū (±3 %) and of the reading (H-TER I's
+/// ±0.2 °C around 4 °C, ±5 % of 8 − T₀) leave it
+/// where it is.
+const STALE_R: f32 = 0.8;
+
 /// A sweep of the model's unit-step response under way.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Sweep {
@@ -111,7 +117,7 @@ impl Holdover {
         self.estimate_s
     }
 
-    /// A sweep is under way (the next [`Holdover::update`] does not read its `start`).
+    /// A sweep is under way.
     pub fn sweeping(&self) -> bool {
         self.sweep.is_some()
     }
@@ -123,9 +129,9 @@ impl Holdover {
 
     /// One sample: the duty the modules got this sample `duty`; `holding`: the controller
     /// drives (the step's [`crate::step::Mode::Normal`]; otherwise no estimate, and none for
-    /// [`SETTLE_SAMPLES`] samples after); `start`, when no sweep is under way: the model and the temperature T₀ to start the next one from (`None` for a
-    /// controller without a model, or an untrusted reading: no sweep starts). Returns the
-    /// estimate.
+    /// [`SETTLE_SAMPLES`] samples after); `start`: the model and the temperature T₀ to start the
+    /// next sweep from, or to check a sweep under way against (`None` for a controller without
+    /// a model, or an untrusted reading: no sweep starts). Returns the estimate.
     #[inline(never)]
     pub fn update(&mut self, duty: f32, holding: bool, start: Option<(&Model, f32)>, ts_s: f32) -> Option<f32> {
         self.duty_f += DUTY_WEIGHT * (duty - self.duty_f);
@@ -142,6 +148,25 @@ impl Holdover {
             return None;
         }
         let horizon = (HORIZON_S / ts_s) as u32;
+        // A sweep runs for up to a sixth of the time it finds (6 h for the horizon), showing the
+        // last estimate meanwhile: when the present T₀ and ū cross sooner than the sweep's start
+        // did (the ambient rose, the load warmed), the sweep aims at the present crossing, from
+        // the start again if it has already passed it.
+        if let (Some(s), Some((m, t0))) = (self.sweep, start) {
+            if LIMIT_C - t0 < STALE_R * s.r * self.duty_avg {
+                match self.begin(m, t0) {
+                    Ok(new) => {
+                        let same = new.a == s.a && new.b == s.b && new.k == s.k;
+                        self.sweep = Some(if same && -s.h[0] < new.r { Sweep { r: new.r, ..s } } else { new });
+                    }
+                    Err(e) => {
+                        self.sweep = None;
+                        self.estimate_s = e;
+                        return e;
+                    }
+                }
+            }
+        }
         let mut sweep = match self.sweep {
             Some(s) => s,
             None => match start {
@@ -409,6 +434,34 @@ mod tests {
         let mut h = settled(0.5);
         assert_eq!(h.update(0.5, true, Some((&heat, 4.0)), 10.0), None);
         assert_eq!(h.update(0.5, true, None, 10.0), None);
+    }
+
+    #[test]
+    fn a_sweep_under_way_follows_a_rise_of_the_mean_duty() {
+        // H-TER II's start model (G = −44.9 °C, slow pole 0.997: τ ≈ 55 min) holding 4 °C at
+        // ū = 0.0902 (a cool room): the model's ambient is 4 + 0.0902·44.9 = 8.05 °C, its
+        // crossing ≈ τ ln(4.05/0.05) ≈ 4 h out, and a sweep runs for a sixth of what it finds.
+        // The duty then rises to 0.6 (the room warmed). 120 samples on (20 min: the mean has
+        // kept 0.2 % of its start) the estimate must be the one the estimator settles on at 0.6
+        // (itself checked against closed forms above); the sweep begun on 0.0902 showed the
+        // cool room's 4 h throughout, and again when it finished, 31 min after it began.
+        let m = crate::profile::START_MODEL_HTER2;
+        let right = settle(m, 0.6, 4.0, 10.0);
+        let mut h = settled(0.0902);
+        let long = loop {
+            if let Some(e) = h.update(0.0902, true, Some((&m, 4.0)), 10.0) {
+                break e;
+            }
+        };
+        assert!(long > 10.0 * right, "{long} s at 0.0902, {right} s at 0.6");
+        h.update(0.0902, true, Some((&m, 4.0)), 10.0);
+        assert!(h.sweeping());
+        let mut est = None;
+        for _ in 0..120 {
+            est = h.update(0.6, true, Some((&m, 4.0)), 10.0);
+        }
+        let est = est.unwrap();
+        assert!((est - right).abs() <= 0.02 * right, "{est} s shown, {right} s at 0.6 (the cool room's {long} s)");
     }
 
     #[test]

@@ -434,10 +434,9 @@ impl<C: Controller> Carrier<C> {
     fn holdover(&mut self, duty: f32, supply_enable: bool, mode: Mode, trusted: bool, temp_c: f32) -> Option<f32> {
         // What the modules got: nothing with the supply switch open.
         let applied = if supply_enable { duty } else { 0.0 };
-        let start = match self.holdover.sweeping() {
-            false if trusted => self.holdover_model.as_ref().map(|m| (m, temp_c)),
-            _ => None,
-        };
+        // Every sample, a sweep under way too: one started on another T₀ and ū is stale once
+        // they move ([`crate::holdover`]).
+        let start = if trusted { self.holdover_model.as_ref().map(|m| (m, temp_c)) } else { None };
         // Only a controller holding the load gives the mean duty a meaning: a sensor fault or
         // the freeze guard stops cooling, limp home's thermostat cycles full cooling on a
         // cycle longer than the mean's memory (`hter sim --scenario power-cut --fault
