@@ -252,11 +252,12 @@ fn each_model_of_the_board_run_is_what_its_rule_alone_gives() {
     assert_eq!(both - record, (n_every - record) + (n_mono - record) - hter::ident::commission::GRID_PASSES);
 }
 
-/// The modules' supply is cut: the duty reaches nothing, the load (at ambient) does not move.
+/// The modules' supply is cut: the duty reaches nothing, the load (at ambient, a 5 °C room)
+/// does not move. In a 28 °C room the same load is out of 2–8 °C, and the run ends at once.
 #[test]
 fn no_excitation_when_the_load_does_not_respond() {
     let cfg = CommissionConfig::DEFAULT;
-    let mut plant = Plant::at_ambient(PlantParams::hter1(Load::Full), 28.0);
+    let mut plant = Plant::at_ambient(PlantParams::hter1(Load::Full), 5.0);
     plant.set_supply_v(0.0);
     let mut bench = Bench::new(plant, 0.4, cfg);
     let (_, samples) = bench.run(cfg.max_total_samples() + 10);
@@ -264,6 +265,12 @@ fn no_excitation_when_the_load_does_not_respond() {
     // Found at the end of the excitation, before any fit.
     assert_eq!(samples, cfg.record_samples());
     assert_eq!(CommissionError::NoExcitation.name(), "no_excitation");
+    let mut warm = Plant::at_ambient(PlantParams::hter1(Load::Full), 28.0);
+    warm.set_supply_v(0.0);
+    let mut bench = Bench::new(warm, 0.4, cfg);
+    let (_, samples) = bench.run(cfg.max_total_samples() + 10);
+    assert_eq!(bench.commissioning().outcome(), Some(Err(CommissionError::Fault(FaultKind::OutOfBand))));
+    assert!(samples < 10, "{samples}");
 }
 
 /// The supply is cut at the start from 4 °C: the load warms by itself toward ambient, which no
