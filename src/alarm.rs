@@ -115,7 +115,7 @@ impl Annunciator {
         let t = out.temp_c.0;
         if out.mode.not_in_control() || self.shorted {
             Indication::NotInControl
-        } else if !(2.0..=8.0).contains(&t) {
+        } else if !crate::coldchain::IN_RANGE_C.contains(&t) {
             Indication::OutOfRange
         } else if self.latched {
             Indication::Unacknowledged

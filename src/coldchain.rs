@@ -41,6 +41,10 @@
 
 use crate::units::{max_f32, min_f32};
 
+/// The vaccine band, °C: in range when 2 ≤ T ≤ 8 (the alarm indicator's out-of-range test,
+/// commissioning's end of a run that leaves it).
+pub const IN_RANGE_C: core::ops::RangeInclusive<f32> = 2.0..=8.0;
+
 /// ΔH/R of the mean kinetic temperature, K (83 144 / 8.314).
 pub const MKT_DH_OVER_R_K: f32 = 83_144.0 / 8.314;
 const T_REF_K: f32 = 278.15;

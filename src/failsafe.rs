@@ -285,7 +285,7 @@ pub const CSR_OBLRSTF: u32 = 1 << 25;
 /// After a load that did not take (option bytes write-protected, a programming error), trying
 /// again at every boot would be a boot loop that never cools and writes the option bytes each
 /// time; the board runs at the level it has and the boot log says so.
-pub fn program_bor_level(level: u8, needed: u8, supply_ok: bool, csr: u32) -> bool {
+pub fn bor_needs_programming(level: u8, needed: u8, supply_ok: bool, csr: u32) -> bool {
     level < needed && supply_ok && csr & CSR_OBLRSTF == 0
 }
 
@@ -376,10 +376,10 @@ mod tests {
     #[test]
     fn the_brown_out_level_is_programmed_once() {
         const PIN_RESET: u32 = 1 << 26;
-        assert!(program_bor_level(0, 3, true, PIN_RESET));
-        assert!(!program_bor_level(0, 3, false, PIN_RESET), "supply below the PVD level");
-        assert!(!program_bor_level(3, 3, true, PIN_RESET) && !program_bor_level(4, 3, true, 0));
-        assert!(!program_bor_level(0, 3, true, CSR_OBLRSTF | PIN_RESET), "after its own load");
+        assert!(bor_needs_programming(0, 3, true, PIN_RESET));
+        assert!(!bor_needs_programming(0, 3, false, PIN_RESET), "supply below the PVD level");
+        assert!(!bor_needs_programming(3, 3, true, PIN_RESET) && !bor_needs_programming(4, 3, true, 0));
+        assert!(!bor_needs_programming(0, 3, true, CSR_OBLRSTF | PIN_RESET), "after its own load");
     }
 
     #[test]

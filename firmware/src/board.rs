@@ -342,7 +342,7 @@ pub struct PowerCheck {
 /// [`config::BOR_LEVEL`] has its option bytes reprogrammed, which reloads them and resets (so
 /// this returns only when the level is right, when the supply is too low to program now, when
 /// the programming failed, or on the reset of a load that did not take:
-/// `hter::failsafe::program_bor_level`, `csr` is RCC_CSR as read at boot). Call after `init`
+/// `hter::failsafe::bor_needs_programming`, `csr` is RCC_CSR as read at boot). Call after `init`
 /// (PWR's clock) and before the flash store is opened.
 pub fn power_check(csr: u32) -> PowerCheck {
     pac::RCC.apb1enr1().modify(|w| w.set_pwren(true));
@@ -355,7 +355,7 @@ pub fn power_check(csr: u32) -> PowerCheck {
     cortex_m::asm::delay(80_000);
     let bor_level = pac::FLASH.optr().read().bor_lev();
     let supply_ok = supply_ok();
-    if hter::failsafe::program_bor_level(bor_level, config::BOR_LEVEL, supply_ok, csr) {
+    if hter::failsafe::bor_needs_programming(bor_level, config::BOR_LEVEL, supply_ok, csr) {
         defmt::warn!(
             "brown-out level {} below {}: programming the option bytes (resets)",
             bor_level,
@@ -370,6 +370,10 @@ pub fn power_check(csr: u32) -> PowerCheck {
 pub fn supply_ok() -> bool {
     !pac::PWR.sr2().read().pvdo()
 }
+
+/// FLASH_SR's error flags (OPERR, PROGERR, WRPERR, PGAERR, SIZERR, PGSERR, MISERR, FASTERR, RDERR,
+/// OPTVERR; RM0351 FLASH_SR), each write-1-to-clear.
+const FLASH_SR_ERRORS: u32 = 0x0000_C3FA;
 
 /// Writes BOR_LEV into FLASH_OPTR and launches the option-byte load, which resets the chip
 /// (RM0351 "Option bytes programming"). Unverified on silicon. Only called with the supply above
@@ -386,15 +390,15 @@ fn program_bor_level(level: u8) {
     }
     while flash.sr().read().bsy() {}
     // Clear every error flag (write 1): a stale one would refuse the start.
-    flash.sr().write_value(pac::flash::regs::Sr(0x0000_C3FA));
+    flash.sr().write_value(pac::flash::regs::Sr(FLASH_SR_ERRORS));
     flash.optr().modify(|w| w.set_bor_lev(level));
     flash.cr().modify(|w| w.set_optstrt(true));
     while flash.sr().read().bsy() {}
     // A refused or failed write (write protection, a programming error): no load, which would
     // reset into the same state; lock again and boot at the level there is (`power_check`'s
     // caller logs it).
-    if flash.sr().read().0 & 0x0000_C3FA != 0 {
-        flash.sr().write_value(pac::flash::regs::Sr(0x0000_C3FA));
+    if flash.sr().read().0 & FLASH_SR_ERRORS != 0 {
+        flash.sr().write_value(pac::flash::regs::Sr(FLASH_SR_ERRORS));
         flash.cr().modify(|w| {
             w.set_optlock(true);
             w.set_lock(true);

@@ -15,7 +15,7 @@
 //!    │                       │  └─output did not move─────────────▶ Failed(no excitation)
 //!    │                       │                      └─check fails─▶ Failed(reason)
 //!    └───────────────────────┴──── abort(reason) at any time ─────▶ Failed(reason)
-//!    └─── the load outside 2…8 °C in any phase (BAND_LOW_C, BAND_HIGH_C) ─▶ Failed(out of band)
+//!    └─── the load outside 2…8 °C in any phase (coldchain::IN_RANGE_C) ─▶ Failed(out of band)
 //! ```
 //!
 //! - **Rest**: holds `u0` (the duty the board applied when commissioning began) for
@@ -128,12 +128,6 @@ use crate::step::Mode;
 
 /// Most samples the record holds (rest + one PRBS period): the default 60 + 127·12 = 1584 fit.
 pub const CAPACITY: usize = 1600;
-
-/// The vaccine band, °C: a run ends ([`FaultKind::OutOfBand`]) on the first trusted reading
-/// outside it, in any phase (the annunciator's out-of-range test, [`crate::alarm`]).
-pub const BAND_LOW_C: f32 = 2.0;
-/// The band's upper edge, °C ([`BAND_LOW_C`]).
-pub const BAND_HIGH_C: f32 = 8.0;
 
 /// Delays scanned, samples (as `hter identify --nk auto`: 1…10).
 pub const MAX_DELAY: usize = 10;
@@ -288,7 +282,7 @@ pub enum FaultKind {
     Overridden,
     /// The temperature left the record's range (±32 °C around its first sample) or was not finite.
     OutputRange,
-    /// The load left the vaccine band [`BAND_LOW_C`]…[`BAND_HIGH_C`]: the run drives the duty
+    /// The load left the vaccine band [`crate::coldchain::IN_RANGE_C`]: the run drives the duty
     /// open loop (the rest, the PRBS, the fit's hold), so a load it takes out of the band (a
     /// start near an edge, an ambient change, a lid opening) is handed back to the law at once.
     OutOfBand,
@@ -1379,7 +1373,7 @@ impl Controller for Commissioning {
         // Open loop in every phase: a load outside the band goes back to the law now (a
         // non-finite reading is the record's `OutputRange`).
         let running = matches!(self.state, State::Rest | State::Excite | State::Fit(_));
-        if running && input.y_c.is_finite() && !(BAND_LOW_C..=BAND_HIGH_C).contains(&input.y_c) {
+        if running && input.y_c.is_finite() && !crate::coldchain::IN_RANGE_C.contains(&input.y_c) {
             return self.fail(CommissionError::Fault(FaultKind::OutOfBand));
         }
         if matches!(self.state, State::Rest | State::Excite) {
