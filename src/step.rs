@@ -201,13 +201,13 @@ impl<C: Controller> Carrier<C> {
     /// Gives the step every reading the board took besides the RTD, for the next sample: what
     /// the glue calls before [`Self::step`] (the firmware's control task, the board application
     /// [`crate::app::App::sample`], the simulator and the processor-in-the-loop runner alike).
+    ///
+    /// A supply or switched-rail reading missing from `r` is missing for this sample: its check
+    /// waits for the next reading rather than judging an older one (a rail read with the switch
+    /// closed and judged as if read with it open is a false "supply switch shorted").
     pub fn observe(&mut self, r: &BoardReadings) {
-        if let Some(v) = r.supply_v {
-            self.observe_supply_v(v);
-        }
-        if let Some(v) = r.switched_v {
-            self.observe_switched_rail_v(v);
-        }
+        self.supervisor.observe_supply_v(r.supply_v);
+        self.supervisor.observe_switched_rail_v(r.switched_v);
         #[cfg(feature = "module-sense")]
         if let Some(v) = r.module_v {
             self.observe_module_v(v);
@@ -221,7 +221,7 @@ impl<C: Controller> Carrier<C> {
     /// sample (boards with a divider on the supply rail call it every sample; without it the
     /// supply-sag check is off).
     pub fn observe_supply_v(&mut self, v: f32) {
-        self.supervisor.observe_supply_v(v);
+        self.supervisor.observe_supply_v(Some(v));
     }
 
     /// Gives the step the switched supply rail — the modules' supply measured *after* the
@@ -230,7 +230,7 @@ impl<C: Controller> Carrier<C> {
     /// commanded open is [`EventKind::SupplySwitchShorted`]. Without this call (a board without
     /// the sense, a replayed trace) there is no check and no test pulse.
     pub fn observe_switched_rail_v(&mut self, v: f32) {
-        self.supervisor.observe_switched_rail_v(v);
+        self.supervisor.observe_switched_rail_v(Some(v));
     }
 
     /// Gives the step the voltage across the modules — the SSR's load side, read in the

@@ -136,3 +136,42 @@ fn below_the_floor_with_nothing_asked_the_supply_switch_opens_too() {
     }
     panic!("the guard and the SSR checks never saw the fall");
 }
+
+#[test]
+fn a_missing_rail_or_supply_reading_is_no_reading_not_the_last_one() {
+    // The switch opens below the floor with nothing asked (the test above). A board whose
+    // switched-rail readings go missing there (a VREFINT conversion reading 0: `None`) must not
+    // have the rail it read with the switch closed judged as the rail with it open.
+    let floor = CarrierConfig::DEFAULT.supervisor.freeze.idle_open_c;
+    let run = |rail_when_open: Option<f32>, supply_after: fn(u32) -> Option<f32>| {
+        let mut c = pi_carrier();
+        let (mut events, mut open) = (Vec::new(), 0);
+        for k in 0..60u32 {
+            let open_phase = k >= 30;
+            let temp = if open_phase { floor - 0.1 } else { floor + 0.05 };
+            let supply_v = if open_phase { supply_after(k - 30) } else { Some(12.0) };
+            let switched_v = if open_phase { rail_when_open } else { Some(12.0) };
+            c.observe(&BoardReadings { supply_v, switched_v, ..BoardReadings::default() });
+            let o =
+                c.step(&StepInput { t_ms: u64::from(k) * 10_000, counts: counts_at(temp) + k % 3, setpoint_c: 4.0 });
+            assert_eq!(o.mode, Mode::Normal, "sample {k}");
+            open += u32::from(!o.supply_enable);
+            events.extend(kinds(&o));
+        }
+        // Open for most of the cold half: long enough for the check to judge the rail.
+        assert!(open >= 20, "{open} samples open");
+        events
+    };
+    // The check works here: a rail read powered with the switch open is a short…
+    let good: fn(u32) -> Option<f32> = |_| Some(12.0);
+    assert_eq!(run(Some(12.0), good), [EventKind::SupplySwitchShorted]);
+    // …and one read dead is none.
+    assert_eq!(run(Some(0.0), good), []);
+    // No reading is no judgement: the rail read before the switch opened is not judged.
+    assert_eq!(run(None, good), []);
+    // A supply sag is three readings below the minimum; one low reading and then none is not
+    // one (every later sample judged that one reading again)…
+    assert_eq!(run(Some(0.0), |k| if k == 0 { Some(10.0) } else { None }), []);
+    // …three are, missing readings between them or not.
+    assert_eq!(run(Some(0.0), |k| if k % 2 == 0 && k < 6 { Some(10.0) } else { None }), [EventKind::SupplySag]);
+}

@@ -460,13 +460,13 @@ impl Supervisor {
         self.state.sensor_fault().is_none()
     }
 
-    /// The measured module supply for the next sample, V.
-    pub(crate) fn observe_supply_v(&mut self, v: f32) {
+    /// The measured module supply for the next sample, V (`None`: not read).
+    pub(crate) fn observe_supply_v(&mut self, v: Option<f32>) {
         self.supply.observe(v);
     }
 
-    /// The switched supply rail for the next sample, V.
-    pub(crate) fn observe_switched_rail_v(&mut self, v: f32) {
+    /// The switched supply rail for the next sample, V (`None`: not read).
+    pub(crate) fn observe_switched_rail_v(&mut self, v: Option<f32>) {
         self.switch.observe(v);
     }
 

@@ -40,9 +40,10 @@ impl SupplyMonitor {
         SupplyMonitor { sag_n: samples_u8(cfg.sag_s, ts_s), v: None, low_run: 0, reported: false }
     }
 
-    /// Takes the measured supply for the next sample, V.
-    pub(crate) fn observe(&mut self, v: f32) {
-        self.v = Some(v);
+    /// Takes the measured supply for the next sample, V (`None`: not read: no check this
+    /// sample, and the run of low samples neither grows nor ends).
+    pub(crate) fn observe(&mut self, v: Option<f32>) {
+        self.v = v;
     }
 
     /// The last measured supply, V.
@@ -76,7 +77,7 @@ mod tests {
     fn sags(m: &mut SupplyMonitor, volts: &[f32]) -> Vec<usize> {
         let mut out = Vec::new();
         for (k, v) in volts.iter().enumerate() {
-            m.observe(*v);
+            m.observe(Some(*v));
             let mut n = 0;
             m.run(&SupplyConfig::DEFAULT, &mut |e| {
                 assert_eq!(e, EventKind::SupplySag);

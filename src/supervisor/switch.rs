@@ -131,9 +131,10 @@ impl SwitchCheck {
         self.held = held;
     }
 
-    /// Takes the switched rail measured for the next sample, V.
-    pub(crate) fn observe(&mut self, v: f32) {
-        self.rail_v = Some(v);
+    /// Takes the switched rail measured for the next sample, V (`None`: not read: no judgement
+    /// and no test pulse this sample).
+    pub(crate) fn observe(&mut self, v: Option<f32>) {
+        self.rail_v = v;
     }
 
     /// Takes the switched rail read at the end of a test pulse, V, for the next sample.
@@ -195,7 +196,7 @@ mod tests {
 
     /// One sample: the rail reads `rail_v`, the check runs, then the output `enable`.
     fn sample(c: &mut SwitchCheck, rail_v: f32, supply_v: Option<f32>, enable: bool) -> bool {
-        c.observe(rail_v);
+        c.observe(Some(rail_v));
         let mut found = false;
         c.check(&SwitchConfig::DEFAULT, supply_v, &mut |e| {
             assert_eq!(e, EventKind::SupplySwitchShorted);
@@ -236,7 +237,7 @@ mod tests {
         let mut pulsed = false;
         (0..n)
             .filter(|_| {
-                c.observe(11.9);
+                c.observe(Some(11.9));
                 if pulsed {
                     c.observe_pulse(0.01);
                 }
