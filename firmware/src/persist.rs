@@ -10,7 +10,8 @@
 //! [`HISTORY_PIPE`]).
 //!
 //! Writes wait for [`hter::persist::WriteGate`]: the supply (the control task's [`note_supply`]
-//! every sample) good for 60 s since boot and good now, or good now for an alarm record. Until
+//! every sample, and PVDO read again before each record) good for 60 s since boot and good
+//! now, or good now for an alarm record. Until
 //! then requests wait in [`hter::persist::PendingSaves`] (the newest record of each kind, every
 //! log entry), so a board in a power-bounce loop never writes (and never tears a word). Reads
 //! go through the stores' ECC repair: the NMI handler notes a double ECC error in either region
@@ -266,7 +267,17 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
         #[cfg(not(feature = "interface"))]
         WAKE.wait().await;
         loop {
-            let next = with_pending(|pending, gate| pending.next(gate, now_ms()));
+            // VDD now, not only at the last sample (up to 10 s old): a supply that has just
+            // fallen under the PVD level closes the gate before this record, not after it. It is
+            // not a sample for the gate's freshness (a stalled control loop still stops writes).
+            let supply_ok = crate::board::supply_ok();
+            let next = with_pending(|pending, gate| {
+                let now = now_ms();
+                if !supply_ok {
+                    gate.note_supply(now, false);
+                }
+                pending.next(gate, now)
+            });
             let Some(save) = next else { break };
             #[cfg(feature = "interface")]
             let mut result = flash::write(&mut store, &mut log, &save).await;
