@@ -85,6 +85,26 @@ pub struct Boot {
     pub pages_lost: u8,
 }
 
+impl Boot {
+    /// How the boot's `history` (the stored one with this boot's reset, stop and repaired pages
+    /// counted) is stored: at once on a good supply, past the write gate's hold-off, when it
+    /// carries a fail-safe stop the stored history does not already have as its newest; behind
+    /// the hold-off otherwise. A board that faults within the hold-off of every boot (a panic in
+    /// the first steps, a stall) restarts before its boot's store: behind the hold-off, the
+    /// stop never reached the cold-chain record however often it repeated, though the next boot
+    /// found it in RAM each time (SPEC §7). The same stop again (a fault loop) waits as before,
+    /// so a loop does not write at every boot; a power bounce has no stop (RAM does not keep the
+    /// reason through a power loss, and the boot took it).
+    pub fn history_save(&self, history: HistoryRecord) -> Save {
+        let stop = self.fault.as_ref().map(crate::persist::LastStop::from);
+        if stop.is_some() && stop != self.history.last_stop {
+            Save::AlarmHistory(history)
+        } else {
+            Save::History(history)
+        }
+    }
+}
+
 /// One sample of the board's inputs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SampleIn {
@@ -335,7 +355,7 @@ impl App {
         }
         // The history before the events: more pages lost than the outbox holds drop events (the
         // history counts them all), never the boot's history.
-        let _ = app_saves.push_back(Save::History(history));
+        let _ = app_saves.push_back(boot.history_save(history));
         for _ in 0..boot.pages_lost {
             let _ = app_saves
                 .push_back(Save::Log(LogEntry::Event { t_s: (base_ms / 1000) as u32, kind: EventKind::FlashPageLost }));

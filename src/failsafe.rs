@@ -42,7 +42,9 @@ pub enum StopKind {
     /// An NMI not caused by the persistence region's flash ECC (clock security system, a
     /// double ECC error elsewhere in flash): `detail` = the source's status word.
     Nmi = 3,
-    /// An interrupt without a handler fired (`detail` = its exception number).
+    /// An interrupt without a handler fired (`detail` = its IRQ number as CMSIS counts it: the
+    /// exception number − 16, so TIM7 on the L476 is 55, and a core exception such as SysTick
+    /// is negative, −1, stored as a two's-complement word).
     UnexpectedInterrupt = 4,
     /// The control loop stopped making progress and the glue noticed before the watchdog did
     /// (`detail` = milliseconds since the last completed step).
@@ -83,7 +85,7 @@ pub struct StopInfo {
     pub pc: u32,
     /// Faulting data address, or 0 when none was latched.
     pub addr: u32,
-    /// Kind-specific word: the panic's line, CFSR, the NMI source's status, the exception number.
+    /// Kind-specific word: the panic's line, CFSR, the NMI source's status, the IRQ number.
     pub detail: u32,
     text: [u8; STOP_TEXT],
     text_len: u8,
@@ -269,8 +271,8 @@ pub fn nmi_info(pc: u32, source: u32) -> StopInfo {
     StopInfo::new(StopKind::Nmi, pc, 0, source)
 }
 
-/// The record of an interrupt that has no handler (`irqn` = its exception number, as
-/// cortex-m-rt's `DefaultHandler` receives it).
+/// The record of an interrupt that has no handler (`irqn` = its IRQ number as cortex-m-rt's
+/// `DefaultHandler` receives it: the exception number − 16, negative for a core exception).
 pub fn unexpected_interrupt_info(irqn: i16) -> StopInfo {
     StopInfo::new(StopKind::UnexpectedInterrupt, 0, 0, irqn as i32 as u32)
 }

@@ -169,14 +169,20 @@ pub fn start_watchdog() {
     iwdg.kr().write(|w| w.set_key(Key::ENABLE));
     iwdg.pr().write(|w| w.set_pr(Pr::from_bits(config::IWDG_PR)));
     iwdg.rlr().write(|w| w.set_rl(config::IWDG_RELOAD));
-    // PVU/RVU: the values cross into the LSI domain within a few LSI cycles; the running
-    // watchdog bounds the wait if the LSI is dead.
+    // PVU/RVU: the values cross into the LSI domain within a few LSI cycles. A dead LSI would
+    // hold this loop for good, and the watchdog with it (it counts the LSI): the pins stay as the
+    // reset left them (Hi-Z, the supply switch pulled open) and the monostable sounds the buzzer.
     while iwdg.sr().read().0 != 0 {}
     iwdg.kr().write(|w| w.set_key(Key::RESET));
     // Halted under a debugger, the watchdog would reset the chip between two steps; only debug
-    // builds freeze it, so a release board with a probe attached behaves as in the field.
-    #[cfg(debug_assertions)]
-    pac::DBGMCU.apb1fzr1().modify(|w| w.set_iwdg(true));
+    // builds freeze it, so a release board with a probe attached behaves as in the field. Written
+    // both ways: DBGMCU_APB1FZR1 is reset only by a power-on reset (RM0351, "Debug MCU APB1
+    // freeze register 1"), so a debug build or a tool that set DBG_IWDG_STOP (st-flash does when
+    // it flashes an L4, stlink's `stop_wdg_in_debug`; ST's OpenOCD board files, `STOP_WATCHDOG
+    // 1`) leaves it set through the flashing of a release image and every reset after it: a core
+    // halted then (a probe left halted, a laptop asleep on the debug port) would hold the
+    // watchdog too, with the SSR and the supply switch as they were.
+    pac::DBGMCU.apb1fzr1().modify(|w| w.set_iwdg(cfg!(debug_assertions)));
 }
 
 /// Feeds the watchdog.

@@ -136,6 +136,9 @@ async fn main(spawner: Spawner) {
         error!("board fault: {}", f);
     }
     let power = board::power_check(csr);
+    // The write gate's first supply reading: a boot's urgent store (a new fail-safe stop) need
+    // not wait for the first sample, which comes with the first step.
+    persist::note_supply(power.supply_ok);
     let watchdog = if board::watchdog_is_hardware() { "hardware (option byte)" } else { "software" };
     // One boot line (the reset, the watchdog, the power check, the firmware's settings): each
     // defmt call costs flash, and the 64 KiB builds have none to spare.
@@ -270,8 +273,9 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
             warn!("event queue full, dropped FlashPageLost");
         }
     }
-    // Waits for the write gate: a power-bounce loop does not write at every boot.
-    persist::request(persist::Save::History(history));
+    // Waits for the write gate: a power-bounce loop does not write at every boot; a new
+    // fail-safe stop goes at once (`Boot::history_save`), before the first step can stop again.
+    persist::request(boot.history_save(history));
     // A restart does not acknowledge: the latch is in the stored history.
     let mut annunciator = hter::alarm::Annunciator::restored(history.unacknowledged);
     info!("controller: {}", carrier.controller().name());
@@ -364,6 +368,11 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
 #[embassy_executor::task]
 async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
     let mut app = App::new(config::APP, &boot);
+    // The boot's history now, not after the first step: a new fail-safe stop in it is stored at
+    // once (`Boot::history_save`), before the first step can stop the board again.
+    while let Some(save) = app.next_save() {
+        persist::request(save);
+    }
     if boot.pages_lost > 0 {
         warn!("{} flash pages were torn by a power cut and repaired", boot.pages_lost);
     }

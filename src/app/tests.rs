@@ -559,13 +559,52 @@ fn a_boot_with_many_repaired_pages_still_stores_its_history() {
     let mut b = Bench::new(&Boot { pages_lost: 20, fault: Some(fault), ..boot() });
     b.drain();
     let h = b.saves.iter().find_map(|s| match s {
-        Save::History(h) => Some(*h),
+        Save::History(h) | Save::AlarmHistory(h) => Some(*h),
         _ => None,
     });
     let h = h.expect("the boot's history is handed over");
     assert_eq!(h.flash_pages_lost, 20);
     assert_eq!(h.stops_of(crate::failsafe::StopKind::HardFault), 1);
     assert_eq!(h.resets_by(ResetCause::Other), 1);
+}
+
+/// A board that stops within the write gate's hold-off of every boot (here a panic 20 s in,
+/// the same one each time: a fault loop) still gets the stop into the cold-chain record: the
+/// first boot that finds a stop the stored history lacks stores its history at once on a good
+/// supply; the same stop again waits for the hold-off, so the loop does not write at every boot;
+/// another stop goes at once again. Behind the hold-off, nothing of the loop reached flash.
+#[test]
+fn a_new_fail_safe_stop_reaches_the_record_before_the_next_stop() {
+    use crate::failsafe::{panic_info, StopInfo, StopKind};
+    use crate::persist::{LastStop, PendingSaves, WriteGate};
+    let panic = panic_info("src/step.rs", 417);
+    let hard_fault = StopInfo::new(StopKind::HardFault, 0x0800_1234, 0, 0x8200);
+    let mut stored = HistoryRecord::EMPTY;
+    let mut writes = Vec::new();
+    for (n, fault) in [panic; 10].into_iter().chain([hard_fault]).enumerate() {
+        let mut app = App::new(config(), &Boot { history: stored, fault: Some(fault), ..boot() });
+        let (mut gate, mut pending) = (WriteGate::firmware(), PendingSaves::EMPTY);
+        while let Some(s) = app.next_save() {
+            pending.put(s);
+        }
+        // A sample every Ts on a good supply, the first at boot (the PVD's reading), until the
+        // stop 20 s in.
+        for t in (0..20_000).step_by(10_000) {
+            gate.note_supply(t, true);
+            while let Some(s) = pending.next(&gate, t) {
+                if let Save::History(h) | Save::AlarmHistory(h) = s {
+                    stored = h;
+                    writes.push(n);
+                }
+            }
+        }
+    }
+    assert_eq!(writes, [0, 10], "the loop's first boot and the new stop's");
+    assert_eq!(stored.last_stop, Some(LastStop::from(&hard_fault)));
+    assert_eq!((stored.stops_of(StopKind::Panic), stored.stops_of(StopKind::HardFault)), (1, 1));
+    // No stop: behind the hold-off as before (a power bounce writes nothing).
+    let quiet = Boot { history: stored, ..boot() };
+    assert!(matches!(quiet.history_save(stored), Save::History(_)));
 }
 
 /// A records region erased because the storage layer found it corrupt: the settings and the
