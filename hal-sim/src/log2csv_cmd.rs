@@ -20,7 +20,8 @@
 //!   good reading, when the filter has nothing to hold) is kept as a *fault row*: `temp_c`
 //!   empty, every other cell (the mode, e.g. `sensor_fault`) as for any sample;
 //! - a log that spans resets is split into *boots*. A boot starts at the firmware's
-//!   `reset cause: Watchdog|BrownOut|Other` line, or, when that line was lost, where `t` stops
+//!   boot line (`hter firmware …: reset cause Watchdog|BrownOut|Other; …`; earlier firmware
+//!   printed `reset cause: …` on a line of its own), or, when that line was lost, where `t` stops
 //!   increasing. The board's clock restarts at 0 on every boot and the log has no wall clock,
 //!   so the length of the reset gap is unknown: each later boot's `t = 0` is placed one sample
 //!   period after the previous boot's last sample (the period from the boot line
@@ -149,10 +150,14 @@ fn named_field<T: Copy + std::fmt::Debug>(
     })
 }
 
-/// The event name of a `reset cause: …` line (the defmt of [`ResetCause`]); `Err` with the
-/// word when it names no known cause.
+/// The event name of a line with the reset cause (the defmt of [`ResetCause`]): the firmware's
+/// boot line `hter firmware …: reset cause BrownOut; watchdog …; Ts = 10 s, …`, or the
+/// `reset cause: BrownOut` line of earlier firmware; `Err` with the word when it names no
+/// known cause.
 fn reset_line(line: &str) -> Option<Result<&'static str, String>> {
-    let word = word_after(line, "reset cause:")?;
+    let at = line.find("reset cause")? + "reset cause".len();
+    let rest = line.get(at..)?.trim_start().trim_start_matches(':');
+    let word = rest.split_whitespace().next().unwrap_or("").trim_end_matches([';', ',']);
     let cause =
         [ResetCause::Watchdog, ResetCause::BrownOut, ResetCause::Other].into_iter().find(|c| format!("{c:?}") == word);
     Some(cause.map(|c| EventKind::Restarted(c).name()).ok_or_else(|| word.to_string()))
@@ -320,12 +325,17 @@ pub fn convert<I: IntoIterator<Item = std::io::Result<String>>>(lines: I) -> Res
     for (i, line) in lines.into_iter().enumerate() {
         let n = i + 1;
         let line = line.with_context(|| format!("line {n}: not text"))?;
-        if let Some(cause) = reset_line(&line) {
-            pending_reset = Some(understood(cause, "reset cause", n));
-            continue;
-        }
+        // A fail-safe stop's text is anything, "reset cause" included: its line first.
         if let Some(kind) = fault_line(&line) {
             pending_fault = Some(understood(kind, "board fault", n));
+            continue;
+        }
+        if let Some(cause) = reset_line(&line) {
+            pending_reset = Some(understood(cause, "reset cause", n));
+            // The firmware's one boot line carries the sample period too.
+            if let Some(ts) = period_line(&line) {
+                boot_period.get_or_insert(ts);
+            }
             continue;
         }
         if let Some(ts) = period_line(&line) {
@@ -604,6 +614,50 @@ t=10 temp=8 sp=4 duty=0.5 mode=Normal
         assert_eq!(text.lines().next(), Some(HEADER));
         assert_eq!(text.lines().nth(1), Some("0,4,,0,sensor_fault,,,,0,restarted_brownout,"));
         assert_eq!(text.lines().nth(2), Some("10,4,5,0.5,normal,,,,0,,"));
+    }
+
+    /// The boot line as the firmware prints it (every build's format string in
+    /// firmware/src/main.rs, its `{}` filled in): one line with the reset cause and the period.
+    /// Read only for a `reset cause:` line of its own, a real log's boots all came out `unknown`
+    /// (the first one with no cause) and a `hter report` of it named no watchdog restart.
+    #[test]
+    fn the_firmwares_boot_line_gives_each_boot_its_cause_and_the_period() {
+        let main = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../firmware/src/main.rs")).unwrap();
+        let formats: Vec<&str> =
+            main.split('"').filter(|s| s.starts_with("hter firmware {}: reset cause {};")).collect();
+        assert!(formats.len() >= 2, "the SSR and buck builds' boot lines: {formats:?}");
+        for format in formats {
+            let boot = |cause: &str| {
+                let values = ["0.1.0", cause, "software", "4", "4", "true", "10", "4", "1", "1000"];
+                let parts: Vec<&str> = format.split("{}").collect();
+                assert!(parts.len() <= values.len() + 1, "{format}");
+                let mut line = parts[0].to_owned();
+                for (v, p) in values.iter().zip(&parts[1..]) {
+                    line.push_str(v);
+                    line.push_str(p);
+                }
+                format!("0.000000 INFO  {line}\n")
+            };
+            let sample = |t: u32| format!("t={t} temp=4 sp=4 duty=0.5 mode=Normal\n");
+            let log = [boot("Other"), sample(0), sample(10), boot("BrownOut"), sample(0), boot("Watchdog"), sample(0)]
+                .concat();
+            assert!(log.contains("reset cause BrownOut; watchdog software;"), "{log}");
+            let c = convert(lines(&log)).unwrap();
+            let got: Vec<(f64, Option<&str>)> =
+                c.rows.iter().map(|r| (r.sample.t_s, r.reset_cause.as_deref())).collect();
+            assert_eq!(
+                got,
+                [
+                    (0.0, Some("restarted")),
+                    (10.0, None),
+                    (20.0, Some("restarted_brownout")),
+                    (30.0, Some("restarted_watchdog"))
+                ],
+                "{log}"
+            );
+            assert_eq!(c.joined, Some((2, 10.0, PeriodSource::BootLine)));
+            assert!(c.warnings.is_empty(), "{:?}", c.warnings);
+        }
     }
 
     #[test]
