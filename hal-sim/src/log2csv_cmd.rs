@@ -20,7 +20,8 @@
 //!   good reading, when the filter has nothing to hold) is kept as a *fault row*: `temp_c`
 //!   empty, every other cell (the mode, e.g. `sensor_fault`) as for any sample;
 //! - a log that spans resets is split into *boots*. A boot starts at the firmware's
-//!   `reset cause: Watchdog|BrownOut|Other` line, or, when that line was lost, where `t` stops
+//!   boot line (`hter firmware …: reset cause Watchdog|BrownOut|Other; …`; earlier firmware
+//!   printed `reset cause: …` on a line of its own), or, when that line was lost, where `t` stops
 //!   increasing. The board's clock restarts at 0 on every boot and the log has no wall clock,
 //!   so the length of the reset gap is unknown: each later boot's `t = 0` is placed one sample
 //!   period after the previous boot's last sample (the period from the boot line
@@ -33,7 +34,10 @@
 //! `restarted`, or `board_fault_panic` (…`_hard_fault`, `_nmi`, `_unexpected_interrupt`,
 //! `_control_stall`) when the boot reported a fail-safe stop (`board fault: Panic pc=…`);
 //! `unknown` for a boot found only by its time going back; empty on the first boot when the
-//! log began while the board was already running.
+//! log began while the board was already running. `events` holds the step's events (`event
+//! t=… SsrStuckOn` lines, which the firmware logs after the sample's telemetry line) on the
+//! sample they came with, by their library names (`ssr_stuck_on`), `;`-separated: what `hter
+//! report` lists with the resets and faults.
 
 use std::io::{BufRead, Write};
 use std::path::PathBuf;
@@ -53,13 +57,13 @@ pub struct Log2CsvArgs {
     #[arg(long)]
     pub input: PathBuf,
     /// Where to write the CSV (columns t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,
-    /// boot,reset_cause,holdover_s).
+    /// boot,reset_cause,holdover_s,events).
     #[arg(long)]
     pub output: PathBuf,
 }
 
 /// The CSV header `hter log2csv` writes.
-pub const HEADER: &str = "t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,boot,reset_cause,holdover_s";
+pub const HEADER: &str = "t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,boot,reset_cause,holdover_s,events";
 
 /// One telemetry sample.
 #[derive(Clone, Debug, PartialEq)]
@@ -95,6 +99,10 @@ pub struct Row {
     pub boot: u32,
     /// Why this boot started (first row of a boot only; see the module doc).
     pub reset_cause: Option<String>,
+    /// The step's events the firmware logged with this sample (`event t=… SsrStuckOn` lines after
+    /// its telemetry line), by their library names (`ssr_stuck_on`); the restart and the
+    /// fail-safe stop are the boot's `reset_cause`.
+    pub events: Vec<&'static str>,
 }
 
 /// Where the sample period used to join boots came from.
@@ -149,10 +157,14 @@ fn named_field<T: Copy + std::fmt::Debug>(
     })
 }
 
-/// The event name of a `reset cause: …` line (the defmt of [`ResetCause`]); `Err` with the
-/// word when it names no known cause.
+/// The event name of a line with the reset cause (the defmt of [`ResetCause`]): the firmware's
+/// boot line `hter firmware …: reset cause BrownOut; watchdog …; Ts = 10 s, …`, or the
+/// `reset cause: BrownOut` line of earlier firmware; `Err` with the word when it names no
+/// known cause.
 fn reset_line(line: &str) -> Option<Result<&'static str, String>> {
-    let word = word_after(line, "reset cause:")?;
+    let at = line.find("reset cause")? + "reset cause".len();
+    let rest = line.get(at..)?.trim_start().trim_start_matches(':');
+    let word = rest.split_whitespace().next().unwrap_or("").trim_end_matches([';', ',']);
     let cause =
         [ResetCause::Watchdog, ResetCause::BrownOut, ResetCause::Other].into_iter().find(|c| format!("{c:?}") == word);
     Some(cause.map(|c| EventKind::Restarted(c).name()).ok_or_else(|| word.to_string()))
@@ -164,6 +176,22 @@ fn fault_line(line: &str) -> Option<Result<&'static str, String>> {
     let word = word_after(line, "board fault:")?;
     let kind = StopKind::ALL.into_iter().find(|k| format!("{k:?}") == word);
     Some(kind.map(|k| EventKind::BoardFault(k).name()).ok_or_else(|| word.to_string()))
+}
+
+/// The step's event of an `event t=… SsrStuckOn` line (the defmt of [`EventKind`]): its time
+/// since the boot, s (`None` if unreadable), and its library name; `Err` with the word when it
+/// names no event. `None` for another line, and for the restart and the fail-safe stop, which
+/// the boot's `reset_cause` already carries.
+fn event_line(line: &str) -> Option<(Option<f64>, Result<&'static str, String>)> {
+    let rest = line.get(line.find("event t=")? + "event t=".len()..)?;
+    let mut words = rest.split_whitespace();
+    let t = words.next()?.parse::<f64>().ok().filter(|t| t.is_finite());
+    let word = words.next().unwrap_or("");
+    if word.starts_with("Restarted") || word.starts_with("BoardFault") {
+        return None;
+    }
+    let kind = EventKind::ALL.into_iter().find(|k| format!("{k:?}") == word || k.name() == word);
+    Some((t, kind.map(EventKind::name).ok_or_else(|| word.to_string())))
 }
 
 /// The cause recorded for a boot whose reset line was lost or not understood.
@@ -310,8 +338,9 @@ pub fn convert<I: IntoIterator<Item = std::io::Result<String>>>(lines: I) -> Res
     let mut boot_period: Option<f64> = None;
     let mut pending_reset: Option<&'static str> = None;
     let mut pending_fault: Option<&'static str> = None;
-    let mut warnings = Vec::new();
-    let mut understood = |found: Result<&'static str, String>, what: &str, n: usize| {
+    let mut pending_events: Vec<&'static str> = Vec::new();
+    let mut warnings: Vec<String> = Vec::new();
+    let understood = |warnings: &mut Vec<String>, found: Result<&'static str, String>, what: &str, n: usize| {
         found.unwrap_or_else(|word| {
             warnings.push(format!("line {n}: unknown {what} '{word}', recorded as '{UNKNOWN_CAUSE}'"));
             UNKNOWN_CAUSE
@@ -320,16 +349,35 @@ pub fn convert<I: IntoIterator<Item = std::io::Result<String>>>(lines: I) -> Res
     for (i, line) in lines.into_iter().enumerate() {
         let n = i + 1;
         let line = line.with_context(|| format!("line {n}: not text"))?;
-        if let Some(cause) = reset_line(&line) {
-            pending_reset = Some(understood(cause, "reset cause", n));
+        // A fail-safe stop's text is anything, "reset cause" included: its line first.
+        if let Some(kind) = fault_line(&line) {
+            pending_fault = Some(understood(&mut warnings, kind, "board fault", n));
             continue;
         }
-        if let Some(kind) = fault_line(&line) {
-            pending_fault = Some(understood(kind, "board fault", n));
+        if let Some(cause) = reset_line(&line) {
+            pending_reset = Some(understood(&mut warnings, cause, "reset cause", n));
+            // The firmware's one boot line carries the sample period too.
+            if let Some(ts) = period_line(&line) {
+                boot_period.get_or_insert(ts);
+            }
             continue;
         }
         if let Some(ts) = period_line(&line) {
             boot_period.get_or_insert(ts);
+            continue;
+        }
+        if let Some((t, found)) = event_line(&line) {
+            match found {
+                // The firmware logs a sample's events after its telemetry line: with the last
+                // sample of its boot at or after the event's time, else with the next sample.
+                Ok(name) => match rows.last_mut().filter(|r| {
+                    pending_reset.is_none() && pending_fault.is_none() && t.is_none_or(|t| t <= r.sample.t_s)
+                }) {
+                    Some(r) => r.events.push(name),
+                    None => pending_events.push(name),
+                },
+                Err(word) => warnings.push(format!("line {n}: unknown event '{word}', left out")),
+            }
             continue;
         }
         let Some(s) = parse_line(&line) else { continue };
@@ -355,7 +403,12 @@ pub fn convert<I: IntoIterator<Item = std::io::Result<String>>>(lines: I) -> Res
         };
         pending_reset = None;
         pending_fault = None;
-        rows.push(Row { sample: s, boot, reset_cause: cause.map(str::to_string) });
+        rows.push(Row {
+            sample: s,
+            boot,
+            reset_cause: cause.map(str::to_string),
+            events: std::mem::take(&mut pending_events),
+        });
     }
     if rows.is_empty() {
         bail!("no telemetry lines (t=… temp=… sp=… duty=…)");
@@ -397,7 +450,7 @@ pub fn csv_text(rows: &[Row]) -> String {
     for r in rows {
         let s = &r.sample;
         text.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{}\n",
             s.t_s,
             s.setpoint_c,
             opt(s.temp_c.map(|c| c.to_string())),
@@ -409,6 +462,7 @@ pub fn csv_text(rows: &[Row]) -> String {
             r.boot,
             r.reset_cause.as_deref().unwrap_or(""),
             opt(s.holdover_s.map(|v| v.to_string())),
+            r.events.join(";"),
         ));
     }
     text
@@ -502,13 +556,12 @@ mod tests {
         assert_eq!(parse_line(&nan).unwrap().unwrap().holdover_s, None);
         let bad = parse_line(&l.replace("holdover=412.5", "holdover=long")).unwrap();
         assert!(bad.unwrap_err().to_string().contains("holdover 'long' is not a number"));
-        // In the CSV: the last column, empty without an estimate.
+        // In the CSV: its column, empty without an estimate.
         let c = convert(lines(&format!("{l}\n{}", nan.replace("t=30 ", "t=40 ")))).unwrap();
         let text = csv_text(&c.rows);
         let cells: Vec<Vec<&str>> = text.lines().map(|r| r.split(',').collect()).collect();
-        assert_eq!(cells[0].last(), Some(&"holdover_s"));
-        assert_eq!(cells[1].last(), Some(&"412.5"));
-        assert_eq!(cells[2].last(), Some(&""));
+        let col = cells[0].iter().position(|h| *h == "holdover_s").unwrap();
+        assert_eq!((cells[1][col], cells[2][col]), ("412.5", ""));
     }
 
     #[test]
@@ -523,7 +576,7 @@ mod tests {
             }
         }
         let c = convert(lines(&line("LimpHome", "OutOfRange"))).unwrap();
-        assert_eq!(csv_text(&c.rows).lines().nth(1), Some("0,4,4,0,limp_home,1,12,out_of_range,0,,"));
+        assert_eq!(csv_text(&c.rows).lines().nth(1), Some("0,4,4,0,limp_home,1,12,out_of_range,0,,,"));
         let e = parse_line(&line("Limping", "Off")).unwrap().unwrap_err();
         assert!(e.to_string().contains("mode 'Limping' is none of Normal, SensorFault"), "{e}");
         let e = parse_line(&line("Normal", "On")).unwrap().unwrap_err();
@@ -602,8 +655,112 @@ t=10 temp=8 sp=4 duty=0.5 mode=Normal
         assert_eq!(c.joined, Some((3, 10.0, PeriodSource::BootLine)));
         let text = csv_text(&c.rows);
         assert_eq!(text.lines().next(), Some(HEADER));
-        assert_eq!(text.lines().nth(1), Some("0,4,,0,sensor_fault,,,,0,restarted_brownout,"));
-        assert_eq!(text.lines().nth(2), Some("10,4,5,0.5,normal,,,,0,,"));
+        assert_eq!(text.lines().nth(1), Some("0,4,,0,sensor_fault,,,,0,restarted_brownout,,"));
+        assert_eq!(text.lines().nth(2), Some("10,4,5,0.5,normal,,,,0,,,sensor_recovered"));
+        // An event logged ahead of its sample (t later than the last one) goes with the next.
+        let c = convert(lines(
+            "t=0 temp=4 sp=4 duty=0 mode=Normal\nevent t=10 LidOpen\nt=10 temp=4 sp=4 duty=0 mode=Normal\n",
+        ))
+        .unwrap();
+        assert_eq!((c.rows[0].events.clone(), c.rows[1].events.clone()), (vec![], vec!["lid_open"]));
+    }
+
+    /// The firmware logs each of the step's events after the sample's telemetry line (`WARN  event
+    /// t=10.000 SsrStuckOn`, firmware/src/main.rs). They were left out of the CSV, so `hter report`
+    /// of a firmware log listed its restarts and no fault: no "SERVICE NEEDED" for a shorted SSR
+    /// or an open probe, where the README says a `hter log2csv` output lists them.
+    #[test]
+    fn the_steps_events_reach_the_csv_and_the_report() {
+        let log = "\
+0.000000 INFO  hter firmware 0.1.0: reset cause BrownOut; watchdog software; Ts = 10 s, setpoint 4 °C
+WARN  event t=0.000 Restarted(BrownOut)
+t=0.000 temp=4.0 sp=4 duty=0.45 mode=Normal
+t=10.000 temp=4.1 sp=4 duty=0.45 mode=Normal
+WARN  event t=10.000 SsrStuckOn
+WARN  event t=10.000 FreezeGuardTripped
+t=20.000 temp=4.2 sp=4 duty=0.45 mode=LimpHome
+WARN  event t=20.000 Gremlin
+0.000000 INFO  hter firmware 0.1.0: reset cause Watchdog; watchdog software; Ts = 10 s, setpoint 4 °C
+WARN  event t=0.000 SensorOpen
+t=0.000 temp=NaN sp=4 duty=0 mode=SensorFault
+t=10.000 temp=NaN sp=4 duty=0 mode=SensorFault
+";
+        let c = convert(lines(log)).unwrap();
+        let got: Vec<(f64, Vec<&str>)> = c.rows.iter().map(|r| (r.sample.t_s, r.events.clone())).collect();
+        assert_eq!(
+            got,
+            [
+                (0.0, vec![]),
+                (10.0, vec!["ssr_stuck_on", "freeze_guard_tripped"]),
+                (20.0, vec![]),
+                (30.0, vec!["sensor_open"]),
+                (40.0, vec![]),
+            ]
+        );
+        assert_eq!(c.warnings, ["line 8: unknown event 'Gremlin', left out".to_string()]);
+        let text = csv_text(&c.rows);
+        assert_eq!(text.lines().nth(2), Some("10,4,4.1,0.45,normal,,,,0,,,ssr_stuck_on;freeze_guard_tripped"));
+        // What `hter monitor` and `hter report` read from it.
+        let p = std::env::temp_dir().join(format!("hter-log2csv-{}-events.csv", std::process::id()));
+        std::fs::write(&p, text).unwrap();
+        let input = crate::monitor_cmd::read_input(&p);
+        let page = crate::report_cmd::html(&p);
+        std::fs::remove_file(&p).unwrap();
+        let names: Vec<(f64, String)> = input.unwrap().events.into_iter().map(|e| (e.t_s, e.name)).collect();
+        let want = [
+            (0.0, "restarted_brownout"),
+            (10.0, "ssr_stuck_on"),
+            (10.0, "freeze_guard_tripped"),
+            (30.0, "restarted_watchdog"),
+            (30.0, "sensor_open"),
+        ];
+        assert_eq!(names, want.map(|(t, n)| (t, n.to_string())));
+        let page = page.unwrap();
+        assert!(page.contains("SERVICE NEEDED — 3 faults that need a service check, the first ssr_stuck_on"), "{page}");
+    }
+
+    /// The boot line as the firmware prints it (every build's format string in
+    /// firmware/src/main.rs, its `{}` filled in): one line with the reset cause and the period.
+    /// Read only for a `reset cause:` line of its own, a real log's boots all came out `unknown`
+    /// (the first one with no cause) and a `hter report` of it named no watchdog restart.
+    #[test]
+    fn the_firmwares_boot_line_gives_each_boot_its_cause_and_the_period() {
+        let main = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../firmware/src/main.rs")).unwrap();
+        let formats: Vec<&str> =
+            main.split('"').filter(|s| s.starts_with("hter firmware {}: reset cause {};")).collect();
+        assert!(formats.len() >= 2, "the SSR and buck builds' boot lines: {formats:?}");
+        for format in formats {
+            let boot = |cause: &str| {
+                let values = ["0.1.0", cause, "software", "4", "4", "true", "10", "4", "1", "1000"];
+                let parts: Vec<&str> = format.split("{}").collect();
+                assert!(parts.len() <= values.len() + 1, "{format}");
+                let mut line = parts[0].to_owned();
+                for (v, p) in values.iter().zip(&parts[1..]) {
+                    line.push_str(v);
+                    line.push_str(p);
+                }
+                format!("0.000000 INFO  {line}\n")
+            };
+            let sample = |t: u32| format!("t={t} temp=4 sp=4 duty=0.5 mode=Normal\n");
+            let log = [boot("Other"), sample(0), sample(10), boot("BrownOut"), sample(0), boot("Watchdog"), sample(0)]
+                .concat();
+            assert!(log.contains("reset cause BrownOut; watchdog software;"), "{log}");
+            let c = convert(lines(&log)).unwrap();
+            let got: Vec<(f64, Option<&str>)> =
+                c.rows.iter().map(|r| (r.sample.t_s, r.reset_cause.as_deref())).collect();
+            assert_eq!(
+                got,
+                [
+                    (0.0, Some("restarted")),
+                    (10.0, None),
+                    (20.0, Some("restarted_brownout")),
+                    (30.0, Some("restarted_watchdog"))
+                ],
+                "{log}"
+            );
+            assert_eq!(c.joined, Some((2, 10.0, PeriodSource::BootLine)));
+            assert!(c.warnings.is_empty(), "{:?}", c.warnings);
+        }
     }
 
     #[test]

@@ -213,8 +213,8 @@ pub fn carrier_alarms(events: &[Event]) -> Vec<AlarmOut> {
         .collect()
 }
 
-/// One event of a board history (`event` column) or a reset of a `hter log2csv` output
-/// (`reset_cause` column).
+/// One event of a board history (`event` column), or a reset or an event of a `hter log2csv`
+/// output (`reset_cause` and `events` columns).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Event {
     /// Time on the log's axis, s.
@@ -235,7 +235,7 @@ pub struct Input {
     pub extremes: Vec<Option<(f64, f64)>>,
     /// Events, in time order (empty when the file has neither column).
     pub events: Vec<Event>,
-    /// Whether the file has an `event` or `reset_cause` column (a file without one cannot say
+    /// Whether the file has an `event`, `reset_cause` or `events` column (a file without one cannot say
     /// that nothing happened).
     pub has_event_column: bool,
 }
@@ -243,7 +243,8 @@ pub struct Input {
 /// Reads a simulator CSV, a `hter log2csv` output or a board history (docs/interface.md): the
 /// `t_s` and `temp_c` columns; when an `event` column exists, a row with a non-empty `event` is
 /// an event, not a sample (its temperature cells only repeat the last interval's mean, or are
-/// empty); a non-empty `reset_cause` is a reset event at that (sample) row. Sample times must
+/// empty); a non-empty `reset_cause` is a reset event at that (sample) row, and each name in a
+/// non-empty `events` cell (`hter log2csv`: `ssr_stuck_on;lid_open`) an event there. Sample times must
 /// strictly increase and no row may go back in time. After a `log_entries_lost` event, the time
 /// from one interval past the sample row before it to the next sample row is no reading (a
 /// sample with no temperature is added there): those rows never reached flash.
@@ -258,6 +259,7 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
     let (t_all, temp_all) = (cols.next().unwrap_or_default(), cols.next().unwrap_or_default());
     let event_col = log::read_text(path, "event")?;
     let reset_col = log::read_text(path, "reset_cause")?;
+    let events_col = log::read_text(path, "events")?;
     let mode_col = log::read_text(path, "mode")?;
     // A board history's interval extremes; a file with one of the two columns is not one.
     let extremes = match (log::has_column(path, "min_c")?, log::has_column(path, "max_c")?) {
@@ -279,7 +281,7 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
         temp_c: Vec::new(),
         extremes: Vec::new(),
         events: Vec::new(),
-        has_event_column: event_col.is_some() || reset_col.is_some(),
+        has_event_column: event_col.is_some() || reset_col.is_some() || events_col.is_some(),
     };
     // The newest sample row's time and the newest row's of any kind.
     let (mut last_sample, mut last): (Option<f64>, Option<f64>) = (None, None);
@@ -329,6 +331,10 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
             // `hter log2csv` names the cause (`restarted_brownout`, …, or `unknown`).
             let name = if cause.starts_with("restarted") { cause } else { format!("restarted: {cause}") };
             input.events.push(Event { t_s: t, name });
+        }
+        // `hter log2csv`'s: the step's events logged with this sample, `;`-separated.
+        for name in cell(&events_col, i).iter().flat_map(|c| c.split(';')).filter(|n| !n.is_empty()) {
+            input.events.push(Event { t_s: t, name: name.to_owned() });
         }
         input.t_s.push(t);
         input.temp_c.push(c);

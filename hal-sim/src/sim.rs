@@ -474,6 +474,9 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
     let mut last_on = false;
     let mut next_change = 0;
     let mut energy0_wh = 0.0;
+    // The time the energy is counted over: the whole run, or up to the sample a power cut's
+    // run ends at (`power-cut` ends hours before its 50 h duration, once the load passes 8 °C).
+    let mut energy_s = n as f64 * ts;
     // The carrier's own record and alarm indicator, fed as the firmware feeds them: the
     // monitor sees what the sensor saw. A brown-out restarts the record from the history last
     // stored, as the board's boot does (what came after that store is lost with the RAM; an
@@ -564,6 +567,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             rows.push(Row::stepped(t_s, w, &out, sensed, d, indication, rig.view(t_s, opts.ambient_c)));
             held = Some((out, sensed.0, indication));
             if sc.cut.is_some_and(|c| c.passed(t_s, rig.true_temp_c())) {
+                energy_s = t_s;
                 break;
             }
         }
@@ -578,7 +582,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
         controller: name,
         tracking: metrics::tracking(&samples, ts),
         energy_wh: rig.energy_wh() - energy0_wh,
-        mean_power_w: metrics::mean_power_w(rig.energy_wh() - energy0_wh, n as f64 * ts),
+        mean_power_w: metrics::mean_power_w(rig.energy_wh() - energy0_wh, energy_s),
         ssr_switches: switches,
         alarms,
         faults_detected: faults,
@@ -609,4 +613,35 @@ fn holdover(rows: &[Row], cut: PowerCut) -> Holdover {
     let predicted_s = rows.iter().take_while(|r| r.t_s < cut.at_s).last().and_then(|r| r.holdover_s);
     let actual_s = rows.iter().find(|r| cut.passed(r.t_s, r.true_temp_c)).map(|r| r.t_s - cut.at_s);
     Holdover { predicted_s, actual_s }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `power-cut` ends once the load passes 8 °C, ≈ 2 h 8 min in, not at its 50 h duration: its
+    /// mean power is its energy over those 2 h 8 min. Over 50 h it read 1.13 W for a carrier
+    /// that drew 56.6 Wh holding 4 °C for 2 h (26.5 W; H-TER I holds 4 °C at 28 °C on ≈ 28 W,
+    /// `piecewise`'s 27.8 Wh in 1 h).
+    #[test]
+    fn a_power_cuts_mean_power_is_over_the_run_it_made() {
+        let sc = Scenario::resolve("power-cut").unwrap();
+        let full_s = sc.duration_s;
+        let out = run(&SimOptions::new(sc, ControllerSpec::new(ControllerChoice::Gpc))).unwrap();
+        let end_s = out.rows.last().unwrap().t_s;
+        assert!(end_s < 3.0 * 3600.0 && end_s < full_s, "{end_s}");
+        let m = &out.metrics;
+        assert!(
+            (m.mean_power_w - m.energy_wh * 3600.0 / end_s).abs() < 1e-9,
+            "{} W, {} Wh",
+            m.mean_power_w,
+            m.energy_wh
+        );
+        assert!((20.0..35.0).contains(&m.mean_power_w), "{} W", m.mean_power_w);
+        // A run without a cut: over its whole duration, as before.
+        let out =
+            run(&SimOptions::new(Scenario::resolve("piecewise").unwrap(), ControllerSpec::new(ControllerChoice::Gpc)))
+                .unwrap();
+        assert!((out.metrics.mean_power_w - out.metrics.energy_wh).abs() < 1e-9, "1 h: W = Wh");
+    }
 }

@@ -352,9 +352,8 @@ fn a_board_identification_log_goes_through_log2csv_and_identify() {
     let out = hter(&["log2csv", "--input", log.to_str().unwrap(), "--output", csv.to_str().unwrap()]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let converted = std::fs::read_to_string(&csv).unwrap();
-    assert!(
-        converted.starts_with("t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,boot,reset_cause,holdover_s\n")
-    );
+    assert!(converted
+        .starts_with("t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,boot,reset_cause,holdover_s,events\n"));
     assert_eq!(converted.lines().count(), text.lines().count(), "one row per sample line");
     let v = json(&["identify", "--input", csv.to_str().unwrap(), "--json"]);
     let _ = std::fs::remove_dir_all(&dir);

@@ -85,9 +85,15 @@ fn a_field_log_with_faults_and_resets_goes_through_log2csv_and_monitor() {
 
     let text = std::fs::read_to_string(&csv).unwrap();
     let mut lines = text.lines();
-    assert_eq!(lines.next(), Some("t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,boot,reset_cause,holdover_s"));
+    assert_eq!(
+        lines.next(),
+        Some("t_s,setpoint_c,temp_c,duty,mode,counts,supply_v,alarm,boot,reset_cause,holdover_s,events")
+    );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
-    assert!(rows.iter().all(|r| r.len() == 11), "{text}");
+    assert!(rows.iter().all(|r| r.len() == 12), "{text}");
+    // The step's events, on the sample they were logged with.
+    let events: Vec<(&str, &str)> = rows.iter().filter(|r| !r[11].is_empty()).map(|r| (r[0], r[11])).collect();
+    assert_eq!(events, [("0", "sensor_open"), ("30", "sensor_recovered")]);
     // Each boot's t = 0 one sample period after the previous boot's last sample.
     let t: Vec<f64> = rows.iter().map(|r| r[0].parse().unwrap()).collect();
     let expected: Vec<f64> =

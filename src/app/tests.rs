@@ -749,6 +749,9 @@ fn a_calibration_that_moves_the_reading_by_degrees_or_lands_mid_commissioning_is
         "err cal_ice: the points move a reading between 0 and 10 °C by more than 1.5 °C\r\n"
     );
     assert_eq!(*b.app.settings(), before);
+    // The accepted point moved the load: a commissioning waits until the carrier has held it.
+    assert!(b.send("identify").starts_with("err identify: a setting moved the load within the last 70 min"));
+    b.run(usize::from(SETTLE_SAMPLES));
     assert_eq!(b.send("identify"), "ok\r\n");
     b.run(3);
     assert_eq!(b.send("set cal_ice 0.5,0"), "err cal_ice: commissioning is running (identify abort)\r\n");
