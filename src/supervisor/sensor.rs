@@ -13,7 +13,7 @@
 //!   supervisor's `check`): nothing cools on it until the stuck check has had its time.
 //!   Several spikes within [`SpikeConfig::window_s`] are reported. A filter that holds one
 //!   reading (the first after a boot or a sensor fault) is outvoted by the next two readings
-//!   when they agree with each other and not with it: that first reading was the spike.
+//!   when they agree with each other, below it: that first reading was a spike, too warm.
 //! - **Offset** (`OffsetWatch`): a step larger than physics allows that stays at its new level
 //!   is a sensor offset; it is reported, and an upward one is measured and subtracted, up to
 //!   [`OffsetConfig::max_comp_c`] in total (the history keeps it across restarts). A step down
@@ -589,8 +589,15 @@ impl SensorChecks {
         // with each other and not with it outvote it, and it restarts from them. Without this a
         // spike on the first reading after a boot or a sensor fault was the filter's value, and
         // the good readings after it spikes, until six of them made a jump: 60 s of full cooling
-        // on a load read at 50 °C, the freeze guard blind, then 3 min of a sensor fault.
-        let outvoted = self.spikes.unconfirmed && verdict == Spike::Ignored && self.spikes.run >= 2;
+        // on a load read at 50 °C, the freeze guard blind, then 3 min of a sensor fault. Only
+        // readings below it outvote it (it read warm, which cools blind): readings above it may
+        // be an offset that began on the second reading, which the offset watch subtracts, and
+        // a first reading too cold holds cooling off.
+        let outvoted = self.spikes.unconfirmed
+            && verdict == Spike::Ignored
+            && self.spikes.run >= 2
+            // This reading, the spike's (`last_c`), below the filter's.
+            && self.spikes.last_c < filter.output().unwrap_or(f32::NAN);
         let jump = verdict == Spike::Jump;
         if jump || outvoted {
             filter.reset();
@@ -1107,6 +1114,16 @@ mod carrier {
         let mut second = vec![4.0, 50.0];
         second.extend([4.0; 10]);
         for (k, (temp, ..)) in run_readings(&second).iter().enumerate() {
+            assert!((temp - 4.0).abs() < 0.05, "{k}: the filter reads {temp}");
+        }
+        // Readings above the first are not its outvote: they may be an offset that began on
+        // the second reading, too warm, which the offset watch measures and subtracts (an
+        // outvote would hold the load 2.5 °C colder, the freezing side).
+        let mut offset = vec![4.0];
+        offset.extend([6.5; 12]);
+        let out = run_readings(&offset);
+        assert!(out[3].3.contains(&EventKind::SensorOffset), "{:?}", out[3]);
+        for (k, (temp, ..)) in out.iter().enumerate().skip(4) {
             assert!((temp - 4.0).abs() < 0.05, "{k}: the filter reads {temp}");
         }
     }
