@@ -576,6 +576,11 @@ impl Supervisor {
             None => {}
         }
         let reading = self.sensor.reading(cfg, t_ms, raw, sensor, filter, emit);
+        if reading.outvoted {
+            // The filtered value that the slope and the history hold was a spike.
+            self.freeze.restart();
+            self.ssr.restart();
+        }
         if reading.jump {
             // The reading left the load's level by more than physics allows and stays there.
             // It may be a probe re-seated in another load, or a front end stuck at a new

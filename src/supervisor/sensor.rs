@@ -11,7 +11,9 @@
 //!   probe, or a front end stuck at a new level) and restarts the filter, is reported as a
 //!   [`EventKind::SensorOffset`], and is a sensor fault for [`SensorConfig::stuck_s`] (in the
 //!   supervisor's `check`): nothing cools on it until the stuck check has had its time.
-//!   Several spikes within [`SpikeConfig::window_s`] are reported.
+//!   Several spikes within [`SpikeConfig::window_s`] are reported. A filter that holds one
+//!   reading (the first after a boot or a sensor fault) is outvoted by the next two readings
+//!   when they agree with each other, below it: that first reading was a spike, too warm.
 //! - **Offset** (`OffsetWatch`): a step larger than physics allows that stays at its new level
 //!   is a sensor offset; it is reported, and an upward one is measured and subtracted, up to
 //!   [`OffsetConfig::max_comp_c`] in total (the history keeps it across restarts). A step down
@@ -212,6 +214,9 @@ pub(crate) struct SpikeFilter {
     window_ms: u32,
     /// Agreeing spikes in a row so far.
     run: u8,
+    /// The measurement filter holds a single reading (the first after a boot, a sensor fault's
+    /// end or a restart), which no other has confirmed yet.
+    unconfirmed: bool,
     /// The last spike's reading, °C.
     last_c: f32,
     /// When the last [`BURST`] spikes came, a ring (`None` until that many have come): a new
@@ -230,6 +235,7 @@ impl SpikeFilter {
             jump_n: samples_u8(cfg.jump_s, ts_s),
             window_ms: ms(cfg.window_s),
             run: 0,
+            unconfirmed: false,
             last_c: f32::NAN,
             times: [None; BURST],
             next: 0,
@@ -305,8 +311,9 @@ pub(crate) struct OffsetWatch {
     /// After a spike the good reading that follows must not look like a step from the spike,
     /// and the filtered value lags a fast pull-down too much to serve.
     last_good_c: Option<f32>,
-    /// How far the reference moved from the good reading on the sample before it, °C (0 when
-    /// that sample had none): the load's own motion, to carry the reference across spikes.
+    /// How far the reference moved a sample from the good reading before it, °C (the mean over
+    /// the spikes between them; 0 when there was none): the load's own motion, to carry the
+    /// reference across spikes.
     trend_c: f32,
     /// Readings watched since the reference was taken (1 on the sample right after it; more
     /// when spikes came between).
@@ -458,9 +465,11 @@ impl OffsetWatch {
     /// `t`, which was not a spike, is the reference for the next step, in the frame of the
     /// offset in force after this sample (`offset_before` was in force before it).
     pub(crate) fn keep_reference(&mut self, t: f32, offset_before: f32) {
-        // Both in the frame of `offset_before`: a change of the offset is no motion.
+        // Both in the frame of `offset_before`: a change of the offset is no motion. Across
+        // spikes (`age` > 1) the load's mean motion a sample since the reference: a fall that
+        // goes on across a second spike is carried on as across the first.
         self.trend_c = match self.last_good_c {
-            Some(p) if self.age == 1 => t - p,
+            Some(p) if self.age > 0 => (t - p) / f32::from(self.age),
             _ => 0.0,
         };
         self.last_good_c = Some(t - (self.offset_c - offset_before));
@@ -479,6 +488,10 @@ pub(crate) struct Reading {
     /// The spike filter took a run of agreeing spikes for a real jump this sample, and
     /// restarted from it (reported as [`EventKind::SensorOffset`]).
     pub(crate) jump: bool,
+    /// The filter's first reading was outvoted this sample, and the filter restarted from this
+    /// one: what was derived from the filtered value (the freeze guard's slope, the SSR checks'
+    /// history) restarts too.
+    pub(crate) outvoted: bool,
 }
 
 /// The stuck, spike and offset checks of the sensor.
@@ -548,6 +561,9 @@ impl SensorChecks {
     ) -> Reading {
         let (sc, filter_cfg) = (&cfg.supervisor.sensor, &cfg.filter);
         let mut hold = false;
+        // Reset by the supervisor (a sensor fault's end) or before the first reading; not by a
+        // jump or an outvote below, whose readings are confirmed.
+        let empty = filter.output().is_none();
         let offset_before = self.offset.offset_c();
         let mut offset_reported = false;
         let raw_c = match raw.ok() {
@@ -569,25 +585,41 @@ impl SensorChecks {
             self.offset.keep_reference(t.0, offset_before);
         }
         let verdict = self.spikes.run(&sc.spike, t_ms, raw_c, spike, emit);
+        // A filter started on one reading cannot tell a spike: two readings in a row that agree
+        // with each other and not with it outvote it, and it restarts from them. Without this a
+        // spike on the first reading after a boot or a sensor fault was the filter's value, and
+        // the good readings after it spikes, until six of them made a jump: 60 s of full cooling
+        // on a load read at 50 °C, the freeze guard blind, then 3 min of a sensor fault. Only
+        // readings below it outvote it (it read warm, which cools blind): readings above it may
+        // be an offset that began on the second reading, which the offset watch subtracts, and
+        // a first reading too cold holds cooling off.
+        let outvoted = self.spikes.unconfirmed
+            && verdict == Spike::Ignored
+            && self.spikes.run >= 2
+            // This reading, the spike's (`last_c`), below the filter's.
+            && self.spikes.last_c < filter.output().unwrap_or(f32::NAN);
         let jump = verdict == Spike::Jump;
-        if jump {
+        if jump || outvoted {
             filter.reset();
             // The jump is the step the offset watch was watching: its new level is the
             // reference from now on, and it is reported once, here if the watch has not yet.
             if let Some(t) = raw_c {
                 self.offset.rebase(t.0);
             }
-            if !offset_reported {
+            if jump && !offset_reported {
                 emit(EventKind::SensorOffset);
             }
         }
         let temp_c = match raw_c {
-            Some(t) if !hold && verdict != Spike::Ignored => filter.step(filter_cfg, t.0),
             // An empty filter (just reset) starts from the reading rather than report nothing.
-            Some(t) if filter.output().is_none() => filter.step(filter_cfg, t.0),
+            Some(t) if (!hold && verdict != Spike::Ignored) || filter.output().is_none() => {
+                // Unconfirmed if it starts the filter on this reading alone.
+                self.spikes.unconfirmed = empty;
+                filter.step(filter_cfg, t.0)
+            }
             _ => filter.output().unwrap_or(f32::NAN),
         };
-        Reading { raw_c, temp_c, jump }
+        Reading { raw_c, temp_c, jump, outvoted }
     }
 }
 
@@ -864,6 +896,24 @@ mod tests {
     }
 
     #[test]
+    fn a_fast_fall_across_two_spikes_one_reading_apart_is_no_step() {
+        // The same fall, 0.37 °C a sample, with a good reading between two spikes: the trend
+        // carried over the first spike is the load's too. It used to be forgotten there, the
+        // reading after the second spike taken for a 0.74 °C step, the filter held while the
+        // steps were watched and the load falling past it, until the readings, 2 °C under the
+        // held value, were six agreeing spikes: a jump, reported as a sensor offset, and 3 min
+        // of a sensor fault (found by a fuzz of the checks: 7.3 °C held while the load fell to
+        // 3.1 °C).
+        let mut readings: Vec<f32> = (0..8).map(|k| 9.0 - 0.37 * k as f32).collect();
+        let fall = |k: usize| 9.0 - 0.37 * k as f32;
+        readings.extend([-16.5, fall(9), 45.0, fall(11), 35.8]);
+        readings.extend((13..30).map(fall));
+        let (ev, offset) = through_checks(&readings);
+        assert!(ev.iter().all(|(_, e)| *e == EventKind::SensorSpikes), "{ev:?}");
+        assert_eq!(offset, 0.0);
+    }
+
+    #[test]
     fn a_long_burst_of_spikes_makes_no_offset_of_the_noise() {
         // A load at rest at 4 °C, its last two readings 0.012 °C apart (the front end's noise),
         // then a failing contact: 200 readings in a row each far off and none agreeing with the
@@ -1024,6 +1074,58 @@ mod carrier {
         }
         // 180 s after the jump at sample 35.
         assert_eq!(first_recovered, Some(53));
+    }
+
+    /// Steps a fresh PI carrier through `readings` (°C, with a count of noise); for each
+    /// sample the filtered temperature, the duty, the mode and the events.
+    fn run_readings(readings: &[f32]) -> Vec<(f32, f32, Mode, Vec<EventKind>)> {
+        let mut c = pi_carrier();
+        let (mut k, mut v) = (0u64, Vec::new());
+        for &t in readings {
+            let counts = if t.is_nan() { 65_535 } else { counts_at(t) + (k % 2) as u32 };
+            let out = at(&mut c, k, counts);
+            v.push((out.temp_c.0, out.duty.get(), out.mode, out.events.iter().map(|e| e.kind).collect()));
+            k += 1;
+        }
+        v
+    }
+
+    #[test]
+    fn a_spike_on_the_first_reading_is_outvoted_by_the_two_after_it() {
+        // After a boot, and after an open sensor's end (a loose contact: opens and spikes),
+        // the first reading is a spike 46 °C high over a load at 4 °C. It used to be the
+        // filter's value and every good reading after it a spike, until the sixth made a jump:
+        // 60 s of full cooling on a load read at 50 °C, the freeze guard blind, then 3 min of
+        // a sensor fault.
+        let mut boot = vec![50.0];
+        boot.extend([4.0; 12]);
+        let mut recovery = vec![4.0, 4.0, f32::NAN, 50.0];
+        recovery.extend([4.0; 12]);
+        for (name, readings, first) in [("boot", boot, 0), ("recovery", recovery, 3)] {
+            let out = run_readings(&readings);
+            for (k, (temp, duty, mode, events)) in out.iter().enumerate().skip(first + 2) {
+                assert!((temp - 4.0).abs() < 0.05, "{name} {k}: the filter reads {temp}");
+                assert_eq!(*mode, Mode::Normal, "{name} {k}");
+                assert!(*duty < 1.0, "{name} {k}: duty {duty}");
+                assert!(!events.contains(&EventKind::SensorOffset), "{name} {k}: {events:?}");
+            }
+        }
+        // A spike on the second reading is still ignored: the filter never reads it.
+        let mut second = vec![4.0, 50.0];
+        second.extend([4.0; 10]);
+        for (k, (temp, ..)) in run_readings(&second).iter().enumerate() {
+            assert!((temp - 4.0).abs() < 0.05, "{k}: the filter reads {temp}");
+        }
+        // Readings above the first are not its outvote: they may be an offset that began on
+        // the second reading, too warm, which the offset watch measures and subtracts (an
+        // outvote would hold the load 2.5 °C colder, the freezing side).
+        let mut offset = vec![4.0];
+        offset.extend([6.5; 12]);
+        let out = run_readings(&offset);
+        assert!(out[3].3.contains(&EventKind::SensorOffset), "{:?}", out[3]);
+        for (k, (temp, ..)) in out.iter().enumerate().skip(4) {
+            assert!((temp - 4.0).abs() < 0.05, "{k}: the filter reads {temp}");
+        }
     }
 
     #[test]
