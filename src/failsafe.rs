@@ -5,7 +5,8 @@
 //! on — before anything else can go wrong, then record why, then reset. The board-specific part
 //! (which pins, how to reset) is behind [`SafeOutputs`]; the order and the record are here, so
 //! the very same code runs in the firmware's handlers and on the processor-in-the-loop machine
-//! (`cargo xtask pil` triggers a panic, a HardFault and an NMI there and checks each step).
+//! (`cargo xtask pil` triggers a panic, a HardFault, an NMI, an unexpected interrupt and a
+//! stack overflow into the stack guard (`arm_stack_guard`) there and checks each step).
 //!
 //! The reason lives in a [`ReasonRecord`] that the glue places in RAM the runtime neither zeroes
 //! nor initialises (`.uninit`): it survives a system reset (not a power cycle). The next boot
@@ -265,6 +266,120 @@ pub fn hard_fault_info(pc: u32, cfsr: u32, bfar: u32, mmfar: u32) -> StopInfo {
     StopInfo::new(StopKind::HardFault, pc, addr, cfsr)
 }
 
+/// CFSR bit: a MemManage fault on exception entry, while stacking the frame (ARMv7-M ARM
+/// B3.2.15, MMFSR.MSTKERR). With the stack guard (`arm_stack_guard`) the guard is the only
+/// region no code may touch, so this bit says the stack reached it.
+pub const CFSR_MSTKERR: u32 = 1 << 4;
+
+/// The text of a HardFault record that a stack overflow caused.
+pub const STACK_OVERFLOW_TEXT: &str = "stack overflow";
+
+/// The record of a HardFault, told apart from a stack overflow: `sp` is the stack pointer the
+/// handler found (where the hardware stacked, or tried to stack, the frame), `guard` the stack
+/// guard's addresses (`__stack_guard_start..__stack_guard_end`).
+///
+/// The stack overflowed when the frame could not be stacked (CFSR.MSTKERR), when the data
+/// access that faulted was in the guard (MMARVALID and MMFAR in it) or when `sp` is below the
+/// guard's end. Its record is a [`StopKind::HardFault`] (the persisted per-kind counts keep
+/// their layout) with the text [`STACK_OVERFLOW_TEXT`], `pc` 0 when the frame was not stacked
+/// (the stacked words are then the guard's old contents, not the fault's), `addr` MMFAR when
+/// latched, else `sp`, and `detail` = CFSR. Any other fault is [`hard_fault_info`]'s.
+pub fn fault_info(pc: u32, sp: u32, cfsr: u32, bfar: u32, mmfar: u32, guard: core::ops::Range<u32>) -> StopInfo {
+    let latched = cfsr & CFSR_MMARVALID != 0;
+    if cfsr & CFSR_MSTKERR == 0 && sp >= guard.end && !(latched && guard.contains(&mmfar)) {
+        return hard_fault_info(pc, cfsr, bfar, mmfar);
+    }
+    let pc = if cfsr & CFSR_MSTKERR != 0 { 0 } else { pc };
+    let mut info = StopInfo::new(StopKind::HardFault, pc, if latched { mmfar } else { sp }, cfsr);
+    info.push_text(STACK_OVERFLOW_TEXT);
+    info
+}
+
+/// MPU_RBAR and MPU_RASR (ARMv7-M ARM B3.5.9–10) of the stack guard `start..end`, MPU region 0:
+/// no access at any privilege (AP = 0b000), execute-never, enabled. `None` unless the guard is
+/// one MPU region: a power of two of at least 32 bytes, aligned to its size.
+pub fn stack_guard_region(start: u32, end: u32) -> Option<(u32, u32)> {
+    let size = end.checked_sub(start)?;
+    if size < 32 || !size.is_power_of_two() || !start.is_multiple_of(size) {
+        return None;
+    }
+    // RBAR: the base, VALID (bit 4) with REGION = 0 in bits 3:0.
+    let rbar = start | 1 << 4;
+    // RASR: XN (bit 28), AP = 0 (bits 26:24), SIZE = log2(size) − 1 (bits 5:1), ENABLE (bit 0).
+    let rasr = 1 << 28 | (size.trailing_zeros() - 1) << 1 | 1;
+    Some((rbar, rasr))
+}
+
+/// MPU_CTRL of the stack guard: ENABLE and PRIVDEFENA (the default memory map everywhere but
+/// the guard); HFNMIENA = 0, so the MPU is off in the HardFault and NMI handlers and in a
+/// HardFault entered from an overflow the handler can still use the stack.
+pub const MPU_CTRL_GUARD: u32 = 1 | 1 << 2;
+
+/// Turns the stack guard on: MPU region 0 over `start..end` ([`stack_guard_region`]), the MPU on
+/// with [`MPU_CTRL_GUARD`]. From then on a push into the guard faults (MemManage, escalated to
+/// HardFault while MemManage is disabled, as on the board) instead of writing over the statics
+/// below it. Returns `false` (and changes nothing) if the guard is not one MPU region.
+///
+/// # Safety
+/// `start..end` must hold nothing the program uses (the linker's `.stack_guard` section), and
+/// no other code may program the MPU.
+#[cfg(all(target_arch = "arm", target_os = "none"))]
+pub unsafe fn arm_stack_guard(start: u32, end: u32) -> bool {
+    let Some((rbar, rasr)) = stack_guard_region(start, end) else {
+        return false;
+    };
+    const MPU_CTRL: *mut u32 = 0xE000_ED94 as *mut u32;
+    const MPU_RBAR: *mut u32 = 0xE000_ED9C as *mut u32;
+    const MPU_RASR: *mut u32 = 0xE000_EDA0 as *mut u32;
+    // SAFETY: the MPU's registers (ARMv7-M ARM B3.5); RBAR's VALID bit selects region 0.
+    unsafe {
+        core::ptr::write_volatile(MPU_RBAR, rbar);
+        core::ptr::write_volatile(MPU_RASR, rasr);
+        core::ptr::write_volatile(MPU_CTRL, MPU_CTRL_GUARD);
+        // The new map applies to the next access and instruction (B3.5.7).
+        core::arch::asm!("dsb", "isb", options(nostack, preserves_flags));
+    }
+    true
+}
+
+/// Defines the `HardFault` vector (in place of cortex-m-rt's trampoline) for a program with the
+/// stack guard: `$handler` is an `extern "C" fn(sp: u32) -> !` called with the stack pointer
+/// the fault left (the stacked frame's address; the process stack's if the fault came from it).
+///
+/// If the main stack pointer is within `$room` bytes above `__stack_guard_end` (or below it: the
+/// stack overflowed), the handler runs from the top of the stack (`_stack_start`) instead: the
+/// overflowed stack is abandoned (the handler never returns) and the handler's frames do not
+/// run down through the guard into the statics (the MPU is off in HardFault). No memory is read
+/// here: the outputs are driven safe before the frame is.
+#[macro_export]
+macro_rules! hard_fault_entry {
+    ($handler:path, $room:literal) => {
+        core::arch::global_asm!(
+            ".section .HardFault.user, \"ax\"",
+            ".global HardFault",
+            ".type HardFault,%function",
+            ".thumb_func",
+            "HardFault:",
+            "tst lr, #4",
+            "ite eq",
+            "mrseq r0, MSP",
+            "mrsne r0, PSP",
+            "mrs r1, MSP",
+            "ldr r2, =__stack_guard_end + {room}",
+            "cmp r1, r2",
+            "bhs 1f",
+            "ldr r2, =_stack_start",
+            "msr MSP, r2",
+            "1:",
+            "b {handler}",
+            ".ltorg",
+            ".size HardFault, . - HardFault",
+            handler = sym $handler,
+            room = const $room,
+        );
+    };
+}
+
 /// The record of an NMI the board could not recover from (`source` = the status word that
 /// names it, e.g. FLASH_ECCR for an ECC error outside the persistence region).
 pub fn nmi_info(pc: u32, source: u32) -> StopInfo {
@@ -398,6 +513,44 @@ mod tests {
         let long = format!("é{}/x.rs", "d".repeat(STOP_TEXT - 6));
         assert_eq!(panic_info(&long, 1).text(), format!("?{}/x.rs", "d".repeat(STOP_TEXT - 6)));
         assert_eq!(unexpected_interrupt_info(-1).detail, u32::MAX);
+    }
+
+    /// A stack overflow is told apart from other HardFaults by CFSR.MSTKERR, by a faulting
+    /// address in the guard or by the stack pointer below the guard's end; anything else keeps
+    /// `hard_fault_info`'s record. CFSR values as QEMU's Cortex-M4 (mps2-an386) latched them.
+    #[test]
+    fn a_stack_overflow_is_a_hard_fault_with_its_own_text() {
+        let guard = 0x2000_0400..0x2000_0800;
+        // The PIL's overflow: DACCVIOL + MMARVALID at the guard's top word, then MSTKERR.
+        let o = fault_info(0x1234, 0x2000_07e0, 0x92, 0, 0x2000_07fc, guard.clone());
+        assert_eq!((o.kind, o.pc, o.addr, o.detail), (StopKind::HardFault, 0, 0x2000_07fc, 0x92));
+        assert_eq!(o.text(), STACK_OVERFLOW_TEXT);
+        // The frame stacked (no MSTKERR) but the access was in the guard: the PC is the fault's.
+        let o = fault_info(0x1234, 0x2000_0900, 0x82, 0, 0x2000_0500, guard.clone());
+        assert_eq!((o.pc, o.addr, o.text()), (0x1234, 0x2000_0500, STACK_OVERFLOW_TEXT));
+        // The stack pointer below the guard's end, nothing latched: its address is the record's.
+        let o = fault_info(0x1234, 0x2000_0300, 0x400, 0, 0, guard.clone());
+        assert_eq!((o.pc, o.addr, o.text()), (0x1234, 0x2000_0300, STACK_OVERFLOW_TEXT));
+        // A bus fault with the stack well above the guard is an ordinary HardFault.
+        let b = fault_info(0x1234, 0x2001_7f00, CFSR_BFARVALID | 0x200, 0xF000_0000, 0, guard.clone());
+        assert_eq!(b, hard_fault_info(0x1234, CFSR_BFARVALID | 0x200, 0xF000_0000, 0));
+        assert_eq!(b.text(), "");
+        // A MemManage at an address outside the guard (MMARVALID) is not an overflow either.
+        assert_eq!(fault_info(1, 0x2001_7f00, 0x82, 0, 0x2000_0000, guard).text(), "");
+    }
+
+    /// The guard's MPU region against ARMv7-M ARM B3.5.9–10: 1 KiB at 0x2000_2c00 is misaligned,
+    /// at 0x2000_2800 it is RBAR 0x2000_2810, RASR XN | SIZE 9 | ENABLE.
+    #[test]
+    fn the_guard_is_one_no_access_mpu_region() {
+        assert_eq!(stack_guard_region(0x2000_2800, 0x2000_2c00), Some((0x2000_2810, 0x1000_0013)));
+        assert_eq!(stack_guard_region(0x2000_0000, 0x2000_0020), Some((0x2000_0010, 0x1000_0009)));
+        assert_eq!(stack_guard_region(0x2000_2c00, 0x2000_3000).map(|r| r.0), Some(0x2000_2c10));
+        assert_eq!(stack_guard_region(0x2000_2a00, 0x2000_2e00), None, "not aligned to its size");
+        assert_eq!(stack_guard_region(0x2000_0000, 0x2000_0010), None, "below the MPU's 32 bytes");
+        assert_eq!(stack_guard_region(0x2000_0000, 0x2000_0060), None, "not a power of two");
+        assert_eq!(stack_guard_region(0x2000_0400, 0x2000_0000), None);
+        assert_eq!(MPU_CTRL_GUARD & 0b111, 0b101, "ENABLE, PRIVDEFENA, not HFNMIENA");
     }
 
     #[test]

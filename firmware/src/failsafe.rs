@@ -3,6 +3,11 @@
 //! ([`board::force_safe`], registers only), then records why in [`REASON`] (RAM the runtime leaves
 //! alone, so it survives the reset) and resets; the next boot [`take_reason`]s it.
 //!
+//! A stack overflow is a HardFault: [`arm_stack_guard`] makes memory.x's `.stack_guard`, between
+//! the statics and the stack, an MPU region no code may touch, and the HardFault entry
+//! (`hter::hard_fault_entry!`) runs the stop path from the top of the stack when the fault left
+//! the stack pointer near the guard.
+//!
 //! One exception returns: an NMI raised by an uncorrectable flash ECC error inside the
 //! persistence region (a double-word whose programming a power cut interrupted). Its address
 //! goes to [`crate::ecc`], the error is cleared, and the read that hit it carries on with garbage
@@ -12,7 +17,7 @@ use core::mem::MaybeUninit;
 use core::panic::PanicInfo;
 use core::ptr::addr_of_mut;
 
-use cortex_m_rt::{exception, ExceptionFrame};
+use cortex_m_rt::exception;
 use embassy_stm32::pac::FLASH;
 use hter::failsafe::{self, ReasonRecord, SafeOutputs, StopInfo, StopKind};
 
@@ -53,8 +58,9 @@ enum Why<'a> {
     /// A panic at this file and line (`None`: no location). Not the `PanicInfo` itself: handed
     /// out of line, its message would keep `core::fmt` linked (several KiB of flash).
     Panic(Option<(&'a str, u32)>),
-    /// A HardFault and its stacked frame (the fault registers are read in [`halt`]).
-    HardFault(&'a ExceptionFrame),
+    /// A HardFault and the stack pointer it left, the stacked frame's address (the frame and
+    /// the fault registers are read in [`halt`]).
+    HardFault(u32),
     /// An NMI with FLASH_ECCR's value (0: another source).
     Nmi(u32),
     /// An interrupt without a handler.
@@ -77,10 +83,12 @@ fn halt(why: Why) -> ! {
             Some((file, line)) => failsafe::panic_info(file, line),
             None => StopInfo::new(StopKind::Panic, 0, 0, 0),
         },
-        Why::HardFault(frame) => {
-            // SAFETY: reads of the System Control Block's fault status and address registers.
-            let scb = unsafe { &*cortex_m::peripheral::SCB::PTR };
-            failsafe::hard_fault_info(frame.pc(), scb.cfsr.read(), scb.bfar.read(), scb.mmfar.read())
+        Why::HardFault(sp) => {
+            // SAFETY: reads of the System Control Block's fault status and address registers,
+            // and of the stacked frame's PC (the MPU is off in HardFault, so the guard reads too).
+            let (scb, pc) =
+                unsafe { (&*cortex_m::peripheral::SCB::PTR, core::ptr::read_volatile((sp + 24) as *const u32)) };
+            failsafe::fault_info(pc, sp, scb.cfsr.read(), scb.bfar.read(), scb.mmfar.read(), guard())
         }
         // cortex-m-rt hands the NMI no exception frame: the PC is not recorded (0); FLASH_ECCR
         // (or 0 for another source such as the clock security system) names the cause.
@@ -108,9 +116,33 @@ fn panic(info: &PanicInfo) -> ! {
     halt(Why::Panic(info.location().map(|at| (at.file(), at.line()))))
 }
 
-#[exception]
-unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
-    halt(Why::HardFault(frame))
+/// The stack guard's addresses (the linker's `.stack_guard`, memory.x).
+fn guard() -> core::ops::Range<u32> {
+    extern "C" {
+        static __stack_guard_start: u8;
+        static __stack_guard_end: u8;
+    }
+    // Only the symbols' addresses are taken.
+    core::ptr::addr_of!(__stack_guard_start) as u32..core::ptr::addr_of!(__stack_guard_end) as u32
+}
+
+/// Turns the stack guard on (`hter::failsafe::arm_stack_guard`): from here a stack overflow
+/// faults into [`hard_fault`] instead of writing over the statics. The first thing `main` does.
+pub fn arm_stack_guard() {
+    let g = guard();
+    // SAFETY: the guard is the linker's `.stack_guard` section, which holds nothing; nothing else
+    // programs the MPU. A guard that is not one MPU region fails the audit.
+    let armed = unsafe { failsafe::arm_stack_guard(g.start, g.end) };
+    debug_assert!(armed);
+}
+
+// The HardFault vector: runs `hard_fault` from the top of the stack when the fault left the stack
+// pointer within 1 KiB of the guard (the stop path's frames need well under that).
+hter::hard_fault_entry!(hard_fault, 1024);
+
+/// HardFault, after `hter::hard_fault_entry!`'s stack switch; `sp` is where the frame was stacked.
+extern "C" fn hard_fault(sp: u32) -> ! {
+    halt(Why::HardFault(sp))
 }
 
 /// Flash bank size of the STM32L476RG, bytes: FLASH_ECCR's ADDR_ECC is the offset within the

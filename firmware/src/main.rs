@@ -119,6 +119,8 @@ static ACKNOWLEDGE: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
+    // A stack overflow from here on is a HardFault (safe outputs, recorded), not corrupt statics.
+    failsafe::arm_stack_guard();
     // Before the clocks and before flash is read: no boot path runs unwatched.
     board::start_watchdog();
     // Why we (re)started; the flags are cleared so the next boot reads its own. The step reports

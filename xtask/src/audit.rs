@@ -13,6 +13,11 @@
 //!   so does the linker's FLASH region in `memory.x` (it bounds what a larger build may use):
 //!   bank 2 holds the persisted records, and read-while-write only holds between the banks.
 //!
+//! - the stack guard is in the image: `.stack_guard` (memory.x) is one MPU region (a power of two
+//!   of at least 32 bytes, aligned to its size), above the statics (`.bss`, `.uninit` with the
+//!   stop record and the RTT buffer) and below the lowest address the stack may use, so a stack
+//!   that overflows faults in it before it reaches them (`hter::failsafe::arm_stack_guard`).
+//!
 //! It prints one line per check and a final JSON line, and exits non-zero if any check fails.
 
 use std::path::Path;
@@ -61,6 +66,7 @@ pub fn audit(features: &str) -> Result<()> {
     findings.push(rtt_finding(&elf, &cargo, &root)?);
     findings.push(image_finding(&elf));
     findings.push(region_finding(&root.join("memory.x"))?);
+    findings.push(stack_guard_finding(&elf));
     if features.split([',', ' ']).any(|f| f == "interface" || f == "serial") {
         findings.push(usart2_finding(&elf)?);
     }
@@ -447,6 +453,36 @@ pub fn image_finding(elf: &Elf) -> Finding {
     }
 }
 
+/// The stack guard lies between the statics and the stack, and is one MPU region.
+pub fn stack_guard_finding(elf: &Elf) -> Finding {
+    let key = "stack_guard";
+    let sym = |n: &str| elf.symbol(n);
+    let (Some(start), Some(end), Some(stack_end), Some(stack_start)) =
+        (sym("__stack_guard_start"), sym("__stack_guard_end"), sym("_stack_end"), sym("_stack_start"))
+    else {
+        return Finding {
+            key,
+            ok: false,
+            line: "no __stack_guard_start/__stack_guard_end (memory.x's .stack_guard) or stack symbols".into(),
+        };
+    };
+    let statics_end = ["__ebss", "__euninit"].iter().filter_map(|n| sym(n)).max().unwrap_or(u64::MAX);
+    let region = u32::try_from(start)
+        .ok()
+        .zip(u32::try_from(end).ok())
+        .and_then(|(s, e)| hter::failsafe::stack_guard_region(s, e));
+    let ok = region.is_some() && statics_end <= start && end <= stack_end && stack_end < stack_start;
+    Finding {
+        key,
+        ok,
+        line: format!(
+            "guard {start:#010x}..{end:#010x} ({} one MPU region); statics end at {statics_end:#010x}, stack {stack_end:#010x}..{stack_start:#010x}{}",
+            if region.is_some() { "is" } else { "NOT" },
+            if ok { "" } else { ": NOT between them" }
+        ),
+    }
+}
+
 /// The `FLASH` region's end from a linker `MEMORY` block, if it parses.
 pub fn flash_region_end(memory_x: &str) -> Option<u64> {
     let line = memory_x.lines().find(|l| l.trim_start().starts_with("FLASH") && l.contains("ORIGIN"))?;
@@ -630,6 +666,24 @@ mod tests {
         assert!(!handler_findings(&Elf::parse(&one).unwrap()).unwrap()[2].ok);
         assert!(Elf::parse(b"\x7fELF\x02\x01").is_err(), "ELF64 refused");
         assert!(Elf::parse(&bad[..60]).is_err(), "truncated");
+    }
+
+    #[test]
+    fn the_stack_guard_lies_between_the_statics_and_the_stack() {
+        let f =
+            |syms: &[(&str, u32)]| stack_guard_finding(&Elf::parse(&elf(&table(T, T, T), T, &[0, 0], syms)).unwrap());
+        let base = [("__ebss", 0x2000_2590), ("__euninit", 0x2000_29dc), ("_stack_start", 0x2001_8000)];
+        let with = |start: u32, end: u32, stack_end: u32| {
+            let mut s = base.to_vec();
+            s.extend([("__stack_guard_start", start), ("__stack_guard_end", end), ("_stack_end", stack_end)]);
+            f(&s)
+        };
+        // The firmware's layout (llvm-nm of the default build).
+        assert!(with(0x2000_2c00, 0x2000_3000, 0x2000_3000).ok);
+        assert!(!with(0x2000_2800, 0x2000_2c00, 0x2000_3000).ok, "over .uninit");
+        assert!(!with(0x2000_2c00, 0x2000_3000, 0x2000_2c00).ok, "the stack may run into it");
+        assert!(!with(0x2000_2e00, 0x2000_3200, 0x2000_3200).ok, "not aligned to its size: no MPU region");
+        assert!(!f(&base).ok, "no guard at all");
     }
 
     #[test]

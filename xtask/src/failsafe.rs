@@ -1,5 +1,7 @@
 //! The fail-safe part of `cargo xtask pil`: boots `pil`'s `failsafe` binary on QEMU mps2-an386
-//! and checks, for each stop path, what its boots report on semihosting stdout.
+//! and checks, for each stop path, what its boots report on semihosting stdout. The last path is
+//! a stack overflow into the MPU stack guard (QEMU models the ARMv7-M MPU): it must end in the
+//! HardFault's stop path, recorded as a stack overflow, with nothing below the guard written.
 //!
 //! QEMU turns the guest's SYSRESETREQ (`SCB::sys_reset`) into a machine reset
 //! (`qemu_system_reset_request`; with `-no-reboot` the same request makes QEMU exit instead, which
@@ -14,12 +16,21 @@ use std::time::Duration;
 
 use anyhow::Result;
 
-/// Each stop path and the boot that reports it (the boot after the one that triggered it).
-pub const FAILSAFE_KINDS: [(&str, u32); 4] = [("panic", 2), ("hard_fault", 3), ("nmi", 4), ("unexpected_interrupt", 5)];
+/// Each stop path, the reason its record names and the boot that reports it (the boot after the
+/// one that triggered it). A stack overflow is a HardFault record with its own text.
+pub const FAILSAFE_KINDS: [(&str, &str, u32); 5] = [
+    ("panic", "panic", 2),
+    ("hard_fault", "hard_fault", 3),
+    ("nmi", "nmi", 4),
+    ("unexpected_interrupt", "unexpected_interrupt", 5),
+    ("stack_overflow", "hard_fault", 6),
+];
 /// The address the HardFault boot reads (the runner's `UNMAPPED`).
 const FAULT_ADDR: u64 = 0xF000_0000;
 /// CFSR.BFARVALID: the bus fault latched its address.
 const CFSR_BFARVALID: u64 = 1 << 15;
+/// CFSR.MSTKERR: the HardFault's frame could not be stacked (it went into the guard).
+const CFSR_MSTKERR: u64 = 1 << 4;
 /// ICSR.VECTACTIVE of the NMI (exception number 2), the NMI record's `detail` on the PIL.
 const NMI_EXCEPTION: u64 = 2;
 /// Five boots take well under a second; a broken boot counter loops forever.
@@ -55,10 +66,17 @@ pub fn run(elf: &Path, work: &Path) -> Result<Vec<Check>> {
     Ok(checks(&out, exited_ok))
 }
 
-/// One boot's report: `failsafe boot=<n> key=value ...`.
+/// One boot's report: `failsafe boot=<n> key=value ... text=<the rest of the line>`.
 fn parse_line(line: &str) -> Option<HashMap<&str, &str>> {
     let rest = line.strip_prefix("failsafe ")?;
-    let map: HashMap<&str, &str> = rest.split_whitespace().filter_map(|kv| kv.split_once('=')).collect();
+    let (words, text) = match rest.split_once(" text=") {
+        Some((words, text)) => (words, Some(text)),
+        None => (rest, None),
+    };
+    let mut map: HashMap<&str, &str> = words.split_whitespace().filter_map(|kv| kv.split_once('=')).collect();
+    if let Some(text) = text {
+        map.insert("text", text);
+    }
     map.contains_key("boot").then_some(map)
 }
 
@@ -78,7 +96,7 @@ pub fn checks(stdout: &str, exited_ok: bool) -> Vec<Check> {
     let sequence_ok = order == expected;
     FAILSAFE_KINDS
         .iter()
-        .map(|&(kind, boot)| {
+        .map(|&(kind, reason, boot)| {
             let mut c = Check { kind, first: true, survived: true, reported: true, why: Vec::new() };
             if !sequence_ok {
                 c.why.push(format!(
@@ -105,7 +123,7 @@ pub fn checks(stdout: &str, exited_ok: bool) -> Vec<Check> {
             let (mut first, mut survived, mut reported) = (true, true, true);
             need(
                 &mut reported,
-                b.get("reason") == Some(&kind) && sequence_ok && exited_ok,
+                b.get("reason") == Some(&reason) && sequence_ok && exited_ok,
                 format!("boot {boot} reported reason={}", b.get("reason").unwrap_or(&"?")),
             );
             let stamps =
@@ -115,7 +133,11 @@ pub fn checks(stdout: &str, exited_ok: bool) -> Vec<Check> {
                 stamps == (Some(1), Some(2), Some(0), Some(1)),
                 format!("safe_seq, record_seq, record_before_safe, outputs_safe = {stamps:?}, not (1, 2, 0, 1)"),
             );
-            need(&mut survived, b.get("reason") == Some(&kind), "no intact record of this kind after the reset".into());
+            need(
+                &mut survived,
+                b.get("reason") == Some(&reason),
+                "no intact record of this kind after the reset".into(),
+            );
             need(&mut survived, num(b, "record_ok_after") == Some(1), "the record did not read back after stop".into());
             need(
                 &mut survived,
@@ -127,6 +149,19 @@ pub fn checks(stdout: &str, exited_ok: bool) -> Vec<Check> {
                 "panic" => detail > 0 && b.get("text").is_some_and(|t| t.ends_with("failsafe.rs")),
                 "hard_fault" => num(b, "addr") == Some(FAULT_ADDR) && detail & CFSR_BFARVALID != 0,
                 "nmi" => detail & 0x1ff == NMI_EXCEPTION,
+                // The guard was armed, the fault's address is in it, the frame went into it, and
+                // the canary below it is whole: the overflow stopped at the guard.
+                "stack_overflow" => {
+                    let guard = b.get("guard").and_then(|g| g.split_once('-')).and_then(|(lo, hi)| {
+                        let hex = |v: &str| u64::from_str_radix(v.strip_prefix("0x")?, 16).ok();
+                        Some(hex(lo)?..hex(hi)?)
+                    });
+                    num(b, "armed") == Some(1)
+                        && num(b, "canary_ok") == Some(1)
+                        && b.get("text") == Some(&"stack overflow")
+                        && detail & CFSR_MSTKERR != 0
+                        && guard.zip(num(b, "addr")).is_some_and(|(g, a)| g.contains(&a))
+                }
                 _ => detail == 0,
             };
             need(&mut survived, specific, format!("{kind} record fields wrong: {b:?}"));
@@ -148,6 +183,7 @@ failsafe boot=2 cfsr=0x0 iser0=0x0 reason=panic pc=0x00000000 addr=0x00000000 de
 failsafe boot=3 cfsr=0x0 iser0=0x0 reason=hard_fault pc=0x00000dac addr=0xf0000000 detail=0x8200 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
 failsafe boot=4 cfsr=0x0 iser0=0x0 reason=nmi pc=0x00000000 addr=0x00000000 detail=0x802 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
 failsafe boot=5 cfsr=0x0 iser0=0x0 reason=unexpected_interrupt pc=0x00000000 addr=0x00000000 detail=0x0 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
+failsafe boot=6 cfsr=0x0 iser0=0x0 guard=0x20000400-0x20000800 armed=1 reason=hard_fault pc=0x00000000 addr=0x200007fc detail=0x92 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 canary_ok=1 text=stack overflow
 ";
 
     fn oks(out: &str, exited: bool) -> Vec<(bool, bool, bool)> {
@@ -158,7 +194,7 @@ failsafe boot=5 cfsr=0x0 iser0=0x0 reason=unexpected_interrupt pc=0x00000000 add
     fn a_good_run_passes_every_check() {
         let c = checks(GOOD, true);
         assert!(c.iter().all(Check::ok), "{c:?}");
-        assert_eq!(c.len(), 4);
+        assert_eq!(c.len(), 5);
     }
 
     #[test]
@@ -181,6 +217,16 @@ failsafe boot=5 cfsr=0x0 iser0=0x0 reason=unexpected_interrupt pc=0x00000000 add
         // The record lost across the reset: the next boot finds none.
         let lost = GOOD.replace("reason=panic", "reason=none");
         assert_eq!(oks(&lost, true)[0], (true, false, false));
+        // The overflow ran past the guard (the canary below it overwritten), faulted outside it,
+        // was not told from another HardFault, or the guard was never armed.
+        for broken in [
+            GOOD.replace("canary_ok=1", "canary_ok=0"),
+            GOOD.replace("addr=0x200007fc", "addr=0x200003fc"),
+            GOOD.replace("text=stack overflow", "text="),
+            GOOD.replace("armed=1", "armed=0"),
+        ] {
+            assert_eq!(oks(&broken, true)[4], (true, false, true), "{broken}");
+        }
     }
 
     #[test]

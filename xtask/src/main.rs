@@ -14,8 +14,9 @@
 //! root crate at "z", which under fat LTO sets how the step is compiled), reported and not held to
 //! it. It exits non-zero when a bit differs in either or when a self-tuning GPC sample of the first
 //! takes more than [`BUDGET_INSN`] instructions. Once, from the first build, it boots `pil`'s
-//! `failsafe` binary, which takes a panic, a HardFault, an NMI and an unexpected interrupt through
-//! the firmware's stop path, each across a real system reset, and checks each path ([`failsafe`]);
+//! `failsafe` binary, which takes a panic, a HardFault, an NMI, an unexpected interrupt and a stack
+//! overflow into the MPU stack guard through the firmware's stop path, each across a real system
+//! reset, and checks each path ([`failsafe`]);
 //! the JSON line's `failsafe` object says which passed, and any `false` fails the command.
 //!
 //! `cargo xtask size` — the firmware's footprint: builds the release firmware once per

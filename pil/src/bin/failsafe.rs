@@ -12,7 +12,13 @@
 //! 2. reports the panic, reads an unmapped address (a precise BusFault, escalated to HardFault);
 //! 3. reports the HardFault, pends the NMI (ICSR.NMIPENDSET);
 //! 4. reports the NMI, pends an enabled interrupt that has no handler (`DefaultHandler`);
-//! 5. reports it and exits through semihosting.
+//! 5. reports it, fills a canary below the stack guard and recurses until the stack overflows
+//!    into the guard (MPU region 0, armed at every boot as the firmware arms it);
+//! 6. reports the overflow (a HardFault whose text is "stack overflow", the faulting address in
+//!    the guard, the canary intact: nothing below the guard was written) and exits.
+//!
+//! The HardFault vector is the firmware's (`hter::hard_fault_entry!`): on an overflow the handler
+//! runs from the top of the stack.
 //!
 //! Each report is one semihosting stdout line `failsafe boot=<n> ...` that xtask parses. The
 //! safe-outputs hook stamps a sequence number and notes whether the reason record was already
@@ -25,10 +31,11 @@ use core::mem::MaybeUninit;
 use core::ptr::{addr_of_mut, read_volatile, write_volatile};
 
 use cortex_m::peripheral::SCB;
-use cortex_m_rt::{entry, exception, ExceptionFrame};
+use cortex_m_rt::{entry, exception};
 use cortex_m_semihosting::{debug, hprintln};
 use hter::failsafe::{
-    hard_fault_info, nmi_info, panic_info, stop, unexpected_interrupt_info, ReasonRecord, SafeOutputs, StopInfo,
+    arm_stack_guard, fault_info, nmi_info, panic_info, stop, unexpected_interrupt_info, ReasonRecord, SafeOutputs,
+    StopInfo,
 };
 
 /// `"HTBC"`: the boot log below holds a count from an earlier boot of this image.
@@ -39,7 +46,9 @@ const UNMAPPED: u32 = 0xF000_0000;
 /// The interrupt pended in boot 4: line 0 has no handler in this image.
 const SPARE_IRQ: u32 = 0;
 /// Boots after which the runner gives up instead of faulting again (a stuck sequence must end).
-const LAST_BOOT: u32 = 5;
+const LAST_BOOT: u32 = 6;
+/// The canary's pattern (boot 5).
+const CANARY: u32 = 0x5AFE_C0DE;
 
 /// What each boot leaves for the next, beside the reason record.
 #[derive(Clone, Copy)]
@@ -59,12 +68,41 @@ struct BootLog {
     record_ok_after: u32,
     /// The "outputs": 1 once driven safe.
     outputs_safe: u32,
+    /// Whether every word of [`CANARY_WORDS`] still held [`CANARY`] when the stop path ran.
+    canary_ok: u32,
 }
 
 #[link_section = ".uninit.hter_reason"]
 static mut REASON: MaybeUninit<ReasonRecord> = MaybeUninit::uninit();
 #[link_section = ".uninit.hter_bootlog"]
 static mut LOG: MaybeUninit<BootLog> = MaybeUninit::uninit();
+/// Statics below the guard that an overflow past it would overwrite (with the two above).
+#[link_section = ".uninit.hter_canary"]
+static mut CANARY_WORDS: MaybeUninit<[u32; 64]> = MaybeUninit::uninit();
+
+fn canary() -> *mut [u32; 64] {
+    addr_of_mut!(CANARY_WORDS).cast()
+}
+
+extern "C" {
+    static __stack_guard_start: u8;
+    static __stack_guard_end: u8;
+}
+
+/// The stack guard's addresses (pil/memory.x's `.stack_guard`).
+fn guard() -> core::ops::Range<u32> {
+    core::ptr::addr_of!(__stack_guard_start) as u32..core::ptr::addr_of!(__stack_guard_end) as u32
+}
+
+/// Calls itself until the stack overflows (a frame of 32 bytes of locals each time).
+#[inline(never)]
+fn recurse(depth: u32) -> u32 {
+    let local = black_box([depth; 8]);
+    if black_box(depth) == u32::MAX {
+        return local[0];
+    }
+    recurse(depth + 1).wrapping_add(local[(depth & 7) as usize])
+}
 
 fn reason() -> *mut ReasonRecord {
     // Only the address is taken; every access is volatile, since the contents come from a
@@ -101,6 +139,9 @@ impl SafeOutputs for PilOutputs {
         let rec = unsafe { read_volatile(reason()) };
         l.record_before_safe = u32::from(rec.peek().is_some());
         l.outputs_safe = 1;
+        // SAFETY: a volatile read of the canary (noise outside boot 5, where it is not checked).
+        let c = unsafe { read_volatile(canary()) };
+        l.canary_ok = u32::from(c.iter().all(|w| *w == CANARY));
         write_log(l);
     }
 }
@@ -122,6 +163,9 @@ fn fail(info: impl FnOnce() -> StopInfo) -> ! {
 
 #[entry]
 fn main() -> ! {
+    let g = guard();
+    // SAFETY: the guard is pil/memory.x's `.stack_guard`, which holds nothing.
+    let armed = unsafe { arm_stack_guard(g.start, g.end) };
     let prev = read_log();
     let boot = if prev.magic == BOOT_MAGIC { prev.boot.saturating_add(1) } else { 1 };
     // SAFETY: the record's memory is ours; `take` clears it so each stop is reported once.
@@ -135,7 +179,7 @@ fn main() -> ! {
     // the reset vector would not.
     // SAFETY: reads of system control block and NVIC registers.
     let (cfsr, iser0) = unsafe { (read_volatile(CFSR), read_volatile(NVIC_ISER0)) };
-    report(boot, cfsr, iser0, &prev, found.as_ref());
+    report(boot, cfsr, iser0, armed, &prev, found.as_ref());
     write_log(BootLog {
         magic: BOOT_MAGIC,
         boot,
@@ -145,6 +189,7 @@ fn main() -> ! {
         record_before_safe: 0,
         record_ok_after: 0,
         outputs_safe: 0,
+        canary_ok: 0,
     });
     match boot {
         1 => {
@@ -170,6 +215,11 @@ fn main() -> ! {
             }
             cortex_m::asm::isb();
         }
+        5 => {
+            // SAFETY: the canary is this runner's alone.
+            unsafe { write_volatile(canary(), [CANARY; 64]) };
+            black_box(recurse(black_box(0)));
+        }
         _ => {}
     }
     if boot < LAST_BOOT {
@@ -183,14 +233,26 @@ fn main() -> ! {
 }
 
 /// One line per boot: what the previous boot's stop path left behind.
-fn report(boot: u32, cfsr: u32, iser0: u32, prev: &BootLog, found: Option<&StopInfo>) {
+fn report(boot: u32, cfsr: u32, iser0: u32, armed: bool, prev: &BootLog, found: Option<&StopInfo>) {
+    let g = guard();
     match found {
-        None => hprintln!("failsafe boot={} cfsr={:#x} iser0={:#x} reason=none", boot, cfsr, iser0),
-        Some(r) => hprintln!(
-            "failsafe boot={} cfsr={:#x} iser0={:#x} reason={} pc={:#010x} addr={:#010x} detail={:#x} safe_seq={} record_seq={} record_before_safe={} record_ok_after={} outputs_safe={} text={}",
+        None => hprintln!(
+            "failsafe boot={} cfsr={:#x} iser0={:#x} guard={:#010x}-{:#010x} armed={} reason=none",
             boot,
             cfsr,
             iser0,
+            g.start,
+            g.end,
+            u32::from(armed)
+        ),
+        Some(r) => hprintln!(
+            "failsafe boot={} cfsr={:#x} iser0={:#x} guard={:#010x}-{:#010x} armed={} reason={} pc={:#010x} addr={:#010x} detail={:#x} safe_seq={} record_seq={} record_before_safe={} record_ok_after={} outputs_safe={} canary_ok={} text={}",
+            boot,
+            cfsr,
+            iser0,
+            g.start,
+            g.end,
+            u32::from(armed),
             r.kind.name(),
             r.pc,
             r.addr,
@@ -200,6 +262,7 @@ fn report(boot: u32, cfsr: u32, iser0: u32, prev: &BootLog, found: Option<&StopI
             prev.record_before_safe,
             prev.record_ok_after,
             prev.outputs_safe,
+            prev.canary_ok,
             r.text()
         ),
     }
@@ -220,12 +283,17 @@ const ICSR: *const u32 = 0xE000_ED04 as *const u32;
 const NVIC_ISER0: *const u32 = 0xE000_E100 as *const u32;
 const NVIC_ISPR0: *mut u32 = 0xE000_E200 as *mut u32;
 
-#[exception]
-unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
+// The firmware's HardFault entry: from the top of the stack when the fault left it near the guard.
+hter::hard_fault_entry!(hard_fault, 1024);
+
+extern "C" fn hard_fault(sp: u32) -> ! {
     fail(|| {
-        // SAFETY: reads of the system control block's status registers.
-        let (cfsr, bfar, mmfar) = unsafe { (read_volatile(CFSR), read_volatile(BFAR), read_volatile(MMFAR)) };
-        hard_fault_info(ef.pc(), cfsr, bfar, mmfar)
+        // SAFETY: reads of the system control block's status registers and of the stacked PC
+        // (the MPU is off in HardFault).
+        let (cfsr, bfar, mmfar, pc) = unsafe {
+            (read_volatile(CFSR), read_volatile(BFAR), read_volatile(MMFAR), read_volatile((sp + 24) as *const u32))
+        };
+        fault_info(pc, sp, cfsr, bfar, mmfar, guard())
     })
 }
 
