@@ -314,6 +314,14 @@
 //! step --no-approach-lead`). Regulation and setpoint changes
 //! after the first approach are not touched.
 //!
+//! **Across a sensor fault** ([`GAP_SETTLE_SAMPLES`]). While the step has no trusted reading it
+//! runs no controller; it tells the self-tuner what it applied instead ([`Controller::skip`]), and
+//! the estimator does not update until [`GAP_SETTLE_SAMPLES`] measurements after the gap. Without
+//! that, the first updates after the fault regressed the measurements after it on the outputs
+//! before it: on the start model's plant holding 5 °C at duty 0.45 (a 1.3 × stronger cooler), a
+//! two-minute fault took b0 above zero and the law ran `frozen` for the remaining 28 h of the run
+//! (`across_a_sensor_fault_the_estimate_is_not_corrupted`); a five-minute one likewise.
+//!
 //! Mode changes are reported through [`Controller::status`] so the step logs each one as an
 //! event (engaged, frozen, fallback). The fallback PI tracks the applied duty all the time, so
 //! switching in either direction is bumpless; the law's histories also track the applied duty.
@@ -465,6 +473,8 @@ pub struct SecondOrderRegressor {
     tau: f32,
     /// Samples in a row the applied duty has not changed, saturating.
     held_n: u16,
+    /// Measurements still to take after a gap before φ is complete again ([`Self::gap`]).
+    fresh: u8,
 }
 
 impl SecondOrderRegressor {
@@ -480,7 +490,17 @@ impl SecondOrderRegressor {
             return Err(ModelError::Order);
         }
         let uf = u0 / (1.0 - tau);
-        Ok(Self { y: [0.0; 3], yf: [0.0; 3], filled: 0, u_last: u0, u: [uf; MAX_K + ESTIMATED_NB], k, tau, held_n: 0 })
+        Ok(Self {
+            y: [0.0; 3],
+            yf: [0.0; 3],
+            filled: 0,
+            u_last: u0,
+            u: [uf; MAX_K + ESTIMATED_NB],
+            k,
+            tau,
+            held_n: 0,
+            fresh: 0,
+        })
     }
 
     /// The delay k, samples.
@@ -503,7 +523,23 @@ impl SecondOrderRegressor {
             shift_in(&mut self.yf, yf);
         }
         self.filled = self.filled.saturating_add(1);
+        if self.fresh > 0 {
+            self.fresh -= 1;
+            return false;
+        }
         self.filled >= 3
+    }
+
+    /// A sample went by without a measurement (the step's sensor fault) and `applied` was
+    /// applied: the input history takes it, and the next [`GAP_SETTLE_SAMPLES`] measurements
+    /// complete no φ. Across the gap the output history would pair the last measurement before it
+    /// with the inputs after, and the prefilter carries that mismatch on (0.6ⁿ of it n samples
+    /// later).
+    pub fn gap(&mut self, applied: f32) {
+        if applied.is_finite() {
+            self.push_u(applied);
+        }
+        self.fresh = GAP_SETTLE_SAMPLES;
     }
 
     /// The target y(t) of the last measurement, through the prefilter.
@@ -556,6 +592,11 @@ impl SecondOrderRegressor {
         shift_in(&mut self.u, uf);
     }
 }
+
+/// Measurements after a gap in the data (a sensor fault the step rode out) before the estimator
+/// updates again ([`SecondOrderRegressor::gap`]; module docs, "Across a sensor fault"): two for
+/// the output lags, ten for the prefilter's memory of the samples before the gap (0.6¹⁰ ≈ 0.6 %).
+pub const GAP_SETTLE_SAMPLES: u8 = 12;
 
 /// GPC's λ while the law runs on a model the current estimate has not confirmed (`Frozen`: the
 /// start model, one restored from flash, or the last trusted one), at least this. On a
@@ -1013,6 +1054,12 @@ impl Controller for SelfTuning {
         self.law_state.track(applied);
         self.fallback.track(input, applied);
         self.reg.push_u(applied);
+    }
+
+    /// A sample without a trusted reading: the estimator's regressor records the gap (module
+    /// docs, "Across a sensor fault"); the law and the PI resume where they left off.
+    fn skip(&mut self, applied: f32) {
+        self.reg.gap(applied);
     }
 
     fn name(&self) -> &'static str {
@@ -1667,6 +1714,47 @@ mod tests {
             assert!(t < 1000, "an implausible estimate freezes the law");
         }
         assert_eq!(c.trusted_model(), rested);
+    }
+
+    #[test]
+    fn across_a_sensor_fault_the_estimate_is_not_corrupted() {
+        use crate::step::Carrier;
+        use crate::units::Celsius;
+        // The start model's plant with a 1.3 × stronger cooler, holding 5 °C in a 28 °C room
+        // (deviation variables from the room), its readings through the whole step; after 56 h
+        // (the estimate long confirmed) the sensor reads nothing plausible for `gap` samples
+        // (cooling off), then reads again.
+        let run = |gap: u64| {
+            let m = START_MODEL_HTER1;
+            let (a, b, k) = ([m.a()[0], m.a()[1]], [1.3 * m.b()[0], 1.3 * m.b()[1]], m.k());
+            let c = SelfTuning::new(ADAPTIVE_GPC, TS_S, 0.4).unwrap();
+            let mut carrier = Carrier::new(crate::step::ValidConfig::DEFAULT, c);
+            let (mut ys, mut us) = ([-23.0f32; 2], std::vec![0.45f32; k + 2]);
+            let (t_gap, end) = (20_000u64, 20_000 + gap + 2000);
+            let (mut seed, mut frozen) = (3u32, 0);
+            for t in 0..end {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                let y = 28.0 + ys[0] + 0.005 * ((seed >> 8) as f32 / (1u32 << 24) as f32 - 0.5);
+                let reading = if (t_gap..t_gap + gap).contains(&t) { 300.0 } else { y };
+                let out = carrier.step_celsius(t * 10_000, Celsius(reading), 5.0);
+                if t >= t_gap + gap && carrier.controller().mode() == AdaptiveMode::Frozen {
+                    frozen += 1;
+                }
+                us.rotate_right(1);
+                us[0] = out.duty.get();
+                ys = [-a[0] * ys[0] - a[1] * ys[1] + b[0] * us[k - 1] + b[1] * us[k], ys[0]];
+            }
+            (frozen, carrier.controller().theta())
+        };
+        let (frozen, theta) = run(0);
+        assert_eq!(frozen, 0, "no fault: {theta:?}");
+        // Two and five minutes without a reading: the estimator waits for fresh data and the
+        // estimate stays a cooler's; regressed across the gap, b0 went above zero and the law ran
+        // frozen from then on (5.5 h, every sample).
+        for gap in [12, 30] {
+            let (frozen, theta) = run(gap);
+            assert!(theta[2] <= 0.0 && frozen == 0, "gap {gap}: {frozen} samples frozen, θ {theta:?}");
+        }
     }
 
     #[test]
