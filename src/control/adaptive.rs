@@ -384,7 +384,8 @@ pub enum AdaptiveError {
     ApproachLead,
     /// The fallback PI's gain is not finite and positive, or its integral time not positive.
     Fallback,
-    /// The law's tuning is out of range, or the law is not built into this image.
+    /// The law's tuning is out of range (GPC: a horizon N2 shorter than the delay k too), or the
+    /// law is not built into this image.
     Law(ControlError),
 }
 
@@ -439,10 +440,18 @@ impl AdaptiveConfig {
         if !(pi.kp_per_c.is_finite() && pi.kp_per_c > 0.0 && pi.ti_s > 0.0) {
             return Err(AdaptiveError::Fallback);
         }
-        match self.law.validate() {
-            Ok(()) => Ok(()),
-            Err(e) => Err(AdaptiveError::Law(e)),
+        if let Err(e) = self.law.validate() {
+            return Err(AdaptiveError::Law(e));
         }
+        // GPC's horizon must reach the delay: before it the step response is zero, no duty acts
+        // on any predicted sample, and the design holds the duty it starts from for good
+        // (`hter sim --n2 4` kept a carrier at 28 °C for 3 h, with no event).
+        if let Law::Gpc(g) = self.law {
+            if g.n2 < self.k {
+                return Err(AdaptiveError::Law(ControlError::Config));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -1175,6 +1184,23 @@ mod tests {
         }
         let law = Law::Gpc(GpcConfig { n1: 0, ..GpcConfig::DEFAULT });
         assert_eq!(refused(AdaptiveConfig { law, ..ADAPTIVE_GPC }), Some(AdaptiveError::Law(ControlError::Config)));
+        // A GPC horizon that ends before the delay: no duty acts on any predicted sample. Run,
+        // it held its starting duty for good and the PI never took over (`hter sim --n2 4`: a
+        // carrier left at 28 °C for 3 h); the board's builds take the PI for a refused
+        // configuration (`profile::SelfTuningOrPi`). N2 = k reaches it
+        // (`a_horizon_ending_at_the_delay_still_runs_gpc`).
+        let k = ADAPTIVE_GPC.k;
+        for (n2, nu) in [(k - 1, 1), (1, 1)] {
+            let law = Law::Gpc(GpcConfig { n2, nu, ..GpcConfig::DEFAULT });
+            let cfg = AdaptiveConfig { law, ..ADAPTIVE_GPC };
+            assert_eq!(refused(cfg), Some(AdaptiveError::Law(ControlError::Config)), "N2 {n2}");
+        }
+        let law = Law::Gpc(GpcConfig { n2: k, nu: 1, ..GpcConfig::DEFAULT });
+        assert_eq!(refused(AdaptiveConfig { law, ..ADAPTIVE_GPC }), None);
+        // The delay of a restored model counts: a record with k = 10 under N2 = 9.
+        let law = Law::Gpc(GpcConfig { n2: 9, ..GpcConfig::DEFAULT });
+        let restored = AdaptiveConfig { law, ..ADAPTIVE_GPC }.restored_from(START_MODEL_HTER1.with_delay(10).unwrap());
+        assert_eq!(refused(restored), Some(AdaptiveError::Law(ControlError::Config)));
         // The longest delay runs: u(t − k − 1) is the oldest input kept.
         let mut c = SelfTuning::new(AdaptiveConfig { k: MAX_K, ..ADAPTIVE_GPC }, TS_S, 0.4).unwrap();
         for _ in 0..5 {
