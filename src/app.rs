@@ -176,6 +176,12 @@ impl Controller for BoardController {
         }
     }
 
+    fn skip(&mut self, applied: f32) {
+        if let BoardController::Adaptive(c) = self {
+            c.skip(applied);
+        }
+    }
+
     fn name(&self) -> &'static str {
         match self {
             BoardController::Adaptive(c) => c.name(),

@@ -226,6 +226,12 @@ impl Controller for SelfTuningOrPi {
         }
     }
 
+    fn skip(&mut self, applied: f32) {
+        if let SelfTuningOrPi::SelfTuning(c) = self {
+            c.skip(applied);
+        }
+    }
+
     fn name(&self) -> &'static str {
         match self {
             SelfTuningOrPi::SelfTuning(c) => c.name(),

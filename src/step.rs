@@ -412,6 +412,8 @@ impl<C: Controller> Carrier<C> {
         let trusted = self.supervisor.trusts_reading();
         if trusted {
             self.controller.track(&ci, verdict.duty.get());
+        } else {
+            self.controller.skip(verdict.duty.get());
         }
         let holdover_s = self.holdover(verdict.duty.get(), verdict.supply_enable, verdict.mode, trusted, temp_c);
         StepOutput {

@@ -246,11 +246,12 @@ pub type Ctl = Identify;
 // stored into the control task's future and copied on from there (−232 B of flash).
 #[inline(never)]
 pub fn controller(adaptive: Option<AdaptiveConfig>) -> Ctl {
-    // Only the start model and its delay come from flash (`AdaptiveConfig::restored_from`);
-    // taking the rest from the constant lets the compiler fold its checks, which
+    // Only the start model, its delay and the estimator's P(0) come from flash
+    // (`AdaptiveConfig::with_restored`: P(0) is `RESUMED_P0` for the model this self-tuner
+    // stored); taking the rest from the constant lets the compiler fold its checks, which
     // `ADAPTIVE_DEFAULT` passed when the firmware compiled.
     let cfg = match adaptive {
-        Some(a) => AdaptiveConfig { initial: a.initial, k: a.k, ..ADAPTIVE_DEFAULT },
+        Some(a) => ADAPTIVE_DEFAULT.with_restored(&a),
         None => ADAPTIVE_DEFAULT,
     };
     // Starts from the PI's bias: the duty that holds the load near 4 °C.

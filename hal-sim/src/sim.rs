@@ -151,8 +151,23 @@ impl ControllerSpec {
         let (Some(profile_cfg), Some(law)) = (kind.adaptive(), self.law()) else {
             return profile::controller(kind, ts_s, u0).map_err(refused);
         };
+        // Before the delay the step response is zero: a GPC horizon that ends there has no duty
+        // act on any predicted sample and holds its first duty for good (the self-tuner's
+        // configuration refuses it too, as `Law(Config)`: said here by name).
+        let reaches = |k: usize| {
+            match law {
+            Law::Gpc(g) if g.n2 < k => Err(anyhow!(
+                "GPC's horizon N2 = {} ends before the model's delay k = {k}: no duty would act on any predicted sample (--n2 {k} or more)",
+                g.n2
+            )),
+            _ => Ok(()),
+        }
+        };
         Ok(match self.model {
-            Some(m) => AnyController::Fixed(FixedModel::new(law, m, u0)),
+            Some(m) => {
+                reaches(m.k())?;
+                AnyController::Fixed(FixedModel::new(law, m, u0))
+            }
             None => {
                 let initial = self.initial.or(profile_cfg.initial);
                 let cfg = AdaptiveConfig {
@@ -167,6 +182,7 @@ impl ControllerSpec {
                     Some(m) if self.resumed => cfg.resumed_from(m),
                     _ => cfg,
                 };
+                reaches(cfg.k)?;
                 let mut c = SelfTuning::new(cfg, ts_s, u0).map_err(refused)?;
                 if !self.approach_lead {
                     c.end_approach();

@@ -357,6 +357,25 @@ fn the_open_loop_scenario_refuses_controllers() {
     assert!(stdout(&out).contains("\"controller\":\"prbs\""), "{}", stdout(&out));
 }
 
+/// A GPC horizon that ends before the model's delay: no duty acts on any predicted sample, and
+/// `hter sim --n2 4` (the self-tuner, delay 5) kept the carrier at 28 °C for 3 h with no word;
+/// `--model` with a longer delay likewise. Refused by name; N2 = k runs.
+#[test]
+fn a_gpc_horizon_shorter_than_the_delay_is_refused() {
+    let said = "ends before the model's delay k = ";
+    assert_error(&["sim", "--n2", "4", "--nu", "1", "--duration", "100"], &format!("N2 = 4 {said}5"));
+    assert_error(&["sim", "--n2", "5", "--nu", "1", "--plant", "hter2", "--duration", "100"], &format!("{said}6"));
+    let model = ["--model", "arx:-0.99;-0.3;10"];
+    assert_error(&[&["sim", "--n2", "9"][..], &model, &["--duration", "100"]].concat(), &format!("{said}10"));
+    for args in [
+        &["sim", "--n2", "5", "--nu", "1", "--duration", "100"][..],
+        &[&["sim", "--n2", "10"][..], &model, &["--duration", "100"]].concat(),
+    ] {
+        let out = hter(args);
+        assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    }
+}
+
 /// A pole in [0, 1) as typed that is 1 in the library's f32 is refused as what it becomes:
 /// `--p-pole 0.999999999` said "Gmvc: configuration refused (Law(Config))", `--t-pole` "…
 /// (TFilter)". The largest f32 below 1 still runs.

@@ -314,6 +314,14 @@
 //! step --no-approach-lead`). Regulation and setpoint changes
 //! after the first approach are not touched.
 //!
+//! **Across a sensor fault** ([`GAP_SETTLE_SAMPLES`]). While the step has no trusted reading it
+//! runs no controller; it tells the self-tuner what it applied instead ([`Controller::skip`]), and
+//! the estimator does not update until [`GAP_SETTLE_SAMPLES`] measurements after the gap. Without
+//! that, the first updates after the fault regressed the measurements after it on the outputs
+//! before it: on the start model's plant holding 5 °C at duty 0.45 (a 1.3 × stronger cooler), a
+//! two-minute fault took b0 above zero and the law ran `frozen` for the remaining 28 h of the run
+//! (`across_a_sensor_fault_the_estimate_is_not_corrupted`); a five-minute one likewise.
+//!
 //! Mode changes are reported through [`Controller::status`] so the step logs each one as an
 //! event (engaged, frozen, fallback). The fallback PI tracks the applied duty all the time, so
 //! switching in either direction is bumpless; the law's histories also track the applied duty.
@@ -376,7 +384,8 @@ pub enum AdaptiveError {
     ApproachLead,
     /// The fallback PI's gain is not finite and positive, or its integral time not positive.
     Fallback,
-    /// The law's tuning is out of range, or the law is not built into this image.
+    /// The law's tuning is out of range (GPC: a horizon N2 shorter than the delay k too), or the
+    /// law is not built into this image.
     Law(ControlError),
 }
 
@@ -395,6 +404,20 @@ impl AdaptiveConfig {
     pub const fn resumed_from(self, model: Model) -> Self {
         let rls = RlsConfig { p0: RESUMED_P0, ..self.rls };
         AdaptiveConfig { rls, ..self.restored_from(model) }
+    }
+
+    /// This configuration with what a boot's flash restore made of it, `restored`
+    /// ([`crate::persist::flash::restore_records`]: [`Self::resumed_from`] the stored model, or the
+    /// configuration unchanged): the start model, its delay and the estimator's P(0),
+    /// [`RESUMED_P0`] if `restored` was resumed; every other field stays this one's (a board's
+    /// constant: P(0) is one of two constants too, and the checks fold when it compiles, +72 B
+    /// of flash against +152 B for `restored`'s P(0) as it is). Until 2026-12 the default
+    /// firmware took the model and the delay alone, so a board that reset in a hold restarted
+    /// its estimator from the start's P(0) = I instead of [`RESUMED_P0`]·I (module docs,
+    /// "Resumed from a stored model").
+    pub const fn with_restored(self, restored: &AdaptiveConfig) -> Self {
+        let rls = if restored.rls.p0 == RESUMED_P0 { RlsConfig { p0: RESUMED_P0, ..self.rls } } else { self.rls };
+        AdaptiveConfig { initial: restored.initial, k: restored.k, rls, ..self }
     }
 
     /// Checks every range [`SelfTuning::new`] relies on (usable in constants: a board can
@@ -417,10 +440,18 @@ impl AdaptiveConfig {
         if !(pi.kp_per_c.is_finite() && pi.kp_per_c > 0.0 && pi.ti_s > 0.0) {
             return Err(AdaptiveError::Fallback);
         }
-        match self.law.validate() {
-            Ok(()) => Ok(()),
-            Err(e) => Err(AdaptiveError::Law(e)),
+        if let Err(e) = self.law.validate() {
+            return Err(AdaptiveError::Law(e));
         }
+        // GPC's horizon must reach the delay: before it the step response is zero, no duty acts
+        // on any predicted sample, and the design holds the duty it starts from for good
+        // (`hter sim --n2 4` kept a carrier at 28 °C for 3 h, with no event).
+        if let Law::Gpc(g) = self.law {
+            if g.n2 < self.k {
+                return Err(AdaptiveError::Law(ControlError::Config));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -451,6 +482,8 @@ pub struct SecondOrderRegressor {
     tau: f32,
     /// Samples in a row the applied duty has not changed, saturating.
     held_n: u16,
+    /// Measurements still to take after a gap before φ is complete again ([`Self::gap`]).
+    fresh: u8,
 }
 
 impl SecondOrderRegressor {
@@ -466,7 +499,17 @@ impl SecondOrderRegressor {
             return Err(ModelError::Order);
         }
         let uf = u0 / (1.0 - tau);
-        Ok(Self { y: [0.0; 3], yf: [0.0; 3], filled: 0, u_last: u0, u: [uf; MAX_K + ESTIMATED_NB], k, tau, held_n: 0 })
+        Ok(Self {
+            y: [0.0; 3],
+            yf: [0.0; 3],
+            filled: 0,
+            u_last: u0,
+            u: [uf; MAX_K + ESTIMATED_NB],
+            k,
+            tau,
+            held_n: 0,
+            fresh: 0,
+        })
     }
 
     /// The delay k, samples.
@@ -489,7 +532,23 @@ impl SecondOrderRegressor {
             shift_in(&mut self.yf, yf);
         }
         self.filled = self.filled.saturating_add(1);
+        if self.fresh > 0 {
+            self.fresh -= 1;
+            return false;
+        }
         self.filled >= 3
+    }
+
+    /// A sample went by without a measurement (the step's sensor fault) and `applied` was
+    /// applied: the input history takes it, and the next [`GAP_SETTLE_SAMPLES`] measurements
+    /// complete no φ. Across the gap the output history would pair the last measurement before it
+    /// with the inputs after, and the prefilter carries that mismatch on (0.6ⁿ of it n samples
+    /// later).
+    pub fn gap(&mut self, applied: f32) {
+        if applied.is_finite() {
+            self.push_u(applied);
+        }
+        self.fresh = GAP_SETTLE_SAMPLES;
     }
 
     /// The target y(t) of the last measurement, through the prefilter.
@@ -542,6 +601,11 @@ impl SecondOrderRegressor {
         shift_in(&mut self.u, uf);
     }
 }
+
+/// Measurements after a gap in the data (a sensor fault the step rode out) before the estimator
+/// updates again ([`SecondOrderRegressor::gap`]; module docs, "Across a sensor fault"): two for
+/// the output lags, ten for the prefilter's memory of the samples before the gap (0.6¹⁰ ≈ 0.6 %).
+pub const GAP_SETTLE_SAMPLES: u8 = 12;
 
 /// GPC's λ while the law runs on a model the current estimate has not confirmed (`Frozen`: the
 /// start model, one restored from flash, or the last trusted one), at least this. On a
@@ -1001,6 +1065,12 @@ impl Controller for SelfTuning {
         self.reg.push_u(applied);
     }
 
+    /// A sample without a trusted reading: the estimator's regressor records the gap (module
+    /// docs, "Across a sensor fault"); the law and the PI resume where they left off.
+    fn skip(&mut self, applied: f32) {
+        self.reg.gap(applied);
+    }
+
     fn name(&self) -> &'static str {
         self.cfg.law.name()
     }
@@ -1114,6 +1184,23 @@ mod tests {
         }
         let law = Law::Gpc(GpcConfig { n1: 0, ..GpcConfig::DEFAULT });
         assert_eq!(refused(AdaptiveConfig { law, ..ADAPTIVE_GPC }), Some(AdaptiveError::Law(ControlError::Config)));
+        // A GPC horizon that ends before the delay: no duty acts on any predicted sample. Run,
+        // it held its starting duty for good and the PI never took over (`hter sim --n2 4`: a
+        // carrier left at 28 °C for 3 h); the board's builds take the PI for a refused
+        // configuration (`profile::SelfTuningOrPi`). N2 = k reaches it
+        // (`a_horizon_ending_at_the_delay_still_runs_gpc`).
+        let k = ADAPTIVE_GPC.k;
+        for (n2, nu) in [(k - 1, 1), (1, 1)] {
+            let law = Law::Gpc(GpcConfig { n2, nu, ..GpcConfig::DEFAULT });
+            let cfg = AdaptiveConfig { law, ..ADAPTIVE_GPC };
+            assert_eq!(refused(cfg), Some(AdaptiveError::Law(ControlError::Config)), "N2 {n2}");
+        }
+        let law = Law::Gpc(GpcConfig { n2: k, nu: 1, ..GpcConfig::DEFAULT });
+        assert_eq!(refused(AdaptiveConfig { law, ..ADAPTIVE_GPC }), None);
+        // The delay of a restored model counts: a record with k = 10 under N2 = 9.
+        let law = Law::Gpc(GpcConfig { n2: 9, ..GpcConfig::DEFAULT });
+        let restored = AdaptiveConfig { law, ..ADAPTIVE_GPC }.restored_from(START_MODEL_HTER1.with_delay(10).unwrap());
+        assert_eq!(refused(restored), Some(AdaptiveError::Law(ControlError::Config)));
         // The longest delay runs: u(t − k − 1) is the oldest input kept.
         let mut c = SelfTuning::new(AdaptiveConfig { k: MAX_K, ..ADAPTIVE_GPC }, TS_S, 0.4).unwrap();
         for _ in 0..5 {
@@ -1123,6 +1210,25 @@ mod tests {
         }
         assert_eq!(c.updates(), 3);
         assert_eq!(SecondOrderRegressor::new(0, 0.4), Err(ModelError::Order));
+    }
+
+    #[test]
+    fn a_board_restarted_from_its_stored_model_resumes_the_estimator() {
+        use crate::persist::ModelRecord;
+        // What the boot's flash restore hands the default firmware (`restore_records`): the
+        // profile resumed from the model its self-tuner stored.
+        let rec = ModelRecord::from_model(&START_MODEL_HTER1).unwrap();
+        let restored = rec.restore(&ADAPTIVE_GPC).unwrap();
+        let stored = rec.to_model(&ADAPTIVE_GPC).unwrap();
+        // The firmware's constant with it: the configuration `resumed_from` documents.
+        let cfg = ADAPTIVE_GPC.with_restored(&restored);
+        assert_eq!(cfg, ADAPTIVE_GPC.resumed_from(stored));
+        // P(0) = 0.01·I for the model's six parameters and 1 for the offset (module docs,
+        // "Resumed from a stored model"), not the start's I: trace 1.06, not 7.
+        let c = SelfTuning::new(cfg, TS_S, 0.4).unwrap();
+        assert!((c.trace_p() - (6.0 * RESUMED_P0 + OFFSET_P0)).abs() < 1e-6, "trace P(0) = {}", c.trace_p());
+        // Nothing stored (the restore hands the constant back): the start's P(0).
+        assert_eq!(ADAPTIVE_GPC.with_restored(&ADAPTIVE_GPC), ADAPTIVE_GPC);
     }
 
     #[test]
@@ -1634,6 +1740,47 @@ mod tests {
             assert!(t < 1000, "an implausible estimate freezes the law");
         }
         assert_eq!(c.trusted_model(), rested);
+    }
+
+    #[test]
+    fn across_a_sensor_fault_the_estimate_is_not_corrupted() {
+        use crate::step::Carrier;
+        use crate::units::Celsius;
+        // The start model's plant with a 1.3 × stronger cooler, holding 5 °C in a 28 °C room
+        // (deviation variables from the room), its readings through the whole step; after 56 h
+        // (the estimate long confirmed) the sensor reads nothing plausible for `gap` samples
+        // (cooling off), then reads again.
+        let run = |gap: u64| {
+            let m = START_MODEL_HTER1;
+            let (a, b, k) = ([m.a()[0], m.a()[1]], [1.3 * m.b()[0], 1.3 * m.b()[1]], m.k());
+            let c = SelfTuning::new(ADAPTIVE_GPC, TS_S, 0.4).unwrap();
+            let mut carrier = Carrier::new(crate::step::ValidConfig::DEFAULT, c);
+            let (mut ys, mut us) = ([-23.0f32; 2], std::vec![0.45f32; k + 2]);
+            let (t_gap, end) = (20_000u64, 20_000 + gap + 2000);
+            let (mut seed, mut frozen) = (3u32, 0);
+            for t in 0..end {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                let y = 28.0 + ys[0] + 0.005 * ((seed >> 8) as f32 / (1u32 << 24) as f32 - 0.5);
+                let reading = if (t_gap..t_gap + gap).contains(&t) { 300.0 } else { y };
+                let out = carrier.step_celsius(t * 10_000, Celsius(reading), 5.0);
+                if t >= t_gap + gap && carrier.controller().mode() == AdaptiveMode::Frozen {
+                    frozen += 1;
+                }
+                us.rotate_right(1);
+                us[0] = out.duty.get();
+                ys = [-a[0] * ys[0] - a[1] * ys[1] + b[0] * us[k - 1] + b[1] * us[k], ys[0]];
+            }
+            (frozen, carrier.controller().theta())
+        };
+        let (frozen, theta) = run(0);
+        assert_eq!(frozen, 0, "no fault: {theta:?}");
+        // Two and five minutes without a reading: the estimator waits for fresh data and the
+        // estimate stays a cooler's; regressed across the gap, b0 went above zero and the law ran
+        // frozen from then on (5.5 h, every sample).
+        for gap in [12, 30] {
+            let (frozen, theta) = run(gap);
+            assert!(theta[2] <= 0.0 && frozen == 0, "gap {gap}: {frozen} samples frozen, θ {theta:?}");
+        }
     }
 
     #[test]

@@ -85,6 +85,12 @@ pub trait Controller {
     /// Informs the controller of the duty actually applied this sample, in [0, 1].
     fn track(&mut self, input: &ControlInput, applied: f32);
 
+    /// The step ran a sample without the controller (no trusted reading: a sensor fault) and
+    /// applied `applied`. Nothing by default: a law resumes where it left off. The self-tuner's
+    /// estimator must not regress across the gap ([`adaptive::SelfTuning`], "Across a sensor
+    /// fault").
+    fn skip(&mut self, _applied: f32) {}
+
     /// Short name for logs ("onoff", "pi", …).
     fn name(&self) -> &'static str;
 
@@ -181,6 +187,12 @@ impl Controller for AnyController {
             AnyController::Fixed(c) => c.track(input, applied),
             AnyController::Prbs(c) => c.track(input, applied),
             AnyController::SelfTuning(c) => c.track(input, applied),
+        }
+    }
+
+    fn skip(&mut self, applied: f32) {
+        if let AnyController::SelfTuning(c) = self {
+            c.skip(applied);
         }
     }
 
