@@ -19,7 +19,8 @@ use crate::log;
 #[derive(clap::Args, Debug, Clone)]
 pub struct MonitorArgs {
     /// CSV log with columns t_s and temp_c (an empty temp_c is a sample with no reading); rows
-    /// with a non-empty `event` column (the board's history) are events, not samples.
+    /// with a non-empty `event` column (the board's history) are events, not samples. A board
+    /// history's interval row (a file with min_c and max_c) covers the 5 min ending at its t_s.
     #[arg(long)]
     pub input: PathBuf,
     /// Print one JSON object.
@@ -114,6 +115,13 @@ impl Record {
 /// measure, and it never forgets an excursion it did. Alarm times are given on the log's own
 /// time axis.
 pub fn report(t: &[f64], temp: &[Option<f64>]) -> Result<Report> {
+    report_closed(t, temp, false)
+}
+
+/// [`report`] of a log whose last sample, when `closing`, is no sample of its own but the end of
+/// the interval of the one before it ([`Input::closing`]: a board history's last row holds to
+/// its `t_s`): with no reading there it is not one more fault sample.
+pub fn report_closed(t: &[f64], temp: &[Option<f64>], closing: bool) -> Result<Report> {
     let readings = temp.iter().filter(|c| c.is_some()).count();
     if readings < 2 {
         bail!("the log needs at least 2 samples with a temperature, it has {readings}");
@@ -126,6 +134,9 @@ pub fn report(t: &[f64], temp: &[Option<f64>]) -> Result<Report> {
     let last_reading = temp.iter().rposition(Option::is_some);
     let mut held = None;
     for (i, (&ts, &c)) in t.iter().zip(temp).enumerate() {
+        if closing && c.is_none() && i + 1 == t.len() {
+            break;
+        }
         if let Some(c) = c {
             rec.push(ts - gaps_s, ts, c)?;
             held = Some(c);
@@ -174,7 +185,7 @@ pub fn report(t: &[f64], temp: &[Option<f64>]) -> Result<Report> {
 /// recomputed from them alone, a dip to −5 °C between two readings of a mean of 4 °C, or the
 /// carrier's own freeze alarm, would not be in the record a supervisor reads.
 pub fn record(input: &Input) -> Result<Report> {
-    let mut r = report(&input.t_s, &input.temp_c)?;
+    let mut r = report_closed(&input.t_s, &input.temp_c, input.closing)?;
     for &(lo, hi) in input.extremes.iter().flatten() {
         r.min_c = r.min_c.min(lo);
         r.max_c = r.max_c.max(hi);
@@ -188,9 +199,9 @@ pub fn record(input: &Input) -> Result<Report> {
 }
 
 /// How far apart, s, the carrier's trigger time and the one recomputed from a history's means
-/// may be for the two to be one alarm: the means lag the samples by up to an interval, and a
-/// run of means meets a threshold up to an interval later or earlier than the samples did.
-pub const SAME_ALARM_S: f64 = 3.0 * INTERVAL_S;
+/// may be for the two to be one alarm: a run of means meets a threshold up to an interval
+/// later or earlier than the samples did, and an interval after a restart is a short one.
+pub const SAME_ALARM_S: f64 = 2.0 * INTERVAL_S;
 
 /// Whether a recomputed alarm and one the carrier recorded are the same.
 fn same_alarm(recomputed: &AlarmOut, carrier: &AlarmOut) -> bool {
@@ -226,7 +237,10 @@ pub struct Event {
 /// A cold-chain log as `hter monitor` and `hter report` read it.
 #[derive(Debug, Clone)]
 pub struct Input {
-    /// Sample times, s, strictly increasing.
+    /// Sample times, s, strictly increasing; a sample holds to the next one. A board history's
+    /// interval row is a sample at the start of its interval (its `t_s` less [`INTERVAL_S`], or
+    /// the row before's `t_s` if that is later), and the last row's `t_s` closes the record
+    /// ([`Self::closing`]).
     pub t_s: Vec<f64>,
     /// Sample temperatures, °C (`None`: no reading).
     pub temp_c: Vec<Option<f64>>,
@@ -238,6 +252,16 @@ pub struct Input {
     /// Whether the file has an `event`, `reset_cause` or `events` column (a file without one cannot say
     /// that nothing happened).
     pub has_event_column: bool,
+    /// Whether the last entry of `t_s` is no row but the end of the last row's interval (a board
+    /// history), where that row's temperature is repeated.
+    pub closing: bool,
+}
+
+impl Input {
+    /// The samples of the file: `t_s`'s entries less the closing one.
+    pub fn samples(&self) -> usize {
+        self.t_s.len() - usize::from(self.closing)
+    }
 }
 
 /// Reads a simulator CSV, a `hter log2csv` output or a board history (docs/interface.md): the
@@ -245,9 +269,19 @@ pub struct Input {
 /// an event, not a sample (its temperature cells only repeat the last interval's mean, or are
 /// empty); a non-empty `reset_cause` is a reset event at that (sample) row, and each name in a
 /// non-empty `events` cell (`hter log2csv`: `ssr_stuck_on;lid_open`) an event there. Sample times must
-/// strictly increase and no row may go back in time. After a `log_entries_lost` event, the time
-/// from one interval past the sample row before it to the next sample row is no reading (a
-/// sample with no temperature is added there): those rows never reached flash.
+/// strictly increase and no row may go back in time.
+///
+/// A board history (a file with the `min_c` and `max_c` columns) is told from a log of samples
+/// (`hter sim --csv`, `hter log2csv`) by those columns. Its interval row's `t_s` is the end of
+/// the interval it summarises (`hter::persist::log::IntervalLog`): the row holds over the
+/// interval that ends at its `t_s`, i.e. it is read as a sample at `t_s` − [`INTERVAL_S`] (at the
+/// row before's `t_s` if that is later), and the last row's `t_s` closes the record. A log of
+/// samples keeps its meaning: a sample holds until the next one. Read as samples at their
+/// `t_s`, a history's alarms started and triggered an interval late, its first interval was cut
+/// from the period and its last interval from every time in and out of range. After a
+/// `log_entries_lost` event, the time from the end of the sample row before it to the start of
+/// the next sample row is no reading (a sample with no temperature is added there; one interval
+/// past the row before, for a file that is no history): those rows never reached flash.
 ///
 /// A sample's temperature must lie in the range the carrier's Pt100 can report (IEC 60751,
 /// [`crate::log::outside_pt100`]): anything else is a corrupt log, not a reading. Unchecked, 1e39 °C
@@ -282,7 +316,10 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
         extremes: Vec::new(),
         events: Vec::new(),
         has_event_column: event_col.is_some() || reset_col.is_some() || events_col.is_some(),
+        closing: false,
     };
+    // A board history (its interval extremes' columns): a row's `t_s` is the end of its interval.
+    let history = extremes.is_some();
     // The newest sample row's time and the newest row's of any kind.
     let (mut last_sample, mut last): (Option<f64>, Option<f64>) = (None, None);
     // A `log_entries_lost` event since the last sample row: the rows after that one, up to the
@@ -319,10 +356,16 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
             extremes_of(lo.get(i).copied().flatten(), hi.get(i).copied().flatten(), c)
                 .map_err(|e| anyhow!("'{shown}' line {line}: {e}"))
         })?;
+        // A history's row holds over the interval that ends at its `t_s`: from an interval
+        // before it, or from the row before it if that ended later (rows less than an interval
+        // apart, which the board's aligned intervals never are).
+        let at = if history { last_sample.map_or(t - INTERVAL_S, |p| p.max(t - INTERVAL_S)) } else { t };
         // Entries lost before this row: the last row before them holds its own interval, and
-        // what follows it up to this row was not recorded (no reading, as on a sensor fault).
+        // what follows it up to this row's interval was not recorded (no reading, as on a sensor
+        // fault).
         let after_loss = std::mem::take(&mut lost);
-        if let Some(hole) = last_sample.map(|p| p + INTERVAL_S).filter(|&h| after_loss && h < t) {
+        let hole = last_sample.map(|p| if history { p } else { p + INTERVAL_S });
+        if let Some(hole) = hole.filter(|&h| after_loss && h < at) {
             input.t_s.push(hole);
             input.temp_c.push(None);
             input.extremes.push(None);
@@ -336,11 +379,18 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
         for name in cell(&events_col, i).iter().flat_map(|c| c.split(';')).filter(|n| !n.is_empty()) {
             input.events.push(Event { t_s: t, name: name.to_owned() });
         }
-        input.t_s.push(t);
+        input.t_s.push(at);
         input.temp_c.push(c);
         input.extremes.push(span);
         last_sample = Some(t);
         last = Some(last.map_or(t, |p: f64| p.max(t)));
+    }
+    // The last row of a history holds to its `t_s`, which closes the record.
+    if let (true, Some(end), Some(&c)) = (history, last_sample, input.temp_c.last()) {
+        input.t_s.push(end);
+        input.temp_c.push(c);
+        input.extremes.push(None);
+        input.closing = true;
     }
     // In time order (a stable sort: the file's order among events of one second).
     input.events.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
@@ -396,13 +446,12 @@ pub fn run(args: &MonitorArgs) -> Result<()> {
     let shown = args.input.display();
     let input = read_input(&args.input)?;
     let r = record(&input).with_context(|| format!("'{shown}'"))?;
-    let t = &input.t_s;
     if args.json {
         println!("{}", serde_json::to_string(&r)?);
         return Ok(());
     }
     let hours = |s: f64| s / 3600.0;
-    println!("cold-chain record of {shown} ({} samples)", t.len());
+    println!("cold-chain record of {shown} ({} samples)", input.samples());
     println!("  mean kinetic temperature  {:7.2} °C  (WHO: must lie within 2–8 °C)", r.mkt_c);
     println!("  min / max                 {:7.2} / {:.2} °C", r.min_c, r.max_c);
     println!("  time below +2 °C          {:7.2} h", hours(r.time_below_2_s));
@@ -487,10 +536,10 @@ mod tests {
     /// A board history with a hole: 5.00 °C rows every 300 s to 3 600 s, then
     /// `log_entries_lost:72` at 25 200 s (the 72 oldest waiting entries, 6 h of rows, dropped
     /// while the write gate was held), then rows again from 25 500 s to 30 000 s. The 6 h were
-    /// not measured in the file: like a sensor fault's rows, they are no reading. By hand, on the
-    /// reader's rule (a row holds over the interval to the next one): the row at 3 600 s holds
-    /// its one interval, to 3 900 s; from there to the next row at 25 500 s there is no reading,
-    /// 21 600 s; in range 3 900 − 300 + 30 000 − 25 500 = 8 100 s. Before, the 5.00 °C row held
+    /// not measured in the file: like a sensor fault's rows, they are no reading. By hand, each
+    /// row covering the interval that ends at its `t_s`: the rows to 3 600 s cover 0 … 3 600 s;
+    /// from there to the start of the next row's interval, 25 200 s, there is no reading,
+    /// 21 600 s; in range 3 600 + 30 000 − 25 200 = 8 400 s. Before, the 5.00 °C row held
     /// across the hole: 29 700 s in range, none unread, and `hter report` said "IN RANGE — the
     /// load stayed within 2–8 °C for the whole period".
     #[test]
@@ -505,8 +554,62 @@ mod tests {
         let input = read_input(&p);
         std::fs::remove_file(&p).unwrap();
         let r = record(&input.unwrap()).unwrap();
-        assert_eq!((r.time_no_reading_s, r.time_in_range_s, r.fault_samples), (21_600.0, 8_100.0, 1));
+        assert_eq!((r.time_no_reading_s, r.time_in_range_s, r.fault_samples), (21_600.0, 8_400.0, 1));
         assert_eq!(crate::report_cmd::verdict(&r).0, "unknown");
+    }
+
+    fn read_history(name: &str, csv: &str) -> Input {
+        let p = std::env::temp_dir().join(format!("hter-monitor-{}-{name}.csv", std::process::id()));
+        std::fs::write(&p, csv).unwrap();
+        let input = read_input(&p);
+        std::fs::remove_file(&p).unwrap();
+        input.unwrap()
+    }
+
+    /// A board history's row summarises the interval that ends at its `t_s`
+    /// (`hter::persist::log::IntervalLog`, docs/interface.md). Rows at 300 and 600 s at 4 °C,
+    /// thirteen at −1 °C (900 … 4 500 s), the carrier's freeze alarm (its first cold sample at
+    /// 610 s, raised at 4 210 s) and a brown-out restart, then 9 °C at 4 800 s and 4 °C at 5 100
+    /// and 5 400 s. By hand, each row covering (t_s − 300, t_s]: the record runs 0 … 5 400 s;
+    /// below 2 °C 600 … 4 500 s = 3 900 s; above 8 °C 4 500 … 4 800 s = 300 s; in range 600 +
+    /// 600 = 1 200 s. `freeze_60min` starts at 600 s (the first cold interval's start) and
+    /// triggers at 4 200 s, when the cold intervals have lasted 60 min (the start of the 13th,
+    /// still cold: SPEC §6's rule on the intervals' starts), 10 s before the carrier's own, so
+    /// the two are one alarm. Read as samples at their `t_s` (before), the run started at 900 s
+    /// and triggered at 4 500 s, the record began at 300 s, and 300 s in range were lost at each
+    /// end.
+    #[test]
+    fn a_history_row_covers_the_interval_that_ends_at_its_time() {
+        let mut csv = String::from("t_s,temp_c,min_c,max_c,duty,mode,event\n");
+        let row = |t: u32, c: f64| format!("{t},{c:.2},{:.2},{:.2},0.40,normal,\n", c - 0.2, c + 0.2);
+        csv += &row(300, 4.0);
+        csv += &row(600, 4.0);
+        (900..=4200).step_by(300).for_each(|t| csv += &row(t, -1.0));
+        csv += "4210,,,,,,alarm:freeze_60min@610\n";
+        csv += &row(4500, -1.0);
+        csv += "4600,,,,,,restarted:brownout\n";
+        csv += &row(4800, 9.0);
+        csv += &row(5100, 4.0);
+        csv += &row(5400, 4.0);
+        let input = read_history("interval-end", &csv);
+        assert_eq!(input.samples(), 18);
+        assert_eq!((input.t_s.first(), input.t_s.last()), (Some(&0.0), Some(&5400.0)), "the period covered");
+        let r = record(&input).unwrap();
+        assert_eq!((r.time_below_2_s, r.time_above_8_s, r.time_in_range_s), (3900.0, 300.0, 1200.0), "{r:?}");
+        assert_eq!(r.alarms, [AlarmOut { kind: "freeze_60min", start_s: 600.0, trigger_s: 4200.0 }]);
+        assert_eq!(r.carrier_alarms, []);
+        assert_eq!((r.min_c, r.max_c, r.intervals_outside_2_8, r.fault_samples), (-1.2, 9.2, 14, 0));
+        // The events keep their own times.
+        assert_eq!(input.events[1], Event { t_s: 4600.0, name: "restarted:brownout".into() });
+
+        // The last row a sensor fault: its interval is no reading, and one fault sample.
+        let fault = csv.replace("5400,4.00,3.80,4.20,0.40,normal,", "5400,4.00,3.80,4.20,0.40,sensor_fault,");
+        let r = record(&read_history("interval-end-fault", &fault)).unwrap();
+        assert_eq!((r.time_no_reading_s, r.fault_samples, r.time_in_range_s), (300.0, 1, 900.0));
+
+        // A log of samples (no interval columns) keeps its meaning: a sample holds to the next.
+        let samples = read_history("samples", "t_s,temp_c\n300,4\n600,9\n900,4\n");
+        assert_eq!((samples.t_s, samples.closing), (vec![300.0, 600.0, 900.0], false));
     }
 
     #[test]

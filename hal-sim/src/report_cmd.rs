@@ -9,8 +9,8 @@
 //! The numbers are `hter monitor`'s: the same reader ([`monitor_cmd::read_input`]) and the
 //! same library monitor ([`monitor_cmd::report`], `hter::coldchain`), so the two commands agree
 //! on every alarm and on MKT. The per-day figures use the monitor's rule: a sample holds over
-//! the interval to the next one, and the interval after a sample with no reading counts neither
-//! in nor out of range.
+//! the interval to the next one (a board history's row over the interval that ends at its
+//! `t_s`), and the interval after a sample with no reading counts neither in nor out of range.
 //!
 //! Days are 24 h blocks of the record's own time axis from its first sample: the logs carry
 //! no calendar date (the board has no real-time clock), and the report says so.
@@ -372,7 +372,7 @@ pub fn html(path: &Path) -> Result<String> {
             "{} ({} samples, t = {t0:.0} … {t1:.0} s). The file has no calendar date: days are 24 h blocks \
              from the first sample.",
             dur(t1 - t0),
-            t.len()
+            input.samples()
         ),
     )?;
     let mkt_ok = (2.0..=8.0).contains(&r.mkt_c);

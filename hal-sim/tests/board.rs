@@ -187,14 +187,14 @@ fn history_goes_verbatim_into_a_csv_monitor_reads() {
     let o = hter(&["monitor", "--input", csv.to_str().unwrap(), "--json"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
-    // The times are the interval rows' means' (the library monitor keeps f32; each holds until
-    // the next row, 300 s each); the lowest and highest are the intervals' extremes (4.80 in
-    // the last interval, 7.80 in the first), not the means' (4.98, 6.10).
+    // The times are the interval rows' means' (the library monitor keeps f32; each covers the
+    // 300 s that end at its `t_s`: 0 … 900 s); the lowest and highest are the intervals'
+    // extremes (4.80 in the last interval, 7.80 in the first), not the means' (4.98, 6.10).
     let close = |key: &str, want: f64| assert!((v[key].as_f64().unwrap() - want).abs() < 1e-5, "{key}: {v}");
     close("min_c", 4.8);
     close("max_c", 7.8);
     assert_eq!(v["time_below_2_s"], 0.0);
-    assert_eq!(v["time_in_range_s"], 600.0);
+    assert_eq!(v["time_in_range_s"], 900.0);
     assert_eq!(v["intervals_outside_2_8"], 0);
     let _ = std::fs::remove_file(&csv);
 }

@@ -174,10 +174,11 @@ fn a_board_history_gives_a_report_with_its_resets_and_faults() {
     std::fs::write(&csv, history()).unwrap();
     let html = d.join("h.html");
     let page = report_agreeing_with_monitor(&csv, &html);
-    // 300 … 93 600 s: 26 h less 5 min, two report days.
+    // 0 … 93 600 s (each row covers the 5 min that end at its `t_s`): 26 h, two report days.
     assert_eq!(day_rows(&page), 2);
     let alarms = page_alarms(&page);
-    assert_eq!(alarms, [("heat_10h".to_owned(), 7200.0, 43200.0)]);
+    // The 12 °C rows end at 7 200 … 46 500 s: above 8 °C from 6 900 s, 10 h of it at 42 900 s.
+    assert_eq!(alarms, [("heat_10h".to_owned(), 6900.0, 42900.0)]);
     assert!(page.contains("restarted:brownout") && page.contains("sensor_open"), "resets and faults listed");
     assert!(page.contains("<li>log_entries_lost:12"), "a hole in the record is listed with the faults, with its size");
     // Each in plain words for the supervisor who reads it.
@@ -282,7 +283,8 @@ fn a_history_reports_the_extremes_and_the_carriers_alarms_its_means_miss() {
     assert!(early.contains("\n3001,,,,,,sensor_offset\n3000,4.00"));
     let (page, v) = read("early.csv", &early);
     assert_eq!(v["fault_samples"].as_u64(), Some(0), "{v}");
-    assert!(page.contains("<li>sensor_offset — day 1, 00:45"), "the event is listed");
+    // 3 001 s from the start of the first interval, 0 s.
+    assert!(page.contains("<li>sensor_offset — day 1, 00:50"), "the event is listed");
 
     // Extremes that contradict their mean are a corrupt record.
     let p = d.join("contradicts.csv");

@@ -480,6 +480,40 @@ fn a_supply_that_drops_every_50_minutes_still_records_the_excursion() {
     assert!(recorded > 0.75 * warm_s, "{recorded} s above 8 °C on record of {warm_s} s");
 }
 
+/// The history of a cabinet that cannot cool, as `hter monitor` and `hter report` read it: each
+/// interval row covers the 5 minutes that end at its `t_s`, so the record starts at 0 s, and the
+/// heat run recomputed from the rows' means starts and triggers within an interval of the
+/// carrier's own `heat_10h` (raised on its 10 s samples), and its time above 8 °C is the
+/// carrier's within an interval. Read as samples at their `t_s`, the record began at 300 s and
+/// the recomputed run started and triggered an interval late.
+#[test]
+fn a_board_historys_heat_run_is_read_at_the_times_the_carrier_saw_it() {
+    use hal_sim::monitor_cmd;
+    let (mut b, _, _) = warm_until_heat_10h(|_, _| false);
+    // An hour more, then the history up to the latest closed interval.
+    for _ in 0..360 {
+        b.step().unwrap();
+    }
+    let reply = b.request("history");
+    let csv: String = reply.lines().filter(|l| *l != "ok").map(|l| format!("{l}\n")).collect();
+    let p = tmp("heat-history.csv");
+    std::fs::write(&p, &csv).unwrap();
+    let input = monitor_cmd::read_input(&p).unwrap();
+    let _ = std::fs::remove_file(&p);
+    let r = monitor_cmd::record(&input).unwrap();
+    let heat = |a: &[monitor_cmd::AlarmOut]| a.iter().find(|a| a.kind == "heat_10h").cloned().expect("heat_10h");
+    let (ours, carrier) = (heat(&r.alarms), heat(&monitor_cmd::carrier_alarms(&input.events)));
+    let end = *input.t_s.last().unwrap();
+    eprintln!("recomputed {ours:?}, the carrier's {carrier:?}; above 8 °C {} s to {end} s", r.time_above_8_s);
+    assert_eq!(input.t_s[0], 0.0, "the first row covers 0 … 300 s");
+    assert!((ours.start_s - carrier.start_s).abs() < 300.0, "{ours:?} {carrier:?}");
+    assert!((ours.trigger_s - carrier.trigger_s).abs() < 300.0, "{ours:?} {carrier:?}");
+    // The carrier's own count of time above 8 °C, up to its latest sample, less the part after
+    // the last row's end.
+    let recorded = f64::from(b.app().recorder().history().above_8_s) - (b.sim_s() - end);
+    assert!((r.time_above_8_s - recorded).abs() < 300.0, "{} s above 8 °C, the carrier {recorded} s", r.time_above_8_s);
+}
+
 /// Several requests in one write, malformed ones among them: the board frames and answers one
 /// line at a time, so each reply comes in the order of its line. The virtual board sent the
 /// refusal of a line as soon as it read it, ahead of the replies to the lines before it.
