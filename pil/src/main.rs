@@ -202,8 +202,7 @@ fn run() -> Result<(), &'static str> {
         static __stack_guard_start: u8;
         static __stack_guard_end: u8;
     }
-    let (lo, hi) =
-        (core::ptr::addr_of!(__stack_guard_start) as u32, core::ptr::addr_of!(__stack_guard_end) as u32);
+    let (lo, hi) = (core::ptr::addr_of!(__stack_guard_start) as u32, core::ptr::addr_of!(__stack_guard_end) as u32);
     // SAFETY: the guard is pil/memory.x's `.stack_guard`, which holds nothing.
     if !unsafe { hter::failsafe::arm_stack_guard(lo, hi) } {
         return Err("the stack guard is not one MPU region");
