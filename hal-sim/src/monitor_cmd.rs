@@ -238,7 +238,7 @@ pub struct Event {
 #[derive(Debug, Clone)]
 pub struct Input {
     /// Sample times, s, strictly increasing; a sample holds to the next one. A board history's
-    /// interval row is a sample at the start of its interval (its `t_s` less [`INTERVAL_S`], or
+    /// interval row is a sample at the start of its interval (its `t_s` less the interval, 300 s, or
     /// the row before's `t_s` if that is later), and the last row's `t_s` closes the record
     /// ([`Self::closing`]).
     pub t_s: Vec<f64>,
@@ -274,7 +274,7 @@ impl Input {
 /// A board history (a file with the `min_c` and `max_c` columns) is told from a log of samples
 /// (`hter sim --csv`, `hter log2csv`) by those columns. Its interval row's `t_s` is the end of
 /// the interval it summarises (`hter::persist::log::IntervalLog`): the row holds over the
-/// interval that ends at its `t_s`, i.e. it is read as a sample at `t_s` − [`INTERVAL_S`] (at the
+/// interval that ends at its `t_s`, i.e. it is read as a sample at `t_s` − `INTERVAL_S` (at the
 /// row before's `t_s` if that is later), and the last row's `t_s` closes the record. A log of
 /// samples keeps its meaning: a sample holds until the next one. Read as samples at their
 /// `t_s`, a history's alarms started and triggered an interval late, its first interval was cut
