@@ -1,6 +1,6 @@
 //! `hter compare`: one scenario run with several controllers, as a markdown table (the
 //! physical bound of the schedule first, each controller's IAE also as a ratio to it) or as
-//! JSON (`{"bound_iae": X, "controllers": [sim JSON, ...]}`), and an optional plot of every run.
+//! JSON (`{"bound_iae": X, "iae_over_bound": [r, ...], "controllers": [sim JSON, ...]}`), and an optional plot of every run.
 
 use anyhow::{bail, Result};
 
@@ -62,8 +62,15 @@ pub fn run(a: &CompareArgs) -> Result<()> {
     // from: the table says why, the JSON has null.
     let bound = bound::bound(&base);
     if a.sim.json {
+        // Each controller's IAE as a ratio to the bound, in the controllers' order (SPEC §9);
+        // null where the bound is 0 or unknown. Beside the sim objects, which stay exactly what
+        // `hter sim --json` prints.
+        let b = bound.as_ref().ok().map(|b| b.iae);
+        let ratios: Vec<Option<f64>> =
+            runs.iter().map(|(_, out)| b.filter(|b| *b > 0.0).map(|b| out.metrics.tracking.iae / b)).collect();
         let v = serde_json::json!({
-            "bound_iae": bound.as_ref().ok().map(|b| b.iae),
+            "bound_iae": b,
+            "iae_over_bound": ratios,
             "controllers": runs.iter().map(|(_, out)| &out.metrics).collect::<Vec<_>>(),
         });
         println!("{v}");

@@ -374,6 +374,13 @@ fn compare_json_has_the_bound_and_the_sim_objects() {
     assert!((600.0..900.0).contains(&bound), "{v}");
     let runs = v["controllers"].as_array().unwrap();
     assert_eq!(runs.len(), 2);
+    // Each controller's ratio to the bound, in the same order.
+    let ratios = v["iae_over_bound"].as_array().unwrap();
+    assert_eq!(ratios.len(), 2, "{v}");
+    for (run, r) in runs.iter().zip(ratios) {
+        let want = run["iae"].as_f64().unwrap() / bound;
+        assert!((r.as_f64().unwrap() - want).abs() < 1e-12, "{r} against {want}");
+    }
     for (run, name) in runs.iter().zip(["pi", "gpc"]) {
         assert_eq!(run["controller"], name);
         let sim = json(&["sim", "--scenario", "piecewise", "--controller", name, "--json"]);
@@ -383,6 +390,7 @@ fn compare_json_has_the_bound_and_the_sim_objects() {
     // A heat step at a constant setpoint has no setpoint transient: the bound is 0.
     let v = json(&["compare", "--scenario", "disturbance", "--controllers", "pi", "--json"]);
     assert_eq!(v["bound_iae"].as_f64(), Some(0.0), "{v}");
+    assert_eq!(v["iae_over_bound"], serde_json::json!([null]), "no ratio to a bound of 0");
     // The table has the bound as its first row and the ratio column.
     let out = hter(&["compare", "--scenario", "piecewise", "--controllers", "pi"]);
     let text = String::from_utf8_lossy(&out.stdout);
