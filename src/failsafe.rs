@@ -310,6 +310,44 @@ pub fn stack_guard_region(start: u32, end: u32) -> Option<(u32, u32)> {
     Some((rbar, rasr))
 }
 
+/// The stack guard's addresses: the linker's `.stack_guard` section (`__stack_guard_start` ..
+/// `__stack_guard_end`, memory.x and pil/memory.x), which [`arm_stack_guard`] protects and
+/// [`hard_fault_record`] tells an overflow by.
+#[cfg(all(target_arch = "arm", target_os = "none"))]
+pub fn stack_guard() -> core::ops::Range<u32> {
+    extern "C" {
+        static __stack_guard_start: u8;
+        static __stack_guard_end: u8;
+    }
+    // Only the symbols' addresses are taken.
+    core::ptr::addr_of!(__stack_guard_start) as u32..core::ptr::addr_of!(__stack_guard_end) as u32
+}
+
+/// The record of the HardFault whose frame [`crate::hard_fault_entry!`] handed over at `sp`: CFSR, BFAR
+/// and MMFAR from the System Control Block, the stacked PC (`sp` + 24), told apart from a stack
+/// overflow against [`stack_guard`] ([`fault_info`]).
+///
+/// # Safety
+/// Only from the HardFault handler, with the `sp` its entry passed (the MPU is off there, so the
+/// frame reads even when it went into the guard).
+#[cfg(all(target_arch = "arm", target_os = "none"))]
+pub unsafe fn hard_fault_record(sp: u32) -> StopInfo {
+    const CFSR: *const u32 = 0xE000_ED28 as *const u32;
+    const MMFAR: *const u32 = 0xE000_ED34 as *const u32;
+    const BFAR: *const u32 = 0xE000_ED38 as *const u32;
+    // SAFETY: the System Control Block's fault status and address registers (ARMv7-M ARM
+    // B3.2.2), and the stacked frame's PC word, which the caller vouches for.
+    let (cfsr, bfar, mmfar, pc) = unsafe {
+        (
+            core::ptr::read_volatile(CFSR),
+            core::ptr::read_volatile(BFAR),
+            core::ptr::read_volatile(MMFAR),
+            core::ptr::read_volatile((sp + 24) as *const u32),
+        )
+    };
+    fault_info(pc, sp, cfsr, bfar, mmfar, stack_guard())
+}
+
 /// MPU_CTRL of the stack guard: ENABLE and PRIVDEFENA (the default memory map everywhere but
 /// the guard); HFNMIENA = 0, so the MPU is off in the HardFault and NMI handlers and in a
 /// HardFault entered from an overflow the handler can still use the stack.

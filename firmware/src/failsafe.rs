@@ -83,13 +83,8 @@ fn halt(why: Why) -> ! {
             Some((file, line)) => failsafe::panic_info(file, line),
             None => StopInfo::new(StopKind::Panic, 0, 0, 0),
         },
-        Why::HardFault(sp) => {
-            // SAFETY: reads of the System Control Block's fault status and address registers,
-            // and of the stacked frame's PC (the MPU is off in HardFault, so the guard reads too).
-            let (scb, pc) =
-                unsafe { (&*cortex_m::peripheral::SCB::PTR, core::ptr::read_volatile((sp + 24) as *const u32)) };
-            failsafe::fault_info(pc, sp, scb.cfsr.read(), scb.bfar.read(), scb.mmfar.read(), guard())
-        }
+        // SAFETY: the HardFault handler's `sp`, as its entry passed it.
+        Why::HardFault(sp) => unsafe { failsafe::hard_fault_record(sp) },
         // cortex-m-rt hands the NMI no exception frame: the PC is not recorded (0); FLASH_ECCR
         // (or 0 for another source such as the clock security system) names the cause.
         Why::Nmi(eccr) => failsafe::nmi_info(0, eccr),
@@ -116,20 +111,10 @@ fn panic(info: &PanicInfo) -> ! {
     halt(Why::Panic(info.location().map(|at| (at.file(), at.line()))))
 }
 
-/// The stack guard's addresses (the linker's `.stack_guard`, memory.x).
-fn guard() -> core::ops::Range<u32> {
-    extern "C" {
-        static __stack_guard_start: u8;
-        static __stack_guard_end: u8;
-    }
-    // Only the symbols' addresses are taken.
-    core::ptr::addr_of!(__stack_guard_start) as u32..core::ptr::addr_of!(__stack_guard_end) as u32
-}
-
 /// Turns the stack guard on (`hter::failsafe::arm_stack_guard`): from here a stack overflow
 /// faults into [`hard_fault`] instead of writing over the statics. The first thing `main` does.
 pub fn arm_stack_guard() {
-    let g = guard();
+    let g = failsafe::stack_guard();
     // SAFETY: the guard is the linker's `.stack_guard` section, which holds nothing; nothing else
     // programs the MPU. A guard that is not one MPU region fails the audit.
     let armed = unsafe { failsafe::arm_stack_guard(g.start, g.end) };

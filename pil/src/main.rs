@@ -198,13 +198,9 @@ fn stack_peak() -> u32 {
 fn run() -> Result<(), &'static str> {
     // The firmware's stack guard (its memory.x and `failsafe::arm_stack_guard`): the step runs
     // with it on, as on the board.
-    extern "C" {
-        static __stack_guard_start: u8;
-        static __stack_guard_end: u8;
-    }
-    let (lo, hi) = (core::ptr::addr_of!(__stack_guard_start) as u32, core::ptr::addr_of!(__stack_guard_end) as u32);
+    let g = hter::failsafe::stack_guard();
     // SAFETY: the guard is pil/memory.x's `.stack_guard`, which holds nothing.
-    if !unsafe { hter::failsafe::arm_stack_guard(lo, hi) } {
+    if !unsafe { hter::failsafe::arm_stack_guard(g.start, g.end) } {
         return Err("the stack guard is not one MPU region");
     }
     let mut cp = cortex_m::Peripherals::take().ok_or("peripherals taken")?;

@@ -34,8 +34,8 @@ use cortex_m::peripheral::SCB;
 use cortex_m_rt::{entry, exception};
 use cortex_m_semihosting::{debug, hprintln};
 use hter::failsafe::{
-    arm_stack_guard, fault_info, nmi_info, panic_info, stop, unexpected_interrupt_info, ReasonRecord, SafeOutputs,
-    StopInfo,
+    arm_stack_guard, hard_fault_record, nmi_info, panic_info, stack_guard, stop, unexpected_interrupt_info,
+    ReasonRecord, SafeOutputs, StopInfo,
 };
 
 /// `"HTBC"`: the boot log below holds a count from an earlier boot of this image.
@@ -82,16 +82,6 @@ static mut CANARY_WORDS: MaybeUninit<[u32; 64]> = MaybeUninit::uninit();
 
 fn canary() -> *mut [u32; 64] {
     addr_of_mut!(CANARY_WORDS).cast()
-}
-
-extern "C" {
-    static __stack_guard_start: u8;
-    static __stack_guard_end: u8;
-}
-
-/// The stack guard's addresses (pil/memory.x's `.stack_guard`).
-fn guard() -> core::ops::Range<u32> {
-    core::ptr::addr_of!(__stack_guard_start) as u32..core::ptr::addr_of!(__stack_guard_end) as u32
 }
 
 /// Calls itself until the stack overflows (a frame of 32 bytes of locals each time).
@@ -163,7 +153,7 @@ fn fail(info: impl FnOnce() -> StopInfo) -> ! {
 
 #[entry]
 fn main() -> ! {
-    let g = guard();
+    let g = stack_guard();
     // SAFETY: the guard is pil/memory.x's `.stack_guard`, which holds nothing.
     let armed = unsafe { arm_stack_guard(g.start, g.end) };
     let prev = read_log();
@@ -234,7 +224,7 @@ fn main() -> ! {
 
 /// One line per boot: what the previous boot's stop path left behind.
 fn report(boot: u32, cfsr: u32, iser0: u32, armed: bool, prev: &BootLog, found: Option<&StopInfo>) {
-    let g = guard();
+    let g = stack_guard();
     match found {
         None => hprintln!(
             "failsafe boot={} cfsr={:#x} iser0={:#x} guard={:#010x}-{:#010x} armed={} reason=none",
@@ -274,10 +264,8 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     fail(|| panic_info(file, line))
 }
 
-/// SCB fault status and address registers (ARMv7-M ARM B3.2.15–18).
+/// SCB fault status register and interrupt control and state register (ARMv7-M ARM B3.2.4, B3.2.15).
 const CFSR: *const u32 = 0xE000_ED28 as *const u32;
-const MMFAR: *const u32 = 0xE000_ED34 as *const u32;
-const BFAR: *const u32 = 0xE000_ED38 as *const u32;
 const ICSR: *const u32 = 0xE000_ED04 as *const u32;
 /// NVIC set-enable and set-pending registers of lines 0–31 (ARMv7-M ARM B3.4.4, B3.4.6).
 const NVIC_ISER0: *const u32 = 0xE000_E100 as *const u32;
@@ -287,14 +275,8 @@ const NVIC_ISPR0: *mut u32 = 0xE000_E200 as *mut u32;
 hter::hard_fault_entry!(hard_fault, 1024);
 
 extern "C" fn hard_fault(sp: u32) -> ! {
-    fail(|| {
-        // SAFETY: reads of the system control block's status registers and of the stacked PC
-        // (the MPU is off in HardFault).
-        let (cfsr, bfar, mmfar, pc) = unsafe {
-            (read_volatile(CFSR), read_volatile(BFAR), read_volatile(MMFAR), read_volatile((sp + 24) as *const u32))
-        };
-        fault_info(pc, sp, cfsr, bfar, mmfar, guard())
-    })
+    // SAFETY: the HardFault handler's `sp`, as its entry passed it.
+    fail(|| unsafe { hard_fault_record(sp) })
 }
 
 #[exception]
