@@ -162,9 +162,8 @@ fn named_field<T: Copy + std::fmt::Debug>(
 /// `reset cause: BrownOut` line of earlier firmware; `Err` with the word when it names no
 /// known cause.
 fn reset_line(line: &str) -> Option<Result<&'static str, String>> {
-    let at = line.find("reset cause")? + "reset cause".len();
-    let rest = line.get(at..)?.trim_start().trim_start_matches(':');
-    let word = rest.split_whitespace().next().unwrap_or("").trim_end_matches([';', ',']);
+    let word =
+        word_after(line, "reset cause:").or_else(|| word_after(line, "reset cause"))?.trim_end_matches([';', ',']);
     let cause =
         [ResetCause::Watchdog, ResetCause::BrownOut, ResetCause::Other].into_iter().find(|c| format!("{c:?}") == word);
     Some(cause.map(|c| EventKind::Restarted(c).name()).ok_or_else(|| word.to_string()))
@@ -190,7 +189,7 @@ fn event_line(line: &str) -> Option<(Option<f64>, Result<&'static str, String>)>
     if word.starts_with("Restarted") || word.starts_with("BoardFault") {
         return None;
     }
-    let kind = EventKind::ALL.into_iter().find(|k| format!("{k:?}") == word || k.name() == word);
+    let kind = named(&EventKind::ALL, EventKind::name, word);
     Some((t, kind.map(EventKind::name).ok_or_else(|| word.to_string())))
 }
 
