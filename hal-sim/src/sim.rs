@@ -154,14 +154,13 @@ impl ControllerSpec {
         // Before the delay the step response is zero: a GPC horizon that ends there has no duty
         // act on any predicted sample and holds its first duty for good (the self-tuner's
         // configuration refuses it too, as `Law(Config)`: said here by name).
-        let reaches = |k: usize| {
-            match law {
+        let reaches = |k: usize| match law {
             Law::Gpc(g) if g.n2 < k => Err(anyhow!(
-                "GPC's horizon N2 = {} ends before the model's delay k = {k}: no duty would act on any predicted sample (--n2 {k} or more)",
+                "GPC's horizon N2 = {} ends before the model's delay k = {k}: no duty would act on \
+                 any predicted sample (--n2 {k} or more)",
                 g.n2
             )),
             _ => Ok(()),
-        }
         };
         Ok(match self.model {
             Some(m) => {

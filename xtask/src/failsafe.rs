@@ -27,13 +27,9 @@ pub const FAILSAFE_KINDS: [(&str, &str, u32); 5] = [
 ];
 /// The address the HardFault boot reads (the runner's `UNMAPPED`).
 const FAULT_ADDR: u64 = 0xF000_0000;
-/// CFSR.BFARVALID: the bus fault latched its address.
-const CFSR_BFARVALID: u64 = 1 << 15;
-/// CFSR.MSTKERR: the HardFault's frame could not be stacked (it went into the guard).
-const CFSR_MSTKERR: u64 = 1 << 4;
 /// ICSR.VECTACTIVE of the NMI (exception number 2), the NMI record's `detail` on the PIL.
 const NMI_EXCEPTION: u64 = 2;
-/// Five boots take well under a second; a broken boot counter loops forever.
+/// Six boots take well under a second; a broken boot counter loops forever.
 const FAILSAFE_TIMEOUT: Duration = Duration::from_secs(60);
 
 /// The three checks of one stop path.
@@ -147,7 +143,9 @@ pub fn checks(stdout: &str, exited_ok: bool) -> Vec<Check> {
             let detail = num(b, "detail").unwrap_or(u64::MAX);
             let specific = match kind {
                 "panic" => detail > 0 && b.get("text").is_some_and(|t| t.ends_with("failsafe.rs")),
-                "hard_fault" => num(b, "addr") == Some(FAULT_ADDR) && detail & CFSR_BFARVALID != 0,
+                "hard_fault" => {
+                    num(b, "addr") == Some(FAULT_ADDR) && detail & u64::from(hter::failsafe::CFSR_BFARVALID) != 0
+                }
                 "nmi" => detail & 0x1ff == NMI_EXCEPTION,
                 // The guard was armed, the fault's address is in it, the frame went into it, and
                 // the canary below it is whole: the overflow stopped at the guard.
@@ -159,7 +157,7 @@ pub fn checks(stdout: &str, exited_ok: bool) -> Vec<Check> {
                     num(b, "armed") == Some(1)
                         && num(b, "canary_ok") == Some(1)
                         && b.get("text") == Some(&"stack overflow")
-                        && detail & CFSR_MSTKERR != 0
+                        && detail & u64::from(hter::failsafe::CFSR_MSTKERR) != 0
                         && guard.zip(num(b, "addr")).is_some_and(|(g, a)| g.contains(&a))
                 }
                 _ => detail == 0,
