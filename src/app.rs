@@ -103,6 +103,29 @@ impl Boot {
             Save::History(history)
         }
     }
+
+    /// Starts the step and the record from what this boot found: counts the boot in the record
+    /// ([`Recorder::note_boot`]) and the pages it repaired, tells the step why the MCU started
+    /// and how the previous boot stopped (its first sample reports both), and resumes what the
+    /// history keeps ([`Carrier::resume`]: the sensor offset, a shorted SSR). Returns the history
+    /// to store ([`Self::history_save`]). What the firmware's control task and [`App::new`] both
+    /// call, before the first sample.
+    pub fn resume<C: crate::control::Controller>(
+        &self,
+        carrier: &mut Carrier<C>,
+        recorder: &mut Recorder,
+    ) -> HistoryRecord {
+        carrier.note_reset(self.reset);
+        let mut history = recorder.note_boot(self.reset, self.fault.as_ref());
+        if let Some(f) = &self.fault {
+            carrier.note_board_fault(f.kind);
+        }
+        carrier.resume(&history);
+        for _ in 0..self.pages_lost {
+            history = recorder.note_flash_page_lost();
+        }
+        history
+    }
 }
 
 /// One sample of the board's inputs.
@@ -361,8 +384,6 @@ impl App {
         let ts_s = cfg.carrier.get().ts_s;
         let controller = build(settings.law, &adaptive, ts_s, cfg.adaptive.fallback.bias);
         let mut carrier = Carrier::new(cfg.carrier.with_calibration(cal), controller);
-        // The sensor fault the previous boot compensated is still in the channel.
-        carrier.restore_sensor_offset(boot.history.sensor_offset);
         #[cfg(feature = "holdover")]
         let cabinet = boot.cabinet;
         #[cfg(not(feature = "holdover"))]
@@ -371,18 +392,10 @@ impl App {
         // start model, never on the self-tuner's saved estimate (README "Holdover": its slow
         // mode drifts while it holds a constant setpoint).
         carrier.set_holdover_model(cabinet.or(cfg.adaptive.initial));
-        carrier.note_reset(boot.reset);
         let mut recorder = Recorder::new(boot.history, cfg.history_save_samples);
         let mut app_saves = heapless::Deque::new();
-        let mut history = recorder.note_reset(boot.reset);
-        if let Some(f) = &boot.fault {
-            carrier.note_board_fault(f.kind);
-            history = recorder.note_board_fault(f);
-        }
+        let history = boot.resume(&mut carrier, &mut recorder);
         let base_ms = (u64::from(boot.log_last_s) + 1) * 1000;
-        for _ in 0..boot.pages_lost {
-            history = recorder.note_flash_page_lost();
-        }
         // The history before the events: more pages lost than the outbox holds drop events (the
         // history counts them all), never the boot's history.
         let _ = app_saves.push_back(boot.history_save(history));
@@ -396,7 +409,7 @@ impl App {
             settings,
             adaptive,
             recorder,
-            annunciator: Annunciator::restored(boot.history.unacknowledged),
+            annunciator: Annunciator::restored(boot.history.unacknowledged()),
             cadence: ModelCadence::new(cfg.model_save_samples),
             intervals: IntervalLog::new(),
             base_ms,
@@ -513,12 +526,17 @@ impl App {
         self.duty_mean.push(out.duty.get());
         self.last_t_ms = t_ms;
         self.commission_step(out.mode);
-        let mut rec = self.recorder.push(t_ms, out.temp_c.0);
+        let mut rec = self.recorder.push(t_ms, out.recorded_c());
         if core::mem::take(&mut self.ack_pending) {
             self.annunciator.acknowledge();
         }
         let alarm = self.annunciator.update(&out, &rec.raised);
-        self.recorder.note_carried(&mut rec, self.annunciator.latched(), self.carrier.sensor_offset());
+        self.recorder.note_carried(
+            &mut rec,
+            self.annunciator.latched(),
+            self.carrier.sensor_offset(),
+            self.carrier.ssr_shorted(),
+        );
         let t_s = self.record_s(t_ms);
         // The interval this sample closes ended at or before it, so it is logged before the
         // sample's events and alarms: the record stays in time order (a fault found on the

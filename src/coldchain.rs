@@ -211,6 +211,10 @@ pub struct ColdChainMonitor {
     /// The open excursion's slot in `log`, always less than its length.
     head: usize,
     excursions: u32,
+    /// The time without a reading so far, ms: the clock given less it is the record's.
+    gap_ms: u64,
+    /// The first sample of the gap under way if the last sample had no reading, else u64::MAX.
+    gap_from: u64,
 }
 
 impl Default for ColdChainMonitor {
@@ -238,6 +242,8 @@ impl ColdChainMonitor {
             log: [None; EXCURSION_LOG + 1],
             head: 0,
             excursions: 0,
+            gap_ms: 0,
+            gap_from: u64::MAX,
         }
     }
 
@@ -246,9 +252,7 @@ impl ColdChainMonitor {
     /// record.
     pub fn push(&mut self, t_ms: u64, temp_c: f32) -> Raised {
         let mut raised: Raised = [None; 4];
-        if !temp_c.is_finite() {
-            return raised;
-        }
+        let Some(t_ms) = self.record_ms(t_ms, temp_c) else { return raised };
         if let Some((t_prev, c_prev)) = self.last {
             if t_ms <= t_prev {
                 return raised;
@@ -309,6 +313,20 @@ impl ColdChainMonitor {
         }
         self.log_excursion(t_ms, temp_c);
         raised
+    }
+
+    /// `t_ms` on the record's clock, which does not run while there is no reading: `None` for a
+    /// sample without one (`temp_c` not finite), whose gap begins at the first such sample and
+    /// ends at the next reading.
+    fn record_ms(&mut self, t_ms: u64, temp_c: f32) -> Option<u64> {
+        if !temp_c.is_finite() {
+            self.gap_from = self.gap_from.min(t_ms);
+            return None;
+        }
+        // `gap_from` is u64::MAX outside a gap.
+        self.gap_ms += t_ms.saturating_sub(self.gap_from);
+        self.gap_from = u64::MAX;
+        Some(t_ms.saturating_sub(self.gap_ms))
     }
 
     /// Continues the runs a previous boot handed over ([`Self::runs`] of its last sample, from

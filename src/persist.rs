@@ -565,19 +565,21 @@ impl SensorOffset {
 
 /// Cold-chain history summary, reset counts and board faults, accumulated over power cycles.
 ///
-/// Layout v5, 138 bytes: `'H'`, 5; alarm counts (4 × u16, in [`AlarmKind`] order heat_10h,
+/// Layout v6, 139 bytes: `'H'`, 6; alarm counts (4 × u16, in [`AlarmKind`] order heat_10h,
 /// freeze_60min, ship_45c_1h, ship_30c_10h); reset counts (3 × u16: watchdog, brown-out, other);
 /// min_c, max_c (f32, NaN = no sample yet); time below 2 °C, time above 8 °C, excursion count,
 /// recorded time (4 × u32, seconds and count); [`HISTORY_EXCURSIONS`] × (side u8: 0 none,
 /// 1 cold, 2 warm; start_s, end_s, extreme_c f32); fail-safe stops (5 × u16, in
 /// [`StopKind::ALL`] order); flash pages lost (u16); last stop (kind code u8, 0 = none; pc, addr,
 /// detail u32); the carried byte (bit 0 the indicator's latch, bits 1–7 the
-/// [`SensorOffset`]'s steps); the alarms' runs (4 × u32, [`Runs`]); CRC-32. Excursion times are
+/// [`SensorOffset`]'s steps); the alarms' runs (4 × u32, [`Runs`]); the faults byte (bit 0 the
+/// SSR found shorted, [`HistoryRecord::ssr_shorted`]); CRC-32. Excursion times are
 /// on the record's own clock: seconds of recorded time since the first boot (each boot's samples
 /// start where the previous boot's record ended), so they stay in order across power cycles.
 ///
-/// v4 (122 bytes: v5 without the runs) is still read, with no run under way; v3 (121 bytes: v4
-/// without the carried byte) with nothing unacknowledged and no offset either; and v2 (96
+/// v5 (138 bytes: v6 without the faults byte) is still read with no short known; v4 (122
+/// bytes: v5 without the runs) with no run under way either; v3 (121 bytes: v4 without the
+/// carried byte) with nothing unacknowledged and no offset either; and v2 (96
 /// bytes: v3 without the board-fault fields) with no faults counted either: it is the carrier's
 /// cold-chain record, and a firmware update must not erase the alarms and excursions the
 /// vaccines have been through. (v1 had no recorded time and stamped excursions
@@ -610,14 +612,13 @@ pub struct HistoryRecord {
     pub flash_pages_lost: u16,
     /// The newest fail-safe stop.
     pub last_stop: Option<LastStop>,
-    /// The alarm indicator's latch ([`crate::alarm::Annunciator`]): a cold-chain alarm or a
-    /// fault not yet acknowledged. The next boot starts from it: RAM alone lost it at every
-    /// restart, and a brown-out silenced an alarm nobody had seen
-    /// ([`Recorder::note_carried`] stores every change).
-    pub unacknowledged: bool,
+    /// The alarm indicator's latch ([`Self::unacknowledged`]) and the SSR's short
+    /// ([`Self::ssr_shorted`]), as bits 0 and 1 of one byte: a `bool` more made the record 4
+    /// bytes longer in RAM, and the copies of it 312 B more of the firmware's flash.
+    flags: u8,
     /// The sensor offset the step subtracted ([`Recorder::note_carried`] stores every change at
     /// once; the next boot subtracts it again from its first sample,
-    /// [`crate::step::Carrier::restore_sensor_offset`]).
+    /// [`crate::step::Carrier::resume`]).
     pub sensor_offset: SensorOffset,
     /// The cold-chain alarms' runs under way at the last sample, which the next boot continues
     /// ([`ColdChainMonitor::resumed`]): without them the board started every run over at each
@@ -625,6 +626,10 @@ pub struct HistoryRecord {
     /// 4 h, as `hter monitor` does from the same record.
     pub runs: Runs,
 }
+
+/// [`HistoryRecord`]'s flag bits.
+const UNACKNOWLEDGED: u8 = 1;
+const SSR_SHORTED: u8 = 2;
 
 impl Default for HistoryRecord {
     fn default() -> Self {
@@ -662,15 +667,17 @@ impl HistoryRecord {
     /// Kind tag.
     pub const TAG: u8 = b'H';
     /// Layout version written by this firmware.
-    pub const VERSION: u8 = 5;
+    pub const VERSION: u8 = 6;
     /// Length of a v2 record (still read), bytes.
     pub const LEN_V2: usize = 2 + 4 * 2 + 3 * 2 + 2 * 4 + 4 * 4 + HISTORY_EXCURSIONS * 13 + 4;
     /// Length of a v3 record (still read: the v4 one without the indicator's latch), bytes.
     pub const LEN_V3: usize = Self::LEN_V2 + StopKind::ALL.len() * 2 + 2 + 1 + 3 * 4;
     /// Length of a v4 record (still read: the v5 one without the alarms' runs), bytes.
     pub const LEN_V4: usize = Self::LEN_V3 + 1;
+    /// Length of a v5 record (still read: the v6 one without the faults byte), bytes.
+    pub const LEN_V5: usize = Self::LEN_V4 + 4 * 4;
     /// Encoded length, bytes.
-    pub const LEN: usize = Self::LEN_V4 + 4 * 4;
+    pub const LEN: usize = Self::LEN_V5 + 1;
     /// Nothing seen yet.
     pub const EMPTY: HistoryRecord = HistoryRecord::empty();
 
@@ -691,10 +698,42 @@ impl HistoryRecord {
             stops: [0; StopKind::ALL.len()],
             flash_pages_lost: 0,
             last_stop: None,
-            unacknowledged: false,
+            flags: 0,
             sensor_offset: SensorOffset::NONE,
             runs: [0; 4],
         }
+    }
+
+    /// The alarm indicator's latch ([`crate::alarm::Annunciator`]): a cold-chain alarm or a
+    /// fault not yet acknowledged. The next boot starts from it: RAM alone lost it at every
+    /// restart, and a brown-out silenced an alarm nobody had seen
+    /// ([`Recorder::note_carried`] stores every change).
+    pub fn unacknowledged(&self) -> bool {
+        self.flags & UNACKNOWLEDGED != 0
+    }
+
+    /// The SSR was found shorted ([`crate::step::Carrier::ssr_shorted`]; [`Recorder::note_carried`]
+    /// stores it at once): the next boot limps home from its first sample
+    /// ([`crate::step::Carrier::resume`]). A short does not heal in a restart, and forgotten, a
+    /// brown-out in limp home handed the modules back to the controller with the short still
+    /// there: full cooling until the checks found it again, the load at 1.88 °C first (`hter sim
+    /// --scenario disturbance --fault ssr-stuck-on@3000 --fault brownout@10000`). A pin or
+    /// software reset that found no fail-safe stop (the technician's reset button, or a reflash,
+    /// after replacing the SSR) clears it ([`Recorder::note_boot`]).
+    pub fn ssr_shorted(&self) -> bool {
+        self.flags & SSR_SHORTED != 0
+    }
+
+    /// This record with the sensor offset `offset`.
+    pub fn with_sensor_offset(mut self, offset: SensorOffset) -> Self {
+        self.sensor_offset = offset;
+        self
+    }
+
+    /// This record with the latch and the short as given.
+    pub fn with_carried(mut self, unacknowledged: bool, ssr_shorted: bool) -> Self {
+        self.flags = u8::from(unacknowledged) | u8::from(ssr_shorted) << 1;
+        self
     }
 
     /// Counts an alarm.
@@ -805,10 +844,11 @@ impl HistoryRecord {
             }
             None => w.put(&[0; 13]),
         }
-        w.put(&[u8::from(self.unacknowledged) | self.sensor_offset.0 << 1]);
+        w.put(&[self.flags & UNACKNOWLEDGED | self.sensor_offset.0 << 1]);
         for r in self.runs {
             w.u32(r);
         }
+        w.put(&[(self.flags & SSR_SHORTED) >> 1]);
         w.finish();
         buf
     }
@@ -822,6 +862,7 @@ impl HistoryRecord {
             (Self::LEN_V2, Some(2)) => (Self::LEN_V2, 2),
             (Self::LEN_V3, Some(3)) => (Self::LEN_V3, 3),
             (Self::LEN_V4, Some(4)) => (Self::LEN_V4, 4),
+            (Self::LEN_V5, Some(5)) => (Self::LEN_V5, 5),
             _ => (Self::LEN, Self::VERSION),
         };
         let v2 = version == 2;
@@ -886,12 +927,14 @@ impl HistoryRecord {
         // A v3 frame ends here: its reader reads 0, nothing unacknowledged and no offset (as the
         // v4 records written before the offset was kept, whose byte is 0 or 1).
         let carried = r.u8();
-        rec.unacknowledged = carried & 1 != 0;
+        rec.flags = carried & UNACKNOWLEDGED;
         rec.sensor_offset = SensorOffset(carried >> 1);
         // A v4 frame ends here: no run under way. Every value of a run is one.
         for run in rec.runs.iter_mut() {
             *run = r.u32();
         }
+        // A v5 frame ends here: no short known. Bit 0 the SSR's short; the other bits are free.
+        rec.flags |= (r.u8() & 1) << 1;
         Ok(rec)
     }
 }
@@ -971,6 +1014,24 @@ impl Recorder {
         self.history()
     }
 
+    /// Counts the boot: its reset ([`Self::note_reset`]) and the fail-safe stop the previous boot
+    /// ended in, if the boot found one ([`Self::note_board_fault`]); returns the history to store
+    /// and to resume from ([`crate::step::Carrier::resume`]). A pin or software reset without a
+    /// stop is a person's (the reset button, a reflash: what a technician does after replacing
+    /// the SSR) and clears [`HistoryRecord::ssr_shorted`]; a brown-out, a watchdog bite or a
+    /// fail-safe stop (whose reset is a software one) keeps it. If the SSR is still shorted, the
+    /// checks find it again as on a first boot.
+    pub fn note_boot(&mut self, reset: ResetCause, fault: Option<&StopInfo>) -> HistoryRecord {
+        self.boot.note_reset(reset);
+        match fault {
+            Some(f) => self.boot.note_stop(f),
+            None if reset == ResetCause::Other => self.boot.flags &= !SSR_SHORTED,
+            None => {}
+        }
+        self.since_save = 0;
+        self.history()
+    }
+
     /// Counts a flash page the boot found damaged and repaired; returns the history to store.
     pub fn note_flash_page_lost(&mut self) -> HistoryRecord {
         self.boot.flash_pages_lost = self.boot.flash_pages_lost.saturating_add(1);
@@ -978,8 +1039,15 @@ impl Recorder {
         self.history()
     }
 
-    /// Records one sample: the temperature the controller saw (`temp_c` of the step's output,
-    /// as `hter sim` and the processor-in-the-loop runner record it).
+    /// Records one sample: the temperature the controller saw
+    /// ([`crate::step::StepOutput::recorded_c`], as `hter sim` and the processor-in-the-loop
+    /// runner record it), NaN for a sample without a reading (a sensor fault). The time from
+    /// such a sample to the next reading is cut out of the record, as `hter monitor` cuts it
+    /// from a log: it counts neither in nor out of range, adds nothing to the mean kinetic
+    /// temperature or to an alarm's run (a run that meets its condition on both sides goes on),
+    /// and the record's clock does not advance over it. Before, the step's last good reading,
+    /// held through the fault, went on the record as a measurement: 12 h of an open sensor on a
+    /// load above 8 °C were 12 h in range at the held 4 °C, and no `heat_10h`.
     pub fn push(&mut self, t_ms: u64, temp_c: f32) -> Recorded {
         let raised = self.monitor.push(t_ms, temp_c);
         let mut alarm = false;
@@ -1010,21 +1078,24 @@ impl Recorder {
 
     /// Takes what the next boot carries on from this one, after the sample `r` recorded and
     /// before [`Self::due_save`]: the alarm indicator's latch
-    /// ([`crate::alarm::Annunciator::latched`]) and the sensor offset the step subtracts
-    /// ([`crate::step::Carrier::sensor_offset`]). A change is stored with the history: at once
+    /// ([`crate::alarm::Annunciator::latched`]), the sensor offset the step subtracts
+    /// ([`crate::step::Carrier::sensor_offset`]) and whether it found the SSR shorted
+    /// ([`crate::step::Carrier::ssr_shorted`]). A change is stored with the history: at once
     /// when the latch was set (a fault or alarm nobody has seen yet must survive a power cut
-    /// that follows it) or the offset changed (forgotten, the load is held colder by it);
+    /// that follows it), the offset changed (forgotten, the load is held colder by it) or a
+    /// short was found (forgotten, the modules cool flat out after the restart);
     /// behind the write gate's hold-off when an acknowledgement cleared the latch (lost to a
     /// cut, the indicator comes back on: the safe side).
     #[inline(never)]
-    pub fn note_carried(&mut self, r: &mut Recorded, latched: bool, offset: SensorOffset) {
+    pub fn note_carried(&mut self, r: &mut Recorded, latched: bool, offset: SensorOffset, shorted: bool) {
         let moved = self.boot.sensor_offset != offset;
-        if self.boot.unacknowledged != latched || moved {
-            self.boot.unacknowledged = latched;
+        let found = shorted && !self.boot.ssr_shorted();
+        if self.boot.unacknowledged() != latched || moved || found {
+            self.boot.flags = u8::from(latched) | u8::from(shorted) << 1;
             self.boot.sensor_offset = offset;
             self.since_save = 0;
             r.save_due = true;
-            r.urgent |= latched | moved;
+            r.urgent |= latched | moved | found;
         }
     }
 
@@ -1509,7 +1580,7 @@ mod tests {
         assert_eq!(h.last_stop, Some(LastStop { kind: StopKind::Panic, pc: 0, addr: 0, detail: 417 }));
         let bytes = h.encode();
         assert_eq!(bytes.len(), HistoryRecord::LEN);
-        assert_eq!(&bytes[..2], &[b'H', 5]);
+        assert_eq!(&bytes[..2], &[b'H', 6]);
         assert_eq!(HistoryRecord::decode(&bytes), Ok(h));
 
         // A v2 record: the v3 bytes before the board-fault fields, version 2, its own CRC.
@@ -1545,28 +1616,28 @@ mod tests {
         let mut rec = Recorder::new(HistoryRecord::EMPTY, 360);
         let _ = rec.note_reset(ResetCause::BrownOut);
         let mut quiet = rec.push(0, 4.0);
-        rec.note_carried(&mut quiet, false, SensorOffset::NONE);
+        rec.note_carried(&mut quiet, false, SensorOffset::NONE, false);
         assert_eq!(rec.due_save(&quiet), None);
         let mut set = rec.push(10_000, 4.0);
-        rec.note_carried(&mut set, true, SensorOffset::NONE);
+        rec.note_carried(&mut set, true, SensorOffset::NONE, false);
         let h = rec.history();
-        assert!(h.unacknowledged);
+        assert!(h.unacknowledged());
         assert_eq!(rec.due_save(&set), Some(Save::AlarmHistory(h)));
         let mut again = rec.push(20_000, 4.0);
-        rec.note_carried(&mut again, true, SensorOffset::NONE);
+        rec.note_carried(&mut again, true, SensorOffset::NONE, false);
         assert_eq!(rec.due_save(&again), None, "stored once");
         assert_eq!(HistoryRecord::decode(&h.encode()), Ok(h));
         let mut cleared = rec.push(30_000, 4.0);
-        rec.note_carried(&mut cleared, false, SensorOffset::NONE);
+        rec.note_carried(&mut cleared, false, SensorOffset::NONE, false);
         assert_eq!(rec.due_save(&cleared), Some(Save::History(rec.history())));
-        assert!(!rec.history().unacknowledged);
+        assert!(!rec.history().unacknowledged());
         // Carried into the next boot's record.
         let mut next = Recorder::new(h, 360);
-        assert!(next.note_reset(ResetCause::BrownOut).unacknowledged);
+        assert!(next.note_reset(ResetCause::BrownOut).unacknowledged());
 
         // A v3 record: the v4 bytes before the latch, version 3, its own CRC.
         let v3: [u8; HistoryRecord::LEN_V3] = older_history(&h.encode(), 3);
-        assert_eq!(HistoryRecord::decode(&v3), Ok(HistoryRecord { unacknowledged: false, ..h }));
+        assert_eq!(HistoryRecord::decode(&v3), Ok(h.with_carried(false, false)));
     }
 
     /// The sensor offset the step subtracts is stored with the history in the carried byte's
@@ -1586,26 +1657,26 @@ mod tests {
 
         let mut rec = Recorder::new(HistoryRecord::EMPTY, 360);
         let mut quiet = rec.push(0, 4.0);
-        rec.note_carried(&mut quiet, false, SensorOffset::NONE);
+        rec.note_carried(&mut quiet, false, SensorOffset::NONE, false);
         assert_eq!(rec.due_save(&quiet), None);
         // A new offset is stored at once, past the hold-off, with the latch as it stands.
         let offset = SensorOffset::from_c(1.47);
         let mut found = rec.push(10_000, 4.0);
-        rec.note_carried(&mut found, false, offset);
+        rec.note_carried(&mut found, false, offset, false);
         let h = rec.history();
-        assert_eq!((h.sensor_offset, h.unacknowledged), (offset, false));
+        assert_eq!((h.sensor_offset, h.unacknowledged()), (offset, false));
         assert_eq!(rec.due_save(&found), Some(Save::AlarmHistory(h)));
         let mut same = rec.push(20_000, 4.0);
-        rec.note_carried(&mut same, false, offset);
+        rec.note_carried(&mut same, false, offset, false);
         assert_eq!(rec.due_save(&same), None, "stored once");
         // Offset and latch side by side in one byte, both read back.
         for latched in [false, true] {
-            let both = HistoryRecord { unacknowledged: latched, sensor_offset: SensorOffset::from_c(3.81), ..h };
+            let both = HistoryRecord { sensor_offset: SensorOffset::from_c(3.81), ..h.with_carried(latched, false) };
             assert_eq!(HistoryRecord::decode(&both.encode()), Ok(both));
         }
         // An offset that goes is stored at once too (a recalibration can lower it).
         let mut gone = rec.push(30_000, 4.0);
-        rec.note_carried(&mut gone, false, SensorOffset::NONE);
+        rec.note_carried(&mut gone, false, SensorOffset::NONE, false);
         assert!(matches!(rec.due_save(&gone), Some(Save::AlarmHistory(_))));
         // Carried into the next boot's record.
         let mut next = Recorder::new(h, 360);
@@ -1617,7 +1688,7 @@ mod tests {
             let mut current = h.encode();
             current[n - 1] = byte;
             let b: [u8; HistoryRecord::LEN_V4] = older_history(&current, 4);
-            let old = HistoryRecord { unacknowledged: latched, sensor_offset: SensorOffset::NONE, ..h };
+            let old = HistoryRecord { sensor_offset: SensorOffset::NONE, ..h.with_carried(latched, false) };
             assert_eq!(HistoryRecord::decode(&b), Ok(old));
         }
     }
@@ -1699,6 +1770,42 @@ mod tests {
         // 1 °C: below 2 °C, no alarm's run (freeze_60min is at −0.5 °C).
         assert_eq!(hour(&mut rec, 1.0), 6, "cold: every 10 minutes");
         assert_eq!(hour(&mut rec, 5.0), 1, "in range again");
+    }
+
+    /// The SSR's short is stored at once and once; a v5 record (before it was kept) decodes with
+    /// no short; the bit reads back.
+    #[test]
+    fn a_shorted_ssr_is_stored_with_the_history_at_once() {
+        let mut rec = Recorder::new(HistoryRecord::EMPTY, 360);
+        let _ = rec.note_reset(ResetCause::BrownOut);
+        let mut quiet = rec.push(0, 4.0);
+        rec.note_carried(&mut quiet, true, SensorOffset::NONE, false);
+        let _ = rec.due_save(&quiet);
+        let mut found = rec.push(10_000, 4.0);
+        rec.note_carried(&mut found, true, SensorOffset::NONE, true);
+        let h = rec.history();
+        assert!(h.ssr_shorted());
+        assert_eq!(rec.due_save(&found), Some(Save::AlarmHistory(h)), "at once, the latch already set");
+        let mut again = rec.push(20_000, 4.0);
+        rec.note_carried(&mut again, true, SensorOffset::NONE, true);
+        assert_eq!(rec.due_save(&again), None, "stored once");
+        let bytes = h.encode();
+        assert_eq!(HistoryRecord::decode(&bytes), Ok(h));
+        // The faults byte is the last before the CRC, bit 0.
+        assert_eq!(bytes[HistoryRecord::LEN - 5], 1);
+        let v5: [u8; HistoryRecord::LEN_V5] = older_history(&bytes, 5);
+        assert_eq!(HistoryRecord::decode(&v5), Ok(h.with_carried(true, false)));
+        // A boot that found a stop keeps it, whatever its reset; a person's reset clears it.
+        let stall = StopInfo::new(StopKind::ControlStall, 0, 0, 12_000);
+        for (reset, stop, kept) in [
+            (ResetCause::BrownOut, None, true),
+            (ResetCause::Watchdog, None, true),
+            (ResetCause::Other, Some(&stall), true),
+            (ResetCause::Other, None, false),
+        ] {
+            let mut next = Recorder::new(h, 360);
+            assert_eq!(next.note_boot(reset, stop).ssr_shorted(), kept, "{reset:?} {stop:?}");
+        }
     }
 
     #[test]

@@ -142,6 +142,19 @@ pub struct StepOutput {
     pub holdover_s: Option<f32>,
 }
 
+impl StepOutput {
+    /// The temperature the cold-chain record takes ([`crate::persist::Recorder::push`]): the
+    /// controller's `temp_c`, or NaN on a sensor fault, whose `temp_c` is the last good value
+    /// held, no measurement.
+    pub fn recorded_c(&self) -> f32 {
+        if self.mode == Mode::SensorFault {
+            f32::NAN
+        } else {
+            self.temp_c.0
+        }
+    }
+}
+
 /// The per-sample application step.
 #[derive(Clone, Debug)]
 pub struct Carrier<C: Controller> {
@@ -348,13 +361,34 @@ impl<C: Controller> Carrier<C> {
         self.supervisor.clear_sensor_offset(&self.cfg.supervisor, &mut self.filter);
     }
 
+    /// Whether the step found the SSR shorted: limp home drives, for the rest of this boot and,
+    /// through the cold-chain history ([`crate::persist::HistoryRecord::ssr_shorted`], which the
+    /// glue hands it with [`crate::persist::Recorder::note_carried`] after every sample), the
+    /// next ones ([`Self::resume`]).
+    pub fn ssr_shorted(&self) -> bool {
+        self.supervisor.shorted()
+    }
+
+    /// Resumes, from the first sample on, what the previous boots found and the history keeps
+    /// (`history`: the boot's, after [`crate::persist::Recorder::note_boot`]): the sensor offset
+    /// (through the calibration in force) and a shorted SSR, which limps home at once instead of
+    /// handing the modules back to the controller until the checks find the short again (at
+    /// full cooling, the load to 1.88 °C first). What the glue calls at boot, after the
+    /// calibration is set and before the first sample.
+    pub fn resume(&mut self, history: &crate::persist::HistoryRecord) {
+        self.restore_sensor_offset(history.sensor_offset);
+        if history.ssr_shorted() {
+            self.supervisor.restore_short();
+        }
+    }
+
     /// Subtracts again, from the first sample on, the sensor offset a previous boot subtracted
     /// (the stored history's [`crate::persist::HistoryRecord::sensor_offset`], through the
     /// calibration in force; at most [`crate::supervisor::sensor::OffsetConfig::max_comp_c`]).
     /// What the glue calls at boot, after the calibration is set and before the first sample:
     /// the fault the offset compensated does not go away with a restart, and forgotten, it read
     /// warm again and the controller held the load that much colder (the freezing side).
-    pub fn restore_sensor_offset(&mut self, offset: crate::persist::SensorOffset) {
+    fn restore_sensor_offset(&mut self, offset: crate::persist::SensorOffset) {
         self.supervisor.restore_sensor_offset(&self.cfg.supervisor, offset.c() * self.cfg.cal.gain);
     }
 

@@ -635,3 +635,24 @@ fn a_sensor_offset_stays_compensated_through_a_brownout() {
         assert!(r.true_temp_c > 3.0, "t={} s: the load at {:.2} °C", r.t_s, r.true_temp_c);
     }
 }
+
+/// A shorted SSR stays known through a brown-out: the restarted board limps home from its first
+/// sample. It was RAM alone: the restart handed the modules back to the controller, which cooled
+/// flat out (the load warm after limp home's off period) until the checks found the short
+/// again, 320 s later with the load at 1.88 °C (`hter sim --scenario disturbance --fault
+/// ssr-stuck-on@3000 --fault brownout@10000`; 4.03 °C at the lowest now).
+#[test]
+fn a_shorted_ssr_limps_home_through_a_brownout() {
+    let brownout_s = AT_S + 2.0 * 3600.0;
+    let out = gpc_disturbance(&[(AT_S, Fault::SsrStuckOn), (brownout_s, Fault::Brownout)], Some(brownout_s + 3600.0));
+    let found = out.metrics.faults_detected.iter().find(|f| f.kind == Detected::Event(EventKind::SsrStuckOn));
+    assert!(found.expect("the short is found").t_s < brownout_s);
+    let after: Vec<_> = out.rows.iter().filter(|r| r.t_s >= brownout_s).collect();
+    assert!(after.len() > 300, "the run goes on after the brown-out: {} samples", after.len());
+    assert!(after.iter().all(|r| r.mode == RowMode::Step(Mode::LimpHome)), "limp home from the first sample");
+    let lowest = after.iter().map(|r| r.true_temp_c).fold(f64::MAX, f64::min);
+    assert!(lowest > 3.5, "the load at {lowest:.2} °C after the restart");
+    // One short, found once: the restart does not find it again.
+    let found = out.metrics.faults_detected.iter().filter(|f| f.kind == Detected::Event(EventKind::SsrStuckOn));
+    assert_eq!(found.count(), 1);
+}

@@ -183,7 +183,8 @@ fn sequence(n: usize) -> Vec<Save> {
             out.push(Save::Cal(TwoPoint { gain: 1.0 + 0.0005 * f, offset_c: -0.01 * f }));
         }
         if i % 3 == 0 {
-            let mut h = HistoryRecord { below_2_s: 60 * i as u32, ..HistoryRecord::EMPTY };
+            let mut h = HistoryRecord::EMPTY;
+            h.below_2_s = 60 * i as u32;
             h.resets[2] = i as u16;
             out.push(Save::History(h));
         }
@@ -521,7 +522,8 @@ fn wear_at_the_firmware_cadence() {
             let mut models = cadence();
             for n in 0..days * 86_400 / history_every_s {
                 let t_s = n * history_every_s;
-                let h = HistoryRecord { recorded_s: t_s, excursions: t_s / (7 * 3600), ..HistoryRecord::EMPTY };
+                let mut h = HistoryRecord::EMPTY;
+                (h.recorded_s, h.excursions) = (t_s, t_s / (7 * 3600));
                 if boots_per_day > 0 && t_s.is_multiple_of(boot_every_s) {
                     let mut boot = h;
                     boot.note_reset(ResetCause::BrownOut);
@@ -575,7 +577,8 @@ fn a_power_cut_anywhere_in_a_settings_write_leaves_the_old_or_the_new_settings()
     let (old, new) = (settings(1, 4.0, Law::Gpc), settings(2, 5.0, Law::Pi));
     // Fill the region's pages with history first, so the cut also falls in page turns.
     let mut store = open(MockFlash::<L4_PAGE>::blank(4), 4);
-    let h = HistoryRecord { recorded_s: 1, ..HistoryRecord::EMPTY };
+    let mut h = HistoryRecord::EMPTY;
+    h.recorded_s = 1;
     for _ in 0..30 {
         block_on(store.save_history(&h)).unwrap();
     }
@@ -624,7 +627,8 @@ fn a_power_cut_anywhere_in_a_cabinet_model_write_leaves_the_old_or_the_new_one()
     let rec = |m| CabinetRecord::from_model(&m).unwrap();
     let model = ModelRecord::from_model(&START_MODEL_HTER1).unwrap();
     let mut store = open(MockFlash::<L4_PAGE>::blank(4), 4);
-    let h = HistoryRecord { recorded_s: 1, ..HistoryRecord::EMPTY };
+    let mut h = HistoryRecord::EMPTY;
+    h.recorded_s = 1;
     for _ in 0..30 {
         block_on(store.save_history(&h)).unwrap();
         // The self-tuner's periodic save has its own key: it never replaces the cabinet model.

@@ -182,6 +182,11 @@ async fn main(spawner: Spawner) {
         }
     }
     spawner.spawn(sample(b.analog).unwrap());
+    // The boot's records go to the control task by reference, from a static: a task's
+    // arguments stay in its state for its whole life, ahead of its own variables, and the
+    // ≈ 0.5 KiB of `Boot` there put the loop's variables past the 4 KiB that a load or store
+    // reaches from one base (`cargo xtask size`: 300 B of flash more for every 24 B of state).
+    let boot: &'static Boot = cortex_m::singleton!(: Boot = boot).unwrap_or_else(|| unreachable!());
     spawner.spawn(control(boot, b.heartbeat).unwrap());
     #[cfg(not(feature = "buck"))]
     let drive = b.ssr;
@@ -258,28 +263,25 @@ fn new_carrier(boot: &Boot) -> hter::step::Carrier<config::Ctl> {
 /// the watchdog.
 #[cfg(not(feature = "interface"))]
 #[embassy_executor::task]
-async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
-    let mut carrier = new_carrier(&boot);
-    // The sensor fault the previous boot compensated is still in the channel.
-    carrier.restore_sensor_offset(boot.history.sensor_offset);
-    carrier.note_reset(boot.reset);
+async fn control(boot: &'static Boot, mut heartbeat_pin: Output<'static>) {
+    let mut carrier = new_carrier(boot);
     let mut recorder = hter::persist::Recorder::new(boot.history, config::HISTORY_SAVE_SAMPLES);
-    let mut history = recorder.note_reset(boot.reset);
-    if let Some(f) = &boot.fault {
-        carrier.note_board_fault(f.kind);
-        history = recorder.note_board_fault(f);
-    }
-    for _ in 0..boot.pages_lost {
-        history = recorder.note_flash_page_lost();
-        if EVENTS.try_send(Event { t_ms: 0, kind: hter::event::EventKind::FlashPageLost }).is_err() {
-            warn!("event queue full, dropped FlashPageLost");
+    // In a block: the boot's history (176 B) is not kept in the task's state through the loop.
+    let mut annunciator = {
+        // The boot counted, the sensor offset and a shorted SSR resumed.
+        let history = boot.resume(&mut carrier, &mut recorder);
+        for _ in 0..boot.pages_lost {
+            if EVENTS.try_send(Event { t_ms: 0, kind: hter::event::EventKind::FlashPageLost }).is_err() {
+                warn!("event queue full, dropped FlashPageLost");
+            }
         }
-    }
-    // Waits for the write gate: a power-bounce loop does not write at every boot; a new
-    // fail-safe stop goes at once (`Boot::history_save`), before the first step can stop again.
-    persist::request(boot.history_save(history));
-    // A restart does not acknowledge: the latch is in the stored history.
-    let mut annunciator = hter::alarm::Annunciator::restored(history.unacknowledged);
+        // Waits for the write gate: a power-bounce loop does not write at every boot; a new
+        // fail-safe stop goes at once (`Boot::history_save`), before the first step can stop
+        // again.
+        persist::request(boot.history_save(history));
+        // A restart does not acknowledge: the latch is in the stored history.
+        hter::alarm::Annunciator::restored(history.unacknowledged())
+    };
     info!("controller: {}", carrier.controller().name());
     let mut model_cadence = hter::persist::ModelCadence::new(config::MODEL_SAVE_SAMPLES);
     let mut samples = 0u32;
@@ -291,13 +293,13 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
         carrier.observe(&s.board);
         let input = hter::step::StepInput { t_ms: s.t_ms, counts: s.counts, setpoint_c: config::SETPOINT_C };
         let out = if s.reference_ok { carrier.step(&input) } else { carrier.step_with_reference_fault(&input) };
-        let mut rec = recorder.push(s.t_ms, out.temp_c.0);
+        let mut rec = recorder.push(s.t_ms, out.recorded_c());
         if ACKNOWLEDGE.try_take().is_some() {
             info!("alarm acknowledged t={=u64:ms}", s.t_ms);
             annunciator.acknowledge();
         }
         let alarm = annunciator.update(&out, &rec.raised);
-        recorder.note_carried(&mut rec, annunciator.latched(), carrier.sensor_offset());
+        recorder.note_carried(&mut rec, annunciator.latched(), carrier.sensor_offset(), carrier.ssr_shorted());
         ACTUATION.signal(Actuation {
             duty: out.duty,
             supply_enable: out.supply_enable,
@@ -368,8 +370,8 @@ async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
 /// heartbeat, tells the stall check and feeds the watchdog.
 #[cfg(feature = "interface")]
 #[embassy_executor::task]
-async fn control(boot: Boot, mut heartbeat_pin: Output<'static>) {
-    let mut app = App::new(config::APP, &boot);
+async fn control(boot: &'static Boot, mut heartbeat_pin: Output<'static>) {
+    let mut app = App::new(config::APP, boot);
     // The boot's history now, not after the first step: a new fail-safe stop in it is stored at
     // once (`Boot::history_save`), before the first step can stop the board again.
     while let Some(save) = app.next_save() {

@@ -525,11 +525,12 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                     carrier.note_reset(ResetCause::BrownOut);
                     cadence = model_cadence();
                     recorder = Recorder::new(last_history(&stores), history_every);
-                    stores.push((t_s, Save::History(recorder.note_reset(ResetCause::BrownOut))));
-                    // The indicator's latch and the sensor offset restart from the stored history.
-                    let stored = recorder.history();
-                    annunciator = Annunciator::restored(stored.unacknowledged);
-                    carrier.restore_sensor_offset(stored.sensor_offset);
+                    let stored = recorder.note_boot(ResetCause::BrownOut, None);
+                    stores.push((t_s, Save::History(stored)));
+                    // The indicator's latch, the sensor offset and a shorted SSR restart from the
+                    // stored history.
+                    annunciator = Annunciator::restored(stored.unacknowledged());
+                    carrier.resume(&stored);
                 } else {
                     rig.inject(f);
                 }
@@ -565,13 +566,13 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             }
             let trips = out.events.iter().filter(|e| e.kind == EventKind::FreezeGuardTripped).count();
             freeze_guard_trips = freeze_guard_trips.saturating_add(trips as u32);
-            let mut recorded = recorder.push(step_clock_ms(t_s), out.temp_c.0);
+            let mut recorded = recorder.push(step_clock_ms(t_s), out.recorded_c());
             let raised = recorded.raised;
             for a in raised.iter().flatten() {
                 alarms.push(Stamped { kind: a.kind, t_s: a.trigger_s() - PREROLL_S });
             }
             let indication = annunciator.update(&out, &raised);
-            recorder.note_carried(&mut recorded, annunciator.latched(), carrier.sensor_offset());
+            recorder.note_carried(&mut recorded, annunciator.latched(), carrier.sensor_offset(), carrier.ssr_shorted());
             if let Some(save) = recorder.due_save(&recorded) {
                 stores.push((t_s, save));
             }

@@ -272,9 +272,9 @@ fn run() -> Result<(), &'static str> {
             let (raised, t) = timed(|| proto::monitor_push(&mut monitor, &inp_b, &o));
             ticks[proto::PART_MONITOR] = t;
             ticks[proto::PART_BOARD] = timed(|| {
-                let mut rec = recorder.push(inp_b.t_ms, o.temp_c.0);
+                let mut rec = recorder.push(inp_b.t_ms, o.recorded_c());
                 let alarm = annunciator.update(&o, &rec.raised);
-                recorder.note_carried(&mut rec, annunciator.latched(), carrier.sensor_offset());
+                recorder.note_carried(&mut rec, annunciator.latched(), carrier.sensor_offset(), carrier.ssr_shorted());
                 if rec.save_due {
                     // What the control task hands the persist task (its queue copies it once).
                     black_box(recorder.history());

@@ -792,6 +792,39 @@ fn bench_with_a_latched_sensor_fault() -> Bench {
     b
 }
 
+/// The board's cold-chain record takes no temperature through a sensor fault: the step's last
+/// good reading, held for the controller, is no measurement. 12 h of a sensor fault with the
+/// load at 12 °C were recorded as 12 h in range at the held 4 °C with no `heat_10h`; now the fault's time is cut out, as `hter monitor` cuts it from a log,
+/// and the hour with readings at 12 °C after it is the record's only time above 8 °C.
+#[test]
+fn the_record_takes_no_temperature_through_a_sensor_fault() {
+    let mut b = Bench::new(&boot());
+    b.dither = true;
+    b.run(30);
+    let before = b.app.recorder().history();
+    // The reference conversions out of their window: no reading from the first sample on.
+    b.load_c = 12.0;
+    for _ in 0..12 * 360 {
+        let counts = counts_at(b.load_c);
+        let out = b.app.sample(&SampleIn { t_ms: b.t_ms, counts, reference_ok: false, board: Default::default() });
+        b.t_ms += 10_000;
+        assert_eq!(out.step.mode, crate::step::Mode::SensorFault);
+        assert!(out.raised.iter().all(Option::is_none), "no alarm from a held reading");
+    }
+    let fault = b.app.recorder().history();
+    // The samples' interval before the fault belongs to the last reading (one sample period).
+    assert!(fault.recorded_s - before.recorded_s <= 10, "{} s recorded in the fault", fault.recorded_s);
+    assert_eq!((fault.below_2_s, fault.above_8_s, fault.excursions), (0, 0, 0));
+    // The sensor back, the load at 12 °C for an hour: an hour above 8 °C, no more.
+    b.load_c = 12.0;
+    b.pinned_c = Some(12.0);
+    b.run(360);
+    let after = b.app.recorder().history();
+    assert!((3_500..=3_600).contains(&after.above_8_s), "{} s above 8 °C", after.above_8_s);
+    assert!((3_500..=3_700).contains(&(after.recorded_s - fault.recorded_s)), "{} s", after.recorded_s);
+    assert_eq!(after.alarms_of(crate::coldchain::AlarmKind::Heat10h), 0);
+}
+
 /// With an alarm latched, `ack` acknowledges it and is recorded, once: a second `ack` before the
 /// next sample has nothing left to acknowledge.
 #[test]
@@ -841,6 +874,61 @@ fn the_apps_sample_carries_the_module_side_sense_to_the_step() {
     let second = b.run(1);
     assert!(second.step.events.iter().any(|e| e.kind == EventKind::SsrStuckOn), "{:?}", second.step.events);
     assert_eq!(second.step.mode, crate::step::Mode::LimpHome);
+}
+
+/// A shorted SSR is stored with the history at once, and the boots after it limp home from
+/// their first sample (a short does not heal in a brown-out, a watchdog bite or a fail-safe
+/// stop); a pin or software reset without a stop (the technician's reset button or a reflash,
+/// after the SSR was replaced) hands the modules back to the controller. Before, every boot
+/// handed them back: full cooling until the checks found the short again.
+#[cfg(feature = "module-sense")]
+#[test]
+fn a_shorted_ssr_is_remembered_until_a_person_resets_the_board() {
+    let mut b = Bench::new(&boot());
+    assert_eq!(b.send("set controller pi"), "ok\r\n");
+    b.run(30);
+    b.saves.clear();
+    b.module_v = Some(12.0);
+    let out = b.run(2);
+    assert_eq!(out.step.mode, crate::step::Mode::LimpHome);
+    // Stored at once (past the write gate's hold-off), with the short.
+    let stored = b.saves.iter().find_map(|s| match s {
+        Save::AlarmHistory(h) if h.ssr_shorted() => Some(*h),
+        _ => None,
+    });
+    let stored = stored.unwrap_or_else(|| panic!("the short is stored at once: {:?}", b.saves));
+    assert_eq!(HistoryRecord::decode(&stored.encode()), Ok(stored));
+    b.saves.clear();
+    b.run(5);
+    let again = b.saves.iter().any(|s| matches!(s, Save::AlarmHistory(_) | Save::History(_)));
+    assert!(!again, "stored once: {:?}", b.saves);
+
+    // The SSR is still shorted: with the modules cooling flat out whatever the duty, the boots
+    // that keep the short limp home from the first sample, supply open; the ones a person reset
+    // hand the modules to the controller.
+    let halt = crate::failsafe::StopInfo::new(crate::failsafe::StopKind::ControlStall, 0, 0, 12_000);
+    for (reset, fault, limps) in [
+        (ResetCause::BrownOut, None, true),
+        (ResetCause::Watchdog, None, true),
+        (ResetCause::Other, Some(halt), true),
+        (ResetCause::Other, None, false),
+    ] {
+        let mut next = Bench::new(&Boot { history: stored, reset, fault, ..boot() });
+        next.load_c = 5.0;
+        let first = next.run(1);
+        let what = format!("{reset:?} {:?}", fault.map(|f| f.kind));
+        assert_eq!(first.step.mode == crate::step::Mode::LimpHome, limps, "{what}: {:?}", first.step.mode);
+        if limps {
+            assert!(!first.step.supply_enable && first.step.duty.get() == 0.0, "{what}: supply open first");
+            assert!(next.app.carrier().ssr_shorted(), "{what}");
+        }
+        // What the boot stores carries the short on, or its clearing.
+        let boot_history = next.saves.iter().find_map(|s| match s {
+            Save::History(h) | Save::AlarmHistory(h) => Some(*h),
+            _ => None,
+        });
+        assert_eq!(boot_history.map(|h| h.ssr_shorted()), Some(limps), "{what}");
+    }
 }
 
 /// What a refusal quotes is the value as it was typed: `2.4999` was answered "2.50 is outside
@@ -1004,14 +1092,14 @@ fn a_restart_keeps_an_unacknowledged_alarm_on() {
     let mut b = bench_with_a_latched_sensor_fault();
     assert_eq!(b.run(30).alarm, Indication::Unacknowledged);
     let stored = stored_history(&b);
-    assert!(stored.unacknowledged);
+    assert!(stored.unacknowledged());
     let mut again = restarted(&b, stored);
     assert_eq!(again.run(1).alarm, Indication::Unacknowledged);
     assert_eq!(again.run(30).alarm, Indication::Unacknowledged);
     assert_eq!(again.send("ack"), "ok\r\n");
     assert_eq!(again.run(1).alarm, Indication::Off);
     let acked = stored_history(&again);
-    assert!(!acked.unacknowledged);
+    assert!(!acked.unacknowledged());
     let mut third = restarted(&again, acked);
     assert_eq!(third.run(30).alarm, Indication::Off);
 }
@@ -1080,7 +1168,7 @@ fn a_restart_keeps_the_sensor_offset_compensated() {
     assert!(!events.contains(&EventKind::SensorOffset), "{events:?}");
     assert!((again.load_c - 4.0).abs() < 0.2, "the load at {}", again.load_c);
     // Without it, the same boot reads the lead's 1.5 °C.
-    let mut forgot = restarted(&b, HistoryRecord { sensor_offset: crate::persist::SensorOffset::NONE, ..stored });
+    let mut forgot = restarted(&b, stored.with_sensor_offset(crate::persist::SensorOffset::NONE));
     let (worst, _) = reading_error(&mut forgot, 1);
     assert!(worst > 1.4, "{worst}");
 }

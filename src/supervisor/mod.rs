@@ -496,6 +496,17 @@ impl Supervisor {
         self.sensor.restore_offset(&cfg.sensor, offset_c);
     }
 
+    /// Whether the SSR was found shorted (limp home drives, latched).
+    pub(crate) fn shorted(&self) -> bool {
+        self.state.shorted()
+    }
+
+    /// Limps home from the next sample on, as on a short found now but without its event: a
+    /// previous boot found it ([`crate::persist::HistoryRecord::ssr_shorted`]).
+    pub(crate) fn restore_short(&mut self) {
+        self.state.ssr_shorted();
+    }
+
     /// Clears the sensor offset: the offset-corrected reading moves up by it, which every check
     /// and the filter take over as a new line through the channel (the checks carry what they
     /// hold over to it, as for [`Self::recalibrated`]).
