@@ -411,3 +411,38 @@ fn a_log2csv_output_lists_its_resets() {
     assert_eq!(day_rows(&page), 1);
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// A simulated trace whose probe opens 2 h in: the carrier holds its last good reading in
+/// `temp_c` (mode `sensor_fault`) while the load warms towards the ambient. `hter monitor`
+/// counts the 2 h after as no reading: its record is the first 2 h's, to the figure (MKT,
+/// extremes, time in and out of range, alarms), however warm the load truly got.
+#[test]
+fn a_sim_trace_through_a_sensor_fault_records_nothing_of_the_fault() {
+    let d = dir("sim-fault");
+    let (csv, head) = (d.join("t.csv"), d.join("head.csv"));
+    ok(&hter(&["sim", "--fault", "sensor-open@7200", "--duration", "14400", "--csv", s(&csv)]));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    // Up to the first fault sample, at 7 200 s.
+    let t_of = |l: &str| l.split(',').next().unwrap().parse::<f64>().unwrap_or(0.0);
+    let first: String = text.lines().filter(|l| t_of(l) <= 7200.0).map(|l| format!("{l}\n")).collect();
+    std::fs::write(&head, first).unwrap();
+    let truly_warm = text.lines().skip(1).filter(|l| t_of(l) > 7200.0).any(|l| {
+        let true_c = l.split(',').nth(5).unwrap().parse::<f64>().unwrap();
+        true_c > 8.0
+    });
+    assert!(truly_warm, "the load warms past 8 °C after the fault");
+    let json = |p: &Path| -> serde_json::Value {
+        let out = hter(&["monitor", "--input", s(p), "--json"]);
+        ok(&out);
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let (all, before) = (json(&csv), json(&head));
+    // From the first fault sample to the last sample, at 14 390 s.
+    assert_eq!((all["time_no_reading_s"].as_f64(), all["fault_samples"].as_u64()), (Some(7190.0), Some(720)), "{all}");
+    for key in
+        ["mkt_c", "min_c", "max_c", "time_below_2_s", "time_above_8_s", "time_in_range_s", "alarms", "excursions"]
+    {
+        assert_eq!(all[key], before[key], "{key}: {all} vs {before}");
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
