@@ -89,7 +89,7 @@ pub enum BoardCommand {
     Ack,
     /// Save the cold-chain record as a CSV that `hter monitor --input` reads.
     History {
-        /// CSV file to write (the board's rows verbatim, header included).
+        /// CSV file to write, FILE.csv (the board's rows verbatim, header included).
         #[arg(long)]
         output: PathBuf,
         /// Only rows from this board time on, s.
@@ -557,6 +557,13 @@ pub fn check_command(cmd: &BoardCommand) -> Result<()> {
                 bail!("set takes a KEY and a VALUE without spaces, got '{key}' '{value}'");
             }
             explain_format(key, value)
+        }
+        // The board sends CSV whatever the name says: `--output x.html` wrote CSV into a
+        // file named .html (SPEC §8: `--output FILE.csv`), found out only when opened.
+        BoardCommand::History { output, .. }
+            if !output.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("csv")) =>
+        {
+            bail!("--output '{}' must end in .csv (the board's history is a CSV)", output.display())
         }
         BoardCommand::History { since: Some(s), .. }
             if !(s.is_finite() && *s >= 0.0 && *s < f64::from(hter::iface::HISTORY_SINCE_LIMIT_S)) =>

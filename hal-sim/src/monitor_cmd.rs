@@ -58,7 +58,8 @@ pub struct Report {
     pub time_in_range_s: f64,
     /// Time with no reading (after a sample with an empty `temp_c`), s.
     pub time_no_reading_s: f64,
-    /// Samples with no reading.
+    /// Samples with no reading; for a board history, its interval rows with no reading (each up
+    /// to 5 min), and one for each hole after a `log_entries_lost` event.
     pub fault_samples: u32,
     /// Number of excursions outside 2–8 °C.
     pub excursions: u32,
@@ -255,12 +256,50 @@ pub struct Input {
     /// Whether the last entry of `t_s` is no row but the end of the last row's interval (a board
     /// history), where that row's temperature is repeated.
     pub closing: bool,
+    /// Whether the file is a board history (its `min_c` and `max_c` columns): its rows are
+    /// intervals of up to 5 min, not samples.
+    pub history: bool,
+    /// Entries of `t_s` that are no row of the file but the start of a hole after a
+    /// `log_entries_lost` event (no reading).
+    pub holes: usize,
 }
 
 impl Input {
     /// The samples of the file: `t_s`'s entries less the closing one.
     pub fn samples(&self) -> usize {
         self.t_s.len() - usize::from(self.closing)
+    }
+
+    /// `n` of the file's rows as people read them: `12 samples` for a log of samples, `12
+    /// intervals` for a board history, whose rows each summarise up to 5 min of the board's
+    /// 10 s samples (a history's row count said "samples" where a row is 30 of them).
+    pub fn rows_text(&self, n: usize) -> String {
+        let unit = if self.history { "interval" } else { "sample" };
+        format!("{n} {unit}{}", if n == 1 { "" } else { "s" })
+    }
+
+    /// The rows of the file read as samples, as [`Self::rows_text`] says them.
+    pub fn count_text(&self) -> String {
+        let text = self.rows_text(self.samples() - self.holes);
+        if self.history {
+            format!("{text} of up to 5 min")
+        } else {
+            text
+        }
+    }
+
+    /// What had no reading, by [`Report::fault_samples`]: the file's rows with no reading and
+    /// the holes after a `log_entries_lost` event, each said as what it is.
+    pub fn no_reading_text(&self, fault_samples: u32) -> String {
+        let rows = (fault_samples as usize).saturating_sub(self.holes);
+        let mut parts = Vec::new();
+        if rows > 0 {
+            parts.push(self.rows_text(rows));
+        }
+        if self.holes > 0 {
+            parts.push(format!("{} hole{} of lost log entries", self.holes, if self.holes == 1 { "" } else { "s" }));
+        }
+        parts.join(" and ")
     }
 }
 
@@ -317,6 +356,8 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
         events: Vec::new(),
         has_event_column: event_col.is_some() || reset_col.is_some() || events_col.is_some(),
         closing: false,
+        history: extremes.is_some(),
+        holes: 0,
     };
     // A board history (its interval extremes' columns): a row's `t_s` is the end of its interval.
     let history = extremes.is_some();
@@ -369,6 +410,7 @@ pub fn read_input(path: &std::path::Path) -> Result<Input> {
             input.t_s.push(hole);
             input.temp_c.push(None);
             input.extremes.push(None);
+            input.holes += 1;
         }
         if let Some(cause) = cell(&reset_col, i) {
             // `hter log2csv` names the cause (`restarted_brownout`, …, or `unknown`).
@@ -451,7 +493,7 @@ pub fn run(args: &MonitorArgs) -> Result<()> {
         return Ok(());
     }
     let hours = |s: f64| s / 3600.0;
-    println!("cold-chain record of {shown} ({} samples)", input.samples());
+    println!("cold-chain record of {shown} ({})", input.count_text());
     println!("  mean kinetic temperature  {:7.2} °C  (WHO: must lie within 2–8 °C)", r.mkt_c);
     println!("  min / max                 {:7.2} / {:.2} °C", r.min_c, r.max_c);
     println!("  time below +2 °C          {:7.2} h", hours(r.time_below_2_s));
@@ -459,9 +501,9 @@ pub fn run(args: &MonitorArgs) -> Result<()> {
     println!("  time within 2–8 °C        {:7.2} h", hours(r.time_in_range_s));
     if r.fault_samples > 0 {
         println!(
-            "  no reading (sensor fault) {:7.2} h  ({} samples; counted neither in nor out of range)",
+            "  no reading (sensor fault) {:7.2} h  ({}; counted neither in nor out of range)",
             hours(r.time_no_reading_s),
-            r.fault_samples
+            input.no_reading_text(r.fault_samples)
         );
     }
     println!("  excursions outside 2–8 °C {:7}", r.excursions);

@@ -369,10 +369,10 @@ pub fn html(path: &Path) -> Result<String> {
         w,
         "Period covered",
         &format!(
-            "{} ({} samples, t = {t0:.0} … {t1:.0} s). The file has no calendar date: days are 24 h blocks \
+            "{} ({}, t = {t0:.0} … {t1:.0} s). The file has no calendar date: days are 24 h blocks \
              from the first sample.",
             dur(t1 - t0),
-            input.samples()
+            input.count_text()
         ),
     )?;
     let mkt_ok = (2.0..=8.0).contains(&r.mkt_c);
@@ -412,7 +412,11 @@ pub fn html(path: &Path) -> Result<String> {
         row(
             w,
             "No reading (sensor fault)",
-            &format!("{} ({} samples; counted neither in nor out of range)", dur(r.time_no_reading_s), r.fault_samples),
+            &format!(
+                "{} ({}; counted neither in nor out of range)",
+                dur(r.time_no_reading_s),
+                input.no_reading_text(r.fault_samples)
+            ),
         )?;
     }
     let listed = if faults.is_empty() {

@@ -199,6 +199,25 @@ fn history_goes_verbatim_into_a_csv_monitor_reads() {
     let _ = std::fs::remove_file(&csv);
 }
 
+/// The history is CSV whatever the file is called: `--output x.html` wrote CSV into a file
+/// named .html. A name that is not FILE.csv (SPEC §8) is refused before the board is asked.
+#[test]
+fn history_refuses_an_output_that_is_not_csv() {
+    let fake = Fake::start("history-ext", vec!["idle"]);
+    for name in ["history.html", "history.pdf", "history"] {
+        let out = tmp(name);
+        let o = hter(&["board", "--port", fake.port(), "history", "--output", out.to_str().unwrap()]);
+        assert_one_line_error(&o, &format!("--output '{}' must end in .csv", out.display()));
+        assert!(!out.exists(), "{} written", out.display());
+    }
+    let csv = tmp("history-ext.CSV");
+    let o = hter(&["board", "--port", fake.port(), "history", "--output", csv.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(std::fs::read_to_string(&csv).unwrap(), HISTORY);
+    let _ = std::fs::remove_file(&csv);
+    assert_eq!(fake.finish(), ["history"], "only the .CSV name reached the board");
+}
+
 #[test]
 fn a_full_30_day_history_arrives_whole() {
     let fake = Fake::start("month", vec!["idle"]);

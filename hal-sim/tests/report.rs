@@ -191,9 +191,9 @@ fn a_board_history_gives_a_report_with_its_resets_and_faults() {
         "the sensor fault asks for a technician; the restart and the lost entries do not"
     );
     assert!(!page.contains("<li>set:"), "a settings change is not a fault");
-    // The event rows are not samples: 312 interval rows, and the one with empty temperatures is
-    // no sensor fault to the monitor either.
-    assert!(page.contains("312 samples"), "event rows counted as samples");
+    // The event rows are not intervals: 312 interval rows, and the one with empty temperatures
+    // is no sensor fault to the monitor either.
+    assert!(page.contains("312 intervals of up to 5 min"), "event rows counted as intervals");
     let out = hter(&["monitor", "--input", s(&csv), "--json"]);
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!((v["fault_samples"].as_u64(), v["time_above_8_s"].as_f64()), (Some(0), Some(11.0 * 3600.0)), "{v}");
@@ -293,6 +293,61 @@ fn a_history_reports_the_extremes_and_the_carriers_alarms_its_means_miss() {
     let _ = std::fs::remove_dir_all(&d);
 }
 
+/// A board history's rows are intervals of up to 5 min, each the summary of 30 samples: `hter
+/// monitor` and `hter report` said "(288 samples)" of a day's history and "(25 samples; counted
+/// neither in nor out of range)" of two hours without a reading, and counted a hole of lost log
+/// entries (here 2 h) as one sample more.
+#[test]
+fn a_historys_rows_are_counted_as_intervals() {
+    let d = dir("counts");
+    let (csv, html) = (d.join("h.csv"), d.join("r.html"));
+    let counts = |text: &str| {
+        std::fs::write(&csv, text).unwrap();
+        let out = hter(&["monitor", "--input", s(&csv)]);
+        ok(&out);
+        ok(&hter(&["report", "--input", s(&csv), "--output", s(&html)]));
+        (String::from_utf8_lossy(&out.stdout).into_owned(), std::fs::read_to_string(&html).unwrap())
+    };
+    let rows: Vec<String> = history_with_a_dip(3.0, None).lines().map(str::to_owned).collect();
+    let t_of = |l: &str| l.split(',').next().unwrap().parse::<u32>().unwrap_or(0);
+
+    // Two hours on a sensor fault: 25 interval rows with no reading.
+    let faulted: String = rows
+        .iter()
+        .map(|l| {
+            let t = t_of(l);
+            if (36_000..=43_200).contains(&t) {
+                format!("{t},4.00,4.00,4.00,0.00,sensor_fault,\n")
+            } else {
+                format!("{l}\n")
+            }
+        })
+        .collect();
+    let (text, page) = counts(&faulted);
+    assert!(text.contains(&format!("cold-chain record of {} (288 intervals of up to 5 min)", csv.display())), "{text}");
+    assert!(text.contains("(25 intervals; counted neither in nor out of range)"), "{text}");
+    assert!(page.contains("(288 intervals of up to 5 min, t = 0 … 86400 s)"), "the period");
+    assert!(page.contains("(25 intervals; counted neither in nor out of range)"), "the rows with no reading");
+    assert!(!text.contains("samples") && !page.contains(" samples"), "{text}");
+
+    // The rows from 36 300 to 43 200 s lost before they reached flash: 264 rows and a hole.
+    let mut holed: String =
+        rows.iter().filter(|l| !(36_300..=43_200).contains(&t_of(l))).map(|l| format!("{l}\n")).collect();
+    holed = holed.replace("\n43500,", "\n43200,,,,,,log_entries_lost:24\n43500,");
+    let (text, page) = counts(&holed);
+    assert!(text.contains("(264 intervals of up to 5 min)"), "{text}");
+    assert!(text.contains("(1 hole of lost log entries; counted neither in nor out of range)"), "{text}");
+    assert!(page.contains("(264 intervals of up to 5 min, t = 0 … 86400 s)"), "the period");
+    assert!(page.contains("(1 hole of lost log entries; counted neither"), "the hole");
+
+    // A log of samples keeps its word.
+    std::fs::write(&csv, "t_s,temp_c\n0,4\n10,\n20,4\n30,4\n").unwrap();
+    let out = hter(&["monitor", "--input", s(&csv)]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("(4 samples)") && text.contains("(1 sample; counted neither"), "{text}");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
 fn assert_one_line_error(args: &[&str], needle: &str) {
     let out = hter(args);
     assert!(!out.status.success(), "{args:?} should fail");
@@ -354,5 +409,40 @@ fn a_log2csv_output_lists_its_resets() {
     assert!(page.contains("SERVICE NEEDED — 1 fault that needs a service check, the first restarted_watchdog"));
     assert!(page.contains("No reading (sensor fault)"));
     assert_eq!(day_rows(&page), 1);
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// A simulated trace whose probe opens 2 h in: the carrier holds its last good reading in
+/// `temp_c` (mode `sensor_fault`) while the load warms towards the ambient. `hter monitor`
+/// counts the 2 h after as no reading: its record is the first 2 h's, to the figure (MKT,
+/// extremes, time in and out of range, alarms), however warm the load truly got.
+#[test]
+fn a_sim_trace_through_a_sensor_fault_records_nothing_of_the_fault() {
+    let d = dir("sim-fault");
+    let (csv, head) = (d.join("t.csv"), d.join("head.csv"));
+    ok(&hter(&["sim", "--fault", "sensor-open@7200", "--duration", "14400", "--csv", s(&csv)]));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    // Up to the first fault sample, at 7 200 s.
+    let t_of = |l: &str| l.split(',').next().unwrap().parse::<f64>().unwrap_or(0.0);
+    let first: String = text.lines().filter(|l| t_of(l) <= 7200.0).map(|l| format!("{l}\n")).collect();
+    std::fs::write(&head, first).unwrap();
+    let truly_warm = text.lines().skip(1).filter(|l| t_of(l) > 7200.0).any(|l| {
+        let true_c = l.split(',').nth(5).unwrap().parse::<f64>().unwrap();
+        true_c > 8.0
+    });
+    assert!(truly_warm, "the load warms past 8 °C after the fault");
+    let json = |p: &Path| -> serde_json::Value {
+        let out = hter(&["monitor", "--input", s(p), "--json"]);
+        ok(&out);
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let (all, before) = (json(&csv), json(&head));
+    // From the first fault sample to the last sample, at 14 390 s.
+    assert_eq!((all["time_no_reading_s"].as_f64(), all["fault_samples"].as_u64()), (Some(7190.0), Some(720)), "{all}");
+    for key in
+        ["mkt_c", "min_c", "max_c", "time_below_2_s", "time_above_8_s", "time_in_range_s", "alarms", "excursions"]
+    {
+        assert_eq!(all[key], before[key], "{key}: {all} vs {before}");
+    }
     let _ = std::fs::remove_dir_all(&d);
 }
