@@ -53,7 +53,8 @@ pub struct Interval {
     pub max_c: f32,
     /// Mean applied duty.
     pub duty: f32,
-    /// The worst mode of the interval (the last in [`Mode::ALL`] order that occurred).
+    /// The worst mode of the interval: `sensor_fault` if any sample had no reading, else the last
+    /// in [`Mode::ALL`] order that occurred.
     pub mode: Mode,
 }
 
@@ -338,7 +339,12 @@ impl IntervalLog {
             self.max_c = max_f32(self.max_c, temp_c);
             self.sum_duty += duty;
         }
-        if (mode as u8) > (self.worst as u8) {
+        // A sensor fault labels the interval whatever else it had: its mean, min and max then hold
+        // the step's last reading through the fault, which a reader must not take as measured
+        // (`hter monitor` drops a `sensor_fault` interval). Ranked below the freeze guard and
+        // limp home, a fault that began or ended in an interval with either was labelled by
+        // them, and the held value read as the load's. Their trips are in the events.
+        if self.worst != Mode::SensorFault && (mode == Mode::SensorFault || (mode as u8) > (self.worst as u8)) {
             self.worst = mode;
         }
         closed
@@ -464,6 +470,33 @@ mod tests {
         assert_eq!(interval.mode, Mode::Normal);
         let LogEntry::Interval { t_s, interval } = closed[1] else { panic!() };
         assert_eq!((t_s, interval.mode), (600, Mode::SensorFault), "sample 40 is at 405 s");
+    }
+
+    /// A sensor fault labels its interval even beside the freeze guard or limp home, which rank
+    /// above it otherwise: the interval's temperatures hold the last reading through the fault.
+    #[test]
+    fn a_sensor_fault_labels_its_interval_beside_any_other_mode() {
+        for modes in [
+            [Mode::LimpHome, Mode::SensorFault, Mode::Normal],
+            [Mode::SensorFault, Mode::FreezeGuard, Mode::LimpHome],
+            [Mode::Normal, Mode::FreezeGuard, Mode::SensorFault],
+        ] {
+            let mut log = IntervalLog::new();
+            for (i, mode) in modes.into_iter().enumerate() {
+                assert_eq!(log.push(10_000 * (i as u64 + 1), 4.0, 0.5, mode), None);
+            }
+            let Some(LogEntry::Interval { interval, .. }) = log.push(300_000, 4.0, 0.5, Mode::Normal) else {
+                panic!("{modes:?}: the interval closes")
+            };
+            assert_eq!(interval.mode, Mode::SensorFault, "{modes:?}");
+        }
+        // Without a fault the rank holds.
+        let mut log = IntervalLog::new();
+        for (i, mode) in [Mode::LimpHome, Mode::FreezeGuard, Mode::Normal].into_iter().enumerate() {
+            let _ = log.push(10_000 * (i as u64 + 1), 4.0, 0.5, mode);
+        }
+        let Some(LogEntry::Interval { interval, .. }) = log.push(300_000, 4.0, 0.5, Mode::Normal) else { panic!() };
+        assert_eq!(interval.mode, Mode::LimpHome);
     }
 
     /// The lost-entry count sits after the event's code, where the bytes were zero before it was
