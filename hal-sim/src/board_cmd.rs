@@ -573,6 +573,8 @@ pub fn check_command(cmd: &BoardCommand) -> Result<()> {
                 crate::sim_cmd::shown(*s)
             )
         }
+        // Before the download (≈ 35 s for 30 days on a board), not after it.
+        BoardCommand::History { output, .. } => crate::plot::check_dir(output),
         _ => Ok(()),
     }
 }

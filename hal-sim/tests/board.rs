@@ -204,18 +204,23 @@ fn history_goes_verbatim_into_a_csv_monitor_reads() {
 #[test]
 fn history_refuses_an_output_that_is_not_csv() {
     let fake = Fake::start("history-ext", vec!["idle"]);
-    for name in ["history.html", "history.pdf", "history"] {
+    // Names of this test's own: another test's stand-in board sits at `tmp("history")`.
+    for name in ["refused.html", "refused.pdf", "refused"] {
         let out = tmp(name);
         let o = hter(&["board", "--port", fake.port(), "history", "--output", out.to_str().unwrap()]);
         assert_one_line_error(&o, &format!("--output '{}' must end in .csv", out.display()));
         assert!(!out.exists(), "{} written", out.display());
     }
+    // A directory that does not exist: refused before the download, not after it.
+    let lost = tmp("no-such-dir").join("history.csv");
+    let o = hter(&["board", "--port", fake.port(), "history", "--output", lost.to_str().unwrap()]);
+    assert_one_line_error(&o, &format!("cannot write '{}'", lost.display()));
     let csv = tmp("history-ext.CSV");
     let o = hter(&["board", "--port", fake.port(), "history", "--output", csv.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(std::fs::read_to_string(&csv).unwrap(), HISTORY);
     let _ = std::fs::remove_file(&csv);
-    assert_eq!(fake.finish(), ["history"], "only the .CSV name reached the board");
+    assert_eq!(fake.finish(), ["history"], "only the .CSV name in a directory that exists reached the board");
 }
 
 #[test]
