@@ -549,6 +549,41 @@ mod tests {
         assert_eq!(full.alarms[0].trigger_s, 3600.0);
     }
 
+    /// The board's own record (the library monitor fed NaN for a sample without a reading, as
+    /// the firmware feeds it `StepOutput::recorded_c`) and `hter monitor` of the same log agree:
+    /// the gap is cut out of both, an alarm's run goes on across it, and the alarm triggers when
+    /// the time with a reading reaches its duration (on the record's clock, which the gap does
+    /// not advance).
+    #[test]
+    fn the_boards_record_cuts_a_sensor_fault_as_hter_monitor_does() {
+        // Minutes: 1 h at 5 °C, 6 h at 10 °C, 3 h without a reading, 5 h at 10 °C, 1 h at 5 °C.
+        let c = |m: u32| match m {
+            0..60 | 900.. => Some(5.0),
+            420..600 => None,
+            _ => Some(10.0),
+        };
+        let t: Vec<f64> = (0..=960).map(|m| 60.0 * f64::from(m)).collect();
+        let temp: Vec<Option<f64>> = (0..=960).map(c).collect();
+        let host = report(&t, &temp).unwrap();
+        let mut board = ColdChainMonitor::new();
+        let mut raised = Vec::new();
+        for (&ts, c) in t.iter().zip(&temp) {
+            let r = board.push((ts * 1000.0) as u64, c.map_or(f32::NAN, |c| c as f32));
+            raised.extend(r.into_iter().flatten().map(|a| (a.kind.name(), a.start_ms, a.trigger_ms)));
+        }
+        let gap_s = 3.0 * 3600.0;
+        assert_eq!(host.time_no_reading_s, gap_s);
+        assert_eq!(f64::from(board.recorded_s()), 960.0 * 60.0 - gap_s);
+        assert_eq!(f64::from(board.time_above_8_s()), host.time_above_8_s);
+        assert_eq!(host.time_above_8_s, 11.0 * 3600.0);
+        assert_eq!(f64::from(board.time_below_2_s()), host.time_below_2_s);
+        assert!((f64::from(board.mkt_c().unwrap()) - host.mkt_c).abs() < 1e-3, "{:?} {}", board.mkt_c(), host.mkt_c);
+        // heat_10h: 10 h above 8 °C with a reading, from minute 60: at minute 60 + 600 + 180
+        // on the log, 3 h earlier on the record's clock.
+        assert_eq!(host.alarms, vec![AlarmOut { kind: "heat_10h", start_s: 3600.0, trigger_s: 840.0 * 60.0 }]);
+        assert_eq!(raised, vec![("heat_10h", 3_600_000, (840 * 60 * 1000) - 3 * 3_600_000)]);
+    }
+
     #[test]
     fn fault_samples_count_neither_in_nor_out_of_range() {
         // Faults first (no reading yet), a warm spell, a fault in the middle, the last sample a
