@@ -549,10 +549,14 @@ fn model_from(fetched: Result<&[u8], LoadStatus>) -> Result<ModelRecord, LoadSta
 /// and stack into its result (−240 B of the firmware's flash).
 #[inline(never)]
 fn adaptive_from(rec: Result<ModelRecord, LoadStatus>, cfg: &AdaptiveConfig) -> Loaded<AdaptiveConfig> {
-    match rec.and_then(|rec| rec.restore(cfg).map_err(LoadStatus::Invalid)) {
-        Ok(value) => Loaded { value, status: LoadStatus::Restored },
-        Err(status) => Loaded { value: *cfg, status },
+    // `ModelRecord::restore`'s steps on the result itself: `cfg` copied into it once, then
+    // resumed there; building `restore`'s value and moving it in cost 60 B more flash.
+    let mut out = Loaded { value: *cfg, status: LoadStatus::Restored };
+    match rec.and_then(|rec| rec.to_model(cfg).map_err(LoadStatus::Invalid)) {
+        Ok(m) => out.value = out.value.resumed_from(m),
+        Err(status) => out.status = status,
     }
+    out
 }
 
 /// The cold-chain log ([`crate::persist::log`]) in its own flash region, as a
