@@ -165,7 +165,10 @@ impl Reader<'_> {
     }
 }
 
-/// Checks length, CRC, tag and version; returns a reader over the payload.
+/// Checks length, CRC, tag and version; returns a reader over the payload. Out of line: every
+/// record's decoder inlined it (−8 B of the default firmware's flash, −232 B of the interface
+/// build's, which decodes the settings and the cabinet model too).
+#[inline(never)]
 fn open_frame(bytes: &[u8], len: usize, tag: u8, version: u8) -> Result<Reader<'_>, DecodeError> {
     if bytes.len() != len {
         return Err(DecodeError::Length);
