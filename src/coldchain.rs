@@ -250,7 +250,7 @@ impl ColdChainMonitor {
     /// Adds a sample at `t_ms`, ms. Times must increase; a sample that is not later than the
     /// previous one is ignored (returns no alarm) so a glitch cannot corrupt the record. A
     /// sample that is not finite has no reading (a sensor fault): the time from the first such
-    /// sample to the next reading is cut out of the record ([`Self::record_ms`]), as `hter
+    /// sample to the next reading is cut out of the record (its clock stops), as `hter
     /// monitor` cuts it from a log, so it counts neither in nor out of range and adds nothing to
     /// the mean kinetic temperature or to an alarm's run, which goes on across it.
     pub fn push(&mut self, t_ms: u64, temp_c: f32) -> Raised {
