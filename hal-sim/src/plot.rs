@@ -13,7 +13,7 @@ use plotters::prelude::*;
 pub struct Series {
     /// Legend label.
     pub name: String,
-    /// (x, y) points.
+    /// (x, y) points; a point whose y is NaN breaks the line there (a gap with no data).
     pub points: Vec<(f64, f64)>,
 }
 
@@ -138,11 +138,18 @@ where
         chart.configure_mesh().x_desc(x_label).y_desc(&panel.y_label).draw().map_err(err)?;
         for (i, s) in panel.series.iter().enumerate() {
             let colour = COLOURS[i % COLOURS.len()];
+            // One line a run between NaN breaks: a line drawn across a gap shows a temperature
+            // nobody measured. The first run carries the legend.
+            let mut runs = s.points.split(|p| p.1.is_nan()).filter(|r| !r.is_empty());
+            let first = runs.next().unwrap_or(&[]);
             chart
-                .draw_series(LineSeries::new(s.points.iter().copied(), colour.stroke_width(2)))
+                .draw_series(LineSeries::new(first.iter().copied(), colour.stroke_width(2)))
                 .map_err(err)?
                 .label(s.name.clone())
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2)));
+            for run in runs {
+                chart.draw_series(LineSeries::new(run.iter().copied(), colour.stroke_width(2))).map_err(err)?;
+            }
         }
         chart
             .configure_series_labels()

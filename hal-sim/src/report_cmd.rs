@@ -275,12 +275,12 @@ fn opt_c(c: Option<f64>) -> String {
     c.map_or_else(|| "—".to_owned(), |c| format!("{c:.1}"))
 }
 
-/// At most [`MAX_PLOT_POINTS`] points: the min and max of each bucket, in time order.
-fn envelope(points: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
-    if points.len() <= MAX_PLOT_POINTS {
+/// At most `max` points (at least 2): the min and max of each bucket, in time order.
+fn envelope_to(points: Vec<(f64, f64)>, max: usize) -> Vec<(f64, f64)> {
+    if points.len() <= max {
         return points;
     }
-    let per = points.len().div_ceil(MAX_PLOT_POINTS / 2);
+    let per = points.len().div_ceil((max / 2).max(1));
     points
         .chunks(per)
         .flat_map(|c| {
@@ -293,19 +293,47 @@ fn envelope(points: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// The points with a value, in runs between those without one (a sample or interval with no
+/// reading), each run enveloped to its share of [`MAX_PLOT_POINTS`] and the runs joined by a
+/// NaN, where the plot breaks its line: a sensor fault is a gap, not a line from the last
+/// reading to the next, which showed a temperature nobody measured.
+fn broken(points: &[(f64, Option<f64>)]) -> Vec<(f64, f64)> {
+    let runs: Vec<Vec<(f64, f64)>> = points
+        .split(|p| p.1.is_none())
+        .filter(|r| !r.is_empty())
+        .map(|r| r.iter().filter_map(|&(x, y)| y.map(|y| (x, y))).collect())
+        .collect();
+    let total: usize = runs.iter().map(Vec::len).sum();
+    let mut line = Vec::new();
+    for run in runs {
+        if let Some(&(x, _)) = run.first().filter(|_| !line.is_empty()) {
+            line.push((x, f64::NAN));
+        }
+        // The run's share of the plot's points, at least two.
+        let share = (MAX_PLOT_POINTS * run.len()).div_ceil(total.max(1)).max(2);
+        line.extend(envelope_to(run, share));
+    }
+    line
+}
+
 /// The temperature against the 2 and 8 °C limits over `[from, to)` of the log, x in hours
-/// from `x0`; a board history's interval extremes as two more lines.
+/// from `x0`; a board history's interval extremes as two more lines. Every line breaks where
+/// there is no reading ([`broken`]).
 fn temp_plot(title: &str, input: &Input, from: f64, to: f64, x0: f64) -> Result<String> {
     let h = |ts: f64| (ts - x0) / 3600.0;
     let within = || input.t_s.iter().enumerate().filter(|(_, &ts)| ts >= from && ts <= to);
-    let pts: Vec<(f64, f64)> = within().filter_map(|(i, &ts)| input.temp_c[i].map(|c| (h(ts), c))).collect();
-    let ext: Vec<(f64, (f64, f64))> =
-        within().filter_map(|(i, &ts)| input.extremes.get(i).copied().flatten().map(|e| (h(ts), e))).collect();
-    let (a, b) = (pts.first().map_or(h(from), |p| p.0), pts.last().map_or(h(to), |p| p.0));
+    let temps: Vec<(f64, Option<f64>)> = within().map(|(i, &ts)| (h(ts), input.temp_c[i])).collect();
+    let (a, b) = (
+        temps.iter().find(|p| p.1.is_some()).map_or(h(from), |p| p.0),
+        temps.iter().rev().find(|p| p.1.is_some()).map_or(h(to), |p| p.0),
+    );
+    let ext: Vec<(f64, Option<(f64, f64)>)> =
+        within().map(|(i, &ts)| (h(ts), input.extremes.get(i).copied().flatten())).collect();
     let limit = |v: f64| vec![(a, v), (b, v)];
-    let mut series = vec![plot::Series { name: "temperature".into(), points: envelope(pts) }];
-    if !ext.is_empty() {
-        let side = |pick: fn((f64, f64)) -> f64| envelope(ext.iter().map(|&(x, e)| (x, pick(e))).collect());
+    let mut series = vec![plot::Series { name: "temperature".into(), points: broken(&temps) }];
+    if ext.iter().any(|e| e.1.is_some()) {
+        let side =
+            |pick: fn((f64, f64)) -> f64| broken(&ext.iter().map(|&(x, e)| (x, e.map(pick))).collect::<Vec<_>>());
         series.push(plot::Series { name: "interval lowest".into(), points: side(|e| e.0) });
         series.push(plot::Series { name: "interval highest".into(), points: side(|e| e.1) });
     }
@@ -744,9 +772,42 @@ mod tests {
     #[test]
     fn the_envelope_keeps_the_extremes() {
         let pts: Vec<(f64, f64)> = (0..100_000).map(|i| (f64::from(i), if i == 54_321 { 99.0 } else { 4.0 })).collect();
-        let e = envelope(pts);
+        let e = envelope_to(pts, MAX_PLOT_POINTS);
         assert!(e.len() <= MAX_PLOT_POINTS + 2, "{}", e.len());
         assert!(e.contains(&(54_321.0, 99.0)));
         assert!(e.windows(2).all(|w| w[0].0 < w[1].0));
+    }
+
+    /// The plot's line breaks where there is no reading: one NaN between two runs, none at the
+    /// ends or for a gap at the start; the runs share the points' budget and keep their extremes.
+    #[test]
+    fn the_plots_line_breaks_where_there_is_no_reading() {
+        let pts: Vec<(f64, Option<f64>)> = (0..100_000)
+            .map(|i| {
+                let c = match i {
+                    0..10 | 40_000..60_000 => None,
+                    12_345 => Some(-3.0),
+                    77_777 => Some(11.0),
+                    _ => Some(4.0),
+                };
+                (f64::from(i), c)
+            })
+            .collect();
+        let line = broken(&pts);
+        let nans: Vec<usize> = line.iter().enumerate().filter(|(_, p)| p.1.is_nan()).map(|(i, _)| i).collect();
+        assert_eq!(nans.len(), 1, "one break");
+        let k = nans[0];
+        // The break sits between the last reading before the gap and the first after it.
+        assert!(
+            line[k - 1].0 < 40_000.0 && line[k].0 == 60_000.0 && line[k + 1].0 == 60_000.0,
+            "{:?}",
+            &line[k - 1..=k + 1]
+        );
+        assert!(line.first().is_some_and(|p| p.0 >= 10.0 && !p.1.is_nan()));
+        assert!(line.len() <= MAX_PLOT_POINTS + 6, "{}", line.len());
+        assert!(line.contains(&(12_345.0, -3.0)) && line.contains(&(77_777.0, 11.0)));
+        assert!(line.windows(2).all(|w| w[0].0 <= w[1].0));
+        // No gap, no break.
+        assert!(broken(&[(0.0, Some(4.0)), (1.0, Some(5.0))]).iter().all(|p| !p.1.is_nan()));
     }
 }

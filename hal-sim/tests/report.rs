@@ -446,3 +446,29 @@ fn a_sim_trace_through_a_sensor_fault_records_nothing_of_the_fault() {
     }
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// The report's plot breaks its lines where the history has no reading: two hours on a sensor
+/// fault draw the temperature and the intervals' extremes as two lines each, not one line
+/// across the gap, which showed a temperature nobody measured (the rows hold the step's last
+/// reading, 4.00 °C). The SVG draws each line, and each legend entry, as a `<polyline>` in the
+/// series' colour.
+#[test]
+fn the_reports_plot_breaks_its_lines_over_a_sensor_fault() {
+    let d = dir("plot-gap");
+    let (csv, html) = (d.join("h.csv"), d.join("r.html"));
+    let lines = |fault: &str| {
+        let mut text = String::from("t_s,temp_c,min_c,max_c,duty,mode,event\n");
+        for t in (1..=288).map(|i| 300 * i) {
+            let mode = if (36_000..=43_200).contains(&t) { fault } else { "normal" };
+            text.push_str(&format!("{t},4.00,3.90,4.10,0.40,{mode},\n"));
+        }
+        std::fs::write(&csv, text).unwrap();
+        ok(&hter(&["report", "--input", s(&csv), "--output", s(&html)]));
+        let page = std::fs::read_to_string(&html).unwrap();
+        // Temperature, interval lowest, interval highest: the plot's first three colours.
+        ["#1F77B4", "#D62728", "#2CA02C"].map(|c| page.matches(&format!("stroke=\"{c}\"")).count())
+    };
+    assert_eq!(lines("normal"), [2, 2, 2], "one line each and its legend");
+    assert_eq!(lines("sensor_fault"), [3, 3, 3], "two lines each and the legend");
+    let _ = std::fs::remove_dir_all(&d);
+}
