@@ -634,6 +634,11 @@ pub struct HistoryRecord {
 const UNACKNOWLEDGED: u8 = 1;
 const SSR_SHORTED: u8 = 2;
 
+/// [`HistoryRecord`]'s flags for the latch and the short.
+fn flags(unacknowledged: bool, ssr_shorted: bool) -> u8 {
+    (u8::from(unacknowledged) * UNACKNOWLEDGED) | (u8::from(ssr_shorted) * SSR_SHORTED)
+}
+
 impl Default for HistoryRecord {
     fn default() -> Self {
         Self::EMPTY
@@ -735,7 +740,7 @@ impl HistoryRecord {
 
     /// This record with the latch and the short as given.
     pub fn with_carried(mut self, unacknowledged: bool, ssr_shorted: bool) -> Self {
-        self.flags = u8::from(unacknowledged) | u8::from(ssr_shorted) << 1;
+        self.flags = flags(unacknowledged, ssr_shorted);
         self
     }
 
@@ -1044,11 +1049,8 @@ impl Recorder {
 
     /// Records one sample: the temperature the controller saw
     /// ([`crate::step::StepOutput::recorded_c`], as `hter sim` and the processor-in-the-loop
-    /// runner record it), NaN for a sample without a reading (a sensor fault). The time from
-    /// such a sample to the next reading is cut out of the record, as `hter monitor` cuts it
-    /// from a log: it counts neither in nor out of range, adds nothing to the mean kinetic
-    /// temperature or to an alarm's run (a run that meets its condition on both sides goes on),
-    /// and the record's clock does not advance over it. Before, the step's last good reading,
+    /// runner record it), NaN for a sample without a reading (a sensor fault), whose time the
+    /// record leaves out ([`ColdChainMonitor::push`]'s rule). Before, the step's last good reading,
     /// held through the fault, went on the record as a measurement: 12 h of an open sensor on a
     /// load above 8 °C were 12 h in range at the held 4 °C, and no `heat_10h`.
     pub fn push(&mut self, t_ms: u64, temp_c: f32) -> Recorded {
@@ -1094,7 +1096,7 @@ impl Recorder {
         let moved = self.boot.sensor_offset != offset;
         let found = shorted && !self.boot.ssr_shorted();
         if self.boot.unacknowledged() != latched || moved || found {
-            self.boot.flags = u8::from(latched) | u8::from(shorted) << 1;
+            self.boot.flags = flags(latched, shorted);
             self.boot.sensor_offset = offset;
             self.since_save = 0;
             r.save_due = true;

@@ -183,9 +183,8 @@ async fn main(spawner: Spawner) {
     }
     spawner.spawn(sample(b.analog).unwrap());
     // The boot's records go to the control task by reference, from a static: a task's
-    // arguments stay in its state for its whole life, ahead of its own variables, and the
-    // ≈ 0.5 KiB of `Boot` there put the loop's variables past the 4 KiB that a load or store
-    // reaches from one base (`cargo xtask size`: 300 B of flash more for every 24 B of state).
+    // arguments stay in its state for its whole life, and `Boot`, used only before the loop,
+    // held ≈ 0.4 KiB of it (`cargo xtask size`: −376 B of static RAM, −28 B of flash).
     let boot: &'static Boot = cortex_m::singleton!(: Boot = boot).unwrap_or_else(|| unreachable!());
     spawner.spawn(control(boot, b.heartbeat).unwrap());
     #[cfg(not(feature = "buck"))]
@@ -266,7 +265,7 @@ fn new_carrier(boot: &Boot) -> hter::step::Carrier<config::Ctl> {
 async fn control(boot: &'static Boot, mut heartbeat_pin: Output<'static>) {
     let mut carrier = new_carrier(boot);
     let mut recorder = hter::persist::Recorder::new(boot.history, config::HISTORY_SAVE_SAMPLES);
-    // In a block: the boot's history (176 B) is not kept in the task's state through the loop.
+    // In a block: the boot's history (156 B) is not kept in the task's state through the loop.
     let mut annunciator = {
         // The boot counted, the sensor offset and a shorted SSR resumed.
         let history = boot.resume(&mut carrier, &mut recorder);
