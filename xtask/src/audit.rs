@@ -16,10 +16,27 @@
 //! - the stack guard is in the image: `.stack_guard` (memory.x) is one MPU region (a power of two
 //!   of at least 32 bytes, aligned to its size), above the statics (`.bss`, `.uninit` with the
 //!   stop record and the RTT buffer) and below the lowest address the stack may use, so a stack
-//!   that overflows faults in it before it reaches them (`hter::failsafe::arm_stack_guard`).
+//!   that overflows faults in it before it reaches them (`hter::failsafe::arm_stack_guard`);
+//! - the code reader those checks rest on (`crate::code`) reads every function of the image as
+//!   llvm-objdump does: frame, calls, indirect calls;
+//! - every stop path reaches the safe outputs: from the NMI, the HardFault, `DefaultHandler`, the
+//!   panic handler and TIM7's vector (which must be the bound `TIM7` stall check, not the default
+//!   handler), the image's direct calls and jumps lead to `BoardOutputs::force_safe`
+//!   (`crate::code` decodes them); the HardFault path's deepest chain of frames fits the room its
+//!   entry leaves above the guard, and the NMI's with its exception frame fits the guard (the MPU
+//!   is off in both, so a deeper path would run through the guard into the statics);
+//! - the whole stack is bounded: the thread's deepest chain from Reset through the executor and
+//!   its deepest task, plus every handler's with its exception frame as if all nested, is
+//!   within the stack, so the guard is never reached and a frame larger than the guard cannot
+//!   step over it. Indirect calls go to any function whose address the image holds, a task poll
+//!   only from the executor (embassy's run loop polls tasks; their own indirect calls are
+//!   wakers); recursion, a frame of run-time size or a target with no symbol fail it. A build
+//!   that links `core::fmt::write` (the interface's text protocol) is not asked: a `Display`
+//!   that formats again nests through a pointer the image cannot follow; its line is a note.
 //!
 //! It prints one line per check and a final JSON line, and exits non-zero if any check fails.
 
+use std::fmt::Write as _;
 use std::path::Path;
 use std::process::Command;
 
@@ -67,6 +84,16 @@ pub fn audit(features: &str) -> Result<()> {
     findings.push(image_finding(&elf));
     findings.push(region_finding(&root.join("memory.x"))?);
     findings.push(stack_guard_finding(&elf));
+    findings.push(decoder_finding(&elf, &path));
+    findings.extend(stop_path_findings(&elf)?);
+    // A build that formats text with core::fmt (the interface's protocol) calls through each
+    // formatting argument's pointer, and a `Display` that formats again nests: the image
+    // alone cannot bound that recursion, so the bound is not asked of it (a note, not a pass).
+    let formats = elf.symbol_containing(&["core", "fmt", "5write"]).is_some();
+    let stack_note = if formats { Some(stack_bound_finding(&elf)) } else { None };
+    if !formats {
+        findings.push(stack_bound_finding(&elf));
+    }
     if features.split([',', ' ']).any(|f| f == "interface" || f == "serial") {
         findings.push(usart2_finding(&elf)?);
     }
@@ -76,6 +103,9 @@ pub fn audit(features: &str) -> Result<()> {
     println!("audit of {}", path.display());
     for f in &findings {
         println!("  {:<22} {:<4} {}", f.key, if f.ok { "ok" } else { "FAIL" }, f.line);
+    }
+    if let Some(note) = stack_note {
+        println!("  {:<22} note {} (not checked: this image formats text with core::fmt)", note.key, note.line);
     }
     let json: Vec<String> = findings.iter().map(|f| format!("\"{}\": {}", f.key, f.ok)).collect();
     println!("{{\"audit\": {{{}}}}}", json.join(", "));
@@ -186,6 +216,16 @@ impl<'a> Elf<'a> {
             .iter()
             .find(|s| s.ty == SHT_PROGBITS && s.addr != 0 && addr >= s.addr && addr + len <= s.addr + s.size)?;
         get(self.bytes, s.offset + (addr - s.addr), len).ok()
+    }
+
+    /// The section headers.
+    pub fn sections(&self) -> &[Section] {
+        &self.sections
+    }
+
+    /// Every named symbol: (name, value, size).
+    pub fn symbols(&self) -> &[(String, u64, u64)] {
+        &self.symbols
     }
 
     pub fn symbol(&self, name: &str) -> Option<u64> {
@@ -337,6 +377,343 @@ pub fn handler_findings(elf: &Elf) -> Result<Vec<Finding>> {
     };
     out.push(Finding { key: "default_handler", ok, line });
     Ok(out)
+}
+
+/// The exception frame the core stacks with the FPU's state (26 words; ARMv7-M ARM B1.5.7).
+pub const EXCEPTION_FRAME: u64 = 104;
+
+/// TIM7's entry in the STM32L476's vector table: the control-stall check (RM0351 table 58;
+/// stm32-metapac's `Interrupt::TIM7 = 55`).
+pub const TIM7_VECTOR: usize = 16 + 55;
+
+/// A symbol's name for a finding's line: the last two path components of a legacy-mangled
+/// Rust name without its hash (`failsafe::halt`), else the name as it is.
+pub fn short_name(name: &str) -> String {
+    // A v0-mangled name (`_RNv…17rust_begin_unwind`): its last identifier.
+    if name.starts_with("_R") {
+        let b = name.as_bytes();
+        for i in 1..b.len() {
+            if b[i].is_ascii_digit() && !b[i - 1].is_ascii_digit() {
+                let digits = b[i..].iter().take_while(|c| c.is_ascii_digit()).count();
+                if name[i..i + digits].parse::<usize>().ok() == Some(b.len() - i - digits) {
+                    return name[i + digits..].to_owned();
+                }
+            }
+        }
+        return name.to_owned();
+    }
+    let Some(mut rest) = name.strip_prefix("_ZN") else { return name.to_owned() };
+    let mut parts = Vec::new();
+    while let Some(digits) = rest.find(|c: char| !c.is_ascii_digit()).filter(|&d| d > 0) {
+        let Ok(n) = rest[..digits].parse::<usize>() else { break };
+        let Some(part) = rest.get(digits..digits + n) else { break };
+        parts.push(part);
+        rest = &rest[digits + n..];
+    }
+    if parts.last().is_some_and(|p| p.len() == 17 && p.starts_with('h')) {
+        parts.pop();
+    }
+    let keep = parts.len().saturating_sub(2);
+    parts[keep..]
+        .join("::")
+        .trim_start_matches('_')
+        .replace("$LT$", "<")
+        .replace("$GT$", ">")
+        .replace("$u20$", " ")
+        .replace("..", "::")
+}
+
+/// The name of the function holding `addr` (Thumb bit ignored), shortened, or the address.
+fn name_at(elf: &Elf, addr: u64) -> String {
+    let a = addr & !1;
+    elf.symbols()
+        .iter()
+        .find(|(n, v, s)| (*v & !1..(*v & !1) + *s).contains(&a) && !n.starts_with('$') && crate::code::in_code(elf, a))
+        .map(|(n, _, _)| short_name(n))
+        .unwrap_or_else(|| format!("{:#010x}", addr & !1))
+}
+
+fn chain(elf: &Elf, addrs: &[u64]) -> String {
+    addrs.iter().map(|&a| name_at(elf, a)).collect::<Vec<_>>().join(" → ")
+}
+
+/// The room the HardFault entry (`hter::hard_fault_entry!`) leaves above the guard before it
+/// moves the stack to its top: the literal `__stack_guard_end + room` it compares the stack
+/// pointer with, read from its literal pool.
+pub fn hard_fault_room(elf: &Elf, entry: u64) -> Option<u64> {
+    let guard_end = elf.symbol("__stack_guard_end")?;
+    let top = elf.symbol("_stack_start")?;
+    let b = crate::code::body(elf, entry)?;
+    let code = elf.read(b.start, b.size)?;
+    let skip = ((4 - b.start % 4) % 4) as usize;
+    code.get(skip..)?
+        .chunks_exact(4)
+        .map(|w| u64::from(u32::from_le_bytes([w[0], w[1], w[2], w[3]])))
+        .find(|&w| w > guard_end && w < top && w - guard_end <= 0x1_0000)
+        .map(|w| w - guard_end)
+}
+
+/// The stop paths, followed through the image's direct calls and jumps: from the NMI, the
+/// HardFault, the default handler (every interrupt nobody handles), the panic handler and the
+/// control-stall check (TIM7's vector, which must be the bound `TIM7` handler), each reaches
+/// the routine that drives the outputs safe (`BoardOutputs::force_safe`). A path that lost
+/// that call, or a stall check left unbound, would stop the board with its outputs as they
+/// were. The HardFault path's stack, summed over its deepest chain of calls, must fit the room
+/// its entry leaves above the guard: the MPU is off in HardFault, so a deeper path would run
+/// through the guard into the statics it may still need to record the stop. The NMI's, with
+/// its exception frame, must fit the guard: the MPU is off in it too, and it may come with the
+/// stack pointer anywhere down to the guard's top.
+pub fn stop_path_findings(elf: &Elf) -> Result<Vec<Finding>> {
+    let v = elf.vectors()?;
+    let goal = elf.symbol_containing(&["BoardOutputs", "force_safe"]).map(|(a, _)| a & !1);
+    let default = elf.symbol("DefaultHandler");
+    let panic = elf.symbol_containing(&["rust_begin_unwind"]).map(|(a, _)| a);
+    let tim7 = v.get(TIM7_VECTOR).copied().filter(|&e| e != 0);
+    let paths: [(&'static str, &str, Option<u64>); 5] = [
+        ("stop_path_nmi", "NMI", v.get(2).copied()),
+        ("stop_path_hard_fault", "HardFault", v.get(3).copied()),
+        ("stop_path_default", "DefaultHandler", default),
+        ("stop_path_panic", "the panic handler", panic),
+        ("stop_path_stall", "TIM7's stall check", tim7),
+    ];
+    let mut out = Vec::new();
+    for (key, what, entry) in paths {
+        let Some(goal) = goal else {
+            out.push(Finding { key, ok: false, line: "no BoardOutputs::force_safe symbol in the image".into() });
+            continue;
+        };
+        let Some(entry) = entry else {
+            out.push(Finding { key, ok: false, line: format!("{what}: no entry in the image") });
+            continue;
+        };
+        if key == "stop_path_stall" {
+            let bound = elf.symbol("TIM7");
+            if bound.map(|a| a & !1) != Some(entry & !1) || default.map(|a| a & !1) == Some(entry & !1) {
+                out.push(Finding {
+                    key,
+                    ok: false,
+                    line: format!(
+                        "vector {TIM7_VECTOR} (TIM7) at {:#010x} is not the bound TIM7 handler: a stalled control loop is never stopped",
+                        entry & !1
+                    ),
+                });
+                continue;
+            }
+        }
+        let w = crate::code::walk(elf, entry, goal, &crate::code::no_indirect);
+        let depth = match (w.depth, w.unbounded_at) {
+            (Some(d), _) => format!("{d} B of stack at most"),
+            (None, Some(at)) => format!("stack not bounded from the code (at {at:#010x}, in {})", name_at(elf, at)),
+            (None, None) => "stack not bounded from the code".into(),
+        };
+        if !w.reaches_goal {
+            out.push(Finding {
+                key,
+                ok: false,
+                line: format!(
+                    "{what} at {:#010x} does NOT reach force_safe through direct calls: a stop there leaves the outputs as they are; {depth}",
+                    entry & !1
+                ),
+            });
+            continue;
+        }
+        let mut ok = true;
+        let mut line = format!("{what}: {}; {depth}", chain(elf, &w.to_goal));
+        if key == "stop_path_nmi" {
+            // The NMI runs with the MPU off (HFNMIENA clear), on whatever stack it came in on:
+            // from a stack pointer at the guard's top, its frames and its own exception frame
+            // must end inside the guard, not in the statics below it.
+            let guard = elf.symbol("__stack_guard_end").zip(elf.symbol("__stack_guard_start")).map(|(e, s)| e - s);
+            match (guard, w.depth) {
+                (Some(g), Some(d)) if d + EXCEPTION_FRAME <= g => {
+                    let _ = write!(line, "; with its {EXCEPTION_FRAME} B exception frame within the {g} B guard");
+                }
+                (Some(g), _) => {
+                    ok = false;
+                    let _ = write!(
+                        line,
+                        ": with its {EXCEPTION_FRAME} B exception frame NOT within the {g} B guard (deepest: {})",
+                        chain(elf, &w.deepest)
+                    );
+                }
+                (None, _) => {
+                    ok = false;
+                    line.push_str(": no __stack_guard_start/__stack_guard_end in the image");
+                }
+            }
+        }
+        if key == "stop_path_hard_fault" {
+            match (hard_fault_room(elf, entry), w.depth) {
+                (Some(room), Some(d)) if d <= room => {
+                    let _ = write!(line, ", within the {room} B the entry leaves above the guard");
+                }
+                (Some(room), _) => {
+                    ok = false;
+                    let _ = write!(
+                        line,
+                        ": NOT within the {room} B the entry leaves above the guard (deepest: {})",
+                        chain(elf, &w.deepest)
+                    );
+                }
+                (None, _) => {
+                    ok = false;
+                    line.push_str(
+                        ": no `__stack_guard_end + room` literal in the HardFault entry (hter::hard_fault_entry!)",
+                    );
+                }
+            }
+        }
+        out.push(Finding { key, ok, line });
+    }
+    Ok(out)
+}
+
+/// llvm-objdump from the toolchain's `llvm-tools` component.
+fn llvm_objdump() -> Option<std::path::PathBuf> {
+    let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
+    let out = Command::new(rustc).args(["--print", "sysroot"]).output().ok()?;
+    let sysroot = std::path::PathBuf::from(String::from_utf8(out.stdout).ok()?.trim());
+    std::fs::read_dir(sysroot.join("lib").join("rustlib"))
+        .ok()?
+        .filter_map(|e| e.ok())
+        .map(|e| e.path().join("bin").join("llvm-objdump"))
+        .find(|p| p.is_file())
+}
+
+/// The code reader the stop-path and stack checks rest on (`crate::code`) against an
+/// independent one: for every function of the image, the frame, the targets outside it and
+/// whether it calls through a register, as decoded from the bytes and as read from
+/// llvm-objdump's disassembly (`crate::code::listed`), must agree. A prologue or branch form
+/// the decoder does not know shows here, not as a wrong bound.
+pub fn decoder_finding(elf: &Elf, path: &Path) -> Finding {
+    let key = "code_decoder";
+    let Some(objdump) = llvm_objdump() else {
+        return Finding {
+            key,
+            ok: false,
+            line: "no llvm-objdump in the toolchain (rustup component add llvm-tools)".into(),
+        };
+    };
+    let text = match Command::new(&objdump).args(["-d", "--no-show-raw-insn"]).arg(path).output() {
+        Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).into_owned(),
+        Ok(o) => {
+            return Finding {
+                key,
+                ok: false,
+                line: format!("llvm-objdump failed: {}", String::from_utf8_lossy(&o.stderr).trim()),
+            }
+        }
+        Err(e) => return Finding { key, ok: false, line: format!("running {}: {e}", objdump.display()) },
+    };
+    let funcs: Vec<(u64, u64)> = crate::code::functions(elf)
+        .into_iter()
+        .filter_map(|f| crate::code::body(elf, f).map(|b| (f, b.size)))
+        .collect();
+    let listed = crate::code::listed(&text, &funcs);
+    let mut differ = Vec::new();
+    for &(f, _) in &funcs {
+        let Some(b) = crate::code::body(elf, f) else { continue };
+        let mut mine = b.out.clone();
+        mine.sort();
+        let theirs = listed.get(&f).map(|l| {
+            let mut out = l.out.clone();
+            out.sort();
+            (l.frame, out, l.indirect, l.dynamic_frame)
+        });
+        if theirs != Some((b.frame, mine, b.indirect.is_some(), b.dynamic_frame.is_some())) {
+            differ.push(f);
+        }
+    }
+    match differ.first() {
+        None => Finding {
+            key,
+            ok: true,
+            line: format!("frames, calls and indirect calls agree with llvm-objdump's for all {} functions", funcs.len()),
+        },
+        Some(&f) => Finding {
+            key,
+            ok: false,
+            line: format!(
+                "{} of {} functions read differently from llvm-objdump, first {} at {f:#010x}: the decoder misses a form the compiler emits",
+                differ.len(),
+                funcs.len(),
+                name_at(elf, f)
+            ),
+        },
+    }
+}
+
+/// Whether a function is one of embassy-executor's task polls (`TaskStorage<F>::poll`): only
+/// the executor calls them, through the task header's pointer.
+fn is_task_poll(name: &str) -> bool {
+    name.contains("TaskStorage") && name.contains("poll")
+}
+
+/// Whether a function is embassy-executor's own (its run loop polls the tasks).
+fn is_executor(name: &str) -> bool {
+    name.contains("embassy_executor") && !is_task_poll(name)
+}
+
+/// The whole program's stack, bounded from the image ([`crate::code::stack_bound`]): the
+/// thread's deepest chain from Reset through the executor and the deepest task, and every
+/// handler's with its exception frame, each once. Within the stack (`_stack_end` to
+/// `_stack_start`), the stack cannot reach the guard whatever the size of one frame; a frame
+/// larger than the guard could otherwise step over it. Recursion, an indirect call the image
+/// gives no targets for, or a frame of run-time size leave it unbounded, which fails.
+pub fn stack_bound_finding(elf: &Elf) -> Finding {
+    let key = "stack_bound";
+    let (Some(end), Some(start)) = (elf.symbol("_stack_end"), elf.symbol("_stack_start")) else {
+        return Finding { key, ok: false, line: "no _stack_end/_stack_start in the image".into() };
+    };
+    let size = start.saturating_sub(end);
+    let b = match crate::code::stack_bound(elf, EXCEPTION_FRAME, &is_task_poll, &is_executor) {
+        Ok(b) => b,
+        Err(e) => return Finding { key, ok: false, line: format!("{e:#}") },
+    };
+    let largest = crate::code::functions(elf)
+        .into_iter()
+        .filter_map(|f| crate::code::body(elf, f))
+        .max_by_key(|b| b.frame)
+        .map(|b| format!("; the largest frame {} B ({})", b.frame, name_at(elf, b.start)))
+        .unwrap_or_default();
+    match b.total {
+        Some(total) => {
+            let handlers: u64 = b.handlers.iter().filter_map(|(_, w)| w.depth).map(|d| d + EXCEPTION_FRAME).sum();
+            let thread = b.thread.depth.unwrap_or(0);
+            // The thread's deepest chain, by its frames of 256 B and more.
+            let big: Vec<String> = b
+                .thread
+                .deepest
+                .iter()
+                .filter_map(|&f| crate::code::body(elf, f))
+                .filter(|f| f.frame >= 256)
+                .map(|f| format!("{} {} B", name_at(elf, f.start), f.frame))
+                .collect();
+            let ok = total <= size;
+            Finding {
+                key,
+                ok,
+                line: format!(
+                    "at most {total} B of the {size} B stack{}: the thread {thread} B (its deepest chain's large frames: {}), {} handlers {handlers} B with their exception frames{largest}",
+                    if ok { ", so no frame, however large, reaches the guard below it" } else { ": MORE than the stack" },
+                    if big.is_empty() { "none".to_owned() } else { big.join(", ") },
+                    b.handlers.len(),
+                ),
+            }
+        }
+        None => {
+            let lost = std::iter::once(&b.thread)
+                .chain(b.handlers.iter().map(|(_, w)| w))
+                .find_map(|w| w.unbounded_at)
+                .map(|at| format!(" (at {at:#010x}, in {})", name_at(elf, at)))
+                .unwrap_or_default();
+            Finding {
+                key,
+                ok: false,
+                line: format!("the stack is not bounded from the code{lost}: recursion, or an indirect call or a frame the image does not show{largest}"),
+            }
+        }
+    }
 }
 
 /// The settings interface's UART interrupt: USART2's vector entry is the bound handler (the
@@ -570,7 +947,9 @@ mod tests {
         ];
         for (name, ty, addr, off, size, link) in sh {
             let mut s = [0u8; 40];
-            for (i, w) in [name, ty, 0, addr, off, size, link].iter().enumerate() {
+            // .text: SHF_ALLOC | SHF_EXECINSTR.
+            let flags = if name == 15 { 6 } else { 0 };
+            for (i, w) in [name, ty, flags, addr, off, size, link].iter().enumerate() {
                 s[4 * i..4 * i + 4].copy_from_slice(&w.to_le_bytes());
             }
             out.extend_from_slice(&s);
@@ -605,6 +984,288 @@ mod tests {
         let mut v = vec![0x2001_8000, T | 1, nmi | 1, hf | 1];
         v.extend([rest | 1; 12]);
         v
+    }
+
+    /// `bl` (`link`) or `b.w` from `from` to `to`, as two halfwords (T1 / T4).
+    fn branch(from: u32, to: u32, link: bool) -> [u16; 2] {
+        let off = i64::from(to) - i64::from(from) - 4;
+        let imm = (off as u32) >> 1;
+        let s = (off < 0) as u16;
+        let (i1, i2) = (((imm >> 23) & 1) as u16, ((imm >> 22) & 1) as u16);
+        let (j1, j2) = (1 ^ i1 ^ s, 1 ^ i2 ^ s);
+        let h = 0xf000 | (s << 10) | ((imm >> 11) & 0x3ff) as u16;
+        let l = if link { 0xd000 } else { 0x9000 } | (j1 << 13) | (j2 << 11) | (imm & 0x7ff) as u16;
+        [h, l]
+    }
+
+    const STOP_T: u32 = 0x0800_0400;
+
+    /// An image with the five stop paths: force_safe, halt (its frame from `halt_frame`, then
+    /// `bl force_safe`, then `halt_extra`), a HardFault trampoline with its literal, and NMI,
+    /// default, panic and TIM7 handlers that each `bl halt` unless named in `cut`.
+    fn stop_image(halt_frame: &[u16], halt_extra: &[u16], cut: &[&str], tim7_default: bool) -> Vec<u8> {
+        const GUARD_END: u32 = 0x2000_3000;
+        let mut code: Vec<u16> = Vec::new();
+        let mut syms: Vec<(String, u32, u32)> = Vec::new();
+        // Past the vector table, which TIM7's entry makes 288 bytes long.
+        let at = |code: &Vec<u16>| STOP_T + 2 * code.len() as u32;
+        // force_safe: push {r7, lr}; pop {r7, pc}.
+        let fs = at(&code);
+        code.extend([0xb580, 0xbd80]);
+        syms.push(("_ZN80_$LT$firmware..failsafe..BoardOutputs$u20$as$u20$hter..failsafe..SafeOutputs$GT$10force_safe17h0123456789abcdefE".into(), fs | 1, 4));
+        let halt = at(&code);
+        code.extend([0xb580]);
+        code.extend(halt_frame);
+        code.extend(branch(at(&code), fs, true));
+        code.extend(halt_extra);
+        code.push(0xe7fe);
+        syms.push(("_ZN8firmware8failsafe4halt17h0123456789abcdefE".into(), halt | 1, at(&code) - halt));
+        let handler = |name: &str, code: &mut Vec<u16>, syms: &mut Vec<(String, u32, u32)>| {
+            let h = at(code);
+            code.push(0xb580);
+            if cut.contains(&name) {
+                code.push(0xe7fe);
+            } else {
+                code.extend(branch(at(code), halt, true));
+            }
+            syms.push((name.into(), h | 1, at(code) - h));
+            h
+        };
+        let nmi = handler("NonMaskableInt", &mut code, &mut syms);
+        let default = handler("DefaultHandler", &mut code, &mut syms);
+        handler("_RNvCs1234_7___rustc17rust_begin_unwind", &mut code, &mut syms);
+        let tim7 = handler("TIM7", &mut code, &mut syms);
+        // HardFault: b.w halt; nop; then (aligned) the literal, marked as data.
+        if code.len() % 2 == 1 {
+            code.push(0xbf00);
+        }
+        let hf = at(&code);
+        if cut.contains(&"HardFault") {
+            code.extend([0xe7fe, 0xbf00]);
+        } else {
+            code.extend(branch(hf, halt, false));
+        }
+        let lit = at(&code);
+        let word = GUARD_END + 1024;
+        code.extend([word as u16, (word >> 16) as u16]);
+        syms.push(("HardFault".into(), hf | 1, 8));
+        syms.push(("$d".into(), lit, 0));
+        syms.push(("__stack_guard_start".into(), GUARD_END - 1024, 0));
+        syms.push(("__stack_guard_end".into(), GUARD_END, 0));
+        syms.push(("_stack_start".into(), 0x2001_8000, 0));
+        let mut v = table(nmi, hf, default);
+        v.resize(TIM7_VECTOR + 1, default | 1);
+        v[TIM7_VECTOR] = if tim7_default { default } else { tim7 } | 1;
+        let sized: Vec<(&str, u32, u32)> = syms.iter().map(|(n, a, s)| (n.as_str(), *a, *s)).collect();
+        elf_sized(&v, STOP_T, &halfwords(&code), &sized)
+    }
+
+    fn stop_findings(bytes: Vec<u8>) -> Vec<Finding> {
+        stop_path_findings(&Elf::parse(&bytes).unwrap()).unwrap()
+    }
+
+    #[test]
+    fn every_stop_path_must_reach_force_safe() {
+        // halt: sub sp, #0x40: 8 + 64 + 8 (force_safe) = 80 B on the deepest chain.
+        let all = stop_findings(stop_image(&[0xb090], &[], &[], false));
+        let keys: Vec<_> = all.iter().map(|f| f.key).collect();
+        assert_eq!(
+            keys,
+            ["stop_path_nmi", "stop_path_hard_fault", "stop_path_default", "stop_path_panic", "stop_path_stall"]
+        );
+        for f in &all {
+            assert!(f.ok, "{}: {}", f.key, f.line);
+            assert!(f.line.contains("failsafe::halt → ") && f.line.contains("force_safe"), "{}", f.line);
+        }
+        let hf = &all[1];
+        assert!(hf.line.contains("80 B of stack at most") && hf.line.contains("within the 1024 B"), "{}", hf.line);
+        assert!(
+            all[0].line.contains("88 B") && all[0].line.contains("within the 1024 B guard"),
+            "the NMI handler's own push counts: {}",
+            all[0].line
+        );
+        // Each path cut on its own fails on its own.
+        for (name, key) in [
+            ("NonMaskableInt", "stop_path_nmi"),
+            ("HardFault", "stop_path_hard_fault"),
+            ("DefaultHandler", "stop_path_default"),
+            ("_RNvCs1234_7___rustc17rust_begin_unwind", "stop_path_panic"),
+            ("TIM7", "stop_path_stall"),
+        ] {
+            let f = stop_findings(stop_image(&[0xb090], &[], &[name], false));
+            for g in &f {
+                assert_eq!(g.ok, g.key != key, "{name} cut: {}: {}", g.key, g.line);
+            }
+            let bad = f.iter().find(|g| g.key == key).unwrap();
+            assert!(bad.line.contains("does NOT reach force_safe"), "{}", bad.line);
+        }
+    }
+
+    #[test]
+    fn the_stall_check_must_be_bound_to_tim7() {
+        let f = stop_findings(stop_image(&[0xb090], &[], &[], true));
+        let stall = f.iter().find(|g| g.key == "stop_path_stall").unwrap();
+        assert!(!stall.ok && stall.line.contains("not the bound TIM7 handler"), "{}", stall.line);
+        // DefaultHandler reaches force_safe too: it is the binding that is wrong.
+        assert!(f.iter().filter(|g| g.key != "stop_path_stall").all(|g| g.ok));
+    }
+
+    #[test]
+    fn the_hard_fault_path_must_fit_the_room_its_entry_leaves() {
+        // subw sp, sp, #0x400: 8 + 1024 + 8 > 1024.
+        let deep = stop_findings(stop_image(&[0xf2ad, 0x4d00], &[], &[], false));
+        let hf = deep.iter().find(|g| g.key == "stop_path_hard_fault").unwrap();
+        assert!(!hf.ok && hf.line.contains("1040 B") && hf.line.contains("NOT within the 1024 B"), "{}", hf.line);
+        // Nor the NMI's the guard; the other paths run on the stack they were on, and reaching
+        // force_safe is their check.
+        for g in &deep {
+            assert_eq!(g.ok, !matches!(g.key, "stop_path_hard_fault" | "stop_path_nmi"), "{}: {}", g.key, g.line);
+        }
+        // sub sp, #0x3f0 (T1's largest is 508: two of them): 8 + 1008 + 8 = 1024 fits.
+        let edge = stop_findings(stop_image(&[0xb0ff, 0xb0fd], &[], &[], false));
+        let hf = edge.iter().find(|g| g.key == "stop_path_hard_fault").unwrap();
+        assert!(!edge[0].ok, "the NMI's 1032 B do not fit: {}", edge[0].line);
+        assert!(hf.ok && hf.line.contains("1024 B of stack at most"), "{}", hf.line);
+        // sub sp, #0x1f0, twice: 8 + 992 + 8 = 1008 B fits the HardFault's room, but the NMI's
+        // 1016 B and its 104 B exception frame do not fit the 1 KiB guard.
+        let nmi = stop_findings(stop_image(&[0xb0fc, 0xb0fc], &[], &[], false));
+        for g in &nmi {
+            assert_eq!(g.ok, g.key != "stop_path_nmi", "{}: {}", g.key, g.line);
+        }
+        let bad = nmi.iter().find(|g| g.key == "stop_path_nmi").unwrap();
+        assert!(bad.line.contains("1016 B") && bad.line.contains("NOT within the 1024 B guard"), "{}", bad.line);
+        // An indirect call on the path (blx r3 after force_safe): the stack cannot be bounded.
+        let blind = stop_findings(stop_image(&[0xb090], &[0x4798], &[], false));
+        let hf = blind.iter().find(|g| g.key == "stop_path_hard_fault").unwrap();
+        assert!(!hf.ok && hf.line.contains("not bounded"), "{}", hf.line);
+    }
+
+    /// One function of [`program`]: its name, the instructions of its frame after
+    /// `push {r7, lr}`, the functions it calls (`bl`), and whether it calls through r3.
+    type Func<'a> = (&'a str, &'a [u16], &'a [&'a str], bool);
+
+    /// An image of `funcs` laid out in order (each `push {r7, lr}`, its frame, its calls, its
+    /// `blx r3`, `pop {r7, pc}`), then a literal pool holding the addresses of `pointers` (as
+    /// `$d`), with Reset at `funcs[0]` and the handlers named in `handlers` in the vector table.
+    fn program(funcs: &[Func], pointers: &[&str], handlers: &[&str], stack: u32) -> Vec<u8> {
+        // Laid out twice: the first pass finds where each function starts.
+        let mut at = std::collections::HashMap::new();
+        let mut code: Vec<u16> = Vec::new();
+        let mut syms: Vec<(String, u32, u32)> = Vec::new();
+        for pass in 0..2 {
+            code.clear();
+            syms.clear();
+            for f in funcs {
+                let start = STOP_T + 2 * code.len() as u32;
+                if pass == 0 {
+                    at.insert(f.0, start);
+                }
+                code.push(0xb580);
+                code.extend(f.1);
+                for callee in f.2 {
+                    let to = at.get(callee).copied().unwrap_or(STOP_T);
+                    code.extend(branch(STOP_T + 2 * code.len() as u32, to, true));
+                }
+                if f.3 {
+                    code.push(0x4798);
+                }
+                code.extend([0xbd80, 0xbf00]);
+                if code.len() % 2 == 1 {
+                    code.push(0xbf00);
+                }
+                syms.push((f.0.into(), start | 1, STOP_T + 2 * code.len() as u32 - start));
+            }
+        }
+        syms.push(("$d".into(), STOP_T + 2 * code.len() as u32, 0));
+        for p in pointers {
+            let w = at[p] | 1;
+            code.extend([w as u16, (w >> 16) as u16]);
+        }
+        // A last function after the pool ends its data.
+        let tail = STOP_T + 2 * code.len() as u32;
+        code.extend([0xe7fe, 0xbf00]);
+        syms.push(("$t".into(), tail, 0));
+        syms.push(("tail".into(), tail | 1, 4));
+        syms.push(("_stack_end".into(), 0x2000_3000, 0));
+        syms.push(("_stack_start".into(), 0x2000_3000 + stack, 0));
+        let mut v = vec![0x2000_3000 + stack, at[funcs[0].0] | 1];
+        v.extend(handlers.iter().map(|h| at[h] | 1));
+        let sized: Vec<(&str, u32, u32)> = syms.iter().map(|(n, a, s)| (n.as_str(), *a, *s)).collect();
+        elf_sized(&v, STOP_T, &halfwords(&code), &sized)
+    }
+
+    fn bound(bytes: Vec<u8>) -> Finding {
+        stack_bound_finding(&Elf::parse(&bytes).unwrap())
+    }
+
+    const EXECUTOR: &str = "_ZN16embassy_executor8platform6thread8Executor3run17h0123456789abcdefE";
+    const TASK_A: &str = "_ZN16embassy_executor3raw20TaskStorage$LT$F$GT$4poll17h0123456789abcde0E";
+    const TASK_B: &str = "_ZN16embassy_executor3raw20TaskStorage$LT$F$GT$4poll17h0123456789abcde1E";
+    const WAKE: &str = "_ZN16embassy_executor3raw5waker4wake17h0123456789abcdefE";
+
+    #[test]
+    fn the_stack_is_bounded_through_the_executor_and_its_tasks() {
+        // Reset (8) → main (8 + 16) → the executor (8), which polls a task through r3: task A
+        // (8 + 1024, calls build: 8 + 2032) or task B (8 + 64); each task wakes through r3
+        // (wake: 8). The deepest: 8 + 24 + 8 + 1032 + 2040 = 3112; or through wake: task A's
+        // 1032 + 8 < its call to build. The handler: 8 + 64 + its 104 B exception frame.
+        let funcs: [Func; 8] = [
+            ("Reset", &[], &["main"], false),
+            ("main", &[0xb084], &[EXECUTOR], false),
+            (EXECUTOR, &[], &[], true),
+            (TASK_A, &[0xf5ad, 0x6d80], &["build"], true),
+            (TASK_B, &[0xb090], &[], true),
+            ("build", &[0xf2ad, 0x7df0], &[], false),
+            (WAKE, &[], &[], false),
+            ("TIM7", &[0xb090], &[], false),
+        ];
+        let ok = bound(program(&funcs, &[TASK_A, TASK_B, WAKE], &["TIM7"], 0x1_0000));
+        assert!(ok.ok, "{}", ok.line);
+        assert!(ok.line.starts_with("at most 3288 B of the 65536 B stack"), "{}", ok.line);
+        assert!(ok.line.contains("the thread 3112 B") && ok.line.contains("1 handlers 176 B"), "{}", ok.line);
+        assert!(
+            ok.line.contains("build 2040 B") && ok.line.contains("the largest frame 2040 B (build)"),
+            "{}",
+            ok.line
+        );
+        // A stack smaller than the bound fails.
+        let small = bound(program(&funcs, &[TASK_A, TASK_B, WAKE], &["TIM7"], 0x800));
+        assert!(!small.ok && small.line.contains("MORE than the stack"), "{}", small.line);
+        // A task's indirect call is a waker's, never a poll: had it been taken for any address
+        // the image holds, the task would call itself. Through a function the executor does not
+        // own, the same call is resolved the same way: no false cycle.
+        let mut wakes = funcs;
+        wakes[6] = (WAKE, &[], &[], true);
+        let cyc = bound(program(&wakes, &[TASK_A, TASK_B, WAKE], &["TIM7"], 0x1_0000));
+        assert!(
+            !cyc.ok && cyc.line.contains("not bounded"),
+            "a waker that calls through a pointer calls itself: {}",
+            cyc.line
+        );
+    }
+
+    #[test]
+    fn recursion_an_unknown_call_or_a_run_time_frame_leave_the_stack_unbounded() {
+        let rec: [Func; 3] =
+            [("Reset", &[], &["main"], false), ("main", &[], &["walk"], false), ("walk", &[0xb082], &["walk"], false)];
+        let f = bound(program(&rec, &[], &[], 0x1_0000));
+        assert!(!f.ok && f.line.contains("not bounded") && f.line.contains("walk"), "{}", f.line);
+        // An indirect call outside the executor with no address in the image: it can only go
+        // to a function whose address the image holds, and it holds none: bounded by main.
+        let none: [Func; 2] = [("Reset", &[], &["main"], false), ("main", &[0xb082], &[], true)];
+        let f = bound(program(&none, &[], &[], 0x1_0000));
+        assert!(f.ok && f.line.contains("at most 24 B"), "{}", f.line);
+        // sub sp, sp, r0: a frame of run-time size.
+        let dynamic: [Func; 2] = [("Reset", &[], &["main"], false), ("main", &[0xebad, 0x0d00], &[], false)];
+        let f = bound(program(&dynamic, &[], &[], 0x1_0000));
+        assert!(!f.ok && f.line.contains("not bounded"), "{}", f.line);
+    }
+
+    #[test]
+    fn names_are_shortened_for_the_lines() {
+        assert_eq!(short_name("_ZN8firmware8failsafe4halt17h3e694ca0ef75b51eE"), "failsafe::halt");
+        assert_eq!(short_name("_RNvCsfLfy6EI15iL_7___rustc17rust_begin_unwind"), "rust_begin_unwind");
+        assert_eq!(short_name("TIM7"), "TIM7");
     }
 
     #[test]

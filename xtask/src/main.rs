@@ -37,6 +37,7 @@
 mod proto;
 
 mod audit;
+mod code;
 mod failsafe;
 
 use std::io::Read;
