@@ -288,6 +288,12 @@ impl Input {
         }
     }
 
+    /// Why there was no reading, by [`Report::fault_samples`]: the probe (the file's rows with
+    /// no reading), the record (holes after a `log_entries_lost` event), or both.
+    pub fn no_reading_cause(&self, fault_samples: u32) -> &'static str {
+        no_reading_cause(fault_samples, self.holes)
+    }
+
     /// What had no reading, by [`Report::fault_samples`]: the file's rows with no reading and
     /// the holes after a `log_entries_lost` event, each said as what it is.
     pub fn no_reading_text(&self, fault_samples: u32) -> String {
@@ -300,6 +306,16 @@ impl Input {
             parts.push(format!("{} hole{} of lost log entries", self.holes, if self.holes == 1 { "" } else { "s" }));
         }
         parts.join(" and ")
+    }
+}
+
+/// Why `fault_samples` had no reading when `holes` of them are holes after a
+/// `log_entries_lost` event: the probe, the record, or both.
+pub fn no_reading_cause(fault_samples: u32, holes: usize) -> &'static str {
+    match ((fault_samples as usize) > holes, holes > 0) {
+        (true, true) => "sensor fault; lost log entries",
+        (false, true) => "lost log entries",
+        _ => "sensor fault",
     }
 }
 
@@ -501,7 +517,8 @@ pub fn run(args: &MonitorArgs) -> Result<()> {
     println!("  time within 2–8 °C        {:7.2} h", hours(r.time_in_range_s));
     if r.fault_samples > 0 {
         println!(
-            "  no reading (sensor fault) {:7.2} h  ({}; counted neither in nor out of range)",
+            "  {:<25} {:7.2} h  ({}; counted neither in nor out of range)",
+            format!("no reading ({})", input.no_reading_cause(r.fault_samples)),
             hours(r.time_no_reading_s),
             input.no_reading_text(r.fault_samples)
         );
@@ -628,11 +645,16 @@ mod tests {
         (25_500..=30_000).step_by(300).for_each(|t| csv.push_str(&row(t)));
         let p = std::env::temp_dir().join(format!("hter-monitor-{}-hole.csv", std::process::id()));
         std::fs::write(&p, csv).unwrap();
-        let input = read_input(&p);
+        let input_again = read_input(&p).unwrap();
         std::fs::remove_file(&p).unwrap();
-        let r = record(&input.unwrap()).unwrap();
+        let r = record(&input_again).unwrap();
         assert_eq!((r.time_no_reading_s, r.time_in_range_s, r.fault_samples), (21_600.0, 8_400.0, 1));
-        assert_eq!(crate::report_cmd::verdict(&r).0, "unknown");
+        let input = input_again;
+        // The record lost them, not the probe: said as such.
+        assert_eq!(input.no_reading_cause(r.fault_samples), "lost log entries");
+        let (class, line) = crate::report_cmd::verdict(&r, input.holes);
+        assert_eq!(class, "unknown");
+        assert!(line.contains("part of the record was lost") && !line.contains("probe"), "{line}");
     }
 
     fn read_history(name: &str, csv: &str) -> Input {

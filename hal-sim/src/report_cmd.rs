@@ -198,8 +198,9 @@ pub fn days(t: &[f64], temp: &[Option<f64>], extremes: &[Option<(f64, f64)>], al
 /// The one-line verdict: freeze risk (a freeze alarm, the file's or the carrier's, or a reading
 /// at or below −0.5 °C, an interval's lowest included), excursions (any alarm, any time outside
 /// 2–8 °C, any interval whose extremes left it, or MKT outside 2–8 °C), not fully recorded
-/// (a sensor fault: no reading for a while, so "in range" cannot be claimed), or in range.
-pub fn verdict(r: &monitor_cmd::Report) -> (&'static str, &'static str) {
+/// (no reading for a while, so "in range" cannot be claimed: the probe's fault, or entries the
+/// record lost, the input's `holes`, each said as what it is), or in range.
+pub fn verdict(r: &monitor_cmd::Report, holes: usize) -> (&'static str, &'static str) {
     if r.alarms.iter().chain(&r.carrier_alarms).any(|a| a.kind == "freeze_60min") || r.min_c <= -0.5 {
         ("freeze", "FREEZE RISK — the vaccines may have frozen: check them (shake test) before use")
     } else if !r.alarms.is_empty()
@@ -211,11 +212,21 @@ pub fn verdict(r: &monitor_cmd::Report) -> (&'static str, &'static str) {
     {
         ("excursion", "EXCURSIONS — the load left 2–8 °C: see the alarms and the days below")
     } else if r.fault_samples > 0 {
-        (
-            "unknown",
-            "NOT FULLY RECORDED — the probe gave no reading for part of the period (below): the record \
-             cannot show the load stayed within 2–8 °C then",
-        )
+        let line = match monitor_cmd::no_reading_cause(r.fault_samples, holes) {
+            "lost log entries" => {
+                "NOT FULLY RECORDED — part of the record was lost (log entries the board could not store, below): \
+                 the record cannot show the load stayed within 2–8 °C then"
+            }
+            "sensor fault" => {
+                "NOT FULLY RECORDED — the probe gave no reading for part of the period (below): the record \
+                 cannot show the load stayed within 2–8 °C then"
+            }
+            _ => {
+                "NOT FULLY RECORDED — the probe gave no reading for part of the period and part of the record \
+                 was lost (below): the record cannot show the load stayed within 2–8 °C then"
+            }
+        };
+        ("unknown", line)
     } else {
         ("ok", "IN RANGE — the load stayed within 2–8 °C for the whole period")
     }
@@ -360,7 +371,7 @@ pub fn html(path: &Path) -> Result<String> {
     let mut spans = alarm_spans(t, temp, r.alarms.clone());
     spans.extend(carrier_spans(&r.carrier_alarms));
     let days = days(t, temp, &input.extremes, &spans);
-    let (class, line) = verdict(&r);
+    let (class, line) = verdict(&r, input.holes);
 
     let mut h = String::new();
     let w = &mut h;
@@ -439,7 +450,7 @@ pub fn html(path: &Path) -> Result<String> {
     if r.fault_samples > 0 {
         row(
             w,
-            "No reading (sensor fault)",
+            &format!("No reading ({})", input.no_reading_cause(r.fault_samples)),
             &format!(
                 "{} ({}; counted neither in nor out of range)",
                 dur(r.time_no_reading_s),
@@ -734,16 +745,16 @@ mod tests {
         assert!((d[0].mean_c.unwrap() - (20.0 * 4.0 + 4.0 * 10.0) / 24.0).abs() < 1e-12);
         assert!((d[1].mean_c.unwrap() - (7.0 * 10.0 + 16.0 * 4.0) / 23.0).abs() < 1e-12);
         assert_eq!((d[0].alarms.clone(), d[1].alarms.clone()), (vec!["heat_10h"], vec!["heat_10h"]));
-        assert_eq!(verdict(&r).0, "excursion");
+        assert_eq!(verdict(&r, 0).0, "excursion");
     }
 
     #[test]
     fn a_freeze_reading_is_a_freeze_risk_and_a_clean_log_is_in_range() {
         let t = [0.0, 60.0, 120.0];
         let r = monitor_cmd::report(&t, &[Some(4.0), Some(-0.6), Some(4.0)]).unwrap();
-        assert_eq!(verdict(&r).0, "freeze");
+        assert_eq!(verdict(&r, 0).0, "freeze");
         let r = monitor_cmd::report(&t, &[Some(4.0), Some(5.0), Some(4.0)]).unwrap();
-        assert_eq!(verdict(&r).0, "ok");
+        assert_eq!(verdict(&r, 0).0, "ok");
     }
 
     /// Every reset and fault the library can record reads in plain words in the header.

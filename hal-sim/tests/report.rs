@@ -328,6 +328,7 @@ fn a_historys_rows_are_counted_as_intervals() {
     assert!(text.contains("(25 intervals; counted neither in nor out of range)"), "{text}");
     assert!(page.contains("(288 intervals of up to 5 min, t = 0 … 86400 s)"), "the period");
     assert!(page.contains("(25 intervals; counted neither in nor out of range)"), "the rows with no reading");
+    assert!(text.contains("no reading (sensor fault)") && page.contains("No reading (sensor fault)"), "{text}");
     assert!(!text.contains("samples") && !page.contains(" samples"), "{text}");
 
     // The rows from 36 300 to 43 200 s lost before they reached flash: 264 rows and a hole.
@@ -339,6 +340,19 @@ fn a_historys_rows_are_counted_as_intervals() {
     assert!(text.contains("(1 hole of lost log entries; counted neither in nor out of range)"), "{text}");
     assert!(page.contains("(264 intervals of up to 5 min, t = 0 … 86400 s)"), "the period");
     assert!(page.contains("(1 hole of lost log entries; counted neither"), "the hole");
+    // The record lost them, not the probe: the row and the verdict say so.
+    assert!(text.contains("no reading (lost log entries)") && !text.contains("sensor fault"), "{text}");
+    assert!(page.contains("No reading (lost log entries)") && !page.contains("sensor fault"), "the row's label");
+    assert!(page.contains("part of the record was lost") && !page.contains("the probe gave no reading"), "the verdict");
+    // Both at once: each named.
+    let both = holed.replace("\n3600,4.00,3.90,4.10,0.40,normal,", "\n3600,4.00,4.00,4.00,0.00,sensor_fault,");
+    assert_ne!(both, holed);
+    let (text, page) = counts(&both);
+    assert!(text.contains("no reading (sensor fault; lost log entries)"), "{text}");
+    assert!(
+        page.contains("the probe gave no reading for part of the period and part of the record was lost"),
+        "the verdict"
+    );
 
     // A log of samples keeps its word.
     std::fs::write(&csv, "t_s,temp_c\n0,4\n10,\n20,4\n30,4\n").unwrap();
