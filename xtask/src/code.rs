@@ -10,7 +10,9 @@
 //! - the direct calls and jumps: `bl`, `b`, `b.w`, `b<c>`, `b<c>.w`; a target outside the body
 //!   is a call (or a tail call), and so is one to the body's own first byte (a recursion);
 //! - what cannot be followed: `blx rN`, `bx rN` other than `bx lr`, `mov pc, rN`, a load into
-//!   pc other than a pop, and `sub sp, sp, rN` (a frame of unknown size).
+//!   pc other than a pop, and `sub sp, sp, rN` (a frame of unknown size);
+//! - the addresses a function forms in code (`movw`/`movt` pairs, `adr`), which an indirect
+//!   call may later use.
 //!
 //! Literal pools and other data inside `.text` are skipped by the ELF's mapping symbols (`$d`
 //! starts data, `$t` starts Thumb code again; ARM ELF ABI §4.5.5).
@@ -33,7 +35,8 @@ pub struct Body {
     pub indirect: Option<u64>,
     /// Its first frame of run-time size, if any.
     pub dynamic_frame: Option<u64>,
-    /// The 32-bit constants it builds with a `movw` then a `movt` into one register.
+    /// The 32-bit constants it builds with a `movw` then a `movt` into one register, and the
+    /// code addresses it forms with `adr` (with the Thumb bit set, as a function pointer has it).
     pub constants: Vec<u64>,
 }
 
@@ -77,6 +80,9 @@ pub enum Effect {
         imm: u64,
         top: bool,
     },
+    /// `adr rd, label`: an address this offset from the instruction's address + 4, rounded
+    /// down to a word.
+    Adr(i64),
     Other,
 }
 
@@ -98,6 +104,8 @@ pub fn effect(h: u16, l: u16) -> Effect {
             0xb400..=0xb5ff => Effect::Frame(4 * u64::from((h & 0x1ff).count_ones())),
             // SUB SP, SP, #imm7 × 4 (T1).
             0xb080..=0xb0ff => Effect::Frame(4 * (hw & 0x7f)),
+            // ADR T1: imm8 words forward.
+            0xa000..=0xa7ff => Effect::Adr(4 * i64::from(h & 0xff)),
             // B T2: imm11.
             0xe000..=0xe7ff => Effect::Branch(sext((hw & 0x7ff) << 1, 12)),
             // B<c> T1: imm8 (cond 1110 is UDF, 1111 SVC).
@@ -136,6 +144,11 @@ pub fn effect(h: u16, l: u16) -> Effect {
     // SUB SP, SP, Rm: a frame of run-time size.
     if h & 0xffef == 0xebad && l & 0x0f00 == 0x0d00 {
         return Effect::DynamicFrame;
+    }
+    // ADR.W T3 (add) / T2 (subtract): i:imm3:imm8.
+    if h & 0xfbff == 0xf20f || h & 0xfbff == 0xf2af {
+        let imm = (((hw >> 10) & 1) << 11 | ((lw >> 12) & 7) << 8 | (lw & 0xff)) as i64;
+        return Effect::Adr(if h & 0xfbff == 0xf2af { -imm } else { imm });
     }
     // MOVW T3 / MOVT T1: imm4:i:imm3:imm8 into Rd.
     if h & 0xfbf0 == 0xf240 || h & 0xfbf0 == 0xf2c0 {
@@ -226,6 +239,8 @@ pub fn body(elf: &Elf, addr: u64) -> Option<Body> {
                     b.constants.push(imm << 16 | lo);
                 }
             }
+            // A code address formed from the pc: taken as a function's with its Thumb bit.
+            Effect::Adr(rel) => b.constants.push((((pc + 4) & !3) as i64 + rel) as u64 | 1),
             Effect::Other => {}
         }
         off += len;
@@ -599,6 +614,10 @@ mod tests {
         // movw r0, #0xf8a8; movt r0, #0x800 (the firmware's, at 0x800c85e).
         assert_eq!(effect(0xf64f, 0x00a8), Effect::Move { rd: 0, imm: 0xf8a8, top: false });
         assert_eq!(effect(0xf6c0, 0x0000), Effect::Move { rd: 0, imm: 0x0800, top: true });
+        // adr r1, #968 (the runner's, at 0x700a); adr.w r1, #4 (the firmware's, at 0x800afec).
+        assert_eq!(effect(0xa1f2, 0), Effect::Adr(968));
+        assert_eq!(effect(0xf20f, 0x0104), Effect::Adr(4));
+        assert_eq!(effect(0xf2af, 0x0108), Effect::Adr(-8), "adr.w r1, #-8");
         assert_eq!(insn_len(0xf000), 4);
         assert_eq!(insn_len(0xe92d), 4);
         assert_eq!(insn_len(0xb580), 2);
