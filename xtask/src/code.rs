@@ -535,7 +535,9 @@ pub fn listed(text: &str, functions: &[(u64, u64)]) -> HashMap<u64, Listed> {
         match op {
             "push" | "push.w" => l.frame += 4 * regs(),
             "vpush" => l.frame += if args.starts_with("{d") { 8 } else { 4 } * regs(),
-            "sub" | "sub.w" | "subw" if args.starts_with("sp,") => {
+            // SP's own decrement (`sub sp, #n`, `sub.w sp, sp, …`), not `sub sp, r7, #n`, which
+            // sets it back up from the frame pointer.
+            "sub" | "sub.w" | "subw" if args.starts_with("sp, #") || args.starts_with("sp, sp,") => {
                 let last = args.rsplit(',').next().unwrap_or("").trim();
                 match last.starts_with('#').then(|| number(last)).flatten() {
                     Some(n) => l.frame += n,
@@ -666,6 +668,8 @@ mod tests {
         assert_eq!(l[&0x0800_02b0].frame, 8);
         let dynamic = listed("0800060c <f>:\n 800060c:      \tsub.w\tsp, sp, r0\n", &funcs);
         assert!(dynamic[&0x0800_060c].dynamic_frame);
+        let restore = listed("0800060c <f>:\n 800060c:      \tsub.w\tsp, r7, #0x18\n", &funcs);
+        assert_eq!(restore[&0x0800_060c], Listed::default(), "the frame pointer's restore is no frame");
     }
 
     #[test]
