@@ -314,6 +314,16 @@ struct DutyMean {
 /// (`hal-sim/tests/virtual_board.rs::identify_waits_until_the_carrier_has_held_a_new_setpoint`).
 const SETTLE_SAMPLES: u16 = 2 * DUTY_BLOCK + 60;
 
+/// A reading further than this from the setpoint moves the operating point as a setting does
+/// ([`DutyMean::moved`]), °C: a pull-down after the carrier is switched on, a recovery from a
+/// disturbance, a sensor fault (no reading). Commissioning a new cabinet is naturally asked for
+/// right after power-up: started when the pull-down first reached 4 °C (35 min at 28 °C on the
+/// virtual board), the commissioning rested at the pull-down's mean duty, ≈ 0.9, and the load
+/// fell into the freeze guard within 31 samples (`failed:fault_freeze_guard`;
+/// `hal-sim/tests/virtual_board.rs::identify_waits_until_a_pulled_down_carrier_has_held_its_setpoint`).
+/// Wide enough for On-Off's cycle (±1.3 °C on H-TER I), which holds its mean duty too.
+const HELD_BAND_C: f32 = 1.5;
+
 impl DutyMean {
     const NEW: DutyMean = DutyMean { last: (0.0, 0), cur: (0.0, 0), since_moved: SETTLE_SAMPLES };
 
@@ -524,6 +534,10 @@ impl App {
 
     fn finish_sample(&mut self, t_ms: u64, out: StepOutput) -> SampleOut {
         self.duty_mean.push(out.duty.get());
+        // NaN (no reading) compares false: a sensor fault moves it too.
+        if !((out.recorded_c() - out.setpoint_c.0).abs() <= HELD_BAND_C) {
+            self.duty_mean.moved();
+        }
         self.last_t_ms = t_ms;
         self.commission_step(out.mode);
         let mut rec = self.recorder.push(t_ms, out.recorded_c());
@@ -806,7 +820,7 @@ impl App {
         }
         if !self.duty_mean.settled() {
             return refuse(
-                "a setting moved the load within the last 70 min: commissioning rests at the last hour's mean duty, so wait until the carrier has held it",
+                "the load moved within the last 70 min (a setting, or a reading more than 1.5 °C from the setpoint: a pull-down, a disturbance, a sensor fault): commissioning rests at the last hour's mean duty, so wait until the carrier has held its setpoint",
             );
         }
         let cfg = CommissionConfig { plausible: self.adaptive, ..CommissionConfig::DEFAULT };

@@ -99,13 +99,19 @@ pub struct VirtualBoard {
 impl VirtualBoard {
     /// A carrier holding 4 °C with a blank flash, booted.
     pub fn new(opts: &VirtualOptions) -> Result<VirtualBoard> {
+        Self::starting(opts, Start::Holding(4.0))
+    }
+
+    /// A carrier that starts as `start` says (`Start::Ambient`: just switched on, everything at
+    /// the ambient) with a blank flash, booted.
+    pub fn starting(opts: &VirtualOptions, start: Start) -> Result<VirtualBoard> {
         if matches!(opts.plant, PlantChoice::Arx(_)) {
             bail!("the virtual board simulates a physical carrier: --plant hter1 or hter2");
         }
         let scenario = Scenario {
             name: "virtual-board".into(),
             description: "a carrier holding 4 °C".into(),
-            start: Start::Holding(4.0),
+            start,
             setpoints: vec![(0.0, 4.0)],
             changes: Vec::new(),
             duration_s: f64::INFINITY,
