@@ -325,7 +325,14 @@ const SETTLE_SAMPLES: u16 = 2 * DUTY_BLOCK + 60;
 const HELD_BAND_C: f32 = 1.5;
 
 impl DutyMean {
-    const NEW: DutyMean = DutyMean { last: (0.0, 0), cur: (0.0, 0), since_moved: SETTLE_SAMPLES };
+    /// After a boot the mean is empty, and a commissioning started at once rested at the
+    /// fallback PI's bias: right only where the bias is the carrier's holding duty. One block
+    /// (30 min) of a boot that holds its setpoint is the mean's shortest window; a boot into a
+    /// pull-down waits [`SETTLE_SAMPLES`] from its last reading out of [`HELD_BAND_C`]. Started
+    /// 1–60 samples after a boot holding 4 °C on the virtual board (H-TER I full and half, 20, 36,
+    /// 43 °C), commissioning ended `fault_out_of_band` or `poor_fit` in every case; 180 or 420
+    /// samples after, `done` in every case.
+    const NEW: DutyMean = DutyMean { last: (0.0, 0), cur: (0.0, 0), since_moved: SETTLE_SAMPLES - DUTY_BLOCK };
 
     /// A setting moved the load: its operating point is settling.
     fn moved(&mut self) {
@@ -820,7 +827,7 @@ impl App {
         }
         if !self.duty_mean.settled() {
             return refuse(
-                "the load moved within the last 70 min (a setting, or a reading more than 1.5 °C from the setpoint: a pull-down, a disturbance, a sensor fault): commissioning rests at the last hour's mean duty, so wait until the carrier has held its setpoint",
+                "the carrier has not held its setpoint long enough: commissioning rests at the last hour's mean duty, so wait 30 min after a boot, 70 min after a setting or a reading more than 1.5 °C from the setpoint (a pull-down, a disturbance, a sensor fault)",
             );
         }
         let cfg = CommissionConfig { plausible: self.adaptive, ..CommissionConfig::DEFAULT };

@@ -750,7 +750,7 @@ fn a_calibration_that_moves_the_reading_by_degrees_or_lands_mid_commissioning_is
     );
     assert_eq!(*b.app.settings(), before);
     // The accepted point moved the load: a commissioning waits until the carrier has held it.
-    assert!(b.send("identify").starts_with("err identify: the load moved within the last 70 min"));
+    assert!(b.send("identify").starts_with("err identify: the carrier has not held its setpoint long enough"));
     b.run(usize::from(SETTLE_SAMPLES));
     assert_eq!(b.send("identify"), "ok\r\n");
     b.run(3);
