@@ -672,23 +672,48 @@ fn a_board_that_goes_away_while_identify_follows_ends_the_watch_in_one_line() {
 /// from 70 min after the change all 6 starts ran to `done` (without a change, every start from
 /// 20 min after the boot did). Here: the change 20 min after the boot, `identify` refused 20 min
 /// later (it would end `poor_fit`), accepted 70 min after the change and run to `done`.
+/// A virtual H-TER I, full load, seed 1, at `ambient_c`, booted as `start` says.
+fn virtual_hter1(ambient_c: f64, start: hal_sim::scenario::Start) -> hal_sim::sim::virtual_board::VirtualBoard {
+    use hal_sim::sim::virtual_board::{VirtualBoard, VirtualOptions};
+    let opts = VirtualOptions {
+        plant: hal_sim::sim::PlantChoice::Hter1,
+        load: hal_sim::plant::Load::Full,
+        ambient_c,
+        seed: 1,
+        module_sense: false,
+    };
+    VirtualBoard::starting(&opts, start).unwrap()
+}
+
+/// `key`'s value in the board's `status`.
+fn board_status(b: &mut hal_sim::sim::virtual_board::VirtualBoard, key: &str) -> String {
+    let reply = b.request("status");
+    let prefix = format!("{key}=");
+    reply.lines().find_map(|l| l.strip_prefix(prefix.as_str())).map(str::to_string).unwrap()
+}
+
+/// Runs the commissioning `identify` started to its end, which must be `done`.
+fn commissioning_ends_done(b: &mut hal_sim::sim::virtual_board::VirtualBoard) {
+    let mut m = 0;
+    loop {
+        b.step().unwrap();
+        let c = board_status(b, "commissioning");
+        if c == "done" {
+            return;
+        }
+        assert!(!c.starts_with("failed"), "{c} after {m} samples");
+        m += 1;
+        assert!(m < 2500, "{c}");
+    }
+}
+
 /// After a boot the duty mean is empty, and a commissioning started at once rested at the
 /// fallback PI's bias, which is the carrier's holding duty only near 28 °C: at 36 °C it ended
 /// `fault_out_of_band` 110 samples in (at 20 °C 368, at 43 °C 73; 60 samples after the boot,
 /// `poor_fit`). It waits one block of the mean, 30 minutes, after a boot that holds its setpoint.
 #[test]
 fn identify_waits_half_an_hour_after_a_boot() {
-    use hal_sim::plant::Load;
-    use hal_sim::sim::virtual_board::{VirtualBoard, VirtualOptions};
-    use hal_sim::sim::PlantChoice;
-    let opts =
-        VirtualOptions { plant: PlantChoice::Hter1, load: Load::Full, ambient_c: 36.0, seed: 1, module_sense: false };
-    let mut b = VirtualBoard::new(&opts).unwrap();
-    let status = |b: &mut VirtualBoard, key: &str| {
-        let reply = b.request("status");
-        let prefix = format!("{key}=");
-        reply.lines().find_map(|l| l.strip_prefix(prefix.as_str())).map(str::to_string).unwrap()
-    };
+    let mut b = virtual_hter1(36.0, hal_sim::scenario::Start::Holding(4.0));
     b.step().unwrap();
     let mut n = 1;
     loop {
@@ -702,17 +727,7 @@ fn identify_waits_half_an_hour_after_a_boot() {
         assert!(n <= 180, "still refused after {n} samples");
     }
     assert_eq!(n, 180, "one block of the duty mean, 30 min, after the boot");
-    let mut m = 0;
-    loop {
-        b.step().unwrap();
-        let c = status(&mut b, "commissioning");
-        if c == "done" {
-            break;
-        }
-        assert!(!c.starts_with("failed"), "{c} after {m} samples");
-        m += 1;
-        assert!(m < 2500, "{c}");
-    }
+    commissioning_ends_done(&mut b);
 }
 
 /// A carrier just switched on pulls its load down from the ambient at full duty. An engineer
@@ -723,25 +738,14 @@ fn identify_waits_half_an_hour_after_a_boot() {
 /// `done`.
 #[test]
 fn identify_waits_until_a_pulled_down_carrier_has_held_its_setpoint() {
-    use hal_sim::plant::Load;
-    use hal_sim::scenario::Start;
-    use hal_sim::sim::virtual_board::{VirtualBoard, VirtualOptions};
-    use hal_sim::sim::PlantChoice;
-    let opts =
-        VirtualOptions { plant: PlantChoice::Hter1, load: Load::Full, ambient_c: 28.0, seed: 1, module_sense: false };
-    let mut b = VirtualBoard::starting(&opts, Start::Ambient).unwrap();
-    let status = |b: &mut VirtualBoard, key: &str| {
-        let reply = b.request("status");
-        let prefix = format!("{key}=");
-        reply.lines().find_map(|l| l.strip_prefix(prefix.as_str())).map(str::to_string).unwrap()
-    };
+    let mut b = virtual_hter1(28.0, hal_sim::scenario::Start::Ambient);
     assert!(b.load_c() > 27.0, "switched on at the ambient: {}", b.load_c());
     // The sample whose reading was last more than 1.5 °C from the setpoint.
     let (mut n, mut last_out) = (0, 0);
     while (b.load_c() - 4.0).abs() > 0.3 {
         b.step().unwrap();
         n += 1;
-        let reading: f64 = status(&mut b, "temp_c").parse().unwrap();
+        let reading: f64 = board_status(&mut b, "temp_c").parse().unwrap();
         if (reading - 4.0).abs() > 1.5 {
             last_out = n;
         }
@@ -750,7 +754,7 @@ fn identify_waits_until_a_pulled_down_carrier_has_held_its_setpoint() {
     // At its setpoint after the pull-down (211 samples): not yet.
     let r = b.request("identify");
     assert!(r.starts_with("err identify: the carrier has not held its setpoint long enough"), "{r}");
-    assert_eq!(status(&mut b, "commissioning"), "idle");
+    assert_eq!(board_status(&mut b, "commissioning"), "idle");
     // Once it has held within 1.5 °C for 70 minutes, accepted, and it ends with a model.
     while b.request("identify") != "ok\r\n" {
         b.step().unwrap();
@@ -758,32 +762,12 @@ fn identify_waits_until_a_pulled_down_carrier_has_held_its_setpoint() {
         assert!(n < last_out + 500, "still refused {} samples after the last reading out", n - last_out);
     }
     assert_eq!(n - last_out, 420, "70 minutes (420 samples) after the last reading more than 1.5 °C out");
-    let mut m = 0;
-    loop {
-        b.step().unwrap();
-        let c = status(&mut b, "commissioning");
-        if c == "done" {
-            break;
-        }
-        assert!(!c.starts_with("failed"), "{c} after {m} samples");
-        m += 1;
-        assert!(m < 2500, "{c}");
-    }
+    commissioning_ends_done(&mut b);
 }
 
 #[test]
 fn identify_waits_until_the_carrier_has_held_a_new_setpoint() {
-    use hal_sim::plant::Load;
-    use hal_sim::sim::virtual_board::{VirtualBoard, VirtualOptions};
-    use hal_sim::sim::PlantChoice;
-    let opts =
-        VirtualOptions { plant: PlantChoice::Hter1, load: Load::Full, ambient_c: 28.0, seed: 1, module_sense: false };
-    let mut b = VirtualBoard::new(&opts).unwrap();
-    let status = |b: &mut VirtualBoard, key: &str| {
-        let reply = b.request("status");
-        let prefix = format!("{key}=");
-        reply.lines().find_map(|l| l.strip_prefix(prefix.as_str())).map(str::to_string).unwrap()
-    };
+    let mut b = virtual_hter1(28.0, hal_sim::scenario::Start::Holding(4.0));
     for _ in 0..120 {
         b.step().unwrap();
     }
@@ -795,23 +779,13 @@ fn identify_waits_until_the_carrier_has_held_a_new_setpoint() {
     assert!((b.load_c() - 5.0).abs() < 0.3, "{}", b.load_c());
     let r = b.request("identify");
     assert!(r.starts_with("err identify: the carrier has not held its setpoint long enough"), "{r}");
-    assert_eq!(status(&mut b, "commissioning"), "idle");
-    assert_eq!(status(&mut b, "controller"), "gpc");
+    assert_eq!(board_status(&mut b, "commissioning"), "idle");
+    assert_eq!(board_status(&mut b, "controller"), "gpc");
     // An unchanged setpoint moves nothing and restarts no wait.
     assert_eq!(b.request("set setpoint_c 5.00"), "ok\r\n");
     for _ in 120..420 {
         b.step().unwrap();
     }
     assert_eq!(b.request("identify"), "ok\r\n");
-    let mut n = 0;
-    loop {
-        b.step().unwrap();
-        let c = status(&mut b, "commissioning");
-        if c == "done" {
-            break;
-        }
-        assert!(!c.starts_with("failed"), "{c}");
-        n += 1;
-        assert!(n < 2500, "{c}");
-    }
+    commissioning_ends_done(&mut b);
 }

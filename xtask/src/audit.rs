@@ -523,47 +523,37 @@ pub fn stop_path_findings(elf: &Elf) -> Result<Vec<Finding>> {
         }
         let mut ok = true;
         let mut line = format!("{what}: {}; {depth}", chain(elf, &w.to_goal));
-        if key == "stop_path_nmi" {
+        let room = match key {
             // The NMI runs with the MPU off (HFNMIENA clear), on whatever stack it came in on:
             // from a stack pointer at the guard's top, its frames and its own exception frame
             // must end inside the guard, not in the statics below it.
-            let guard = elf.symbol("__stack_guard_end").zip(elf.symbol("__stack_guard_start")).map(|(e, s)| e - s);
-            match (guard, w.depth) {
-                (Some(g), Some(d)) if d + EXCEPTION_FRAME <= g => {
-                    let _ = write!(line, "; with its {EXCEPTION_FRAME} B exception frame within the {g} B guard");
+            "stop_path_nmi" => Some((
+                elf.symbol("__stack_guard_end").zip(elf.symbol("__stack_guard_start")).map(|(e, s)| e - s),
+                EXCEPTION_FRAME,
+                "the {} B guard with its exception frame",
+                "no __stack_guard_start/__stack_guard_end in the image",
+            )),
+            "stop_path_hard_fault" => Some((
+                hard_fault_room(elf, entry),
+                0,
+                "the {} B the entry leaves above the guard",
+                "no `__stack_guard_end + room` literal in the HardFault entry (hter::hard_fault_entry!)",
+            )),
+            _ => None,
+        };
+        if let Some((room, extra, within, missing)) = room {
+            let within = |r: u64| within.replace("{}", &r.to_string());
+            match (room, w.depth) {
+                (Some(r), Some(d)) if d + extra <= r => {
+                    let _ = write!(line, ", within {}", within(r));
                 }
-                (Some(g), _) => {
+                (Some(r), _) => {
                     ok = false;
-                    let _ = write!(
-                        line,
-                        ": with its {EXCEPTION_FRAME} B exception frame NOT within the {g} B guard (deepest: {})",
-                        chain(elf, &w.deepest)
-                    );
+                    let _ = write!(line, ": NOT within {} (deepest: {})", within(r), chain(elf, &w.deepest));
                 }
                 (None, _) => {
                     ok = false;
-                    line.push_str(": no __stack_guard_start/__stack_guard_end in the image");
-                }
-            }
-        }
-        if key == "stop_path_hard_fault" {
-            match (hard_fault_room(elf, entry), w.depth) {
-                (Some(room), Some(d)) if d <= room => {
-                    let _ = write!(line, ", within the {room} B the entry leaves above the guard");
-                }
-                (Some(room), _) => {
-                    ok = false;
-                    let _ = write!(
-                        line,
-                        ": NOT within the {room} B the entry leaves above the guard (deepest: {})",
-                        chain(elf, &w.deepest)
-                    );
-                }
-                (None, _) => {
-                    ok = false;
-                    line.push_str(
-                        ": no `__stack_guard_end + room` literal in the HardFault entry (hter::hard_fault_entry!)",
-                    );
+                    let _ = write!(line, ": {missing}");
                 }
             }
         }
