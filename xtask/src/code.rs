@@ -272,6 +272,8 @@ pub struct Walk {
     pub reaches_goal: bool,
     /// The chain from the entry to `goal`, when reached.
     pub to_goal: Vec<u64>,
+    /// Every function the walk entered, sorted.
+    pub reached: Vec<u64>,
 }
 
 /// Walks every call and jump from `entry` (the indirect ones where `resolve` places them),
@@ -350,12 +352,15 @@ pub fn walk(elf: &Elf, entry: u64, goal: u64, resolve: Resolve) -> Walk {
         to_goal: None,
     };
     let r = visit(&mut st, entry & !1);
+    let mut reached: Vec<u64> = st.memo.keys().copied().collect();
+    reached.sort();
     Walk {
         depth: r.as_ref().map(|(d, _)| *d),
         deepest: r.map(|(_, c)| c).unwrap_or_default(),
         unbounded_at: st.unbounded_at,
         reaches_goal: st.to_goal.is_some(),
         to_goal: st.to_goal.unwrap_or_default(),
+        reached,
     }
 }
 
@@ -440,7 +445,10 @@ pub struct StackBound {
     pub thread: Walk,
     /// (entry, its walk), one per distinct handler in the vector table.
     pub handlers: Vec<(u64, Walk)>,
-    /// The sum, if every walk is bounded.
+    /// The task polls the thread's walk never entered: their frames are in no chain, so the
+    /// bound is not one (`total` is `None`).
+    pub unreached_tasks: Vec<u64>,
+    /// The sum, if every walk is bounded and every task poll is reached.
     pub total: Option<u64>,
 }
 
@@ -476,9 +484,16 @@ pub fn stack_bound(
     entries.sort();
     entries.dedup();
     let handlers: Vec<(u64, Walk)> = entries.into_iter().map(|e| (e, walk(elf, e, u64::MAX, &resolve))).collect();
-    let total =
-        thread.depth.and_then(|d| handlers.iter().try_fold(d, |t, (_, w)| Some(t + w.depth? + exception_frame)));
-    Ok(StackBound { thread, handlers, total })
+    // A task poll is followed only from a function named as the executor's: one the executor's
+    // call of it has moved out of (an outlined sequence, the run loop inlined into `main`) would
+    // leave the tasks' frames out of the bound without a word.
+    let unreached_tasks: Vec<u64> =
+        tasks.iter().copied().filter(|t| thread.reached.binary_search(t).is_err()).collect();
+    let total = thread
+        .depth
+        .filter(|_| unreached_tasks.is_empty())
+        .and_then(|d| handlers.iter().try_fold(d, |t, (_, w)| Some(t + w.depth? + exception_frame)));
+    Ok(StackBound { thread, handlers, unreached_tasks, total })
 }
 
 /// What llvm-objdump's text shows of one function, read as [`body`] reads the bytes.
