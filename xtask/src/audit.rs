@@ -1291,6 +1291,13 @@ mod tests {
         let dynamic: [Func; 2] = [("Reset", &[], &["main"], false), ("main", &[0xebad, 0x0d00], &[], false)];
         let f = bound(program(&dynamic, &[], &[], 0x1_0000));
         assert!(!f.ok && f.line.contains("not bounded"), "{}", f.line);
+        // A frame realigned for an over-aligned local (LLVM's `sub.w r4, sp, #0x800; bfc r4, #0,
+        // #6; mov sp, r4`): SP set from a register takes 2 KiB the decoder did not count, and the
+        // bound, 16 B, passed a 1 KiB stack.
+        let realigned: [Func; 2] =
+            [("Reset", &[], &["main"], false), ("main", &[0xf5ad, 0x6400, 0xf36f, 0x0405, 0x46a5], &[], false)];
+        let f = bound(program(&realigned, &[], &[], 0x400));
+        assert!(!f.ok && f.line.contains("not bounded"), "{}", f.line);
     }
 
     #[test]
