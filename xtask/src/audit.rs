@@ -30,7 +30,8 @@
 //!   within the stack, so the guard is never reached and a frame larger than the guard cannot
 //!   step over it. Indirect calls go to any function whose address the image holds, a task poll
 //!   only from the executor (embassy's run loop polls tasks; their own indirect calls are
-//!   wakers); recursion, a frame of run-time size or a target with no symbol fail it. A build
+//!   wakers); recursion, a frame of run-time size, a target with no symbol or a task poll the
+//!   thread's walk never reaches (its call moved out of the executor's code) fail it. A build
 //!   that links `core::fmt::write` (the interface's text protocol) is not asked: a `Display`
 //!   that formats again nests through a pointer the image cannot follow; its line is a note.
 //!
@@ -695,6 +696,15 @@ pub fn stack_bound_finding(elf: &Elf) -> Finding {
                 ),
             }
         }
+        None if !b.unreached_tasks.is_empty() => Finding {
+            key,
+            ok: false,
+            line: format!(
+                "the stack is not bounded from the code: {} task poll(s), first {}, not reached from Reset: the executor's call of them is in a function not taken for the executor's, so their stack is in no chain{largest}",
+                b.unreached_tasks.len(),
+                name_at(elf, b.unreached_tasks[0])
+            ),
+        },
         None => {
             let lost = std::iter::once(&b.thread)
                 .chain(b.handlers.iter().map(|(_, w)| w))
@@ -1239,6 +1249,34 @@ mod tests {
     }
 
     #[test]
+    fn a_task_poll_the_executor_is_not_seen_to_call_leaves_the_stack_unbounded() {
+        // The executor's call of the task poll through its pointer sits in a function not named
+        // as the executor's (the outliner's, as `OUTLINED_FUNCTION_10` holds `bx r5` in the
+        // firmware; or the run loop inlined into main): resolved as any other indirect call, it
+        // never reached task A's 1032 B, and the bound, 32 B, passed a 512 B stack.
+        let funcs: [Func; 5] = [
+            ("Reset", &[], &["main"], false),
+            ("main", &[], &[EXECUTOR], false),
+            (EXECUTOR, &[], &["OUTLINED_FUNCTION_0"], false),
+            ("OUTLINED_FUNCTION_0", &[], &[], true),
+            (TASK_A, &[0xf5ad, 0x6d80], &[], false),
+        ];
+        let f = bound(program(&funcs, &[TASK_A], &[], 0x200));
+        assert!(!f.ok && f.line.contains("not reached"), "{}", f.line);
+        // Called from the executor itself, the same poll is counted, and does not fit.
+        let direct: [Func; 4] = [
+            ("Reset", &[], &["main"], false),
+            ("main", &[], &[EXECUTOR], false),
+            (EXECUTOR, &[], &[], true),
+            (TASK_A, &[0xf5ad, 0x6d80], &[], false),
+        ];
+        let f = bound(program(&direct, &[TASK_A], &[], 0x200));
+        assert!(!f.ok && f.line.contains("MORE than the stack"), "{}", f.line);
+        let f = bound(program(&direct, &[TASK_A], &[], 0x1_0000));
+        assert!(f.ok && f.line.contains("the thread 1056 B"), "{}", f.line);
+    }
+
+    #[test]
     fn recursion_an_unknown_call_or_a_run_time_frame_leave_the_stack_unbounded() {
         let rec: [Func; 3] =
             [("Reset", &[], &["main"], false), ("main", &[], &["walk"], false), ("walk", &[0xb082], &["walk"], false)];
@@ -1252,6 +1290,13 @@ mod tests {
         // sub sp, sp, r0: a frame of run-time size.
         let dynamic: [Func; 2] = [("Reset", &[], &["main"], false), ("main", &[0xebad, 0x0d00], &[], false)];
         let f = bound(program(&dynamic, &[], &[], 0x1_0000));
+        assert!(!f.ok && f.line.contains("not bounded"), "{}", f.line);
+        // A frame realigned for an over-aligned local (LLVM's `sub.w r4, sp, #0x800; bfc r4, #0,
+        // #6; mov sp, r4`): SP set from a register takes 2 KiB the decoder did not count, and the
+        // bound, 16 B, passed a 1 KiB stack.
+        let realigned: [Func; 2] =
+            [("Reset", &[], &["main"], false), ("main", &[0xf5ad, 0x6400, 0xf36f, 0x0405, 0x46a5], &[], false)];
+        let f = bound(program(&realigned, &[], &[], 0x400));
         assert!(!f.ok && f.line.contains("not bounded"), "{}", f.line);
     }
 

@@ -10,7 +10,8 @@
 //! - the direct calls and jumps: `bl`, `b`, `b.w`, `b<c>`, `b<c>.w`; a target outside the body
 //!   is a call (or a tail call), and so is one to the body's own first byte (a recursion);
 //! - what cannot be followed: `blx rN`, `bx rN` other than `bx lr`, `mov pc, rN`, a load into
-//!   pc other than a pop, and `sub sp, sp, rN` (a frame of unknown size);
+//!   pc other than a pop, and `sub sp, sp, rN` and `mov sp, rN` (a frame of unknown size: an
+//!   alloca, a frame realigned for an over-aligned local);
 //! - the addresses a function forms in code (`movw`/`movt` pairs, `adr`), which an indirect
 //!   call may later use.
 //!
@@ -72,7 +73,7 @@ pub enum Effect {
     Branch(i64),
     /// A call or jump through a register or a loaded address.
     Indirect,
-    /// A frame of run-time size (`sub sp, sp, rN`).
+    /// A frame of run-time size (`sub sp, sp, rN`, `mov sp, rN`).
     DynamicFrame,
     /// `movw rd, #imm16` (`top` false) or `movt rd, #imm16` (`top` true): half an address.
     Move {
@@ -114,6 +115,9 @@ pub fn effect(h: u16, l: u16) -> Effect {
             _ if h & 0xff87 == 0x4780 => Effect::Indirect,
             _ if h & 0xff87 == 0x4700 && (h >> 3) & 0xf != 14 => Effect::Indirect,
             _ if h & 0xff87 == 0x4687 => Effect::Indirect,
+            // MOV SP, Rm (T1, Rd = 13): SP set from a register, as a realigned frame's
+            // `sub.w rX, sp, #n; bfc rX, …; mov sp, rX` does: of a size the image does not show.
+            _ if h & 0xff87 == 0x4685 => Effect::DynamicFrame,
             _ => Effect::Other,
         };
     }
@@ -272,6 +276,8 @@ pub struct Walk {
     pub reaches_goal: bool,
     /// The chain from the entry to `goal`, when reached.
     pub to_goal: Vec<u64>,
+    /// Every function the walk entered, sorted.
+    pub reached: Vec<u64>,
 }
 
 /// Walks every call and jump from `entry` (the indirect ones where `resolve` places them),
@@ -350,12 +356,15 @@ pub fn walk(elf: &Elf, entry: u64, goal: u64, resolve: Resolve) -> Walk {
         to_goal: None,
     };
     let r = visit(&mut st, entry & !1);
+    let mut reached: Vec<u64> = st.memo.keys().copied().collect();
+    reached.sort();
     Walk {
         depth: r.as_ref().map(|(d, _)| *d),
         deepest: r.map(|(_, c)| c).unwrap_or_default(),
         unbounded_at: st.unbounded_at,
         reaches_goal: st.to_goal.is_some(),
         to_goal: st.to_goal.unwrap_or_default(),
+        reached,
     }
 }
 
@@ -440,7 +449,10 @@ pub struct StackBound {
     pub thread: Walk,
     /// (entry, its walk), one per distinct handler in the vector table.
     pub handlers: Vec<(u64, Walk)>,
-    /// The sum, if every walk is bounded.
+    /// The task polls the thread's walk never entered: their frames are in no chain, so the
+    /// bound is not one (`total` is `None`).
+    pub unreached_tasks: Vec<u64>,
+    /// The sum, if every walk is bounded and every task poll is reached.
     pub total: Option<u64>,
 }
 
@@ -476,9 +488,16 @@ pub fn stack_bound(
     entries.sort();
     entries.dedup();
     let handlers: Vec<(u64, Walk)> = entries.into_iter().map(|e| (e, walk(elf, e, u64::MAX, &resolve))).collect();
-    let total =
-        thread.depth.and_then(|d| handlers.iter().try_fold(d, |t, (_, w)| Some(t + w.depth? + exception_frame)));
-    Ok(StackBound { thread, handlers, total })
+    // A task poll is followed only from a function named as the executor's: one the executor's
+    // call of it has moved out of (an outlined sequence, the run loop inlined into `main`) would
+    // leave the tasks' frames out of the bound without a word.
+    let unreached_tasks: Vec<u64> =
+        tasks.iter().copied().filter(|t| thread.reached.binary_search(t).is_err()).collect();
+    let total = thread
+        .depth
+        .filter(|_| unreached_tasks.is_empty())
+        .and_then(|d| handlers.iter().try_fold(d, |t, (_, w)| Some(t + w.depth? + exception_frame)));
+    Ok(StackBound { thread, handlers, unreached_tasks, total })
 }
 
 /// What llvm-objdump's text shows of one function, read as [`body`] reads the bytes.
@@ -545,6 +564,8 @@ pub fn listed(text: &str, functions: &[(u64, u64)]) -> HashMap<u64, Listed> {
                     None => {}
                 }
             }
+            // SP set from a register (a realigned frame, an alloca): no size to read.
+            "mov" | "mov.w" if args.starts_with("sp, r") => l.dynamic_frame = true,
             _ if op.starts_with("str") && args.contains("[sp, #-") && args.ends_with("]!") => {
                 let n = args.rsplit("#-").next().and_then(|n| number(n.trim_end_matches("]!")));
                 l.frame += n.unwrap_or(0);
@@ -592,6 +613,8 @@ mod tests {
         assert_eq!(effect(0xf5ad, 0x5d9b), Effect::Frame(0x1360), "sub.w sp, sp, #0x1360");
         assert_eq!(effect(0xf6ad, 0x4dd8), Effect::Frame(0xcd8), "subw sp, sp, #0xcd8");
         assert_eq!(effect(0xebad, 0x0d00), Effect::DynamicFrame, "sub.w sp, sp, r0");
+        assert_eq!(effect(0x46a5, 0), Effect::DynamicFrame, "mov sp, r4 (a realigned frame)");
+        assert_eq!(effect(0x466c, 0), Effect::Other, "mov r4, sp");
         assert_eq!(effect(0xe96d, 0x4502), Effect::Frame(8), "strd r4, r5, [sp, #-8]!");
         // Not frames: add sp, pop, sub into another register.
         assert_eq!(effect(0xb010, 0), Effect::Other, "add sp, #0x40");
@@ -668,6 +691,8 @@ mod tests {
         assert_eq!(l[&0x0800_02b0].frame, 8);
         let dynamic = listed("0800060c <f>:\n 800060c:      \tsub.w\tsp, sp, r0\n", &funcs);
         assert!(dynamic[&0x0800_060c].dynamic_frame);
+        let realign = listed("0800060c <f>:\n 800060c:      \tmov\tsp, r4\n", &funcs);
+        assert!(realign[&0x0800_060c].dynamic_frame, "SP set from a register");
         let restore = listed("0800060c <f>:\n 800060c:      \tsub.w\tsp, r7, #0x18\n", &funcs);
         assert_eq!(restore[&0x0800_060c], Listed::default(), "the frame pointer's restore is no frame");
     }
