@@ -444,16 +444,14 @@ fn chain(elf: &Elf, addrs: &[u64]) -> String {
 
 /// The room the HardFault entry (`hter::hard_fault_entry!`) leaves above the guard before it
 /// moves the stack to its top: the literal `__stack_guard_end + room` it compares the stack
-/// pointer with, read from its literal pool.
+/// pointer with, read from its literal pool (the `$d` range, not its instructions).
 pub fn hard_fault_room(elf: &Elf, entry: u64) -> Option<u64> {
     let guard_end = elf.symbol("__stack_guard_end")?;
     let top = elf.symbol("_stack_start")?;
     let b = crate::code::body(elf, entry)?;
-    let code = elf.read(b.start, b.size)?;
-    let skip = ((4 - b.start % 4) % 4) as usize;
-    code.get(skip..)?
-        .chunks_exact(4)
-        .map(|w| u64::from(u32::from_le_bytes([w[0], w[1], w[2], w[3]])))
+    // Its literal pool only: an instruction pair could read as such a word too.
+    crate::code::literal_words(elf, b.start, b.size)
+        .into_iter()
         .find(|&w| w > guard_end && w < top && w - guard_end <= 0x1_0000)
         .map(|w| w - guard_end)
 }
@@ -1008,6 +1006,17 @@ mod tests {
     /// `bl force_safe`, then `halt_extra`), a HardFault trampoline with its literal, and NMI,
     /// default, panic and TIM7 handlers that each `bl halt` unless named in `cut`.
     fn stop_image(halt_frame: &[u16], halt_extra: &[u16], cut: &[&str], tim7_default: bool) -> Vec<u8> {
+        stop_image_marked(halt_frame, halt_extra, cut, tim7_default, true)
+    }
+
+    /// [`stop_image`], with the HardFault entry's literal marked as data (`$d`) or not.
+    fn stop_image_marked(
+        halt_frame: &[u16],
+        halt_extra: &[u16],
+        cut: &[&str],
+        tim7_default: bool,
+        mark_literal: bool,
+    ) -> Vec<u8> {
         const GUARD_END: u32 = 0x2000_3000;
         let mut code: Vec<u16> = Vec::new();
         let mut syms: Vec<(String, u32, u32)> = Vec::new();
@@ -1053,7 +1062,9 @@ mod tests {
         let word = GUARD_END + 1024;
         code.extend([word as u16, (word >> 16) as u16]);
         syms.push(("HardFault".into(), hf | 1, 8));
-        syms.push(("$d".into(), lit, 0));
+        if mark_literal {
+            syms.push(("$d".into(), lit, 0));
+        }
         syms.push(("__stack_guard_start".into(), GUARD_END - 1024, 0));
         syms.push(("__stack_guard_end".into(), GUARD_END, 0));
         syms.push(("_stack_start".into(), 0x2001_8000, 0));
@@ -1138,6 +1149,11 @@ mod tests {
         }
         let bad = nmi.iter().find(|g| g.key == "stop_path_nmi").unwrap();
         assert!(bad.line.contains("1016 B") && bad.line.contains("NOT within the 1024 B guard"), "{}", bad.line);
+        // The room is read from the entry's literal pool only: the same word among its
+        // instructions (no `$d` before it) is no room.
+        let unmarked = stop_findings(stop_image_marked(&[0xb090], &[], &[], false, false));
+        let hf = unmarked.iter().find(|g| g.key == "stop_path_hard_fault").unwrap();
+        assert!(!hf.ok && hf.line.contains("no `__stack_guard_end + room` literal"), "{}", hf.line);
         // An indirect call on the path (blx r3 after force_safe): the stack cannot be bounded.
         let blind = stop_findings(stop_image(&[0xb090], &[0x4798], &[], false));
         let hf = blind.iter().find(|g| g.key == "stop_path_hard_fault").unwrap();

@@ -428,6 +428,39 @@ pub fn in_code(elf: &Elf, addr: u64) -> bool {
     elf.sections().iter().any(|s| s.flags & SHF_EXECINSTR != 0 && (s.addr..s.addr + s.size).contains(&addr))
 }
 
+/// The aligned 32-bit words of the data (`$d`) ranges inside the function at `start` of `size`
+/// bytes: its literal pool, not its instructions.
+pub fn literal_words(elf: &Elf, start: u64, size: u64) -> Vec<u64> {
+    let end = start + size;
+    let mut marks: Vec<(u64, bool)> = elf
+        .symbols()
+        .iter()
+        .filter(|(_, v, _)| (start..end).contains(v))
+        .filter_map(|(n, v, _)| match n.split('.').next() {
+            Some("$d") => Some((*v, true)),
+            Some("$t") => Some((*v, false)),
+            _ => None,
+        })
+        .collect();
+    marks.sort();
+    let mut out = Vec::new();
+    for (k, &(at, data)) in marks.iter().enumerate() {
+        if !data {
+            continue;
+        }
+        let to = marks[k + 1..].iter().map(|m| m.0).find(|&e| e > at).unwrap_or(end);
+        let from = (at + 3) & !3;
+        let mut a = from;
+        while a + 4 <= to {
+            if let Some(w) = elf.read(a, 4) {
+                out.push(u64::from(u32::from_le_bytes([w[0], w[1], w[2], w[3]])));
+            }
+            a += 4;
+        }
+    }
+    out
+}
+
 /// Every sized symbol in executable code (a function), its first byte, sorted.
 pub fn functions(elf: &Elf) -> Vec<u64> {
     let mut f: Vec<u64> = elf
