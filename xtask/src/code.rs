@@ -185,6 +185,23 @@ pub fn effect(h: u16, l: u16) -> Effect {
     Effect::Other
 }
 
+/// The mapping symbols in `range`, in address order: (address, true where data starts, false
+/// where Thumb code starts again).
+fn mapping_symbols(elf: &Elf, range: std::ops::Range<u64>) -> Vec<(u64, bool)> {
+    let mut maps: Vec<(u64, bool)> = elf
+        .symbols()
+        .iter()
+        .filter(|(_, v, _)| range.contains(v))
+        .filter_map(|(n, v, _)| match n.split('.').next() {
+            Some("$d") => Some((*v, true)),
+            Some("$t") => Some((*v, false)),
+            _ => None,
+        })
+        .collect();
+    maps.sort();
+    maps
+}
+
 /// The function whose symbol starts at `addr` (Thumb bit ignored), decoded.
 pub fn body(elf: &Elf, addr: u64) -> Option<Body> {
     let start = addr & !1;
@@ -194,17 +211,7 @@ pub fn body(elf: &Elf, addr: u64) -> Option<Body> {
     let size = elf.symbols().iter().find(|(n, v, s)| *v & !1 == start && *s > 0 && !n.starts_with('$'))?.2;
     let code = elf.read(start, size)?;
     // Mapping symbols inside the body, in address order: true where data starts.
-    let mut maps: Vec<(u64, bool)> = elf
-        .symbols()
-        .iter()
-        .filter(|(_, v, _)| (start..start + size).contains(v))
-        .filter_map(|(n, v, _)| match n.split('.').next() {
-            Some("$d") => Some((*v, true)),
-            Some("$t") => Some((*v, false)),
-            _ => None,
-        })
-        .collect();
-    maps.sort();
+    let maps = mapping_symbols(elf, start..start + size);
     let data_at = |pc: u64| maps.iter().rev().find(|(a, _)| *a <= pc).is_some_and(|(_, d)| *d);
     let half = |off: u64| code.get(off as usize..off as usize + 2).map(|b| u16::from_le_bytes([b[0], b[1]]));
     let mut b =
@@ -393,15 +400,7 @@ pub fn address_taken(elf: &Elf) -> Vec<u64> {
         }
     }
     // The data ranges in code: from each `$d` to the next mapping symbol or function start.
-    let mut marks: Vec<(u64, bool)> = elf
-        .symbols()
-        .iter()
-        .filter_map(|(n, v, _)| match n.split('.').next() {
-            Some("$d") => Some((*v, true)),
-            Some("$t") => Some((*v, false)),
-            _ => None,
-        })
-        .collect();
+    let mut marks = mapping_symbols(elf, 0..u64::MAX);
     marks.extend(funcs.iter().map(|&f| (f, false)));
     marks.sort();
     for (k, &(at, data)) in marks.iter().enumerate() {
@@ -432,17 +431,7 @@ pub fn in_code(elf: &Elf, addr: u64) -> bool {
 /// bytes: its literal pool, not its instructions.
 pub fn literal_words(elf: &Elf, start: u64, size: u64) -> Vec<u64> {
     let end = start + size;
-    let mut marks: Vec<(u64, bool)> = elf
-        .symbols()
-        .iter()
-        .filter(|(_, v, _)| (start..end).contains(v))
-        .filter_map(|(n, v, _)| match n.split('.').next() {
-            Some("$d") => Some((*v, true)),
-            Some("$t") => Some((*v, false)),
-            _ => None,
-        })
-        .collect();
-    marks.sort();
+    let marks = mapping_symbols(elf, start..end);
     let mut out = Vec::new();
     for (k, &(at, data)) in marks.iter().enumerate() {
         if !data {
