@@ -90,11 +90,13 @@ pub fn audit(features: &str) -> Result<()> {
     // A build that formats text with core::fmt (the interface's protocol) calls through each
     // formatting argument's pointer, and a `Display` that formats again nests: the image
     // alone cannot bound that recursion, so the bound is not asked of it (a note, not a pass).
-    let formats = elf.symbol_containing(&["core", "fmt", "5write"]).is_some();
-    let stack_note = if formats { Some(stack_bound_finding(&elf)) } else { None };
-    if !formats {
-        findings.push(stack_bound_finding(&elf));
-    }
+    let stack = stack_bound_finding(&elf);
+    let stack_note = if elf.symbol_containing(&["core", "fmt", "5write"]).is_some() {
+        Some(stack)
+    } else {
+        findings.push(stack);
+        None
+    };
     if features.split([',', ' ']).any(|f| f == "interface" || f == "serial") {
         findings.push(usart2_finding(&elf)?);
     }
@@ -312,23 +314,11 @@ fn decode(h: u16, h2: Option<u16>) -> Insn {
         0xe92d => Insn::PrologueWide,
         // NOP, YIELD, WFE, WFI.
         0xbf00 | 0xbf10 | 0xbf20 | 0xbf30 => Insn::Hint,
-        // B T2: imm11, offset = SignExtend(imm11:0).
-        0xe000..=0xe7ff => {
-            let imm = i64::from(h & 0x7ff);
-            Insn::Branch { offset: ((imm << 53) >> 52), len: 2 }
-        }
-        // B.W T4: S:I1:I2:imm10:imm11:0, I1 = NOT(J1 XOR S), I2 = NOT(J2 XOR S).
+        // B T2 (unconditional, 16-bit).
+        0xe000..=0xe7ff => Insn::Branch { offset: crate::code::b_t2_offset(h), len: 2 },
+        // B.W T4 (unconditional, 32-bit; not BL).
         _ if h & 0xf800 == 0xf000 => match h2 {
-            Some(l) if l & 0xd000 == 0x9000 => {
-                let s = i64::from((h >> 10) & 1);
-                let j1 = i64::from((l >> 13) & 1);
-                let j2 = i64::from((l >> 11) & 1);
-                let i1 = 1 ^ (j1 ^ s);
-                let i2 = 1 ^ (j2 ^ s);
-                let imm =
-                    (s << 24) | (i1 << 23) | (i2 << 22) | (i64::from(h & 0x3ff) << 12) | (i64::from(l & 0x7ff) << 1);
-                Insn::Branch { offset: (imm << 39) >> 39, len: 4 }
-            }
+            Some(l) if l & 0xd000 == 0x9000 => Insn::Branch { offset: crate::code::t4_offset(h, l), len: 4 },
             _ => Insn::Other,
         },
         _ => Insn::Other,
@@ -598,14 +588,13 @@ pub fn decoder_finding(elf: &Elf, path: &Path) -> Finding {
         }
         Err(e) => return Finding { key, ok: false, line: format!("running {}: {e}", objdump.display()) },
     };
-    let funcs: Vec<(u64, u64)> = crate::code::functions(elf)
-        .into_iter()
-        .filter_map(|f| crate::code::body(elf, f).map(|b| (f, b.size)))
-        .collect();
+    let bodies: Vec<crate::code::Body> =
+        crate::code::functions(elf).into_iter().filter_map(|f| crate::code::body(elf, f)).collect();
+    let funcs: Vec<(u64, u64)> = bodies.iter().map(|b| (b.start, b.size)).collect();
     let listed = crate::code::listed(&text, &funcs);
     let mut differ = Vec::new();
-    for &(f, _) in &funcs {
-        let Some(b) = crate::code::body(elf, f) else { continue };
+    for b in &bodies {
+        let f = b.start;
         let mut mine = b.out.clone();
         mine.sort();
         let theirs = listed.get(&f).map(|l| {

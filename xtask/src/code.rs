@@ -87,6 +87,21 @@ pub enum Effect {
     Other,
 }
 
+/// B T2's offset from the instruction's address + 4: SignExtend(imm11:0).
+pub fn b_t2_offset(h: u16) -> i64 {
+    sext(u64::from(h & 0x7ff) << 1, 12)
+}
+
+/// BL T1's and B.W T4's offset from the instruction's address + 4: S:I1:I2:imm10:imm11:0,
+/// I1 = NOT(J1 XOR S), I2 = NOT(J2 XOR S).
+pub fn t4_offset(h: u16, l: u16) -> i64 {
+    let (hw, lw) = (u64::from(h), u64::from(l));
+    let s = (hw >> 10) & 1;
+    let (j1, j2) = ((lw >> 13) & 1, (lw >> 11) & 1);
+    let (i1, i2) = (1 ^ (j1 ^ s), 1 ^ (j2 ^ s));
+    sext((s << 24) | (i1 << 23) | (i2 << 22) | ((hw & 0x3ff) << 12) | ((lw & 0x7ff) << 1), 25)
+}
+
 /// Length in bytes of the Thumb instruction whose first halfword is `h`.
 pub fn insn_len(h: u16) -> u64 {
     if h >> 11 >= 0b11101 {
@@ -108,7 +123,7 @@ pub fn effect(h: u16, l: u16) -> Effect {
             // ADR T1: imm8 words forward.
             0xa000..=0xa7ff => Effect::Adr(4 * i64::from(h & 0xff)),
             // B T2: imm11.
-            0xe000..=0xe7ff => Effect::Branch(sext((hw & 0x7ff) << 1, 12)),
+            0xe000..=0xe7ff => Effect::Branch(b_t2_offset(h)),
             // B<c> T1: imm8 (cond 1110 is UDF, 1111 SVC).
             0xd000..=0xddff => Effect::Branch(sext((hw & 0xff) << 1, 9)),
             // BLX Rm; BX Rm other than LR; MOV PC, Rm (T1, Rd = 15).
@@ -160,16 +175,13 @@ pub fn effect(h: u16, l: u16) -> Effect {
         return Effect::Move { rd: (l >> 8) & 0xf, imm, top: h & 0xfbf0 == 0xf2c0 };
     }
     if h & 0xf800 == 0xf000 {
-        let s = (hw >> 10) & 1;
-        // BL T1 and B.W T4: S:I1:I2:imm10:imm11:0, I1 = NOT(J1 XOR S), I2 = NOT(J2 XOR S).
+        // BL T1 and B.W T4.
         if l & 0xd000 == 0xd000 || l & 0xd000 == 0x9000 {
-            let (j1, j2) = ((lw >> 13) & 1, (lw >> 11) & 1);
-            let (i1, i2) = (1 ^ (j1 ^ s), 1 ^ (j2 ^ s));
-            let imm = (s << 24) | (i1 << 23) | (i2 << 22) | ((hw & 0x3ff) << 12) | ((lw & 0x7ff) << 1);
-            return Effect::Branch(sext(imm, 25));
+            return Effect::Branch(t4_offset(h, l));
         }
         // B<c>.W T3: S:J2:J1:imm6:imm11:0 (cond 111x are other instructions).
         if l & 0xd000 == 0x8000 && (h >> 6) & 0xe != 0xe {
+            let s = (hw >> 10) & 1;
             let (j1, j2) = ((lw >> 13) & 1, (lw >> 11) & 1);
             let imm = (s << 20) | (j2 << 19) | (j1 << 18) | ((hw & 0x3f) << 12) | ((lw & 0x7ff) << 1);
             return Effect::Branch(sext(imm, 21));
@@ -202,13 +214,20 @@ fn mapping_symbols(elf: &Elf, range: std::ops::Range<u64>) -> Vec<(u64, bool)> {
     maps
 }
 
+/// The sized symbol (a function, not a mapping symbol) that starts at `addr` (Thumb bit
+/// ignored): (name, value, size).
+pub fn function_symbol<'e>(elf: &'e Elf, addr: u64) -> Option<&'e (String, u64, u64)> {
+    let start = addr & !1;
+    elf.symbols().iter().find(|(n, v, s)| *v & !1 == start && *s > 0 && !n.starts_with('$'))
+}
+
 /// The function whose symbol starts at `addr` (Thumb bit ignored), decoded.
 pub fn body(elf: &Elf, addr: u64) -> Option<Body> {
     let start = addr & !1;
     if !in_code(elf, start) {
         return None;
     }
-    let size = elf.symbols().iter().find(|(n, v, s)| *v & !1 == start && *s > 0 && !n.starts_with('$'))?.2;
+    let size = function_symbol(elf, start)?.2;
     let code = elf.read(start, size)?;
     // Mapping symbols inside the body, in address order: true where data starts.
     let maps = mapping_symbols(elf, start..start + size);
@@ -376,40 +395,25 @@ pub fn walk(elf: &Elf, entry: u64, goal: u64, resolve: Resolve) -> Walk {
 }
 
 /// The functions whose address the image holds as data, as an indirect call would find them:
-/// the words of `.rodata` and `.data` and of the literal pools in `.text` (the `$d` ranges)
-/// that are a function's address with the Thumb bit, and the `movw`/`movt` constants of every
-/// function's code. The vector table is left out: its handlers are not called by code.
+/// the words of `.rodata` and `.data` and of the literal pools in code ([`literal_words`])
+/// that are a function's address with the Thumb bit, and the `movw`/`movt` and `adr`
+/// constants of every function's code. The vector table is left out: its handlers are not
+/// called by code.
 pub fn address_taken(elf: &Elf) -> Vec<u64> {
     let funcs: Vec<u64> = functions(elf);
     let is_func = |w: u64| w & 1 == 1 && funcs.binary_search(&(w & !1)).is_ok();
-    let mut taken = Vec::new();
-    let mut words = |bytes: &[u8], base: u64| {
-        let skip = ((4 - base % 4) % 4) as usize;
-        for w in bytes.get(skip..).unwrap_or(&[]).chunks_exact(4) {
-            let w = u64::from(u32::from_le_bytes([w[0], w[1], w[2], w[3]]));
-            if is_func(w) {
-                taken.push(w & !1);
-            }
-        }
-    };
+    let mut taken: Vec<u64> = Vec::new();
     for sec in elf.sections() {
-        if sec.ty == 1 && sec.flags & 2 != 0 && sec.addr != 0 && (sec.name == ".rodata" || sec.name == ".data") {
-            if let Some(bytes) = elf.read(sec.addr, sec.size) {
-                words(bytes, sec.addr);
-            }
-        }
-    }
-    // The data ranges in code: from each `$d` to the next mapping symbol or function start.
-    let mut marks = mapping_symbols(elf, 0..u64::MAX);
-    marks.extend(funcs.iter().map(|&f| (f, false)));
-    marks.sort();
-    for (k, &(at, data)) in marks.iter().enumerate() {
-        if data {
-            let end = marks[k + 1..].iter().map(|m| m.0).find(|&e| e > at);
-            if let Some(bytes) = end.and_then(|e| elf.read(at, e - at)) {
-                words(bytes, at);
-            }
-        }
+        let loaded = sec.ty == 1 && sec.flags & 2 != 0 && sec.addr != 0;
+        let words = if loaded && (sec.name == ".rodata" || sec.name == ".data") {
+            elf.read(sec.addr, sec.size).map_or_else(Vec::new, |bytes| aligned_words(bytes, sec.addr))
+        } else if loaded && in_code(elf, sec.addr) {
+            // The data ranges in code: the literal pools.
+            literal_words(elf, sec.addr, sec.size)
+        } else {
+            continue;
+        };
+        taken.extend(words.into_iter().filter(|&w| is_func(w)).map(|w| w & !1));
     }
     for &f in &funcs {
         if let Some(b) = body(elf, f) {
@@ -427,8 +431,21 @@ pub fn in_code(elf: &Elf, addr: u64) -> bool {
     elf.sections().iter().any(|s| s.flags & SHF_EXECINSTR != 0 && (s.addr..s.addr + s.size).contains(&addr))
 }
 
-/// The aligned 32-bit words of the data (`$d`) ranges inside the function at `start` of `size`
-/// bytes: its literal pool, not its instructions.
+/// The little-endian 32-bit words of `bytes`, which start at address `base`, that lie on word
+/// boundaries.
+fn aligned_words(bytes: &[u8], base: u64) -> Vec<u64> {
+    let skip = ((4 - base % 4) % 4) as usize;
+    bytes
+        .get(skip..)
+        .unwrap_or(&[])
+        .chunks_exact(4)
+        .map(|w| u64::from(u32::from_le_bytes([w[0], w[1], w[2], w[3]])))
+        .collect()
+}
+
+/// The aligned 32-bit words of the data (`$d`) ranges in `size` bytes of code from `start` (a
+/// function, or a whole section): the literal pools, not the instructions. A range ends at the
+/// next mapping symbol, or at `start + size`.
 pub fn literal_words(elf: &Elf, start: u64, size: u64) -> Vec<u64> {
     let end = start + size;
     let marks = mapping_symbols(elf, start..end);
@@ -438,13 +455,8 @@ pub fn literal_words(elf: &Elf, start: u64, size: u64) -> Vec<u64> {
             continue;
         }
         let to = marks[k + 1..].iter().map(|m| m.0).find(|&e| e > at).unwrap_or(end);
-        let from = (at + 3) & !3;
-        let mut a = from;
-        while a + 4 <= to {
-            if let Some(w) = elf.read(a, 4) {
-                out.push(u64::from(u32::from_le_bytes([w[0], w[1], w[2], w[3]])));
-            }
-            a += 4;
+        if let Some(bytes) = elf.read(at, to - at) {
+            out.extend(aligned_words(bytes, at));
         }
     }
     out
@@ -489,17 +501,11 @@ pub fn stack_bound(
     executor: &dyn Fn(&str) -> bool,
 ) -> anyhow::Result<StackBound> {
     let v = elf.vectors()?;
-    let name = |addr: u64| {
-        elf.symbols()
-            .iter()
-            .find(|(n, a, s)| *a & !1 == addr && *s > 0 && !n.starts_with('$'))
-            .map(|(n, _, _)| n.clone())
-            .unwrap_or_default()
-    };
+    let name = |addr: u64| function_symbol(elf, addr).map_or("", |(n, _, _)| n.as_str());
     let taken = address_taken(elf);
-    let (tasks, others): (Vec<u64>, Vec<u64>) = taken.iter().partition(|&&f| task(&name(f)));
+    let (tasks, others): (Vec<u64>, Vec<u64>) = taken.iter().partition(|&&f| task(name(f)));
     let resolve = |b: &Body| -> Option<Vec<u64>> {
-        if executor(&name(b.start)) {
+        if executor(name(b.start)) {
             Some(tasks.iter().chain(&others).copied().collect())
         } else {
             Some(others.clone())
