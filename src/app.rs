@@ -549,16 +549,17 @@ impl App {
 
     fn finish_sample(&mut self, t_ms: u64, out: StepOutput) -> SampleOut {
         self.duty_mean.push(out.duty.get());
-        // NaN (no reading) compares false: a sensor fault moves it too.
-        // The law that ran this sample: a commissioning's excitation has the narrow band.
+        let recorded = out.recorded_c();
+        // The law that ran this sample: a commissioning's excitation has the narrow band. NaN
+        // (no reading) compares false: a sensor fault moves it too.
         let onoff = matches!(self.carrier.controller(), BoardController::OnOff(_));
         let band = if onoff { ONOFF_HELD_BAND_C } else { HELD_BAND_C };
-        if !((out.recorded_c() - out.setpoint_c.0).abs() <= band) {
+        if !((recorded - out.setpoint_c.0).abs() <= band) {
             self.duty_mean.moved();
         }
         self.last_t_ms = t_ms;
         self.commission_step(out.mode);
-        let mut rec = self.recorder.push(t_ms, out.recorded_c());
+        let mut rec = self.recorder.push(t_ms, recorded);
         if core::mem::take(&mut self.ack_pending) {
             self.annunciator.acknowledge();
         }

@@ -290,8 +290,8 @@ impl Input {
 
     /// Why there was no reading, by [`Report::fault_samples`]: the probe (the file's rows with
     /// no reading), the record (holes after a `log_entries_lost` event), or both.
-    pub fn no_reading_cause(&self, fault_samples: u32) -> &'static str {
-        no_reading_cause(fault_samples, self.holes)
+    pub fn no_reading_cause(&self, fault_samples: u32) -> NoReading {
+        NoReading::of(fault_samples, self.holes)
     }
 
     /// What had no reading, by [`Report::fault_samples`]: the file's rows with no reading and
@@ -309,13 +309,34 @@ impl Input {
     }
 }
 
-/// Why `fault_samples` had no reading when `holes` of them are holes after a
-/// `log_entries_lost` event: the probe, the record, or both.
-pub fn no_reading_cause(fault_samples: u32, holes: usize) -> &'static str {
-    match ((fault_samples as usize) > holes, holes > 0) {
-        (true, true) => "sensor fault; lost log entries",
-        (false, true) => "lost log entries",
-        _ => "sensor fault",
+/// Why a log had no reading for a while.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoReading {
+    /// The probe: rows with no reading.
+    SensorFault,
+    /// The record: holes after a `log_entries_lost` event.
+    LostEntries,
+    /// Both.
+    Both,
+}
+
+impl NoReading {
+    /// The cause when `holes` of `fault_samples` are holes after a `log_entries_lost` event.
+    pub fn of(fault_samples: u32, holes: usize) -> NoReading {
+        match ((fault_samples as usize) > holes, holes > 0) {
+            (true, true) => NoReading::Both,
+            (false, true) => NoReading::LostEntries,
+            _ => NoReading::SensorFault,
+        }
+    }
+
+    /// As the no-reading line and the report's row name it.
+    pub fn label(self) -> &'static str {
+        match self {
+            NoReading::SensorFault => "sensor fault",
+            NoReading::LostEntries => "lost log entries",
+            NoReading::Both => "sensor fault; lost log entries",
+        }
     }
 }
 
@@ -518,7 +539,7 @@ pub fn run(args: &MonitorArgs) -> Result<()> {
     if r.fault_samples > 0 {
         println!(
             "  {:<25} {:7.2} h  ({}; counted neither in nor out of range)",
-            format!("no reading ({})", input.no_reading_cause(r.fault_samples)),
+            format!("no reading ({})", input.no_reading_cause(r.fault_samples).label()),
             hours(r.time_no_reading_s),
             input.no_reading_text(r.fault_samples)
         );
@@ -645,13 +666,12 @@ mod tests {
         (25_500..=30_000).step_by(300).for_each(|t| csv.push_str(&row(t)));
         let p = std::env::temp_dir().join(format!("hter-monitor-{}-hole.csv", std::process::id()));
         std::fs::write(&p, csv).unwrap();
-        let input_again = read_input(&p).unwrap();
+        let input = read_input(&p).unwrap();
         std::fs::remove_file(&p).unwrap();
-        let r = record(&input_again).unwrap();
+        let r = record(&input).unwrap();
         assert_eq!((r.time_no_reading_s, r.time_in_range_s, r.fault_samples), (21_600.0, 8_400.0, 1));
-        let input = input_again;
         // The record lost them, not the probe: said as such.
-        assert_eq!(input.no_reading_cause(r.fault_samples), "lost log entries");
+        assert_eq!(input.no_reading_cause(r.fault_samples).label(), "lost log entries");
         let (class, line) = crate::report_cmd::verdict(&r, input.holes);
         assert_eq!(class, "unknown");
         assert!(line.contains("part of the record was lost") && !line.contains("probe"), "{line}");

@@ -212,16 +212,16 @@ pub fn verdict(r: &monitor_cmd::Report, holes: usize) -> (&'static str, &'static
     {
         ("excursion", "EXCURSIONS — the load left 2–8 °C: see the alarms and the days below")
     } else if r.fault_samples > 0 {
-        let line = match monitor_cmd::no_reading_cause(r.fault_samples, holes) {
-            "lost log entries" => {
+        let line = match monitor_cmd::NoReading::of(r.fault_samples, holes) {
+            monitor_cmd::NoReading::LostEntries => {
                 "NOT FULLY RECORDED — part of the record was lost (log entries the board could not store, below): \
                  the record cannot show the load stayed within 2–8 °C then"
             }
-            "sensor fault" => {
+            monitor_cmd::NoReading::SensorFault => {
                 "NOT FULLY RECORDED — the probe gave no reading for part of the period (below): the record \
                  cannot show the load stayed within 2–8 °C then"
             }
-            _ => {
+            monitor_cmd::NoReading::Both => {
                 "NOT FULLY RECORDED — the probe gave no reading for part of the period and part of the record \
                  was lost (below): the record cannot show the load stayed within 2–8 °C then"
             }
@@ -450,7 +450,7 @@ pub fn html(path: &Path) -> Result<String> {
     if r.fault_samples > 0 {
         row(
             w,
-            &format!("No reading ({})", input.no_reading_cause(r.fault_samples)),
+            &format!("No reading ({})", input.no_reading_cause(r.fault_samples).label()),
             &format!(
                 "{} ({}; counted neither in nor out of range)",
                 dur(r.time_no_reading_s),
