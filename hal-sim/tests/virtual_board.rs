@@ -253,32 +253,18 @@ fn identify_runs_to_completion_and_the_status_shows_the_new_model_and_adaptive_m
 /// not the self-tuner's estimate) and GPC holds 4 °C from the control model.
 #[test]
 fn after_a_reset_the_holdover_still_runs_on_the_cabinet_model() {
-    use hal_sim::plant::Load;
-    use hal_sim::sim::virtual_board::{VirtualBoard, VirtualOptions};
-    use hal_sim::sim::PlantChoice;
-    let field = |b: &mut VirtualBoard, key: &str| {
-        let reply = b.request("status");
-        let prefix = format!("{key}=");
-        reply.lines().find_map(|l| l.strip_prefix(prefix.as_str())).map(str::to_string).unwrap()
-    };
-    let opts =
-        VirtualOptions { plant: PlantChoice::Hter1, load: Load::Full, ambient_c: 28.0, seed: 1, module_sense: false };
-    let mut b = VirtualBoard::new(&opts).unwrap();
+    let mut b = virtual_hter1(hal_sim::plant::Load::Full, 28.0, hal_sim::scenario::Start::Holding(4.0));
     for _ in 0..360 {
         b.step().unwrap();
     }
     assert_eq!(b.request("identify"), "ok\r\n");
-    let mut n = 0;
-    while field(&mut b, "commissioning") != "done" {
-        b.step().unwrap();
-        n += 1;
-        assert!(n < 2500, "commissioning: {}", field(&mut b, "commissioning"));
-    }
+    commissioning_ends_done(&mut b);
     let cabinet = b.app().cabinet().expect("a cabinet model");
     assert!(cabinet.b()[1] > 0.0, "{cabinet:?}");
     assert_eq!(b.app().carrier().holdover_model(), Some(cabinet));
-    let control = (field(&mut b, "model_a"), field(&mut b, "model_k"));
-    let shown = (field(&mut b, "cabinet_a"), field(&mut b, "cabinet_b"), field(&mut b, "cabinet_k"));
+    let control = (board_status(&mut b, "model_a"), board_status(&mut b, "model_k"));
+    let shown =
+        (board_status(&mut b, "cabinet_a"), board_status(&mut b, "cabinet_b"), board_status(&mut b, "cabinet_k"));
     // Both records are written at once (the supply has been good for an hour).
     for _ in 0..6 {
         b.step().unwrap();
@@ -287,8 +273,15 @@ fn after_a_reset_the_holdover_still_runs_on_the_cabinet_model() {
     assert_eq!(b.restarts, 1);
     assert_eq!(b.app().cabinet(), Some(cabinet), "restored from its own record");
     assert_eq!(b.app().carrier().holdover_model(), Some(cabinet), "the holdover runs on it after the reset");
-    assert_eq!((field(&mut b, "cabinet_a"), field(&mut b, "cabinet_b"), field(&mut b, "cabinet_k")), shown);
-    assert_eq!((field(&mut b, "model_a"), field(&mut b, "model_k")), control, "the self-tuner restarts from its model");
+    assert_eq!(
+        (board_status(&mut b, "cabinet_a"), board_status(&mut b, "cabinet_b"), board_status(&mut b, "cabinet_k")),
+        shown
+    );
+    assert_eq!(
+        (board_status(&mut b, "model_a"), board_status(&mut b, "model_k")),
+        control,
+        "the self-tuner restarts from its model"
+    );
     // Two hours on: GPC holds 4 °C, the holdover gives an estimate from the cabinet model.
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for i in 0..720 {
@@ -299,8 +292,8 @@ fn after_a_reset_the_holdover_still_runs_on_the_cabinet_model() {
         }
     }
     assert!(lo > 3.7 && hi < 4.3, "holds 4 °C after the reset: {lo:.2}…{hi:.2}");
-    assert_eq!(field(&mut b, "controller"), "gpc");
-    let holdover: f64 = field(&mut b, "holdover_s").parse().expect("a number");
+    assert_eq!(board_status(&mut b, "controller"), "gpc");
+    let holdover: f64 = board_status(&mut b, "holdover_s").parse().expect("a number");
     assert!((60.0..3600.0).contains(&holdover), "{holdover}");
     assert_eq!(b.app().carrier().holdover_model(), Some(cabinet));
 }
@@ -672,16 +665,15 @@ fn a_board_that_goes_away_while_identify_follows_ends_the_watch_in_one_line() {
 /// from 70 min after the change all 6 starts ran to `done` (without a change, every start from
 /// 20 min after the boot did). Here: the change 20 min after the boot, `identify` refused 20 min
 /// later (it would end `poor_fit`), accepted 70 min after the change and run to `done`.
-/// A virtual H-TER I, full load, seed 1, at `ambient_c`, booted as `start` says.
-fn virtual_hter1(ambient_c: f64, start: hal_sim::scenario::Start) -> hal_sim::sim::virtual_board::VirtualBoard {
+/// A virtual H-TER I with `load`, seed 1, at `ambient_c`, booted as `start` says.
+fn virtual_hter1(
+    load: hal_sim::plant::Load,
+    ambient_c: f64,
+    start: hal_sim::scenario::Start,
+) -> hal_sim::sim::virtual_board::VirtualBoard {
     use hal_sim::sim::virtual_board::{VirtualBoard, VirtualOptions};
-    let opts = VirtualOptions {
-        plant: hal_sim::sim::PlantChoice::Hter1,
-        load: hal_sim::plant::Load::Full,
-        ambient_c,
-        seed: 1,
-        module_sense: false,
-    };
+    let opts =
+        VirtualOptions { plant: hal_sim::sim::PlantChoice::Hter1, load, ambient_c, seed: 1, module_sense: false };
     VirtualBoard::starting(&opts, start).unwrap()
 }
 
@@ -713,7 +705,7 @@ fn commissioning_ends_done(b: &mut hal_sim::sim::virtual_board::VirtualBoard) {
 /// `poor_fit`). It waits one block of the mean, 30 minutes, after a boot that holds its setpoint.
 #[test]
 fn identify_waits_half_an_hour_after_a_boot() {
-    let mut b = virtual_hter1(36.0, hal_sim::scenario::Start::Holding(4.0));
+    let mut b = virtual_hter1(hal_sim::plant::Load::Full, 36.0, hal_sim::scenario::Start::Holding(4.0));
     b.step().unwrap();
     let mut n = 1;
     loop {
@@ -738,7 +730,7 @@ fn identify_waits_half_an_hour_after_a_boot() {
 /// `done`.
 #[test]
 fn identify_waits_until_a_pulled_down_carrier_has_held_its_setpoint() {
-    let mut b = virtual_hter1(28.0, hal_sim::scenario::Start::Ambient);
+    let mut b = virtual_hter1(hal_sim::plant::Load::Full, 28.0, hal_sim::scenario::Start::Ambient);
     assert!(b.load_c() > 27.0, "switched on at the ambient: {}", b.load_c());
     // The sample whose reading was last more than 1.5 °C from the setpoint.
     let (mut n, mut last_out) = (0, 0);
@@ -767,7 +759,7 @@ fn identify_waits_until_a_pulled_down_carrier_has_held_its_setpoint() {
 
 #[test]
 fn identify_waits_until_the_carrier_has_held_a_new_setpoint() {
-    let mut b = virtual_hter1(28.0, hal_sim::scenario::Start::Holding(4.0));
+    let mut b = virtual_hter1(hal_sim::plant::Load::Full, 28.0, hal_sim::scenario::Start::Holding(4.0));
     for _ in 0..120 {
         b.step().unwrap();
     }
@@ -797,15 +789,7 @@ fn identify_waits_until_the_carrier_has_held_a_new_setpoint() {
 /// was set.
 #[test]
 fn identify_waits_no_longer_than_70_min_under_onoff_in_a_hot_room() {
-    use hal_sim::sim::virtual_board::{VirtualBoard, VirtualOptions};
-    let opts = VirtualOptions {
-        plant: hal_sim::sim::PlantChoice::Hter1,
-        load: hal_sim::plant::Load::Half,
-        ambient_c: 43.0,
-        seed: 1,
-        module_sense: false,
-    };
-    let mut b = VirtualBoard::starting(&opts, hal_sim::scenario::Start::Holding(4.0)).unwrap();
+    let mut b = virtual_hter1(hal_sim::plant::Load::Half, 43.0, hal_sim::scenario::Start::Holding(4.0));
     b.step().unwrap();
     assert!(b.request("set controller onoff").ends_with("ok\r\n"));
     let (mut n, mut hi) = (0, f64::MIN);
