@@ -35,7 +35,9 @@ use crate::iface::num::Fixed;
 use crate::iface::{Command, Law, Refusal, SetRequest, Why, HELP};
 use crate::model::Model;
 use crate::persist::log::{IntervalLog, LogEntry, SettingKey};
-use crate::persist::{HistoryRecord, ModelCadence, ModelRecord, Recorder, ResetCause, Save, SettingsRecord};
+use crate::persist::{
+    HistoryRecord, ModelCadence, ModelRecord, Recorder, ResetCause, Save, SensorOffset, SettingsRecord,
+};
 use crate::profile::SelfTuningOrPi;
 use crate::step::{Carrier, StepInput, StepOutput, ValidConfig};
 
@@ -83,13 +85,17 @@ pub struct Boot {
     pub fault: Option<StopInfo>,
     /// Flash pages the boot found torn and repaired.
     pub pages_lost: u8,
+    /// The acknowledge button was held through the reset: a technician's service reset
+    /// ([`Self::service_reset`]).
+    pub service: bool,
 }
 
 impl Boot {
     /// How the boot's `history` (the stored one with this boot's reset, stop and repaired pages
     /// counted) is stored: at once on a good supply, past the write gate's hold-off, when it
-    /// carries a fail-safe stop the stored history does not already have as its newest; behind
-    /// the hold-off otherwise. A board that faults within the hold-off of every boot (a panic in
+    /// carries a fail-safe stop the stored history does not already have as its newest, or
+    /// forgets what a service reset cleared ([`Self::service_reset`]); behind the hold-off
+    /// otherwise. A board that faults within the hold-off of every boot (a panic in
     /// the first steps, a stall) restarts before its boot's store: behind the hold-off, the
     /// stop never reached the cold-chain record however often it repeated, though the next boot
     /// found it in RAM each time (SPEC §7). The same stop again (a fault loop) waits as before,
@@ -97,11 +103,25 @@ impl Boot {
     /// reason through a power loss, and the boot took it).
     pub fn history_save(&self, history: HistoryRecord) -> Save {
         let stop = self.fault.as_ref().map(crate::persist::LastStop::from);
-        if stop.is_some() && stop != self.history.last_stop {
+        // A service reset's forgetting is stored at once too: behind the hold-off, a power cut
+        // in the first minute brought back a short or an offset the technician had cleared.
+        let forgot =
+            history.ssr_shorted() != self.history.ssr_shorted() || history.sensor_offset != self.history.sensor_offset;
+        if forgot || (stop.is_some() && stop != self.history.last_stop) {
             Save::AlarmHistory(history)
         } else {
             Save::History(history)
         }
+    }
+
+    /// Whether this boot is a technician's service reset, which forgets what the history
+    /// carries ([`Recorder::note_service`]: the SSR's short and the sensor offset, after the
+    /// repair): the acknowledge button held through a reset ([`Self::service`]), and the reset
+    /// a person's (the reset button, a power-on). Not after a watchdog bite or a fail-safe
+    /// stop, which a button held by chance must not turn into a repair. A reset alone no longer
+    /// clears the short: an NRST glitch or a debugger attaching under reset gives one too.
+    pub fn service_reset(&self) -> bool {
+        self.service && self.fault.is_none() && self.reset != ResetCause::Watchdog
     }
 
     /// Starts the step and the record from what this boot found: counts the boot in the record
@@ -117,6 +137,9 @@ impl Boot {
     ) -> HistoryRecord {
         carrier.note_reset(self.reset);
         let mut history = recorder.note_boot(self.reset, self.fault.as_ref());
+        if self.service_reset() {
+            history = recorder.note_service();
+        }
         if let Some(f) = &self.fault {
             carrier.note_board_fault(f.kind);
         }
@@ -424,6 +447,15 @@ impl App {
         // The history before the events: more pages lost than the outbox holds drop events (the
         // history counts them all), never the boot's history.
         let _ = app_saves.push_back(boot.history_save(history));
+        let (short, offset) = (boot.history.ssr_shorted(), boot.history.sensor_offset);
+        if boot.service_reset() && (short || offset != SensorOffset::NONE) {
+            let value = [offset.c(), f32::from(u8::from(short))];
+            let _ = app_saves.push_back(Save::Log(LogEntry::Setting {
+                t_s: (base_ms / 1000) as u32,
+                key: SettingKey::Service,
+                value,
+            }));
+        }
         for _ in 0..boot.pages_lost {
             let _ = app_saves
                 .push_back(Save::Log(LogEntry::Event { t_s: (base_ms / 1000) as u32, kind: EventKind::FlashPageLost }));

@@ -725,9 +725,9 @@ impl HistoryRecord {
     /// ([`crate::step::Carrier::resume`]). A short does not heal in a restart, and forgotten, a
     /// brown-out in limp home handed the modules back to the controller with the short still
     /// there: full cooling until the checks found it again, the load at 1.88 °C first (`hter sim
-    /// --scenario disturbance --fault ssr-stuck-on@3000 --fault brownout@10000`). A pin or
-    /// software reset that found no fail-safe stop (the technician's reset button, or a reflash,
-    /// after replacing the SSR) clears it ([`Recorder::note_boot`]).
+    /// --scenario disturbance --fault ssr-stuck-on@3000 --fault brownout@10000`). Only a
+    /// technician's service reset clears it ([`Recorder::note_service`]): not a reset alone, which
+    /// an NRST glitch or a debugger gives as well.
     pub fn ssr_shorted(&self) -> bool {
         self.flags & SSR_SHORTED != 0
     }
@@ -1024,18 +1024,30 @@ impl Recorder {
 
     /// Counts the boot: its reset ([`Self::note_reset`]) and the fail-safe stop the previous boot
     /// ended in, if the boot found one ([`Self::note_board_fault`]); returns the history to store
-    /// and to resume from ([`crate::step::Carrier::resume`]). A pin or software reset without a
-    /// stop is a person's (the reset button, a reflash: what a technician does after replacing
-    /// the SSR) and clears [`HistoryRecord::ssr_shorted`]; a brown-out, a watchdog bite or a
-    /// fail-safe stop (whose reset is a software one) keeps it. If the SSR is still shorted, the
-    /// checks find it again as on a first boot.
+    /// and to resume from ([`crate::step::Carrier::resume`]). What the history carries (the
+    /// SSR's short, the sensor offset) stays, whatever the reset: only a service reset
+    /// ([`Self::note_service`]) forgets it.
     pub fn note_boot(&mut self, reset: ResetCause, fault: Option<&StopInfo>) -> HistoryRecord {
         self.boot.note_reset(reset);
-        match fault {
-            Some(f) => self.boot.note_stop(f),
-            None if reset == ResetCause::Other => self.boot.flags &= !SSR_SHORTED,
-            None => {}
+        if let Some(f) = fault {
+            self.boot.note_stop(f);
         }
+        self.since_save = 0;
+        self.history()
+    }
+
+    /// A technician's service reset ([`crate::app::Boot::service_reset`]: the acknowledge button
+    /// held through a reset, after replacing the SSR or repairing the probe's lead): forgets the
+    /// SSR's short ([`HistoryRecord::ssr_shorted`]) and the sensor offset
+    /// ([`HistoryRecord::sensor_offset`]); returns the history to store and to resume from. If
+    /// the fault is still there, the checks find it again as on a first boot (a short: full
+    /// cooling until they do, the load to ≈ 1.9 °C first; an offset: the load held that much
+    /// colder until the offset watch measures it again). Before, any pin or software reset
+    /// without a fail-safe stop cleared the short: the reset button, but also an NRST glitch or
+    /// a debugger attaching under reset.
+    pub fn note_service(&mut self) -> HistoryRecord {
+        self.boot.flags &= !SSR_SHORTED;
+        self.boot.sensor_offset = SensorOffset::NONE;
         self.since_save = 0;
         self.history()
     }
@@ -1800,16 +1812,25 @@ mod tests {
         assert_eq!(bytes[HistoryRecord::LEN - 5], 1);
         let v5: [u8; HistoryRecord::LEN_V5] = older_history(&bytes, 5);
         assert_eq!(HistoryRecord::decode(&v5), Ok(h.with_carried(true, false)));
-        // A boot that found a stop keeps it, whatever its reset; a person's reset clears it.
+        // Every boot keeps it, whatever its reset (a pin reset is also an NRST glitch); a
+        // service reset clears it, and the sensor offset with it, and nothing else.
         let stall = StopInfo::new(StopKind::ControlStall, 0, 0, 12_000);
-        for (reset, stop, kept) in [
-            (ResetCause::BrownOut, None, true),
-            (ResetCause::Watchdog, None, true),
-            (ResetCause::Other, Some(&stall), true),
-            (ResetCause::Other, None, false),
+        let offset = SensorOffset::from_c(1.5);
+        let h = h.with_sensor_offset(offset);
+        for (reset, stop) in [
+            (ResetCause::BrownOut, None),
+            (ResetCause::Watchdog, None),
+            (ResetCause::Other, Some(&stall)),
+            (ResetCause::Other, None),
         ] {
             let mut next = Recorder::new(h, 360);
-            assert_eq!(next.note_boot(reset, stop).ssr_shorted(), kept, "{reset:?} {stop:?}");
+            let booted = next.note_boot(reset, stop);
+            assert!(booted.ssr_shorted(), "{reset:?} {stop:?}");
+            assert_eq!(booted.sensor_offset, offset, "{reset:?} {stop:?}");
+            let serviced = next.note_service();
+            assert!(!serviced.ssr_shorted() && serviced.sensor_offset == SensorOffset::NONE);
+            assert!(serviced.unacknowledged(), "the latch is the button's, not the service reset's");
+            assert_eq!(serviced.with_carried(true, true).with_sensor_offset(offset), booted);
         }
     }
 

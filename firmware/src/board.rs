@@ -17,7 +17,7 @@
 //! | modules' side of the SSR (`module-sense` build) | PC1 (ADC1_IN2) | A4 (CN8-5) | 47 kΩ from the SSR's load terminal (the modules' supply side) to PC1, 10 kΩ to AGND, 100 nF across the 10 kΩ (τ 0.8 ms: settled ≥ 20 ms before it is read), and a BAT54 Schottky from AGND (anode) to PC1: the modules' Seebeck voltage reverses when the load is warmer than the room (up to −0.56 V at the pin, past the −0.3 V the pin allows). Read in the conversion window after the RTD, where the SSR is off at every duty below full: a shorted SSR reads the supply (`hter::supervisor::module`, README "The module-side sense") |
 //! | alarm output | PC7 | D9 (CN5-2) | a buzzer or red lamp through a low-side NPN/N-MOSFET driver; high = alarm (`hter::alarm`); the second path to the buzzer beside the heartbeat |
 //! | heartbeat | PB5 | D4 (CN9-5) | one 10 µs high pulse per healthy control step ([`heartbeat_pulse`]; a rising edge every Ts, where a toggled level gave the 74HC123's one trigger edge every 2·Ts, past its 15 s) into a retriggerable monostable (74HC123, timeout ≈ 15 s = 1.5·Ts): its output silences the buzzer only while edges arrive, and is ANDed into the supply-enable gate drive, so a reset, hung or dead MCU (pins Hi-Z) sounds the buzzer and opens the supply within 2·Ts without software (README, wiring) |
-//! | acknowledge button | PC13 | B1 (on board, blue) | pressed pulls low (the Nucleo's pull-up); clears a latched alarm |
+//! | acknowledge button | PC13 | B1 (on board, blue) | pressed pulls low (the Nucleo's pull-up); clears a latched alarm; held through a reset, a service reset ([`button_held`]) |
 //! | settings interface TX | PA2 (USART2_TX, AF7) | ST-LINK VCP (on board) | the ST-LINK's virtual COM port (UM1724: SB13/SB14 closed and SB62/SB63 open, as shipped; then PA2/PA3 are not on CN9 D1/D0); 115200 8N1 ([`serial_config`]) |
 //! | settings interface RX | PA3 (USART2_RX, AF7) | ST-LINK VCP (on board) | as TX |
 //!
@@ -370,6 +370,17 @@ pub fn power_check(csr: u32) -> PowerCheck {
         program_bor_level(config::BOR_LEVEL);
     }
     PowerCheck { bor_level, supply_ok }
+}
+
+/// Whether the acknowledge button is held at boot: a technician's service reset (held while the
+/// reset button is pressed and released, or through a power-on; `hter::app::Boot::service`).
+/// Read twice 50 ms apart: a bounce or a glitch on the line is no service reset.
+pub fn button_held(button: &Input<'static>) -> bool {
+    if button.is_high() {
+        return false;
+    }
+    embassy_time::block_for(embassy_time::Duration::from_millis(50));
+    button.is_low()
 }
 
 /// VDD is above the PVD level (PVDO clear): flash may be written.

@@ -134,6 +134,9 @@ async fn main(spawner: Spawner) {
     };
     let fault = failsafe::take_reason();
     let b = board::init();
+    // Read before the flash is: the technician holds the button only for a moment past the
+    // reset.
+    let service = board::button_held(&b.button);
     if let Some(f) = &fault {
         error!("board fault: {}", f);
     }
@@ -175,6 +178,10 @@ async fn main(spawner: Spawner) {
     spawner.spawn(persist::persist(b.flash).unwrap());
     let restored = persist::BOOTED.receive().await;
     let mut boot = restored.boot(reset, fault);
+    boot.service = service;
+    if boot.service_reset() {
+        warn!("service reset: the SSR's short and the sensor offset are forgotten");
+    }
     if restored.settings.is_err() {
         // No settings stored: this build's calibration constant, if it has one.
         if let Some(cal) = config::CALIBRATION {

@@ -355,6 +355,59 @@ fn with_the_module_side_sense_the_interface_build_finds_a_shorted_ssr_at_the_sec
     eprintln!("shorted SSR found at sample {:?} with the sense, {:?} without (sample, load °C)", found[0], found[1]);
 }
 
+/// A shorted SSR found on a board with the module-side sense, then the reset button: the board
+/// limps home from its first sample (an NRST glitch or a debugger's reset is no repair). Then
+/// a service reset (the acknowledge button held through the reset): the board forgets the
+/// short and hands the modules back to the controller, the history says so, and since this
+/// SSR is still shorted the sense finds it again within three samples. Before, the plain reset
+/// already forgot it.
+#[test]
+fn the_reset_button_keeps_a_shorted_ssr_and_a_service_reset_forgets_it() {
+    use hal_sim::fault::Fault;
+    use hal_sim::plant::Load;
+    use hal_sim::sim::virtual_board::{VirtualBoard, VirtualOptions};
+    use hal_sim::sim::PlantChoice;
+    use hter::event::EventKind;
+    use hter::step::Mode;
+    let opts =
+        VirtualOptions { plant: PlantChoice::Hter1, load: Load::Full, ambient_c: 28.0, seed: 1, module_sense: true };
+    let mut b = VirtualBoard::new(&opts).unwrap();
+    for _ in 0..360 {
+        b.step().unwrap();
+    }
+    b.inject(Fault::SsrStuckOn).unwrap();
+    let found = |b: &mut VirtualBoard| {
+        (1..=10).find(|_| b.step().unwrap().step.events.iter().any(|e| e.kind == EventKind::SsrStuckOn))
+    };
+    assert_eq!(found(&mut b), Some(2));
+    // Past the write gate's hold-off: the short is in flash.
+    for _ in 0..30 {
+        b.step().unwrap();
+    }
+    b.reset(false);
+    let first = b.step().unwrap();
+    assert_eq!(first.step.mode, Mode::LimpHome, "the reset button alone");
+    assert!(!first.step.supply_enable);
+    for _ in 0..30 {
+        assert_eq!(b.step().unwrap().step.mode, Mode::LimpHome);
+    }
+    b.reset(true);
+    assert_eq!(b.restarts, 2);
+    let first = b.step().unwrap();
+    assert_ne!(first.step.mode, Mode::LimpHome, "a service reset forgets the short");
+    assert!(first.step.supply_enable);
+    let again = found(&mut b);
+    assert!(again.is_some_and(|n| n <= 2), "found again within the boot's first three samples: {again:?}");
+    for _ in 0..30 {
+        b.step().unwrap();
+    }
+    let history = b.request("history");
+    let cleared: Vec<&str> = history.lines().filter(|l| l.contains("service_reset")).collect();
+    assert_eq!(cleared.len(), 1, "{history}");
+    assert!(cleared[0].ends_with(",service_reset:cleared ssr_short"), "{}", cleared[0]);
+    assert_eq!(history.lines().filter(|l| l.ends_with(",ssr_stuck_on")).count(), 2, "{history}");
+}
+
 /// `--fault` rehearses a failure over the interface, as an engineer would before the field: a
 /// relay that shorts after an hour on a board with the module-side sense. `status` shows limp
 /// home and the alarm, `history` the event within two samples of the short. A hung control loop is

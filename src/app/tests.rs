@@ -34,6 +34,7 @@ fn boot() -> Boot {
         reset: ResetCause::Other,
         fault: None,
         pages_lost: 0,
+        service: false,
     }
 }
 
@@ -877,13 +878,14 @@ fn the_apps_sample_carries_the_module_side_sense_to_the_step() {
 }
 
 /// A shorted SSR is stored with the history at once, and the boots after it limp home from
-/// their first sample (a short does not heal in a brown-out, a watchdog bite or a fail-safe
-/// stop); a pin or software reset without a stop (the technician's reset button or a reflash,
-/// after the SSR was replaced) hands the modules back to the controller. Before, every boot
-/// handed them back: full cooling until the checks found the short again.
+/// their first sample (a short does not heal in a brown-out, a watchdog bite, a fail-safe stop
+/// or a pin reset, which an NRST glitch or a debugger gives too); only a service reset (the
+/// acknowledge button held through a person's reset, after the SSR was replaced) hands the
+/// modules back to the controller. Before, every boot handed them back: full cooling until the
+/// checks found the short again; then a pin reset alone did.
 #[cfg(feature = "module-sense")]
 #[test]
-fn a_shorted_ssr_is_remembered_until_a_person_resets_the_board() {
+fn a_shorted_ssr_is_remembered_until_a_service_reset() {
     let mut b = Bench::new(&boot());
     assert_eq!(b.send("set controller pi"), "ok\r\n");
     b.run(30);
@@ -904,30 +906,45 @@ fn a_shorted_ssr_is_remembered_until_a_person_resets_the_board() {
     assert!(!again, "stored once: {:?}", b.saves);
 
     // The SSR is still shorted: with the modules cooling flat out whatever the duty, the boots
-    // that keep the short limp home from the first sample, supply open; the ones a person reset
-    // hand the modules to the controller.
+    // that keep the short limp home from the first sample, supply open; a service reset hands
+    // the modules to the controller. The button held by chance through a watchdog bite or a
+    // fail-safe stop is no service reset.
     let halt = crate::failsafe::StopInfo::new(crate::failsafe::StopKind::ControlStall, 0, 0, 12_000);
-    for (reset, fault, limps) in [
-        (ResetCause::BrownOut, None, true),
-        (ResetCause::Watchdog, None, true),
-        (ResetCause::Other, Some(halt), true),
-        (ResetCause::Other, None, false),
+    for (reset, fault, service, limps) in [
+        (ResetCause::BrownOut, None, false, true),
+        (ResetCause::Watchdog, None, false, true),
+        (ResetCause::Other, Some(halt), false, true),
+        (ResetCause::Other, None, false, true),
+        (ResetCause::Watchdog, None, true, true),
+        (ResetCause::Other, Some(halt), true, true),
+        (ResetCause::Other, None, true, false),
+        (ResetCause::BrownOut, None, true, false),
     ] {
-        let mut next = Bench::new(&Boot { history: stored, reset, fault, ..boot() });
+        let mut next = Bench::new(&Boot { history: stored, reset, fault, service, ..boot() });
         next.load_c = 5.0;
         let first = next.run(1);
-        let what = format!("{reset:?} {:?}", fault.map(|f| f.kind));
+        let what = format!("{reset:?} {:?} service {service}", fault.map(|f| f.kind));
         assert_eq!(first.step.mode == crate::step::Mode::LimpHome, limps, "{what}: {:?}", first.step.mode);
         if limps {
             assert!(!first.step.supply_enable && first.step.duty.get() == 0.0, "{what}: supply open first");
             assert!(next.app.carrier().ssr_shorted(), "{what}");
         }
-        // What the boot stores carries the short on, or its clearing.
+        // What the boot stores carries the short on, or its clearing, at once and on record.
         let boot_history = next.saves.iter().find_map(|s| match s {
             Save::History(h) | Save::AlarmHistory(h) => Some(*h),
             _ => None,
         });
         assert_eq!(boot_history.map(|h| h.ssr_shorted()), Some(limps), "{what}");
+        let cleared = next.saves.iter().find_map(|s| match s {
+            Save::Log(LogEntry::Setting { key: SettingKey::Service, value, .. }) => Some(*value),
+            _ => None,
+        });
+        if limps {
+            assert_eq!(cleared, None, "{what}");
+        } else {
+            assert!(next.saves.iter().any(|s| matches!(s, Save::AlarmHistory(h) if !h.ssr_shorted())), "{what}");
+            assert_eq!(cleared, Some([0.0, 1.0]), "{what}");
+        }
     }
 }
 
@@ -1171,6 +1188,41 @@ fn a_restart_keeps_the_sensor_offset_compensated() {
     let mut forgot = restarted(&b, stored.with_sensor_offset(crate::persist::SensorOffset::NONE));
     let (worst, _) = reading_error(&mut forgot, 1);
     assert!(worst > 1.4, "{worst}");
+}
+
+/// A lead repaired with the RTD unplugged leaves the offset kept (above); on a build without
+/// the interface there is no `set sensor_offset_c 0`. A service reset (the acknowledge button
+/// held through a reset) clears it on every build: the repaired sensor reads true from the
+/// first sample, the history without it is stored at once and the record says what was
+/// cleared. A reset alone keeps it.
+#[test]
+fn a_service_reset_clears_the_sensor_offset_after_a_repair() {
+    let mut b = bench_with_a_compensated_lead();
+    let stored = stored_history(&b);
+    b.lead_c = 0.0;
+    let service = Boot { settings: Some(*b.app.settings()), history: stored, service: true, ..boot() };
+    for (boot, cleared) in [(Boot { service: false, ..service }, false), (service, true)] {
+        let mut again = Bench::new(&boot);
+        (again.load_c, again.lead_c, again.dither, again.pipe) = (b.load_c, 0.0, true, b.pipe.clone());
+        let (worst, _) = reading_error(&mut again, 1);
+        let at_boot = &again.saves;
+        let logged = at_boot.iter().find_map(|s| match s {
+            Save::Log(LogEntry::Setting { key: SettingKey::Service, value, .. }) => Some(*value),
+            _ => None,
+        });
+        if cleared {
+            assert!(worst < 0.05, "the repaired sensor reads the load: {worst} °C off");
+            let first = at_boot.iter().find(|s| matches!(s, Save::History(_) | Save::AlarmHistory(_)));
+            assert!(
+                matches!(first, Some(Save::AlarmHistory(h)) if h.sensor_offset == crate::persist::SensorOffset::NONE),
+                "{first:?}"
+            );
+            assert!(logged.is_some_and(|v| (v[0] - 1.5).abs() < 0.05 && v[1] == 0.0), "{logged:?}");
+        } else {
+            assert!((worst - 1.5).abs() < 0.1, "a reset alone keeps it: {worst}");
+            assert_eq!(logged, None);
+        }
+    }
 }
 
 /// The offset is stored in the channel's terms: a calibration stored after it, and a power cut

@@ -80,10 +80,14 @@ pub enum SettingKey {
     IdentifyEnd,
     /// `sensor_offset_c 0`: the sensor offset cleared (value 0: the offset it had, °C).
     SensorOffset,
+    /// A service reset ([`crate::app::Boot::service_reset`]) forgot what the history carried
+    /// (value 0: the sensor offset it had, in the channel's terms, °C; value 1: 1 if the SSR was
+    /// known shorted).
+    Service,
 }
 
 impl SettingKey {
-    const ALL: [SettingKey; 9] = [
+    const ALL: [SettingKey; 10] = [
         SettingKey::Setpoint,
         SettingKey::Controller,
         SettingKey::CalIce,
@@ -93,6 +97,7 @@ impl SettingKey {
         SettingKey::Identify,
         SettingKey::IdentifyEnd,
         SettingKey::SensorOffset,
+        SettingKey::Service,
     ];
 
     /// The key's wire name.
@@ -107,6 +112,7 @@ impl SettingKey {
             SettingKey::Identify => "identify",
             SettingKey::IdentifyEnd => "identify_end",
             SettingKey::SensorOffset => "sensor_offset_c",
+            SettingKey::Service => "service_reset",
         }
     }
 }
@@ -390,6 +396,16 @@ pub fn write_csv_row(entry: &LogEntry, out: &mut impl core::fmt::Write) -> core:
                     SettingKey::Model => write!(out, "set:model=gain {};k {}", Fixed(value[0], 1), Fixed(value[1], 0)),
                     SettingKey::Ack => out.write_str("ack"),
                     SettingKey::SensorOffset => write!(out, "set:sensor_offset_c=0.00;was {}", Fixed(value[0], 2)),
+                    SettingKey::Service => {
+                        out.write_str("service_reset:cleared")?;
+                        if value[1] > 0.5 {
+                            out.write_str(" ssr_short")?;
+                        }
+                        if value[0] == 0.0 {
+                            return Ok(());
+                        }
+                        write!(out, " sensor_offset_c {}", Fixed(value[0], 2))
+                    }
                     SettingKey::Identify => out.write_str("commissioning:started"),
                     SettingKey::IdentifyEnd if value[0] > 0.5 => out.write_str("commissioning:done"),
                     SettingKey::IdentifyEnd => {
@@ -420,6 +436,7 @@ mod tests {
             LogEntry::Lost { t_s: 9, entries: u16::MAX },
             LogEntry::Alarm { t_s: 36_000, kind: AlarmKind::Heat10h, start_s: 0 },
             LogEntry::Setting { t_s: 12, key: SettingKey::CalWarm, value: [25.31, 25.02] },
+            LogEntry::Setting { t_s: 13, key: SettingKey::Service, value: [1.5, 1.0] },
         ];
         for e in entries {
             let back = LogEntry::decode(&e.encode()).unwrap();
@@ -523,7 +540,13 @@ mod tests {
         write_csv_row(&LogEntry::Interval { t_s: 300, interval: i }, &mut s).unwrap();
         s.push('\n');
         write_csv_row(&LogEntry::Setting { t_s: 310, key: SettingKey::Setpoint, value: [5.0, 0.0] }, &mut s).unwrap();
-        assert_eq!(s, "300,4.00,3.50,4.50,0.450,normal,\n310,,,,,,set:setpoint_c=5.00");
+        for value in [[0.0, 1.0], [1.5, 0.0], [0.99, 1.0]] {
+            s.push('\n');
+            write_csv_row(&LogEntry::Setting { t_s: 320, key: SettingKey::Service, value }, &mut s).unwrap();
+        }
+        let service = "320,,,,,,service_reset:cleared ssr_short\n320,,,,,,service_reset:cleared sensor_offset_c 1.50\n\
+                       320,,,,,,service_reset:cleared ssr_short sensor_offset_c 0.99";
+        assert_eq!(s, format!("300,4.00,3.50,4.50,0.450,normal,\n310,,,,,,set:setpoint_c=5.00\n{service}"));
         assert_eq!(CSV_HEADER.split(',').count(), s.lines().next().unwrap().split(',').count());
     }
 }

@@ -90,7 +90,7 @@ pub struct VirtualBoard {
     sim_s: f64,
     last_on: bool,
     cut_settings: Option<usize>,
-    /// Boots after the first (power cuts).
+    /// Boots after the first (power cuts, resets).
     pub restarts: u32,
     /// Flash writes that failed (each logged to stderr by the server).
     pub write_errors: u32,
@@ -140,7 +140,7 @@ impl VirtualBoard {
             ..profile::ADAPTIVE_GPC
         };
         let (mut store, mut log) = (open_store(MockFlash::blank(STORE_PAGES)), open_log(MockFlash::blank(LOG_PAGES)));
-        let app = booted(adaptive, &mut store, &mut log, ResetCause::Other);
+        let app = booted(adaptive, &mut store, &mut log, ResetCause::Other, false);
         Ok(VirtualBoard {
             rig,
             app,
@@ -194,9 +194,9 @@ impl VirtualBoard {
     }
 
     /// Powers the board up from what its flash holds: scrub, restore, a new [`App`].
-    fn boot(&mut self, reset: ResetCause) {
+    fn boot(&mut self, reset: ResetCause, service: bool) {
         let (Some(store), Some(log)) = (self.store.as_mut(), self.log.as_mut()) else { return };
-        self.app = booted(self.adaptive, store, log, reset);
+        self.app = booted(self.adaptive, store, log, reset, service);
         self.pending = PendingSaves::EMPTY;
         self.gate = WriteGate::firmware();
         self.t_ms = 0;
@@ -218,7 +218,15 @@ impl VirtualBoard {
             self.log = Some(open_log(b));
         }
         self.restarts += 1;
-        self.boot(ResetCause::BrownOut);
+        self.boot(ResetCause::BrownOut, false);
+    }
+
+    /// The reset button between two samples (RAM lost, flash and the carrier as they are); with
+    /// `service`, the acknowledge button held through it: a technician's service reset
+    /// ([`hter::app::Boot::service_reset`]).
+    pub fn reset(&mut self, service: bool) {
+        self.restarts += 1;
+        self.boot(ResetCause::Other, service);
     }
 
     /// One control sample: the step, the actuator, Ts of plant, then the flash writes the gate
@@ -295,9 +303,9 @@ impl VirtualBoard {
 
 /// An [`App`] booted from what the flash holds: scrub, restore, a new application (the
 /// firmware's boot sequence).
-fn booted(adaptive: AdaptiveConfig, store: &mut MockStore, log: &mut MockLog, reset: ResetCause) -> App {
+fn booted(adaptive: AdaptiveConfig, store: &mut MockStore, log: &mut MockLog, reset: ResetCause, service: bool) -> App {
     let restored = block_on(flash::restore(store, log, Some(adaptive)));
-    App::new(app_config(adaptive), &restored.boot(reset, None))
+    App::new(app_config(adaptive), &hter::app::Boot { service, ..restored.boot(reset, None) })
 }
 
 fn open_store(flash: MockFlash<PAGE>) -> MockStore {
