@@ -537,9 +537,14 @@ pub fn run(args: &MonitorArgs) -> Result<()> {
     println!("  time above +8 °C          {:7.2} h", hours(r.time_above_8_s));
     println!("  time within 2–8 °C        {:7.2} h", hours(r.time_in_range_s));
     if r.fault_samples > 0 {
+        let mut label = format!("no reading ({})", input.no_reading_cause(r.fault_samples).label());
+        // A label wider than the column gets its own line: the figure stays under the others.
+        if label.chars().count() > 25 {
+            println!("  {label}");
+            label.clear();
+        }
         println!(
-            "  {:<25} {:7.2} h  ({}; counted neither in nor out of range)",
-            format!("no reading ({})", input.no_reading_cause(r.fault_samples).label()),
+            "  {label:<25} {:7.2} h  ({}; counted neither in nor out of range)",
             hours(r.time_no_reading_s),
             input.no_reading_text(r.fault_samples)
         );

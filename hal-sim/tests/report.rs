@@ -348,7 +348,10 @@ fn a_historys_rows_are_counted_as_intervals() {
     let both = holed.replace("\n3600,4.00,3.90,4.10,0.40,normal,", "\n3600,4.00,4.00,4.00,0.00,sensor_fault,");
     assert_ne!(both, holed);
     let (text, page) = counts(&both);
-    assert!(text.contains("no reading (sensor fault; lost log entries)"), "{text}");
+    // Wider than the label column: on its own line, the figure under the others' (it pushed the
+    // figure 18 columns right).
+    let under = format!("no reading (sensor fault; lost log entries)\n{}", " ".repeat(28));
+    assert!(text.contains(&under), "{text}");
     assert!(
         page.contains("the probe gave no reading for part of the period and part of the record was lost"),
         "the verdict"
