@@ -48,7 +48,8 @@ pub enum StopKind {
     /// is negative, −1, stored as a two's-complement word).
     UnexpectedInterrupt = 4,
     /// The control loop stopped making progress and the glue noticed before the watchdog did
-    /// (`detail` = milliseconds since the last completed step).
+    /// (`detail` = milliseconds since the last completed step); or a boot the watchdog reset
+    /// before its control loop started ([`boot_stall`]: `detail` 0, `addr` the [`BootPhase`]).
     ControlStall = 5,
 }
 
@@ -246,6 +247,56 @@ pub fn panic_info(file: &str, line: u32) -> StopInfo {
     let from = file.len().saturating_sub(STOP_TEXT);
     info.push_bytes(file.as_bytes().get(from..).unwrap_or(&[]));
     info
+}
+
+/// How far a boot got on its way to the control loop. The glue keeps the phase in a
+/// reset-surviving word ([`Self::marker`]) from right after it took the last reset's record up
+/// to the control-stall check's start: a boot that hangs there (in the clocks, in a flash
+/// restore) before any stop path can notice is reset by the watchdog, and the next boot makes a
+/// stop of it ([`boot_stop`]). Before, the bite was a watchdog reset and nothing more, and a
+/// loop of them that hung before the history's store at every boot left nothing in the
+/// cold-chain record, however long it lasted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum BootPhase {
+    /// The board's set-up: the clocks and the peripherals.
+    Board = 1,
+    /// Restoring the flash records (scrub, repair, load).
+    Restore = 2,
+    /// Building the step from them, up to the control-stall check's start.
+    Start = 3,
+}
+
+/// [`BootPhase::marker`]'s upper half: RAM's noise after a power-up is a marker by chance
+/// once in 2³⁰, and then only a watchdog reset takes it for one.
+const BOOT_MARK: u32 = 0xB007_0000;
+
+impl BootPhase {
+    /// Every phase, in order.
+    pub const ALL: [BootPhase; 3] = [BootPhase::Board, BootPhase::Restore, BootPhase::Start];
+
+    /// The word the glue keeps while the boot is in this phase (0 once the control loop runs).
+    pub const fn marker(self) -> u32 {
+        BOOT_MARK | self as u32
+    }
+}
+
+/// The stop a boot that never reached its control loop leaves: a [`StopKind::ControlStall`]
+/// (the persisted per-kind counts keep their layout) with `pc` 0, `addr` the phase and
+/// `detail` 0 (a stall the glue notices is at least two sample periods: never 0 ms).
+pub fn boot_stall(phase: BootPhase) -> StopInfo {
+    StopInfo::new(StopKind::ControlStall, 0, phase as u32, 0)
+}
+
+/// The last reset's stop: `recorded`, the record a stop path left, if any; else, after a
+/// watchdog reset, the boot the watchdog reset before its control loop, if `marker` (the
+/// reset-surviving word) names its phase ([`boot_stall`]). After any other reset a marker is a
+/// boot a person reset (the reset button in its first second) or a power cut: no hang.
+pub fn boot_stop(recorded: Option<StopInfo>, marker: u32, reset: crate::persist::ResetCause) -> Option<StopInfo> {
+    if recorded.is_some() || reset != crate::persist::ResetCause::Watchdog {
+        return recorded;
+    }
+    BootPhase::ALL.into_iter().find(|p| p.marker() == marker).map(boot_stall)
 }
 
 /// CFSR bit: BFAR holds a valid fault address (ARMv7-M ARM B3.2.15, BusFault status).
@@ -447,7 +498,31 @@ pub fn bor_needs_programming(level: u8, needed: u8, supply_ok: bool, csr: u32) -
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::persist::ResetCause;
     use core::fmt::Write;
+
+    /// A boot's marker is the next boot's stop after a watchdog reset only, named by its phase;
+    /// a stop path's record comes first; the loop's start (0) and noise are no marker.
+    #[test]
+    fn a_boot_the_watchdog_reset_before_its_loop_is_a_stop_of_its_phase() {
+        for phase in BootPhase::ALL {
+            let stop = boot_stop(None, phase.marker(), ResetCause::Watchdog);
+            let stop = stop.unwrap_or_else(|| panic!("{phase:?}"));
+            assert_eq!((stop.kind, stop.pc, stop.addr, stop.detail), (StopKind::ControlStall, 0, phase as u32, 0));
+            for reset in [ResetCause::BrownOut, ResetCause::Other] {
+                assert_eq!(boot_stop(None, phase.marker(), reset), None, "{phase:?} {reset:?}");
+            }
+        }
+        let panic = panic_info("src/persist.rs", 12);
+        for reset in [ResetCause::Watchdog, ResetCause::Other] {
+            assert_eq!(boot_stop(Some(panic), BootPhase::Restore.marker(), reset), Some(panic));
+        }
+        for word in [0, 0xB007_0000, 0xB007_0004, 0x0007_0002, 0xFFFF_FFFF] {
+            assert_eq!(boot_stop(None, word, ResetCause::Watchdog), None, "{word:#x}");
+        }
+        // A stall the check noticed is another stop than a boot's.
+        assert_ne!(boot_stall(BootPhase::Start), StopInfo::new(StopKind::ControlStall, 0, 0, 20_000));
+    }
 
     /// Stamps each step of a stop path with the next number of a shared counter.
     struct Pins<'a> {

@@ -93,11 +93,32 @@ fn halt(why: Why) -> ! {
     cortex_m::peripheral::SCB::sys_reset()
 }
 
-/// The stop the last reset came from, if one was recorded; clears the record.
-pub fn take_reason() -> Option<StopInfo> {
+/// The stop the last reset came from: the record a stop path left, if any, or a boot the
+/// watchdog reset before its control loop ([`failsafe::boot_stop`]).
+pub fn take_reason(reset: hter::persist::ResetCause) -> Option<StopInfo> {
     // SAFETY: called once at boot, before the stall check is armed; a fault meanwhile resets
-    // without returning here.
-    unsafe { reason() }.take()
+    // without returning here. BOOT_PHASE is a word: any bit pattern is a value.
+    let (recorded, marker) = unsafe { (reason().take(), (*addr_of_mut!(BOOT_PHASE)).assume_init_read()) };
+    failsafe::boot_stop(recorded, marker, reset)
+}
+
+/// The boot's phase across a reset ([`failsafe::BootPhase::marker`]; 0 once the control loop
+/// runs), beside [`REASON`].
+#[link_section = ".uninit.BOOT_PHASE"]
+static mut BOOT_PHASE: MaybeUninit<u32> = MaybeUninit::uninit();
+
+/// Marks the boot as at `phase` until [`boot_done`]: a watchdog reset before then is the next
+/// boot's stop.
+pub fn note_boot(phase: failsafe::BootPhase) {
+    // SAFETY: one aligned word, written by the boot's thread only (main, then the control task
+    // before its stall check starts); nothing else reads it before the next reset.
+    unsafe { (*addr_of_mut!(BOOT_PHASE)).write(phase.marker()) };
+}
+
+/// The control loop starts: the stall check and the watchdog watch it from now on.
+pub fn boot_done() {
+    // SAFETY: as `note_boot`'s.
+    unsafe { (*addr_of_mut!(BOOT_PHASE)).write(0) };
 }
 
 /// The control loop stalled for `since_ms` (called from the stall check's interrupt).

@@ -132,7 +132,10 @@ async fn main(spawner: Spawner) {
         rcc.csr().modify(|w| w.set_rmvf(true));
         (ResetCause::from_stm32l4_csr(csr), csr)
     };
-    let fault = failsafe::take_reason();
+    let fault = failsafe::take_reason(reset);
+    // From here to the control loop no stop path watches: a hang is the watchdog's, and the
+    // phase left in the reset-surviving record tells the next boot where it was.
+    failsafe::note_boot(hter::failsafe::BootPhase::Board);
     let b = board::init();
     // Read before the flash is: the technician holds the button only for a moment past the
     // reset.
@@ -175,8 +178,10 @@ async fn main(spawner: Spawner) {
         config::BUCK_PWM_HZ
     );
     // The persist task owns the flash: it restores both regions, then serves the writes.
+    failsafe::note_boot(hter::failsafe::BootPhase::Restore);
     spawner.spawn(persist::persist(b.flash).unwrap());
     let restored = persist::BOOTED.receive().await;
+    failsafe::note_boot(hter::failsafe::BootPhase::Start);
     let mut boot = restored.boot(reset, fault);
     boot.service = service;
     if boot.service_reset() {
@@ -291,6 +296,7 @@ async fn control(boot: &'static Boot, mut heartbeat_pin: Output<'static>) {
     info!("controller: {}", carrier.controller().name());
     let mut model_cadence = hter::persist::ModelCadence::new(config::MODEL_SAVE_SAMPLES);
     let mut samples = 0u32;
+    failsafe::boot_done();
     board::start_stall_check();
     loop {
         let s = SAMPLES.receive().await;
@@ -388,6 +394,7 @@ async fn control(boot: &'static Boot, mut heartbeat_pin: Output<'static>) {
     }
     info!("controller: {}", app.carrier().controller().name());
     let mut samples = 0u32;
+    failsafe::boot_done();
     board::start_stall_check();
     loop {
         let s = match select(SAMPLES.receive(), serial::REQUESTS.receive()).await {

@@ -608,6 +608,48 @@ fn a_new_fail_safe_stop_reaches_the_record_before_the_next_stop() {
     assert!(matches!(quiet.history_save(stored), Save::History(_)));
 }
 
+/// A boot that hangs before its control loop (in the clocks, in a flash restore) is reset by
+/// the watchdog, again and again while the cause lasts; the stall check is not armed yet and no
+/// stop path runs. The phase each boot leaves in a reset-surviving word
+/// ([`crate::failsafe::BootPhase::marker`]) makes the first boot that gets through store
+/// a `control_stall` stop naming the phase, at once, even with the alarm's latch already set:
+/// before, it found only a watchdog reset, stored behind the hold-off (and not at all if it hung
+/// again within the minute), and the record did not say the board had looped.
+#[test]
+fn a_watchdog_loop_before_the_control_loop_reaches_the_record() {
+    use crate::failsafe::{boot_stall, boot_stop, BootPhase, ReasonRecord, StopKind};
+    use crate::persist::LastStop;
+    let stored = HistoryRecord::EMPTY.with_carried(true, false);
+    let (mut reason, mut marker) = (ReasonRecord::EMPTY, 0);
+    // The loop: each boot takes the last one's stop, marks its phases, hangs in the restore.
+    for _ in 0..5 {
+        let _ = boot_stop(reason.take(), marker, ResetCause::Watchdog);
+        // Board, then Restore, where it hangs.
+        for phase in [BootPhase::Board, BootPhase::Restore] {
+            marker = phase.marker();
+        }
+    }
+    // The cause goes away: the next boot gets through.
+    let fault = boot_stop(reason.take(), marker, ResetCause::Watchdog);
+    assert_eq!(fault, Some(boot_stall(BootPhase::Restore)));
+    let mut b = Bench::new(&Boot { history: stored, reset: ResetCause::Watchdog, fault, ..boot() });
+    let first = b.run(1);
+    assert!(first.step.events.iter().any(|e| e.kind == EventKind::BoardFault(StopKind::ControlStall)));
+    let h = b.saves.iter().find_map(|s| match s {
+        Save::AlarmHistory(h) => Some(*h),
+        _ => None,
+    });
+    let h = h.unwrap_or_else(|| panic!("stored at once: {:?}", b.saves));
+    assert_eq!(h.last_stop, fault.as_ref().map(LastStop::from));
+    assert_eq!((h.stops_of(StopKind::ControlStall), h.resets_by(ResetCause::Watchdog)), (1, 1));
+    // The same loop again later waits for the hold-off, as every repeated stop does.
+    let again = Boot { history: h, reset: ResetCause::Watchdog, fault, ..boot() };
+    assert!(matches!(again.history_save(h), Save::History(_)));
+    // Without the marker, the watchdog reset alone: behind the hold-off.
+    let bare = Boot { history: stored, reset: ResetCause::Watchdog, ..boot() };
+    assert!(matches!(bare.history_save(stored), Save::History(_)));
+}
+
 /// A records region erased because the storage layer found it corrupt: the settings and the
 /// cabinet model, which nothing stores again unless they change, are queued once more with the
 /// history; a board that never stored settings stores none.
