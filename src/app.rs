@@ -117,11 +117,12 @@ impl Boot {
     /// Whether this boot is a technician's service reset, which forgets what the history
     /// carries ([`Recorder::note_service`]: the SSR's short and the sensor offset, after the
     /// repair): the acknowledge button held through a reset ([`Self::service`]), and the reset
-    /// a person's (the reset button, a power-on). Not after a watchdog bite or a fail-safe
-    /// stop, which a button held by chance must not turn into a repair. A reset alone no longer
-    /// clears the short: an NRST glitch or a debugger attaching under reset gives one too.
+    /// a pin reset (the reset button) without a fail-safe stop. Not after a watchdog bite, a
+    /// fail-safe stop or a power cut, which the button held by chance (someone acknowledging an
+    /// alarm) must not turn into a repair. A reset alone no longer clears the short: an NRST
+    /// glitch or a debugger attaching under reset gives one too.
     pub fn service_reset(&self) -> bool {
-        self.service && self.fault.is_none() && self.reset != ResetCause::Watchdog
+        self.service && self.fault.is_none() && self.reset == ResetCause::Other
     }
 
     /// Starts the step and the record from what this boot found: counts the boot in the record

@@ -373,7 +373,7 @@ pub fn power_check(csr: u32) -> PowerCheck {
 }
 
 /// Whether the acknowledge button is held at boot: a technician's service reset (held while the
-/// reset button is pressed and released, or through a power-on; `hter::app::Boot::service`).
+/// reset button is pressed and released; `hter::app::Boot::service_reset`).
 /// Read twice 50 ms apart: a bounce or a glitch on the line is no service reset.
 pub fn button_held(button: &Input<'static>) -> bool {
     if button.is_high() {

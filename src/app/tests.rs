@@ -949,8 +949,8 @@ fn a_shorted_ssr_is_remembered_until_a_service_reset() {
 
     // The SSR is still shorted: with the modules cooling flat out whatever the duty, the boots
     // that keep the short limp home from the first sample, supply open; a service reset hands
-    // the modules to the controller. The button held by chance through a watchdog bite or a
-    // fail-safe stop is no service reset.
+    // the modules to the controller. The button held by chance through a watchdog bite, a
+    // fail-safe stop or a power cut is no service reset.
     let halt = crate::failsafe::StopInfo::new(crate::failsafe::StopKind::ControlStall, 0, 0, 12_000);
     for (reset, fault, service, limps) in [
         (ResetCause::BrownOut, None, false, true),
@@ -959,8 +959,8 @@ fn a_shorted_ssr_is_remembered_until_a_service_reset() {
         (ResetCause::Other, None, false, true),
         (ResetCause::Watchdog, None, true, true),
         (ResetCause::Other, Some(halt), true, true),
+        (ResetCause::BrownOut, None, true, true),
         (ResetCause::Other, None, true, false),
-        (ResetCause::BrownOut, None, true, false),
     ] {
         let mut next = Bench::new(&Boot { history: stored, reset, fault, service, ..boot() });
         next.load_c = 5.0;
