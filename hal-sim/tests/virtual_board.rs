@@ -835,24 +835,32 @@ fn identify_waits_until_the_carrier_has_held_a_new_setpoint() {
     commissioning_ends_done(&mut b);
 }
 
-/// On-Off holds its setpoint with a limit cycle of up to 3 °C peak to peak that is not centred
-/// on it: with half a load in a 43 °C room it runs from −0.5 to +2.1 °C. Taken for readings out
-/// of a 1.5 °C band, the cycle restarted the wait at every peak and `identify` was refused for
-/// good, while the refusal said to wait 70 minutes. It is accepted 70 minutes after the law
-/// was set.
+/// On-Off holds its setpoint with a limit cycle of up to 3 °C peak to peak about a point off it
+/// (half a load at 20 °C: −2.3 … +0.8 °C): a commissioning started from it rests at its mean
+/// duty from wherever the cycle left the load, and here it ended `fault_out_of_band` 3 h in
+/// (13 of 16 such runs failed, 12 after 3–5 h). `identify` is refused under On-Off, saying what
+/// to do; 70 minutes after `set controller gpc` (and the load back near the setpoint) it is
+/// accepted and ends `done`.
 #[test]
-fn identify_waits_no_longer_than_70_min_under_onoff_in_a_hot_room() {
-    let mut b = virtual_hter1(hal_sim::plant::Load::Half, 43.0, hal_sim::scenario::Start::Holding(4.0));
+fn identify_is_refused_under_onoff_and_runs_70_min_after_gpc_is_set() {
+    let mut b = virtual_hter1(hal_sim::plant::Load::Half, 20.0, hal_sim::scenario::Start::Holding(4.0));
     b.step().unwrap();
     assert!(b.request("set controller onoff").ends_with("ok\r\n"));
-    let (mut n, mut hi) = (0, f64::MIN);
+    for _ in 0..720 {
+        b.step().unwrap();
+    }
+    let refused = b.request("identify");
+    assert!(refused.starts_with("err identify: the carrier runs onoff"), "{refused}");
+    assert!(refused.contains("set controller gpc"), "{refused}");
+    assert_eq!(board_status(&mut b, "controller"), "onoff");
+    assert!(b.request("set controller gpc").ends_with("ok\r\n"));
+    let mut n = 0;
     while b.request("identify") != "ok\r\n" {
         b.step().unwrap();
         n += 1;
-        hi = hi.max(board_status(&mut b, "temp_c").parse().unwrap());
-        assert!(n < 600, "still refused {n} samples after the law was set (highest reading {hi} °C)");
+        assert!(n < 600, "still refused {n} samples after gpc was set");
     }
-    assert_eq!(n, 420, "70 minutes after the setting");
-    assert!(hi > 5.5, "the cycle went more than 1.5 °C above the setpoint: {hi}");
-    assert_eq!(board_status(&mut b, "controller"), "commission");
+    // 70 minutes after the setting, or after GPC brought the cycle's low back within 1.5 °C.
+    assert!((420..=450).contains(&n), "{n} samples after gpc was set");
+    commissioning_ends_done(&mut b);
 }
