@@ -115,8 +115,8 @@ impl Boot {
     }
 
     /// Whether this boot is a technician's service reset, which forgets what the history
-    /// carries ([`Recorder::note_service`]: the SSR's short and the sensor offset, after the
-    /// repair): the acknowledge button held through a reset ([`Self::service`]), and the reset
+    /// carries ([`Recorder::note_service`]: the SSR's short if one is stored, else the sensor
+    /// offset, after the repair): the acknowledge button held through a reset ([`Self::service`]), and the reset
     /// a pin reset (the reset button) without a fail-safe stop. Not after a watchdog bite, a
     /// fail-safe stop or a power cut, which the button held by chance (someone acknowledging an
     /// alarm) must not turn into a repair. A reset alone no longer clears the short: an NRST
@@ -441,7 +441,13 @@ impl App {
         // The history before the events: more pages lost than the outbox holds drop events (the
         // history counts them all), never the boot's history.
         let _ = app_saves.push_back(boot.history_save(history));
-        let (short, offset) = (boot.history.ssr_shorted(), boot.history.sensor_offset);
+        // What the service reset forgot ([`Recorder::note_service`]: the short, or the offset).
+        let short = boot.history.ssr_shorted() && !history.ssr_shorted();
+        let offset = if history.sensor_offset != boot.history.sensor_offset {
+            boot.history.sensor_offset
+        } else {
+            SensorOffset::NONE
+        };
         if boot.service_reset() && (short || offset != SensorOffset::NONE) {
             let value = [offset.c(), f32::from(u8::from(short))];
             let _ = app_saves.push_back(Save::Log(LogEntry::Setting {

@@ -1037,17 +1037,23 @@ impl Recorder {
     }
 
     /// A technician's service reset ([`crate::app::Boot::service_reset`]: the acknowledge button
-    /// held through a reset, after replacing the SSR or repairing the probe's lead): forgets the
-    /// SSR's short ([`HistoryRecord::ssr_shorted`]) and the sensor offset
-    /// ([`HistoryRecord::sensor_offset`]); returns the history to store and to resume from. If
-    /// the fault is still there, the checks find it again as on a first boot (a short: full
-    /// cooling until they do, the load to ≈ 1.9 °C first; an offset: the load held that much
-    /// colder until the offset watch measures it again). Before, any pin or software reset
-    /// without a fail-safe stop cleared the short: the reset button, but also an NRST glitch or
-    /// a debugger attaching under reset.
+    /// held through a reset, after replacing the SSR or repairing the probe's lead): forgets one
+    /// repair, the SSR's short ([`HistoryRecord::ssr_shorted`]) if the history carries one, else
+    /// the sensor offset ([`HistoryRecord::sensor_offset`]); returns the history to store and to
+    /// resume from. A short still there is found again as on a first boot (full cooling until
+    /// the checks do, the load to ≈ 1.9 °C first). An offset still there is not: the offset
+    /// watch sees steps, and after a restart the first reading already carries it, so the load
+    /// would be held that much colder for good (up to 3 °C, the freeze guard blind to it).
+    /// Forgetting both at once forgot a damaged lead's offset at the service reset that followed
+    /// an SSR's replacement; both repaired take two service resets. Before, any pin or software
+    /// reset without a fail-safe stop cleared the short: the reset button, but also an NRST
+    /// glitch or a debugger attaching under reset.
     pub fn note_service(&mut self) -> HistoryRecord {
-        self.boot.flags &= !SSR_SHORTED;
-        self.boot.sensor_offset = SensorOffset::NONE;
+        if self.boot.flags & SSR_SHORTED != 0 {
+            self.boot.flags &= !SSR_SHORTED;
+        } else {
+            self.boot.sensor_offset = SensorOffset::NONE;
+        }
         self.since_save = 0;
         self.history()
     }
@@ -1813,7 +1819,8 @@ mod tests {
         let v5: [u8; HistoryRecord::LEN_V5] = older_history(&bytes, 5);
         assert_eq!(HistoryRecord::decode(&v5), Ok(h.with_carried(true, false)));
         // Every boot keeps it, whatever its reset (a pin reset is also an NRST glitch); a
-        // service reset clears it, and the sensor offset with it, and nothing else.
+        // service reset clears it and nothing else; the next one, with no short left, the sensor
+        // offset (a damaged lead's offset outlives the SSR's replacement).
         let stall = StopInfo::new(StopKind::ControlStall, 0, 0, 12_000);
         let offset = SensorOffset::from_c(1.5);
         let h = h.with_sensor_offset(offset);
@@ -1828,9 +1835,11 @@ mod tests {
             assert!(booted.ssr_shorted(), "{reset:?} {stop:?}");
             assert_eq!(booted.sensor_offset, offset, "{reset:?} {stop:?}");
             let serviced = next.note_service();
-            assert!(!serviced.ssr_shorted() && serviced.sensor_offset == SensorOffset::NONE);
+            assert!(!serviced.ssr_shorted() && serviced.sensor_offset == offset);
             assert!(serviced.unacknowledged(), "the latch is the button's, not the service reset's");
-            assert_eq!(serviced.with_carried(true, true).with_sensor_offset(offset), booted);
+            assert_eq!(serviced.with_carried(true, true), booted);
+            let again = next.note_service();
+            assert_eq!(again, serviced.with_sensor_offset(SensorOffset::NONE));
         }
     }
 

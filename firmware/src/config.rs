@@ -147,7 +147,8 @@ pub const IWDG_PR: u8 = 6;
 /// Independent watchdog reload, LSI ÷ 256 ticks: 3750 ticks = 30.0 s at the LSI's nominal
 /// 32 kHz, 28.2–32.5 s over its 29.5–34 kHz spread (datasheet DS10198, "LSI oscillator"):
 /// three sample periods, always more than the 2·Ts stall check that acts first. The control
-/// task feeds it only after a completed step. Its longest timeout is 4096 · 256 / 32 kHz = 32.8 s.
+/// task feeds it when its loop starts (`failsafe::boot_done`, with the stall check's start),
+/// then only after a completed step. Its longest timeout is 4096 · 256 / 32 kHz = 32.8 s.
 pub const IWDG_RELOAD: u16 = 3750 - 1;
 
 // The watchdog's option byte. The board starts the IWDG in software as the first thing `main`

@@ -115,10 +115,16 @@ pub fn note_boot(phase: failsafe::BootPhase) {
     unsafe { (*addr_of_mut!(BOOT_PHASE)).write(phase.marker()) };
 }
 
-/// The control loop starts: the stall check and the watchdog watch it from now on.
+/// The control loop starts: the stall check and the watchdog watch it from now on. Feeds the
+/// watchdog: unfed since `main` started it, its window ran from the boot's first instructions,
+/// so after a slow boot (an LSE that starts late in the cold, a flash repair) it bit before the
+/// stall check's 2·Ts and a hang in the first steps, with the marker already cleared, was a
+/// bare watchdog reset: no stop on record. From here it has its whole window, more than the
+/// stall check's (`config::IWDG_RELOAD`).
 pub fn boot_done() {
     // SAFETY: as `note_boot`'s.
     unsafe { (*addr_of_mut!(BOOT_PHASE)).write(0) };
+    board::pet_watchdog();
 }
 
 /// The control loop stalled for `since_ms` (called from the stall check's interrupt).

@@ -185,7 +185,7 @@ async fn main(spawner: Spawner) {
     let mut boot = restored.boot(reset, fault);
     boot.service = service;
     if boot.service_reset() {
-        warn!("service reset: the SSR's short and the sensor offset are forgotten");
+        warn!("service reset: the SSR's short is forgotten, or the sensor offset if no short was stored");
     }
     if restored.settings.is_err() {
         // No settings stored: this build's calibration constant, if it has one.

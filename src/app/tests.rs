@@ -1267,6 +1267,46 @@ fn a_service_reset_clears_the_sensor_offset_after_a_repair() {
     }
 }
 
+/// A service reset after replacing the SSR, on a carrier whose probe lead still reads 1.5 °C
+/// warm (compensated months before): the short is forgotten, the offset is not. A restart does
+/// not measure an offset again (the watch sees steps, and the first reading already carries
+/// it), so forgotten with the lead still damaged, the board held the load 1.5 °C colder than it
+/// read for good, the freeze guard blind to it (up to 3 °C: the freezing side). One service
+/// reset forgets one repair, the short first; a second one, with no short left, the offset.
+#[test]
+fn a_service_reset_after_an_ssr_repair_keeps_the_sensor_offset() {
+    let mut b = bench_with_a_compensated_lead();
+    let with_short = stored_history(&b).with_carried(false, true);
+    let service = |history| Boot { settings: Some(*b.app.settings()), history, service: true, ..boot() };
+    let logged = |saves: &[Save]| {
+        saves.iter().find_map(|s| match s {
+            Save::Log(LogEntry::Setting { key: SettingKey::Service, value, .. }) => Some(*value),
+            _ => None,
+        })
+    };
+    let mut again = Bench::new(&service(with_short));
+    (again.load_c, again.lead_c, again.dither, again.pipe) = (b.load_c, b.lead_c, true, b.pipe.clone());
+    let (worst, events) = reading_error(&mut again, 360);
+    let load = again.load_c;
+    assert!(
+        worst < 0.05,
+        "the lead still reads warm: the offset must stay subtracted ({worst} °C off, load {load} °C)"
+    );
+    assert!(!again.app.carrier().ssr_shorted(), "the short is forgotten");
+    assert!(!events.contains(&EventKind::SensorOffset), "{events:?}");
+    assert_eq!(logged(&again.saves), Some([0.0, 1.0]), "the record says the short alone was cleared");
+    let kept = stored_history(&again);
+    assert!(!kept.ssr_shorted() && (kept.sensor_offset.c() - 1.5).abs() < 0.05, "{kept:?}");
+
+    // The lead repaired too: a second service reset forgets the offset.
+    b.lead_c = 0.0;
+    let mut third = Bench::new(&service(kept));
+    (third.load_c, third.lead_c, third.dither, third.pipe) = (again.load_c, 0.0, true, again.pipe.clone());
+    let (worst, _) = reading_error(&mut third, 1);
+    assert!(worst < 0.05, "the repaired sensor reads the load: {worst} °C off");
+    assert!(logged(&third.saves).is_some_and(|v| (v[0] - 1.5).abs() < 0.05 && v[1] == 0.0));
+}
+
 /// The offset is stored in the channel's terms: a calibration stored after it, and a power cut
 /// before the next history, restore it as the board subtracted it through the new line. In the
 /// reading's own terms, the new line's gain of 1.05 left 0.075 °C of the 1.5 °C lead in it.

@@ -81,8 +81,8 @@ pub enum SettingKey {
     /// `sensor_offset_c 0`: the sensor offset cleared (value 0: the offset it had, °C).
     SensorOffset,
     /// A service reset ([`crate::app::Boot::service_reset`]) forgot what the history carried
-    /// (value 0: the sensor offset it had, in the channel's terms, °C; value 1: 1 if the SSR was
-    /// known shorted).
+    /// (value 0: the sensor offset it forgot, in the channel's terms, °C, 0 if none; value 1: 1
+    /// if it forgot the SSR's short; [`crate::persist::Recorder::note_service`]: one of them).
     Service,
 }
 
