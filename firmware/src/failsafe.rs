@@ -97,8 +97,9 @@ fn halt(why: Why) -> ! {
 /// watchdog reset before its control loop ([`failsafe::boot_stop`]).
 pub fn take_reason(reset: hter::persist::ResetCause) -> Option<StopInfo> {
     // SAFETY: called once at boot, before the stall check is armed; a fault meanwhile resets
-    // without returning here. BOOT_PHASE is a word: any bit pattern is a value.
-    let (recorded, marker) = unsafe { (reason().take(), (*addr_of_mut!(BOOT_PHASE)).assume_init_read()) };
+    // without returning here. BOOT_PHASE is an aligned word, read volatile: its contents come
+    // from before the reset (or a power-up's noise), which the compiler cannot know.
+    let (recorded, marker) = unsafe { (reason().take(), addr_of_mut!(BOOT_PHASE).cast::<u32>().read_volatile()) };
     failsafe::boot_stop(recorded, marker, reset)
 }
 
@@ -112,7 +113,8 @@ static mut BOOT_PHASE: MaybeUninit<u32> = MaybeUninit::uninit();
 pub fn note_boot(phase: failsafe::BootPhase) {
     // SAFETY: one aligned word, written by the boot's thread only (main, then the control task
     // before its stall check starts); nothing else reads it before the next reset.
-    unsafe { (*addr_of_mut!(BOOT_PHASE)).write(phase.marker()) };
+    // Volatile: the word is read only after the next reset, so a plain store could be dropped.
+    unsafe { addr_of_mut!(BOOT_PHASE).cast::<u32>().write_volatile(phase.marker()) };
 }
 
 /// The control loop starts: the stall check and the watchdog watch it from now on. Feeds the
@@ -123,7 +125,7 @@ pub fn note_boot(phase: failsafe::BootPhase) {
 /// stall check's (`config::IWDG_RELOAD`).
 pub fn boot_done() {
     // SAFETY: as `note_boot`'s.
-    unsafe { (*addr_of_mut!(BOOT_PHASE)).write(0) };
+    unsafe { addr_of_mut!(BOOT_PHASE).cast::<u32>().write_volatile(0) };
     board::pet_watchdog();
 }
 
