@@ -19,8 +19,6 @@
 //! build links, a calibration pair, a plausible model); a refused request changes nothing and
 //! is not logged, an accepted one is a [`LogEntry::Setting`].
 
-use core::fmt::Write;
-
 use crate::alarm::{Annunciator, Indication};
 use crate::calib::TwoPoint;
 use crate::coldchain::Raised;
@@ -32,6 +30,7 @@ use crate::ident::commission::{
     cabinet_plausible, CommissionConfig, CommissionError, Commissioning, Implausibility, Phase,
 };
 use crate::iface::num::Fixed;
+use crate::iface::sink::{put, Sink, Written};
 use crate::iface::{Command, Law, Refusal, SetRequest, Why, HELP};
 use crate::model::Model;
 use crate::persist::log::{IntervalLog, LogEntry, SettingKey};
@@ -631,7 +630,7 @@ impl App {
 
     /// Runs one request line and writes its reply (lines ended by `\r\n`, the last one `ok` or
     /// `err …`), except for `history`, whose rows the glue streams ([`Handled::History`]).
-    pub fn handle(&mut self, line: &str, out: &mut impl Write) -> Handled {
+    pub fn handle(&mut self, line: &str, out: &mut impl Sink) -> Handled {
         let result = match Command::parse(line) {
             Ok(None) => return Handled::Done,
             Ok(Some(Command::History { since_s })) => return Handled::History { since_s },
@@ -639,17 +638,17 @@ impl App {
             Err(r) => Err(r),
         };
         let _ = match result {
-            Ok(()) => out.write_str("ok\r\n"),
-            Err(r) => write!(out, "{r}\r\n"),
+            Ok(()) => out.str("ok\r\n"),
+            Err(r) => put!(out, r, "\r\n"),
         };
         Handled::Done
     }
 
-    fn run(&mut self, cmd: Command, out: &mut impl Write) -> Result<(), Refusal<'static>> {
+    fn run(&mut self, cmd: Command, out: &mut impl Sink) -> Result<(), Refusal<'static>> {
         match cmd {
             Command::Help => {
                 for l in HELP {
-                    let _ = write!(out, "{l}\r\n");
+                    let _ = put!(out, *l, "\r\n");
                 }
                 Ok(())
             }
@@ -659,15 +658,21 @@ impl App {
             }
             Command::Get => {
                 let s = &self.settings;
-                let _ = write!(
+                let _ = put!(
                     out,
-                    "setpoint_c={}\r\ncontroller={}\r\ncal_ice={},{}\r\ncal_warm={},{}\r\n",
+                    "setpoint_c=",
                     Fixed(s.setpoint_c, 2),
+                    "\r\ncontroller=",
                     s.law.name(),
+                    "\r\ncal_ice=",
                     Fixed(s.cal_ice[0], 2),
+                    ",",
                     Fixed(s.cal_ice[1], 2),
+                    "\r\ncal_warm=",
                     Fixed(s.cal_warm[0], 2),
-                    Fixed(s.cal_warm[1], 2)
+                    ",",
+                    Fixed(s.cal_warm[1], 2),
+                    "\r\n"
                 );
                 Ok(())
             }
@@ -680,9 +685,9 @@ impl App {
             Command::Set(SetRequest::Ack) if !self.annunciator.latched() || self.ack_pending => {
                 let _ = match self.last.map(|o| o.alarm) {
                     Some(a @ (Indication::OutOfRange | Indication::NotInControl)) => {
-                        write!(out, "alarm={} stays on while it lasts\r\n", a.name())
+                        put!(out, "alarm=", a.name(), " stays on while it lasts\r\n")
                     }
-                    _ => out.write_str("no alarm\r\n"),
+                    _ => out.str("no alarm\r\n"),
                 };
                 Ok(())
             }
@@ -713,13 +718,14 @@ impl App {
     /// 8.16 °C at 6.5 °C and 43 °C), half loaded 3.0 °C (1.09 °C, 8.77 °C); H-TER II 1.7–2.2 °C. A
     /// data line, not a second final line: `hter board` and any client reading to `ok`/`err` see
     /// an accepted setting with a line to show.
-    fn warn_on_off(&self, out: &mut impl Write) {
+    fn warn_on_off(&self, out: &mut impl Sink) {
         let field = self.cfg.laws.iter().copied().find(|l| matches!(l, Law::Gpc | Law::Igmvc)).unwrap_or(Law::Gpc);
-        let _ = out.write_str(
+        let _ = put!(
+            out,
             "warning: onoff is a comparison baseline: it swings up to 3 °C peak to peak and can leave 2-8 °C; ",
+            field.name(),
+            " is the field controller\r\n"
         );
-        let _ = out.write_str(field.name());
-        let _ = out.write_str(" is the field controller\r\n");
     }
 
     /// The applied duty of the last sample (a switched law starts from it).
@@ -947,11 +953,11 @@ impl App {
         }
     }
 
-    fn write_status(&self, out: &mut impl Write) -> core::fmt::Result {
+    fn write_status(&self, out: &mut impl Sink) -> Written {
         let last = self.last;
         // From the integer clock: through f32 the tenths went wrong after 48 days (8025510.4 on a
         // 10 s grid) and the whole value became `-` after 6 years.
-        write!(out, "t_s={}.{}\r\n", self.last_t_ms / 1000, self.last_t_ms % 1000 / 100)?;
+        put!(out, "t_s=", self.last_t_ms / 1000, ".", self.last_t_ms % 1000 / 100, "\r\n")?;
         let (temp, duty, mode, alarm) = match last {
             Some(o) => (o.step.temp_c.0, o.step.duty.get(), o.step.mode.name(), o.alarm.name()),
             None => (f32::NAN, f32::NAN, "-", "-"),
@@ -962,21 +968,21 @@ impl App {
         // What is subtracted from the reading: a lead fault the offset watch measured (kept
         // across restarts), which an engineer must see to service it.
         let offset = self.carrier.sensor_offset_c();
-        write!(out, "temp_c={}\r\nsensor_offset_c={}\r\n", Fixed(temp, 2), Fixed(offset, 2))?;
-        write!(out, "setpoint_c={}\r\nduty={}\r\n", Fixed(sp, 2), Fixed(duty, 3))?;
+        put!(out, "temp_c=", Fixed(temp, 2), "\r\nsensor_offset_c=", Fixed(offset, 2), "\r\n")?;
+        put!(out, "setpoint_c=", Fixed(sp, 2), "\r\nduty=", Fixed(duty, 3), "\r\n")?;
         // No law while the step holds the outputs (a sensor fault: cooling off, the law not run;
         // limp home: the supply switch's On-Off): `get` says which law resumes.
         let law = match last {
             Some(o) if o.step.mode.not_in_control() => None,
             _ => Some(self.carrier.controller()),
         };
-        write!(out, "mode={mode}\r\nalarm={alarm}\r\ncontroller={}\r\n", law.map_or("-", |l| l.name()))?;
+        put!(out, "mode=", mode, "\r\nalarm=", alarm, "\r\ncontroller=", law.map_or("-", |l| l.name()), "\r\n")?;
         let status = law.and_then(|l| l.status());
-        write!(out, "adaptive={}\r\ncontrollers=", status.map_or("-", |s| s.mode.name()))?;
+        put!(out, "adaptive=", status.map_or("-", |s| s.mode.name()), "\r\ncontrollers=")?;
         for (i, l) in self.cfg.laws.iter().enumerate() {
-            write!(out, "{}{}", if i == 0 { "" } else { "," }, l.name())?;
+            put!(out, if i == 0 { "" } else { "," }, l.name())?;
         }
-        out.write_str("\r\n")?;
+        out.str("\r\n")?;
         let model = self.carrier.controller().trusted_model().or(match self.settings.law {
             Law::Gpc | Law::Igmvc => self.adaptive.initial,
             _ => None,
@@ -992,19 +998,27 @@ impl App {
             .sum();
         let resets = boots.saturating_sub(1);
         let holdover = last.and_then(|o| o.step.holdover_s).unwrap_or(f32::NAN);
-        write!(out, "holdover_s={}\r\nresets={resets}\r\nfirmware={}\r\n", Fixed(holdover, 0), self.cfg.firmware)?;
-        out.write_str("commissioning=")?;
+        put!(
+            out,
+            "holdover_s=",
+            Fixed(holdover, 0),
+            "\r\nresets=",
+            resets,
+            "\r\nfirmware=",
+            self.cfg.firmware,
+            "\r\ncommissioning="
+        )?;
         match (self.carrier.controller(), self.commissioned) {
             (BoardController::Commission(c), _) => match c.phase() {
-                Phase::Done(_) => out.write_str("done")?,
-                Phase::Failed(e) => write!(out, "failed:{}", e.name())?,
-                p => write!(out, "{}:{}", p.name(), p.percent())?,
+                Phase::Done(_) => out.str("done")?,
+                Phase::Failed(e) => put!(out, "failed:", e.name())?,
+                p => put!(out, p.name(), ":", p.percent())?,
             },
-            (_, Some(Ok(()))) => out.write_str("done")?,
-            (_, Some(Err(e))) => write!(out, "failed:{}", e.name())?,
-            (_, None) => out.write_str("idle")?,
+            (_, Some(Ok(()))) => out.str("done")?,
+            (_, Some(Err(e))) => put!(out, "failed:", e.name())?,
+            (_, None) => out.str("idle")?,
         }
-        write!(out, "\r\nsettings_version={}\r\n", self.settings.seq)
+        put!(out, "\r\nsettings_version=", self.settings.seq, "\r\n")
     }
 }
 
@@ -1016,17 +1030,17 @@ pub fn commission_failure_name(code: u8) -> &'static str {
 /// A model's status lines `{key}_a=a1,a2`, `{key}_b=b0,…` (its nb B terms: up to four for the
 /// self-tuner's estimate, two for a commissioned or uploaded model), `{key}_k=k`, or `-` for each
 /// when there is none (or its A is not second order).
-fn write_model(out: &mut impl Write, key: &str, m: Option<Model>) -> core::fmt::Result {
+fn write_model(out: &mut impl Sink, key: &str, m: Option<Model>) -> Written {
     match m {
         Some(m) if m.na() == 2 => {
             let a = m.a();
-            write!(out, "{key}_a={},{}\r\n{key}_b=", Fixed(a[0], 6), Fixed(a[1], 6))?;
+            put!(out, key, "_a=", Fixed(a[0], 6), ",", Fixed(a[1], 6), "\r\n", key, "_b=")?;
             for (i, b) in m.b().iter().take(m.nb()).enumerate() {
-                write!(out, "{}{}", if i == 0 { "" } else { "," }, Fixed(*b, 6))?;
+                put!(out, if i == 0 { "" } else { "," }, Fixed(*b, 6))?;
             }
-            write!(out, "\r\n{key}_k={}\r\n", m.k())
+            put!(out, "\r\n", key, "_k=", m.k(), "\r\n")
         }
-        _ => write!(out, "{key}_a=-\r\n{key}_b=-\r\n{key}_k=-\r\n"),
+        _ => put!(out, key, "_a=-\r\n", key, "_b=-\r\n", key, "_k=-\r\n"),
     }
 }
 

@@ -130,6 +130,8 @@ impl StopInfo {
     }
 }
 
+/// For the host and the tests: the firmware's stop paths push their text with
+/// [`StopInfo::push_text`] and link no `core::fmt`.
 impl core::fmt::Write for StopInfo {
     fn write_str(&mut self, s: &str) -> core::fmt::Result {
         self.push_text(s);

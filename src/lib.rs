@@ -36,6 +36,10 @@
 // Index loops mirror the textbook sums (Σ_i a_i y(t−i)) they implement.
 #![allow(clippy::needless_range_loop)]
 
+// A `String` is an interface sink on the host (`iface::sink`).
+#[cfg(any(test, feature = "alloc"))]
+extern crate alloc;
+
 pub mod adc;
 pub mod alarm;
 pub mod app;

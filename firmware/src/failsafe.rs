@@ -77,7 +77,8 @@ fn halt(why: Why) -> ! {
     failsafe::stop(&mut BoardOutputs, unsafe { reason() }, || match why {
         Why::Stall(since_ms) => StopInfo::new(StopKind::ControlStall, 0, 0, since_ms),
         // Records the location only: formatting the message would link `core::fmt` (several KiB
-        // of flash) into a binary at its budget. defmt's own panics (`unwrap!`,
+        // of flash, and calls through formatting arguments that leave the audit's stack bound
+        // unproven) into a binary at its budget. defmt's own panics (`unwrap!`,
         // `defmt::assert!`) have already logged their message over RTT when they get here.
         Why::Panic(at) => match at {
             Some((file, line)) => failsafe::panic_info(file, line),

@@ -24,8 +24,6 @@
 //! and erases a page every ≈ 5 h; the 10 s control loop and the 30 s watchdog do not notice.
 
 use core::cell::RefCell;
-#[cfg(feature = "interface")]
-use core::fmt::Write as _;
 use core::future::{ready, Future};
 
 use defmt::{info, warn};
@@ -352,7 +350,7 @@ async fn stream_history<F: NorFlash>(log: &mut LogStore<F, L4Ecc>, since_s: u32)
         .for_each(since_s, async |e: &LogEntry| {
             row.clear();
             let _ = write_csv_row(e, &mut row);
-            let _ = row.write_str("\r\n");
+            let _ = row.push_str("\r\n");
             stalled = !send(row.as_bytes()).await;
             !stalled
         })

@@ -22,8 +22,6 @@
 //! driver and its interrupt handler ≈ 1.6 KB, this task ≈ 1.2 KB, framing, waits) and +1 824 B
 //! of static RAM (the rings, the reply buffer and the line buffer live in the task's future).
 
-use core::fmt::Write;
-
 use defmt::warn;
 use embassy_stm32::usart::{BufferedUart, BufferedUartTx};
 use embassy_time::{with_timeout, Duration, Instant};
@@ -37,6 +35,7 @@ use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use hter::app::Handled;
 use hter::iface::line::{Frame, LineFramer};
+use hter::iface::sink::{Full, Sink, Written};
 use hter::iface::MAX_LINE;
 
 use crate::board;
@@ -66,7 +65,7 @@ pub const TX_TIMEOUT_MS: u64 = 250;
 const TX_RETRY_MS: u64 = 2;
 
 /// A reply being written: at most [`REPLY_CAP`] bytes, `\n` sent as `\r\n`. A reply that does not
-/// fit is marked too long (the writer returns `fmt::Error` from then on).
+/// fit is marked too long (the sink returns [`Full`] from then on).
 pub struct Reply {
     buf: [u8; REPLY_CAP],
     len: usize,
@@ -84,8 +83,8 @@ impl Reply {
         self.overflow = false;
     }
 
-    fn push(&mut self, b: u8) -> core::fmt::Result {
-        let slot = self.buf.get_mut(self.len).ok_or(core::fmt::Error)?;
+    fn push(&mut self, b: u8) -> Written {
+        let slot = self.buf.get_mut(self.len).ok_or(Full)?;
         *slot = b;
         self.len += 1;
         Ok(())
@@ -94,7 +93,7 @@ impl Reply {
     /// What to send: the reply, ending in a line end; or the refusal of a reply too long.
     fn finish(&mut self) -> &[u8] {
         if !self.overflow && self.len > 0 && self.buf.get(self.len - 1) != Some(&b'\n') {
-            self.overflow = self.write_str("\n").is_err();
+            self.overflow = self.str("\n").is_err();
         }
         if self.overflow {
             return b"err reply: too long\r\n";
@@ -103,10 +102,10 @@ impl Reply {
     }
 }
 
-impl Write for Reply {
-    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+impl Sink for Reply {
+    fn str(&mut self, s: &str) -> Written {
         if self.overflow {
-            return Err(core::fmt::Error);
+            return Err(Full);
         }
         for &b in s.as_bytes() {
             let r = if b == b'\n' && self.len.checked_sub(1).and_then(|i| self.buf.get(i)) != Some(&b'\r') {

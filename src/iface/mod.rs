@@ -11,9 +11,11 @@
 
 pub mod line;
 pub mod num;
+pub mod sink;
 
 use crate::model::{Model, MAX_K};
-use num::{parse_decimal, parse_list, parse_whole, Decimal, MAX_DIGITS};
+use num::{parse_decimal, parse_list, parse_whole, Decimal, Fixed, MAX_DIGITS};
+use sink::{put, Sink, Text, Written};
 
 /// Longest request line, bytes (docs/interface.md).
 pub const MAX_LINE: usize = 96;
@@ -140,21 +142,21 @@ pub enum Why<'a> {
     Line(&'static str),
 }
 
-impl core::fmt::Display for Refusal<'_> {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        use num::Fixed;
-        write!(f, "err {}: ", self.what)?;
+impl Refusal<'_> {
+    /// Writes the refusal's line, without its line end.
+    pub fn write<S: Sink + ?Sized>(&self, out: &mut S) -> Written {
+        put!(out, "err ", self.what, ": ")?;
         match self.why {
-            Why::UnknownCommand => f.write_str("unknown command (try help)"),
-            Why::UnknownKey => f.write_str("unknown setting (setpoint_c, controller, cal_ice, cal_warm, model, ack)"),
-            Why::Usage(u) => write!(f, "usage: {u}"),
-            Why::NotDecimal => f.write_str("not a decimal number"),
-            Why::OutOfRange(x, lo, hi) => write!(f, "{x} is outside {}…{}", Fixed(lo, 1), Fixed(hi, 1)),
-            Why::Finer(x, step, n) => write!(f, "{x} is finer than the {step} step (at most {n} decimals)"),
-            Why::Digits(x) => write!(f, "{x} has more than {MAX_DIGITS} significant digits"),
-            Why::Delay(k) => write!(f, "K must be a whole number of samples in 1…{MAX_K}, not {k}"),
-            Why::NotInBuild => f.write_str("not a law this build links (see status: controllers)"),
-            Why::Calibration(e) => f.write_str(match e {
+            Why::UnknownCommand => out.str("unknown command (try help)"),
+            Why::UnknownKey => out.str("unknown setting (setpoint_c, controller, cal_ice, cal_warm, model, ack)"),
+            Why::Usage(u) => put!(out, "usage: ", u),
+            Why::NotDecimal => out.str("not a decimal number"),
+            Why::OutOfRange(x, lo, hi) => put!(out, x, " is outside ", Fixed(lo, 1), "…", Fixed(hi, 1)),
+            Why::Finer(x, step, n) => put!(out, x, " is finer than the ", step, " step (at most ", n, " decimals)"),
+            Why::Digits(x) => put!(out, x, " has more than ", MAX_DIGITS, " significant digits"),
+            Why::Delay(k) => put!(out, "K must be a whole number of samples in 1…", MAX_K, ", not ", k),
+            Why::NotInBuild => out.str("not a law this build links (see status: controllers)"),
+            Why::Calibration(e) => out.str(match e {
                 crate::calib::CalError::NonFinite => "a point is not finite",
                 crate::calib::CalError::PointsTooClose => "the two points are less than 1 °C apart",
                 crate::calib::CalError::ImplausibleGain => "the points give a gain outside 0.9…1.1",
@@ -162,8 +164,21 @@ impl core::fmt::Display for Refusal<'_> {
                     "the points move a reading between 0 and 10 °C by more than 1.5 °C"
                 }
             }),
-            Why::Model(w) | Why::NotNow(w) | Why::Line(w) => f.write_str(w),
+            Why::Model(w) | Why::NotNow(w) | Why::Line(w) => out.str(w),
         }
+    }
+}
+
+impl Text for Refusal<'_> {
+    fn put<S: Sink + ?Sized>(&self, out: &mut S) -> Written {
+        self.write(out)
+    }
+}
+
+/// For the host and the tests (`to_string()`): the line [`Refusal::write`] writes.
+impl core::fmt::Display for Refusal<'_> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        self.write(f).map_err(|_| core::fmt::Error)
     }
 }
 

@@ -12,6 +12,8 @@
 
 use core::fmt;
 
+use super::sink::Sink;
+
 /// Most significant digits a setting's value may have: 7 keep the mantissa below 2²⁴, so it and
 /// the power of ten are exact in f32 and their one division is correctly rounded: the value is
 /// the f32 nearest the decimal, as `str::parse` gives. Zeros before the first non-zero digit and
@@ -143,24 +145,11 @@ pub fn parse_list<const N: usize>(s: &str) -> Option<[(&str, Decimal); N]> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Fixed(pub f32, pub u8);
 
+/// For the host and the tests (`to_string()`): the same text as [`super::sink::Sink::fixed`],
+/// which the firmware writes it with.
 impl fmt::Display for Fixed {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let Fixed(x, decimals) = *self;
-        let decimals = u32::from(decimals.min(6));
-        let scale = 10u32.pow(decimals);
-        let scaled = x * scale as f32;
-        // NaN fails both comparisons.
-        if !(scaled > -2.0e9 && scaled < 2.0e9) {
-            return f.write_str("-");
-        }
-        let n = if scaled < 0.0 { (scaled - 0.5) as i32 } else { (scaled + 0.5) as i32 };
-        let sign = if n < 0 { "-" } else { "" };
-        let n = n.unsigned_abs();
-        if decimals == 0 {
-            write!(f, "{sign}{n}")
-        } else {
-            write!(f, "{sign}{}.{:0width$}", n / scale, n % scale, width = decimals as usize)
-        }
+        f.fixed(self.0, self.1).map_err(|_| fmt::Error)
     }
 }
 

@@ -32,6 +32,7 @@
 
 use crate::coldchain::AlarmKind;
 use crate::event::EventKind;
+use crate::iface::sink::{put, Sink, Written};
 use crate::step::Mode;
 use crate::units::{max_f32, min_f32};
 
@@ -362,54 +363,58 @@ pub const CSV_HEADER: &str = "t_s,temp_c,min_c,max_c,duty,mode,event";
 
 /// Writes `entry` as one CSV row of `history` (no line end). Event rows leave the measurement
 /// columns empty (`hter monitor` and `hter report` take them as events, not samples).
-pub fn write_csv_row(entry: &LogEntry, out: &mut impl core::fmt::Write) -> core::fmt::Result {
+pub fn write_csv_row(entry: &LogEntry, out: &mut impl Sink) -> Written {
     use crate::iface::num::Fixed;
     let t = entry.t_s();
     match entry {
-        LogEntry::Interval { interval: i, .. } => {
-            write!(
-                out,
-                "{t},{},{},{},{},{},",
-                Fixed(i.mean_c, 2),
-                Fixed(i.min_c, 2),
-                Fixed(i.max_c, 2),
-                Fixed(i.duty, 3),
-                i.mode.name()
-            )
-        }
+        LogEntry::Interval { interval: i, .. } => put!(
+            out,
+            t,
+            ",",
+            Fixed(i.mean_c, 2),
+            ",",
+            Fixed(i.min_c, 2),
+            ",",
+            Fixed(i.max_c, 2),
+            ",",
+            Fixed(i.duty, 3),
+            ",",
+            i.mode.name(),
+            ","
+        ),
         _ => {
-            write!(out, "{t},,,,,,")?;
+            put!(out, t, ",,,,,,")?;
             match entry {
-                LogEntry::Event { kind, .. } => out.write_str(kind.name()),
-                LogEntry::Lost { entries: 0, .. } => out.write_str(EventKind::LogEntriesLost.name()),
-                LogEntry::Lost { entries, .. } => write!(out, "{}:{entries}", EventKind::LogEntriesLost.name()),
-                LogEntry::Alarm { kind, start_s, .. } => write!(out, "alarm:{}@{start_s}", kind.name()),
+                LogEntry::Event { kind, .. } => out.str(kind.name()),
+                LogEntry::Lost { entries: 0, .. } => out.str(EventKind::LogEntriesLost.name()),
+                LogEntry::Lost { entries, .. } => put!(out, EventKind::LogEntriesLost.name(), ":", *entries),
+                LogEntry::Alarm { kind, start_s, .. } => put!(out, "alarm:", kind.name(), "@", *start_s),
                 LogEntry::Setting { key, value, .. } => match key {
-                    SettingKey::Setpoint => write!(out, "set:setpoint_c={}", Fixed(value[0], 2)),
+                    SettingKey::Setpoint => put!(out, "set:setpoint_c=", Fixed(value[0], 2)),
                     SettingKey::Controller => {
                         let name = crate::iface::Law::ALL.get(value[0] as usize).map_or("?", |l| l.name());
-                        write!(out, "set:controller={name}")
+                        put!(out, "set:controller=", name)
                     }
                     SettingKey::CalIce | SettingKey::CalWarm => {
-                        write!(out, "set:{}={};{}", key.name(), Fixed(value[0], 2), Fixed(value[1], 2))
+                        put!(out, "set:", key.name(), "=", Fixed(value[0], 2), ";", Fixed(value[1], 2))
                     }
-                    SettingKey::Model => write!(out, "set:model=gain {};k {}", Fixed(value[0], 1), Fixed(value[1], 0)),
-                    SettingKey::Ack => out.write_str("ack"),
-                    SettingKey::SensorOffset => write!(out, "set:sensor_offset_c=0.00;was {}", Fixed(value[0], 2)),
+                    SettingKey::Model => put!(out, "set:model=gain ", Fixed(value[0], 1), ";k ", Fixed(value[1], 0)),
+                    SettingKey::Ack => out.str("ack"),
+                    SettingKey::SensorOffset => put!(out, "set:sensor_offset_c=0.00;was ", Fixed(value[0], 2)),
                     SettingKey::Service => {
-                        out.write_str("service_reset:cleared")?;
+                        out.str("service_reset:cleared")?;
                         if value[1] > 0.5 {
-                            out.write_str(" ssr_short")?;
+                            out.str(" ssr_short")?;
                         }
                         if value[0] == 0.0 {
                             return Ok(());
                         }
-                        write!(out, " sensor_offset_c {}", Fixed(value[0], 2))
+                        put!(out, " sensor_offset_c ", Fixed(value[0], 2))
                     }
-                    SettingKey::Identify => out.write_str("commissioning:started"),
-                    SettingKey::IdentifyEnd if value[0] > 0.5 => out.write_str("commissioning:done"),
+                    SettingKey::Identify => out.str("commissioning:started"),
+                    SettingKey::IdentifyEnd if value[0] > 0.5 => out.str("commissioning:done"),
                     SettingKey::IdentifyEnd => {
-                        write!(out, "commissioning:failed:{}", crate::app::commission_failure_name(value[1] as u8))
+                        put!(out, "commissioning:failed:", crate::app::commission_failure_name(value[1] as u8))
                     }
                 },
                 LogEntry::Interval { .. } => Ok(()),
