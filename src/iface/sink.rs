@@ -36,14 +36,6 @@ pub trait Sink {
         digits(self, n, 1)
     }
 
-    /// Appends `n` in decimal, `-` before a negative value.
-    fn int(&mut self, n: i64) -> Written {
-        if n < 0 {
-            self.str("-")?;
-        }
-        self.uint(n.unsigned_abs())
-    }
-
     /// Appends `x` as [`Fixed`] prints it: `decimals` places (at most 6), rounded half away from
     /// zero (in f32: exact to the digit for the interface's values, which carry far fewer than 7
     /// significant digits); a non-finite value, or one whose scaled value passes ±2·10⁹, is `-`,
@@ -195,11 +187,6 @@ mod tests {
         {
             let mut s = String::new();
             s.uint(n).unwrap();
-            assert_eq!(s, format!("{n}"));
-        }
-        for n in [0i64, -1, 1, -10, i64::MIN, i64::MAX] {
-            let mut s = String::new();
-            s.int(n).unwrap();
             assert_eq!(s, format!("{n}"));
         }
         for (n, width, want) in [(0u64, 3u8, "000"), (5, 2, "05"), (123, 2, "123"), (7, 25, "00000000000000000007")] {
