@@ -170,15 +170,6 @@ mod tests {
     use std::format;
     use std::string::String;
 
-    /// A sink of `N` bytes at most, as the firmware's buffers are.
-    struct Small<const N: usize>(heapless::String<N>);
-
-    impl<const N: usize> Sink for Small<N> {
-        fn str(&mut self, s: &str) -> Written {
-            self.0.str(s)
-        }
-    }
-
     #[test]
     fn integers_read_as_std_writes_them() {
         for n in [0u64, 1, 9, 10, 11, 99, 100, 101, 4_294_967_295, 4_294_967_296, 10u64.pow(19), u64::MAX]
@@ -233,11 +224,12 @@ mod tests {
         let mut s = String::new();
         put!(&mut s, "t=", 12u32, ",x=", Fixed(-1.5, 2), ",k=", 3usize).unwrap();
         assert_eq!(s, "t=12,x=-1.50,k=3");
-        let mut small = Small::<4>(heapless::String::new());
+        // A sink of 4 bytes at most, as the firmware's buffers are.
+        let mut small = heapless::String::<4>::new();
         assert_eq!(put!(&mut small, "ab", 12u8), Ok(()));
         assert_eq!(put!(&mut small, "c"), Err(Full));
-        assert_eq!(small.0.as_str(), "ab12");
-        let mut small = Small::<4>(heapless::String::new());
+        assert_eq!(small.as_str(), "ab12");
+        let mut small = heapless::String::<4>::new();
         assert_eq!(small.uint(123_456), Err(Full));
     }
 }
