@@ -5,7 +5,7 @@
 //! Why not `core::fmt`: `core::fmt::write` calls each argument's formatting function through a
 //! pointer, and a `Display` may format again, so a call chain through it can nest without a
 //! bound the image shows: `cargo xtask audit` cannot bound the stack of a firmware that links it
-//! (README, "the stack bounded"). It also cost ≈ 2 KB of flash in the interface build
+//! (README, "The whole stack is bounded"). It also cost ≈ 2 KB of flash in the interface build
 //! (`Formatter::pad`, `pad_integral`, the integer `Display`s, `core::fmt::write`). What the
 //! interface writes needs none of its generality: string slices, unsigned integers and decimals
 //! of a fixed number of places ([`Fixed`]).

@@ -32,10 +32,10 @@
 //!   only from the executor (embassy's run loop polls tasks; their own indirect calls are
 //!   wakers); recursion, a frame of run-time size, a target with no symbol or a task poll the
 //!   thread's walk never reaches (its call moved out of the executor's code) fail it. Every
-//!   build is asked, the interface build too: its text protocol is written without `core::fmt`
-//!   (`hter::iface::sink`), whose `core::fmt::write` calls each argument's formatter through a
-//!   pointer and can nest (a `Display` that formats again), a recursion the image cannot bound;
-//!   an unbounded image that links it says so in its line.
+//!   build is asked, the interface build too: its text protocol is written through
+//!   `hter::iface::sink`, not `core::fmt`, whose `core::fmt::write` calls each argument's
+//!   formatter through a pointer and can nest (a `Display` that formats again), a recursion the
+//!   image cannot bound; an unbounded image that links `core::fmt::write` says so in its line.
 //!
 //! It prints one line per check and a final JSON line, and exits non-zero if any check fails.
 
