@@ -84,9 +84,9 @@ pub struct Boot {
     pub fault: Option<StopInfo>,
     /// Flash pages the boot found torn and repaired.
     pub pages_lost: u8,
-    /// The acknowledge button was held through the reset: a technician's service reset
-    /// ([`Self::service_reset`]).
-    pub service: bool,
+    /// The acknowledge button was held through the reset: a technician's service reset if the
+    /// reset was the reset button's ([`Self::service_reset`]), chance otherwise.
+    pub button_held: bool,
 }
 
 impl Boot {
@@ -115,13 +115,13 @@ impl Boot {
 
     /// Whether this boot is a technician's service reset, which forgets what the history
     /// carries ([`Recorder::note_service`]: the SSR's short if one is stored, else the sensor
-    /// offset, after the repair): the acknowledge button held through a reset ([`Self::service`]), and the reset
+    /// offset, after the repair): the acknowledge button held through a reset ([`Self::button_held`]), and the reset
     /// a pin reset (the reset button) without a fail-safe stop. Not after a watchdog bite, a
     /// fail-safe stop or a power cut, which the button held by chance (someone acknowledging an
     /// alarm) must not turn into a repair. A reset alone no longer clears the short: an NRST
     /// glitch or a debugger attaching under reset gives one too.
     pub fn service_reset(&self) -> bool {
-        self.service && self.fault.is_none() && self.reset == ResetCause::Other
+        self.button_held && self.fault.is_none() && self.reset == ResetCause::Other
     }
 
     /// Starts the step and the record from what this boot found: counts the boot in the record

@@ -139,7 +139,7 @@ async fn main(spawner: Spawner) {
     let b = board::init();
     // Read before the flash is: the technician holds the button only for a moment past the
     // reset.
-    let service = board::button_held(&b.button);
+    let button_held = board::button_held(&b.button);
     if let Some(f) = &fault {
         error!("board fault: {}", f);
     }
@@ -183,7 +183,7 @@ async fn main(spawner: Spawner) {
     let restored = persist::BOOTED.receive().await;
     failsafe::note_boot(hter::failsafe::BootPhase::Start);
     let mut boot = restored.boot(reset, fault);
-    boot.service = service;
+    boot.button_held = button_held;
     if boot.service_reset() {
         warn!("service reset: the SSR's short is forgotten, or the sensor offset if no short was stored");
     }

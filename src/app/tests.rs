@@ -34,7 +34,7 @@ fn boot() -> Boot {
         reset: ResetCause::Other,
         fault: None,
         pages_lost: 0,
-        service: false,
+        button_held: false,
     }
 }
 
@@ -962,7 +962,7 @@ fn a_shorted_ssr_is_remembered_until_a_service_reset() {
         (ResetCause::BrownOut, None, true, true),
         (ResetCause::Other, None, true, false),
     ] {
-        let mut next = Bench::new(&Boot { history: stored, reset, fault, service, ..boot() });
+        let mut next = Bench::new(&Boot { history: stored, reset, fault, button_held: service, ..boot() });
         next.load_c = 5.0;
         let first = next.run(1);
         let what = format!("{reset:?} {:?} service {service}", fault.map(|f| f.kind));
@@ -1242,8 +1242,8 @@ fn a_service_reset_clears_the_sensor_offset_after_a_repair() {
     let mut b = bench_with_a_compensated_lead();
     let stored = stored_history(&b);
     b.lead_c = 0.0;
-    let service = Boot { settings: Some(*b.app.settings()), history: stored, service: true, ..boot() };
-    for (boot, cleared) in [(Boot { service: false, ..service }, false), (service, true)] {
+    let service = Boot { settings: Some(*b.app.settings()), history: stored, button_held: true, ..boot() };
+    for (boot, cleared) in [(Boot { button_held: false, ..service }, false), (service, true)] {
         let mut again = Bench::new(&boot);
         (again.load_c, again.lead_c, again.dither, again.pipe) = (b.load_c, 0.0, true, b.pipe.clone());
         let (worst, _) = reading_error(&mut again, 1);
@@ -1277,7 +1277,7 @@ fn a_service_reset_clears_the_sensor_offset_after_a_repair() {
 fn a_service_reset_after_an_ssr_repair_keeps_the_sensor_offset() {
     let mut b = bench_with_a_compensated_lead();
     let with_short = stored_history(&b).with_carried(false, true);
-    let service = |history| Boot { settings: Some(*b.app.settings()), history, service: true, ..boot() };
+    let service = |history| Boot { settings: Some(*b.app.settings()), history, button_held: true, ..boot() };
     let logged = |saves: &[Save]| {
         saves.iter().find_map(|s| match s {
             Save::Log(LogEntry::Setting { key: SettingKey::Service, value, .. }) => Some(*value),

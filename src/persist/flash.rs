@@ -775,7 +775,7 @@ impl Restored {
             reset,
             fault,
             pages_lost: u8::try_from(self.repairs.total()).unwrap_or(u8::MAX),
-            service: false,
+            button_held: false,
         }
     }
 }

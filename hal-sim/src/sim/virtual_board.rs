@@ -305,7 +305,7 @@ impl VirtualBoard {
 /// firmware's boot sequence).
 fn booted(adaptive: AdaptiveConfig, store: &mut MockStore, log: &mut MockLog, reset: ResetCause, service: bool) -> App {
     let restored = block_on(flash::restore(store, log, Some(adaptive)));
-    App::new(app_config(adaptive), &hter::app::Boot { service, ..restored.boot(reset, None) })
+    App::new(app_config(adaptive), &hter::app::Boot { button_held: service, ..restored.boot(reset, None) })
 }
 
 fn open_store(flash: MockFlash<PAGE>) -> MockStore {
