@@ -977,10 +977,7 @@ fn a_shorted_ssr_is_remembered_until_a_service_reset() {
             _ => None,
         });
         assert_eq!(boot_history.map(|h| h.ssr_shorted()), Some(limps), "{what}");
-        let cleared = next.saves.iter().find_map(|s| match s {
-            Save::Log(LogEntry::Setting { key: SettingKey::Service, value, .. }) => Some(*value),
-            _ => None,
-        });
+        let cleared = service_logged(&next);
         if limps {
             assert_eq!(cleared, None, "{what}");
         } else {
@@ -1142,6 +1139,15 @@ fn stored_history(b: &Bench) -> HistoryRecord {
         .expect("a history was stored")
 }
 
+/// The record's `service_reset` entry the bench queued, if any: what a service reset cleared
+/// (the offset, °C, 0 if none; 1 if the SSR's short).
+fn service_logged(b: &Bench) -> Option<[f32; 2]> {
+    b.saves.iter().find_map(|s| match s {
+        Save::Log(LogEntry::Setting { key: SettingKey::Service, value, .. }) => Some(*value),
+        _ => None,
+    })
+}
+
 /// A restart is no acknowledgement: a fault nobody has seen (a sensor that failed and came
 /// back) keeps the indicator on after a brown-out, from the history the boot reads; the boot
 /// after an `ack` is quiet. The latch was RAM alone, and the first sample after the restart
@@ -1248,10 +1254,7 @@ fn a_service_reset_clears_the_sensor_offset_after_a_repair() {
         (again.load_c, again.lead_c, again.dither, again.pipe) = (b.load_c, 0.0, true, b.pipe.clone());
         let (worst, _) = reading_error(&mut again, 1);
         let at_boot = &again.saves;
-        let logged = at_boot.iter().find_map(|s| match s {
-            Save::Log(LogEntry::Setting { key: SettingKey::Service, value, .. }) => Some(*value),
-            _ => None,
-        });
+        let logged = service_logged(&again);
         if cleared {
             assert!(worst < 0.05, "the repaired sensor reads the load: {worst} °C off");
             let first = at_boot.iter().find(|s| matches!(s, Save::History(_) | Save::AlarmHistory(_)));
@@ -1278,12 +1281,6 @@ fn a_service_reset_after_an_ssr_repair_keeps_the_sensor_offset() {
     let mut b = bench_with_a_compensated_lead();
     let with_short = stored_history(&b).with_carried(false, true);
     let service = |history| Boot { settings: Some(*b.app.settings()), history, button_held: true, ..boot() };
-    let logged = |saves: &[Save]| {
-        saves.iter().find_map(|s| match s {
-            Save::Log(LogEntry::Setting { key: SettingKey::Service, value, .. }) => Some(*value),
-            _ => None,
-        })
-    };
     let mut again = Bench::new(&service(with_short));
     (again.load_c, again.lead_c, again.dither, again.pipe) = (b.load_c, b.lead_c, true, b.pipe.clone());
     let (worst, events) = reading_error(&mut again, 360);
@@ -1294,7 +1291,7 @@ fn a_service_reset_after_an_ssr_repair_keeps_the_sensor_offset() {
     );
     assert!(!again.app.carrier().ssr_shorted(), "the short is forgotten");
     assert!(!events.contains(&EventKind::SensorOffset), "{events:?}");
-    assert_eq!(logged(&again.saves), Some([0.0, 1.0]), "the record says the short alone was cleared");
+    assert_eq!(service_logged(&again), Some([0.0, 1.0]), "the record says the short alone was cleared");
     let kept = stored_history(&again);
     assert!(!kept.ssr_shorted() && (kept.sensor_offset.c() - 1.5).abs() < 0.05, "{kept:?}");
 
@@ -1304,7 +1301,7 @@ fn a_service_reset_after_an_ssr_repair_keeps_the_sensor_offset() {
     (third.load_c, third.lead_c, third.dither, third.pipe) = (again.load_c, 0.0, true, again.pipe.clone());
     let (worst, _) = reading_error(&mut third, 1);
     assert!(worst < 0.05, "the repaired sensor reads the load: {worst} °C off");
-    assert!(logged(&third.saves).is_some_and(|v| (v[0] - 1.5).abs() < 0.05 && v[1] == 0.0));
+    assert!(service_logged(&third).is_some_and(|v| (v[0] - 1.5).abs() < 0.05 && v[1] == 0.0));
 }
 
 /// The offset is stored in the channel's terms: a calibration stored after it, and a power cut
