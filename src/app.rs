@@ -345,7 +345,7 @@ const SETTLE_SAMPLES: u16 = 2 * DUTY_BLOCK + 60;
 /// fell into the freeze guard within 31 samples (`failed:fault_freeze_guard`;
 /// `hal-sim/tests/virtual_board.rs::identify_waits_until_a_pulled_down_carrier_has_held_its_setpoint`).
 /// Wide enough for the closed-loop laws' hold (On-Off's cycle is no hold: `identify` refuses it,
-/// [`App::handle`]).
+/// [`App::start_commissioning`]).
 const HELD_BAND_C: f32 = 1.5;
 
 impl DutyMean {
