@@ -133,8 +133,8 @@ async fn main(spawner: Spawner) {
         (ResetCause::from_stm32l4_csr(csr), csr)
     };
     let fault = failsafe::take_reason(reset);
-    // From here to the control loop no stop path watches: a hang is the watchdog's, and the
-    // phase left in the reset-surviving record tells the next boot where it was.
+    // From here to the control loop no stall check watches: a hang is the watchdog's, and the
+    // phase left in a reset-surviving word beside the stop record tells the next boot where it was.
     failsafe::note_boot(hter::failsafe::BootPhase::Board);
     let b = board::init();
     // Read before the flash is: the technician holds the button only for a moment past the
