@@ -1049,7 +1049,7 @@ impl Recorder {
     /// reset without a fail-safe stop cleared the short: the reset button, but also an NRST
     /// glitch or a debugger attaching under reset.
     pub fn note_service(&mut self) -> HistoryRecord {
-        if self.boot.flags & SSR_SHORTED != 0 {
+        if self.boot.ssr_shorted() {
             self.boot.flags &= !SSR_SHORTED;
         } else {
             self.boot.sensor_offset = SensorOffset::NONE;
