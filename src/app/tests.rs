@@ -617,20 +617,13 @@ fn a_new_fail_safe_stop_reaches_the_record_before_the_next_stop() {
 /// again within the minute), and the record did not say the board had looped.
 #[test]
 fn a_watchdog_loop_before_the_control_loop_reaches_the_record() {
-    use crate::failsafe::{boot_stall, boot_stop, BootPhase, ReasonRecord, StopKind};
+    use crate::failsafe::{boot_stall, boot_stop, BootPhase, StopKind};
     use crate::persist::LastStop;
     let stored = HistoryRecord::EMPTY.with_carried(true, false);
-    let (mut reason, mut marker) = (ReasonRecord::EMPTY, 0);
-    // The loop: each boot takes the last one's stop, marks its phases, hangs in the restore.
-    for _ in 0..5 {
-        let _ = boot_stop(reason.take(), marker, ResetCause::Watchdog);
-        // Board, then Restore, where it hangs.
-        for phase in [BootPhase::Board, BootPhase::Restore] {
-            marker = phase.marker();
-        }
-    }
-    // The cause goes away: the next boot gets through.
-    let fault = boot_stop(reason.take(), marker, ResetCause::Watchdog);
+    // Each boot of the loop marks Board, then Restore, and hangs there: no stop path runs, so no
+    // stop is recorded, and the word says Restore at every watchdog reset. The cause goes away:
+    // the next boot gets through and reads it.
+    let fault = boot_stop(None, BootPhase::Restore.marker(), ResetCause::Watchdog);
     assert_eq!(fault, Some(boot_stall(BootPhase::Restore)));
     let mut b = Bench::new(&Boot { history: stored, reset: ResetCause::Watchdog, fault, ..boot() });
     let first = b.run(1);
@@ -1200,8 +1193,12 @@ fn bench_with_a_compensated_lead() -> Bench {
 /// The board after a brown-out of `b`'s, from the settings and the history `b` handed over for
 /// flash, in front of the same load, lead and plant.
 fn restarted(b: &Bench, history: HistoryRecord) -> Bench {
-    let boot = Boot { settings: Some(*b.app.settings()), history, reset: ResetCause::BrownOut, ..boot() };
-    let mut again = Bench::new(&boot);
+    booted_after(b, &Boot { settings: Some(*b.app.settings()), history, reset: ResetCause::BrownOut, ..boot() })
+}
+
+/// The board booted from `boot` after `b`'s, in front of the same load, lead and plant.
+fn booted_after(b: &Bench, boot: &Boot) -> Bench {
+    let mut again = Bench::new(boot);
     (again.load_c, again.lead_c, again.dither, again.pipe) = (b.load_c, b.lead_c, b.dither, b.pipe.clone());
     again
 }
@@ -1250,8 +1247,7 @@ fn a_service_reset_clears_the_sensor_offset_after_a_repair() {
     b.lead_c = 0.0;
     let service = Boot { settings: Some(*b.app.settings()), history: stored, button_held: true, ..boot() };
     for (boot, cleared) in [(Boot { button_held: false, ..service }, false), (service, true)] {
-        let mut again = Bench::new(&boot);
-        (again.load_c, again.lead_c, again.dither, again.pipe) = (b.load_c, 0.0, true, b.pipe.clone());
+        let mut again = booted_after(&b, &boot);
         let (worst, _) = reading_error(&mut again, 1);
         let at_boot = &again.saves;
         let logged = service_logged(&again);
@@ -1278,11 +1274,10 @@ fn a_service_reset_clears_the_sensor_offset_after_a_repair() {
 /// reset forgets one repair, the short first; a second one, with no short left, the offset.
 #[test]
 fn a_service_reset_after_an_ssr_repair_keeps_the_sensor_offset() {
-    let mut b = bench_with_a_compensated_lead();
+    let b = bench_with_a_compensated_lead();
     let with_short = stored_history(&b).with_carried(false, true);
     let service = |history| Boot { settings: Some(*b.app.settings()), history, button_held: true, ..boot() };
-    let mut again = Bench::new(&service(with_short));
-    (again.load_c, again.lead_c, again.dither, again.pipe) = (b.load_c, b.lead_c, true, b.pipe.clone());
+    let mut again = booted_after(&b, &service(with_short));
     let (worst, events) = reading_error(&mut again, 360);
     let load = again.load_c;
     assert!(
@@ -1296,9 +1291,8 @@ fn a_service_reset_after_an_ssr_repair_keeps_the_sensor_offset() {
     assert!(!kept.ssr_shorted() && (kept.sensor_offset.c() - 1.5).abs() < 0.05, "{kept:?}");
 
     // The lead repaired too: a second service reset forgets the offset.
-    b.lead_c = 0.0;
-    let mut third = Bench::new(&service(kept));
-    (third.load_c, third.lead_c, third.dither, third.pipe) = (again.load_c, 0.0, true, again.pipe.clone());
+    again.lead_c = 0.0;
+    let mut third = booted_after(&again, &service(kept));
     let (worst, _) = reading_error(&mut third, 1);
     assert!(worst < 0.05, "the repaired sensor reads the load: {worst} °C off");
     assert!(service_logged(&third).is_some_and(|v| (v[0] - 1.5).abs() < 0.05 && v[1] == 0.0));
