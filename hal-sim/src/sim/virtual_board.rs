@@ -194,9 +194,9 @@ impl VirtualBoard {
     }
 
     /// Powers the board up from what its flash holds: scrub, restore, a new [`App`].
-    fn boot(&mut self, reset: ResetCause, service: bool) {
+    fn boot(&mut self, reset: ResetCause, button_held: bool) {
         let (Some(store), Some(log)) = (self.store.as_mut(), self.log.as_mut()) else { return };
-        self.app = booted(self.adaptive, store, log, reset, service);
+        self.app = booted(self.adaptive, store, log, reset, button_held);
         self.pending = PendingSaves::EMPTY;
         self.gate = WriteGate::firmware();
         self.t_ms = 0;
@@ -222,11 +222,11 @@ impl VirtualBoard {
     }
 
     /// The reset button between two samples (RAM lost, flash and the carrier as they are); with
-    /// `service`, the acknowledge button held through it: a technician's service reset
+    /// `button_held`, the acknowledge button held through it: a technician's service reset
     /// ([`hter::app::Boot::service_reset`]).
-    pub fn reset(&mut self, service: bool) {
+    pub fn reset(&mut self, button_held: bool) {
         self.restarts += 1;
-        self.boot(ResetCause::Other, service);
+        self.boot(ResetCause::Other, button_held);
     }
 
     /// One control sample: the step, the actuator, Ts of plant, then the flash writes the gate
@@ -303,9 +303,15 @@ impl VirtualBoard {
 
 /// An [`App`] booted from what the flash holds: scrub, restore, a new application (the
 /// firmware's boot sequence).
-fn booted(adaptive: AdaptiveConfig, store: &mut MockStore, log: &mut MockLog, reset: ResetCause, service: bool) -> App {
+fn booted(
+    adaptive: AdaptiveConfig,
+    store: &mut MockStore,
+    log: &mut MockLog,
+    reset: ResetCause,
+    button_held: bool,
+) -> App {
     let restored = block_on(flash::restore(store, log, Some(adaptive)));
-    App::new(app_config(adaptive), &hter::app::Boot { button_held: service, ..restored.boot(reset, None) })
+    App::new(app_config(adaptive), &hter::app::Boot { button_held, ..restored.boot(reset, None) })
 }
 
 fn open_store(flash: MockFlash<PAGE>) -> MockStore {
