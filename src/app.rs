@@ -25,7 +25,7 @@ use crate::coldchain::Raised;
 use crate::control::adaptive::{plausible_model, AdaptiveConfig, SelfTuning};
 use crate::control::{ControlError, ControlInput, Controller, ControllerStatus, OnOff, OnOffConfig, Pi};
 use crate::event::EventKind;
-use crate::failsafe::StopInfo;
+use crate::failsafe::Stops;
 use crate::ident::commission::{
     cabinet_plausible, CommissionConfig, CommissionError, Commissioning, Implausibility, Phase,
 };
@@ -80,8 +80,9 @@ pub struct Boot {
     pub log_last_s: u32,
     /// Why the MCU started.
     pub reset: ResetCause,
-    /// The fail-safe stop of the previous boot, if any.
-    pub fault: Option<StopInfo>,
+    /// The fail-safe stops the stored history does not have yet: the previous boot's, and one
+    /// before it that a boot took but did not store ([`crate::failsafe::ResetRecords::boot`]).
+    pub stops: Stops,
     /// Flash pages the boot found torn and repaired.
     pub pages_lost: u8,
     /// The acknowledge button was held through the reset: a technician's service reset if the
@@ -98,10 +99,11 @@ impl Boot {
     /// the first steps, a stall) restarts before its boot's store: behind the hold-off, the
     /// stop never reached the cold-chain record however often it repeated, though the next boot
     /// found it in RAM each time (SPEC §7). The same stop again (a fault loop) waits as before,
-    /// so a loop does not write at every boot; a power bounce has no stop (RAM does not keep the
-    /// reason through a power loss, and the boot took it).
+    /// so a loop does not write at every boot, a stop before it kept beside it
+    /// ([`Stops::earlier`]) included: it stays in RAM until the store; a power bounce has no
+    /// stop (RAM does not keep the reason through a power loss).
     pub fn history_save(&self, history: HistoryRecord) -> Save {
-        let stop = self.fault.as_ref().map(crate::persist::LastStop::from);
+        let stop = self.stops.latest.as_ref().map(crate::persist::LastStop::from);
         // A service reset's forgetting is stored at once too: behind the hold-off, a power cut
         // in the first minute brought back a short or an offset the technician had cleared.
         let forgot =
@@ -121,7 +123,7 @@ impl Boot {
     /// alarm) must not turn into a repair. A reset alone no longer clears the short: an NRST
     /// glitch or a debugger attaching under reset gives one too.
     pub fn service_reset(&self) -> bool {
-        self.button_held && self.fault.is_none() && self.reset == ResetCause::Other
+        self.button_held && self.stops.latest.is_none() && self.reset == ResetCause::Other
     }
 
     /// Starts the step and the record from what this boot found: counts the boot in the record
@@ -136,11 +138,11 @@ impl Boot {
         recorder: &mut Recorder,
     ) -> HistoryRecord {
         carrier.note_reset(self.reset);
-        let mut history = recorder.note_boot(self.reset, self.fault.as_ref());
+        let mut history = recorder.note_boot(self.reset, &self.stops);
         if self.service_reset() {
             history = recorder.note_service();
         }
-        if let Some(f) = &self.fault {
+        for f in self.stops.iter() {
             carrier.note_board_fault(f.kind);
         }
         carrier.resume(&history);

@@ -8,10 +8,12 @@
 //! (`cargo xtask pil` triggers a panic, a HardFault, an NMI, an unexpected interrupt and a
 //! stack overflow into the stack guard (`arm_stack_guard`) there and checks each step).
 //!
-//! The reason lives in a [`ReasonRecord`] that the glue places in RAM the runtime neither zeroes
-//! nor initialises (`.uninit`): it survives a system reset (not a power cycle). The next boot
-//! [`ReasonRecord::take`]s it — a record whose magic or CRC is wrong is noise from a power-up and
-//! is ignored — and reports it as [`crate::event::EventKind::BoardFault`].
+//! The reason lives in a [`ReasonRecord`] of the [`ResetRecords`] that the glue places in RAM the
+//! runtime neither zeroes nor initialises (`.uninit`): it survives a system reset (not a power
+//! cycle). The next boot reads it ([`ResetRecords::boot`]) — a record whose magic or CRC is wrong
+//! is noise from a power-up and is ignored — reports it as
+//! [`crate::event::EventKind::BoardFault`] and counts it in the history, and it stays in RAM
+//! until that history is in flash ([`ResetRecords::stored`]).
 //!
 //! Glossary: *stop* = any path that leaves the control loop for good (until reset); *PC* = the
 //! program counter stacked by the exception entry; *CFSR/HFSR* = the Cortex-M fault status
@@ -173,7 +175,7 @@ pub struct ReasonRecord {
 }
 
 impl ReasonRecord {
-    /// An empty record (what a fresh boot holds after [`ReasonRecord::take`]).
+    /// An empty record.
     pub const EMPTY: ReasonRecord =
         ReasonRecord { magic: 0, kind: 0, pc: 0, addr: 0, detail: 0, text_len: 0, text: [0; STOP_TEXT], crc: 0 };
 
@@ -201,15 +203,7 @@ impl ReasonRecord {
         self.crc = self.crc();
     }
 
-    /// The recorded stop, if the record is intact (magic, CRC, kind and text length valid);
-    /// clears the record either way, so each stop is reported once.
-    pub fn take(&mut self) -> Option<StopInfo> {
-        let found = self.peek();
-        *self = ReasonRecord::EMPTY;
-        found
-    }
-
-    /// The recorded stop without clearing it.
+    /// The recorded stop, if the record is intact (magic, CRC, kind and text length valid).
     pub fn peek(&self) -> Option<StopInfo> {
         if self.magic != MAGIC || self.crc != self.crc() {
             return None;
@@ -227,10 +221,11 @@ impl ReasonRecord {
 /// The reason is built by `info` only once the outputs are safe: reading fault registers or
 /// cutting a file name down costs little, but a fault in it must not find the SSR still driven.
 /// The record (a CRC over 72 bytes) comes last and is written whole before the reset, so the
-/// next boot can trust it. Returns what was recorded.
+/// next boot can trust it ([`ResetRecords::record`]: a stop the flash does not have yet is kept
+/// beside it). Returns what was recorded.
 pub fn stop<O: SafeOutputs + ?Sized>(
     outputs: &mut O,
-    record: &mut ReasonRecord,
+    records: &mut ResetRecords,
     info: impl FnOnce() -> StopInfo,
 ) -> StopInfo {
     outputs.force_safe();
@@ -238,7 +233,7 @@ pub fn stop<O: SafeOutputs + ?Sized>(
     // outputs' writes.
     core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
     let info = info();
-    record.write(&info);
+    records.record(&info);
     info
 }
 
@@ -255,7 +250,7 @@ pub fn panic_info(file: &str, line: u32) -> StopInfo {
 /// reset-surviving word ([`Self::marker`]) from right after it took the last reset's record up
 /// to the control-stall check's start: a boot that hangs there (in the clocks, in a flash
 /// restore) before any stop path can notice is reset by the watchdog, and the next boot makes a
-/// stop of it ([`boot_stop`]). Before, the bite was a watchdog reset and nothing more, and a
+/// stop of it ([`ResetRecords::boot`]). Before, the bite was a watchdog reset and nothing more, and a
 /// loop of them that hung before the history's store at every boot left nothing in the
 /// cold-chain record, however long it lasted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -290,15 +285,109 @@ pub fn boot_stall(phase: BootPhase) -> StopInfo {
     StopInfo::new(StopKind::ControlStall, 0, phase as u32, 0)
 }
 
-/// The last reset's stop: `recorded`, the record a stop path left, if any; else, after a
-/// watchdog reset, the boot the watchdog reset before its control loop, if `marker` (the
-/// reset-surviving word) names its phase ([`boot_stall`]). After any other reset a marker is a
-/// boot a person reset (the reset button in its first second) or a power cut: no hang.
-pub fn boot_stop(recorded: Option<StopInfo>, marker: u32, reset: crate::persist::ResetCause) -> Option<StopInfo> {
-    if recorded.is_some() || reset != crate::persist::ResetCause::Watchdog {
-        return recorded;
+/// The stops a boot found that the flash does not have yet ([`ResetRecords::boot`]), oldest
+/// first: at most two, so that a stop and the hang or stop of the boot that took it are both
+/// counted.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Stops {
+    /// A stop before [`Self::latest`] that an earlier boot took but did not store.
+    pub earlier: Option<StopInfo>,
+    /// The newest stop.
+    pub latest: Option<StopInfo>,
+}
+
+impl Stops {
+    /// Each stop, oldest first.
+    pub fn iter(&self) -> impl Iterator<Item = &StopInfo> {
+        self.earlier.iter().chain(self.latest.iter())
     }
-    BootPhase::ALL.into_iter().find(|p| p.marker() == marker).map(boot_stall)
+}
+
+/// What crosses a reset for the fail-safe (not a power cut): the stops the stored history does
+/// not have yet, and how far the boot got ([`BootPhase`]). The glue keeps one in RAM the
+/// runtime neither zeroes nor initialises (`.uninit`; after a power-up it is noise, which each
+/// record's magic and CRC reject, and which a marker matches once in 2³⁰).
+///
+/// A stop stays here until the flash has it ([`Self::stored`]), not only until the next boot
+/// reads it. Before, the boot cleared the record as it took it: a boot that then hung or
+/// stopped before its history was stored (a hang in the flash restore, a fault in the first
+/// steps, behind the write gate's minute) left the next boot only its own stop or hang, and the
+/// first stop was in no record. Now the stop path that finds a stop not yet stored keeps it as
+/// [`Self::earlier`]'s before writing its own ([`Self::record`]), and a boot the watchdog reset
+/// before its control loop is recorded the same way ([`Self::boot`]). A loop that stops faster
+/// than it stores keeps the first and the newest stop.
+#[derive(Clone, Copy, Debug)]
+#[repr(C)]
+pub struct ResetRecords {
+    /// The newest stop not yet stored (what the stop paths write).
+    latest: ReasonRecord,
+    /// The stop before it, when the stop path that wrote `latest` found it not yet stored.
+    earlier: ReasonRecord,
+    /// [`BootPhase::marker`] while the boot is on its way to the control loop, 0 once it runs.
+    phase: u32,
+}
+
+impl ResetRecords {
+    /// No stop, no boot under way.
+    pub const EMPTY: ResetRecords =
+        ResetRecords { latest: ReasonRecord::EMPTY, earlier: ReasonRecord::EMPTY, phase: 0 };
+
+    /// Records `info` as the newest stop. A stop already there and not yet stored moves to
+    /// [`Self::earlier`] if that is free; if it is not, the oldest stays and `info` replaces the
+    /// one between.
+    pub fn record(&mut self, info: &StopInfo) {
+        // The magic alone, not the CRC: the stop path stays short, and a record copied on a
+        // magic found by chance in power-up noise is still no record to the boot's check.
+        if self.earlier.magic != MAGIC && self.latest.magic == MAGIC {
+            self.earlier = self.latest;
+        }
+        self.latest.write(info);
+    }
+
+    /// At boot, with the reset's cause: the stops the flash does not have yet, oldest first.
+    /// After a watchdog reset, a boot left in one of its phases ([`Self::enter`]) had hung on
+    /// its way to the control loop, where no stop path watches: it is recorded as a stop of its
+    /// phase ([`boot_stall`]). After any other reset a phase left over is a boot a person reset
+    /// (the reset button in its first second) or a power cut, not a hang. The stops stay until
+    /// [`Self::stored`].
+    pub fn boot(&mut self, reset: crate::persist::ResetCause) -> Stops {
+        // SAFETY: a read of this struct's own field; volatile because the word was written by
+        // the boot before the reset, which the compiler cannot know about.
+        let marker = unsafe { core::ptr::read_volatile(&self.phase) };
+        if reset == crate::persist::ResetCause::Watchdog {
+            if let Some(phase) = BootPhase::ALL.into_iter().find(|p| p.marker() == marker) {
+                self.record(&boot_stall(phase));
+            }
+        }
+        self.stops()
+    }
+
+    /// The stops held, oldest first, as they are (no phase read, nothing recorded).
+    pub fn stops(&self) -> Stops {
+        Stops { earlier: self.earlier.peek(), latest: self.latest.peek() }
+    }
+
+    /// The boot is now at `phase`, until [`Self::running`]: a watchdog reset before then is the
+    /// next boot's stop. Volatile: the word is read only after the next reset, and the writes
+    /// of two phases with nothing between them that reads it could otherwise be merged.
+    pub fn enter(&mut self, phase: BootPhase) {
+        // SAFETY: a write of this struct's own field.
+        unsafe { core::ptr::write_volatile(&mut self.phase, phase.marker()) };
+    }
+
+    /// The control loop runs: from here the stall check and the watchdog watch it.
+    pub fn running(&mut self) {
+        // SAFETY: as `enter`'s.
+        unsafe { core::ptr::write_volatile(&mut self.phase, 0) };
+    }
+
+    /// The history with this boot's stops is in flash: they are no longer kept. A reset between
+    /// the store and this call counts them again at the next boot (once more rather than never).
+    pub fn stored(&mut self) {
+        // The magic alone: a record without it is none ([`ReasonRecord::peek`]).
+        self.earlier.magic = 0;
+        self.latest.magic = 0;
+    }
 }
 
 /// CFSR bit: BFAR holds a valid fault address (ARMv7-M ARM B3.2.15, BusFault status).
@@ -504,26 +593,91 @@ mod tests {
     use core::fmt::Write;
 
     /// A boot's marker is the next boot's stop after a watchdog reset only, named by its phase;
-    /// a stop path's record comes first; the loop's start (0) and noise are no marker.
+    /// the loop's start (0) and noise are no marker.
     #[test]
     fn a_boot_the_watchdog_reset_before_its_loop_is_a_stop_of_its_phase() {
         for phase in BootPhase::ALL {
-            let stop = boot_stop(None, phase.marker(), ResetCause::Watchdog);
-            let stop = stop.unwrap_or_else(|| panic!("{phase:?}"));
+            let mut r = ResetRecords::EMPTY;
+            r.enter(phase);
+            let stop = r.boot(ResetCause::Watchdog).latest.unwrap_or_else(|| panic!("{phase:?}"));
             assert_eq!((stop.kind, stop.pc, stop.addr, stop.detail), (StopKind::ControlStall, 0, phase as u32, 0));
+            assert_eq!(stop, boot_stall(phase));
             for reset in [ResetCause::BrownOut, ResetCause::Other] {
-                assert_eq!(boot_stop(None, phase.marker(), reset), None, "{phase:?} {reset:?}");
+                let mut r = ResetRecords::EMPTY;
+                r.enter(phase);
+                assert_eq!(r.boot(reset), Stops::default(), "{phase:?} {reset:?}");
             }
         }
-        let panic = panic_info("src/persist.rs", 12);
-        for reset in [ResetCause::Watchdog, ResetCause::Other] {
-            assert_eq!(boot_stop(Some(panic), BootPhase::Restore.marker(), reset), Some(panic));
-        }
         for word in [0, 0xB007_0000, 0xB007_0004, 0x0007_0002, 0xFFFF_FFFF] {
-            assert_eq!(boot_stop(None, word, ResetCause::Watchdog), None, "{word:#x}");
+            let mut r = ResetRecords { phase: word, ..ResetRecords::EMPTY };
+            assert_eq!(r.boot(ResetCause::Watchdog), Stops::default(), "{word:#x}");
         }
+        let mut r = ResetRecords::EMPTY;
+        r.enter(BootPhase::Start);
+        r.running();
+        assert_eq!(r.boot(ResetCause::Watchdog), Stops::default(), "a bite in the loop is the stall check's");
         // A stall the check noticed is another stop than a boot's.
         assert_ne!(boot_stall(BootPhase::Start), StopInfo::new(StopKind::ControlStall, 0, 0, 20_000));
+    }
+
+    /// A stop stays until the history has it: every boot before the store finds it again, and
+    /// the hang or the stop of a boot that took it is kept beside it, not instead of it.
+    #[test]
+    fn a_stop_is_kept_until_stored_and_the_next_one_beside_it() {
+        let panic = panic_info("src/persist.rs", 12);
+        let fault = hard_fault_info(0x0800_1234, 0x8200, 0, 0);
+        let mut r = ResetRecords::EMPTY;
+        r.record(&panic);
+        // The boot that took it is reset by a person before its store: the panic again.
+        for reset in [ResetCause::Other, ResetCause::BrownOut] {
+            r.enter(BootPhase::Restore);
+            assert_eq!(r.boot(reset), Stops { earlier: None, latest: Some(panic) }, "{reset:?}");
+        }
+        // That boot hangs in its restore: the panic and the hang.
+        r.enter(BootPhase::Restore);
+        let both = r.boot(ResetCause::Watchdog);
+        assert_eq!(both, Stops { earlier: Some(panic), latest: Some(boot_stall(BootPhase::Restore)) });
+        assert_eq!(both.iter().copied().collect::<Vec<_>>(), [panic, boot_stall(BootPhase::Restore)]);
+        // The next one faults in its first steps: the oldest stays, the newest replaces the hang.
+        r.running();
+        r.record(&fault);
+        assert_eq!(r.boot(ResetCause::Other), Stops { earlier: Some(panic), latest: Some(fault) });
+        // Stored: gone, and the next stop is alone again.
+        r.stored();
+        assert_eq!(r.boot(ResetCause::Other), Stops::default());
+        r.record(&fault);
+        assert_eq!(r.boot(ResetCause::Other), Stops { earlier: None, latest: Some(fault) });
+        // A stop after a store is not kept beside a stored one.
+        let mut r = ResetRecords::EMPTY;
+        r.record(&panic);
+        r.stored();
+        r.record(&fault);
+        assert_eq!(r.boot(ResetCause::Other), Stops { earlier: None, latest: Some(fault) });
+    }
+
+    /// Power-up noise in the whole struct is neither a stop nor a boot under way; a torn
+    /// `earlier` (a reset in the middle of the stop path's copy) is none, the newest kept.
+    #[test]
+    fn noise_in_the_reset_records_is_no_stop() {
+        let mut seed = 0x1234_5678u32;
+        for _ in 0..2000 {
+            let mut r = ResetRecords::EMPTY;
+            let words = core::mem::size_of::<ResetRecords>() / 4;
+            // SAFETY: ResetRecords is repr(C) plain words and bytes; any bit pattern is valid.
+            let w = unsafe { core::slice::from_raw_parts_mut(&mut r as *mut ResetRecords as *mut u32, words) };
+            for x in w.iter_mut() {
+                seed ^= seed << 13;
+                seed ^= seed >> 17;
+                seed ^= seed << 5;
+                *x = seed;
+            }
+            assert_eq!(r.boot(ResetCause::Watchdog), Stops::default());
+        }
+        let mut r = ResetRecords::EMPTY;
+        r.record(&panic_info("a.rs", 1));
+        r.record(&panic_info("b.rs", 2));
+        r.earlier.crc ^= 1;
+        assert_eq!(r.boot(ResetCause::Other), Stops { earlier: None, latest: Some(panic_info("b.rs", 2)) });
     }
 
     /// Stamps each step of a stop path with the next number of a shared counter.
@@ -547,7 +701,7 @@ mod tests {
     fn stop_drives_the_outputs_then_builds_the_reason_then_records() {
         let seq = core::cell::Cell::new(0);
         let mut pins = Pins { seq: &seq, safe_at: None };
-        let mut rec = ReasonRecord::EMPTY;
+        let mut rec = ResetRecords::EMPTY;
         let mut built_at = None;
         let mut want = StopInfo::new(StopKind::Panic, 0, 0, 42);
         write!(want, "src/step.rs: index out of bounds").unwrap();
@@ -557,11 +711,11 @@ mod tests {
         });
         assert_eq!((pins.safe_at, built_at), (Some(1), Some(2)), "outputs safe before the reason is built");
         assert_eq!(got, want);
-        let stored = rec.peek().unwrap();
-        assert_eq!(stored, want);
-        assert_eq!(stored.text(), "src/step.rs: index out of bounds");
-        assert_eq!(rec.take(), Some(want));
-        assert_eq!(rec.take(), None, "a stop is reported once");
+        let found = rec.boot(ResetCause::Other).latest.unwrap();
+        assert_eq!(found, want);
+        assert_eq!(found.text(), "src/step.rs: index out of bounds");
+        rec.stored();
+        assert_eq!(rec.boot(ResetCause::Other), Stops::default(), "a stop is counted until stored");
     }
 
     #[test]

@@ -18,7 +18,7 @@
 //!   for the firmware, the processor-in-the-loop runner and the simulator.
 //! - [`ident`]: ARX/ARMAX structures, LS/RLS/RELS estimators, PRBS, validation.
 //! - [`event`]: timestamped events the step reports (sensor faults, guard actions, mode changes).
-//! - [`failsafe`]: the safe-outputs seam and the reset-surviving reason record (the fail-loud
+//! - [`failsafe`]: the safe-outputs seam and the reset-surviving stop records (the fail-loud
 //!   alarm's heartbeat is the firmware's `board::heartbeat_pulse`, simulated by `hal-sim`).
 //! - [`hal`]: the small hardware seams the firmware and `hal-sim` implement.
 //! - [`step`]: the per-sample application step: convert, check, control, guard, actuate.

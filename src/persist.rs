@@ -1014,22 +1014,24 @@ impl Recorder {
         self.history()
     }
 
-    /// Counts the fail-safe stop that ended the previous boot (the reason record the boot found);
-    /// returns the history to store.
+    /// Counts a fail-safe stop (one the boot found in [`crate::failsafe::ResetRecords`]); returns
+    /// the history to store.
     pub fn note_board_fault(&mut self, info: &StopInfo) -> HistoryRecord {
         self.boot.note_stop(info);
         self.since_save = 0;
         self.history()
     }
 
-    /// Counts the boot: its reset ([`Self::note_reset`]) and the fail-safe stop the previous boot
-    /// ended in, if the boot found one ([`Self::note_board_fault`]); returns the history to store
-    /// and to resume from ([`crate::step::Carrier::resume`]). What the history carries (the
-    /// SSR's short, the sensor offset) stays, whatever the reset: only a service reset
-    /// ([`Self::note_service`]) forgets it.
-    pub fn note_boot(&mut self, reset: ResetCause, fault: Option<&StopInfo>) -> HistoryRecord {
+    /// Counts the boot: its reset ([`Self::note_reset`]) and the fail-safe stops the stored
+    /// history lacks, the previous boot's and one before it if the boot found them
+    /// ([`crate::failsafe::ResetRecords::boot`]), oldest first, so the newest is the history's
+    /// [`HistoryRecord::last_stop`]; returns the history to store and to resume from
+    /// ([`crate::step::Carrier::resume`]). What the history carries (the SSR's short, the sensor
+    /// offset) stays, whatever the reset: only a service reset ([`Self::note_service`]) forgets
+    /// it.
+    pub fn note_boot(&mut self, reset: ResetCause, stops: &crate::failsafe::Stops) -> HistoryRecord {
         self.boot.note_reset(reset);
-        if let Some(f) = fault {
+        for f in stops.iter() {
             self.boot.note_stop(f);
         }
         self.since_save = 0;
@@ -1827,11 +1829,11 @@ mod tests {
         for (reset, stop) in [
             (ResetCause::BrownOut, None),
             (ResetCause::Watchdog, None),
-            (ResetCause::Other, Some(&stall)),
+            (ResetCause::Other, Some(stall)),
             (ResetCause::Other, None),
         ] {
             let mut next = Recorder::new(h, 360);
-            let booted = next.note_boot(reset, stop);
+            let booted = next.note_boot(reset, &crate::failsafe::Stops { earlier: None, latest: stop });
             assert!(booted.ssr_shorted(), "{reset:?} {stop:?}");
             assert_eq!(booted.sensor_offset, offset, "{reset:?} {stop:?}");
             let serviced = next.note_service();

@@ -166,8 +166,10 @@ pub struct Carrier<C: Controller> {
     adaptive_mode: Option<AdaptiveMode>,
     /// A restart to report with the next sample.
     pending_reset: Option<crate::persist::ResetCause>,
-    /// A fail-safe stop of the previous boot to report with the next sample.
-    pending_stop: Option<crate::failsafe::StopKind>,
+    /// The fail-safe stops the boot found ([`crate::failsafe::Stops`]) to report with the next
+    /// sample: their [`crate::failsafe::StopKind`] codes, a nibble each, the oldest lowest
+    /// (two `Option`s and an emit each cost 224 B of the default firmware).
+    pending_stops: u8,
     /// Only in builds with the estimate: the default firmware carries neither its state nor
     /// its initialisation (≈ 350 B of its flash once the settling count was added).
     #[cfg(feature = "holdover")]
@@ -189,7 +191,7 @@ impl<C: Controller> Carrier<C> {
             setpoint_clamped: false,
             adaptive_mode: None,
             pending_reset: None,
-            pending_stop: None,
+            pending_stops: 0,
             #[cfg(feature = "holdover")]
             // The mean duty starts at full duty: until it settles it errs on the short side
             // ([`crate::holdover`]).
@@ -204,11 +206,13 @@ impl<C: Controller> Carrier<C> {
         self.pending_reset = Some(cause);
     }
 
-    /// Tells the step that the previous boot ended in a fail-safe stop (the reason record the
-    /// glue found at boot, [`crate::failsafe::ReasonRecord::take`]); the next sample reports it
-    /// as [`EventKind::BoardFault`].
+    /// Tells the step of a fail-safe stop the boot found ([`crate::failsafe::ResetRecords::boot`]:
+    /// the previous boot's, and one before it that boot had not stored), oldest first; the next
+    /// sample reports each as [`EventKind::BoardFault`].
     pub fn note_board_fault(&mut self, kind: crate::failsafe::StopKind) {
-        self.pending_stop = Some(kind);
+        // Two are all a boot finds: the newest goes above the oldest.
+        let shift = if self.pending_stops == 0 { 0 } else { 4 };
+        self.pending_stops |= (kind as u8) << shift;
     }
 
     /// Gives the step every reading the board took besides the RTD, for the next sample: what
@@ -419,8 +423,10 @@ impl<C: Controller> Carrier<C> {
         if let Some(cause) = self.pending_reset.take() {
             emit(EventKind::Restarted(cause));
         }
-        if let Some(kind) = self.pending_stop.take() {
+        let mut stops = core::mem::take(&mut self.pending_stops);
+        while let Some(kind) = crate::failsafe::StopKind::from_code(stops & 0xF) {
             emit(EventKind::BoardFault(kind));
+            stops >>= 4;
         }
 
         let reading = self.supervisor.check(&self.cfg, t_ms, raw, sensor, &mut self.filter, &mut emit);

@@ -1,7 +1,8 @@
 //! The board's stop paths: the panic handler, HardFault, NMI, the default handler of every
 //! interrupt without one, and the control-stall check. Each drives the outputs safe first
-//! ([`board::force_safe`], registers only), then records why in [`REASON`] (RAM the runtime leaves
-//! alone, so it survives the reset) and resets; the next boot [`take_reason`]s it.
+//! ([`board::force_safe`], registers only), then records why in [`RECORDS`] (RAM the runtime
+//! leaves alone, so it survives the reset) and resets; the next boot reads it ([`boot_stops`]) and
+//! the persist task lets it go once the history that counts it is in flash ([`stops_stored`]).
 //!
 //! A stack overflow is a HardFault: [`arm_stack_guard`] makes memory.x's `.stack_guard`, between
 //! the statics and the stack, an MPU region no code may touch, and the HardFault entry
@@ -19,24 +20,26 @@ use core::ptr::addr_of_mut;
 
 use cortex_m_rt::exception;
 use embassy_stm32::pac::FLASH;
-use hter::failsafe::{self, ReasonRecord, SafeOutputs, StopInfo, StopKind};
+use hter::failsafe::{self, ResetRecords, SafeOutputs, StopInfo, StopKind, Stops};
 
 use crate::board;
 
-/// The stop reason across the reset. `.uninit` is neither zeroed nor initialised by cortex-m-rt,
-/// so after a power-up it holds noise, which the record's magic and CRC reject.
-#[link_section = ".uninit.REASON"]
-static mut REASON: MaybeUninit<ReasonRecord> = MaybeUninit::uninit();
+/// The stops the flash does not have yet and the boot's phase, across a reset. `.uninit` is
+/// neither zeroed nor initialised by cortex-m-rt, so after a power-up it holds noise, which the
+/// records' magic and CRC reject.
+#[link_section = ".uninit.RECORDS"]
+static mut RECORDS: MaybeUninit<ResetRecords> = MaybeUninit::uninit();
 
-/// The record in [`REASON`].
+/// The records in [`RECORDS`].
 ///
 /// # Safety
-/// Only one context may hold the reference: the boot (before interrupts run the stop paths) or
-/// a stop path that never returns.
-unsafe fn reason() -> &'static mut ReasonRecord {
-    // SAFETY: ReasonRecord is `repr(C)` words and bytes, so any bit pattern is a valid value;
+/// Only one context may hold the reference at a time: the boot's thread (main, then the control
+/// task until its loop runs), the persist task in a critical section ([`stops_stored`]), or a
+/// stop path that never returns.
+unsafe fn records() -> &'static mut ResetRecords {
+    // SAFETY: ResetRecords is `repr(C)` words and bytes, so any bit pattern is a valid value;
     // exclusivity is the caller's promise.
-    unsafe { (*addr_of_mut!(REASON)).assume_init_mut() }
+    unsafe { (*addr_of_mut!(RECORDS)).assume_init_mut() }
 }
 
 /// The board's outputs behind the library's seam.
@@ -74,7 +77,7 @@ enum Why<'a> {
 fn halt(why: Why) -> ! {
     // SAFETY: this path does not return, and a fault inside it escalates to a lockup, which the
     // watchdog resets: no second holder of the record runs after this one.
-    failsafe::stop(&mut BoardOutputs, unsafe { reason() }, || match why {
+    failsafe::stop(&mut BoardOutputs, unsafe { records() }, || match why {
         Why::Stall(since_ms) => StopInfo::new(StopKind::ControlStall, 0, 0, since_ms),
         // Records the location only: formatting the message would link `core::fmt` (several KiB
         // of flash, and calls through formatting arguments that leave the audit's stack bound
@@ -94,28 +97,21 @@ fn halt(why: Why) -> ! {
     cortex_m::peripheral::SCB::sys_reset()
 }
 
-/// The stop the last reset came from: the record a stop path left, if any, or a boot the
-/// watchdog reset before its control loop ([`failsafe::boot_stop`]).
-pub fn take_reason(reset: hter::persist::ResetCause) -> Option<StopInfo> {
-    // SAFETY: called once at boot, before the stall check is armed; a fault meanwhile resets
-    // without returning here. BOOT_PHASE is an aligned word, read volatile: its contents come
-    // from before the reset (or a power-up's noise), which the compiler cannot know.
-    let (recorded, marker) = unsafe { (reason().take(), addr_of_mut!(BOOT_PHASE).cast::<u32>().read_volatile()) };
-    failsafe::boot_stop(recorded, marker, reset)
+/// The stops the last reset came from that the flash does not have yet: the record a stop path
+/// left, one before it the boot before did not store, or a boot the watchdog reset before its
+/// control loop ([`ResetRecords::boot`]). They stay in RAM until [`stops_stored`].
+pub fn boot_stops(reset: hter::persist::ResetCause) -> Stops {
+    // SAFETY: called once at boot, before the stall check is armed and before the persist task
+    // runs; a fault meanwhile resets without returning here.
+    unsafe { records() }.boot(reset)
 }
-
-/// The boot's phase across a reset ([`failsafe::BootPhase::marker`]; 0 once the control loop
-/// runs), beside [`REASON`].
-#[link_section = ".uninit.BOOT_PHASE"]
-static mut BOOT_PHASE: MaybeUninit<u32> = MaybeUninit::uninit();
 
 /// Marks the boot as at `phase` until [`boot_done`]: a watchdog reset before then is the next
 /// boot's stop.
 pub fn note_boot(phase: failsafe::BootPhase) {
-    // SAFETY: one aligned word, written by the boot's thread only (main, then the control task
-    // before its stall check starts); nothing else reads it before the next reset.
-    // Volatile: the word is read only after the next reset, so a plain store could be dropped.
-    unsafe { addr_of_mut!(BOOT_PHASE).cast::<u32>().write_volatile(phase.marker()) };
+    // SAFETY: the boot's thread (main, then the control task before its stall check starts);
+    // the phase word is written volatile by the library, and nothing else writes it.
+    unsafe { records() }.enter(phase);
 }
 
 /// The control loop starts: the stall check and the watchdog watch it from now on. Feeds the
@@ -126,8 +122,18 @@ pub fn note_boot(phase: failsafe::BootPhase) {
 /// stall check's (`config::IWDG_RELOAD`).
 pub fn boot_done() {
     // SAFETY: as `note_boot`'s.
-    unsafe { addr_of_mut!(BOOT_PHASE).cast::<u32>().write_volatile(0) };
+    unsafe { records() }.running();
     board::pet_watchdog();
+}
+
+/// A history that counts this boot's stops is in flash: RAM no longer keeps them (the persist
+/// task, after each history it stores). In a critical section: the stall check's interrupt
+/// runs a stop path, which must not find the records half cleared.
+pub fn stops_stored() {
+    // SAFETY: the stop paths that could also hold the records run in interrupts, which the
+    // critical section holds off (a HardFault cannot be, but one here is a fault in two word
+    // stores, and it resets without returning).
+    cortex_m::interrupt::free(|_| unsafe { records() }.stored());
 }
 
 /// The control loop stalled for `since_ms` (called from the stall check's interrupt).

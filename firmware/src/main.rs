@@ -132,7 +132,7 @@ async fn main(spawner: Spawner) {
         rcc.csr().modify(|w| w.set_rmvf(true));
         (ResetCause::from_stm32l4_csr(csr), csr)
     };
-    let fault = failsafe::take_reason(reset);
+    let stops = failsafe::boot_stops(reset);
     // From here to the control loop no stall check watches: a hang is the watchdog's, and the
     // phase left in a reset-surviving word beside the stop record tells the next boot where it was.
     failsafe::note_boot(hter::failsafe::BootPhase::Board);
@@ -140,8 +140,13 @@ async fn main(spawner: Spawner) {
     // Read before the flash is: the technician holds the button only for a moment past the
     // reset.
     let button_held = board::button_held(&b.button);
-    if let Some(f) = &fault {
+    // The newest as `board fault:` (what `hter log2csv` reads as the boot's cause). One before
+    // it that the boot before did not store is counted again; that boot logged it.
+    if let Some(f) = &stops.latest {
         error!("board fault: {}", f);
+    }
+    if stops.earlier.is_some() {
+        warn!("and the stop before it, not yet stored: counted again");
     }
     let power = board::power_check(csr);
     // The write gate's first supply reading: a boot's urgent store (a new fail-safe stop) need
@@ -182,7 +187,7 @@ async fn main(spawner: Spawner) {
     spawner.spawn(persist::persist(b.flash).unwrap());
     let restored = persist::BOOTED.receive().await;
     failsafe::note_boot(hter::failsafe::BootPhase::Start);
-    let mut boot = restored.boot(reset, fault);
+    let mut boot = restored.boot(reset, stops);
     boot.button_held = button_held;
     if boot.service_reset() {
         warn!("service reset: the SSR's short is forgotten, or the sensor offset if no short was stored");

@@ -324,7 +324,11 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
                 }
                 (Ok(()), Save::Log(_)) => {}
                 (Ok(()), Save::Model(rec)) => info!("persist: model stored: theta={} k={}", rec.theta, rec.k),
-                (Ok(()), Save::History(_) | Save::AlarmHistory(_)) => info!("persist: history stored"),
+                (Ok(()), Save::History(_) | Save::AlarmHistory(_)) => {
+                    // It counts the boot's stops: RAM need not keep them for the next boot.
+                    crate::failsafe::stops_stored();
+                    info!("persist: history stored")
+                }
                 (Ok(()), Save::Settings(s)) => info!("persist: settings v{} stored", s.seq),
                 (Ok(()), Save::Calibration(_)) => info!("persist: calibration stored"),
                 #[cfg(feature = "interface")]

@@ -525,7 +525,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                     carrier.note_reset(ResetCause::BrownOut);
                     cadence = model_cadence();
                     recorder = Recorder::new(last_history(&stores), history_every);
-                    let stored = recorder.note_boot(ResetCause::BrownOut, None);
+                    let stored = recorder.note_boot(ResetCause::BrownOut, &Default::default());
                     stores.push((t_s, Save::History(stored)));
                     // The indicator's latch, the sensor offset and a shorted SSR restart from the
                     // stored history.

@@ -32,7 +32,7 @@ fn boot() -> Boot {
         history: HistoryRecord::EMPTY,
         log_last_s: 0,
         reset: ResetCause::Other,
-        fault: None,
+        stops: Stops::default(),
         pages_lost: 0,
         button_held: false,
     }
@@ -557,7 +557,7 @@ fn stored_settings_with_a_law_this_build_does_not_link_keep_their_setpoint_and_c
 #[test]
 fn a_boot_with_many_repaired_pages_still_stores_its_history() {
     let fault = crate::failsafe::StopInfo::new(crate::failsafe::StopKind::HardFault, 0x0800_1234, 0, 0);
-    let mut b = Bench::new(&Boot { pages_lost: 20, fault: Some(fault), ..boot() });
+    let mut b = Bench::new(&Boot { pages_lost: 20, stops: Stops { earlier: None, latest: Some(fault) }, ..boot() });
     b.drain();
     let h = b.saves.iter().find_map(|s| match s {
         Save::History(h) | Save::AlarmHistory(h) => Some(*h),
@@ -583,7 +583,10 @@ fn a_new_fail_safe_stop_reaches_the_record_before_the_next_stop() {
     let mut stored = HistoryRecord::EMPTY;
     let mut writes = Vec::new();
     for (n, fault) in [panic; 10].into_iter().chain([hard_fault]).enumerate() {
-        let mut app = App::new(config(), &Boot { history: stored, fault: Some(fault), ..boot() });
+        let mut app = App::new(
+            config(),
+            &Boot { history: stored, stops: Stops { earlier: None, latest: Some(fault) }, ..boot() },
+        );
         let (mut gate, mut pending) = (WriteGate::firmware(), PendingSaves::EMPTY);
         while let Some(s) = app.next_save() {
             pending.put(s);
@@ -611,21 +614,24 @@ fn a_new_fail_safe_stop_reaches_the_record_before_the_next_stop() {
 /// A boot that hangs before its control loop (in the clocks, in a flash restore) is reset by
 /// the watchdog, again and again while the cause lasts; the stall check is not armed yet and no
 /// stop path runs. The phase each boot leaves in a reset-surviving word
-/// ([`crate::failsafe::BootPhase::marker`]) makes the first boot that gets through store
+/// ([`crate::failsafe::ResetRecords::enter`]) makes the first boot that gets through store
 /// a `control_stall` stop naming the phase, at once, even with the alarm's latch already set:
 /// before, it found only a watchdog reset, stored behind the hold-off (and not at all if it hung
 /// again within the minute), and the record did not say the board had looped.
 #[test]
 fn a_watchdog_loop_before_the_control_loop_reaches_the_record() {
-    use crate::failsafe::{boot_stall, boot_stop, BootPhase, StopKind};
+    use crate::failsafe::{boot_stall, BootPhase, ResetRecords, StopKind};
     use crate::persist::LastStop;
     let stored = HistoryRecord::EMPTY.with_carried(true, false);
     // Each boot of the loop marks Board, then Restore, and hangs there: no stop path runs, so no
     // stop is recorded, and the word says Restore at every watchdog reset. The cause goes away:
     // the next boot gets through and reads it.
-    let fault = boot_stop(None, BootPhase::Restore.marker(), ResetCause::Watchdog);
-    assert_eq!(fault, Some(boot_stall(BootPhase::Restore)));
-    let mut b = Bench::new(&Boot { history: stored, reset: ResetCause::Watchdog, fault, ..boot() });
+    let mut ram = ResetRecords::EMPTY;
+    ram.enter(BootPhase::Board);
+    ram.enter(BootPhase::Restore);
+    let stops = ram.boot(ResetCause::Watchdog);
+    assert_eq!(stops, Stops { earlier: None, latest: Some(boot_stall(BootPhase::Restore)) });
+    let mut b = Bench::new(&Boot { history: stored, reset: ResetCause::Watchdog, stops, ..boot() });
     let first = b.run(1);
     assert!(first.step.events.iter().any(|e| e.kind == EventKind::BoardFault(StopKind::ControlStall)));
     let h = b.saves.iter().find_map(|s| match s {
@@ -633,14 +639,54 @@ fn a_watchdog_loop_before_the_control_loop_reaches_the_record() {
         _ => None,
     });
     let h = h.unwrap_or_else(|| panic!("stored at once: {:?}", b.saves));
-    assert_eq!(h.last_stop, fault.as_ref().map(LastStop::from));
+    assert_eq!(h.last_stop, stops.latest.as_ref().map(LastStop::from));
     assert_eq!((h.stops_of(StopKind::ControlStall), h.resets_by(ResetCause::Watchdog)), (1, 1));
     // The same loop again later waits for the hold-off, as every repeated stop does.
-    let again = Boot { history: h, reset: ResetCause::Watchdog, fault, ..boot() };
+    let again = Boot { history: h, reset: ResetCause::Watchdog, stops, ..boot() };
     assert!(matches!(again.history_save(h), Save::History(_)));
     // Without the marker, the watchdog reset alone: behind the hold-off.
     let bare = Boot { history: stored, reset: ResetCause::Watchdog, ..boot() };
     assert!(matches!(bare.history_save(stored), Save::History(_)));
+}
+
+/// A stop, then a boot that hangs before its history is stored (here in the flash restore):
+/// the boot that gets through stores both, the stop first, the hang as the newest. Before, the
+/// boot that took the stop cleared it from RAM as it read it, and the hang's boot found only
+/// the hang: the stop was in no record.
+#[test]
+fn a_stop_and_the_hang_of_the_boot_that_took_it_both_reach_the_record() {
+    use crate::failsafe::{boot_stall, panic_info, BootPhase, ResetRecords, StopKind};
+    use crate::persist::LastStop;
+    let panic = panic_info("src/step.rs", 417);
+    let mut ram = ResetRecords::EMPTY;
+    ram.record(&panic);
+    // The boot after the panic reads it, counts it, and hangs in the restore before any store.
+    assert_eq!(ram.boot(ResetCause::Other), Stops { earlier: None, latest: Some(panic) });
+    ram.enter(BootPhase::Restore);
+    // The watchdog resets it; the next boot gets through.
+    let stops = ram.boot(ResetCause::Watchdog);
+    let mut b = Bench::new(&Boot { reset: ResetCause::Watchdog, stops, ..boot() });
+    let first = b.run(1);
+    let faults: Vec<_> = first
+        .step
+        .events
+        .iter()
+        .filter_map(|e| match e.kind {
+            EventKind::BoardFault(k) => Some(k),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(faults, [StopKind::Panic, StopKind::ControlStall]);
+    let h = b.saves.iter().find_map(|s| match s {
+        Save::AlarmHistory(h) => Some(*h),
+        _ => None,
+    });
+    let h = h.unwrap_or_else(|| panic!("stored at once: {:?}", b.saves));
+    assert_eq!((h.stops_of(StopKind::Panic), h.stops_of(StopKind::ControlStall)), (1, 1));
+    assert_eq!(h.last_stop, Some(LastStop::from(&boot_stall(BootPhase::Restore))));
+    // Once stored, the next boot finds neither.
+    ram.stored();
+    assert_eq!(ram.boot(ResetCause::Other), Stops::default());
 }
 
 /// A records region erased because the storage layer found it corrupt: the settings and the
@@ -955,7 +1001,13 @@ fn a_shorted_ssr_is_remembered_until_a_service_reset() {
         (ResetCause::BrownOut, None, true, true),
         (ResetCause::Other, None, true, false),
     ] {
-        let mut next = Bench::new(&Boot { history: stored, reset, fault, button_held: service, ..boot() });
+        let mut next = Bench::new(&Boot {
+            history: stored,
+            reset,
+            stops: Stops { earlier: None, latest: fault },
+            button_held: service,
+            ..boot()
+        });
         next.load_c = 5.0;
         let first = next.run(1);
         let what = format!("{reset:?} {:?} service {service}", fault.map(|f| f.kind));
@@ -1111,7 +1163,7 @@ fn switching_to_on_off_is_accepted_with_a_warning_line() {
 fn a_boot_after_a_fail_safe_stop_latches_the_indicator() {
     use crate::failsafe::{StopInfo, StopKind};
     let stall = StopInfo::new(StopKind::ControlStall, 0, 0, 25_000);
-    let mut b = Bench::new(&Boot { fault: Some(stall), ..boot() });
+    let mut b = Bench::new(&Boot { stops: Stops { earlier: None, latest: Some(stall) }, ..boot() });
     assert_eq!(b.run(1).alarm, Indication::Unacknowledged);
     assert_eq!(b.run(30).alarm, Indication::Unacknowledged);
     assert_eq!(b.send("ack"), "ok\r\n");

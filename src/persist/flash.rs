@@ -763,7 +763,7 @@ impl Restored {
     /// The application's boot from what was restored. Out of line: inlined into the firmware's
     /// `main`, it cost 312 B of code there, against 264 B here (−56 B of flash in all).
     #[inline(never)]
-    pub fn boot(&self, reset: super::ResetCause, fault: Option<crate::failsafe::StopInfo>) -> crate::app::Boot {
+    pub fn boot(&self, reset: super::ResetCause, stops: crate::failsafe::Stops) -> crate::app::Boot {
         crate::app::Boot {
             settings: self.settings.ok(),
             #[cfg(feature = "holdover")]
@@ -773,7 +773,7 @@ impl Restored {
             history: self.history.value,
             log_last_s: self.log_last_s.unwrap_or(0),
             reset,
-            fault,
+            stops,
             pages_lost: u8::try_from(self.repairs.total()).unwrap_or(u8::MAX),
             button_held: false,
         }

@@ -311,7 +311,7 @@ fn booted(
     button_held: bool,
 ) -> App {
     let restored = block_on(flash::restore(store, log, Some(adaptive)));
-    App::new(app_config(adaptive), &hter::app::Boot { button_held, ..restored.boot(reset, None) })
+    App::new(app_config(adaptive), &hter::app::Boot { button_held, ..restored.boot(reset, Default::default()) })
 }
 
 fn open_store(flash: MockFlash<PAGE>) -> MockStore {

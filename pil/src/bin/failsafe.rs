@@ -35,8 +35,9 @@ use cortex_m_rt::{entry, exception};
 use cortex_m_semihosting::{debug, hprintln};
 use hter::failsafe::{
     arm_stack_guard, hard_fault_record, nmi_info, panic_info, stack_guard, stop, unexpected_interrupt_info,
-    ReasonRecord, SafeOutputs, StopInfo,
+    ResetRecords, SafeOutputs, StopInfo,
 };
+use hter::persist::ResetCause;
 
 /// `"HTBC"`: the boot log below holds a count from an earlier boot of this image.
 const BOOT_MAGIC: u32 = 0x4342_5448;
@@ -73,7 +74,7 @@ struct BootLog {
 }
 
 #[link_section = ".uninit.hter_reason"]
-static mut REASON: MaybeUninit<ReasonRecord> = MaybeUninit::uninit();
+static mut REASON: MaybeUninit<ResetRecords> = MaybeUninit::uninit();
 #[link_section = ".uninit.hter_bootlog"]
 static mut LOG: MaybeUninit<BootLog> = MaybeUninit::uninit();
 /// Statics below the guard that an overflow past it would overwrite (with the two above).
@@ -94,7 +95,7 @@ fn recurse(depth: u32) -> u32 {
     recurse(depth + 1).wrapping_add(local[(depth & 7) as usize])
 }
 
-fn reason() -> *mut ReasonRecord {
+fn reason() -> *mut ResetRecords {
     // Only the address is taken; every access is volatile, since the contents come from a
     // previous boot and the compiler must not assume the (absent) initialiser.
     addr_of_mut!(REASON).cast()
@@ -127,7 +128,7 @@ impl SafeOutputs for PilOutputs {
         // hook, the record would already be valid here.
         // SAFETY: a volatile read of the record's memory while `stop` holds no write to it yet.
         let rec = unsafe { read_volatile(reason()) };
-        l.record_before_safe = u32::from(rec.peek().is_some());
+        l.record_before_safe = u32::from(rec.stops().latest.is_some());
         l.outputs_safe = 1;
         // SAFETY: a volatile read of the canary (noise outside boot 5, where it is not checked).
         let c = unsafe { read_volatile(canary()) };
@@ -145,7 +146,7 @@ fn fail(info: impl FnOnce() -> StopInfo) -> ! {
     l.seq += 1;
     l.record_seq = l.seq;
     // SAFETY: as above.
-    let back = unsafe { read_volatile(reason()) }.peek();
+    let back = unsafe { read_volatile(reason()) }.stops().latest;
     l.record_ok_after = u32::from(back.is_some_and(|b| b.kind == info.kind));
     write_log(l);
     SCB::sys_reset()
@@ -158,10 +159,12 @@ fn main() -> ! {
     let armed = unsafe { arm_stack_guard(g.start, g.end) };
     let prev = read_log();
     let boot = if prev.magic == BOOT_MAGIC { prev.boot.saturating_add(1) } else { 1 };
-    // SAFETY: the record's memory is ours; `take` clears it so each stop is reported once.
+    // SAFETY: the record's memory is ours. This runner has no flash: the report stands for the
+    // board's stored history, so the stop is let go once read and each is reported once.
     let found = unsafe {
         let mut rec = read_volatile(reason());
-        let found = rec.take();
+        let found = rec.boot(ResetCause::Other).latest;
+        rec.stored();
         write_volatile(reason(), rec);
         found
     };
