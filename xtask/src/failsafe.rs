@@ -251,7 +251,7 @@ fn hang_checks(
         reported,
         b.get("if_other") == Some(&"none") && b.get("if_brown_out") == Some(&"none"),
         format!(
-            "the marker is a stop after another reset too: if_other={} if_brown_out={}",
+            "after another reset the rule gives if_other={} if_brown_out={}, not none",
             field("if_other"),
             field("if_brown_out")
         ),
