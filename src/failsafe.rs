@@ -351,15 +351,21 @@ impl ResetRecords {
     /// (the reset button in its first second) or a power cut, not a hang. The stops stay until
     /// [`Self::stored`].
     pub fn boot(&mut self, reset: crate::persist::ResetCause) -> Stops {
-        // SAFETY: a read of this struct's own field; volatile because the word was written by
-        // the boot before the reset, which the compiler cannot know about.
-        let marker = unsafe { core::ptr::read_volatile(&self.phase) };
+        let marker = self.marker();
         if reset == crate::persist::ResetCause::Watchdog {
             if let Some(phase) = BootPhase::ALL.into_iter().find(|p| p.marker() == marker) {
                 self.record(&boot_stall(phase));
             }
         }
         self.stops()
+    }
+
+    /// The phase word as it is: a [`BootPhase::marker`] while a boot is on its way to its control
+    /// loop (or was, when it was reset), 0 once the loop runs, noise after a power-up.
+    pub fn marker(&self) -> u32 {
+        // SAFETY: a read of this struct's own field; volatile because the word was written by
+        // the boot before the reset, which the compiler cannot know about.
+        unsafe { core::ptr::read_volatile(&self.phase) }
     }
 
     /// The stops held, oldest first, as they are (no phase read, nothing recorded).

@@ -1,7 +1,14 @@
 //! The fail-safe part of `cargo xtask pil`: boots `pil`'s `failsafe` binary on QEMU mps2-an386
-//! and checks, for each stop path, what its boots report on semihosting stdout. The last path is
+//! and checks, for each stop path, what its boots report on semihosting stdout. The fifth path is
 //! a stack overflow into the MPU stack guard (QEMU models the ARMv7-M MPU): it must end in the
 //! HardFault's stop path, recorded as a stack overflow, with nothing below the guard written.
+//! The last is no stop path: a boot that reads the overflow's stop, marks its phase as the
+//! firmware does ([`hter::failsafe::BootPhase::Restore`]), arms the board's watchdog and hangs
+//! before it lets the stop go (as a board's boot can hang before its history is stored); the
+//! next boot must see a watchdog reset, the marker, [`hter::failsafe::ResetRecords::boot`]'s
+//! stop of it (a `control_stall` of that phase) with the overflow kept beside it as the earlier
+//! stop, and after any other reset the overflow alone, no stop from the marker. Every other
+//! boot must find no earlier stop: each lets its stop go once reported.
 //!
 //! QEMU turns the guest's SYSRESETREQ (`SCB::sys_reset`) into a machine reset
 //! (`qemu_system_reset_request`; with `-no-reboot` the same request makes QEMU exit instead, which
@@ -9,6 +16,21 @@
 //! state are cleared, and RAM outside the ELF's loaded segments keeps its contents. The ELF's
 //! `.uninit` statics are in a segment with no file bytes, which QEMU's loader does not re-zero
 //! at reset; the checks below fail if that ever changes (the record would not survive).
+//!
+//! The watchdog is the CMSDK APB watchdog QEMU puts at 0x4000_8000 on mps2-an386, clocked at the
+//! 25 MHz SYSCLK, its interrupt wired to the NMI (QEMU 7.2 `hw/arm/mps2.c`, lines 377–383). Its
+//! first timeout raises the interrupt, its second, with the interrupt not cleared and RESEN set,
+//! calls `watchdog_perform_action` (`hw/watchdog/cmsdk-apb-watchdog.c`, lines 280–292 and 113–116),
+//! whose default action is the same `qemu_system_reset_request(SHUTDOWN_CAUSE_GUEST_RESET)` as
+//! SYSRESETREQ's (`hw/watchdog/watchdog.c` line 49, `hw/intc/armv7m_nvic.c` line 77): the same
+//! machine reset, so `.uninit` crosses it as it crosses SYSRESETREQ (the loader's reset handler
+//! skips a segment without file bytes: `include/hw/elf_ops.h` line 580, `hw/core/loader.c` lines
+//! 1177–1179), and with `-no-reboot` it would make QEMU exit as well: the run must not pass it
+//! (nor `-action watchdog=` other than `reset`). The run uses `-icount shift=6,sleep=off`, as
+//! the PIL cases do: the watchdog counts QEMU's virtual clock, which without `-icount` follows the
+//! host's, and a loaded host that stalled the guest for its 10 ms period between arming it and
+//! noting so would fail the check by chance; with it, the 20 ms to the reset are 312 500 guest
+//! instructions, the same on every run.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -17,30 +39,39 @@ use std::time::Duration;
 use anyhow::Result;
 
 /// Each stop path, the reason its record names and the boot that reports it (the boot after the
-/// one that triggered it). A stack overflow is a HardFault record with its own text.
-pub const FAILSAFE_KINDS: [(&str, &str, u32); 5] = [
+/// one that triggered it). A stack overflow is a HardFault record with its own text; the hang
+/// ([`HANG`]) has no record: its reason is the stop the next boot makes of its phase marker.
+pub const FAILSAFE_KINDS: [(&str, &str, u32); 6] = [
     ("panic", "panic", 2),
     ("hard_fault", "hard_fault", 3),
     ("nmi", "nmi", 4),
     ("unexpected_interrupt", "unexpected_interrupt", 5),
     ("stack_overflow", "hard_fault", 6),
+    (HANG, "control_stall", 7),
 ];
+/// The boot that hangs until the watchdog resets it (and the next boot reports).
+pub const HANG: &str = "watchdog_hang";
 /// The address the HardFault boot reads (the runner's `UNMAPPED`).
 const FAULT_ADDR: u64 = 0xF000_0000;
 /// ICSR.VECTACTIVE of the NMI (exception number 2), the NMI record's `detail` on the PIL.
 const NMI_EXCEPTION: u64 = 2;
-/// Six boots take well under a second; a broken boot counter loops forever.
+/// Seven boots take well under a second of host time (the hang's two watchdog periods are
+/// 20 ms of guest time); a broken boot counter, or a watchdog that never resets, loops forever.
 const FAILSAFE_TIMEOUT: Duration = Duration::from_secs(60);
 
-/// The three checks of one stop path.
+/// The three checks of one stop path (of the hang: [`Check::labels`]).
 #[derive(Debug)]
 pub struct Check {
     pub kind: &'static str,
     /// The safe-outputs hook ran first: stamp 1, before the record was valid, record stamp 2.
+    /// The hang: the reset was the watchdog's (armed, its interrupt passed over by the NMI
+    /// handler, no stop path recorded, the machine reset).
     pub first: bool,
-    /// The record crossed a real reset intact (magic + CRC, kind, kind-specific fields).
+    /// The record crossed a real reset intact (magic + CRC, kind, kind-specific fields). The
+    /// hang: its phase marker did.
     pub survived: bool,
-    /// The next boot (the boot counter advanced by one) reported it.
+    /// The next boot (the boot counter advanced by one) reported it. The hang: as the boot's
+    /// stop of its phase, and as no stop after another reset.
     pub reported: bool,
     /// Why a check failed, one line each.
     pub why: Vec<String>,
@@ -50,13 +81,22 @@ impl Check {
     pub fn ok(&self) -> bool {
         self.first && self.survived && self.reported
     }
+
+    /// What [`Self::first`], [`Self::survived`] and [`Self::reported`] say for this kind.
+    pub fn labels(&self) -> [&'static str; 3] {
+        if self.kind == HANG {
+            ["watchdog reset", "marker survived the reset", "next boot made the stop of it"]
+        } else {
+            ["safe outputs first", "record survived the reset", "next boot reported it"]
+        }
+    }
 }
 
 /// Boots the runner until it exits; returns the checks.
 pub fn run(elf: &Path, work: &Path) -> Result<Vec<Check>> {
     let dir = work.join("failsafe");
     std::fs::create_dir_all(&dir)?;
-    let run = crate::qemu(elf, &dir, &[], FAILSAFE_TIMEOUT)?;
+    let run = crate::qemu(elf, &dir, &["-icount", "shift=6,sleep=off"], FAILSAFE_TIMEOUT)?;
     let (exited_ok, out) = (run.status.is_some_and(|s| s.success()), run.stdout);
     std::fs::write(dir.join("stdout.txt"), &out)?;
     Ok(checks(&out, exited_ok))
@@ -84,7 +124,8 @@ fn num(map: &HashMap<&str, &str>, key: &str) -> Option<u64> {
     }
 }
 
-/// The checks of every stop path from the runner's stdout and whether it exited with success.
+/// The checks of every stop path (and the hang) from the runner's stdout and whether it exited
+/// with success.
 pub fn checks(stdout: &str, exited_ok: bool) -> Vec<Check> {
     let boots: Vec<HashMap<&str, &str>> = stdout.lines().filter_map(parse_line).collect();
     let order: Vec<Option<u64>> = boots.iter().map(|b| num(b, "boot")).collect();
@@ -93,82 +134,142 @@ pub fn checks(stdout: &str, exited_ok: bool) -> Vec<Check> {
     FAILSAFE_KINDS
         .iter()
         .map(|&(kind, reason, boot)| {
-            let mut c = Check { kind, first: true, survived: true, reported: true, why: Vec::new() };
+            let mut why = Vec::new();
             if !sequence_ok {
-                c.why.push(format!(
+                why.push(format!(
                     "boots reported {order:?}, not 1..={}: the boot counter or a reset failed",
                     expected.len()
                 ));
             }
             if !exited_ok {
-                c.why.push("the runner did not exit with success after its last boot".into());
+                why.push("the runner did not exit with success after its last boot".into());
             }
             let Some(b) = boots.iter().find(|b| num(b, "boot") == Some(u64::from(boot))) else {
-                c.why.push(format!("boot {boot} never reported"));
-                c.first = false;
-                c.survived = false;
-                c.reported = false;
-                return c;
+                why.push(format!("boot {boot} never reported"));
+                return Check { kind, first: false, survived: false, reported: false, why };
             };
+            let (mut first, mut survived, mut reported) = (true, true, true);
             let mut need = |flag: &mut bool, ok: bool, what: String| {
                 if !ok {
                     *flag = false;
-                    c.why.push(what);
+                    why.push(what);
                 }
             };
-            let (mut first, mut survived, mut reported) = (true, true, true);
             need(
                 &mut reported,
                 b.get("reason") == Some(&reason) && sequence_ok && exited_ok,
                 format!("boot {boot} reported reason={}", b.get("reason").unwrap_or(&"?")),
             );
-            let stamps =
-                (num(b, "safe_seq"), num(b, "record_seq"), num(b, "record_before_safe"), num(b, "outputs_safe"));
-            need(
-                &mut first,
-                stamps == (Some(1), Some(2), Some(0), Some(1)),
-                format!("safe_seq, record_seq, record_before_safe, outputs_safe = {stamps:?}, not (1, 2, 0, 1)"),
-            );
-            need(
-                &mut survived,
-                b.get("reason") == Some(&reason),
-                "no intact record of this kind after the reset".into(),
-            );
-            need(&mut survived, num(b, "record_ok_after") == Some(1), "the record did not read back after stop".into());
             need(
                 &mut survived,
                 num(b, "cfsr") == Some(0) && num(b, "iser0") == Some(0),
                 "fault status or interrupt enables survived: not a system reset".into(),
             );
-            let detail = num(b, "detail").unwrap_or(u64::MAX);
-            let specific = match kind {
-                "panic" => detail > 0 && b.get("text").is_some_and(|t| t.ends_with("failsafe.rs")),
-                "hard_fault" => {
-                    num(b, "addr") == Some(FAULT_ADDR) && detail & u64::from(hter::failsafe::CFSR_BFARVALID) != 0
-                }
-                "nmi" => detail & 0x1ff == NMI_EXCEPTION,
-                // The guard was armed, the fault's address is in it, the frame went into it, and
-                // the canary below it is whole: the overflow stopped at the guard.
-                "stack_overflow" => {
-                    let guard = b.get("guard").and_then(|g| g.split_once('-')).and_then(|(lo, hi)| {
-                        let hex = |v: &str| u64::from_str_radix(v.strip_prefix("0x")?, 16).ok();
-                        Some(hex(lo)?..hex(hi)?)
-                    });
-                    num(b, "armed") == Some(1)
-                        && num(b, "canary_ok") == Some(1)
-                        && b.get("text") == Some(&"stack overflow")
-                        && detail & u64::from(hter::failsafe::CFSR_MSTKERR) != 0
-                        && guard.zip(num(b, "addr")).is_some_and(|(g, a)| g.contains(&a))
-                }
-                _ => detail == 0,
-            };
-            need(&mut survived, specific, format!("{kind} record fields wrong: {b:?}"));
-            c.first = first;
-            c.survived = survived;
-            c.reported = reported;
-            c
+            if kind == HANG {
+                hang_checks(b, [&mut first, &mut survived, &mut reported], &mut need);
+            } else {
+                stop_checks(b, kind, reason, [&mut first, &mut survived, &mut reported], &mut need);
+            }
+            Check { kind, first, survived, reported, why }
         })
         .collect()
+}
+
+/// What a stop path's report must hold beyond its reason: the order of its stamps and the
+/// record's kind-specific fields. `need(flag, ok, why)` clears `flag` and notes `why` unless `ok`.
+fn stop_checks(
+    b: &HashMap<&str, &str>,
+    kind: &str,
+    reason: &str,
+    [first, survived, reported]: [&mut bool; 3],
+    need: &mut impl FnMut(&mut bool, bool, String),
+) {
+    let stamps = (num(b, "safe_seq"), num(b, "record_seq"), num(b, "record_before_safe"), num(b, "outputs_safe"));
+    need(
+        first,
+        stamps == (Some(1), Some(2), Some(0), Some(1)),
+        format!("safe_seq, record_seq, record_before_safe, outputs_safe = {stamps:?}, not (1, 2, 0, 1)"),
+    );
+    need(survived, b.get("reason") == Some(&reason), "no intact record of this kind after the reset".into());
+    need(survived, num(b, "record_ok_after") == Some(1), "the record did not read back after stop".into());
+    need(
+        reported,
+        b.get("earlier") == Some(&"none"),
+        format!("earlier={}, not none: a stop reported and let go came back", b.get("earlier").unwrap_or(&"?")),
+    );
+    let detail = num(b, "detail").unwrap_or(u64::MAX);
+    let specific = match kind {
+        "panic" => detail > 0 && b.get("text").is_some_and(|t| t.ends_with("failsafe.rs")),
+        "hard_fault" => num(b, "addr") == Some(FAULT_ADDR) && detail & u64::from(hter::failsafe::CFSR_BFARVALID) != 0,
+        "nmi" => detail & 0x1ff == NMI_EXCEPTION,
+        // The guard was armed, the fault's address is in it, the frame went into it, and
+        // the canary below it is whole: the overflow stopped at the guard.
+        "stack_overflow" => {
+            let guard = b.get("guard").and_then(|g| g.split_once('-')).and_then(|(lo, hi)| {
+                let hex = |v: &str| u64::from_str_radix(v.strip_prefix("0x")?, 16).ok();
+                Some(hex(lo)?..hex(hi)?)
+            });
+            num(b, "armed") == Some(1)
+                && num(b, "canary_ok") == Some(1)
+                && b.get("text") == Some(&"stack overflow")
+                && detail & u64::from(hter::failsafe::CFSR_MSTKERR) != 0
+                && guard.zip(num(b, "addr")).is_some_and(|(g, a)| g.contains(&a))
+        }
+        _ => detail == 0,
+    };
+    need(survived, specific, format!("{kind} record fields wrong: {b:?}"));
+}
+
+/// What the report of the boot after the hang must hold beyond its reason (`control_stall`):
+/// a watchdog reset and the evidence the runner drew it from (the watchdog armed, its first
+/// timeout's interrupt passed over, the watchdog back in its reset state), the phase marker the
+/// hang wrote, the stop of that phase (`hter::failsafe::boot_stall`) with the stop the hung boot
+/// had read and not let go beside it (the stack overflow's `hard_fault`), and after another reset
+/// that stop alone, none from the marker.
+fn hang_checks(
+    b: &HashMap<&str, &str>,
+    [first, survived, reported]: [&mut bool; 3],
+    need: &mut impl FnMut(&mut bool, bool, String),
+) {
+    use hter::failsafe::BootPhase;
+    let field = |k: &str| b.get(k).copied().unwrap_or("?");
+    let evidence = (num(b, "wdog_armed"), num(b, "wdog_nmi").is_some_and(|n| n >= 1), num(b, "wdog_control"));
+    need(
+        first,
+        b.get("reset") == Some(&"watchdog") && evidence == (Some(1), true, Some(0)),
+        format!(
+            "no watchdog reset: reset={} wdog_armed={} wdog_nmi={} wdog_control={}",
+            field("reset"),
+            field("wdog_armed"),
+            field("wdog_nmi"),
+            field("wdog_control")
+        ),
+    );
+    let phase = BootPhase::Restore;
+    need(
+        survived,
+        num(b, "marker") == Some(u64::from(phase.marker())),
+        format!("marker={}, not {phase:?}'s {:#010x}", field("marker"), phase.marker()),
+    );
+    // The boot stall's contract (`StopKind::ControlStall`'s docs): no PC, the phase's number as
+    // the address, 0 ms (a stall the control loop's check notices is never 0 ms).
+    let stop = (num(b, "pc"), num(b, "addr"), num(b, "detail"));
+    let want = (Some(0), Some(phase as u64), Some(0));
+    need(reported, stop == want, format!("the stop's pc, addr, detail = {stop:?}, not {want:?}"));
+    need(
+        reported,
+        b.get("earlier") == Some(&"hard_fault"),
+        format!("earlier={}, not the overflow's hard_fault the hung boot had not let go", field("earlier")),
+    );
+    need(
+        reported,
+        b.get("if_other") == Some(&"hard_fault") && b.get("if_brown_out") == Some(&"hard_fault"),
+        format!(
+            "after another reset the rule gives if_other={} if_brown_out={}, not the kept hard_fault alone",
+            field("if_other"),
+            field("if_brown_out")
+        ),
+    );
 }
 
 #[cfg(test)]
@@ -177,11 +278,12 @@ mod tests {
 
     const GOOD: &str = "\
 failsafe boot=1 cfsr=0x0 iser0=0x0 reason=none
-failsafe boot=2 cfsr=0x0 iser0=0x0 reason=panic pc=0x00000000 addr=0x00000000 detail=0x99 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=src/bin/failsafe.rs
-failsafe boot=3 cfsr=0x0 iser0=0x0 reason=hard_fault pc=0x00000dac addr=0xf0000000 detail=0x8200 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
-failsafe boot=4 cfsr=0x0 iser0=0x0 reason=nmi pc=0x00000000 addr=0x00000000 detail=0x802 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
-failsafe boot=5 cfsr=0x0 iser0=0x0 reason=unexpected_interrupt pc=0x00000000 addr=0x00000000 detail=0x0 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
-failsafe boot=6 cfsr=0x0 iser0=0x0 guard=0x20000400-0x20000800 armed=1 reason=hard_fault pc=0x00000000 addr=0x200007fc detail=0x92 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 canary_ok=1 text=stack overflow
+failsafe boot=2 cfsr=0x0 iser0=0x0 earlier=none reason=panic pc=0x00000000 addr=0x00000000 detail=0x99 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=src/bin/failsafe.rs
+failsafe boot=3 cfsr=0x0 iser0=0x0 earlier=none reason=hard_fault pc=0x00000dac addr=0xf0000000 detail=0x8200 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
+failsafe boot=4 cfsr=0x0 iser0=0x0 earlier=none reason=nmi pc=0x00000000 addr=0x00000000 detail=0x802 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
+failsafe boot=5 cfsr=0x0 iser0=0x0 earlier=none reason=unexpected_interrupt pc=0x00000000 addr=0x00000000 detail=0x0 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
+failsafe boot=6 cfsr=0x0 iser0=0x0 guard=0x20000400-0x20000800 armed=1 earlier=none reason=hard_fault pc=0x00000000 addr=0x200007fc detail=0x92 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 canary_ok=1 text=stack overflow
+failsafe boot=7 cfsr=0x0 iser0=0x0 guard=0x20000400-0x20000800 armed=1 reset=watchdog marker=0xb0070002 wdog_armed=1 wdog_nmi=1 wdog_control=0x0 if_other=hard_fault if_brown_out=hard_fault earlier=hard_fault reason=control_stall pc=0x00000000 addr=0x00000002 detail=0x0 safe_seq=0 record_seq=0 record_before_safe=0 record_ok_after=0 outputs_safe=0 canary_ok=0 text=
 ";
 
     fn oks(out: &str, exited: bool) -> Vec<(bool, bool, bool)> {
@@ -192,7 +294,7 @@ failsafe boot=6 cfsr=0x0 iser0=0x0 guard=0x20000400-0x20000800 armed=1 reason=ha
     fn a_good_run_passes_every_check() {
         let c = checks(GOOD, true);
         assert!(c.iter().all(Check::ok), "{c:?}");
-        assert_eq!(c.len(), 5);
+        assert_eq!(c.len(), 6);
     }
 
     #[test]
@@ -212,6 +314,9 @@ failsafe boot=6 cfsr=0x0 iser0=0x0 guard=0x20000400-0x20000800 armed=1 reason=ha
         // Fault status still set at the next boot: the CPU jumped to the reset vector.
         let no_reset = GOOD.replace("boot=4 cfsr=0x0", "boot=4 cfsr=0x8200");
         assert_eq!(oks(&no_reset, true)[2], (true, false, true));
+        // A stop reported and let go found again by the next boot.
+        let again = GOOD.replace("earlier=none reason=hard_fault pc=0x00000dac", "earlier=panic reason=hard_fault pc=0x00000dac");
+        assert_eq!(oks(&again, true)[1], (true, true, false));
         // The record lost across the reset: the next boot finds none.
         let lost = GOOD.replace("reason=panic", "reason=none");
         assert_eq!(oks(&lost, true)[0], (true, false, false));
@@ -221,10 +326,51 @@ failsafe boot=6 cfsr=0x0 iser0=0x0 guard=0x20000400-0x20000800 armed=1 reason=ha
             GOOD.replace("canary_ok=1", "canary_ok=0"),
             GOOD.replace("addr=0x200007fc", "addr=0x200003fc"),
             GOOD.replace("text=stack overflow", "text="),
-            GOOD.replace("armed=1", "armed=0"),
+            GOOD.replace(" armed=1", " armed=0"),
         ] {
             assert_eq!(oks(&broken, true)[4], (true, false, true), "{broken}");
         }
+    }
+
+    /// Each way the hang's boot can go wrong fails its own check of the hang, with a reason.
+    #[test]
+    fn a_hang_without_a_watchdog_reset_or_its_marker_fails() {
+        let hang = |out: &str| checks(out, true).pop().expect("the hang's check");
+        // Reset by something else (SYSRESETREQ: the watchdog's interrupt never came), the
+        // watchdog never armed, or still armed after the "reset" (a jump to the reset vector).
+        for broken in [
+            GOOD.replace("reset=watchdog", "reset=other"),
+            GOOD.replace("wdog_nmi=1", "wdog_nmi=0"),
+            GOOD.replace("wdog_armed=1", "wdog_armed=0"),
+            GOOD.replace("wdog_control=0x0", "wdog_control=0x3"),
+        ] {
+            let c = hang(&broken);
+            assert_eq!((c.first, c.survived, c.reported), (false, true, true), "{broken}");
+            assert!(c.why.iter().any(|w| w.starts_with("no watchdog reset")), "{:?}", c.why);
+        }
+        // The marker lost (or never written): no stop either.
+        let lost = GOOD.replace("marker=0xb0070002", "marker=0x00000000").replace(
+            "reason=control_stall pc=0x00000000 addr=0x00000002 detail=0x0 safe_seq=0 record_seq=0 record_before_safe=0 record_ok_after=0 outputs_safe=0 canary_ok=0 text=",
+            "reason=none",
+        );
+        let c = hang(&lost);
+        assert_eq!((c.first, c.survived, c.reported), (true, false, false), "{:?}", c.why);
+        // Another phase's stop, or a stop from the marker after another reset.
+        for broken in [
+            GOOD.replace("addr=0x00000002", "addr=0x00000003"),
+            GOOD.replace("if_other=hard_fault", "if_other=control_stall"),
+            GOOD.replace("if_brown_out=hard_fault", "if_brown_out=control_stall"),
+            GOOD.replace("earlier=hard_fault", "earlier=none"),
+        ] {
+            let c = hang(&broken);
+            assert_eq!((c.first, c.survived, c.reported), (true, true, false), "{broken}");
+            assert_eq!(c.why.len(), 1, "{:?}", c.why);
+        }
+        // The watchdog never reset the hung boot: QEMU was killed at the time limit.
+        let six: String = GOOD.lines().take(6).map(|l| format!("{l}\n")).collect();
+        let c = checks(&six, false).pop().expect("the hang's check");
+        assert!(!c.first && !c.survived && !c.reported);
+        assert!(c.why.contains(&"boot 7 never reported".to_string()), "{:?}", c.why);
     }
 
     #[test]

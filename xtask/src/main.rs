@@ -16,8 +16,10 @@
 //! takes more than [`BUDGET_INSN`] instructions. Once, from the first build, it boots `pil`'s
 //! `failsafe` binary, which takes a panic, a HardFault, an NMI, an unexpected interrupt and a stack
 //! overflow into the MPU stack guard through the firmware's stop path, each across a real system
-//! reset, and checks each path ([`failsafe`]);
-//! the JSON line's `failsafe` object says which passed, and any `false` fails the command.
+//! reset, then hangs a boot in its flash-restore phase until the emulated board's watchdog resets
+//! it, and checks each path and that the next boot makes the firmware's boot stall of the hang
+//! ([`failsafe`]); the JSON line's `failsafe` object says which passed, and any `false` fails the
+//! command.
 //!
 //! `cargo xtask size` — the firmware's footprint: builds the release firmware once per
 //! controller (the default self-tuning GPC, the same on the buck drive, then each controller
@@ -337,14 +339,15 @@ fn pil() -> Result<()> {
     let fs = failsafe::run(&elf.with_file_name("failsafe"), &work)?;
     let yes = |b: bool| if b { "yes" } else { "NO" };
     println!(
-        "fail-safe paths: {} boots of {} across SYSRESETREQ resets ({:.1} s)",
+        "fail-safe paths: {} boots of {} across SYSRESETREQ and watchdog resets ({:.1} s)",
         failsafe::FAILSAFE_KINDS.len() + 1,
         elf.with_file_name("failsafe").display(),
         t0.elapsed().as_secs_f64()
     );
     for c in &fs {
+        let [first, survived, reported] = c.labels();
         println!(
-            "  {:<21} safe outputs first: {:<3}  record survived the reset: {:<3}  next boot reported it: {}",
+            "  {:<21} {first}: {:<3}  {survived}: {:<3}  {reported}: {}",
             c.kind,
             yes(c.first),
             yes(c.survived),
