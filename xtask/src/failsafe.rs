@@ -315,7 +315,8 @@ failsafe boot=7 cfsr=0x0 iser0=0x0 guard=0x20000400-0x20000800 armed=1 reset=wat
         let no_reset = GOOD.replace("boot=4 cfsr=0x0", "boot=4 cfsr=0x8200");
         assert_eq!(oks(&no_reset, true)[2], (true, false, true));
         // A stop reported and let go found again by the next boot.
-        let again = GOOD.replace("earlier=none reason=hard_fault pc=0x00000dac", "earlier=panic reason=hard_fault pc=0x00000dac");
+        let again = GOOD
+            .replace("earlier=none reason=hard_fault pc=0x00000dac", "earlier=panic reason=hard_fault pc=0x00000dac");
         assert_eq!(oks(&again, true)[1], (true, true, false));
         // The record lost across the reset: the next boot finds none.
         let lost = GOOD.replace("reason=panic", "reason=none");
