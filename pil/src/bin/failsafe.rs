@@ -59,8 +59,8 @@ use cortex_m::peripheral::SCB;
 use cortex_m_rt::{entry, exception};
 use cortex_m_semihosting::{debug, hprint, hprintln};
 use hter::failsafe::{
-    arm_stack_guard, hard_fault_record, nmi_info, panic_info, stack_guard, stop, unexpected_interrupt_info,
-    BootPhase, ResetRecords, SafeOutputs, StopInfo, Stops,
+    arm_stack_guard, hard_fault_record, nmi_info, panic_info, stack_guard, stop, unexpected_interrupt_info, BootPhase,
+    ResetRecords, SafeOutputs, StopInfo, Stops,
 };
 use hter::persist::ResetCause;
 
