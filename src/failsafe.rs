@@ -313,7 +313,7 @@ impl Stops {
 /// stopped before its history was stored (a hang in the flash restore, a fault in the first
 /// steps, behind the write gate's minute) left the next boot only its own stop or hang, and the
 /// first stop was in no record. Now the stop path that finds a stop not yet stored keeps it as
-/// [`Self::earlier`]'s before writing its own ([`Self::record`]), and a boot the watchdog reset
+/// [`Stops::earlier`]'s before writing its own ([`Self::record`]), and a boot the watchdog reset
 /// before its control loop is recorded the same way ([`Self::boot`]). A loop that stops faster
 /// than it stores keeps the first and the newest stop.
 #[derive(Clone, Copy, Debug)]
@@ -333,7 +333,7 @@ impl ResetRecords {
         ResetRecords { latest: ReasonRecord::EMPTY, earlier: ReasonRecord::EMPTY, phase: 0 };
 
     /// Records `info` as the newest stop. A stop already there and not yet stored moves to
-    /// [`Self::earlier`] if that is free; if it is not, the oldest stays and `info` replaces the
+    /// [`Stops::earlier`] if that is free; if it is not, the oldest stays and `info` replaces the
     /// one between.
     pub fn record(&mut self, info: &StopInfo) {
         // The magic alone, not the CRC: the stop path stays short, and a record copied on a
