@@ -179,13 +179,15 @@ impl ReasonRecord {
     pub const EMPTY: ReasonRecord =
         ReasonRecord { magic: 0, kind: 0, pc: 0, addr: 0, detail: 0, text_len: 0, text: [0; STOP_TEXT], crc: 0 };
 
+    /// The CRC of the record's bytes before `crc`, as they lie in memory: the six words
+    /// little-endian (every target of this crate is), then the text. Read in place, not copied
+    /// word by word into a buffer first (−112 B of the default firmware).
     fn crc(&self) -> u32 {
-        let mut bytes = [0u8; 24 + STOP_TEXT];
-        for (i, w) in [self.magic, self.kind, self.pc, self.addr, self.detail, self.text_len].iter().enumerate() {
-            bytes[4 * i..4 * i + 4].copy_from_slice(&w.to_le_bytes());
-        }
-        bytes[24..].copy_from_slice(&self.text);
-        crc32(&bytes)
+        const COVERED: usize = core::mem::offset_of!(ReasonRecord, crc);
+        const _: () = assert!(COVERED == 24 + STOP_TEXT && cfg!(target_endian = "little"));
+        // SAFETY: `repr(C)` words and bytes with no padding (the assertion above): the first
+        // COVERED bytes of `self` are initialised and inside it.
+        crc32(unsafe { core::slice::from_raw_parts((self as *const Self).cast::<u8>(), COVERED) })
     }
 
     /// Records `info` (replacing whatever was there).
@@ -835,5 +837,14 @@ mod tests {
         }
         assert_eq!(StopKind::from_code(0), None);
         assert_eq!(core::mem::size_of::<ReasonRecord>(), 19 * 4);
+        // The CRC read in place covers the words little-endian, then the text, as a copy would.
+        let mut r = ReasonRecord::EMPTY;
+        r.write(&panic_info("src/step.rs", 417));
+        let mut bytes = std::vec::Vec::new();
+        for w in [r.magic, r.kind, r.pc, r.addr, r.detail, r.text_len] {
+            bytes.extend_from_slice(&w.to_le_bytes());
+        }
+        bytes.extend_from_slice(&r.text);
+        assert_eq!(r.crc, crc32(&bytes));
     }
 }
