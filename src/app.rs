@@ -99,16 +99,20 @@ impl Boot {
     /// the first steps, a stall) restarts before its boot's store: behind the hold-off, the
     /// stop never reached the cold-chain record however often it repeated, though the next boot
     /// found it in RAM each time (SPEC §7). The same stop again (a fault loop) waits as before,
-    /// so a loop does not write at every boot, a stop before it kept beside it
-    /// ([`Stops::earlier`]) included: it stays in RAM until the store; a power bounce has no
-    /// stop (RAM does not keep the reason through a power loss).
+    /// so a loop does not write at every boot; a stop kept beside it ([`Stops::earlier`]) that
+    /// the stored history lacks goes at once, as a new newest does; a power bounce has no stop
+    /// (RAM does not keep the reason through a power loss).
     pub fn history_save(&self, history: HistoryRecord) -> Save {
-        let stop = self.stops.latest.as_ref().map(crate::persist::LastStop::from);
+        // Each stop, not the newest alone: a new stop kept as the earlier behind a repeat of the
+        // stored newest (a boot that took it on a bad supply, then the loop's panic) waited for a
+        // boot that outlasts the hold-off, in RAM, where a power cut loses it. Once stored it is
+        // let go, and the repeat alone waits again.
+        let new_stop = self.stops.iter().any(|s| Some(crate::persist::LastStop::from(s)) != self.history.last_stop);
         // A service reset's forgetting is stored at once too: behind the hold-off, a power cut
         // in the first minute brought back a short or an offset the technician had cleared.
         let forgot =
             history.ssr_shorted() != self.history.ssr_shorted() || history.sensor_offset != self.history.sensor_offset;
-        if forgot || (stop.is_some() && stop != self.history.last_stop) {
+        if forgot || new_stop {
             Save::AlarmHistory(history)
         } else {
             Save::History(history)

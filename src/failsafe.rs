@@ -205,9 +205,16 @@ impl ReasonRecord {
         self.crc = self.crc();
     }
 
+    /// Whether the record is whole: its magic and its CRC ([`Self::peek`] checks the fields
+    /// too).
+    #[inline(never)]
+    fn intact(&self) -> bool {
+        self.magic == MAGIC && self.crc == self.crc()
+    }
+
     /// The recorded stop, if the record is intact (magic, CRC, kind and text length valid).
     pub fn peek(&self) -> Option<StopInfo> {
-        if self.magic != MAGIC || self.crc != self.crc() {
+        if !self.intact() {
             return None;
         }
         let kind = StopKind::from_code(u8::try_from(self.kind).ok()?)?;
@@ -338,9 +345,12 @@ impl ResetRecords {
     /// [`Stops::earlier`] if that is free; if it is not, the oldest stays and `info` replaces the
     /// one between.
     pub fn record(&mut self, info: &StopInfo) {
-        // The magic alone, not the CRC: the stop path stays short, and a record copied on a
-        // magic found by chance in power-up noise is still no record to the boot's check.
-        if self.earlier.magic != MAGIC && self.latest.magic == MAGIC {
+        // Whole records, by their CRC, not their magic alone: a copy into `earlier` that a reset
+        // or a nested stop path cut (an NMI preempting this one: the outer never resumes) has
+        // the magic and not the CRC. Taken by its magic for a kept stop, it held the slot, and
+        // the stop still whole in `latest` was written over: lost. The CRC is `write`'s own,
+        // already on every stop path.
+        if !self.earlier.intact() && self.latest.intact() {
             self.earlier = self.latest;
         }
         self.latest.write(info);
@@ -686,6 +696,31 @@ mod tests {
         r.record(&panic_info("b.rs", 2));
         r.earlier.crc ^= 1;
         assert_eq!(r.boot(ResetCause::Other), Stops { earlier: None, latest: Some(panic_info("b.rs", 2)) });
+    }
+
+    /// A copy into `earlier` that a reset or a nested stop path cut (an NMI preempting a stop
+    /// path, a watchdog bite in it) leaves the magic without the CRC: the next stop path must
+    /// take the slot as free and keep the stop still whole in `latest`, not write over it.
+    #[test]
+    fn a_cut_copy_into_earlier_does_not_cost_the_newest_stop() {
+        let (a, b) = (panic_info("a.rs", 1), panic_info("b.rs", 2));
+        for cut_after_words in [1, 5, 18] {
+            let mut r = ResetRecords::EMPTY;
+            r.record(&a);
+            // The next stop path's `earlier = latest`, cut after its first words.
+            let words = core::mem::size_of::<ReasonRecord>() / 4;
+            // SAFETY: ReasonRecord is repr(C) plain words and bytes; any bit pattern is valid.
+            let (src, dst) = unsafe {
+                (
+                    core::slice::from_raw_parts(&r.latest as *const ReasonRecord as *const u32, words).to_vec(),
+                    core::slice::from_raw_parts_mut(&mut r.earlier as *mut ReasonRecord as *mut u32, words),
+                )
+            };
+            dst[..cut_after_words].copy_from_slice(&src[..cut_after_words]);
+            assert_eq!(r.boot(ResetCause::Other), Stops { earlier: None, latest: Some(a) }, "{cut_after_words}");
+            r.record(&b);
+            assert_eq!(r.boot(ResetCause::Other), Stops { earlier: Some(a), latest: Some(b) }, "{cut_after_words}");
+        }
     }
 
     /// Stamps each step of a stop path with the next number of a shared counter.

@@ -611,6 +611,45 @@ fn a_new_fail_safe_stop_reaches_the_record_before_the_next_stop() {
     assert!(matches!(quiet.history_save(stored), Save::History(_)));
 }
 
+/// A new stop kept as the earlier behind a repeat of the stored history's newest (here an NMI
+/// on a supply under the PVD level, then the loop's panic 20 s into every boot) is stored at
+/// once by the first boot on a good supply, not behind the hold-off: there it waited for a boot
+/// that outlasts the minute, in RAM only, and a power cut meanwhile lost it. Once stored, the
+/// loop's panic alone waits again, so the loop does not write at every boot.
+#[test]
+fn a_new_stop_kept_as_the_earlier_reaches_the_record_before_the_next_stop() {
+    use crate::failsafe::{nmi_info, panic_info, ResetRecords, StopKind};
+    use crate::persist::{PendingSaves, Recorder, WriteGate};
+    let panic = panic_info("src/step.rs", 417);
+    let mut stored = Recorder::new(HistoryRecord::EMPTY, 360)
+        .note_boot(ResetCause::Other, &Stops { earlier: None, latest: Some(panic) });
+    let mut ram = ResetRecords::EMPTY;
+    ram.record(&nmi_info(0, 0));
+    let mut writes = Vec::new();
+    for n in 0..5 {
+        let stops = ram.boot(ResetCause::Other);
+        let mut app = App::new(config(), &Boot { history: stored, stops, ..boot() });
+        let (mut gate, mut pending) = (WriteGate::firmware(), PendingSaves::EMPTY);
+        while let Some(s) = app.next_save() {
+            pending.put(s);
+        }
+        // The first boot's supply is under the PVD level; the panic comes 20 s into each.
+        for t in (0..20_000).step_by(10_000) {
+            gate.note_supply(t, n > 0);
+            while let Some(s) = pending.next(&gate, t) {
+                if let Save::History(h) | Save::AlarmHistory(h) = s {
+                    stored = h;
+                    writes.push(n);
+                    ram.stored();
+                }
+            }
+        }
+        ram.record(&panic);
+    }
+    assert_eq!(writes, [1], "the first boot on a good supply, then the loop behind the hold-off");
+    assert_eq!((stored.stops_of(StopKind::Nmi), stored.stops_of(StopKind::Panic)), (1, 2));
+}
+
 /// A boot that hangs before its control loop (in the clocks, in a flash restore) is reset by
 /// the watchdog, again and again while the cause lasts; the stall check is not armed yet and no
 /// stop path runs. The phase each boot leaves in a reset-surviving word
