@@ -80,8 +80,11 @@ pub struct Boot {
     pub log_last_s: u32,
     /// Why the MCU started.
     pub reset: ResetCause,
-    /// The fail-safe stops the stored history does not have yet: the previous boot's, and one
-    /// before it that a boot took but did not store ([`crate::failsafe::ResetRecords::boot`]).
+    /// The fail-safe stops the stored history does not have yet
+    /// ([`crate::failsafe::ResetRecords::boot`]): the stop that ended the previous boot
+    /// ([`Stops::fresh`]), or one an earlier boot reported and did not store, and one before it.
+    /// Each is counted and reported as a `BoardFault` event until a history that counts it is
+    /// in flash.
     pub stops: Stops,
     /// Flash pages the boot found torn and repaired.
     pub pages_lost: u8,
@@ -122,12 +125,13 @@ impl Boot {
     /// Whether this boot is a technician's service reset, which forgets what the history
     /// carries ([`Recorder::note_service`]: the SSR's short if one is stored, else the sensor
     /// offset, after the repair): the acknowledge button held through a reset ([`Self::button_held`]), and the reset
-    /// a pin reset (the reset button) without a fail-safe stop. Not after a watchdog bite, a
-    /// fail-safe stop or a power cut, which the button held by chance (someone acknowledging an
-    /// alarm) must not turn into a repair. A reset alone no longer clears the short: an NRST
-    /// glitch or a debugger attaching under reset gives one too.
+    /// a pin reset (the reset button) without a fail-safe stop of its own ([`Stops::fresh`]: a
+    /// stop an earlier boot reported and did not store yet does not refuse it). Not after a
+    /// watchdog bite, a fail-safe stop or a power cut, which the button held by chance (someone
+    /// acknowledging an alarm) must not turn into a repair. A reset alone no longer clears the
+    /// short: an NRST glitch or a debugger attaching under reset gives one too.
     pub fn service_reset(&self) -> bool {
-        self.button_held && self.stops.latest.is_none() && self.reset == ResetCause::Other
+        self.button_held && !self.stops.fresh && self.reset == ResetCause::Other
     }
 
     /// Starts the step and the record from what this boot found: counts the boot in the record

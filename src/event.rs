@@ -62,7 +62,8 @@ pub enum EventKind {
     /// The previous boot stopped through a fail-safe path (panic, HardFault, NMI, an unexpected
     /// interrupt, a control stall): its outputs went safe, its reason survived the reset in
     /// RAM ([`crate::failsafe::ResetRecords`]), and this boot reports it with its first sample.
-    /// A stop the boot before did not get into flash is reported again, before the newest.
+    /// A stop the boot before did not get into flash is reported again (by each boot until a
+    /// history that counts it is stored), before the newest.
     BoardFault(crate::failsafe::StopKind),
     /// The persistence region could not be read where a power cut interrupted a flash write (an
     /// ECC error on the L4: a torn double-word). The store repaired it at boot — the torn word

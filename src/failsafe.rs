@@ -158,6 +158,8 @@ impl defmt::Format for StopInfo {
 
 /// `"HTSR"`: a record written by [`ReasonRecord::write`].
 const MAGIC: u32 = 0x5253_5448;
+/// In a record's kind word, above the kind's code: a boot has reported it ([`Stops::fresh`]).
+const SEEN: u32 = 1 << 8;
 
 /// The reset-surviving record of a stop, laid out as plain words so that uninitialised RAM can
 /// hold it: the glue declares one `static mut` in `.uninit` and never lets the runtime touch it.
@@ -205,6 +207,15 @@ impl ReasonRecord {
         self.crc = self.crc();
     }
 
+    /// Marks a whole record as reported by a boot ([`Stops::fresh`]): [`SEEN`] in its kind word,
+    /// the CRC written again.
+    fn mark_seen(&mut self) {
+        if self.intact() {
+            self.kind |= SEEN;
+            self.crc = self.crc();
+        }
+    }
+
     /// Whether the record is whole: its magic and its CRC ([`Self::peek`] checks the fields
     /// too).
     #[inline(never)]
@@ -217,7 +228,7 @@ impl ReasonRecord {
         if !self.intact() {
             return None;
         }
-        let kind = StopKind::from_code(u8::try_from(self.kind).ok()?)?;
+        let kind = StopKind::from_code(u8::try_from(self.kind & !SEEN).ok()?)?;
         let text_len = u8::try_from(self.text_len).ok().filter(|n| usize::from(*n) <= STOP_TEXT)?;
         let info = StopInfo { kind, pc: self.pc, addr: self.addr, detail: self.detail, text: self.text, text_len };
         info.text.get(..usize::from(text_len))?.is_ascii().then_some(info)
@@ -303,6 +314,12 @@ pub struct Stops {
     pub earlier: Option<StopInfo>,
     /// The newest stop.
     pub latest: Option<StopInfo>,
+    /// `latest` is the last reset's own (a stop path's record, or the hang a watchdog reset
+    /// ended): no boot reported it before. False for a stop an earlier boot already reported and
+    /// did not get into flash (a person's reset in its first minute, a supply under the PVD
+    /// level, a failed store): counted again, since the flash does not have it, but not the
+    /// reason this boot started.
+    pub fresh: bool,
 }
 
 impl Stops {
@@ -369,7 +386,11 @@ impl ResetRecords {
                 self.record(&boot_stall(phase));
             }
         }
-        self.stops()
+        let fresh = self.latest.intact() && self.latest.kind & SEEN == 0;
+        // `earlier` was a `latest` a boot reported, or the stop before a nested one: its mark
+        // tells nothing, so it is not written.
+        self.latest.mark_seen();
+        Stops { fresh, ..self.stops() }
     }
 
     /// The phase word as it is: a [`BootPhase::marker`] while a boot is on its way to its control
@@ -380,9 +401,10 @@ impl ResetRecords {
         unsafe { core::ptr::read_volatile(&self.phase) }
     }
 
-    /// The stops held, oldest first, as they are (no phase read, nothing recorded).
+    /// The stops held, oldest first, as they are (no phase read, nothing recorded or marked;
+    /// [`Stops::fresh`] false).
     pub fn stops(&self) -> Stops {
-        Stops { earlier: self.earlier.peek(), latest: self.latest.peek() }
+        Stops { earlier: self.earlier.peek(), latest: self.latest.peek(), fresh: false }
     }
 
     /// The boot is now at `phase`, until [`Self::running`]: a watchdog reset before then is the
@@ -646,31 +668,33 @@ mod tests {
         let fault = hard_fault_info(0x0800_1234, 0x8200, 0, 0);
         let mut r = ResetRecords::EMPTY;
         r.record(&panic);
-        // The boot that took it is reset by a person before its store: the panic again.
-        for reset in [ResetCause::Other, ResetCause::BrownOut] {
+        // The boot that took it is reset by a person before its store: the panic again, no
+        // longer the reason the board started.
+        for (reset, fresh) in [(ResetCause::Other, true), (ResetCause::Other, false), (ResetCause::BrownOut, false)] {
             r.enter(BootPhase::Restore);
-            assert_eq!(r.boot(reset), Stops { earlier: None, latest: Some(panic) }, "{reset:?}");
+            assert_eq!(r.boot(reset), Stops { earlier: None, latest: Some(panic), fresh }, "{reset:?}");
         }
         // That boot hangs in its restore: the panic and the hang.
         r.enter(BootPhase::Restore);
         let both = r.boot(ResetCause::Watchdog);
-        assert_eq!(both, Stops { earlier: Some(panic), latest: Some(boot_stall(BootPhase::Restore)) });
+        assert_eq!(both, Stops { earlier: Some(panic), latest: Some(boot_stall(BootPhase::Restore)), fresh: true });
         assert_eq!(both.iter().copied().collect::<Vec<_>>(), [panic, boot_stall(BootPhase::Restore)]);
         // The next one faults in its first steps: the oldest stays, the newest replaces the hang.
         r.running();
         r.record(&fault);
-        assert_eq!(r.boot(ResetCause::Other), Stops { earlier: Some(panic), latest: Some(fault) });
+        assert_eq!(r.boot(ResetCause::Other), Stops { earlier: Some(panic), latest: Some(fault), fresh: true });
+        assert_eq!(r.boot(ResetCause::Other), Stops { earlier: Some(panic), latest: Some(fault), fresh: false });
         // Stored: gone, and the next stop is alone again.
         r.stored();
         assert_eq!(r.boot(ResetCause::Other), Stops::default());
         r.record(&fault);
-        assert_eq!(r.boot(ResetCause::Other), Stops { earlier: None, latest: Some(fault) });
+        assert_eq!(r.boot(ResetCause::Other), Stops { earlier: None, latest: Some(fault), fresh: true });
         // A stop after a store is not kept beside a stored one.
         let mut r = ResetRecords::EMPTY;
         r.record(&panic);
         r.stored();
         r.record(&fault);
-        assert_eq!(r.boot(ResetCause::Other), Stops { earlier: None, latest: Some(fault) });
+        assert_eq!(r.boot(ResetCause::Other), Stops { earlier: None, latest: Some(fault), fresh: true });
     }
 
     /// Power-up noise in the whole struct is neither a stop nor a boot under way; a torn
@@ -695,7 +719,10 @@ mod tests {
         r.record(&panic_info("a.rs", 1));
         r.record(&panic_info("b.rs", 2));
         r.earlier.crc ^= 1;
-        assert_eq!(r.boot(ResetCause::Other), Stops { earlier: None, latest: Some(panic_info("b.rs", 2)) });
+        assert_eq!(
+            r.boot(ResetCause::Other),
+            Stops { earlier: None, latest: Some(panic_info("b.rs", 2)), fresh: true }
+        );
     }
 
     /// A copy into `earlier` that a reset or a nested stop path cut (an NMI preempting a stop
@@ -717,9 +744,14 @@ mod tests {
                 )
             };
             dst[..cut_after_words].copy_from_slice(&src[..cut_after_words]);
-            assert_eq!(r.boot(ResetCause::Other), Stops { earlier: None, latest: Some(a) }, "{cut_after_words}");
+            assert_eq!(
+                r.boot(ResetCause::Other),
+                Stops { earlier: None, latest: Some(a), fresh: true },
+                "{cut_after_words}"
+            );
             r.record(&b);
-            assert_eq!(r.boot(ResetCause::Other), Stops { earlier: Some(a), latest: Some(b) }, "{cut_after_words}");
+            let both = Stops { earlier: Some(a), latest: Some(b), fresh: true };
+            assert_eq!(r.boot(ResetCause::Other), both, "{cut_after_words}");
         }
     }
 

@@ -1833,7 +1833,8 @@ mod tests {
             (ResetCause::Other, None),
         ] {
             let mut next = Recorder::new(h, 360);
-            let booted = next.note_boot(reset, &crate::failsafe::Stops { earlier: None, latest: stop });
+            let booted =
+                next.note_boot(reset, &crate::failsafe::Stops { earlier: None, latest: stop, fresh: stop.is_some() });
             assert!(booted.ssr_shorted(), "{reset:?} {stop:?}");
             assert_eq!(booted.sensor_offset, offset, "{reset:?} {stop:?}");
             let serviced = next.note_service();

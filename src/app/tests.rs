@@ -557,7 +557,11 @@ fn stored_settings_with_a_law_this_build_does_not_link_keep_their_setpoint_and_c
 #[test]
 fn a_boot_with_many_repaired_pages_still_stores_its_history() {
     let fault = crate::failsafe::StopInfo::new(crate::failsafe::StopKind::HardFault, 0x0800_1234, 0, 0);
-    let mut b = Bench::new(&Boot { pages_lost: 20, stops: Stops { earlier: None, latest: Some(fault) }, ..boot() });
+    let mut b = Bench::new(&Boot {
+        pages_lost: 20,
+        stops: Stops { earlier: None, latest: Some(fault), fresh: true },
+        ..boot()
+    });
     b.drain();
     let h = b.saves.iter().find_map(|s| match s {
         Save::History(h) | Save::AlarmHistory(h) => Some(*h),
@@ -585,7 +589,7 @@ fn a_new_fail_safe_stop_reaches_the_record_before_the_next_stop() {
     for (n, fault) in [panic; 10].into_iter().chain([hard_fault]).enumerate() {
         let mut app = App::new(
             config(),
-            &Boot { history: stored, stops: Stops { earlier: None, latest: Some(fault) }, ..boot() },
+            &Boot { history: stored, stops: Stops { earlier: None, latest: Some(fault), fresh: true }, ..boot() },
         );
         let (mut gate, mut pending) = (WriteGate::firmware(), PendingSaves::EMPTY);
         while let Some(s) = app.next_save() {
@@ -622,7 +626,7 @@ fn a_new_stop_kept_as_the_earlier_reaches_the_record_before_the_next_stop() {
     use crate::persist::{PendingSaves, Recorder, WriteGate};
     let panic = panic_info("src/step.rs", 417);
     let mut stored = Recorder::new(HistoryRecord::EMPTY, 360)
-        .note_boot(ResetCause::Other, &Stops { earlier: None, latest: Some(panic) });
+        .note_boot(ResetCause::Other, &Stops { earlier: None, latest: Some(panic), fresh: true });
     let mut ram = ResetRecords::EMPTY;
     ram.record(&nmi_info(0, 0));
     let mut writes = Vec::new();
@@ -669,7 +673,7 @@ fn a_watchdog_loop_before_the_control_loop_reaches_the_record() {
     ram.enter(BootPhase::Board);
     ram.enter(BootPhase::Restore);
     let stops = ram.boot(ResetCause::Watchdog);
-    assert_eq!(stops, Stops { earlier: None, latest: Some(boot_stall(BootPhase::Restore)) });
+    assert_eq!(stops, Stops { earlier: None, latest: Some(boot_stall(BootPhase::Restore)), fresh: true });
     let mut b = Bench::new(&Boot { history: stored, reset: ResetCause::Watchdog, stops, ..boot() });
     let first = b.run(1);
     assert!(first.step.events.iter().any(|e| e.kind == EventKind::BoardFault(StopKind::ControlStall)));
@@ -700,7 +704,7 @@ fn a_stop_and_the_hang_of_the_boot_that_took_it_both_reach_the_record() {
     let mut ram = ResetRecords::EMPTY;
     ram.record(&panic);
     // The boot after the panic reads it, counts it, and hangs in the restore before any store.
-    assert_eq!(ram.boot(ResetCause::Other), Stops { earlier: None, latest: Some(panic) });
+    assert_eq!(ram.boot(ResetCause::Other), Stops { earlier: None, latest: Some(panic), fresh: true });
     ram.enter(BootPhase::Restore);
     // The watchdog resets it; the next boot gets through.
     let stops = ram.boot(ResetCause::Watchdog);
@@ -1043,7 +1047,7 @@ fn a_shorted_ssr_is_remembered_until_a_service_reset() {
         let mut next = Bench::new(&Boot {
             history: stored,
             reset,
-            stops: Stops { earlier: None, latest: fault },
+            stops: Stops { earlier: None, latest: fault, fresh: fault.is_some() },
             button_held: service,
             ..boot()
         });
@@ -1202,7 +1206,7 @@ fn switching_to_on_off_is_accepted_with_a_warning_line() {
 fn a_boot_after_a_fail_safe_stop_latches_the_indicator() {
     use crate::failsafe::{StopInfo, StopKind};
     let stall = StopInfo::new(StopKind::ControlStall, 0, 0, 25_000);
-    let mut b = Bench::new(&Boot { stops: Stops { earlier: None, latest: Some(stall) }, ..boot() });
+    let mut b = Bench::new(&Boot { stops: Stops { earlier: None, latest: Some(stall), fresh: true }, ..boot() });
     assert_eq!(b.run(1).alarm, Indication::Unacknowledged);
     assert_eq!(b.run(30).alarm, Indication::Unacknowledged);
     assert_eq!(b.send("ack"), "ok\r\n");
@@ -1565,4 +1569,21 @@ fn a_commissioned_model_starts_the_self_tuner_with_the_starts_p0_after_a_resumed
     b.run(10);
     assert_eq!(b.send("set model -1.859405,0.859802;-0.014713,-0.003021;8"), "ok\r\n");
     assert_eq!(b.app.adaptive.rls.p0, start_p0);
+}
+
+/// A service reset is refused after a fail-safe stop's own reset, not after one that an earlier
+/// boot already reported and has not stored yet (a reset button pressed in that boot's first
+/// minute): the stop is counted again, and the technician's reset still forgets a repair.
+#[test]
+fn a_stop_reported_before_does_not_refuse_a_service_reset() {
+    use crate::failsafe::{panic_info, ResetRecords};
+    let mut ram = ResetRecords::EMPTY;
+    ram.record(&panic_info("src/step.rs", 417));
+    let first = Boot { stops: ram.boot(ResetCause::Other), button_held: true, ..boot() };
+    assert!(first.stops.fresh && !first.service_reset(), "the stop's own reset");
+    let again = Boot { stops: ram.boot(ResetCause::Other), button_held: true, ..boot() };
+    assert!(!again.stops.fresh && again.stops.latest.is_some());
+    assert!(again.service_reset(), "the reset button, the stop reported before");
+    let history = Recorder::new(HistoryRecord::EMPTY, 360).note_boot(ResetCause::Other, &again.stops);
+    assert_eq!(history.stops_of(crate::failsafe::StopKind::Panic), 1, "still counted");
 }
