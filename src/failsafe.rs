@@ -6,7 +6,9 @@
 //! (which pins, how to reset) is behind [`SafeOutputs`]; the order and the record are here, so
 //! the very same code runs in the firmware's handlers and on the processor-in-the-loop machine
 //! (`cargo xtask pil` triggers a panic, a HardFault, an NMI, an unexpected interrupt and a
-//! stack overflow into the stack guard (`arm_stack_guard`) there and checks each step).
+//! stack overflow into the stack guard (`arm_stack_guard`) there and checks each step, then
+//! hangs a boot that read a stop until the emulated watchdog resets it, and checks that the next
+//! boot has both: [`ResetRecords`]).
 //!
 //! The reason lives in a [`ReasonRecord`] of the [`ResetRecords`] that the glue places in RAM the
 //! runtime neither zeroes nor initialises (`.uninit`): it survives a system reset (not a power
@@ -267,7 +269,7 @@ pub fn panic_info(file: &str, line: u32) -> StopInfo {
 }
 
 /// How far a boot got on its way to the control loop. The glue keeps the phase in a
-/// reset-surviving word ([`Self::marker`]) from right after it took the last reset's record up
+/// reset-surviving word ([`Self::marker`]) from right after it read the last reset's stops up
 /// to the control-stall check's start: a boot that hangs there (in the clocks, in a flash
 /// restore) before any stop path can notice is reset by the watchdog, and the next boot makes a
 /// stop of it ([`ResetRecords::boot`]). Before, the bite was a watchdog reset and nothing more, and a
@@ -422,7 +424,9 @@ impl ResetRecords {
     }
 
     /// The history with this boot's stops is in flash: they are no longer kept. A reset between
-    /// the store and this call counts them again at the next boot (once more rather than never).
+    /// the store and this call counts them again at the next boot (once more rather than never),
+    /// and so does a stop path that runs between its two stores (an NMI, which no critical
+    /// section holds off: it keeps the stored `latest` as its `earlier`).
     pub fn stored(&mut self) {
         // The magic alone: a record without it is none ([`ReasonRecord::peek`]).
         self.earlier.magic = 0;

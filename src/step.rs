@@ -210,9 +210,9 @@ impl<C: Controller> Carrier<C> {
     /// the previous boot's, and one before it that boot had not stored), oldest first; the next
     /// sample reports each as [`EventKind::BoardFault`].
     pub fn note_board_fault(&mut self, kind: crate::failsafe::StopKind) {
-        // Two are all a boot finds: the newest goes above the oldest.
-        let shift = if self.pending_stops == 0 { 0 } else { 4 };
-        self.pending_stops |= (kind as u8) << shift;
+        // Two are all a boot finds: the newest goes above the oldest (a third would replace it).
+        self.pending_stops =
+            if self.pending_stops == 0 { kind as u8 } else { self.pending_stops & 0xF | (kind as u8) << 4 };
     }
 
     /// Gives the step every reading the board took besides the RTD, for the next sample: what

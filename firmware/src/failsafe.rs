@@ -33,9 +33,12 @@ static mut RECORDS: MaybeUninit<ResetRecords> = MaybeUninit::uninit();
 /// The records in [`RECORDS`].
 ///
 /// # Safety
-/// Only one context may hold the reference at a time: the boot's thread (main, then the control
-/// task until its loop runs), the persist task in a critical section ([`stops_stored`]), or a
-/// stop path that never returns.
+/// One context at a time uses the reference: the boot's thread (main, then the control task
+/// until its loop runs), the persist task in a critical section ([`stops_stored`]), or a stop
+/// path. A stop path can preempt one of the others (an NMI or a HardFault, which no critical
+/// section holds off) while it holds its reference; two then exist by the letter, but the
+/// preempted one is never used again: a stop path does not return, it resets. (The same holds
+/// of the stop record before it, 2026-12-06.)
 unsafe fn records() -> &'static mut ResetRecords {
     // SAFETY: ResetRecords is `repr(C)` words and bytes, so any bit pattern is a valid value;
     // exclusivity is the caller's promise.

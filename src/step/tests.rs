@@ -76,6 +76,8 @@ fn restarts_and_board_faults_are_reported_with_the_next_sample() {
     assert!(c.step(&StepInput { t_ms: 10_000, counts: counts_at(4.0), setpoint_c: 4.0 }).events.is_empty());
     // A stop the boot before did not store and the one after it: both, oldest first.
     c.note_board_fault(crate::failsafe::StopKind::Panic);
+    c.note_board_fault(crate::failsafe::StopKind::HardFault);
+    // A third replaces the newest, not a mix of two kinds' bits.
     c.note_board_fault(crate::failsafe::StopKind::ControlStall);
     let out = c.step(&StepInput { t_ms: 20_000, counts: counts_at(4.0), setpoint_c: 4.0 });
     assert_eq!(
