@@ -340,6 +340,9 @@ async fn control(boot: &'static Boot, mut heartbeat_pin: Output<'static>) {
         for a in rec.raised.iter().flatten() {
             log_alarm(a);
         }
+        // The records region erased as corrupt: the history is stored again now, not at the
+        // next hourly store (the model follows at its own cadence).
+        rec.save_due |= persist::RECORDS_ERASED.swap(false, Ordering::Relaxed);
         // An alarm's history is stored as soon as the supply allows, without the boot's hold-off.
         if let Some(save) = recorder.due_save(&rec) {
             persist::request(save);

@@ -148,8 +148,8 @@ fn set_up(p: &mut Pending) -> (&mut PendingSaves, &mut WriteGate) {
 static WAKE: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
 /// The records region was erased after the storage layer found it corrupt: the control task
-/// hands the application's records over again ([`hter::app::App::records_erased`]).
-#[cfg(feature = "interface")]
+/// hands the records over again (the interface build: [`hter::app::App::records_erased`]; the
+/// others: the history and the calibration).
 pub static RECORDS_ERASED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
 
 /// What the boot restored: the persist task sends it once, `main` waits for it. A one-slot
@@ -310,6 +310,13 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
                     }
                     #[cfg(not(feature = "interface"))]
                     {
+                        // The history went with the region (and with it the stops that RAM no
+                        // longer keeps, once stored): the control task queues it again, where it
+                        // waited for the next hourly store and a power cut meanwhile lost every
+                        // count since the first boot.
+                        if !matches!(save, Save::History(_) | Save::AlarmHistory(_)) {
+                            RECORDS_ERASED.store(true, core::sync::atomic::Ordering::Relaxed);
+                        }
                         result = flash::write_record(&mut store, &save).await;
                     }
                 }
