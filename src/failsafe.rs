@@ -209,13 +209,15 @@ impl ReasonRecord {
         self.crc = self.crc();
     }
 
-    /// Marks a whole record as reported by a boot ([`Stops::fresh`]): [`SEEN`] in its kind word,
-    /// the CRC written again.
-    fn mark_seen(&mut self) {
-        if self.intact() {
+    /// Marks a whole record as reported by a boot: [`SEEN`] in its kind word, the CRC written
+    /// again. Whether it was whole and not yet marked ([`Stops::fresh`]).
+    fn mark_seen(&mut self) -> bool {
+        let fresh = self.intact() && self.kind & SEEN == 0;
+        if fresh {
             self.kind |= SEEN;
             self.crc = self.crc();
         }
+        fresh
     }
 
     /// Whether the record is whole: its magic and its CRC ([`Self::peek`] checks the fields
@@ -388,10 +390,9 @@ impl ResetRecords {
                 self.record(&boot_stall(phase));
             }
         }
-        let fresh = self.latest.intact() && self.latest.kind & SEEN == 0;
         // `earlier` was a `latest` a boot reported, or the stop before a nested one: its mark
         // tells nothing, so it is not written.
-        self.latest.mark_seen();
+        let fresh = self.latest.mark_seen();
         Stops { fresh, ..self.stops() }
     }
 

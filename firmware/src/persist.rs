@@ -149,7 +149,7 @@ static WAKE: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
 /// The records region was erased after the storage layer found it corrupt: the control task
 /// hands the records over again (the interface build: [`hter::app::App::records_erased`]; the
-/// others: the history and the calibration).
+/// others: the history, at the next sample).
 pub static RECORDS_ERASED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
 
 /// What the boot restored: the persist task sends it once, `main` waits for it. A one-slot
