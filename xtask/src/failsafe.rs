@@ -2,13 +2,22 @@
 //! and checks, for each stop path, what its boots report on semihosting stdout. The fifth path is
 //! a stack overflow into the MPU stack guard (QEMU models the ARMv7-M MPU): it must end in the
 //! HardFault's stop path, recorded as a stack overflow, with nothing below the guard written.
-//! The last is no stop path: a boot that reads the overflow's stop, marks its phase as the
+//! The sixth is no stop path: a boot that reads the overflow's stop, marks its phase as the
 //! firmware does ([`hter::failsafe::BootPhase::Restore`]), arms the board's watchdog and hangs
 //! before it lets the stop go (as a board's boot can hang before its history is stored); the
 //! next boot must see a watchdog reset, the marker, [`hter::failsafe::ResetRecords::boot`]'s
 //! stop of it (a `control_stall` of that phase) with the overflow kept beside it as the earlier
-//! stop, and after any other reset the overflow alone, no stop from the marker. Every other
-//! boot must find no earlier stop: each lets its stop go once reported.
+//! stop, field for field as the boot before reported it, and after any other reset the overflow
+//! alone, no stop from the marker. That boot lets both go and panics.
+//!
+//! The last is a stop path that finds a stop reported and not let go
+//! ([`hter::failsafe::ResetRecords::record`]): the boot after the panic reports it (alone, as
+//! the newest stop and fresh) and, before it lets it go, reads the unmapped address. The next
+//! boot must find the HardFault as the newest stop, fresh and with its own fields, and the panic
+//! kept beside it as the earlier stop, whole (a record that fails its magic or CRC is none) and
+//! field for field as the boot before reported it; that boot lets both go and resets with no
+//! stop path, and the boot after it must find no stop at all. Every other boot must find no
+//! earlier stop: each lets its stop go once reported.
 //!
 //! QEMU turns the guest's SYSRESETREQ (`SCB::sys_reset`) into a machine reset
 //! (`qemu_system_reset_request`; with `-no-reboot` the same request makes QEMU exit instead, which
@@ -40,38 +49,48 @@ use anyhow::Result;
 
 /// Each stop path, the reason its record names and the boot that reports it (the boot after the
 /// one that triggered it). A stack overflow is a HardFault record with its own text; the hang
-/// ([`HANG`]) has no record: its reason is the stop the next boot makes of its phase marker.
-pub const FAILSAFE_KINDS: [(&str, &str, u32); 6] = [
+/// ([`HANG`]) has no record: its reason is the stop the next boot makes of its phase marker;
+/// [`KEPT`]'s is the HardFault of a boot that had not let its panic go.
+pub const FAILSAFE_KINDS: [(&str, &str, u32); 7] = [
     ("panic", "panic", 2),
     ("hard_fault", "hard_fault", 3),
     ("nmi", "nmi", 4),
     ("unexpected_interrupt", "unexpected_interrupt", 5),
     ("stack_overflow", "hard_fault", 6),
     (HANG, "control_stall", 7),
+    (KEPT, "hard_fault", 9),
 ];
 /// The boot that hangs until the watchdog resets it (and the next boot reports).
 pub const HANG: &str = "watchdog_hang";
+/// The stop path that finds a stop reported and not let go: the next boot has both.
+pub const KEPT: &str = "stop_beside_unstored";
+/// The boots of a run: the last reports what the one that let [`KEPT`]'s two stops go left
+/// (nothing), then exits.
+pub const BOOTS: u64 = 10;
+/// The line after a boot's report with the fields of the earlier stop it found, if any.
+const EARLIER: &str = "failsafe-earlier ";
 /// The address the HardFault boot reads (the runner's `UNMAPPED`).
 const FAULT_ADDR: u64 = 0xF000_0000;
 /// ICSR.VECTACTIVE of the NMI (exception number 2), the NMI record's `detail` on the PIL.
 const NMI_EXCEPTION: u64 = 2;
-/// Seven boots take well under a second of host time (the hang's two watchdog periods are
+/// Ten boots take well under a second of host time (the hang's two watchdog periods are
 /// 20 ms of guest time); a broken boot counter, or a watchdog that never resets, loops forever.
 const FAILSAFE_TIMEOUT: Duration = Duration::from_secs(60);
 
-/// The three checks of one stop path (of the hang: [`Check::labels`]).
+/// The three checks of one stop path (of the hang and of [`KEPT`]: [`Check::labels`]).
 #[derive(Debug)]
 pub struct Check {
     pub kind: &'static str,
-    /// The safe-outputs hook ran first: stamp 1, before the record was valid, record stamp 2.
+    /// The safe-outputs hook ran first: stamp 1, before the records changed, record stamp 2.
     /// The hang: the reset was the watchdog's (armed, its interrupt passed over by the NMI
     /// handler, no stop path recorded, the machine reset).
     pub first: bool,
     /// The record crossed a real reset intact (magic + CRC, kind, kind-specific fields). The
-    /// hang: its phase marker did.
+    /// hang: its phase marker did. [`KEPT`]: both records did, the earlier as it was reported.
     pub survived: bool,
     /// The next boot (the boot counter advanced by one) reported it. The hang: as the boot's
-    /// stop of its phase, and as no stop after another reset.
+    /// stop of its phase, and as no stop after another reset. [`KEPT`]: as the fresh stop, the
+    /// one before it having been the only one, and no stop once both were let go.
     pub reported: bool,
     /// Why a check failed, one line each.
     pub why: Vec<String>,
@@ -84,10 +103,10 @@ impl Check {
 
     /// What [`Self::first`], [`Self::survived`] and [`Self::reported`] say for this kind.
     pub fn labels(&self) -> [&'static str; 3] {
-        if self.kind == HANG {
-            ["watchdog reset", "marker survived the reset", "next boot made the stop of it"]
-        } else {
-            ["safe outputs first", "record survived the reset", "next boot reported it"]
+        match self.kind {
+            HANG => ["watchdog reset", "marker survived the reset", "next boot made the stop of it"],
+            KEPT => ["safe outputs first", "both records survived the reset", "reported fresh, let go"],
+            _ => ["safe outputs first", "record survived the reset", "next boot reported it"],
         }
     }
 }
@@ -102,21 +121,25 @@ pub fn run(elf: &Path, work: &Path) -> Result<Vec<Check>> {
     Ok(checks(&out, exited_ok))
 }
 
-/// One boot's report: `failsafe boot=<n> key=value ... text=<the rest of the line>`.
-fn parse_line(line: &str) -> Option<HashMap<&str, &str>> {
-    let rest = line.strip_prefix("failsafe ")?;
+/// A line of the boots' reports: its fields by name.
+type Report<'a> = HashMap<&'a str, &'a str>;
+
+/// One boot's report: `failsafe boot=<n> key=value ... text=<the rest of the line>` (`prefix`
+/// `"failsafe "`), or the earlier stop it found ([`EARLIER`], the same form).
+fn parse_line<'a>(prefix: &str, line: &'a str) -> Option<Report<'a>> {
+    let rest = line.strip_prefix(prefix)?;
     let (words, text) = match rest.split_once(" text=") {
         Some((words, text)) => (words, Some(text)),
         None => (rest, None),
     };
-    let mut map: HashMap<&str, &str> = words.split_whitespace().filter_map(|kv| kv.split_once('=')).collect();
+    let mut map: Report = words.split_whitespace().filter_map(|kv| kv.split_once('=')).collect();
     if let Some(text) = text {
         map.insert("text", text);
     }
     map.contains_key("boot").then_some(map)
 }
 
-fn num(map: &HashMap<&str, &str>, key: &str) -> Option<u64> {
+fn num(map: &Report, key: &str) -> Option<u64> {
     let v = map.get(key)?;
     match v.strip_prefix("0x") {
         Some(hex) => u64::from_str_radix(hex, 16).ok(),
@@ -124,12 +147,40 @@ fn num(map: &HashMap<&str, &str>, key: &str) -> Option<u64> {
     }
 }
 
-/// The checks of every stop path (and the hang) from the runner's stdout and whether it exited
-/// with success.
+/// Every boot's report and the earlier stops they found, by boot.
+struct Run<'a> {
+    boots: Vec<Report<'a>>,
+    earlier: Vec<Report<'a>>,
+}
+
+impl<'a> Run<'a> {
+    fn parse(stdout: &'a str) -> Self {
+        let of = |prefix: &str| stdout.lines().filter_map(|l| parse_line(prefix, l)).collect();
+        Run { boots: of("failsafe "), earlier: of(EARLIER) }
+    }
+
+    fn find<'r>(list: &'r [Report<'a>], boot: u32) -> Option<&'r Report<'a>> {
+        list.iter().find(|b| num(b, "boot") == Some(u64::from(boot)))
+    }
+
+    /// Boot `boot`'s report.
+    fn boot(&self, boot: u32) -> Option<&Report<'a>> {
+        Self::find(&self.boots, boot)
+    }
+
+    /// The earlier stop boot `boot` found, if it found one.
+    fn earlier(&self, boot: u32) -> Option<&Report<'a>> {
+        Self::find(&self.earlier, boot)
+    }
+}
+
+/// The checks of every stop path (the hang's and [`KEPT`]'s too) from the runner's stdout and
+/// whether it exited with success.
 pub fn checks(stdout: &str, exited_ok: bool) -> Vec<Check> {
-    let boots: Vec<HashMap<&str, &str>> = stdout.lines().filter_map(parse_line).collect();
+    let run = Run::parse(stdout);
+    let boots = &run.boots;
     let order: Vec<Option<u64>> = boots.iter().map(|b| num(b, "boot")).collect();
-    let expected: Vec<Option<u64>> = (1..=FAILSAFE_KINDS.len() as u64 + 1).map(Some).collect();
+    let expected: Vec<Option<u64>> = (1..=BOOTS).map(Some).collect();
     let sequence_ok = order == expected;
     FAILSAFE_KINDS
         .iter()
@@ -144,7 +195,7 @@ pub fn checks(stdout: &str, exited_ok: bool) -> Vec<Check> {
             if !exited_ok {
                 why.push("the runner did not exit with success after its last boot".into());
             }
-            let Some(b) = boots.iter().find(|b| num(b, "boot") == Some(u64::from(boot))) else {
+            let Some(b) = run.boot(boot) else {
                 why.push(format!("boot {boot} never reported"));
                 return Check { kind, first: false, survived: false, reported: false, why };
             };
@@ -165,10 +216,11 @@ pub fn checks(stdout: &str, exited_ok: bool) -> Vec<Check> {
                 num(b, "cfsr") == Some(0) && num(b, "iser0") == Some(0),
                 "fault status or interrupt enables survived: not a system reset".into(),
             );
-            if kind == HANG {
-                hang_checks(b, [&mut first, &mut survived, &mut reported], &mut need);
-            } else {
-                stop_checks(b, kind, reason, [&mut first, &mut survived, &mut reported], &mut need);
+            let flags = [&mut first, &mut survived, &mut reported];
+            match kind {
+                HANG => hang_checks(b, &run, boot, flags, &mut need),
+                KEPT => kept_checks(b, &run, boot, flags, &mut need),
+                _ => stop_checks(b, kind, reason, flags, &mut need),
             }
             Check { kind, first, survived, reported, why }
         })
@@ -178,18 +230,13 @@ pub fn checks(stdout: &str, exited_ok: bool) -> Vec<Check> {
 /// What a stop path's report must hold beyond its reason: the order of its stamps and the
 /// record's kind-specific fields. `need(flag, ok, why)` clears `flag` and notes `why` unless `ok`.
 fn stop_checks(
-    b: &HashMap<&str, &str>,
+    b: &Report,
     kind: &str,
     reason: &str,
     [first, survived, reported]: [&mut bool; 3],
     need: &mut impl FnMut(&mut bool, bool, String),
 ) {
-    let stamps = (num(b, "safe_seq"), num(b, "record_seq"), num(b, "record_before_safe"), num(b, "outputs_safe"));
-    need(
-        first,
-        stamps == (Some(1), Some(2), Some(0), Some(1)),
-        format!("safe_seq, record_seq, record_before_safe, outputs_safe = {stamps:?}, not (1, 2, 0, 1)"),
-    );
+    stamp_checks(b, first, need);
     need(survived, b.get("reason") == Some(&reason), "no intact record of this kind after the reset".into());
     need(survived, num(b, "record_ok_after") == Some(1), "the record did not read back after stop".into());
     need(
@@ -197,8 +244,26 @@ fn stop_checks(
         b.get("earlier") == Some(&"none"),
         format!("earlier={}, not none: a stop reported and let go came back", b.get("earlier").unwrap_or(&"?")),
     );
+    need(survived, fields_ok(kind, b), format!("{kind} record fields wrong: {b:?}"));
+}
+
+/// The stamps of the stop path a boot reports: the safe-outputs hook first (stamp 1), while the
+/// records still held what the boot had left in them, then the record (stamp 2), the outputs
+/// safe.
+fn stamp_checks(b: &Report, first: &mut bool, need: &mut impl FnMut(&mut bool, bool, String)) {
+    let stamps = (num(b, "safe_seq"), num(b, "record_seq"), num(b, "record_before_safe"), num(b, "outputs_safe"));
+    need(
+        first,
+        stamps == (Some(1), Some(2), Some(0), Some(1)),
+        format!("safe_seq, record_seq, record_before_safe, outputs_safe = {stamps:?}, not (1, 2, 0, 1)"),
+    );
+}
+
+/// Whether a stop's fields are those its path (`kind`, as [`FAILSAFE_KINDS`] names it) records
+/// on the PIL; `b` is a boot's report of it or an [`EARLIER`] line.
+fn fields_ok(kind: &str, b: &Report) -> bool {
     let detail = num(b, "detail").unwrap_or(u64::MAX);
-    let specific = match kind {
+    match kind {
         "panic" => detail > 0 && b.get("text").is_some_and(|t| t.ends_with("failsafe.rs")),
         "hard_fault" => num(b, "addr") == Some(FAULT_ADDR) && detail & u64::from(hter::failsafe::CFSR_BFARVALID) != 0,
         "nmi" => detail & 0x1ff == NMI_EXCEPTION,
@@ -216,18 +281,35 @@ fn stop_checks(
                 && guard.zip(num(b, "addr")).is_some_and(|(g, a)| g.contains(&a))
         }
         _ => detail == 0,
+    }
+}
+
+/// Whether two lines name the same stop, field for field (a `None` or a line without a reason is
+/// none).
+fn same_stop(a: Option<&Report>, b: Option<&Report>) -> bool {
+    const FIELDS: [&str; 5] = ["reason", "pc", "addr", "detail", "text"];
+    a.zip(b).is_some_and(|(a, b)| a.contains_key("reason") && FIELDS.iter().all(|k| a.get(k) == b.get(k)))
+}
+
+/// A stop's fields as one line of a reason (`none` if there is no stop).
+fn describe(s: Option<&Report>) -> String {
+    let Some(s) = s.filter(|s| s.contains_key("reason") && s.get("reason") != Some(&"none")) else {
+        return "none".into();
     };
-    need(survived, specific, format!("{kind} record fields wrong: {b:?}"));
+    let f = |k: &str| s.get(k).copied().unwrap_or("?");
+    format!("{} pc={} addr={} detail={} text={}", f("reason"), f("pc"), f("addr"), f("detail"), f("text"))
 }
 
 /// What the report of the boot after the hang must hold beyond its reason (`control_stall`):
 /// a watchdog reset and the evidence the runner drew it from (the watchdog armed, its first
 /// timeout's interrupt passed over, the watchdog back in its reset state), the phase marker the
 /// hang wrote, the stop of that phase (`hter::failsafe::boot_stall`) with the stop the hung boot
-/// had read and not let go beside it (the stack overflow's `hard_fault`), and after another reset
-/// that stop alone, none from the marker.
+/// had read and not let go beside it (the stack overflow's `hard_fault`, as the hung boot
+/// reported it), and after another reset that stop alone, none from the marker.
 fn hang_checks(
-    b: &HashMap<&str, &str>,
+    b: &Report,
+    run: &Run,
+    boot: u32,
     [first, survived, reported]: [&mut bool; 3],
     need: &mut impl FnMut(&mut bool, bool, String),
 ) {
@@ -256,10 +338,16 @@ fn hang_checks(
     let stop = (num(b, "pc"), num(b, "addr"), num(b, "detail"));
     let want = (Some(0), Some(phase as u64), Some(0));
     need(reported, stop == want, format!("the stop's pc, addr, detail = {stop:?}, not {want:?}"));
+    let (kept, was) = (run.earlier(boot), run.boot(boot - 1));
     need(
         reported,
-        b.get("earlier") == Some(&"hard_fault"),
-        format!("earlier={}, not the overflow's hard_fault the hung boot had not let go", field("earlier")),
+        b.get("earlier") == Some(&"hard_fault") && same_stop(kept, was),
+        format!(
+            "earlier={} ({}), not the overflow's hard_fault the hung boot had not let go ({})",
+            field("earlier"),
+            describe(kept),
+            describe(was)
+        ),
     );
     need(
         reported,
@@ -272,29 +360,99 @@ fn hang_checks(
     );
 }
 
+/// What the report of the boot after [`KEPT`]'s stop path must hold beyond its reason
+/// (`hard_fault`), with the reports of the boot before it and of the boot after it: the stop
+/// path's stamps (the hook ran while the records still held the unstored panic as its boot left
+/// them), the HardFault's own fields, the panic kept beside it as the earlier stop with a panic's
+/// fields, the very ones the boot before reported, the HardFault fresh; the boot before found the
+/// panic fresh and alone (the boot before it let the hang's two go); and the boot after this one
+/// finds no stop at all, this one having let both go.
+fn kept_checks(
+    b: &Report,
+    run: &Run,
+    boot: u32,
+    [first, survived, reported]: [&mut bool; 3],
+    need: &mut impl FnMut(&mut bool, bool, String),
+) {
+    let field = |s: Option<&Report>, k: &str| s.and_then(|s| s.get(k)).map_or("?".to_string(), |v| v.to_string());
+    stamp_checks(b, first, need);
+    need(survived, num(b, "record_ok_after") == Some(1), "the record did not read back after stop".into());
+    need(survived, fields_ok("hard_fault", b), format!("hard_fault record fields wrong: {b:?}"));
+    let (kept, was) = (run.earlier(boot), run.boot(boot - 1));
+    need(
+        survived,
+        kept.is_some_and(|k| k.get("reason") == Some(&"panic") && fields_ok("panic", k)) && same_stop(kept, was),
+        format!(
+            "boot {boot} kept {} as the earlier stop, not the panic boot {} reported and did not let go ({})",
+            describe(kept),
+            boot - 1,
+            describe(was)
+        ),
+    );
+    need(
+        reported,
+        num(b, "fresh") == Some(1),
+        format!("boot {boot} fresh={}, not 1: the HardFault is the reason it started", field(Some(b), "fresh")),
+    );
+    need(
+        reported,
+        was.is_some_and(|w| w.get("reason") == Some(&"panic") && w.get("earlier") == Some(&"none"))
+            && was.and_then(|w| num(w, "fresh")) == Some(1),
+        format!(
+            "boot {} reported reason={} fresh={} earlier={}, not a fresh panic alone",
+            boot - 1,
+            field(was, "reason"),
+            field(was, "fresh"),
+            field(was, "earlier")
+        ),
+    );
+    let after = run.boot(boot + 1);
+    need(
+        reported,
+        after.is_some_and(|a| a.get("reason") == Some(&"none") && a.get("earlier") == Some(&"none")),
+        format!(
+            "boot {} found reason={} earlier={}, not none: the stops boot {boot} let go came back",
+            boot + 1,
+            field(after, "reason"),
+            field(after, "earlier")
+        ),
+    );
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     const GOOD: &str = "\
 failsafe boot=1 cfsr=0x0 iser0=0x0 reason=none
-failsafe boot=2 cfsr=0x0 iser0=0x0 earlier=none reason=panic pc=0x00000000 addr=0x00000000 detail=0x99 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=src/bin/failsafe.rs
-failsafe boot=3 cfsr=0x0 iser0=0x0 earlier=none reason=hard_fault pc=0x00000dac addr=0xf0000000 detail=0x8200 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
-failsafe boot=4 cfsr=0x0 iser0=0x0 earlier=none reason=nmi pc=0x00000000 addr=0x00000000 detail=0x802 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
-failsafe boot=5 cfsr=0x0 iser0=0x0 earlier=none reason=unexpected_interrupt pc=0x00000000 addr=0x00000000 detail=0x0 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
-failsafe boot=6 cfsr=0x0 iser0=0x0 guard=0x20000400-0x20000800 armed=1 earlier=none reason=hard_fault pc=0x00000000 addr=0x200007fc detail=0x92 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 canary_ok=1 text=stack overflow
-failsafe boot=7 cfsr=0x0 iser0=0x0 guard=0x20000400-0x20000800 armed=1 reset=watchdog marker=0xb0070002 wdog_armed=1 wdog_nmi=1 wdog_control=0x0 if_other=hard_fault if_brown_out=hard_fault earlier=hard_fault reason=control_stall pc=0x00000000 addr=0x00000002 detail=0x0 safe_seq=0 record_seq=0 record_before_safe=0 record_ok_after=0 outputs_safe=0 canary_ok=0 text=
+failsafe boot=2 cfsr=0x0 iser0=0x0 fresh=1 earlier=none reason=panic pc=0x00000000 addr=0x00000000 detail=0x99 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=src/bin/failsafe.rs
+failsafe boot=3 cfsr=0x0 iser0=0x0 fresh=1 earlier=none reason=hard_fault pc=0x00000dac addr=0xf0000000 detail=0x8200 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
+failsafe boot=4 cfsr=0x0 iser0=0x0 fresh=1 earlier=none reason=nmi pc=0x00000000 addr=0x00000000 detail=0x802 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
+failsafe boot=5 cfsr=0x0 iser0=0x0 fresh=1 earlier=none reason=unexpected_interrupt pc=0x00000000 addr=0x00000000 detail=0x0 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
+failsafe boot=6 cfsr=0x0 iser0=0x0 guard=0x20000400-0x20000800 armed=1 fresh=1 earlier=none reason=hard_fault pc=0x00000000 addr=0x200007fc detail=0x92 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 canary_ok=1 text=stack overflow
+failsafe boot=7 cfsr=0x0 iser0=0x0 guard=0x20000400-0x20000800 armed=1 reset=watchdog marker=0xb0070002 wdog_armed=1 wdog_nmi=1 wdog_control=0x0 if_other=hard_fault if_brown_out=hard_fault fresh=1 earlier=hard_fault reason=control_stall pc=0x00000000 addr=0x00000002 detail=0x0 safe_seq=0 record_seq=0 record_before_safe=0 record_ok_after=0 outputs_safe=0 canary_ok=0 text=
+failsafe-earlier boot=7 reason=hard_fault pc=0x00000000 addr=0x200007fc detail=0x92 text=stack overflow
+failsafe boot=8 cfsr=0x0 iser0=0x0 reset=other marker=0x00000000 if_other=panic if_brown_out=panic fresh=1 earlier=none reason=panic pc=0x00000000 addr=0x00000000 detail=0x99 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=src/bin/failsafe.rs
+failsafe boot=9 cfsr=0x0 iser0=0x0 reset=other marker=0x00000000 if_other=hard_fault if_brown_out=hard_fault fresh=1 earlier=panic reason=hard_fault pc=0x00000dac addr=0xf0000000 detail=0x8200 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=
+failsafe-earlier boot=9 reason=panic pc=0x00000000 addr=0x00000000 detail=0x99 text=src/bin/failsafe.rs
+failsafe boot=10 cfsr=0x0 iser0=0x0 reset=other marker=0x00000000 if_other=none if_brown_out=none fresh=0 earlier=none reason=none
 ";
 
     fn oks(out: &str, exited: bool) -> Vec<(bool, bool, bool)> {
         checks(out, exited).iter().map(|c| (c.first, c.survived, c.reported)).collect()
     }
 
+    /// The check of `kind`.
+    fn of(kind: &str, out: &str, exited: bool) -> Check {
+        checks(out, exited).into_iter().find(|c| c.kind == kind).expect("a check of that kind")
+    }
+
     #[test]
     fn a_good_run_passes_every_check() {
         let c = checks(GOOD, true);
         assert!(c.iter().all(Check::ok), "{c:?}");
-        assert_eq!(c.len(), 6);
+        assert!(c.iter().all(|c| c.why.is_empty()), "{c:?}");
+        assert_eq!(c.len(), 7);
     }
 
     #[test]
@@ -336,7 +494,7 @@ failsafe boot=7 cfsr=0x0 iser0=0x0 guard=0x20000400-0x20000800 armed=1 reset=wat
     /// Each way the hang's boot can go wrong fails its own check of the hang, with a reason.
     #[test]
     fn a_hang_without_a_watchdog_reset_or_its_marker_fails() {
-        let hang = |out: &str| checks(out, true).pop().expect("the hang's check");
+        let hang = |out: &str| of(HANG, out, true);
         // Reset by something else (SYSRESETREQ: the watchdog's interrupt never came), the
         // watchdog never armed, or still armed after the "reset" (a jump to the reset vector).
         for broken in [
@@ -356,12 +514,18 @@ failsafe boot=7 cfsr=0x0 iser0=0x0 guard=0x20000400-0x20000800 armed=1 reset=wat
         );
         let c = hang(&lost);
         assert_eq!((c.first, c.survived, c.reported), (true, false, false), "{:?}", c.why);
-        // Another phase's stop, or a stop from the marker after another reset.
+        // Another phase's stop, a stop from the marker after another reset, or the overflow
+        // not kept beside it, or kept other than the hung boot reported it.
         for broken in [
             GOOD.replace("addr=0x00000002", "addr=0x00000003"),
             GOOD.replace("if_other=hard_fault", "if_other=control_stall"),
             GOOD.replace("if_brown_out=hard_fault", "if_brown_out=control_stall"),
-            GOOD.replace("earlier=hard_fault", "earlier=none"),
+            GOOD.replace("earlier=hard_fault", "earlier=none").replace(
+                "failsafe-earlier boot=7 reason=hard_fault pc=0x00000000 addr=0x200007fc detail=0x92 text=stack overflow\n",
+                "",
+            ),
+            GOOD.replace("boot=7 reason=hard_fault pc=0x00000000 addr=0x200007fc detail=0x92", "boot=7 reason=hard_fault pc=0x00000000 addr=0x200007fc detail=0x82"),
+            GOOD.replace("boot=7 reason=hard_fault pc=0x00000000 addr=0x200007fc detail=0x92 text=stack overflow", "boot=7 reason=hard_fault pc=0x00000000 addr=0x200007fc detail=0x92 text=stack"),
         ] {
             let c = hang(&broken);
             assert_eq!((c.first, c.survived, c.reported), (true, true, false), "{broken}");
@@ -369,9 +533,66 @@ failsafe boot=7 cfsr=0x0 iser0=0x0 guard=0x20000400-0x20000800 armed=1 reset=wat
         }
         // The watchdog never reset the hung boot: QEMU was killed at the time limit.
         let six: String = GOOD.lines().take(6).map(|l| format!("{l}\n")).collect();
-        let c = checks(&six, false).pop().expect("the hang's check");
+        let c = of(HANG, &six, false);
         assert!(!c.first && !c.survived && !c.reported);
         assert!(c.why.contains(&"boot 7 never reported".to_string()), "{:?}", c.why);
+    }
+
+    /// Each way the stop path after an unstored stop can go wrong fails its own check of
+    /// [`KEPT`], with one reason.
+    #[test]
+    fn a_stop_path_that_loses_the_unstored_stop_fails() {
+        let kept = |out: &str| of(KEPT, out, true);
+        let line9 =
+            "failsafe-earlier boot=9 reason=panic pc=0x00000000 addr=0x00000000 detail=0x99 text=src/bin/failsafe.rs";
+        // The panic let go before the HardFault's stop path (no earlier stop), a record of
+        // another stop there, or the panic's fields not as boot 8 reported them (its line, its
+        // text cut, its own fields lost).
+        for broken in [
+            GOOD.replace("earlier=panic", "earlier=none").replace(&format!("{line9}\n"), ""),
+            GOOD.replace("earlier=panic", "earlier=nmi").replace(line9, &line9.replace("reason=panic", "reason=nmi")),
+            GOOD.replace(line9, &line9.replace("detail=0x99", "detail=0x98")),
+            GOOD.replace(line9, &line9.replace("text=src/bin/failsafe.rs", "text=src/bin/fail")),
+            GOOD.replace(line9, &line9.replace("detail=0x99", "detail=0x0")).replace(
+                "earlier=none reason=panic pc=0x00000000 addr=0x00000000 detail=0x99",
+                "earlier=none reason=panic pc=0x00000000 addr=0x00000000 detail=0x0",
+            ),
+        ] {
+            let c = kept(&broken);
+            assert_eq!((c.first, c.survived, c.reported), (true, false, true), "{broken}");
+            assert_eq!(c.why.len(), 1, "{:?}", c.why);
+            assert!(c.why[0].starts_with("boot 9 kept "), "{:?}", c.why);
+        }
+        // The new stop written before the outputs were safe (the hook found the records other
+        // than boot 8 left them), or its own fields wrong.
+        let c = kept(&GOOD.replace(
+            "record_before_safe=0 record_ok_after=1 outputs_safe=1 text=\nfailsafe-earlier boot=9",
+            "record_before_safe=1 record_ok_after=1 outputs_safe=1 text=\nfailsafe-earlier boot=9",
+        ));
+        assert_eq!((c.first, c.survived, c.reported), (false, true, true), "{:?}", c.why);
+        let c = kept(&GOOD.replace(
+            "earlier=panic reason=hard_fault pc=0x00000dac addr=0xf0000000",
+            "earlier=panic reason=hard_fault pc=0x00000dac addr=0x00000000",
+        ));
+        assert_eq!((c.first, c.survived, c.reported), (true, false, true), "{:?}", c.why);
+        // The new stop not fresh, the panic not alone at boot 8 (the hang's stops not let go),
+        // or a stop still there after boot 9 let both go.
+        for broken in [
+            GOOD.replace("fresh=1 earlier=panic", "fresh=0 earlier=panic"),
+            GOOD.replace("fresh=1 earlier=none reason=panic pc=0x00000000 addr=0x00000000 detail=0x99 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=src/bin/failsafe.rs\nfailsafe boot=9", "fresh=1 earlier=hard_fault reason=panic pc=0x00000000 addr=0x00000000 detail=0x99 safe_seq=1 record_seq=2 record_before_safe=0 record_ok_after=1 outputs_safe=1 text=src/bin/failsafe.rs\nfailsafe boot=9"),
+            GOOD.replace("fresh=0 earlier=none reason=none", "fresh=0 earlier=none reason=hard_fault pc=0x00000dac addr=0xf0000000 detail=0x8200 text="),
+            GOOD.replace("fresh=0 earlier=none reason=none", "fresh=0 earlier=panic reason=none"),
+        ] {
+            let c = kept(&broken);
+            assert_eq!((c.first, c.survived, c.reported), (true, true, false), "{broken}");
+            assert_eq!(c.why.len(), 1, "{:?}", c.why);
+        }
+        // The run ended before the boot that shows what is left after the store.
+        let nine: String =
+            GOOD.lines().filter(|l| !l.starts_with("failsafe boot=10 ")).map(|l| format!("{l}\n")).collect();
+        let c = of(KEPT, &nine, true);
+        assert!(!c.reported, "{:?}", c.why);
+        assert!(c.why.iter().any(|w| w.contains("not 1..=10")), "{:?}", c.why);
     }
 
     #[test]

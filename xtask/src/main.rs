@@ -17,9 +17,10 @@
 //! `failsafe` binary, which takes a panic, a HardFault, an NMI, an unexpected interrupt and a stack
 //! overflow into the MPU stack guard through the firmware's stop path, each across a real system
 //! reset, then hangs a boot in its flash-restore phase until the emulated board's watchdog resets
-//! it, and checks each path and that the next boot makes the firmware's boot stall of the hang
-//! ([`failsafe`]); the JSON line's `failsafe` object says which passed, and any `false` fails the
-//! command.
+//! it, then stops a boot on a real stop path before it let its stop go, and checks each path,
+//! that the next boot makes the firmware's boot stall of the hang, and that the stop path kept
+//! the stop not yet let go beside its own ([`failsafe`]); the JSON line's `failsafe` object says
+//! which passed, and any `false` fails the command.
 //!
 //! `cargo xtask size` — the firmware's footprint: builds the release firmware once per
 //! controller (the default self-tuning GPC, the same on the buck drive, then each controller
@@ -340,7 +341,7 @@ fn pil() -> Result<()> {
     let yes = |b: bool| if b { "yes" } else { "NO" };
     println!(
         "fail-safe paths: {} boots of {} across SYSRESETREQ and watchdog resets ({:.1} s)",
-        failsafe::FAILSAFE_KINDS.len() + 1,
+        failsafe::BOOTS,
         elf.with_file_name("failsafe").display(),
         t0.elapsed().as_secs_f64()
     );

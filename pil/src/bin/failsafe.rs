@@ -3,7 +3,9 @@
 //! ([`hter::failsafe::stop`] and the `*_info` constructors), each followed by a real system
 //! reset (`SCB::sys_reset`, SYSRESETREQ), and each reported by the next boot; then a boot that
 //! read a stop, hangs before it "stores" it and is reset by a real watchdog: the next boot makes
-//! a stop of the hang and still has the first beside it ([`hter::failsafe::ResetRecords`]).
+//! a stop of the hang and still has the first beside it ([`hter::failsafe::ResetRecords`]); then
+//! a boot that read a stop and, before it "stores" it, stops on a real stop path: the next boot
+//! has the new stop and the first beside it, and once that boot lets them go, none.
 //!
 //! QEMU's mps2-an386 resets the whole machine on SYSRESETREQ and starts again at the reset
 //! vector; its RAM keeps its contents, so the `.uninit` statics below cross the reset (their ELF
@@ -24,10 +26,20 @@
 //!    first timeout raises its interrupt, which on this board is the NMI: the NMI handler tells
 //!    it from a genuine NMI by WDOGMIS and returns (the board's IWDG has no early interrupt),
 //!    and the second timeout resets the machine. It has not let the overflow go (every other
-//!    boot does once it has reported, as the board does once its history is in flash);
+//!    boot but 8 does once it has reported, as the board does once its history is in flash);
 //! 7. reports the watchdog's reset: the phase marker found, what the firmware's rule makes of
 //!    it after a watchdog reset (a `control_stall` of phase 2, with the overflow kept beside it
-//!    as the earlier stop) and after any other (the overflow alone, no stall), then exits.
+//!    as the earlier stop) and after any other (the overflow alone, no stall), lets them go and
+//!    panics (as boot 1);
+//! 8. reports the panic (alone: boot 7 let the hang's two go) and does not let it go (as a
+//!    board's boot that stops before its history is stored), then reads the unmapped address
+//!    (as boot 2): the HardFault's stop path ([`ResetRecords::record`]) finds the panic reported
+//!    and not stored in the newest record and keeps it as the earlier one before writing its own;
+//! 9. reports both: the HardFault as the newest stop, fresh (the reason it started), and the
+//!    panic beside it, each whole with its own fields (a second line, `failsafe-earlier`, has the
+//!    earlier stop's fields as the first line has the newest's); lets them go and resets with a
+//!    bare SYSRESETREQ, no stop path;
+//! 10. reports no stop, newest or earlier (what boot 9 let go does not come back), then exits.
 //!
 //! The HardFault vector is the firmware's (`hter::hard_fault_entry!`): on an overflow the handler
 //! runs from the top of the stack.
@@ -35,9 +47,12 @@
 //! Each report is one semihosting stdout line `failsafe boot=<n> ...` that xtask parses. The
 //! safe-outputs hook stamps a sequence number and notes whether the reason record was already
 //! written when it ran; the handler stamps another after `stop` returns, and checks the record.
-//! `reason` and `earlier` are what the firmware's `boot_stops` returns
+//! `reason`, `fresh` and `earlier` are what the firmware's `boot_stops` returns
 //! ([`ResetRecords::boot`]): the newest stop (a stop path's record, or the stop made of a phase
-//! marker after a watchdog reset) and one before it not yet let go.
+//! marker after a watchdog reset), whether no boot reported it before, and one before it not yet
+//! let go, whose fields follow on a line of their own. The hook's check that it ran first
+//! compares the records with what the boot left in them (a stop it had not let go, at boot 8),
+//! not with no stop.
 //!
 //! The PIL machine has no reset-cause register (the board's RCC_CSR), so each boot derives the
 //! cause from what it sees ([`reset_cause`]): the previous boot armed the watchdog and its
@@ -53,7 +68,7 @@
 
 use core::hint::black_box;
 use core::mem::MaybeUninit;
-use core::ptr::{addr_of_mut, read_volatile, write_volatile};
+use core::ptr::{addr_of, addr_of_mut, read_volatile, write_volatile};
 
 use cortex_m::peripheral::SCB;
 use cortex_m_rt::{entry, exception};
@@ -72,7 +87,9 @@ const UNMAPPED: u32 = 0xF000_0000;
 /// The interrupt pended in boot 4: line 0 has no handler in this image.
 const SPARE_IRQ: u32 = 0;
 /// Boots after which the runner gives up instead of faulting again (a stuck sequence must end).
-const LAST_BOOT: u32 = 7;
+const LAST_BOOT: u32 = 10;
+/// The boots that report a stop and do not let it go before they stop: 6 hangs, 8 faults.
+const UNSTORED: [u32; 2] = [6, 8];
 /// The canary's pattern (boot 5).
 const CANARY: u32 = 0x5AFE_C0DE;
 
@@ -88,7 +105,8 @@ struct BootLog {
     safe_seq: u32,
     /// Stamp taken when `stop` returned (the record written), 0 if it did not.
     record_seq: u32,
-    /// Whether the reason record was already valid when the hook ran (it must not be).
+    /// Whether the records already held other stops than the boot left in them ([`LEFT`]) when
+    /// the hook ran (the stop path wrote before the outputs were safe: it must not).
     record_before_safe: u32,
     /// Whether the record read back valid, of the expected kind, right after `stop`.
     record_ok_after: u32,
@@ -107,6 +125,9 @@ struct BootLog {
 static mut RECORDS: MaybeUninit<ResetRecords> = MaybeUninit::uninit();
 #[link_section = ".uninit.hter_bootlog"]
 static mut LOG: MaybeUninit<BootLog> = MaybeUninit::uninit();
+/// The stops this boot left in the records, for the safe-outputs hook: written by `main` before
+/// any trigger, read by the hook only (a plain static: the runtime sets it at every boot).
+static mut LEFT: Stops = Stops { earlier: None, latest: None, fresh: false };
 /// Statics below the guard that an overflow past it would overwrite (with the two above).
 #[link_section = ".uninit.hter_canary"]
 static mut CANARY_WORDS: MaybeUninit<[u32; 64]> = MaybeUninit::uninit();
@@ -168,10 +189,12 @@ impl SafeOutputs for PilOutputs {
         l.seq += 1;
         l.safe_seq = l.seq;
         // The record's magic is its first word: if `stop` wrote the record before calling the
-        // hook, the record would already be valid here.
-        // SAFETY: a volatile read of the record's memory while `stop` holds no write to it yet.
-        let rec = unsafe { read_volatile(reason()) };
-        l.record_before_safe = u32::from(rec.stops().latest.is_some());
+        // hook, the records would already hold another stop than the boot left there (none, or
+        // a stop it had not let go).
+        // SAFETY: a volatile read of the record's memory while `stop` holds no write to it yet;
+        // `LEFT` is written once by `main`, before any trigger.
+        let (rec, left) = unsafe { (read_volatile(reason()), read_volatile(addr_of!(LEFT))) };
+        l.record_before_safe = u32::from(rec.stops() != left);
         l.outputs_safe = 1;
         // SAFETY: a volatile read of the canary (noise outside boot 5, where it is not checked).
         let c = unsafe { read_volatile(canary()) };
@@ -223,14 +246,17 @@ fn main() -> ! {
     // This runner has no flash: the report stands for the board's stored history, so the stops
     // are let go once reported, except by boot 6, which reports the stack overflow and then hangs
     // in its "restore", before its store, as a board's boot can: its stop must reach boot 7
-    // beside the hang.
-    if boot != 6 {
+    // beside the hang; and by boot 8, which reports boot 7's panic and then faults before its
+    // store: the panic must reach boot 9 beside the fault.
+    if !UNSTORED.contains(&boot) {
         records.stored();
     }
     // This boot reached its "control loop": the marker is cleared, as the firmware's `boot_done`
-    // clears it (boot 7 leaves the word as a power-up would find it before it exits).
+    // clears it (the last boot leaves the word as a power-up would find it before it exits).
     records.running();
     keep_records(records);
+    // SAFETY: no stop path has run in this boot yet: nothing else reads or writes `LEFT`.
+    unsafe { write_volatile(addr_of_mut!(LEFT), records.stops()) };
     report(boot, cfsr, iser0, armed, &prev, &last);
     write_log(BootLog {
         magic: BOOT_MAGIC,
@@ -246,12 +272,12 @@ fn main() -> ! {
         wdog_nmi: 0,
     });
     match boot {
-        1 => {
+        1 | 7 => {
             let v = [1u32, 2, 3];
             let i = black_box(7usize);
             black_box(v[i]);
         }
-        2 => {
+        2 | 8 => {
             // SAFETY: deliberately faults: nothing is mapped at `UNMAPPED`.
             black_box(unsafe { read_volatile(UNMAPPED as *const u32) });
         }
@@ -287,6 +313,9 @@ fn main() -> ! {
                 core::hint::spin_loop();
             }
         }
+        // Both stops reported and let go: a reset that is no stop path, so that boot 10 shows
+        // what the records hold after a store.
+        9 => SCB::sys_reset(),
         _ => {}
     }
     if boot < LAST_BOOT {
@@ -343,11 +372,12 @@ fn stop_name(s: Option<&StopInfo>) -> &'static str {
     s.map_or("none", |s| s.kind.name())
 }
 
-/// One line per boot: what the previous boot's stop path, or its hang, left behind.
+/// One line per boot: what the previous boot's stop path, or its hang, left behind; a second
+/// when the boot found an earlier stop beside the newest.
 fn report(boot: u32, cfsr: u32, iser0: u32, armed: bool, prev: &BootLog, last: &LastBoot) {
     let g = stack_guard();
     hprint!(
-        "failsafe boot={} cfsr={:#x} iser0={:#x} guard={:#010x}-{:#010x} armed={} reset={} marker={:#010x} wdog_armed={} wdog_nmi={} wdog_control={:#x} if_other={} if_brown_out={} earlier={} ",
+        "failsafe boot={} cfsr={:#x} iser0={:#x} guard={:#010x}-{:#010x} armed={} reset={} marker={:#010x} wdog_armed={} wdog_nmi={} wdog_control={:#x} if_other={} if_brown_out={} fresh={} earlier={} ",
         boot,
         cfsr,
         iser0,
@@ -361,6 +391,7 @@ fn report(boot: u32, cfsr: u32, iser0: u32, armed: bool, prev: &BootLog, last: &
         last.wdog_control,
         stop_name(last.if_other.as_ref()),
         stop_name(last.if_brown_out.as_ref()),
+        u32::from(last.stops.fresh),
         stop_name(last.stops.earlier.as_ref())
     );
     match &last.stops.latest {
@@ -379,6 +410,19 @@ fn report(boot: u32, cfsr: u32, iser0: u32, armed: bool, prev: &BootLog, last: &
             prev.canary_ok,
             r.text()
         ),
+    }
+    // The earlier stop's own fields, on a line of their own: its text, like the newest's, is
+    // the rest of its line.
+    if let Some(e) = &last.stops.earlier {
+        hprintln!(
+            "failsafe-earlier boot={} reason={} pc={:#010x} addr={:#010x} detail={:#x} text={}",
+            boot,
+            e.kind.name(),
+            e.pc,
+            e.addr,
+            e.detail,
+            e.text()
+        );
     }
 }
 
