@@ -132,14 +132,16 @@ impl Alarm {
     }
 }
 
-/// Which side of 2…8 °C an excursion is on.
+/// Which side of 2…8 °C an excursion is on. The discriminants are the history record's codes
+/// ([`crate::persist::HistoryRecord`]), and leave 0 for `None` in an `Option<Excursion>`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
 pub enum Side {
     /// Below +2 °C.
-    Cold,
+    Cold = 1,
     /// Above +8 °C.
-    Warm,
+    Warm = 2,
 }
 
 /// One excursion outside 2…8 °C. Its times are f32 seconds, the form the history record
@@ -338,10 +340,19 @@ impl ColdChainMonitor {
     /// on the record's clock, as in `hter monitor`, which reads the record as one clock across
     /// restarts. The cumulative kind's sum goes on. A run that has raised its alarm does not
     /// raise it again. Out of line: it runs once a boot.
+    ///
+    /// `open` is the excursion under way at the previous boot's last stored sample
+    /// ([`crate::persist::HistoryRecord::open_excursion`]), on the record's clock, whose time
+    /// was `base_s` at that store: it is the log's excursion under way, not counted again. A
+    /// first reading on its side extends it, as `hter monitor` reads one excursion across a
+    /// restart in a log; one in range or on the other side ends it.
     #[inline(never)]
-    pub fn resumed(runs: &Runs) -> Self {
+    pub fn resumed(runs: &Runs, open: Option<Excursion>, base_s: f32) -> Self {
         let mut m = Self::new();
         m.resume(runs);
+        // The log's slot at `head` (0) holds the excursion under way; its times on this boot's
+        // clock, where the history's merge adds `base_s` back.
+        m.log[0] = open.map(|e| Excursion { start_s: e.start_s - base_s, end_s: e.end_s - base_s, ..e });
         m
     }
 
@@ -787,5 +798,39 @@ mod tests {
         m.push(5_000, 5.0);
         m.push(70_000, 12.0);
         assert_eq!(m.max_c(), Some(10.0));
+    }
+    /// A monitor resumed with the stored history's excursion under way holds it in its log,
+    /// uncounted, and reads as in an excursion before its first reading; a first reading on its
+    /// side extends it (a sample without a reading waits), one in range or on the other side
+    /// ends it where it was. Its times are this boot's clock, the record's less `base_s`.
+    #[test]
+    fn a_resumed_monitor_goes_on_with_the_excursion_under_way() {
+        let stored = Excursion { side: Side::Warm, start_s: 100.0, end_s: 300.0, extreme_c: 10.0 };
+        let on_boot_clock = Excursion { start_s: -200.0, end_s: 0.0, ..stored };
+        let m = ColdChainMonitor::resumed(&[0; 4], Some(stored), 300.0);
+        assert!(m.in_excursion());
+        assert_eq!(m.excursions().copied().collect::<std::vec::Vec<_>>(), [on_boot_clock]);
+        assert_eq!(m.excursion_count(), 0);
+
+        let mut on = m.clone();
+        on.push(0, f32::NAN);
+        on.push(10_000, 9.0);
+        on.push(20_000, 12.0);
+        let ex: std::vec::Vec<_> = on.excursions().copied().collect();
+        assert_eq!(ex, [Excursion { end_s: 10.0, extreme_c: 12.0, ..on_boot_clock }], "one excursion, extended");
+        assert_eq!(on.excursion_count(), 0);
+
+        for (first, new) in [(5.0, None), (1.0, Some(Side::Cold))] {
+            let mut off = m.clone();
+            off.push(0, first);
+            let ex: std::vec::Vec<_> = off.excursions().copied().collect();
+            assert_eq!(ex[0], on_boot_clock, "{first}: ended where it was");
+            assert_eq!(ex.get(1).map(|e| e.side), new, "{first}");
+            assert_eq!(off.excursion_count(), u32::from(new.is_some()), "{first}");
+            assert_eq!(off.in_excursion(), new.is_some(), "{first}");
+        }
+        // Nothing under way: an empty log, as a new monitor's.
+        let none = ColdChainMonitor::resumed(&[0; 4], None, 300.0);
+        assert!(!none.in_excursion() && none.excursions().next().is_none());
     }
 }

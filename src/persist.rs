@@ -633,6 +633,8 @@ pub struct HistoryRecord {
 /// [`HistoryRecord`]'s flag bits.
 const UNACKNOWLEDGED: u8 = 1;
 const SSR_SHORTED: u8 = 2;
+/// The newest excursion was under way at the last sample ([`HistoryRecord::open_excursion`]).
+const EXCURSION_OPEN: u8 = 4;
 
 /// [`HistoryRecord`]'s flags for the latch and the short.
 fn flags(unacknowledged: bool, ssr_shorted: bool) -> u8 {
@@ -732,6 +734,20 @@ impl HistoryRecord {
         self.flags & SSR_SHORTED != 0
     }
 
+    /// The newest excursion if it was under way at the record's last sample: the next boot
+    /// goes on with it ([`Recorder::new`], [`ColdChainMonitor::resumed`]), and if that boot's
+    /// first reading is on its side it goes on across the restart, as `hter monitor` reads one
+    /// excursion across a restart in a log, rather than count a new one. Before, each restart in
+    /// an excursion counted one more: a supply that dropped every 50 minutes through a day of
+    /// heat put some thirty excursions on the record, and its four newest were all pieces of
+    /// the same one. Stored in the faults byte's bit 1, which v6 readers before it ignore.
+    pub fn open_excursion(&self) -> Option<Excursion> {
+        match self.last {
+            [.., e] if self.flags & EXCURSION_OPEN != 0 => e,
+            _ => None,
+        }
+    }
+
     /// This record with the sensor offset `offset`.
     pub fn with_sensor_offset(mut self, offset: SensorOffset) -> Self {
         self.sensor_offset = offset;
@@ -782,7 +798,9 @@ impl HistoryRecord {
     }
 
     /// This record (what was carried in at boot) plus what `monitor` saw since boot. Always
-    /// merge into the boot-time record, not into a previous merge, or this session counts twice.
+    /// merge into the boot-time record, not into a previous merge, or this session counts twice,
+    /// and `monitor` must have been resumed from it ([`Recorder::new`]: the alarms' runs and the
+    /// excursion under way go on from the record's).
     pub fn merged(&self, monitor: &ColdChainMonitor) -> HistoryRecord {
         let pick = |a: Option<f32>, b: Option<f32>, f: fn(f32, f32) -> f32| match (a, b) {
             (Some(a), Some(b)) => Some(f(a, b)),
@@ -793,7 +811,9 @@ impl HistoryRecord {
         // instead is a `memmove` call each.
         let base = self.recorded_s as f32;
         let mut ring = self.last;
-        let mut oldest = 0;
+        // The monitor's first excursion is the record's newest if that one was under way: it
+        // was handed on to the monitor ([`Recorder::new`]) and goes back in its own slot.
+        let mut oldest = if self.open_excursion().is_some() { HISTORY_EXCURSIONS - 1 } else { 0 };
         for e in monitor.excursions() {
             ring[oldest] = Some(Excursion { start_s: base + e.start_s, end_s: base + e.end_s, ..*e });
             oldest = (oldest + 1) % HISTORY_EXCURSIONS;
@@ -809,6 +829,7 @@ impl HistoryRecord {
         rec.excursions = self.excursions.saturating_add(monitor.excursion_count());
         rec.recorded_s = self.recorded_s.saturating_add(secs(monitor.recorded_s()));
         rec.runs = monitor.runs();
+        rec.flags = self.flags & !EXCURSION_OPEN | u8::from(monitor.in_excursion()) * EXCURSION_OPEN;
         rec
     }
 
@@ -828,10 +849,8 @@ impl HistoryRecord {
         for e in &self.last {
             match e {
                 Some(e) => {
-                    w.put(&[match e.side {
-                        Side::Cold => 1,
-                        Side::Warm => 2,
-                    }]);
+                    // The stored codes are the discriminants: 1 cold, 2 warm.
+                    w.put(&[e.side as u8]);
                     w.f32(e.start_s);
                     w.f32(e.end_s);
                     w.f32(e.extreme_c);
@@ -856,7 +875,7 @@ impl HistoryRecord {
         for r in self.runs {
             w.u32(r);
         }
-        w.put(&[(self.flags & SSR_SHORTED) >> 1]);
+        w.put(&[(self.flags & (SSR_SHORTED | EXCURSION_OPEN)) >> 1]);
         w.finish();
         buf
     }
@@ -941,8 +960,9 @@ impl HistoryRecord {
         for run in rec.runs.iter_mut() {
             *run = r.u32();
         }
-        // A v5 frame ends here: no short known. Bit 0 the SSR's short; the other bits are free.
-        rec.flags |= (r.u8() & 1) << 1;
+        // A v5 frame ends here: no short known. Bit 0 the SSR's short, bit 1 the newest
+        // excursion under way; the other bits are free.
+        rec.flags |= (r.u8() & 3) << 1;
         Ok(rec)
     }
 }
@@ -997,8 +1017,9 @@ impl Recorder {
     pub fn new(boot: HistoryRecord, save_every_samples: u32) -> Self {
         Recorder {
             boot,
-            // The alarms' runs go on where the stored history left them.
-            monitor: ColdChainMonitor::resumed(&boot.runs),
+            // The alarms' runs and the excursion under way go on where the stored history left
+            // them (the history's merge puts that excursion back in its slot).
+            monitor: ColdChainMonitor::resumed(&boot.runs, boot.open_excursion(), boot.recorded_s as f32),
             save_every_samples: save_every_samples.max(1),
             since_save: 0,
             runs_stored: run_bits(&boot.runs),
@@ -1116,7 +1137,7 @@ impl Recorder {
         let moved = self.boot.sensor_offset != offset;
         let found = shorted && !self.boot.ssr_shorted();
         if self.boot.unacknowledged() != latched || moved || found {
-            self.boot.flags = flags(latched, shorted);
+            self.boot.flags = flags(latched, shorted) | self.boot.flags & EXCURSION_OPEN;
             self.boot.sensor_offset = offset;
             self.since_save = 0;
             r.save_due = true;
@@ -1419,7 +1440,12 @@ mod tests {
     }
 
     fn monitor(samples: &[(f32, f32)]) -> ColdChainMonitor {
-        let mut m = ColdChainMonitor::new();
+        monitor_after(&HistoryRecord::EMPTY, samples)
+    }
+
+    /// The monitor of the boot after the one that stored `rec`, as [`Recorder::new`] starts it.
+    fn monitor_after(rec: &HistoryRecord, samples: &[(f32, f32)]) -> ColdChainMonitor {
+        let mut m = ColdChainMonitor::resumed(&rec.runs, rec.open_excursion(), rec.recorded_s as f32);
         for &(t, c) in samples {
             m.push(t as u64 * 1000, c);
         }
@@ -1466,7 +1492,7 @@ mod tests {
         assert_eq!(HistoryRecord::decode(&first.encode()), Ok(first));
 
         // Next boot: carried totals plus a session with a colder minimum; the ring keeps the newest.
-        let second = first.merged(&monitor(&[(0.0, 0.5), (60.0, 5.0), (120.0, 9.0), (180.0, 5.0)]));
+        let second = first.merged(&monitor_after(&first, &[(0.0, 0.5), (60.0, 5.0), (120.0, 9.0), (180.0, 5.0)]));
         assert_eq!(second.min_c, Some(0.5));
         assert_eq!(second.max_c, Some(9.5));
         assert_eq!(second.excursions, 4);
@@ -1481,8 +1507,10 @@ mod tests {
         assert_eq!(HistoryRecord::decode(&second.encode()), Ok(second));
 
         // A boot with more excursions than the record keeps: its newest four, oldest first.
-        let third =
-            second.merged(&monitor(&[(0.0, 9.0), (60.0, 1.0), (120.0, 9.0), (180.0, 1.0), (240.0, 9.0), (300.0, 5.0)]));
+        let third = second.merged(&monitor_after(
+            &second,
+            &[(0.0, 9.0), (60.0, 1.0), (120.0, 9.0), (180.0, 1.0), (240.0, 9.0), (300.0, 5.0)],
+        ));
         assert_eq!(third.excursions, 9);
         let kept = third.last.map(|e| e.map(|e| (e.side, e.start_s)));
         let base = 2340.0 + 180.0;
@@ -1775,9 +1803,105 @@ mod tests {
         for (k, c) in [(3, 9.0), (4, 5.0), (5, 9.0), (6, 5.0)] {
             assert!(!ends.push(k * 60_000, c).save_due, "minute {k}");
         }
-        // v4: no run.
+        // v4: no run, and no excursion known to be under way (the faults byte came with v6).
+        assert!(h.open_excursion().is_some());
         let v4: [u8; HistoryRecord::LEN_V4] = older_history(&h.encode(), 4);
-        assert_eq!(HistoryRecord::decode(&v4), Ok(HistoryRecord { runs: [0; 4], ..h }));
+        let v4_read = HistoryRecord { runs: [0; 4], ..h.with_carried(h.unacknowledged(), h.ssr_shorted()) };
+        assert_eq!(HistoryRecord::decode(&v4), Ok(v4_read));
+        assert_eq!(v4_read.open_excursion(), None);
+    }
+
+    /// Boots cut at random through excursions, each history stored as the firmware stores it
+    /// (at the boot, then when [`Recorder::push`] says so, through [`Recorder::due_save`]), the
+    /// samples after a boot's last store lost with the cut. The record's excursions must be
+    /// those of the readings that reached it read as one series, as `hter monitor` reads a log
+    /// across restarts: a run of readings on one side of 2…8 °C is one excursion whatever the
+    /// restarts and sensor faults inside it. The reference counts runs in the readings and
+    /// times them on the record's clock (each boot's reading j at the record's time when the
+    /// boot began plus 10 s for each reading before it). Before, every restart inside an
+    /// excursion counted another one.
+    fn excursions_across_restarts(seed: u64) -> Result<(), std::string::String> {
+        let mut x = seed | 1;
+        let mut next = move |n: u64| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x % n
+        };
+        // (side, start_s, end_s, extreme_c) of the reference's runs.
+        let mut runs: std::vec::Vec<(Side, f32, f32, f32)> = std::vec::Vec::new();
+        let mut open = false;
+        let mut stored = HistoryRecord::EMPTY;
+        let mut level = 0u64;
+        for _boot in 0..1 + next(8) {
+            let mut rec = Recorder::new(stored, 36);
+            stored = rec.note_reset(ResetCause::BrownOut);
+            let base = stored.recorded_s as f32;
+            // This boot's reference runs, kept only up to the boot's last store.
+            let (mut boot_runs, mut boot_open, mut readings) = (runs.clone(), open, 0u32);
+            for j in 0..1 + next(60) {
+                if next(10) == 0 {
+                    level = next(3);
+                }
+                let c = match (next(12), level) {
+                    (0, _) => f32::NAN,
+                    (_, 0) => 4.0 + next(30) as f32 * 0.1,
+                    (_, 1) => 8.5 + next(40) as f32 * 0.1,
+                    _ => 1.9 - next(40) as f32 * 0.1,
+                };
+                let r = rec.push(j * 10_000, c);
+                if !c.is_nan() {
+                    let t = base + 10.0 * readings as f32;
+                    readings += 1;
+                    let side = if c > 8.0 {
+                        Some(Side::Warm)
+                    } else if c < 2.0 {
+                        Some(Side::Cold)
+                    } else {
+                        None
+                    };
+                    match (side, boot_runs.last_mut()) {
+                        (Some(s), Some(last)) if boot_open && last.0 == s => {
+                            last.2 = t;
+                            last.3 = if s == Side::Warm { last.3.max(c) } else { last.3.min(c) };
+                        }
+                        (Some(s), _) => boot_runs.push((s, t, t, c)),
+                        (None, _) => {}
+                    }
+                    boot_open = side.is_some();
+                }
+                if let Some(Save::History(h) | Save::AlarmHistory(h)) = rec.due_save(&r) {
+                    stored = h;
+                    (runs, open) = (boot_runs.clone(), boot_open);
+                }
+            }
+        }
+        let newest: std::vec::Vec<_> = runs.iter().rev().take(HISTORY_EXCURSIONS).rev().copied().collect();
+        let kept: std::vec::Vec<_> =
+            stored.last.iter().flatten().map(|e| (e.side, e.start_s, e.end_s, e.extreme_c)).collect();
+        if stored.excursions as usize != runs.len() || kept != newest {
+            return Err(std::format!(
+                "{} excursions {kept:?}, the readings' {} {newest:?}",
+                stored.excursions,
+                runs.len()
+            ));
+        }
+        if stored.open_excursion().map(|e| e.side) != open.then(|| newest.last().map(|e| e.0)).flatten() {
+            return Err(std::format!("open {:?}, the readings' {open}", stored.open_excursion()));
+        }
+        let bytes = stored.encode();
+        if HistoryRecord::decode(&bytes) != Ok(stored) {
+            return Err("the round trip".into());
+        }
+        Ok(())
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig { cases: 2_000, ..Default::default() })]
+        #[test]
+        fn an_excursion_across_restarts_is_one_excursion(seed in proptest::prelude::any::<u64>()) {
+            proptest::prop_assert_eq!(excursions_across_restarts(seed), Ok(()));
+        }
     }
 
     /// The history is due six times as often while the load is outside 2…8 °C (a supply that

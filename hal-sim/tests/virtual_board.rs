@@ -522,8 +522,21 @@ fn a_supply_that_drops_every_50_minutes_still_records_the_excursion() {
     let (b, run_h, warm_s) = warm_until_heat_10h(|t_s, restarts| t_s >= 3000.0 * f64::from(restarts + 1));
     // Each 50-minute boot loses at most the 10 minutes since its last store.
     assert!((10.0..=10.0 * 50.0 / 40.0 + 0.5).contains(&run_h), "heat_10h {run_h:.2} h after the crossing");
-    let recorded = f64::from(b.app().recorder().history().above_8_s);
+    let history = b.app().recorder().history();
+    let recorded = f64::from(history.above_8_s);
     assert!(recorded > 0.75 * warm_s, "{recorded} s above 8 °C on record of {warm_s} s");
+    // One excursion, whatever the restarts inside it (each had counted one more, and the
+    // record's four newest were pieces of this one), from the crossing in the first boot.
+    assert!(b.restarts >= 10, "{} restarts", b.restarts);
+    let newest = history.last.iter().flatten().copied().collect::<Vec<_>>();
+    assert_eq!(history.excursions, 1, "{newest:?}");
+    assert_eq!(newest.len(), 1, "{newest:?}");
+    assert!(newest[0].start_s < 3000.0, "{newest:?}");
+    assert!(
+        f64::from(newest[0].end_s - newest[0].start_s) >= 0.99 * recorded,
+        "{newest:?} against {recorded} s above 8 °C"
+    );
+    assert!(history.open_excursion().is_some());
 }
 
 /// The history of a cabinet that cannot cool, as `hter monitor` and `hter report` read it: each
