@@ -576,7 +576,9 @@ impl SensorOffset {
 /// [`StopKind::ALL`] order); flash pages lost (u16); last stop (kind code u8, 0 = none; pc, addr,
 /// detail u32); the carried byte (bit 0 the indicator's latch, bits 1–7 the
 /// [`SensorOffset`]'s steps); the alarms' runs (4 × u32, [`Runs`]); the faults byte (bit 0 the
-/// SSR found shorted, [`HistoryRecord::ssr_shorted`]); CRC-32. Excursion times are
+/// SSR found shorted, [`HistoryRecord::ssr_shorted`]; bit 1 the newest excursion under way at
+/// the last sample, [`HistoryRecord::open_excursion`], which v6 records written before it leave
+/// at 0); CRC-32. Excursion times are
 /// on the record's own clock: seconds of recorded time since the first boot (each boot's samples
 /// start where the previous boot's record ended), so they stay in order across power cycles.
 ///
