@@ -519,7 +519,7 @@ fn a_heat_run_goes_on_through_a_brown_out() {
 /// nothing of a day of heat, and `heat_10h` never came.
 #[test]
 fn a_supply_that_drops_every_50_minutes_still_records_the_excursion() {
-    let (b, run_h, warm_s) = warm_until_heat_10h(|t_s, restarts| t_s >= 3000.0 * f64::from(restarts + 1));
+    let (mut b, run_h, warm_s) = warm_until_heat_10h(|t_s, restarts| t_s >= 3000.0 * f64::from(restarts + 1));
     // Each 50-minute boot loses at most the 10 minutes since its last store.
     assert!((10.0..=10.0 * 50.0 / 40.0 + 0.5).contains(&run_h), "heat_10h {run_h:.2} h after the crossing");
     let history = b.app().recorder().history();
@@ -537,6 +537,15 @@ fn a_supply_that_drops_every_50_minutes_still_records_the_excursion() {
         "{newest:?} against {recorded} s above 8 °C"
     );
     assert!(history.open_excursion().is_some());
+    // `hter monitor` on the board's own interval log across the restarts counts the same one.
+    let reply = b.request("history");
+    let csv: String = reply.lines().filter(|l| *l != "ok").map(|l| format!("{l}\n")).collect();
+    let p = tmp("drops-history.csv");
+    std::fs::write(&p, &csv).unwrap();
+    let input = hal_sim::monitor_cmd::read_input(&p).unwrap();
+    let _ = std::fs::remove_file(&p);
+    let r = hal_sim::monitor_cmd::record(&input).unwrap();
+    assert_eq!(r.excursions, history.excursions, "hter monitor on the board's history rows");
 }
 
 /// The history of a cabinet that cannot cool, as `hter monitor` and `hter report` read it: each
