@@ -228,14 +228,20 @@ impl ReasonRecord {
     }
 
     /// The recorded stop, if the record is intact (magic, CRC, kind and text length valid).
+    #[inline(never)]
     pub fn peek(&self) -> Option<StopInfo> {
         if !self.intact() {
             return None;
         }
         let kind = StopKind::from_code(u8::try_from(self.kind & !SEEN).ok()?)?;
         let text_len = u8::try_from(self.text_len).ok().filter(|n| usize::from(*n) <= STOP_TEXT)?;
-        let info = StopInfo { kind, pc: self.pc, addr: self.addr, detail: self.detail, text: self.text, text_len };
-        info.text.get(..usize::from(text_len))?.is_ascii().then_some(info)
+        // The text checked first and the reason built in the result: built first, it went through
+        // a copy on the stack (−24 B of flash; out of line, as inlined into the boot's two calls
+        // it cost 168 B more).
+        if !self.text.get(..usize::from(text_len))?.is_ascii() {
+            return None;
+        }
+        Some(StopInfo { kind, pc: self.pc, addr: self.addr, detail: self.detail, text: self.text, text_len })
     }
 }
 

@@ -345,6 +345,12 @@ const BUF_LEN: usize = (1 + HistoryRecord::LEN).next_multiple_of(MAX_WORD);
 #[repr(C, align(8))]
 struct Buffer([u8; BUF_LEN]);
 
+/// [`Store`]'s copy of the newest fetched record, word-aligned: after the storage layer's
+/// state its bytes began three past a word, and [`Store::new`] zeroed them through the
+/// unaligned `__aeabi_memclr` (−8 B of flash aligned).
+#[repr(C, align(4))]
+struct Fetched([u8; HistoryRecord::LEN]);
+
 type Map<F, E> = MapStorage<u8, EccFlash<F, E>, Cache<Uncached, Uncached, Uncached, u8>>;
 
 /// The persisted records over a flash region.
@@ -353,7 +359,7 @@ pub struct Store<F: NorFlash, E: EccErrors> {
     range: Range<u32>,
     buf: Buffer,
     /// The newest fetched record's bytes, copied out of `buf` so a retry can reuse `buf`.
-    rec: [u8; HistoryRecord::LEN],
+    rec: Fetched,
     repairs: Repairs,
 }
 
@@ -366,7 +372,7 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
             map: MapStorage::new(EccFlash::new(flash, ecc), config, Cache::new_uncached()),
             range,
             buf: Buffer([0; BUF_LEN]),
-            rec: [0; HistoryRecord::LEN],
+            rec: Fetched([0; HistoryRecord::LEN]),
             repairs: Repairs::default(),
         })
     }
@@ -429,7 +435,7 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
         let mut repairs_left = MAX_REPAIRS;
         let len = loop {
             let err = match self.map.fetch_item::<&[u8]>(&mut self.buf.0, &key).await {
-                Ok(Some(bytes)) => match self.rec.get_mut(..bytes.len()) {
+                Ok(Some(bytes)) => match self.rec.0.get_mut(..bytes.len()) {
                     Some(dst) => {
                         dst.copy_from_slice(bytes);
                         break bytes.len();
@@ -447,7 +453,7 @@ impl<F: NorFlash, E: EccErrors> Store<F, E> {
                 _ => return Err(LoadStatus::Flash(err.into())),
             }
         };
-        Ok(self.rec.get(..len).unwrap_or(&[]))
+        Ok(self.rec.0.get(..len).unwrap_or(&[]))
     }
 
     /// Fetches the newest item under `key` and decodes it.

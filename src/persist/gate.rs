@@ -82,10 +82,17 @@ impl WriteGate {
     /// Whether a write may start at `now_ms`: the supply is good now and, unless an alarm record
     /// is due, has been for the hold-off.
     pub fn allows(&self, now_ms: u64, alarm_due: bool) -> bool {
-        match self.good_since_ms {
-            Some(since) if self.good_now(now_ms) => alarm_due || now_ms.saturating_sub(since) >= self.hold_off_ms,
-            _ => false,
-        }
+        self.good_since(now_ms).is_some_and(|since| alarm_due || self.held(now_ms, since))
+    }
+
+    /// The start of the run of good samples, if the supply is good now.
+    fn good_since(&self, now_ms: u64) -> Option<u64> {
+        self.good_since_ms.filter(|_| self.good_now(now_ms))
+    }
+
+    /// Whether a supply good since `since` has been for the hold-off at `now_ms`.
+    fn held(&self, now_ms: u64, since: u64) -> bool {
+        now_ms.saturating_sub(since) >= self.hold_off_ms
     }
 }
 
@@ -197,13 +204,17 @@ impl PendingSaves {
     /// state through a copy of its own (−244 B of flash).
     #[inline(never)]
     pub fn next(&mut self, gate: &WriteGate, now_ms: u64) -> Option<Save> {
-        if self.alarm && gate.allows(now_ms, true) {
+        // [`WriteGate::allows`] taken apart: the supply good now (both kinds of record), then the
+        // hold-off (all but an alarm's); asked whole twice, the test of now was made twice
+        // (−44 B of flash).
+        let since = gate.good_since(now_ms)?;
+        if self.alarm {
             self.alarm = false;
             if let Some(h) = self.history.take() {
                 return Some(Save::AlarmHistory(h));
             }
         }
-        if !gate.allows(now_ms, false) {
+        if !gate.held(now_ms, since) {
             return None;
         }
         if let Some(s) = self.settings.take() {
