@@ -351,8 +351,16 @@ impl ColdChainMonitor {
         let mut m = Self::new();
         m.resume(runs);
         // The log's slot at `head` (0) holds the excursion under way; its times on this boot's
-        // clock, where the history's merge adds `base_s` back.
-        m.log[0] = open.map(|e| Excursion { start_s: e.start_s - base_s, end_s: e.end_s - base_s, ..e });
+        // clock, where the history's merge adds `base_s` back, and not after this boot's start:
+        // the board times excursions from its reset and `base_s` counts whole seconds from
+        // the first sample, so a stored excursion can lie up to that sample's time and a second
+        // after `base_s`, and a first reading before that on its side made an end before the
+        // start, a record the next boot rejects whole (found in review: 10.703 s against 10.7).
+        m.log[0] = open.map(|e| Excursion {
+            start_s: min_f32(e.start_s - base_s, 0.0),
+            end_s: min_f32(e.end_s - base_s, 0.0),
+            ..e
+        });
         m
     }
 
