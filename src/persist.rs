@@ -1944,6 +1944,56 @@ mod tests {
         }
     }
 
+    /// The review's case on the board's clock: the first sample 0.7 s after the reset, an
+    /// excursion from 10.703 s with the record at 10 whole seconds, a watchdog restart whose
+    /// first reading, at 0.7 s and on the same side, sets the latch and stores the history at
+    /// once. It stored an excursion from 10.703 s to 10.7 s, which the next boot rejected with
+    /// the whole history.
+    #[test]
+    fn a_first_reading_early_on_the_boards_clock_keeps_the_excursion_in_order() {
+        let mut rec = Recorder::new(HistoryRecord::EMPTY, 360);
+        let _ = rec.note_reset(ResetCause::BrownOut);
+        rec.push(700, 5.0);
+        rec.push(10_703, 9.0);
+        let stored = rec.history();
+        assert_eq!((stored.recorded_s, stored.open_excursion().map(|e| e.start_s)), (10, Some(10.703)));
+        let mut next = Recorder::new(stored, 360);
+        let _ = next.note_reset(ResetCause::Watchdog);
+        let mut r = next.push(700, 9.5);
+        next.note_carried(&mut r, true, SensorOffset::NONE, false);
+        let Some(Save::AlarmHistory(h)) = next.due_save(&r) else { panic!("the latch stores at once") };
+        let e = h.last[3].expect("the excursion");
+        assert!(e.start_s <= e.end_s, "{e:?}");
+        assert_eq!((h.excursions, e.extreme_c), (1, 9.5));
+        assert_eq!(HistoryRecord::decode(&h.encode()), Ok(h));
+    }
+
+    /// A boot that continues the stored excursion and then has twenty more, more than its
+    /// monitor's log keeps: the record counts them all once, and keeps the four newest in
+    /// order (the continued one long gone from the log).
+    #[test]
+    fn a_continued_excursion_then_more_than_the_log_keeps() {
+        let mut rec = Recorder::new(HistoryRecord::EMPTY, 360);
+        rec.push(0, 5.0);
+        rec.push(10_000, 9.0);
+        let stored = rec.history();
+        let mut next = Recorder::new(stored, 360);
+        next.push(0, 9.5);
+        let mut t = 10_000;
+        for k in 0..20 {
+            next.push(t, 5.0);
+            next.push(t + 10_000, if k % 2 == 0 { 1.0 } else { 9.0 });
+            t += 20_000;
+        }
+        let h = next.history();
+        assert_eq!(h.excursions, 21);
+        let sides: std::vec::Vec<_> = h.last.iter().map(|e| e.map(|e| e.side)).collect();
+        assert_eq!(sides, [Some(Side::Cold), Some(Side::Warm), Some(Side::Cold), Some(Side::Warm)]);
+        let starts: std::vec::Vec<_> = h.last.iter().flatten().map(|e| e.start_s).collect();
+        assert!(starts.windows(2).all(|w| w[0] < w[1]), "{starts:?}");
+        assert_eq!(HistoryRecord::decode(&h.encode()), Ok(h));
+    }
+
     /// The history is due six times as often while the load is outside 2…8 °C (a supply that
     /// drops more often than the periodic store would lose the excursion otherwise).
     #[test]
