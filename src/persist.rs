@@ -809,7 +809,7 @@ impl HistoryRecord {
     /// merge into the boot-time record, not into a previous merge, or this session counts twice,
     /// and `monitor` must have been resumed from it ([`Recorder::new`]: the alarms' runs and the
     /// excursion under way go on from the record's).
-    pub fn merged(&self, monitor: &ColdChainMonitor) -> HistoryRecord {
+    pub(crate) fn merged(&self, monitor: &ColdChainMonitor) -> HistoryRecord {
         let pick = |a: Option<f32>, b: Option<f32>, f: fn(f32, f32) -> f32| match (a, b) {
             (Some(a), Some(b)) => Some(f(a, b)),
             (a, b) => a.or(b),
