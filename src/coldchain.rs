@@ -810,6 +810,7 @@ mod tests {
         m.push(70_000, 12.0);
         assert_eq!(m.max_c(), Some(10.0));
     }
+
     /// A monitor resumed with the stored history's excursion under way holds it in its log,
     /// uncounted, and reads as in an excursion before its first reading; a first reading on its
     /// side extends it (a sample without a reading waits), one in range or on the other side

@@ -747,8 +747,8 @@ impl HistoryRecord {
     /// first reading is on its side it goes on across the restart, as `hter monitor` reads one
     /// excursion across a restart in a log, rather than count a new one. Before, each restart in
     /// an excursion counted one more: a supply that dropped every 50 minutes through a day of
-    /// heat put some thirty excursions on the record, and its four newest were all pieces of
-    /// the same one. Stored in the faults byte's bit 1, which v6 readers before it ignore.
+    /// heat put 13 excursions on the record for one, and its four newest were all pieces of it
+    /// (`hal-sim/tests/virtual_board.rs`). Stored in the faults byte's bit 1, which v6 readers before it ignore.
     pub fn open_excursion(&self) -> Option<Excursion> {
         match self.last {
             [.., e] if self.flags & EXCURSION_OPEN != 0 => e,
