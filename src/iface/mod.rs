@@ -311,9 +311,10 @@ fn parse_set<'a>(key: &str, value: &'a str) -> Result<SetRequest, Refusal<'a>> {
         // `set ack 0` must not read as "do not acknowledge" and acknowledge.
         "ack" if value == "1" => Ok(SetRequest::Ack),
         "ack" => refuse("ack", Why::Usage("set ack 1, or ack")),
-        // The board measures the offset; a person can only clear it (`0`, `0.00`, …).
+        // The board measures the offset; a person can only clear it (`0`, `0.00`, …): zero by its
+        // digits, not its f32, which a tiny value underflows to (`0.` and 45 zeros and a 1).
         "sensor_offset_c" => match parse_decimal(value) {
-            Some(d) if d.value == 0.0 => Ok(SetRequest::ClearSensorOffset),
+            Some(d) if d.digits == 0 => Ok(SetRequest::ClearSensorOffset),
             Some(_) => refuse(
                 "sensor_offset_c",
                 Why::Usage("set sensor_offset_c 0 (only 0: it clears the offset the board measured)"),
@@ -419,6 +420,21 @@ mod tests {
         assert!(refusal(&"x".repeat(97)).starts_with("err line: longer than 96"));
         for line in ["set setpoint_c 12", "set setpoint_c nan", "frobnicate", "set model 1"] {
             assert!(!refusal(line).contains('\n'), "{line}");
+        }
+    }
+
+    /// Found by `tests/iface_fuzz.rs`: `0.` and 45 zeros and a 1 is no 0, but its f32 underflows
+    /// to 0.0, and it cleared the sensor offset.
+    #[test]
+    fn only_a_zero_clears_the_sensor_offset_however_small_the_value() {
+        let usage =
+            "err sensor_offset_c: usage: set sensor_offset_c 0 (only 0: it clears the offset the board measured)";
+        for tiny in [format!("0.{}1", "0".repeat(45)), format!("-.{}7", "0".repeat(60)), "0.01".into()] {
+            assert_eq!(refusal(&format!("set sensor_offset_c {tiny}")), usage, "{tiny}");
+        }
+        for zero in ["0", "-0", "0.00", ".0", "000", &format!("0.{}", "0".repeat(70))] {
+            let line = format!("set sensor_offset_c {zero}");
+            assert_eq!(Command::parse(&line), Ok(Some(Command::Set(SetRequest::ClearSensorOffset))), "{zero}");
         }
     }
 }
