@@ -217,8 +217,9 @@ impl Command {
             ("history", since, None) => Command::History {
                 since_s: match since {
                     None => 0,
+                    // The limit is on the value typed, the rounding up after it: `3999999999.5`.
                     Some(s) => match since_seconds(s) {
-                        Some(x) if x < HISTORY_SINCE_LIMIT_S => x,
+                        Some((whole, part)) if whole < HISTORY_SINCE_LIMIT_S => whole + u32::from(part),
                         Some(_) => return refuse("history", Why::Usage("history [SINCE_S], SINCE_S below 4000000000")),
                         None => return refuse("history", Why::NotDecimal),
                     },
@@ -239,10 +240,12 @@ impl Command {
 /// `history`'s SINCE_S must be below this, record s.
 pub const HISTORY_SINCE_LIMIT_S: u32 = 4_000_000_000;
 
-/// `history`'s SINCE_S: a decimal ≥ 0 of up to 10 whole digits, rounded up to the record's whole
-/// seconds (rows are stamped in them). Not [`parse_decimal`]: the record's time passes its 7
-/// digits after 116 days of service, and `history 10000000` was "not a decimal number".
-fn since_seconds(s: &str) -> Option<u32> {
+/// `history`'s SINCE_S: a decimal ≥ 0 of up to 10 whole digits, as its whole seconds and whether
+/// a fraction is left (the caller rounds up to the record's whole seconds, which rows are stamped
+/// in, once it has checked the value: rounded first, `3999999999.5`, below the limit, was refused).
+/// Not [`parse_decimal`]: the record's time passes its 7 digits after 116 days of service, and
+/// `history 10000000` was "not a decimal number".
+fn since_seconds(s: &str) -> Option<(u32, bool)> {
     let (whole, frac) = match s.split_once('.') {
         Some((_, "")) => return None,
         Some((w, f)) => (w, f),
@@ -251,7 +254,7 @@ fn since_seconds(s: &str) -> Option<u32> {
     if frac.len() > 6 || !frac.bytes().all(|b| b.is_ascii_digit()) {
         return None;
     }
-    parse_whole(whole)?.checked_add(u32::from(frac.bytes().any(|b| b != b'0')))
+    Some((parse_whole(whole)?, frac.bytes().any(|b| b != b'0')))
 }
 
 /// How a numeric setting is kept: the range it takes and its step, the decimals it is stored,
@@ -435,6 +438,25 @@ mod tests {
         for zero in ["0", "-0", "0.00", ".0", "000", &format!("0.{}", "0".repeat(70))] {
             let line = format!("set sensor_offset_c {zero}");
             assert_eq!(Command::parse(&line), Ok(Some(Command::Set(SetRequest::ClearSensorOffset))), "{zero}");
+        }
+    }
+
+    /// Found by `tests/iface_fuzz.rs`: SINCE_S below the limit with a fraction, rounded up to it
+    /// first, was refused as not below it (`hter board history --since 3999999999.5` passes the
+    /// host's check, which is on the value).
+    #[test]
+    fn history_since_is_checked_before_it_is_rounded_up() {
+        for (s, since_s) in
+            [("3999999999.5", 4_000_000_000), ("3999999999.000001", 4_000_000_000), ("3999999999.0", 3_999_999_999)]
+        {
+            assert_eq!(Command::parse(&format!("history {s}")), Ok(Some(Command::History { since_s })), "{s}");
+        }
+        for s in ["4000000000", "4000000000.5", "4294967295.5"] {
+            assert_eq!(
+                refusal(&format!("history {s}")),
+                "err history: usage: history [SINCE_S], SINCE_S below 4000000000",
+                "{s}"
+            );
         }
     }
 }
