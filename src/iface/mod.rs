@@ -339,6 +339,8 @@ fn parse_model(value: &str) -> Result<Model, Refusal<'_>> {
     let b = pair("model", b, &COEFFICIENT)?;
     let k = match parse_decimal(k) {
         Some(d) if d.decimals == 0 && d.value >= 1.0 && d.value <= MAX_K as f32 => d.value as usize,
+        // No K to quote (`A1,A2;B0,B1;`): "…, not " and nothing.
+        None if k.is_empty() => return Err(bad),
         _ => return refuse("model", Why::Delay(k)),
     };
     Model::second_order(a, b, k).map_err(|_| Refusal { what: "model", why: Why::Model("not a second-order model") })
@@ -457,6 +459,15 @@ mod tests {
                 "err history: usage: history [SINCE_S], SINCE_S below 4000000000",
                 "{s}"
             );
+        }
+    }
+
+    /// Found by `tests/iface_fuzz.rs`: a model without its K was refused quoting the K it lacks:
+    /// `err model: K must be a whole number of samples in 1…10, not ` and nothing.
+    #[test]
+    fn a_model_without_its_delay_is_refused_with_the_usage() {
+        for line in ["set model -1.8,0.81;-0.02,-0.01;", "set model -1.8,0.81;-0.02,-0.01; "] {
+            assert_eq!(refusal(line), "err model: usage: model A1,A2;B0,B1;K", "{line:?}");
         }
     }
 }
