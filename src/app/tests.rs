@@ -906,6 +906,31 @@ fn repeated_acks_and_unchanged_settings_leave_the_record_alone() {
     assert_eq!(b.setting_logs(), [SettingKey::Setpoint]);
 }
 
+/// Found by `tests/iface_fuzz.rs`: `set model` of the cabinet model the board already has, which
+/// the self-tuner does not take (b1 > 0), changes nothing, yet it was logged and its record
+/// queued for flash again at every repeat. A model the self-tuner takes restarts it from the
+/// model each time, which is a change, and is recorded.
+#[test]
+fn a_repeated_cabinet_model_is_neither_stored_nor_recorded_again() {
+    let mut b = Bench::new(&boot());
+    b.run(10);
+    for _ in 0..3 {
+        assert_eq!(b.send(&format!("set model {PARALLEL_LAGS}")), "ok\r\n");
+    }
+    assert_eq!(b.setting_logs(), [SettingKey::Model]);
+    #[cfg(feature = "holdover")]
+    assert_eq!(b.saves.iter().filter(|s| matches!(s, Save::Cabinet(_))).count(), 1);
+    assert_eq!(b.field("cabinet_a"), "-1.938996,0.939181");
+    let control = "-1.859405,0.859802;-0.014713,-0.003021;8";
+    for _ in 0..2 {
+        assert_eq!(b.send(&format!("set model {control}")), "ok\r\n");
+    }
+    assert_eq!(b.setting_logs(), [SettingKey::Model; 3]);
+    // Back to the first: a change of the cabinet model.
+    assert_eq!(b.send(&format!("set model {PARALLEL_LAGS}")), "ok\r\n");
+    assert_eq!(b.setting_logs(), [SettingKey::Model; 4]);
+}
+
 /// A bench 10 samples in, whose sensor broke for 3 samples and came back: the indicator latched.
 fn bench_with_a_latched_sensor_fault() -> Bench {
     let mut b = Bench::new(&boot());
