@@ -56,30 +56,17 @@ const WHATS: &[&str] = &[
     "identify",
 ];
 
-/// `status`'s keys, in the contract's order.
-const STATUS_KEYS: &[&str] = &[
-    "t_s",
-    "temp_c",
-    "sensor_offset_c",
-    "setpoint_c",
-    "duty",
-    "mode",
-    "alarm",
-    "controller",
-    "adaptive",
-    "controllers",
-    "model_a",
-    "model_b",
-    "model_k",
-    "cabinet_a",
-    "cabinet_b",
-    "cabinet_k",
-    "holdover_s",
-    "resets",
-    "firmware",
-    "commissioning",
-    "settings_version",
-];
+/// `status`'s keys, in the contract's order: the first column of docs/interface.md's table.
+fn status_keys() -> &'static [&'static str] {
+    static KEYS: std::sync::OnceLock<Vec<&'static str>> = std::sync::OnceLock::new();
+    KEYS.get_or_init(|| {
+        let doc = include_str!("../docs/interface.md");
+        let table = doc.split("## `status` fields").nth(1).and_then(|s| s.split("\n#").next()).unwrap_or("");
+        let keys: Vec<&str> = table.lines().filter_map(|l| l.strip_prefix("| `")?.split('`').next()).collect();
+        assert_eq!(keys.first(), Some(&"t_s"), "docs/interface.md's status table");
+        keys
+    })
+}
 
 fn config() -> AppConfig {
     AppConfig {
@@ -315,7 +302,7 @@ fn check_reply(line: &str, handled: Handled, reply: &str) -> Result<Ended, TestC
 fn check_data(line: &str, data: &[String], settings: &SettingsRecord) -> Result<(), TestCaseError> {
     let keys: Vec<&str> = data.iter().filter_map(|d| d.split_once('=').map(|(k, _)| k)).collect();
     let want: &[&str] = match words(line).as_slice() {
-        ["status"] => STATUS_KEYS,
+        ["status"] => status_keys(),
         ["get"] => &["setpoint_c", "controller", "cal_ice", "cal_warm"],
         ["help"] => {
             prop_assert_eq!(data.len(), hter::iface::HELP.len());
@@ -339,7 +326,7 @@ fn check_data(line: &str, data: &[String], settings: &SettingsRecord) -> Result<
         let (k, v) = d.split_once('=').unwrap_or_default();
         // `firmware` is `hter <version>` (the contract's table; `hter board` splits at the `=`).
         prop_assert!(!v.is_empty() && (!v.contains(' ') || k == "firmware"), "{d:?}");
-        prop_assert!(value_as_documented(k, v, settings, want == STATUS_KEYS), "{d:?} ({settings:?})");
+        prop_assert!(value_as_documented(k, v, settings, want == status_keys()), "{d:?} ({settings:?})");
     }
     Ok(())
 }
