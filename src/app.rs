@@ -94,6 +94,22 @@ pub struct Boot {
 }
 
 impl Boot {
+    /// A new board's first boot: nothing in flash, a plain reset, no stop, no button (what the
+    /// tests and the host's tools start from, field by field overridden).
+    pub const NEW: Boot = Boot {
+        settings: None,
+        calibration: TwoPoint::IDENTITY,
+        adaptive: None,
+        #[cfg(feature = "holdover")]
+        cabinet: None,
+        history: HistoryRecord::EMPTY,
+        log_last_s: 0,
+        reset: ResetCause::Other,
+        stops: Stops { earlier: None, latest: None, fresh: false },
+        pages_lost: 0,
+        button_held: false,
+    };
+
     /// How the boot's `history` (the stored one with this boot's reset, stop and repaired pages
     /// counted) is stored: at once on a good supply, past the write gate's hold-off, when it
     /// carries a fail-safe stop the stored history does not already have as its newest, or

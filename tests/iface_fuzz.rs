@@ -22,13 +22,12 @@
 use std::collections::VecDeque;
 
 use hter::app::{App, AppConfig, Boot, Handled, SampleIn};
-use hter::calib::TwoPoint;
 use hter::failsafe::{StopInfo, StopKind, Stops};
 use hter::iface::line::{Frame, LineFramer, LINE_KILL};
 use hter::iface::{Law, SetRequest, MAX_LINE, SETPOINT_RANGE_C};
 use hter::model::{Model, MAX_K};
 use hter::persist::log::{LogEntry, SettingKey};
-use hter::persist::{HistoryRecord, ModelRecord, ResetCause, Save, SettingsRecord};
+use hter::persist::{ModelRecord, Save, SettingsRecord};
 use hter::step::{CarrierConfig, ValidConfig};
 use hter::units::Celsius;
 use proptest::prelude::*;
@@ -100,19 +99,7 @@ enum Start {
 }
 
 fn boot(start: Start) -> Boot {
-    let base = Boot {
-        settings: None,
-        calibration: TwoPoint::IDENTITY,
-        adaptive: None,
-        #[cfg(feature = "holdover")]
-        cabinet: None,
-        history: HistoryRecord::EMPTY,
-        log_last_s: 0,
-        reset: ResetCause::Other,
-        stops: Stops::default(),
-        pages_lost: 0,
-        button_held: false,
-    };
+    let base = Boot::NEW;
     match start {
         Start::New | Start::Held(_) | Start::Commissioning(_) => base,
         Start::Law(law) => {

@@ -23,19 +23,7 @@ fn config() -> AppConfig {
 }
 
 fn boot() -> Boot {
-    Boot {
-        settings: None,
-        calibration: TwoPoint::IDENTITY,
-        adaptive: None,
-        #[cfg(feature = "holdover")]
-        cabinet: None,
-        history: HistoryRecord::EMPTY,
-        log_last_s: 0,
-        reset: ResetCause::Other,
-        stops: Stops::default(),
-        pages_lost: 0,
-        button_held: false,
-    }
+    Boot::NEW
 }
 
 /// The app in front of a first-order plant holding 4 °C.
