@@ -1587,3 +1587,23 @@ fn a_stop_reported_before_does_not_refuse_a_service_reset() {
     let history = Recorder::new(HistoryRecord::EMPTY, 360).note_boot(ResetCause::Other, &again.stops);
     assert_eq!(history.stops_of(crate::failsafe::StopKind::Panic), 1, "still counted");
 }
+
+/// Found by fuzzing (`fuzz::the_app_starts_safe_from_arbitrary_stored_records`): a stored
+/// calibration record of gain 0.9 and offset 7.5 °C (the record took offsets up to 10 °C) ran as
+/// stored on a board with no settings: a load pinned at −1 °C read 6.6 °C and was cooled
+/// on, the freeze guard blind to it. Refused now, the board runs the identity and its freeze
+/// guard stops the cooling.
+#[test]
+fn a_stored_calibration_that_hides_a_freezing_load_is_not_run() {
+    use crate::persist::CalibrationRecord;
+    let stored = CalibrationRecord { cal: TwoPoint { gain: 0.9, offset_c: 7.5 } }.encode();
+    let calibration = CalibrationRecord::decode(&stored).map_or(TwoPoint::IDENTITY, |r| r.cal);
+    let mut b = Bench::new(&Boot { calibration, ..boot() });
+    (b.pinned_c, b.load_c, b.dither) = (Some(-1.0), -1.0, true);
+    b.run(20);
+    for _ in 0..20 {
+        let out = b.run(1);
+        assert!(out.step.duty.get() == 0.0 || !out.step.supply_enable, "cooling a −1 °C load: {:?}", out.step);
+    }
+    assert_eq!(b.app.carrier().config().cal, TwoPoint::IDENTITY);
+}
