@@ -399,7 +399,10 @@ impl ResetRecords {
         // `earlier` was a `latest` a boot reported, or the stop before a nested one: its mark
         // tells nothing, so it is not written.
         let fresh = self.latest.mark_seen();
-        Stops { fresh, ..self.stops() }
+        let stops = self.stops();
+        // A whole record this firmware cannot read (another firmware's kind code) is no stop,
+        // and so not the reset's own either (`&`, not `&&`: 8 B less flash).
+        Stops { fresh: fresh & stops.latest.is_some(), ..stops }
     }
 
     /// The phase word as it is: a [`BootPhase::marker`] while a boot is on its way to its control
@@ -734,6 +737,22 @@ mod tests {
             r.boot(ResetCause::Other),
             Stops { earlier: None, latest: Some(panic_info("b.rs", 2)), fresh: true }
         );
+    }
+
+    /// Found by fuzzing (`fuzz::arbitrary_reset_records_give_whole_stops_or_none`): a whole
+    /// record this firmware cannot read (a kind code it does not know, as a newer firmware's
+    /// stop path leaves it across a reset into this one; a text length beyond the text; text
+    /// outside ASCII) was the reset's own stop, [`Stops::fresh`], with no stop there, and a
+    /// technician's service reset after it was refused ([`crate::app::Boot::service_reset`]).
+    #[test]
+    fn a_whole_record_this_firmware_cannot_read_is_not_the_resets_stop() {
+        for (kind, text_len, text) in [(6, 0, 0), (0, 0, 0), (1, STOP_TEXT as u32 + 1, 0), (1, 1, 0xC3)] {
+            let mut r = ResetRecords::EMPTY;
+            r.latest.write(&StopInfo::new(StopKind::Panic, 0, 0, 7));
+            (r.latest.kind, r.latest.text_len, r.latest.text[0]) = (kind, text_len, text);
+            r.latest.crc = r.latest.crc();
+            assert_eq!(r.boot(ResetCause::Other), Stops::default(), "{kind} {text_len} {text}");
+        }
     }
 
     /// A copy into `earlier` that a reset or a nested stop path cut (an NMI preempting a stop
