@@ -1607,3 +1607,27 @@ fn a_stored_calibration_that_hides_a_freezing_load_is_not_run() {
     }
     assert_eq!(b.app.carrier().config().cal, TwoPoint::IDENTITY);
 }
+
+/// Found by fuzzing (`fuzz::the_app_starts_safe_from_arbitrary_stored_records`): a log whose
+/// newest entry is near the end of the record's clock (u32 seconds: an entry on another clock,
+/// or one corrupt under a storage CRC that passed) made the next boot's entries wrap to 0 s, and
+/// every boot after it again (the newest entry stays the newest): the record ran back in time
+/// until the log overwrote that entry. Record time now stops at the end of its clock.
+#[test]
+fn record_time_does_not_wrap_at_the_end_of_its_clock() {
+    for last in [u32::MAX, u32::MAX - 1, u32::MAX - 400, 7] {
+        let mut b = Bench::new(&Boot { log_last_s: last, pages_lost: 1, ..boot() });
+        b.run(100);
+        let logged: Vec<u32> = b
+            .saves
+            .iter()
+            .filter_map(|s| match s {
+                Save::Log(e) => Some(e.t_s()),
+                _ => None,
+            })
+            .collect();
+        assert!(logged.len() >= 3, "{last}: {logged:?}");
+        assert!(logged.iter().all(|&t| t > last || t == u32::MAX), "{last}: {logged:?}");
+        assert!(logged.is_sorted(), "{last}: in time order: {logged:?}");
+    }
+}
