@@ -418,8 +418,10 @@ impl CalibrationRecord {
 /// Layout v1, 31 bytes: `'S'`, 1, seq (u32), setpoint_c (f32), law (u8, index in
 /// [`crate::iface::Law::ALL`]), ice point (measured, reference) and warm point (f32 each),
 /// CRC-32. On decode every value is range-checked as the interface checks it, and the points
-/// must pass [`TwoPoint::from_points`]: a record that would be refused as a request is refused
-/// as a record.
+/// must pass [`TwoPoint::from_points`]: a record that would be refused as a request for its range
+/// or its calibration is refused as a record. Not for its step: a value finer than the interface
+/// takes now (`5.001`, which it took before it refused values finer than a setting's step) is
+/// read and runs as stored, where refused it would cost the whole record, the calibration too.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SettingsRecord {
