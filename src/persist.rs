@@ -30,6 +30,8 @@ use crate::model::{Model, MAX_K};
 
 #[cfg(feature = "persist-flash")]
 pub mod flash;
+#[cfg(test)]
+pub(crate) mod fuzz;
 mod gate;
 pub mod log;
 
