@@ -33,7 +33,7 @@ use crate::iface::num::Fixed;
 use crate::iface::sink::{put, Sink, Written};
 use crate::iface::{Command, Law, Refusal, SetRequest, Why, HELP};
 use crate::model::Model;
-use crate::persist::log::{IntervalLog, LogEntry, SettingKey};
+use crate::persist::log::{record_secs, IntervalLog, LogEntry, SettingKey};
 use crate::persist::{
     HistoryRecord, ModelCadence, ModelRecord, Recorder, ResetCause, Save, SensorOffset, SettingsRecord,
 };
@@ -476,14 +476,14 @@ impl App {
         if boot.service_reset() && (short || offset != SensorOffset::NONE) {
             let value = [offset.c(), f32::from(u8::from(short))];
             let _ = app_saves.push_back(Save::Log(LogEntry::Setting {
-                t_s: (base_ms / 1000) as u32,
+                t_s: record_secs(base_ms),
                 key: SettingKey::Service,
                 value,
             }));
         }
         for _ in 0..boot.pages_lost {
             let _ = app_saves
-                .push_back(Save::Log(LogEntry::Event { t_s: (base_ms / 1000) as u32, kind: EventKind::FlashPageLost }));
+                .push_back(Save::Log(LogEntry::Event { t_s: record_secs(base_ms), kind: EventKind::FlashPageLost }));
         }
         App {
             cfg,
@@ -581,7 +581,7 @@ impl App {
     }
 
     fn record_s(&self, t_ms: u64) -> u32 {
-        ((self.base_ms + t_ms) / 1000) as u32
+        record_secs(self.base_ms + t_ms)
     }
 
     /// The user button (or `ack`): the alarm has been seen; applied with the next sample.

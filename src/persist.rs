@@ -20,7 +20,7 @@
 //! has changed by the next boot, and the estimator starts it at 0 anyway); k the model delay in
 //! samples.
 
-use crate::calib::TwoPoint;
+use crate::calib::{TwoPoint, MAX_CORRECTION_C, MIN_GAIN};
 use crate::coldchain::{AlarmKind, ColdChainMonitor, Excursion, Raised, Runs, Side};
 use crate::control::adaptive::{model_from_theta, plausible_model_cold, AdaptiveConfig, ESTIMATED_NB};
 use crate::control::{AdaptiveMode, Controller};
@@ -30,6 +30,8 @@ use crate::model::{Model, MAX_K};
 
 #[cfg(feature = "persist-flash")]
 pub mod flash;
+#[cfg(test)]
+pub(crate) mod fuzz;
 mod gate;
 pub mod log;
 
@@ -368,15 +370,12 @@ impl CabinetRecord {
     }
 }
 
-/// Largest |offset| a stored calibration may have, °C: a Pt100 channel 10 °C off needs ≈ 3.9 Ω
-/// of error (0.385 Ω/°C), more than leads and reference tolerance give; it is broken.
-pub const CAL_OFFSET_MAX_C: f32 = 10.0;
-
 /// The two-point calibration ([`TwoPoint`]).
 ///
-/// Layout v1, 14 bytes: `'C'`, 1, gain (f32 LE), offset_c (f32 LE), CRC-32. On decode the gain
-/// must be within 0.9 … 1.1 (as [`TwoPoint::from_points`] requires) and |offset| ≤
-/// [`CAL_OFFSET_MAX_C`].
+/// Layout v1, 14 bytes: `'C'`, 1, gain (f32 LE), offset_c (f32 LE), CRC-32. On decode the line
+/// must be one [`TwoPoint::from_points`] gives: a gain within 0.9 … 1.1 and a correction of a
+/// reading between 0 and 10 °C of at most [`MAX_CORRECTION_C`] (|offset| up to 10 °C with any
+/// such gain was read before, a line that moved the freeze guard's readings by up to 11 °C).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct CalibrationRecord {
@@ -405,8 +404,12 @@ impl CalibrationRecord {
     /// Parses and range-checks stored bytes.
     pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
         let mut r = open_frame(bytes, Self::LEN, Self::TAG, Self::VERSION)?;
-        let gain = r.f32_in(0.9, 1.1)?;
-        let offset_c = r.f32_in(-CAL_OFFSET_MAX_C, CAL_OFFSET_MAX_C)?;
+        let gain = r.f32_in(MIN_GAIN, 1.1)?;
+        let offset_c = r.f32_in(-MAX_CORRECTION_C, MAX_CORRECTION_C)?;
+        // The correction at 10 °C, as `from_points` bounds it (the one at 0 °C is the offset).
+        if !(((gain - 1.0) * 10.0 + offset_c).abs() <= MAX_CORRECTION_C) {
+            return Err(DecodeError::OutOfRange);
+        }
         Ok(CalibrationRecord { cal: TwoPoint { gain, offset_c } })
     }
 }
@@ -417,8 +420,10 @@ impl CalibrationRecord {
 /// Layout v1, 31 bytes: `'S'`, 1, seq (u32), setpoint_c (f32), law (u8, index in
 /// [`crate::iface::Law::ALL`]), ice point (measured, reference) and warm point (f32 each),
 /// CRC-32. On decode every value is range-checked as the interface checks it, and the points
-/// must pass [`TwoPoint::from_points`]: a record that would be refused as a request is refused
-/// as a record.
+/// must pass [`TwoPoint::from_points`]: a record that would be refused as a request for its range
+/// or its calibration is refused as a record. Not for its step: a value finer than the interface
+/// takes now (`5.001`, which it took before it refused values finer than a setting's step) is
+/// read and runs as stored, where refused it would cost the whole record, the calibration too.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SettingsRecord {
@@ -1452,6 +1457,28 @@ mod tests {
         assert_eq!(CalibrationRecord::decode(&offset.encode()), Err(DecodeError::OutOfRange));
         let inf = CalibrationRecord { cal: TwoPoint { gain: 1.0, offset_c: f32::INFINITY } };
         assert_eq!(CalibrationRecord::decode(&inf.encode()), Err(DecodeError::NonFinite));
+    }
+
+    /// Found by fuzzing (`fuzz::edited_calibration_and_settings_records`): the record took any
+    /// offset up to 10 °C with any gain in 0.9 … 1.1, lines that move a reading between 0 and
+    /// 10 °C by up to 11 °C, where a calibration ([`TwoPoint::from_points`], the interface's
+    /// `set cal_ice`) stops at [`crate::calib::MAX_CORRECTION_C`]. A build without the interface
+    /// runs the stored line as it is: gain 1.1 and offset 10 °C read a −5.5 °C load as 4 °C, the
+    /// freeze guard blind to it.
+    #[test]
+    fn a_calibration_record_beyond_what_a_calibration_accepts_is_refused() {
+        for (gain, offset_c) in [(1.1, 10.0), (0.9, -10.0), (1.093_570_1, 1.193_910_5), (1.0, 1.6), (1.1, 0.6)] {
+            let rec = CalibrationRecord { cal: TwoPoint { gain, offset_c } };
+            assert_eq!(CalibrationRecord::decode(&rec.encode()), Err(DecodeError::OutOfRange), "{gain} {offset_c}");
+        }
+        // Every line a calibration gives is read, at the limits too.
+        use crate::units::Celsius;
+        for (mi, ri, mw, rw) in
+            [(0.12, 0.0, 25.31, 25.02), (0.0, 1.5, 10.0, 11.5), (0.0, -1.5, 10.0, 8.5), (0.0, 1.5, 10.0, 10.5)]
+        {
+            let cal = TwoPoint::from_points(Celsius(mi), Celsius(ri), Celsius(mw), Celsius(rw)).unwrap();
+            assert_eq!(CalibrationRecord::decode(&CalibrationRecord { cal }.encode()), Ok(CalibrationRecord { cal }));
+        }
     }
 
     fn monitor(samples: &[(f32, f32)]) -> ColdChainMonitor {

@@ -773,3 +773,415 @@ fn a_power_cut_anywhere_in_a_log_append_loses_at_most_the_entry_being_written() 
         assert_eq!(log.release().torn_words(), 0);
     }
 }
+
+// ---- Fuzz: the boot from arbitrary flash (proptest; the `_long` twins in CI, ignored here) ----
+
+/// What a boot restores from flash that it did not just write: a store region and a log region
+/// as a board leaves them (every record kind written, pages turned), as the factory left them
+/// (erased) or as noise, each with bytes and double words overwritten and words torn (failing
+/// their ECC check) anywhere; and every record kind stored as arbitrary bytes (a valid record
+/// with edits and its CRC written again, another version's length, noise). Whatever the flash
+/// holds, [`hter::persist::flash::restore`] returns (no panic, no hang, repairs bounded, no ECC
+/// damage left), each record it restores is valid by its type's rules and is what its decoder
+/// makes of the stored bytes, each refused one is the default with the decoder's reason (the
+/// boot log's), the app boots from it in range and with its freeze guard, and the regions take
+/// records again (after the firmware's erase where the storage layer found them corrupt).
+mod fuzz {
+    use super::*;
+    use hter::app::{App, AppConfig};
+    use hter::calib::{MAX_CORRECTION_C, MIN_GAIN};
+    use hter::failsafe::{StopInfo, StopKind, Stops};
+    use hter::ident::commission::cabinet_plausible;
+    use hter::persist::flash::{key, restore, Restored};
+    use hter::persist::{crc32, CabinetRecord, CalibrationRecord};
+    use hter::step::ValidConfig;
+    use proptest::collection::vec;
+    use proptest::prelude::*;
+    use proptest::sample::select;
+    use std::sync::OnceLock;
+
+    const PAGES: usize = 4;
+    const LAWS: &[Law] = &[Law::Gpc, Law::Pi, Law::OnOff];
+
+    fn app_config() -> AppConfig {
+        AppConfig {
+            carrier: ValidConfig::DEFAULT,
+            adaptive: gpc(),
+            laws: LAWS,
+            setpoint_c: 4.0,
+            firmware: "hter fuzz",
+            history_save_samples: 360,
+            model_save_samples: 1440,
+        }
+    }
+
+    /// A line a calibration gives ([`TwoPoint::from_points`]).
+    fn plausible_line(cal: &TwoPoint) -> bool {
+        let at_10 = (cal.gain - 1.0) * 10.0 + cal.offset_c;
+        (MIN_GAIN..=1.1).contains(&cal.gain)
+            && cal.offset_c.abs() <= MAX_CORRECTION_C
+            && at_10.abs() <= MAX_CORRECTION_C
+    }
+
+    fn history(i: u32) -> HistoryRecord {
+        let mut h = HistoryRecord::EMPTY;
+        h.recorded_s = 3600 * i;
+        h.note_reset(ResetCause::BrownOut);
+        h.min_c = Some(1.5);
+        h.max_c = Some(9.0);
+        h
+    }
+
+    /// The two regions after a board's life: every record kind written over and over, log
+    /// entries pushed until the log turned its pages.
+    fn used() -> &'static (Vec<u8>, Vec<u8>) {
+        static IMAGE: OnceLock<(Vec<u8>, Vec<u8>)> = OnceLock::new();
+        IMAGE.get_or_init(|| {
+            let mut store = open(MockFlash::<L4_PAGE>::blank(PAGES), PAGES);
+            let mut log = open_log(MockFlash::<L4_PAGE>::blank(PAGES), PAGES);
+            block_on(async {
+                for i in 0..40 {
+                    store.save_history(&history(i)).await.unwrap();
+                    if i % 4 == 0 {
+                        store.save_model(&ModelRecord::from_model(&START_MODEL_HTER1).unwrap()).await.unwrap();
+                        store.save_settings(&settings(i, 4.5, Law::Pi)).await.unwrap();
+                        store.save_calibration(TwoPoint { gain: 1.01, offset_c: -0.2 }).await.unwrap();
+                        store
+                            .save_cabinet(&CabinetRecord::from_model(&cabinet(-1.938_996, 0.271_719)).unwrap())
+                            .await
+                            .unwrap();
+                    }
+                }
+                for i in 0..300 {
+                    log.push(&entry(i)).await.unwrap();
+                }
+            });
+            (store.release().bytes, log.release().bytes)
+        })
+    }
+
+    /// What a region held before the damage.
+    #[derive(Clone, Copy, Debug)]
+    enum Image {
+        Erased,
+        Used,
+        Noise(u32),
+    }
+
+    /// Damage to a region.
+    #[derive(Clone, Copy, Debug)]
+    enum Damage {
+        /// A byte set.
+        Byte(usize, u8),
+        /// A double word set (all zeros, all ones, anything).
+        Word(usize, u64),
+        /// A double word failing its ECC check (a cut program or erase).
+        Torn(usize),
+        /// A page of noise.
+        Page(usize, u32),
+    }
+
+    fn image() -> impl Strategy<Value = Image> {
+        prop_oneof![1 => Just(Image::Erased), 6 => Just(Image::Used), 1 => any::<u32>().prop_map(Image::Noise)]
+    }
+
+    fn damage() -> impl Strategy<Value = Vec<Damage>> {
+        let d = prop_oneof![
+            (any::<usize>(), any::<u8>()).prop_map(|(at, x)| Damage::Byte(at, x)),
+            (any::<usize>(), prop_oneof![Just(0u64), Just(u64::MAX), any::<u64>()])
+                .prop_map(|(at, x)| Damage::Word(at, x)),
+            any::<usize>().prop_map(Damage::Torn),
+            (any::<usize>(), any::<u32>()).prop_map(|(p, seed)| Damage::Page(p, seed)),
+        ];
+        vec(d, 0..6)
+    }
+
+    /// A region of `image` with `damage`.
+    fn region(image: Image, damage: &[Damage], used: &[u8], tear: Tear, nmi_only: bool) -> MockFlash<L4_PAGE> {
+        let mut f = MockFlash::<L4_PAGE>::with_tear(PAGES, tear);
+        f.nmi_only = nmi_only;
+        match image {
+            Image::Erased => {}
+            Image::Used => f.bytes = used.to_vec(),
+            Image::Noise(seed) => f.bytes = noise(seed | 1, PAGES * L4_PAGE),
+        }
+        let words = f.torn.len();
+        for d in damage {
+            match *d {
+                Damage::Byte(at, x) => f.bytes[at % (PAGES * L4_PAGE)] = x,
+                Damage::Word(at, x) => {
+                    let w = at % words;
+                    f.bytes[w * 8..w * 8 + 8].copy_from_slice(&x.to_le_bytes());
+                }
+                Damage::Torn(at) => f.torn[at % words] = true,
+                Damage::Page(p, seed) => {
+                    let p = p % PAGES;
+                    f.bytes[p * L4_PAGE..(p + 1) * L4_PAGE].copy_from_slice(&noise(seed | 1, L4_PAGE));
+                }
+            }
+        }
+        f
+    }
+
+    /// A boot's reset and the stops it found in RAM.
+    fn start() -> impl Strategy<Value = (ResetCause, Stops, bool)> {
+        let stop = proptest::option::of(
+            (select(StopKind::ALL.to_vec()), any::<u32>()).prop_map(|(k, d)| StopInfo::new(k, 0, 0, d)),
+        );
+        (
+            select(vec![ResetCause::Watchdog, ResetCause::BrownOut, ResetCause::Other]),
+            (stop.clone(), stop, any::<bool>()).prop_map(|(earlier, latest, fresh)| Stops { earlier, latest, fresh }),
+            any::<bool>(),
+        )
+    }
+
+    /// Every restored record valid by its type's rules; every refused one the default.
+    fn restored_valid(r: &Restored) -> Result<(), TestCaseError> {
+        if let Ok(s) = r.settings {
+            let (lo, hi) = hter::iface::SETPOINT_RANGE_C;
+            prop_assert!((lo..=hi).contains(&s.setpoint_c), "{s:?}");
+            prop_assert!(s.calibration().is_ok_and(|c| plausible_line(&c)), "{s:?}");
+            prop_assert_eq!(SettingsRecord::decode(&s.encode()), Ok(s));
+        }
+        prop_assert!(plausible_line(&r.calibration.value), "{:?}", r.calibration);
+        if r.calibration.status != LoadStatus::Restored {
+            prop_assert_eq!(r.calibration.value, TwoPoint::IDENTITY);
+        }
+        let h = r.history.value;
+        prop_assert_eq!(HistoryRecord::decode(&h.encode()), Ok(h));
+        if r.history.status != LoadStatus::Restored {
+            prop_assert_eq!(h, HistoryRecord::EMPTY);
+        }
+        let a = r.adaptive.expect("restored with a self-tuner");
+        if a.status == LoadStatus::Restored {
+            let tuner = SelfTuning::new(a.value, 10.0, 0.45);
+            prop_assert!(tuner.is_ok(), "{:?}", tuner.err());
+        } else {
+            prop_assert_eq!(a.value, gpc());
+        }
+        if let Ok(m) = r.cabinet {
+            prop_assert!(cabinet_plausible(&gpc(), &m).is_ok(), "{m:?}");
+        }
+        Ok(())
+    }
+
+    /// The app booted from `r` starts in range, with the build's guards, and controls.
+    fn app_boots(r: &Restored, (reset, stops, button): (ResetCause, Stops, bool)) -> Result<(), TestCaseError> {
+        let mut boot = r.boot(reset, stops);
+        boot.button_held = button;
+        let mut app = App::new(app_config(), &boot);
+        let s = *app.settings();
+        let (lo, hi) = hter::iface::SETPOINT_RANGE_C;
+        prop_assert!((lo..=hi).contains(&s.setpoint_c) && LAWS.contains(&s.law), "{s:?}");
+        if r.settings.is_err() {
+            prop_assert_eq!((s.setpoint_c, s.law), (4.0, Law::Gpc), "the defaults");
+        }
+        prop_assert!(plausible_line(&app.carrier().config().cal));
+        prop_assert_eq!(app.carrier().config().supervisor, ValidConfig::DEFAULT.get().supervisor);
+        for k in 0..20u64 {
+            let out = app.sample_celsius(k * 10_000, 4.0 + (k % 2) as f32 * 0.01);
+            prop_assert!((0.0..=1.0).contains(&out.step.duty.get()), "{out:?}");
+        }
+        while let Some(save) = app.next_save() {
+            if let hter::persist::Save::History(h) | hter::persist::Save::AlarmHistory(h) = save {
+                prop_assert_eq!(HistoryRecord::decode(&h.encode()), Ok(h));
+            }
+        }
+        Ok(())
+    }
+
+    fn check_flash(
+        (store_image, store_damage): (Image, Vec<Damage>),
+        (log_image, log_damage): (Image, Vec<Damage>),
+        (tear, nmi_only): (Tear, bool),
+        start: (ResetCause, Stops, bool),
+    ) -> Result<(), TestCaseError> {
+        let (s, l) = used();
+        let mut store = open(region(store_image, &store_damage, s, tear, nmi_only), PAGES);
+        let mut log = open_log(region(log_image, &log_damage, l, tear, nmi_only), PAGES);
+        let r = block_on(restore(&mut store, &mut log, Some(gpc())));
+        let bound = 2 * PAGES + 6 * MAX_REPAIRS;
+        prop_assert!(usize::from(r.repairs.total()) <= bound, "{:?}", r.repairs);
+        restored_valid(&r)?;
+        // Every entry the log hands out reads as it would be written.
+        let mut entries = Vec::new();
+        let walked = block_on(log.for_each(0, async |e: &LogEntry| {
+            entries.push(*e);
+            true
+        }));
+        for e in &entries {
+            let again = LogEntry::decode(&e.encode()).map(|x| x.encode());
+            prop_assert_eq!(again, Ok(e.encode()), "{:?}", e);
+        }
+        // The record's time goes on from the newest entry the boot found: none the log hands
+        // out later is newer. (Not the same entries: over pages of noise, which no power cut
+        // on the L4 leaves, the storage layer's walk erases a page it finds nothing in, and the
+        // next walk may start elsewhere.)
+        if let (Ok(last), Ok(_)) = (r.log_last_s, walked) {
+            prop_assert!(entries.iter().all(|e| e.t_s() <= last), "{last} s, {entries:?}");
+        }
+        app_boots(&r, start)?;
+        // The regions take records again, after an erase where the storage layer refuses
+        // (what the firmware's persist task does).
+        let h = history(7);
+        block_on(async {
+            if store.save_history(&h).await.is_err() {
+                store.erase_all().await.unwrap();
+                store.save_history(&h).await.unwrap();
+            }
+            assert_eq!(
+                store.load_history().await,
+                hter::persist::flash::Loaded { value: h, status: LoadStatus::Restored }
+            );
+            if log.push(&entry(1)).await.is_err() {
+                log.erase_all().await.unwrap();
+                log.push(&entry(1)).await.unwrap();
+            }
+        });
+        let (store_flash, log_flash) = (store.release(), log.release());
+        prop_assert_eq!((store_flash.torn_words(), log_flash.torn_words()), (0, 0), "ECC damage left");
+        Ok(())
+    }
+
+    // -- Arbitrary records stored whole (the storage layer's CRC right), through the boot.
+
+    /// Writes the CRC of a frame's bytes before its last four into them.
+    fn reframe(b: &mut [u8]) {
+        let n = b.len() - 4;
+        let crc = crc32(&b[..n]);
+        b[n..].copy_from_slice(&crc.to_le_bytes());
+    }
+
+    /// A record's bytes: one of `frames` edited (the CRC written again) or as it is, or noise.
+    fn record(frames: Vec<Vec<u8>>, len: usize) -> impl Strategy<Value = Option<Vec<u8>>> {
+        let edit = (any::<usize>(), prop_oneof![any::<u32>(), any::<f32>().prop_map(f32::to_bits)], 1usize..=4);
+        prop_oneof![
+            1 => Just(None),
+            4 => (select(frames), vec(edit, 0..4)).prop_map(|(mut b, edits)| {
+                let body = b.len() - 4;
+                for (at, word, n) in edits {
+                    let at = at % body;
+                    for (d, s) in b[at..body].iter_mut().zip(&word.to_le_bytes()[..n]) {
+                        *d = *s;
+                    }
+                }
+                reframe(&mut b);
+                Some(b)
+            }),
+            1 => vec(any::<u8>(), 0..=2 * len).prop_map(Some),
+        ]
+    }
+
+    fn records() -> impl Strategy<Value = [Option<Vec<u8>>; 5]> {
+        let older = |v: u8, n: usize| {
+            let mut b = history(3).encode()[..n].to_vec();
+            b[1] = v;
+            reframe(&mut b);
+            b
+        };
+        (
+            record(vec![settings(5, 4.5, Law::Pi).encode().to_vec()], SettingsRecord::LEN),
+            record(vec![CalibrationRecord { cal: TwoPoint { gain: 1.01, offset_c: -0.2 } }.encode().to_vec()], 14),
+            record(vec![ModelRecord::from_model(&START_MODEL_HTER2).unwrap().encode().to_vec()], ModelRecord::LEN),
+            record(
+                vec![CabinetRecord::from_model(&cabinet(-1.938_996, 0.271_719)).unwrap().encode().to_vec()],
+                CabinetRecord::LEN,
+            ),
+            record(
+                vec![
+                    history(3).encode().to_vec(),
+                    older(5, HistoryRecord::LEN_V5),
+                    older(4, HistoryRecord::LEN_V4),
+                    older(3, HistoryRecord::LEN_V3),
+                    older(2, HistoryRecord::LEN_V2),
+                ],
+                HistoryRecord::LEN,
+            ),
+        )
+            .prop_map(|(a, b, c, d, e)| [a, b, c, d, e])
+    }
+
+    /// What the boot must make of `bytes` under a key: the decoder's value, or its reason.
+    fn expect<T: PartialEq + std::fmt::Debug>(
+        got: Result<T, LoadStatus>,
+        bytes: &Option<Vec<u8>>,
+        decode: impl Fn(&[u8]) -> Result<T, DecodeError>,
+    ) -> Result<(), TestCaseError> {
+        let want = match bytes {
+            None => Err(LoadStatus::Missing),
+            Some(b) if b.len() > HistoryRecord::LEN => Err(LoadStatus::Invalid(DecodeError::Length)),
+            Some(b) => decode(b).map_err(LoadStatus::Invalid),
+        };
+        prop_assert_eq!(got, want);
+        Ok(())
+    }
+
+    fn loaded<T>(l: hter::persist::flash::Loaded<T>) -> Result<T, LoadStatus> {
+        match l.status {
+            LoadStatus::Restored => Ok(l.value),
+            e => Err(e),
+        }
+    }
+
+    fn check_records(recs: &[Option<Vec<u8>>; 5], start: (ResetCause, Stops, bool)) -> Result<(), TestCaseError> {
+        let mut store = open(MockFlash::<L4_PAGE>::blank(PAGES), PAGES);
+        let mut log = open_log(MockFlash::<L4_PAGE>::blank(PAGES), PAGES);
+        let keys = [key::SETTINGS, key::CALIBRATION, key::MODEL, key::CABINET, key::HISTORY];
+        let mut stored = recs.clone();
+        for (k, b) in keys.iter().zip(stored.iter_mut()) {
+            if let Some(bytes) = b {
+                // An item the storage layer's buffer cannot hold is not stored (nor read).
+                if block_on(store.store(*k, bytes)).is_err() {
+                    *b = None;
+                }
+            }
+        }
+        let mut store = reboot(store, PAGES);
+        let r = block_on(restore(&mut store, &mut log, Some(gpc())));
+        restored_valid(&r)?;
+        let [settings, cal, model, cab, hist] = &stored;
+        expect(r.settings, settings, SettingsRecord::decode)?;
+        expect(loaded(r.calibration), cal, |b| CalibrationRecord::decode(b).map(|r| r.cal))?;
+        expect(loaded(r.history), hist, HistoryRecord::decode)?;
+        let a = r.adaptive.expect("restored with a self-tuner");
+        expect(loaded(a), model, |b| ModelRecord::decode(b).and_then(|r| r.restore(&gpc())))?;
+        expect(r.cabinet, cab, |b| CabinetRecord::decode(b, &gpc()))?;
+        app_boots(&r, start)
+    }
+
+    fn tear() -> impl Strategy<Value = (Tear, bool)> {
+        (select(vec![Tear::Ecc, Tear::Readable]), any::<bool>())
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+        #[test]
+        fn arbitrary_flash_restores_valid_records_or_defaults(
+            s in (image(), damage()), l in (image(), damage()), t in tear(), start in start()
+        ) {
+            check_flash(s, l, t, start)?;
+        }
+
+        #[test]
+        fn arbitrary_stored_records_restore_as_their_decoders_read_them(recs in records(), start in start()) {
+            check_records(&recs, start)?;
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 50_000, ..ProptestConfig::default() })]
+        #[test]
+        #[ignore = "many cases: CI runs it in release with `-- --ignored`"]
+        fn arbitrary_flash_restores_valid_records_or_defaults_long(
+            s in (image(), damage()), l in (image(), damage()), t in tear(), start in start()
+        ) {
+            check_flash(s, l, t, start)?;
+        }
+
+        #[test]
+        #[ignore = "many cases: CI runs it in release with `-- --ignored`"]
+        fn arbitrary_stored_records_restore_as_their_decoders_read_them_long(recs in records(), start in start()) {
+            check_records(&recs, start)?;
+        }
+    }
+}

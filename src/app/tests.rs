@@ -1600,3 +1600,271 @@ fn a_stop_reported_before_does_not_refuse_a_service_reset() {
     let history = Recorder::new(HistoryRecord::EMPTY, 360).note_boot(ResetCause::Other, &again.stops);
     assert_eq!(history.stops_of(crate::failsafe::StopKind::Panic), 1, "still counted");
 }
+
+/// Found by fuzzing (`fuzz::the_app_starts_safe_from_arbitrary_stored_records`): a stored
+/// calibration record of gain 0.9 and offset 7.5 °C (the record took offsets up to 10 °C) ran as
+/// stored on a board with no settings: a load pinned at −1 °C read 6.6 °C and was cooled
+/// on, the freeze guard blind to it. Refused now, the board runs the identity and its freeze
+/// guard stops the cooling.
+#[test]
+fn a_stored_calibration_that_hides_a_freezing_load_is_not_run() {
+    use crate::persist::CalibrationRecord;
+    let stored = CalibrationRecord { cal: TwoPoint { gain: 0.9, offset_c: 7.5 } }.encode();
+    let calibration = CalibrationRecord::decode(&stored).map_or(TwoPoint::IDENTITY, |r| r.cal);
+    let mut b = Bench::new(&Boot { calibration, ..boot() });
+    (b.pinned_c, b.load_c, b.dither) = (Some(-1.0), -1.0, true);
+    b.run(20);
+    for _ in 0..20 {
+        let out = b.run(1);
+        assert!(out.step.duty.get() == 0.0 || !out.step.supply_enable, "cooling a −1 °C load: {:?}", out.step);
+    }
+    assert_eq!(b.app.carrier().config().cal, TwoPoint::IDENTITY);
+}
+
+/// Found by fuzzing (`fuzz::the_app_starts_safe_from_arbitrary_stored_records`): a log whose
+/// newest entry is near the end of the record's clock (u32 seconds: an entry on another clock,
+/// or one corrupt under a storage CRC that passed) made the next boot's entries wrap to 0 s, and
+/// every boot after it again (the newest entry stays the newest): the record ran back in time
+/// until the log overwrote that entry. Record time now stops at the end of its clock.
+#[test]
+fn record_time_does_not_wrap_at_the_end_of_its_clock() {
+    for last in [u32::MAX, u32::MAX - 1, u32::MAX - 400, 7] {
+        let mut b = Bench::new(&Boot { log_last_s: last, pages_lost: 1, ..boot() });
+        b.run(100);
+        let logged: Vec<u32> = b
+            .saves
+            .iter()
+            .filter_map(|s| match s {
+                Save::Log(e) => Some(e.t_s()),
+                _ => None,
+            })
+            .collect();
+        assert!(logged.len() >= 3, "{last}: {logged:?}");
+        assert!(logged.iter().all(|&t| t > last || t == u32::MAX), "{last}: {logged:?}");
+        assert!(logged.is_sorted(), "{last}: in time order: {logged:?}");
+    }
+}
+
+/// Fuzzing the boot from what the flash holds (each record missing, as written, edited with its
+/// CRC written again, or noise; the reset, the stops found in RAM, the pages lost, the button),
+/// the records decoded as [`crate::persist::flash::restore`] decodes them: the app starts, with
+/// a setpoint in its range and a law of the build, the defaults for settings that did not
+/// decode, a calibration a calibration can give and that `get` shows, the build's freeze guard
+/// and at most the offset the offset watch subtracts; every record it stores reads back; it
+/// controls (a duty in 0 … 1) and its freeze guard stops the cooling of a load below 0 °C.
+mod fuzz {
+    use super::*;
+    use crate::failsafe::{StopInfo, StopKind};
+    use crate::persist::fuzz::{
+        any_bytes, cabinet_frame, calibration_frame, edited, edits, history_frame, history_valid, model_frame,
+        plausible_line, settings_frame, CABINET_FIELDS, CALIBRATION_FIELDS, HISTORY_FIELDS, MODEL_FIELDS,
+        SETTINGS_FIELDS,
+    };
+    use crate::persist::{CabinetRecord, CalibrationRecord, ModelRecord};
+    use proptest::prelude::*;
+    use proptest::sample::select;
+
+    /// What the flash and the reset hand a boot.
+    #[derive(Clone, Debug)]
+    struct Found {
+        settings: Option<Vec<u8>>,
+        calibration: Option<Vec<u8>>,
+        model: Option<Vec<u8>>,
+        cabinet: Option<Vec<u8>>,
+        history: Option<Vec<u8>>,
+        log_last_s: u32,
+        reset: ResetCause,
+        stops: Stops,
+        pages_lost: u8,
+        button_held: bool,
+    }
+
+    /// A record missing, as written, edited (its CRC written again) or noise.
+    fn stored<S: Strategy<Value = Vec<u8>> + 'static>(
+        frame: S,
+        fields: &'static [usize],
+        len: usize,
+    ) -> BoxedStrategy<Option<Vec<u8>>> {
+        let frame = frame.boxed();
+        prop_oneof![
+            1 => Just(None),
+            2 => frame.clone().prop_map(Some),
+            4 => (frame, edits(fields)).prop_map(|(f, e)| Some(edited(&f, &e))),
+            1 => any_bytes(len).prop_map(Some),
+        ]
+        .boxed()
+    }
+
+    fn found() -> impl Strategy<Value = Found> {
+        let stop = proptest::option::of(
+            (select(StopKind::ALL.to_vec()), any::<[u32; 3]>()).prop_map(|(k, [p, a, d])| StopInfo::new(k, p, a, d)),
+        );
+        (
+            (
+                stored(settings_frame(), SETTINGS_FIELDS, SettingsRecord::LEN),
+                stored(calibration_frame(), CALIBRATION_FIELDS, CalibrationRecord::LEN),
+                stored(model_frame(), MODEL_FIELDS, ModelRecord::LEN),
+                stored(cabinet_frame(), CABINET_FIELDS, CabinetRecord::LEN),
+                stored(history_frame(), HISTORY_FIELDS, HistoryRecord::LEN),
+            ),
+            (
+                prop_oneof![Just(0u32), any::<u32>(), (0u32..1_000).prop_map(|d| u32::MAX - d)],
+                select(std::vec![ResetCause::Watchdog, ResetCause::BrownOut, ResetCause::Other]),
+                (stop.clone(), stop, any::<bool>()).prop_map(|(earlier, latest, fresh)| Stops {
+                    earlier,
+                    latest,
+                    fresh,
+                }),
+                prop_oneof![Just(0u8), 0u8..4, any::<u8>()],
+                any::<bool>(),
+            ),
+        )
+            .prop_map(
+                |(
+                    (settings, calibration, model, cabinet, history),
+                    (log_last_s, reset, stops, pages_lost, button_held),
+                )| {
+                    Found {
+                        settings,
+                        calibration,
+                        model,
+                        cabinet,
+                        history,
+                        log_last_s,
+                        reset,
+                        stops,
+                        pages_lost,
+                        button_held,
+                    }
+                },
+            )
+    }
+
+    /// The boot of `f`, each record decoded and checked as the flash's restore does it: the
+    /// default for one missing or refused.
+    fn boot_of(f: &Found) -> Boot {
+        let cfg = config().adaptive;
+        let rec = |b: &Option<Vec<u8>>| b.clone().unwrap_or_default();
+        Boot {
+            settings: SettingsRecord::decode(&rec(&f.settings)).ok(),
+            calibration: CalibrationRecord::decode(&rec(&f.calibration)).map_or(TwoPoint::IDENTITY, |r| r.cal),
+            adaptive: Some(ModelRecord::decode(&rec(&f.model)).and_then(|r| r.restore(&cfg)).unwrap_or(cfg)),
+            #[cfg(feature = "holdover")]
+            cabinet: CabinetRecord::decode(&rec(&f.cabinet), &cfg).ok(),
+            history: HistoryRecord::decode(&rec(&f.history)).unwrap_or(HistoryRecord::EMPTY),
+            log_last_s: f.log_last_s,
+            reset: f.reset,
+            stops: f.stops,
+            pages_lost: f.pages_lost,
+            button_held: f.button_held,
+        }
+    }
+
+    /// Every record the app handed over reads back as it was handed over.
+    fn saves_read_back(saves: &[Save]) -> Result<(), TestCaseError> {
+        for s in saves {
+            match s {
+                Save::History(h) | Save::AlarmHistory(h) => {
+                    history_valid(h)?;
+                    prop_assert_eq!(HistoryRecord::decode(&h.encode()), Ok(*h));
+                }
+                Save::Settings(r) => prop_assert_eq!(SettingsRecord::decode(&r.encode()), Ok(*r)),
+                Save::Model(r) => prop_assert_eq!(ModelRecord::decode(&r.encode()), Ok(*r)),
+                Save::Calibration(cal) => {
+                    let r = CalibrationRecord { cal: *cal };
+                    prop_assert_eq!(CalibrationRecord::decode(&r.encode()), Ok(r));
+                }
+                #[cfg(feature = "holdover")]
+                Save::Cabinet(r) => {
+                    let m = CabinetRecord::decode(&r.encode(), &config().adaptive);
+                    prop_assert!(m.is_ok(), "{r:?}: {m:?}");
+                }
+                Save::Log(e) => {
+                    let again = LogEntry::decode(&e.encode()).map(|x| x.encode());
+                    prop_assert_eq!(again, Ok(e.encode()), "{:?}", e);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Samples until a load pinned below 0 °C has its cooling off for good.
+    const FREEZE_SAMPLES: usize = 40;
+
+    fn check(f: &Found) -> Result<(), TestCaseError> {
+        let boot = boot_of(f);
+        let mut b = Bench::new(&boot);
+        let s = *b.app.settings();
+        let (lo, hi) = crate::iface::SETPOINT_RANGE_C;
+        prop_assert!((lo..=hi).contains(&s.setpoint_c), "{s:?}");
+        prop_assert!(LAWS.contains(&s.law), "{s:?}");
+        if boot.settings.is_none() {
+            prop_assert_eq!((s.setpoint_c, s.law, s.seq), (config().setpoint_c, LAWS[0], 0), "the defaults");
+        }
+        // The line that runs is one a calibration gives, and the one `get` shows.
+        let cal = b.app.carrier().config().cal;
+        prop_assert!(plausible_line(&cal), "{cal:?}");
+        let shown = s.calibration();
+        prop_assert!(
+            shown.is_ok_and(|c| (c.gain - cal.gain).abs() < 1e-5 && (c.offset_c - cal.offset_c).abs() < 1e-4),
+            "`get` shows {s:?} ({shown:?}), {cal:?} runs"
+        );
+        let want = *ValidConfig::DEFAULT.get();
+        prop_assert_eq!(b.app.carrier().config().supervisor, want.supervisor, "the build's guards");
+        let offset = b.app.carrier().sensor_offset_c();
+        prop_assert!((0.0..=want.supervisor.sensor.offset.max_comp_c).contains(&offset), "{offset}");
+        b.drain();
+        // `status` and `get` show whatever it restored.
+        for line in ["status", "get"] {
+            let reply = b.send(line);
+            prop_assert!(reply.ends_with("\r\nok\r\n") && reply.is_ascii(), "{line}: {reply}");
+        }
+        // It controls: a duty in 0 … 1, the setpoint in force.
+        b.dither = true;
+        for _ in 0..20 {
+            let out = b.run(1);
+            prop_assert!((0.0..=1.0).contains(&out.step.duty.get()), "{out:?}");
+            prop_assert_eq!(out.step.setpoint_c.0, s.setpoint_c);
+        }
+        // A load at −1 °C: within the calibration's 1.5 °C it reads below the freeze guard's cut,
+        // and the cooling stops (the duty 0 or the supply open) and stays off.
+        b.pinned_c = Some(-1.0);
+        b.load_c = -1.0;
+        let mut on = Vec::new();
+        for k in 0..FREEZE_SAMPLES {
+            let out = b.run(1);
+            if out.step.duty.get() > 0.0 && out.step.supply_enable {
+                on.push((k, out.step.mode, out.step.temp_c.0));
+            }
+        }
+        prop_assert!(
+            on.last().is_none_or(|&(k, _, _)| k < FREEZE_SAMPLES / 2),
+            "cooling a −1 °C load: {on:?} ({cal:?}, offset {offset})"
+        );
+        saves_read_back(&b.saves)?;
+        // The record's time goes on from the log's newest entry: never back before it.
+        for s in &b.saves {
+            if let Save::Log(e) = s {
+                prop_assert!(e.t_s() >= boot.log_last_s, "{e:?} after a log up to {} s", boot.log_last_s);
+            }
+        }
+        Ok(())
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+        #[test]
+        fn the_app_starts_safe_from_arbitrary_stored_records(f in found()) {
+            check(&f)?;
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 20_000, ..ProptestConfig::default() })]
+        #[test]
+        #[ignore = "many cases: CI runs it in release with `-- --ignored`"]
+        fn the_app_starts_safe_from_arbitrary_stored_records_long(f in found()) {
+            check(&f)?;
+        }
+    }
+}
