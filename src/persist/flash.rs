@@ -567,9 +567,10 @@ fn adaptive_from(rec: Result<ModelRecord, LoadStatus>, cfg: &AdaptiveConfig) -> 
 
 /// The cold-chain log ([`crate::persist::log`]) in its own flash region, as a
 /// `sequential-storage` queue that overwrites its oldest entries when full: 16-byte entries,
-/// 32 bytes each in flash with the item header and the L4's 8-byte words, so a 2 KiB page holds
-/// 63 and 30 days of 5-minute intervals (8 640) fill 138 pages; the firmware gives it 248
-/// (496 KiB), ≈ 50 days with the events. The same ECC repair as [`Store`]'s.
+/// 24 bytes each in flash with sequential-storage 8's 8-byte item header (a multiple of the L4's
+/// 8-byte words already), so a 2 KiB page (less its two 8-byte state markers) holds 84 and 30
+/// days of 5-minute intervals (8 640) fill 103 pages; the firmware gives it 248 (496 KiB),
+/// ≈ 70 days of intervals, less the room its events take. The same ECC repair as [`Store`]'s.
 pub struct LogStore<F: NorFlash, E: EccErrors> {
     queue: QueueStorage<EccFlash<F, E>, Cache<Uncached, Uncached, Uncached, ()>>,
     range: Range<u32>,
