@@ -407,15 +407,16 @@ fn takes(s: &str, decimals: usize, lo: f32, hi: f32) -> Option<f32> {
     plain(s).filter(|p| p.decimals <= decimals && p.digits <= 7 && (lo..=hi).contains(&p.value)).map(|p| p.value)
 }
 
-/// `history`'s SINCE_S as the contract takes it: 1–10 whole digits and up to 6 decimals, below
-/// 4 000 000 000, rounded up to whole seconds.
+/// `history`'s SINCE_S as the contract takes it: a plain decimal (`.5` and `3600.` too, not `.`
+/// alone) of up to 10 whole digits and 6 decimals, below 4 000 000 000, rounded up to whole
+/// seconds.
 fn since(s: &str) -> Option<u32> {
     let (whole, frac) = s.split_once('.').unwrap_or((s, ""));
     let ok = |t: &str, n: usize| t.len() <= n && t.bytes().all(|b| b.is_ascii_digit());
-    if whole.is_empty() || !ok(whole, 10) || !ok(frac, 6) || (s.contains('.') && frac.is_empty()) {
+    if whole.len() + frac.len() == 0 || !ok(whole, 10) || !ok(frac, 6) {
         return None;
     }
-    let whole: u64 = whole.parse().ok()?;
+    let whole: u64 = if whole.is_empty() { 0 } else { whole.parse().ok()? };
     (whole < 4_000_000_000).then(|| (whole + u64::from(frac.bytes().any(|b| b != b'0'))) as u32)
 }
 

@@ -220,7 +220,12 @@ impl Command {
                     // The limit is on the value typed, the rounding up after it: `3999999999.5`.
                     Some(s) => match since_seconds(s) {
                         Some((whole, part)) if whole < HISTORY_SINCE_LIMIT_S => whole + u32::from(part),
-                        Some(_) => return refuse("history", Why::Usage("history [SINCE_S], SINCE_S below 4000000000")),
+                        Some(_) => {
+                            return refuse(
+                                "history",
+                                Why::Usage("history [SINCE_S], SINCE_S below 4000000000, at most 6 decimals"),
+                            )
+                        }
                         None => return refuse("history", Why::NotDecimal),
                     },
                 },
@@ -240,21 +245,23 @@ impl Command {
 /// `history`'s SINCE_S must be below this, record s.
 pub const HISTORY_SINCE_LIMIT_S: u32 = 4_000_000_000;
 
-/// `history`'s SINCE_S: a decimal ≥ 0 of up to 10 whole digits, as its whole seconds and whether
-/// a fraction is left (the caller rounds up to the record's whole seconds, which rows are stamped
-/// in, once it has checked the value: rounded first, `3999999999.5`, below the limit, was refused).
-/// Not [`parse_decimal`]: the record's time passes its 7 digits after 116 days of service, and
+/// `history`'s SINCE_S: a plain decimal ≥ 0 as every number is (`3600`, `3600.5`, `.5`,
+/// `3600.`), as its whole seconds and whether a fraction is left (the caller rounds up to the
+/// record's whole seconds, which rows are stamped in, once it has checked the value: rounded
+/// first, `3999999999.5`, below the limit, was refused). One beyond 10 whole digits or 6 decimals
+/// is `u32::MAX`, which the caller refuses with the limits; `None`: not a decimal. Not
+/// [`parse_decimal`]: the record's time passes its 7 digits after 116 days of service, and
 /// `history 10000000` was "not a decimal number".
 fn since_seconds(s: &str) -> Option<(u32, bool)> {
-    let (whole, frac) = match s.split_once('.') {
-        Some((_, "")) => return None,
-        Some((w, f)) => (w, f),
-        None => (s, ""),
-    };
-    if frac.len() > 6 || !frac.bytes().all(|b| b.is_ascii_digit()) {
+    let (whole, frac) = s.split_once('.').unwrap_or((s, ""));
+    if whole.len() + frac.len() == 0 || !whole.bytes().chain(frac.bytes()).all(|b| b.is_ascii_digit()) {
         return None;
     }
-    Some((parse_whole(whole)?, frac.bytes().any(|b| b != b'0')))
+    if frac.len() > 6 {
+        return Some((u32::MAX, false));
+    }
+    let whole = if whole.is_empty() { 0 } else { parse_whole(whole).unwrap_or(u32::MAX) };
+    Some((whole, frac.bytes().any(|b| b != b'0')))
 }
 
 /// How a numeric setting is kept: the range it takes and its step, the decimals it is stored,
@@ -387,10 +394,21 @@ mod tests {
         assert_eq!(Command::parse("history 3999999999"), Ok(Some(Command::History { since_s: 3_999_999_999 })));
         assert_eq!(Command::parse("history 3600.5"), Ok(Some(Command::History { since_s: 3601 })));
         assert_eq!(Command::parse("history 3600.00"), Ok(Some(Command::History { since_s: 3600 })));
-        for bad in ["history -1", "history 1e9", "history 3600.", "history .5", "history 99999999999", "history x"] {
+        // Plain decimals as every number is (docs/interface.md, "Numbers").
+        assert_eq!(Command::parse("history .5"), Ok(Some(Command::History { since_s: 1 })));
+        assert_eq!(Command::parse("history 3600."), Ok(Some(Command::History { since_s: 3600 })));
+        for bad in ["history -1", "history 1e9", "history .", "history 1.2.3", "history 99999999999", "history x"] {
             assert!(Command::parse(bad).is_err(), "{bad}");
         }
-        assert_eq!(refusal("history 4000000000"), "err history: usage: history [SINCE_S], SINCE_S below 4000000000");
+        // Beyond its limits a number is refused with them, not as "not a decimal number".
+        for beyond in ["99999999999", "0.0000001", "4294967296"] {
+            let usage = "err history: usage: history [SINCE_S], SINCE_S below 4000000000, at most 6 decimals";
+            assert_eq!(refusal(&format!("history {beyond}")), usage, "{beyond}");
+        }
+        assert_eq!(
+            refusal("history 4000000000"),
+            "err history: usage: history [SINCE_S], SINCE_S below 4000000000, at most 6 decimals"
+        );
         assert_eq!(Command::parse("identify abort"), Ok(Some(Command::IdentifyAbort)));
         let Ok(Some(Command::Set(SetRequest::Model(m)))) = Command::parse("set model -1.8,0.81;-0.02,-0.01;9") else {
             panic!()
@@ -456,7 +474,7 @@ mod tests {
         for s in ["4000000000", "4000000000.5", "4294967295.5"] {
             assert_eq!(
                 refusal(&format!("history {s}")),
-                "err history: usage: history [SINCE_S], SINCE_S below 4000000000",
+                "err history: usage: history [SINCE_S], SINCE_S below 4000000000, at most 6 decimals",
                 "{s}"
             );
         }
