@@ -45,6 +45,9 @@ pub const MAX_CORRECTION_C: f32 = 1.5;
 /// The lowest gain a fit accepts ([`CalError::ImplausibleGain`] below it).
 pub const MIN_GAIN: f32 = 0.9;
 
+/// The highest gain a fit accepts ([`CalError::ImplausibleGain`] above it).
+pub const MAX_GAIN: f32 = 1.1;
+
 /// A straight-line correction `T_cal = gain · T_meas + offset_c`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -82,10 +85,17 @@ impl TwoPoint {
             return Err(CalError::PointsTooClose);
         }
         let gain = (r1 - r0) / (m1 - m0);
-        if !(gain >= MIN_GAIN && gain <= 1.1) {
+        Self::checked(gain, r0 - gain * m0)
+    }
+
+    /// The line `gain`, `offset_c` if a calibration may apply it: a gain within
+    /// [`MIN_GAIN`]…[`MAX_GAIN`] and a correction of a reading between 0 and 10 °C of at most
+    /// [`MAX_CORRECTION_C`]. [`Self::from_points`]' checks of its fit, and what a stored line
+    /// must pass (`persist::CalibrationRecord::decode`). `gain` and `offset_c` finite.
+    pub const fn checked(gain: f32, offset_c: f32) -> Result<TwoPoint, CalError> {
+        if !(gain >= MIN_GAIN && gain <= MAX_GAIN) {
             return Err(CalError::ImplausibleGain);
         }
-        let offset_c = r0 - gain * m0;
         // The correction gain·t + offset − t is linear in t: its ends bound it on 0…10 °C.
         let at_10 = (gain - 1.0) * 10.0 + offset_c;
         if !(offset_c.abs() <= MAX_CORRECTION_C && at_10.abs() <= MAX_CORRECTION_C) {

@@ -20,7 +20,7 @@
 //! has changed by the next boot, and the estimator starts it at 0 anyway); k the model delay in
 //! samples.
 
-use crate::calib::{TwoPoint, MAX_CORRECTION_C, MIN_GAIN};
+use crate::calib::{TwoPoint, MAX_CORRECTION_C, MAX_GAIN, MIN_GAIN};
 use crate::coldchain::{AlarmKind, ColdChainMonitor, Excursion, Raised, Runs, Side};
 use crate::control::adaptive::{model_from_theta, plausible_model_cold, AdaptiveConfig, ESTIMATED_NB};
 use crate::control::{AdaptiveMode, Controller};
@@ -404,13 +404,11 @@ impl CalibrationRecord {
     /// Parses and range-checks stored bytes.
     pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
         let mut r = open_frame(bytes, Self::LEN, Self::TAG, Self::VERSION)?;
-        let gain = r.f32_in(MIN_GAIN, 1.1)?;
+        let gain = r.f32_in(MIN_GAIN, MAX_GAIN)?;
         let offset_c = r.f32_in(-MAX_CORRECTION_C, MAX_CORRECTION_C)?;
-        // The correction at 10 °C, as `from_points` bounds it (the one at 0 °C is the offset).
-        if !(((gain - 1.0) * 10.0 + offset_c).abs() <= MAX_CORRECTION_C) {
-            return Err(DecodeError::OutOfRange);
-        }
-        Ok(CalibrationRecord { cal: TwoPoint { gain, offset_c } })
+        // The rest of `from_points`' checks: the correction at 10 °C.
+        let cal = TwoPoint::checked(gain, offset_c).map_err(|_| DecodeError::OutOfRange)?;
+        Ok(CalibrationRecord { cal })
     }
 }
 
