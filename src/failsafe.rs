@@ -646,6 +646,13 @@ mod tests {
     use crate::persist::ResetCause;
     use core::fmt::Write;
 
+    /// Flips bit `bit` of the record's words.
+    fn flip(rec: &mut ReasonRecord, bit: usize) {
+        // SAFETY: ReasonRecord is repr(C) plain words and bytes; any bit pattern is valid.
+        let w = unsafe { &mut *(rec as *mut ReasonRecord as *mut [u32; 19]) };
+        w[bit / 32] ^= 1 << (bit % 32);
+    }
+
     /// A boot's marker is the next boot's stop after a watchdog reset only, named by its phase;
     /// the loop's start (0) and noise are no marker.
     #[test]
@@ -832,9 +839,7 @@ mod tests {
         let words = core::mem::size_of::<ReasonRecord>() / 4;
         for bit in 0..words * 32 {
             let mut r = rec;
-            // SAFETY: ReasonRecord is repr(C) plain words and bytes; any bit pattern is valid.
-            let w = unsafe { &mut *(&mut r as *mut ReasonRecord as *mut [u32; 19]) };
-            w[bit / 32] ^= 1 << (bit % 32);
+            flip(&mut r, bit);
             assert_eq!(r.peek(), None, "flip of bit {bit} accepted");
         }
     }
@@ -1026,9 +1031,7 @@ mod tests {
                 }
                 Plant::Flipped(info, bit) => {
                     rec.write(info);
-                    // SAFETY: ReasonRecord is repr(C) plain words and bytes; any bit pattern is valid.
-                    let w = unsafe { &mut *(rec as *mut ReasonRecord as *mut [u32; 19]) };
-                    w[bit / 32] ^= 1 << (bit % 32);
+                    flip(rec, *bit);
                 }
                 Plant::Framed { kind, text_len } => {
                     rec.magic = MAGIC;
@@ -1087,7 +1090,6 @@ mod tests {
         }
 
         fn check(ram: &ResetRecords, x: &StopInfo) -> Result<(), TestCaseError> {
-            let _ = (ram.latest.peek(), ram.earlier.peek());
             stops_whole(&ram.stops(), ram)?;
             for cause in CAUSES {
                 let mut r = *ram;

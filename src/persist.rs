@@ -1255,8 +1255,8 @@ mod tests {
     }
 
     /// Writes the CRC of a frame's bytes before its last four into them: a frame edited by a
-    /// test, framed again so that only the edit is checked.
-    fn reframe(frame: &mut [u8]) {
+    /// test, framed again so that only the edit is checked (also `persist::fuzz`'s).
+    pub(crate) fn reframe(frame: &mut [u8]) {
         let n = frame.len() - 4;
         let crc = crc32(&frame[..n]);
         frame[n..].copy_from_slice(&crc.to_le_bytes());

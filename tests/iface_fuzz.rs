@@ -629,7 +629,7 @@ fn check_refusal_reason(line: &str, what: &str, why: &str, commissioning: bool) 
 }
 
 /// One line through one board, every check that needs no twin; how it ended.
-fn one_line(b: &mut Board, line: &str) -> Result<(Ended, Kept, Kept, Vec<Save>), TestCaseError> {
+fn one_line(b: &mut Board, line: &str) -> Result<(Ended, Vec<Save>), TestCaseError> {
     b.drain();
     let commissioning = b.observe().contains("controller=commission");
     let before = kept(&b.app);
@@ -656,7 +656,7 @@ fn one_line(b: &mut Board, line: &str) -> Result<(Ended, Kept, Kept, Vec<Save>),
             check_refusal_reason(line, what, why, commissioning)?;
         }
     }
-    Ok((ended, before, after, new))
+    Ok((ended, new))
 }
 
 /// What reaches the board: lines and samples.
@@ -696,7 +696,7 @@ fn twins(start: Start, ops: &[Op]) -> Result<(), TestCaseError> {
             }
             Op::Again(_) => {}
             Op::Line(line) => {
-                let (ended, _, _, new) = one_line(&mut a, line)?;
+                let (ended, new) = one_line(&mut a, line)?;
                 if !matches!(ended, Ended::Err(..)) {
                     let (_, ra) = a.send("status");
                     let (_, reply_b) = b.send(line);

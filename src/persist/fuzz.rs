@@ -17,6 +17,7 @@
 //! --test persist -- --ignored`).
 
 use super::log::{write_csv_row, LogEntry, ENTRY_LEN};
+use super::tests::reframe;
 use super::*;
 use crate::coldchain::EXCURSION_LOG;
 use crate::control::adaptive::SelfTuning;
@@ -125,13 +126,6 @@ pub(crate) fn edits(fields: &'static [usize]) -> impl Strategy<Value = Vec<Edit>
     vec(edit(fields), 1..=4)
 }
 
-/// Writes the CRC of a frame's bytes before its last four into them.
-fn reframe(frame: &mut [u8]) {
-    let n = frame.len() - 4;
-    let crc = crc32(&frame[..n]);
-    frame[n..].copy_from_slice(&crc.to_le_bytes());
-}
-
 /// `frame` with `edits` in its body (everything before the CRC) and its CRC written again.
 pub(crate) fn edited(frame: &[u8], edits: &[Edit]) -> Vec<u8> {
     let mut b = frame.to_vec();
@@ -177,15 +171,24 @@ fn configs() -> [AdaptiveConfig; 2] {
 // ---------------------------------------------------------------------------------------------
 // The model records.
 
+/// A delay, mostly in range.
+fn delay() -> impl Strategy<Value = u8> {
+    prop_oneof![4 => 1..=MAX_K as u8, 1 => any::<u8>()]
+}
+
+/// Moves a model's θ (a1, a2, b…) by the fractions `d` in −1…1: A by up to 0.01 % (its poles
+/// are near 1), B by up to 30 %.
+fn jitter(theta: &mut [f32], d: Vec<f32>) {
+    for (i, (x, d)) in theta.iter_mut().zip(d).enumerate() {
+        *x += d * x.abs() * if i < 2 { 1e-4 } else { 0.3 };
+    }
+}
+
 /// A model record near a carrier's model, mostly with a delay in range.
 fn model_record() -> impl Strategy<Value = ModelRecord> {
-    let k = prop_oneof![4 => 1..=MAX_K as u8, 1 => any::<u8>()];
-    (select(std::vec![START_MODEL_HTER1, START_MODEL_HTER2]), vec(-1f32..1.0, 6), k).prop_map(|(m, d, k)| {
+    (select(std::vec![START_MODEL_HTER1, START_MODEL_HTER2]), vec(-1f32..1.0, 6), delay()).prop_map(|(m, d, k)| {
         let mut r = ModelRecord::from_model(&m).expect("a second-order start model");
-        // A by up to 0.01 % (its poles are near 1), B by up to 30 %.
-        for (i, (x, d)) in r.theta.iter_mut().zip(d).enumerate() {
-            *x += d * x.abs() * if i < 2 { 1e-4 } else { 0.3 };
-        }
+        jitter(&mut r.theta, d);
         ModelRecord { k, ..r }
     })
 }
@@ -226,12 +229,9 @@ fn check_model(bytes: &[u8]) -> Result<(), TestCaseError> {
 
 /// A cabinet record near a carrier's model, mostly with a delay in range.
 pub(crate) fn cabinet_frame() -> impl Strategy<Value = Vec<u8>> {
-    let k = prop_oneof![4 => 1..=MAX_K as u8, 1 => any::<u8>()];
-    (vec(-1f32..1.0, 4), k).prop_map(|(d, k)| {
+    (vec(-1f32..1.0, 4), delay()).prop_map(|(d, k)| {
         let mut r = CabinetRecord::from_model(&START_MODEL_HTER1).expect("second order");
-        for (i, (x, d)) in r.theta.iter_mut().zip(d).enumerate() {
-            *x += d * x.abs() * if i < 2 { 1e-4 } else { 0.3 };
-        }
+        jitter(&mut r.theta, d);
         CabinetRecord { k, ..r }.encode().to_vec()
     })
 }
