@@ -43,6 +43,9 @@ pub fn needs_attention(kind: EventKind) -> bool {
                 // a panic or a fault. Quiet, a control stall was no alarm where the same hang
                 // caught by the watchdog was one.
                 | EventKind::BoardFault(_)
+                // A stored record refused at boot: the carrier runs a default in its place (a
+                // calibration or a setpoint set on it is not the one in force).
+                | EventKind::RecordRefused(_)
         )
 }
 
@@ -198,9 +201,9 @@ mod tests {
     }
 
     #[test]
-    fn exactly_the_faults_a_watchdog_bite_and_a_fail_safe_stop_ask_for_attention() {
+    fn exactly_the_faults_a_watchdog_bite_a_fail_safe_stop_and_a_refused_record_ask_for_attention() {
         use crate::failsafe::StopKind;
-        use crate::persist::ResetCause;
+        use crate::persist::{Record, ResetCause};
         use EventKind::*;
         let attention = [
             SensorOpen,
@@ -222,6 +225,11 @@ mod tests {
             BoardFault(StopKind::Nmi),
             BoardFault(StopKind::UnexpectedInterrupt),
             BoardFault(StopKind::ControlStall),
+            RecordRefused(Record::Model),
+            RecordRefused(Record::Calibration),
+            RecordRefused(Record::History),
+            RecordRefused(Record::Settings),
+            RecordRefused(Record::Cabinet),
         ];
         for k in EventKind::ALL {
             assert_eq!(needs_attention(k), attention.contains(&k), "{k:?}");

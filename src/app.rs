@@ -88,6 +88,9 @@ pub struct Boot {
     pub stops: Stops,
     /// Flash pages the boot found torn and repaired.
     pub pages_lost: u8,
+    /// The stored records the boot refused ([`crate::persist::flash::Restored::refused`]), as
+    /// [`crate::persist::Record::bit`]s: each runs the build's default instead.
+    pub refused: u8,
     /// The acknowledge button was held through the reset: a technician's service reset if the
     /// reset was the reset button's ([`Self::service_reset`]), chance otherwise.
     pub button_held: bool,
@@ -107,6 +110,7 @@ impl Boot {
         reset: ResetCause::Other,
         stops: Stops { earlier: None, latest: None, fresh: false },
         pages_lost: 0,
+        refused: 0,
         button_held: false,
     };
 
@@ -150,18 +154,31 @@ impl Boot {
         self.button_held && !self.stops.fresh && self.reset == ResetCause::Other
     }
 
+    /// The records this boot refused that the stored history does not have as refused
+    /// ([`HistoryRecord::refused`]), as [`crate::persist::Record::bit`]s: each one is reported,
+    /// as [`EventKind::RecordRefused`] on the log and with the alarm indicator's latch, once. A
+    /// record still refused at the next boot is not reported again (it stays as it is in flash:
+    /// removed, it was gone for good should the firmware that wrote it come back); one that
+    /// loads again and is refused later is.
+    pub fn newly_refused(&self) -> u8 {
+        self.refused & !self.history.refused()
+    }
+
     /// Starts the step and the record from what this boot found: counts the boot in the record
     /// ([`Recorder::note_boot`]) and the pages it repaired, tells the step why the MCU started
     /// and how the previous boot stopped (its first sample reports both), and resumes what the
-    /// history keeps ([`Carrier::resume`]: the sensor offset, a shorted SSR). Returns the history
-    /// to store ([`Self::history_save`]). What the firmware's control task and [`App::new`] both
-    /// call, before the first sample.
+    /// history keeps ([`Carrier::resume`]: the sensor offset, a shorted SSR), and keeps the
+    /// records it refused in the history, the latch set for a new refusal
+    /// ([`Recorder::note_refused`], [`Self::newly_refused`]). Returns the history to store
+    /// ([`Self::history_save`]; the indicator starts from its latch). What the firmware's
+    /// control task and [`App::new`] both call, before the first sample.
     pub fn resume<C: crate::control::Controller>(
         &self,
         carrier: &mut Carrier<C>,
         recorder: &mut Recorder,
     ) -> HistoryRecord {
         carrier.note_reset(self.reset);
+        recorder.note_refused(self.refused);
         let mut history = recorder.note_boot(self.reset, &self.stops);
         if self.service_reset() {
             history = recorder.note_service();
@@ -481,6 +498,15 @@ impl App {
                 value,
             }));
         }
+        // The refusals before the pages lost, which the history counts if the outbox drops them.
+        for r in crate::persist::Record::ALL {
+            if boot.newly_refused() & r.bit() != 0 {
+                let _ = app_saves.push_back(Save::Log(LogEntry::Event {
+                    t_s: record_secs(base_ms),
+                    kind: EventKind::RecordRefused(r),
+                }));
+            }
+        }
         for _ in 0..boot.pages_lost {
             let _ = app_saves
                 .push_back(Save::Log(LogEntry::Event { t_s: record_secs(base_ms), kind: EventKind::FlashPageLost }));
@@ -491,7 +517,7 @@ impl App {
             settings,
             adaptive,
             recorder,
-            annunciator: Annunciator::restored(boot.history.unacknowledged()),
+            annunciator: Annunciator::restored(history.unacknowledged()),
             cadence: ModelCadence::new(cfg.model_save_samples),
             intervals: IntervalLog::new(),
             base_ms,

@@ -84,13 +84,22 @@ pub enum EventKind {
     /// the record ([`crate::persist::PendingSaves`]) at the newest lost entry's time, before
     /// the entries it kept, so the record shows where its hole is.
     LogEntriesLost,
+    /// A record stored in flash failed this firmware's checks at boot, though its storage CRC
+    /// passed: a record an earlier firmware wrote under looser checks (the usual cause, after an
+    /// update), or one a newer firmware wrote in a layout this one cannot read (after going
+    /// back), or a corruption the CRC missed. The board runs the build's default in its place
+    /// (the calibration constant or none, the default settings, the start model, an empty
+    /// history) and asks for a person: a calibration or a setpoint set on this carrier is not
+    /// the one in force. Reported once per refusal ([`crate::persist::HistoryRecord::refused`]);
+    /// the record stays in flash as it is until a new one of its kind replaces it.
+    RecordRefused(crate::persist::Record),
 }
 
 impl EventKind {
     /// Every kind, in declaration order (each reset cause and fail-safe stop its own kind).
-    pub const ALL: [EventKind; 30] = {
+    pub const ALL: [EventKind; 35] = {
         use crate::failsafe::StopKind;
-        use crate::persist::ResetCause;
+        use crate::persist::{Record, ResetCause};
         [
             EventKind::SensorOpen,
             EventKind::SensorShort,
@@ -122,6 +131,11 @@ impl EventKind {
             EventKind::SupplySwitchShorted,
             EventKind::ReferenceOutOfRange,
             EventKind::LogEntriesLost,
+            EventKind::RecordRefused(Record::Model),
+            EventKind::RecordRefused(Record::Calibration),
+            EventKind::RecordRefused(Record::History),
+            EventKind::RecordRefused(Record::Settings),
+            EventKind::RecordRefused(Record::Cabinet),
         ]
     };
 
@@ -180,6 +194,11 @@ impl EventKind {
             EventKind::SupplySwitchShorted => "supply_switch_shorted",
             EventKind::ReferenceOutOfRange => "reference_out_of_range",
             EventKind::LogEntriesLost => "log_entries_lost",
+            EventKind::RecordRefused(crate::persist::Record::Model) => "record_refused_model",
+            EventKind::RecordRefused(crate::persist::Record::Calibration) => "record_refused_calibration",
+            EventKind::RecordRefused(crate::persist::Record::History) => "record_refused_history",
+            EventKind::RecordRefused(crate::persist::Record::Settings) => "record_refused_settings",
+            EventKind::RecordRefused(crate::persist::Record::Cabinet) => "record_refused_cabinet",
         }
     }
 
@@ -214,6 +233,7 @@ impl EventKind {
             EventKind::SupplySwitchShorted => 22,
             EventKind::ReferenceOutOfRange => 23,
             EventKind::LogEntriesLost => 24,
+            EventKind::RecordRefused(r) => 0x50 + u32::from(r as u8),
         }
     }
 }
@@ -313,12 +333,18 @@ mod tests {
         for k in crate::failsafe::StopKind::ALL {
             assert!(EventKind::ALL.contains(&EventKind::BoardFault(k)), "{k:?}");
         }
+        for r in crate::persist::Record::ALL {
+            assert!(EventKind::ALL.contains(&EventKind::RecordRefused(r)), "{r:?}");
+        }
     }
 
     #[test]
-    fn board_fault_names_follow_the_stop_kinds() {
+    fn board_fault_and_refusal_names_follow_their_kinds() {
         for k in crate::failsafe::StopKind::ALL {
             assert_eq!(EventKind::BoardFault(k).name(), format!("board_fault_{}", k.name()));
+        }
+        for r in crate::persist::Record::ALL {
+            assert_eq!(EventKind::RecordRefused(r).name(), format!("record_refused_{}", r.name()));
         }
     }
 

@@ -515,6 +515,46 @@ impl ResetCause {
     }
 }
 
+/// The records the board keeps in flash, each under its own key (its discriminant,
+/// [`crate::persist::flash::key`]). What a boot refused of them is on the record
+/// ([`HistoryRecord::refused`], [`crate::event::EventKind::RecordRefused`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Record {
+    /// The self-tuner's model ([`ModelRecord`]).
+    Model = 1,
+    /// The calibration of an older firmware or of the build ([`CalibrationRecord`]).
+    Calibration = 2,
+    /// The cold-chain history ([`HistoryRecord`]).
+    History = 3,
+    /// The interface's settings ([`SettingsRecord`]).
+    Settings = 4,
+    /// The holdover's cabinet model ([`CabinetRecord`]).
+    Cabinet = 5,
+}
+
+impl Record {
+    /// Every record, in key order.
+    pub const ALL: [Record; 5] =
+        [Record::Model, Record::Calibration, Record::History, Record::Settings, Record::Cabinet];
+
+    /// Its bit in a set of records ([`HistoryRecord::refused`], [`crate::app::Boot::refused`]).
+    pub const fn bit(self) -> u8 {
+        1 << (self as u8 - 1)
+    }
+
+    /// Stable snake_case name (the event's suffix).
+    pub fn name(self) -> &'static str {
+        match self {
+            Record::Model => "model",
+            Record::Calibration => "calibration",
+            Record::History => "history",
+            Record::Settings => "settings",
+            Record::Cabinet => "cabinet",
+        }
+    }
+}
+
 /// Excursions kept in a [`HistoryRecord`] (the newest).
 pub const HISTORY_EXCURSIONS: usize = 4;
 
@@ -586,8 +626,8 @@ impl SensorOffset {
 /// detail u32); the carried byte (bit 0 the indicator's latch, bits 1–7 the
 /// [`SensorOffset`]'s steps); the alarms' runs (4 × u32, [`Runs`]); the faults byte (bit 0 the
 /// SSR found shorted, [`HistoryRecord::ssr_shorted`]; bit 1 the newest excursion under way at
-/// the last sample, [`HistoryRecord::open_excursion`], which v6 records written before it leave
-/// at 0); CRC-32. Excursion times are
+/// the last sample, [`HistoryRecord::open_excursion`]; bits 2–6 the records the boot refused,
+/// [`HistoryRecord::refused`]; v6 records written before these bits leave them at 0); CRC-32. Excursion times are
 /// on the record's own clock: seconds of recorded time since the first boot (each boot's samples
 /// start where the previous boot's record ended), so they stay in order across power cycles.
 ///
@@ -626,9 +666,11 @@ pub struct HistoryRecord {
     pub flash_pages_lost: u16,
     /// The newest fail-safe stop.
     pub last_stop: Option<LastStop>,
-    /// The alarm indicator's latch ([`Self::unacknowledged`]) and the SSR's short
-    /// ([`Self::ssr_shorted`]), as bits 0 and 1 of one byte: a `bool` more made the record 4
-    /// bytes longer in RAM, and the copies of it 312 B more of the firmware's flash.
+    /// The alarm indicator's latch ([`Self::unacknowledged`]), the SSR's short
+    /// ([`Self::ssr_shorted`]) and the newest excursion under way ([`Self::open_excursion`]) as
+    /// bits 0, 1 and 2 of one byte, the records refused ([`Self::refused`]) in bits 3–7: a `bool`
+    /// more made the record 4 bytes longer in RAM, and the copies of it 312 B more of the
+    /// firmware's flash.
     flags: u8,
     /// The sensor offset the step subtracted ([`Recorder::note_carried`] stores every change at
     /// once; the next boot subtracts it again from its first sample,
@@ -646,6 +688,10 @@ const UNACKNOWLEDGED: u8 = 1;
 const SSR_SHORTED: u8 = 2;
 /// The newest excursion was under way at the last sample ([`HistoryRecord::open_excursion`]).
 const EXCURSION_OPEN: u8 = 4;
+/// The records the last boot refused ([`HistoryRecord::refused`]), one bit each
+/// ([`Record::bit`]) from bit 3 up.
+const REFUSED: u8 = 0xF8;
+const REFUSED_SHIFT: u8 = 3;
 
 /// [`HistoryRecord`]'s flags for the latch and the short.
 fn flags(unacknowledged: bool, ssr_shorted: bool) -> u8 {
@@ -765,9 +811,20 @@ impl HistoryRecord {
         self
     }
 
-    /// This record with the latch and the short as given (the open excursion's bit kept).
+    /// The stored records the boot that wrote this history refused, as [`Record::bit`]s: a record
+    /// it could not use (a firmware that checks more than the one that wrote it, a corruption
+    /// its CRC missed), for which it ran the build's default. The next boot reports only a record
+    /// refused that this set does not have ([`crate::app::Boot::newly_refused`]): one refusal is
+    /// one event and one alarm, not one at every boot. Stored in the faults byte's bits 2–6,
+    /// which v6 readers before it ignore.
+    pub fn refused(&self) -> u8 {
+        self.flags >> REFUSED_SHIFT
+    }
+
+    /// This record with the latch and the short as given (the open excursion's bit and the
+    /// refused records kept).
     pub fn with_carried(mut self, unacknowledged: bool, ssr_shorted: bool) -> Self {
-        self.flags = flags(unacknowledged, ssr_shorted) | self.flags & EXCURSION_OPEN;
+        self.flags = flags(unacknowledged, ssr_shorted) | self.flags & (EXCURSION_OPEN | REFUSED);
         self
     }
 
@@ -893,7 +950,7 @@ impl HistoryRecord {
         for r in self.runs {
             w.u32(r);
         }
-        w.put(&[(self.flags & (SSR_SHORTED | EXCURSION_OPEN)) >> 1]);
+        w.put(&[(self.flags & !UNACKNOWLEDGED) >> 1]);
         w.finish();
         buf
     }
@@ -979,8 +1036,8 @@ impl HistoryRecord {
             *run = r.u32();
         }
         // A v5 frame ends here: no short known. Bit 0 the SSR's short, bit 1 the newest
-        // excursion under way; the other bits are free.
-        rec.flags |= (r.u8() & 3) << 1;
+        // excursion under way, bits 2–6 the records refused; bit 7 is free.
+        rec.flags |= (r.u8() & 0x7F) << 1;
         Ok(rec)
     }
 }
@@ -1099,6 +1156,19 @@ impl Recorder {
         self.history()
     }
 
+    /// Keeps the stored records this boot refused (`refused`, [`Record::bit`]s) as the history's
+    /// [`HistoryRecord::refused`], and sets the alarm indicator's latch if one of them is not
+    /// among those the stored history had (a refusal nobody has seen yet). What a boot calls
+    /// first ([`crate::app::Boot::resume`]): the history [`Self::note_boot`] returns has them. A
+    /// refusal is not stored at once: lost to a power cut before the next store, the next boot
+    /// finds it new again and reports it then.
+    pub fn note_refused(&mut self, refused: u8) {
+        if refused & !self.boot.refused() != 0 {
+            self.boot.flags |= UNACKNOWLEDGED;
+        }
+        self.boot.flags = self.boot.flags & !REFUSED | refused << REFUSED_SHIFT;
+    }
+
     /// Counts a flash page the boot found damaged and repaired; returns the history to store.
     pub fn note_flash_page_lost(&mut self) -> HistoryRecord {
         self.boot.flash_pages_lost = self.boot.flash_pages_lost.saturating_add(1);
@@ -1155,7 +1225,7 @@ impl Recorder {
         let moved = self.boot.sensor_offset != offset;
         let found = shorted && !self.boot.ssr_shorted();
         if self.boot.unacknowledged() != latched || moved || found {
-            self.boot.flags = flags(latched, shorted) | self.boot.flags & EXCURSION_OPEN;
+            self.boot.flags = flags(latched, shorted) | self.boot.flags & (EXCURSION_OPEN | REFUSED);
             self.boot.sensor_offset = offset;
             self.since_save = 0;
             r.save_due = true;
@@ -2083,6 +2153,46 @@ mod tests {
             let again = next.note_service();
             assert_eq!(again, serviced.with_sensor_offset(SensorOffset::NONE));
         }
+    }
+
+    /// The records a boot refused ride in the faults byte's bits 2–6, through every store of the
+    /// boot (the latch, the short and the sensor offset changing around them) and a service
+    /// reset; a v6 record written before them reads none, and a v5 one too.
+    #[test]
+    fn the_refused_records_are_stored_with_the_history() {
+        let both = Record::Calibration.bit() | Record::Cabinet.bit();
+        let mut rec = Recorder::new(HistoryRecord::EMPTY, 360);
+        rec.note_refused(both);
+        let h = rec.note_boot(ResetCause::BrownOut, &crate::failsafe::Stops::default());
+        assert_eq!(h.refused(), both);
+        assert!(h.unacknowledged(), "a refusal not stored before latches");
+        let bytes = h.encode();
+        assert_eq!(bytes[HistoryRecord::LEN - 5], both << 2, "bits 2–6 of the faults byte");
+        assert_eq!(HistoryRecord::decode(&bytes), Ok(h));
+        let mut before = bytes;
+        before[HistoryRecord::LEN - 5] = 0;
+        crate::persist::tests::reframe(&mut before);
+        assert_eq!(HistoryRecord::decode(&before).map(|h| h.refused()), Ok(0), "a v6 record from before");
+        let v5: [u8; HistoryRecord::LEN_V5] = older_history(&bytes, 5);
+        assert_eq!(HistoryRecord::decode(&v5).map(|h| h.refused()), Ok(0));
+        // Kept through the latch, the short and the offset as they change, and a service reset.
+        let mut out = rec.push(0, 4.0);
+        rec.note_carried(&mut out, false, SensorOffset::from_c(0.3), true);
+        let mut out = rec.push(10_000, 4.0);
+        rec.note_carried(&mut out, true, SensorOffset::NONE, true);
+        assert_eq!(rec.history().refused(), both);
+        assert_eq!(rec.note_service().refused(), both);
+        assert_eq!(rec.history().with_carried(false, false).refused(), both);
+        // The same refusals again: no latch; one fewer: none either, and it is forgotten.
+        for refused in [both, Record::Calibration.bit()] {
+            let mut next = Recorder::new(h.with_carried(false, false), 360);
+            next.note_refused(refused);
+            let again = next.history();
+            assert_eq!((again.refused(), again.unacknowledged()), (refused, false));
+        }
+        let mut next = Recorder::new(h.with_carried(false, false), 360);
+        next.note_refused(both | Record::Model.bit());
+        assert!(next.history().unacknowledged(), "one more is new");
     }
 
     #[test]

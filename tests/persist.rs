@@ -689,6 +689,46 @@ fn a_stored_cabinet_model_is_checked_on_restore_as_an_upload_is() {
     assert_eq!(block_on(store.load_cabinet(&gpc())), Ok(good));
 }
 
+/// What a boot refused, read from the flash: a CRC-valid record that fails this firmware's
+/// checks, not a missing or a good one; the calibration record only while no settings are
+/// stored (the settings' calibration runs otherwise). And the build's calibration constant is
+/// stored while the record does not hold it, so that the next image without it keeps it.
+#[test]
+fn the_boot_knows_what_it_refused_and_stores_the_builds_calibration_once() {
+    use hter::persist::flash::{key, restore, restore_records};
+    use hter::persist::{CalibrationRecord, Record};
+    let mut store = open(MockFlash::<L4_PAGE>::blank(4), 4);
+    let mut log = open_log(MockFlash::<L4_PAGE>::blank(4), 4);
+    let constant = TwoPoint { gain: 1.013, offset_c: -0.42 };
+    let r = block_on(restore_records(&mut store, Some(&gpc())));
+    assert_eq!(r.refused(), 0, "nothing stored, nothing refused");
+    assert_eq!(r.calibration_to_store(constant), Some(constant));
+    // An older firmware's calibration (its bound was 10 °C of offset) and a model whose A has a
+    // pole at 1.2; a good history.
+    let old = CalibrationRecord { cal: TwoPoint { gain: 0.9, offset_c: 7.5 } }.encode();
+    block_on(store.store(key::CALIBRATION, &old)).unwrap();
+    block_on(store.save_model(&ModelRecord { theta: [-2.2, 1.2, -0.03, -0.03, 0.0, 0.0], k: 5 })).unwrap();
+    block_on(store.save_history(&HistoryRecord::EMPTY)).unwrap();
+    let mut store = reboot(store, 4);
+    let r = block_on(restore_records(&mut store, Some(&gpc())));
+    assert_eq!(r.refused(), Record::Calibration.bit() | Record::Model.bit());
+    assert_eq!(r.boot(ResetCause::Other, Default::default()).refused, r.refused());
+    assert_eq!(r.calibration_to_store(constant), Some(constant), "a refused record is no calibration");
+    // Settings stored: their calibration runs, the record's refusal changes nothing.
+    block_on(store.save_settings(&settings(1, 4.0, Law::Gpc))).unwrap();
+    let r = block_on(restore(&mut store, &mut log, Some(gpc())));
+    assert_eq!(r.refused(), Record::Model.bit());
+    // The constant stored: found at the next boot, not stored again.
+    block_on(store.save_calibration(constant)).unwrap();
+    let mut store = reboot(store, 4);
+    let r = block_on(restore_records(&mut store, Some(&gpc())));
+    assert_eq!((r.calibration.value, r.calibration.status), (constant, LoadStatus::Restored));
+    assert_eq!(r.refused(), Record::Model.bit());
+    assert_eq!(r.calibration_to_store(constant), None);
+    let other = TwoPoint { gain: 0.996, offset_c: 0.2 };
+    assert_eq!(r.calibration_to_store(other), Some(other), "a new constant replaces it");
+}
+
 fn entry(i: u32) -> LogEntry {
     let c = 4.0 + (i % 50) as f32 * 0.01;
     LogEntry::Interval {

@@ -201,6 +201,12 @@ async fn main(spawner: Spawner) {
         // No settings stored: this build's calibration constant, if it has one.
         if let Some(cal) = config::CALIBRATION {
             boot.calibration = cal;
+            // The constant, not the record, runs: a record refused changes nothing.
+            boot.refused &= !hter::persist::Record::Calibration.bit();
+            // Stored once, for the images after this one built without it.
+            if let Some(cal) = restored.calibration_to_store(cal) {
+                persist::request(persist::Save::Calibration(cal));
+            }
         }
     }
     spawner.spawn(sample(b.analog).unwrap());

@@ -240,7 +240,7 @@ pub fn verdict(r: &monitor_cmd::Report, holes: usize) -> (&'static str, &'static
 /// recoveries are not.
 fn is_reset_or_fault(e: &Event) -> bool {
     let n = e.name.to_ascii_lowercase();
-    const PREFIXES: [&str; 11] = [
+    const PREFIXES: [&str; 12] = [
         "restart",
         "board_fault",
         "sensor_",
@@ -249,6 +249,7 @@ fn is_reset_or_fault(e: &Event) -> bool {
         "reference_out_of_range",
         "flash_page_lost",
         "log_entries_lost",
+        "record_refused",
         "controller_non_finite",
         "freeze_guard_tripped",
         "lid_open",
@@ -642,6 +643,29 @@ fn fault_meaning(name: &str) -> Option<(String, bool)> {
                 false,
             )
         }
+        r if r.starts_with("record_refused_") => {
+            let what = match &r["record_refused_".len()..] {
+                "calibration" => {
+                    "the stored calibration of the temperature probe, so the controller reads without \
+                        it (up to 1.5 °C off) until it is calibrated again"
+                }
+                "settings" => {
+                    "the stored settings (setpoint, controller, calibration), so the controller runs \
+                        its defaults until they are set again"
+                }
+                "history" => {
+                    "the stored cold-chain summary, so its counts start again here (the entries of \
+                        this record are intact)"
+                }
+                "model" => "the cooling model learnt on this carrier, so the controller learns it again",
+                "cabinet" => {
+                    "the cabinet model from commissioning, so the holdover estimate uses the built-in \
+                        one until the carrier is commissioned again"
+                }
+                _ => return None,
+            };
+            (format!("the controller could not use {what} (most often after a firmware change)"), true)
+        }
         _ => return None,
     };
     Some(if service { (format!("{text}; the carrier needs a service check"), true) } else { (text, false) })
@@ -777,6 +801,9 @@ mod tests {
         assert!(text("log_entries_lost:1").starts_with("1 record entry was lost"));
         assert!(text("log_entries_lost").starts_with("record entries were lost"));
         assert!(text("ssr_stuck_on").ends_with("; the carrier needs a service check"));
+        assert!(text("record_refused_calibration").contains("reads without it (up to 1.5 °C off)"));
+        assert!(text("record_refused_calibration").ends_with("; the carrier needs a service check"));
+        assert_eq!(fault_meaning("record_refused_nothing"), None);
         assert_eq!(fault_meaning("no_such_event"), None);
     }
 

@@ -408,6 +408,59 @@ fn the_reset_button_keeps_a_shorted_ssr_and_a_service_reset_forgets_it() {
     assert_eq!(history.lines().filter(|l| l.ends_with(",ssr_stuck_on")).count(), 2, "{history}");
 }
 
+/// A firmware update over a record it refuses: the calibration record an older firmware wrote
+/// under its looser bound (gain 0.9, offset 7.5 °C; this firmware holds a calibration to 1.5 °C
+/// of correction between 0 and 10 °C), CRC-valid. The board runs without it, `status` shows the
+/// alarm and `history` the refusal once; acknowledged, a restart neither reports it again nor
+/// lights the indicator. Calibrated again over the interface, the settings' calibration runs and
+/// the old record's refusal is forgotten.
+#[test]
+fn a_record_the_new_firmware_refuses_is_on_the_record_once() {
+    use hter::persist::{flash::key, CalibrationRecord};
+    let mut b = virtual_hter1(hal_sim::plant::Load::Full, 28.0, hal_sim::scenario::Start::Holding(4.0));
+    let old = CalibrationRecord { cal: hter::calib::TwoPoint { gain: 0.9, offset_c: 7.5 } }.encode();
+    assert!(CalibrationRecord::decode(&old).is_err(), "this firmware refuses it");
+    b.store_raw(key::CALIBRATION, &old).unwrap();
+    let refusals = |b: &mut hal_sim::sim::virtual_board::VirtualBoard| {
+        b.request("history").lines().filter(|l| l.ends_with(",record_refused_calibration")).count()
+    };
+    b.reset(false);
+    b.step().unwrap();
+    assert_eq!(board_status(&mut b, "alarm"), "unacknowledged");
+    assert_eq!(b.app().carrier().config().cal, hter::calib::TwoPoint::IDENTITY, "not run");
+    // Past the write gate's hold-off: the event and the history are in flash.
+    for _ in 0..30 {
+        b.step().unwrap();
+    }
+    assert_eq!(refusals(&mut b), 1);
+    assert!(b.request("ack").ends_with("ok\r\n"));
+    for _ in 0..30 {
+        b.step().unwrap();
+    }
+    for _ in 0..2 {
+        b.reset(false);
+        for _ in 0..30 {
+            b.step().unwrap();
+        }
+        assert_eq!(board_status(&mut b, "alarm"), "off", "refused again, reported once");
+        assert_eq!(refusals(&mut b), 1);
+    }
+    // Calibrated again: the settings carry it, the old record no longer matters.
+    assert!(b.request("set cal_ice 0.1,0").ends_with("ok\r\n"));
+    for _ in 0..30 {
+        b.step().unwrap();
+    }
+    b.reset(false);
+    for _ in 0..30 {
+        b.step().unwrap();
+    }
+    // (0.1 → 0, 25 → 25.)
+    let cal = b.app().carrier().config().cal;
+    assert!((cal.gain - 25.0 / 24.9).abs() < 1e-6 && (cal.offset_c + 0.1 * 25.0 / 24.9).abs() < 1e-6, "{cal:?}");
+    assert_eq!(board_status(&mut b, "alarm"), "off");
+    assert_eq!(refusals(&mut b), 1);
+}
+
 /// `--fault` rehearses a failure over the interface, as an engineer would before the field: a
 /// relay that shorts after an hour on a board with the module-side sense. `status` shows limp
 /// home and the alarm, `history` the event within two samples of the short. A hung control loop is

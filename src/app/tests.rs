@@ -1621,6 +1621,69 @@ fn a_stored_calibration_that_hides_a_freezing_load_is_not_run() {
     assert_eq!(b.app.carrier().config().cal, TwoPoint::IDENTITY);
 }
 
+/// A stored record the boot refuses (here the calibration record an older firmware wrote under
+/// its looser bound, the one above) is reported once: a `record_refused_calibration` event on the
+/// log and the indicator latched, the refusal kept in the history. The next boots that refuse it
+/// again report nothing more, and once acknowledged the indicator stays off; a boot that loads a
+/// good record forgets the refusal, and a record refused after it is reported again.
+#[test]
+fn a_refused_record_is_reported_once_and_again_only_after_a_good_one() {
+    use crate::persist::{HistoryRecord, Record};
+    let refusals = |saves: &[Save]| {
+        saves
+            .iter()
+            .filter_map(|s| match s {
+                Save::Log(LogEntry::Event { kind: EventKind::RecordRefused(r), .. }) => Some(*r),
+                _ => None,
+            })
+            .collect::<Vec<_>>()
+    };
+    let history = |saves: &[Save]| {
+        saves.iter().rev().find_map(|s| match s {
+            Save::History(h) | Save::AlarmHistory(h) => Some(*h),
+            _ => None,
+        })
+    };
+    // A boot, 10 samples, an acknowledgement if asked: the refusals on the log, the indicator
+    // at the first sample and after the acknowledgement, and the history the next boot reads.
+    let run = |stored: HistoryRecord, refused: u8, ack: bool| {
+        let mut b = Bench::new(&Boot { history: stored, refused, ..boot() });
+        b.drain();
+        let first = b.run(1).alarm;
+        if ack {
+            b.send("ack");
+        }
+        let last = b.run(10).alarm;
+        (refusals(&b.saves), first, last, history(&b.saves).unwrap())
+    };
+    let calibration = Record::Calibration.bit();
+
+    // (Stored behind the write gate's hold-off: a power cut before it, and the next boot, which
+    // reads the history as it was, reports the refusal again.)
+    let (log, first, last, h) = run(HistoryRecord::EMPTY, calibration, false);
+    assert_eq!(log, [Record::Calibration]);
+    assert_eq!((first, last), (Indication::Unacknowledged, Indication::Unacknowledged));
+    assert_eq!(h.refused(), calibration);
+    assert!(h.unacknowledged());
+    // Refused again: nothing new on the log; the latch as stored, off once acknowledged.
+    let (log, first, last, h) = run(h, calibration, true);
+    assert_eq!((log, first, last), (vec![], Indication::Unacknowledged, Indication::Off));
+    assert_eq!((h.refused(), h.unacknowledged()), (calibration, false));
+    let (log, first, last, h) = run(h, calibration, false);
+    assert_eq!((log, first, last), (vec![], Indication::Off, Indication::Off));
+    // The history itself refused besides: it starts empty, and reports both.
+    let (log, ..) = run(HistoryRecord::EMPTY, calibration | Record::History.bit(), false);
+    assert_eq!(log, [Record::Calibration, Record::History]);
+    // A good calibration record loads: the refusal is forgotten; refused later, it is new again.
+    let (log, _, last, h) = run(h, 0, false);
+    assert_eq!((log, last, h.refused()), (vec![], Indication::Off, 0));
+    let (log, _, last, h) = run(h, calibration | Record::Model.bit(), false);
+    assert_eq!(
+        (log, last, h.refused()),
+        (vec![Record::Model, Record::Calibration], Indication::Unacknowledged, calibration | Record::Model.bit())
+    );
+}
+
 /// Found by fuzzing (`fuzz::the_app_starts_safe_from_arbitrary_stored_records`): a log whose
 /// newest entry is near the end of the record's clock (u32 seconds: an entry on another clock,
 /// or one corrupt under a storage CRC that passed) made the next boot's entries wrap to 0 s, and
@@ -1743,19 +1806,33 @@ mod fuzz {
     /// The boot of `f`, each record decoded and checked as the flash's restore does it: the
     /// default for one missing or refused.
     fn boot_of(f: &Found) -> Boot {
+        use crate::persist::Record;
         let cfg = config().adaptive;
         let rec = |b: &Option<Vec<u8>>| b.clone().unwrap_or_default();
+        let settings = SettingsRecord::decode(&rec(&f.settings));
+        let calibration = CalibrationRecord::decode(&rec(&f.calibration));
+        let model = ModelRecord::decode(&rec(&f.model)).and_then(|r| r.restore(&cfg));
+        let cabinet = CabinetRecord::decode(&rec(&f.cabinet), &cfg);
+        let history = HistoryRecord::decode(&rec(&f.history));
+        // Refused: stored and failing its checks (a missing record is no refusal).
+        let refused = |r: Record, b: &Option<Vec<u8>>, ok: bool| if b.is_some() && !ok { r.bit() } else { 0 };
+        let refused = refused(Record::Settings, &f.settings, settings.is_ok())
+            | refused(Record::Calibration, &f.calibration, calibration.is_ok())
+            | refused(Record::Model, &f.model, model.is_ok())
+            | refused(Record::Cabinet, &f.cabinet, cabinet.is_ok() || !cfg!(feature = "holdover"))
+            | refused(Record::History, &f.history, history.is_ok());
         Boot {
-            settings: SettingsRecord::decode(&rec(&f.settings)).ok(),
-            calibration: CalibrationRecord::decode(&rec(&f.calibration)).map_or(TwoPoint::IDENTITY, |r| r.cal),
-            adaptive: Some(ModelRecord::decode(&rec(&f.model)).and_then(|r| r.restore(&cfg)).unwrap_or(cfg)),
+            settings: settings.ok(),
+            calibration: calibration.map_or(TwoPoint::IDENTITY, |r| r.cal),
+            adaptive: Some(model.unwrap_or(cfg)),
             #[cfg(feature = "holdover")]
-            cabinet: CabinetRecord::decode(&rec(&f.cabinet), &cfg).ok(),
-            history: HistoryRecord::decode(&rec(&f.history)).unwrap_or(HistoryRecord::EMPTY),
+            cabinet: cabinet.ok(),
+            history: history.unwrap_or(HistoryRecord::EMPTY),
             log_last_s: f.log_last_s,
             reset: f.reset,
             stops: f.stops,
             pages_lost: f.pages_lost,
+            refused,
             button_held: f.button_held,
         }
     }
@@ -1794,6 +1871,28 @@ mod fuzz {
     fn check(f: &Found) -> Result<(), TestCaseError> {
         let boot = boot_of(f);
         let mut b = Bench::new(&boot);
+        // A record refused that the stored history did not have as refused is on the log once
+        // and lights the indicator; the history keeps what this boot refused. (The glue takes the
+        // boot's saves before the first sample, whose own may push the oldest out.)
+        b.drain();
+        let first = b.run(1);
+        let new = boot.newly_refused();
+        let reported: Vec<crate::persist::Record> = b
+            .saves
+            .iter()
+            .filter_map(|s| match s {
+                Save::Log(LogEntry::Event { kind: EventKind::RecordRefused(r), .. }) => Some(*r),
+                _ => None,
+            })
+            .collect();
+        let want: Vec<_> = crate::persist::Record::ALL.into_iter().filter(|r| new & r.bit() != 0).collect();
+        prop_assert_eq!(reported, want);
+        prop_assert!(new == 0 || first.alarm.is_on(), "{first:?}");
+        let stored = b.saves.iter().find_map(|s| match s {
+            Save::History(h) | Save::AlarmHistory(h) => Some(*h),
+            _ => None,
+        });
+        prop_assert_eq!(stored.map(|h| h.refused()), Some(boot.refused));
         let s = *b.app.settings();
         let (lo, hi) = crate::iface::SETPOINT_RANGE_C;
         prop_assert!((lo..=hi).contains(&s.setpoint_c), "{s:?}");

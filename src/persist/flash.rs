@@ -50,19 +50,20 @@ use super::{CalibrationRecord, DecodeError, HistoryRecord, ModelRecord, Settings
 use crate::calib::TwoPoint;
 use crate::control::adaptive::AdaptiveConfig;
 
-/// Map keys, one per record kind. Never reuse a key for a different layout: bump the record's
-/// version instead.
+/// Map keys, one per record kind ([`crate::persist::Record`]'s discriminants). Never reuse a key
+/// for a different layout: bump the record's version instead.
 pub mod key {
+    use crate::persist::Record;
     /// [`super::ModelRecord`].
-    pub const MODEL: u8 = 1;
+    pub const MODEL: u8 = Record::Model as u8;
     /// [`super::CalibrationRecord`].
-    pub const CALIBRATION: u8 = 2;
+    pub const CALIBRATION: u8 = Record::Calibration as u8;
     /// [`super::HistoryRecord`].
-    pub const HISTORY: u8 = 3;
+    pub const HISTORY: u8 = Record::History as u8;
     /// [`super::SettingsRecord`].
-    pub const SETTINGS: u8 = 4;
+    pub const SETTINGS: u8 = Record::Settings as u8;
     /// [`crate::persist::CabinetRecord`].
-    pub const CABINET: u8 = 5;
+    pub const CABINET: u8 = Record::Cabinet as u8;
 }
 
 /// Repairs one load or store may make before it gives up with [`StoreError::Flash`]: one power
@@ -693,11 +694,16 @@ pub async fn write<F: NorFlash, E: EccErrors, G: NorFlash, H: EccErrors>(
 ) -> Result<(), StoreError> {
     match save {
         super::Save::Log(entry) => log.push(entry).await,
+        super::Save::Settings(s) => store.store(key::SETTINGS, &s.encode()).await,
+        #[cfg(feature = "holdover")]
+        super::Save::Cabinet(c) => store.store(key::CABINET, &c.encode()).await,
         _ => write_record(store, save).await,
     }
 }
 
-/// Writes a record to the store (a board without the log: a log entry is [`StoreError::Other`]).
+/// Writes a record of a board without the interface to the store: the model, the history, the
+/// calibration. What that board never writes is [`StoreError::Other`]: a log entry, settings, a
+/// cabinet model ([`write()`] writes them), whose encoders it then leaves out of its flash.
 pub async fn write_record<F: NorFlash, E: EccErrors>(
     store: &mut Store<F, E>,
     save: &super::Save,
@@ -705,13 +711,12 @@ pub async fn write_record<F: NorFlash, E: EccErrors>(
     use super::Save;
     let mut buf = [0u8; HistoryRecord::LEN];
     let (key, len) = match save {
-        Save::Log(_) => return Err(StoreError::Other),
+        Save::Log(_) | Save::Settings(_) => return Err(StoreError::Other),
+        #[cfg(feature = "holdover")]
+        Save::Cabinet(_) => return Err(StoreError::Other),
         Save::Model(rec) => (key::MODEL, put(&mut buf, &rec.encode())),
         Save::History(h) | Save::AlarmHistory(h) => (key::HISTORY, put(&mut buf, &h.encode())),
         Save::Calibration(cal) => (key::CALIBRATION, put(&mut buf, &CalibrationRecord { cal: *cal }.encode())),
-        Save::Settings(s) => (key::SETTINGS, put(&mut buf, &s.encode())),
-        #[cfg(feature = "holdover")]
-        Save::Cabinet(c) => (key::CABINET, put(&mut buf, &c.encode())),
     };
     store.store(key, buf.get(..len).unwrap_or(&[])).await
 }
@@ -767,11 +772,44 @@ impl Restored {
         }
     }
 
+    /// The records this boot refused ([`LoadStatus::Invalid`]: stored, their CRC good, their
+    /// content failing this firmware's checks), as [`crate::persist::Record::bit`]s. A record the
+    /// flash could not give ([`LoadStatus::Flash`]) is not one: the storage layer's repair and the
+    /// boot's warning deal with it. Nor is the calibration record when settings were restored:
+    /// the settings' calibration runs ([`crate::app::App::new`]), so its refusal changes nothing
+    /// (the glue clears the bit likewise where the build's constant replaces the record).
+    pub fn refused(&self) -> u8 {
+        use crate::persist::Record;
+        // By reference: the model's configuration copied out to read its status cost flash.
+        let refused =
+            |r: Record, s: Option<&LoadStatus>| if matches!(s, Some(LoadStatus::Invalid(_))) { r.bit() } else { 0 };
+        #[cfg(feature = "holdover")]
+        let cabinet = refused(Record::Cabinet, self.cabinet.as_ref().err());
+        #[cfg(not(feature = "holdover"))]
+        let cabinet = 0;
+        refused(Record::Model, self.adaptive.as_ref().map(|a| &a.status))
+            | refused(Record::Calibration, self.settings.is_err().then_some(&self.calibration.status))
+            | refused(Record::History, Some(&self.history.status))
+            | refused(Record::Settings, self.settings.as_ref().err())
+            | cabinet
+    }
+
+    /// What a boot stores of the build's calibration constant `constant` (firmware `config.rs`'s
+    /// `CALIBRATION`), which it runs when no settings are stored: the constant, unless the
+    /// calibration record already holds it. Stored, a later image built without the constant
+    /// keeps it (README "Calibrating a board"); unstored, that image read up to 1.5 °C off with
+    /// nothing on record. Once: the next boot finds the record.
+    pub fn calibration_to_store(&self, constant: TwoPoint) -> Option<TwoPoint> {
+        let stored = self.calibration.status == LoadStatus::Restored && self.calibration.value == constant;
+        (!stored).then_some(constant)
+    }
+
     /// The application's boot from what was restored. Out of line: inlined into the firmware's
     /// `main`, it cost 312 B of code there, against 264 B here (−56 B of flash in all).
     #[inline(never)]
     pub fn boot(&self, reset: super::ResetCause, stops: crate::failsafe::Stops) -> crate::app::Boot {
         crate::app::Boot {
+            refused: self.refused(),
             settings: self.settings.ok(),
             #[cfg(feature = "holdover")]
             cabinet: self.cabinet.ok(),

@@ -326,7 +326,7 @@ fn history() -> impl Strategy<Value = HistoryRecord> {
     (
         (uniform4(count_u16()), uniform3(count_u16()), extremes, uniform4(count_u32())),
         (0usize..=HISTORY_EXCURSIONS, vec(excursion(), HISTORY_EXCURSIONS)),
-        (uniform5(count_u16()), count_u16(), stop, 0u8..8, 0u8..=127, uniform4(edge_u32())),
+        (uniform5(count_u16()), count_u16(), stop, any::<u8>(), 0u8..=127, uniform4(edge_u32())),
     )
         .prop_map(
             |((alarms, resets, (min_c, max_c), t), (n, mut ex), (stops, lost, stop, flags, offset, runs))| {
@@ -380,7 +380,8 @@ pub(crate) fn history_frame() -> impl Strategy<Value = Vec<u8>> {
 }
 
 /// A history valid by its own rules: extremes absent or within −60 … 100 °C and in order;
-/// excursions with 0 ≤ start ≤ end and an extreme in range; no flag beyond the three kept.
+/// excursions with 0 ≤ start ≤ end and an extreme in range (every flag bit is one: three
+/// flags and the five records' refusals).
 pub(crate) fn history_valid(h: &HistoryRecord) -> Result<(), TestCaseError> {
     for x in [h.min_c, h.max_c].into_iter().flatten() {
         prop_assert!(TEMP_RANGE_C.contains(&x), "extreme {x}: {h:?}");
@@ -392,7 +393,6 @@ pub(crate) fn history_valid(h: &HistoryRecord) -> Result<(), TestCaseError> {
         prop_assert!(e.start_s >= 0.0 && e.start_s <= e.end_s && e.end_s.is_finite(), "{e:?}: {h:?}");
         prop_assert!(TEMP_RANGE_C.contains(&e.extreme_c), "{e:?}: {h:?}");
     }
-    prop_assert!(h.flags & !(UNACKNOWLEDGED | SSR_SHORTED | EXCURSION_OPEN) == 0, "{h:?}");
     prop_assert!(h.sensor_offset.0 <= SensorOffset::MAX_STEPS, "{h:?}");
     Ok(())
 }
@@ -412,6 +412,8 @@ struct Continued {
     stops: Stops,
     service: bool,
     page_lost: bool,
+    /// The records the boot refused ([`Recorder::note_refused`]), if any were or had been.
+    refused: Option<u8>,
     every: u32,
     t0_ms: u64,
     /// (ms since the previous sample, the recorded °C or NaN, latched, offset steps, shorted).
@@ -434,19 +436,22 @@ fn continued() -> impl Strategy<Value = Continued> {
         select(std::vec![ResetCause::Watchdog, ResetCause::BrownOut, ResetCause::Other]),
         (stop.clone(), stop, any::<bool>()),
         any::<bool>(),
-        any::<bool>(),
+        (any::<bool>(), proptest::option::of(0u8..32)),
         1u32..400,
         0u64..20_000,
         vec(sample, 0..60),
     )
-        .prop_map(|(reset, (earlier, latest, fresh), service, page_lost, every, t0_ms, samples)| Continued {
-            reset,
-            stops: Stops { earlier, latest, fresh },
-            service,
-            page_lost,
-            every,
-            t0_ms,
-            samples,
+        .prop_map(|(reset, (earlier, latest, fresh), service, (page_lost, refused), every, t0_ms, samples)| {
+            Continued {
+                reset,
+                stops: Stops { earlier, latest, fresh },
+                service,
+                page_lost,
+                refused,
+                every,
+                t0_ms,
+                samples,
+            }
         })
 }
 
@@ -455,7 +460,14 @@ fn continued() -> impl Strategy<Value = Continued> {
 /// back the same, and has lost none of the counts it carried in.
 fn check_continued(rec: &HistoryRecord, boot: &Continued) -> Result<(), TestCaseError> {
     let mut r = Recorder::new(*rec, boot.every);
+    if let Some(refused) = boot.refused {
+        r.note_refused(refused);
+    }
     let mut stored = std::vec![r.note_boot(boot.reset, &boot.stops)];
+    let refused = boot.refused.unwrap_or(rec.refused());
+    let h = stored[0];
+    prop_assert_eq!(h.refused(), refused);
+    prop_assert!(h.unacknowledged() || refused & !rec.refused() == 0, "a new refusal latches: {:?}", h);
     if boot.service {
         stored.push(r.note_service());
     }
@@ -479,6 +491,7 @@ fn check_continued(rec: &HistoryRecord, boot: &Continued) -> Result<(), TestCase
         let kept = h.alarms.iter().zip(&rec.alarms).chain(h.resets.iter().zip(&rec.resets));
         prop_assert!(kept.clone().all(|(now, was)| now >= was), "{h:?} after {rec:?}");
         prop_assert!(h.excursions >= rec.excursions && h.recorded_s >= rec.recorded_s, "{h:?} after {rec:?}");
+        prop_assert_eq!(h.refused(), refused, "the refusals kept through the boot: {:?}", h);
     }
     Ok(())
 }

@@ -179,6 +179,14 @@ impl VirtualBoard {
         self.cut_settings = Some(ops);
     }
 
+    /// Test hook: stores `bytes` under `key` (`hter::persist::flash::key`) in the records region
+    /// as another firmware would have written them, unchecked: what a firmware update finds
+    /// there at its first boot ([`Self::reset`]).
+    pub fn store_raw(&mut self, key: u8, bytes: &[u8]) -> Result<()> {
+        let Some(store) = self.store.as_mut() else { bail!("the board has no flash") };
+        block_on(store.store(key, bytes)).map_err(|e| anyhow::anyhow!("the flash refused the record: {e:?}"))
+    }
+
     /// Injects a fault into the simulated carrier from the next sample on (`hter virtual-board
     /// --fault`, tests): a brown-out is a power cut between two samples ([`Self::power_cut`]);
     /// a hung control loop is refused (the virtual board answers requests from its step: `hter
