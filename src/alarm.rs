@@ -100,10 +100,14 @@ impl Annunciator {
         Annunciator { latched: false, shorted: false }
     }
 
-    /// After a restart: latched as the stored history says
-    /// ([`crate::persist::HistoryRecord::unacknowledged`]), so a restart does not acknowledge.
-    pub const fn restored(latched: bool) -> Self {
-        Annunciator { latched, shorted: false }
+    /// After a restart, as the stored history says: latched
+    /// ([`crate::persist::HistoryRecord::unacknowledged`]), so a restart does not acknowledge,
+    /// and the SSR shorted ([`crate::persist::HistoryRecord::ssr_shorted`]), which the step
+    /// resumes without a new [`EventKind::SsrStuckOn`]. Before, a restart forgot the short here:
+    /// acknowledged, the indicator went off through limp home's freeze-guard holds, a carrier
+    /// with a known bad relay looking healthy after every power cycle.
+    pub fn restored(history: &crate::persist::HistoryRecord) -> Self {
+        Annunciator { latched: history.unacknowledged(), shorted: history.ssr_shorted() }
     }
 
     /// Takes one sample's step output and the cold-chain alarms it raised.
@@ -234,6 +238,24 @@ mod tests {
         for k in EventKind::ALL {
             assert_eq!(needs_attention(k), attention.contains(&k), "{k:?}");
         }
+    }
+
+    /// A short the stored history carries is the indicator's too after a restart: the step
+    /// resumes limp home without a new `ssr_stuck_on`, and its freeze guard's holds report
+    /// `freeze_guard`; acknowledged, the indicator stays `not_in_control` through them.
+    #[test]
+    fn a_short_carried_through_a_restart_stays_not_in_control() {
+        let none: Raised = [None; 4];
+        let stored = crate::persist::HistoryRecord::EMPTY.with_carried(false, true);
+        let mut a = Annunciator::restored(&stored);
+        assert_eq!(a.update(&out(2.6, Mode::FreezeGuard, &[]), &none), Indication::NotInControl);
+        a.acknowledge();
+        assert_eq!(a.update(&out(2.6, Mode::FreezeGuard, &[]), &none), Indication::NotInControl);
+        // Unshorted and latched: latched, off once acknowledged.
+        let mut b = Annunciator::restored(&crate::persist::HistoryRecord::EMPTY.with_carried(true, false));
+        assert!(b.latched());
+        b.acknowledge();
+        assert_eq!(b.update(&out(2.6, Mode::FreezeGuard, &[]), &none), Indication::Off);
     }
 
     /// Limp home lasts until reset, but while its freeze guard holds cooling off the step

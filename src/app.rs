@@ -517,7 +517,7 @@ impl App {
             settings,
             adaptive,
             recorder,
-            annunciator: Annunciator::restored(history.unacknowledged()),
+            annunciator: Annunciator::restored(&history),
             cadence: ModelCadence::new(cfg.model_save_samples),
             intervals: IntervalLog::new(),
             base_ms,
@@ -579,7 +579,8 @@ impl App {
 
     /// The records region was erased (the storage layer found it corrupt and the persist task
     /// wiped it to write again): queues once more what nothing stores on a cadence — the
-    /// settings when any were stored, the cabinet model — and the history now rather than at
+    /// settings when any were stored, the calibration that runs, the cabinet
+    /// model — and the history now rather than at
     /// its next hourly store. Without it a corrupt region lost the setpoint, the calibration
     /// and the cabinet model for good (they are written only when they change). The model
     /// record comes back with the self-tuner's next store.
@@ -588,6 +589,9 @@ impl App {
         if self.settings.seq != 0 {
             self.save(Save::Settings(self.settings));
         }
+        // The calibration that runs, for an image without the interface (which reads the
+        // calibration record alone) and for one without a constant.
+        self.save(Save::Calibration(self.carrier.config().cal));
         #[cfg(feature = "holdover")]
         if let Some(rec) = self.cabinet.as_ref().and_then(crate::persist::CabinetRecord::from_model) {
             self.save(Save::Cabinet(rec));
@@ -852,6 +856,9 @@ impl App {
         }
         if let Some(cal) = recalibrated {
             self.carrier.set_calibration(cal);
+            // The calibration record too: an image without the interface reads that one, not
+            // the settings, and would have run this carrier uncalibrated after a reflash.
+            self.save(Save::Calibration(cal));
         }
         self.settings = next;
         self.save(Save::Settings(next));

@@ -78,7 +78,10 @@ pub const VALID_CARRIER: ValidConfig = match CARRIER.validated() {
 /// ```
 ///
 /// and flash once: the boot stores it (`Restored::calibration_to_store`, through the write
-/// gate), and later images with `None` keep using it. A pair of points the library refuses
+/// gate), and later images with `None` keep using it. In the interface build it runs only while
+/// no settings are stored: once a `set` has stored them, their calibration runs (`set cal_ice`
+/// and `set cal_warm` change it, and store the calibration record too), and the boot log says
+/// the constant was not run. A pair of points the library refuses
 /// (closer than 1 °C, gain outside 0.9–1.1, a correction beyond ±1.5 °C between 0 and 10 °C,
 /// not finite) stops the build. The `calibrated` feature builds with the example above, so that
 /// `cargo xtask size` holds a calibrated board to the budget too (the constant's store costs

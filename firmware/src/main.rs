@@ -208,6 +208,10 @@ async fn main(spawner: Spawner) {
                 persist::request(persist::Save::Calibration(cal));
             }
         }
+    } else if config::CALIBRATION.is_some() {
+        // Settings stored (the interface build): their calibration runs, which `set cal_ice` and
+        // `set cal_warm` change; the constant would undo those at every boot.
+        warn!("config.rs CALIBRATION not run: the stored settings' calibration runs (set cal_ice / cal_warm)");
     }
     spawner.spawn(sample(b.analog).unwrap());
     // The boot's records go to the control task by reference, from a static: a task's
@@ -307,9 +311,14 @@ async fn control(boot: &'static Boot, mut heartbeat_pin: Output<'static>) {
         // again.
         persist::request(boot.history_save(history));
         // A restart does not acknowledge: the latch is in the stored history.
-        hter::alarm::Annunciator::restored(history.unacknowledged())
+        hter::alarm::Annunciator::restored(&history)
     };
-    info!("controller: {}", carrier.controller().name());
+    info!(
+        "controller: {}, calibration gain {} offset {} °C",
+        carrier.controller().name(),
+        carrier.config().cal.gain,
+        carrier.config().cal.offset_c
+    );
     let mut model_cadence = hter::persist::ModelCadence::new(config::MODEL_SAVE_SAMPLES);
     let mut samples = 0u32;
     failsafe::boot_done();
@@ -347,8 +356,12 @@ async fn control(boot: &'static Boot, mut heartbeat_pin: Output<'static>) {
             log_alarm(a);
         }
         // The records region erased as corrupt: the history is stored again now, not at the
-        // next hourly store (the model follows at its own cadence).
-        rec.save_due |= persist::RECORDS_ERASED.swap(false, Ordering::Relaxed);
+        // next hourly store (the model follows at its own cadence), and the calibration that
+        // runs, which nothing stores again (the next image without a constant reads it).
+        if persist::RECORDS_ERASED.swap(false, Ordering::Relaxed) {
+            rec.save_due = true;
+            persist::request(persist::Save::Calibration(carrier.config().cal));
+        }
         // An alarm's history is stored as soon as the supply allows, without the boot's hold-off.
         if let Some(save) = recorder.due_save(&rec) {
             persist::request(save);
@@ -411,7 +424,12 @@ async fn control(boot: &'static Boot, mut heartbeat_pin: Output<'static>) {
     if boot.pages_lost > 0 {
         warn!("{} flash pages were torn by a power cut and repaired", boot.pages_lost);
     }
-    info!("controller: {}", app.carrier().controller().name());
+    info!(
+        "controller: {}, calibration gain {} offset {} °C",
+        app.carrier().controller().name(),
+        app.carrier().config().cal.gain,
+        app.carrier().config().cal.offset_c
+    );
     let mut samples = 0u32;
     failsafe::boot_done();
     board::start_stall_check();

@@ -529,7 +529,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                     stores.push((t_s, Save::History(stored)));
                     // The indicator's latch, the sensor offset and a shorted SSR restart from the
                     // stored history.
-                    annunciator = Annunciator::restored(stored.unacknowledged());
+                    annunciator = Annunciator::restored(&stored);
                     carrier.resume(&stored);
                 } else {
                     rig.inject(f);

@@ -720,9 +720,10 @@ fn a_stop_and_the_hang_of_the_boot_that_took_it_both_reach_the_record() {
     assert_eq!(ram.boot(ResetCause::Other), Stops::default());
 }
 
-/// A records region erased because the storage layer found it corrupt: the settings and the
-/// cabinet model, which nothing stores again unless they change, are queued once more with the
-/// history; a board that never stored settings stores none.
+/// A records region erased because the storage layer found it corrupt: the settings, the
+/// calibration that runs and the cabinet model, which nothing stores again unless they change,
+/// are queued once more with the history; a board that never stored settings stores none. An
+/// accepted calibration is stored in the calibration record as well as in the settings.
 #[test]
 fn an_erased_records_region_gets_the_settings_and_models_back() {
     let mut b = Bench::new(&boot());
@@ -730,7 +731,19 @@ fn an_erased_records_region_gets_the_settings_and_models_back() {
     b.saves.clear();
     b.app.records_erased();
     b.drain();
-    assert!(matches!(b.saves[..], [Save::History(_)]), "nothing set yet: {:?}", b.saves);
+    assert!(
+        matches!(b.saves[..], [Save::Calibration(TwoPoint::IDENTITY), Save::History(_)]),
+        "nothing set yet: {:?}",
+        b.saves
+    );
+    // The calibration that runs is stored again too: an image without the interface reads it.
+    assert_eq!(b.send("set cal_ice 0.5,0.0"), "ok\r\n");
+    let cal = b.app.carrier().config().cal;
+    assert!(b.saves.contains(&Save::Calibration(cal)), "with the settings: {:?}", b.saves);
+    b.saves.clear();
+    b.app.records_erased();
+    b.drain();
+    assert!(b.saves.contains(&Save::Calibration(cal)), "{:?}", b.saves);
     assert_eq!(b.send("set setpoint_c 5.5"), "ok\r\n");
     assert_eq!(b.send("set model -1.904667,0.904945;-0.012378,-0.0001;6"), "ok\r\n");
     b.saves.clear();
@@ -1071,6 +1084,24 @@ fn a_shorted_ssr_is_remembered_until_a_service_reset() {
         if limps {
             assert!(!first.step.supply_enable && first.step.duty.get() == 0.0, "{what}: supply open first");
             assert!(next.app.carrier().ssr_shorted(), "{what}");
+            // Acknowledged, the indicator stays on through limp home's freeze-guard holds, which
+            // report `freeze_guard`: the short is the history's, not this boot's finding (before,
+            // the indicator went off there after every restart).
+            next.send("ack");
+            let run: Vec<_> = (0..40)
+                .map(|k| {
+                    // A load falling 0.6 °C a minute, from 5 °C to 2.2 °C: the guard's look-ahead.
+                    next.pinned_c = Some((5.0 - 0.1 * k as f32).max(2.2));
+                    next.run(1)
+                })
+                .collect();
+            assert!(
+                run.iter().any(|o| o.step.mode == crate::step::Mode::FreezeGuard),
+                "{what}: a hold: {:?}",
+                run.iter().map(|o| (o.step.mode, o.step.temp_c.0)).collect::<Vec<_>>()
+            );
+            assert!(run.iter().all(|o| o.alarm == Indication::NotInControl), "{what}: {:?}", run.last());
+            next.pinned_c = None;
         }
         // What the boot stores carries the short on, or its clearing, at once and on record.
         let boot_history = next.saves.iter().find_map(|s| match s {
