@@ -170,7 +170,7 @@ pub const IWDG_RELOAD: u16 = 3750 - 1;
 //
 // (STM32CubeProgrammer; in its GUI: Option bytes → User configuration → untick IWDG_SW), or
 // with OpenOCD (`stm32l4x option_write 0 0x20 0 0x10000`, then `stm32l4x option_load 0`).
-// The boot log says which the board has (`watchdog: hardware` / `software`).
+// The boot log says which the board has (`watchdog hardware (option byte)` / `watchdog software`).
 
 /// Brown-out reset level the board needs (FLASH_OPTR BOR_LEV): 3, reset below ≈ 2.47 V falling
 /// / 2.56 V rising (DS10198, "BOR thresholds"). The default level 0 (≈ 1.7 V) lets the CPU run
