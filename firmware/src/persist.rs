@@ -166,7 +166,7 @@ static WAKE: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
 /// The records region was erased after the storage layer found it corrupt: the control task
 /// hands the records over again (the interface build: [`hter::app::App::records_erased`]; the
-/// others: the history, at the next sample).
+/// others: the history and the calibration in force, at the next sample).
 pub static RECORDS_ERASED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
 
 /// What the boot restored: the persist task sends it once, `main` waits for it. A one-slot
@@ -246,8 +246,9 @@ fn report(r: &Restored) {
 /// Restores, then stores each requested record the write gate lets through (and, with the
 /// interface, streams the log for `history`). A region the storage layer finds corrupt is
 /// erased once and written again (what it held is lost either way): the model and the history
-/// come back with their next stores, and in the interface build the settings and the cabinet
-/// model, which are stored only when they change, are handed over again ([`RECORDS_ERASED`]).
+/// come back with their next stores, and the calibration (and in the interface build the
+/// settings and the cabinet model), which are stored only when they change, are handed over
+/// again ([`RECORDS_ERASED`]).
 #[embassy_executor::task]
 pub async fn persist(flash: Peri<'static, FLASH>) {
     let flash = RefCell::new(Flash::new_blocking(flash));
@@ -320,7 +321,13 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
                     {
                         // The settings and the cabinet model went with the region: the control
                         // task queues them again (`App::records_erased`).
-                        if !matches!(save, Save::Log(_)) {
+                        if let Save::Log(e) = &save {
+                            // The log's entries went with it: a plain `log_entries_lost` first
+                            // marks where the record's hole ends (before, `history` started
+                            // there as if the carrier were new, with no trace but RTT).
+                            let lost = Save::Log(LogEntry::Lost { t_s: e.t_s(), entries: 0 });
+                            let _ = flash::write(&mut store, &mut log, &lost).await;
+                        } else {
                             RECORDS_ERASED.store(true, core::sync::atomic::Ordering::Relaxed);
                         }
                         result = flash::write(&mut store, &mut log, &save).await;
@@ -330,10 +337,12 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
                         // The history went with the region (and with it the stops that RAM no
                         // longer keeps, once stored): the control task queues it again, where it
                         // waited for the next hourly store and a power cut meanwhile lost every
-                        // count since the first boot.
-                        if !matches!(save, Save::History(_) | Save::AlarmHistory(_)) {
-                            RECORDS_ERASED.store(true, core::sync::atomic::Ordering::Relaxed);
-                        }
+                        // count since the first boot; and the calibration, which nothing else
+                        // stores again. Whatever the record being written: when it was the
+                        // history (the most frequent write), the calibration went all the same
+                        // (a review found it never stored again there), and the history is
+                        // stored twice, once.
+                        RECORDS_ERASED.store(true, core::sync::atomic::Ordering::Relaxed);
                         result = flash::write_record(&mut store, &save).await;
                     }
                 }

@@ -76,7 +76,7 @@ pub enum BoardCommand {
     },
     /// Print every setting, one key=value per line.
     Get,
-    /// Change a setting (setpoint_c, controller, cal_ice, cal_warm, model, ack); the board
+    /// Change a setting (setpoint_c, controller, cal_ice, cal_warm, model, sensor_offset_c, ack); the board
     /// validates it and refuses a bad value with one line, changing nothing.
     Set {
         /// Setting name.

@@ -630,18 +630,15 @@ fn fault_meaning(name: &str) -> Option<(String, bool)> {
             ("a record being written when power was cut was lost; the rest of the record is intact".to_owned(), false)
         }
         "log_entries_lost" => {
+            let waited = "while the controller waited to write them (just after a start, or on a bad supply)";
             let what = match detail.parse::<u32>() {
-                Ok(1) => "1 record entry was lost".to_owned(),
-                Ok(count) => format!("{count} record entries were lost"),
-                Err(_) => "record entries were lost".to_owned(),
+                Ok(1) => format!("1 record entry was lost {waited}"),
+                Ok(count) => format!("{count} record entries were lost {waited}"),
+                Err(_) => "record entries were lost, how many is not known (the controller found its \
+                    log corrupt and erased it, or entries waiting to be written were dropped)"
+                    .to_owned(),
             };
-            (
-                format!(
-                    "{what} while the controller waited to write them (just after a start, or on a \
-                bad supply): the record has a gap before this time"
-                ),
-                false,
-            )
+            (format!("{what}: the record has a gap before this time"), false)
         }
         r if r.starts_with("record_refused_") => {
             let what = match &r["record_refused_".len()..] {

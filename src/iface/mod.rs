@@ -148,7 +148,9 @@ impl Refusal<'_> {
         put!(out, "err ", self.what, ": ")?;
         match self.why {
             Why::UnknownCommand => out.str("unknown command (try help)"),
-            Why::UnknownKey => out.str("unknown setting (setpoint_c, controller, cal_ice, cal_warm, model, ack)"),
+            Why::UnknownKey => {
+                out.str("unknown setting (setpoint_c, controller, cal_ice, cal_warm, model, sensor_offset_c, ack)")
+            }
             Why::Usage(u) => put!(out, "usage: ", u),
             Why::NotDecimal => out.str("not a decimal number"),
             Why::OutOfRange(x, lo, hi) => put!(out, x, " is outside ", Fixed(lo, 1), "…", Fixed(hi, 1)),
@@ -428,7 +430,7 @@ mod tests {
         );
         assert_eq!(
             refusal("set colour blue"),
-            "err set: unknown setting (setpoint_c, controller, cal_ice, cal_warm, model, ack)"
+            "err set: unknown setting (setpoint_c, controller, cal_ice, cal_warm, model, sensor_offset_c, ack)"
         );
         assert_eq!(refusal("set setpoint_c"), "err set: usage: set KEY VALUE");
         assert_eq!(refusal("frobnicate"), "err line: unknown command (try help)");
