@@ -157,9 +157,10 @@ impl Boot {
     /// The records this boot refused that the stored history does not have as refused
     /// ([`HistoryRecord::refused`]), as [`crate::persist::Record::bit`]s: each one is reported,
     /// as [`EventKind::RecordRefused`] on the log and with the alarm indicator's latch, once. A
-    /// record still refused at the next boot is not reported again (it stays as it is in flash:
-    /// removed, it was gone for good should the firmware that wrote it come back); one that
-    /// loads again and is refused later is.
+    /// record still refused at the next boot is not reported again (the boot does not remove it:
+    /// removed, a settings, calibration or cabinet record was gone for good should the firmware
+    /// that wrote it come back; a history or a model is replaced by the next store anyway); one
+    /// that loads again and is refused later is.
     pub fn newly_refused(&self) -> u8 {
         self.refused & !self.history.refused()
     }
