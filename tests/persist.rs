@@ -729,6 +729,56 @@ fn the_boot_knows_what_it_refused_and_stores_the_builds_calibration_once() {
     assert_eq!(r.calibration_to_store(other), Some(other), "a new constant replaces it");
 }
 
+/// A region the storage layer finds corrupt (noise where its pages should be): `write_or_erase`
+/// erases it and writes the record again, as the firmware's persist task does. The records
+/// region comes back holding the record and says it was erased (the caller hands the rest over
+/// again); the log comes back beginning with a plain `log_entries_lost` at the entry's time, then
+/// the entry: `history` shows where the hole ends.
+#[test]
+fn a_corrupt_region_is_erased_and_written_again_and_the_log_says_where_its_hole_ends() {
+    use hter::persist::flash::{write_or_erase, Erased};
+    use hter::persist::Save as Rec;
+    let (mut records, mut logs) = (0, 0);
+    for seed in 1..=40u32 {
+        // The records region corrupt, the log blank.
+        let mut flash = MockFlash::<L4_PAGE>::blank(4);
+        flash.bytes = noise(seed, 4 * L4_PAGE);
+        let mut store = open(flash, 4);
+        let mut log = open_log(MockFlash::<L4_PAGE>::blank(4), 4);
+        let mut h = HistoryRecord::EMPTY;
+        h.recorded_s = seed;
+        let (result, erased) = block_on(write_or_erase(&mut store, &mut log, &Rec::History(h)));
+        // Never a corruption left as it is (other errors, e.g. noise the flash will not program
+        // over, are the flash's: the firmware's warning, no erase).
+        assert_ne!(result, Err(StoreError::Corrupted), "seed {seed}");
+        assert_ne!(erased, Erased::Log);
+        if erased == Erased::Records {
+            records += 1;
+            assert_eq!(result, Ok(()), "seed {seed}");
+            let mut store = reboot(store, 4);
+            assert_eq!(block_on(store.load_history()).value, h, "seed {seed}");
+        }
+
+        // The log corrupt, the records region blank.
+        let mut store = open(MockFlash::<L4_PAGE>::blank(4), 4);
+        let mut flash = MockFlash::<L4_PAGE>::blank(4);
+        flash.bytes = noise(seed, 4 * L4_PAGE);
+        let mut log = open_log(flash, 4);
+        // As stored (the interval's temperatures in 0.01 °C).
+        let e = LogEntry::decode(&entry(seed).encode()).unwrap();
+        let (result, erased) = block_on(write_or_erase(&mut store, &mut log, &Rec::Log(e)));
+        assert_ne!(result, Err(StoreError::Corrupted), "seed {seed}");
+        assert_ne!(erased, Erased::Records);
+        if erased == Erased::Log {
+            logs += 1;
+            assert_eq!(result, Ok(()), "seed {seed}");
+            assert_eq!(log_entries(&mut log), [LogEntry::Lost { t_s: e.t_s(), entries: 0 }, e], "seed {seed}");
+        }
+    }
+    // Noise is corrupt to the storage layer in most seeds: both paths ran.
+    assert!(records > 0 && logs > 0, "erased records {records}, logs {logs} of 40");
+}
+
 fn entry(i: u32) -> LogEntry {
     let c = 4.0 + (i % 50) as f32 * 0.01;
     LogEntry::Interval {

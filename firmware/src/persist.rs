@@ -305,48 +305,40 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
                 pending.next(gate, now)
             });
             let Some(save) = next else { break };
+            // A region the storage layer finds corrupt is erased once and the record written
+            // again (what it held is lost either way): the control task then hands over again
+            // what went with the records region and nothing stores on a cadence
+            // ([`RECORDS_ERASED`]: the history and the calibration; the interface build's
+            // settings and cabinet model). The interface build through the library's
+            // `flash::write_or_erase`, which the virtual board runs too; the build without the
+            // log in line (the library's form cost it 104 B of the 64 KiB, which the calibrated
+            // module-sense build lacks).
             #[cfg(feature = "interface")]
-            let mut result = flash::write(&mut store, &mut log, &save).await;
-            #[cfg(not(feature = "interface"))]
-            let mut result = flash::write_record(&mut store, &save).await;
-            if result == Err(flash::StoreError::Corrupted) {
-                warn!("persist: region corrupt, erasing it");
-                result = match save {
-                    #[cfg(feature = "interface")]
-                    Save::Log(_) => log.erase_all().await,
-                    _ => store.erase_all().await,
-                };
-                if result.is_ok() {
-                    #[cfg(feature = "interface")]
-                    {
-                        // The settings and the cabinet model went with the region: the control
-                        // task queues them again (`App::records_erased`).
-                        if let Save::Log(e) = &save {
-                            // The log's entries went with it: a plain `log_entries_lost` first
-                            // marks where the record's hole ends (before, `history` started
-                            // there as if the carrier were new, with no trace but RTT).
-                            let lost = Save::Log(LogEntry::Lost { t_s: e.t_s(), entries: 0 });
-                            let _ = flash::write(&mut store, &mut log, &lost).await;
-                        } else {
-                            RECORDS_ERASED.store(true, core::sync::atomic::Ordering::Relaxed);
-                        }
-                        result = flash::write(&mut store, &mut log, &save).await;
+            let result = {
+                let (result, erased) = flash::write_or_erase(&mut store, &mut log, &save).await;
+                match erased {
+                    flash::Erased::Nothing => {}
+                    flash::Erased::Log => warn!("persist: log corrupt, erased: the record begins again here"),
+                    flash::Erased::Records => {
+                        warn!("persist: records region corrupt, erased");
+                        RECORDS_ERASED.store(true, core::sync::atomic::Ordering::Relaxed);
                     }
-                    #[cfg(not(feature = "interface"))]
-                    {
-                        // The history went with the region (and with it the stops that RAM no
-                        // longer keeps, once stored): the control task queues it again, where it
-                        // waited for the next hourly store and a power cut meanwhile lost every
-                        // count since the first boot; and the calibration, which nothing else
-                        // stores again. Whatever the record being written: when it was the
-                        // history (the most frequent write), the calibration went all the same
-                        // (a review found it never stored again there), and the history is
-                        // stored twice, once.
+                }
+                result
+            };
+            #[cfg(not(feature = "interface"))]
+            let result = {
+                let mut result = flash::write_record(&mut store, &save).await;
+                if result == Err(flash::StoreError::Corrupted) {
+                    warn!("persist: region corrupt, erasing it");
+                    result = store.erase_all().await;
+                    if result.is_ok() {
                         RECORDS_ERASED.store(true, core::sync::atomic::Ordering::Relaxed);
                         result = flash::write_record(&mut store, &save).await;
                     }
                 }
-            }
+                result
+            };
             match (result, save) {
                 #[cfg(feature = "interface")]
                 (Ok(()), Save::Log(LogEntry::Lost { t_s, entries })) => {

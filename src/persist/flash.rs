@@ -701,6 +701,49 @@ pub async fn write<F: NorFlash, E: EccErrors, G: NorFlash, H: EccErrors>(
     }
 }
 
+/// Which region [`write_or_erase`] erased.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Erased {
+    /// None: the write went as [`write()`] alone.
+    Nothing,
+    /// The records region: the caller hands over again what nothing stores on a cadence (the
+    /// history now, the calibration; the interface build's settings and cabinet model,
+    /// [`crate::app::App::records_erased`]).
+    Records,
+    /// The log: every entry before this one is gone, and it begins with a plain
+    /// [`LogEntry::Lost`] (no count) at this entry's time, so that the record shows where its
+    /// hole ends (before, `history` began there as if the carrier were new).
+    Log,
+}
+
+/// [`write()`], and a region the storage layer finds corrupt ([`StoreError::Corrupted`], which its
+/// own repair could not mend) erased once and the record written again: what the region held is
+/// lost either way, and without the erase no record of its kind would be stored again.
+pub async fn write_or_erase<F: NorFlash, E: EccErrors, G: NorFlash, H: EccErrors>(
+    store: &mut Store<F, E>,
+    log: &mut LogStore<G, H>,
+    save: &super::Save,
+) -> (Result<(), StoreError>, Erased) {
+    let result = write(store, log, save).await;
+    if result != Err(StoreError::Corrupted) {
+        return (result, Erased::Nothing);
+    }
+    match save {
+        super::Save::Log(entry) => {
+            if let Err(e) = log.erase_all().await {
+                return (Err(e), Erased::Nothing);
+            }
+            let _ = log.push(&LogEntry::Lost { t_s: entry.t_s(), entries: 0 }).await;
+            (log.push(entry).await, Erased::Log)
+        }
+        _ => match store.erase_all().await {
+            Ok(()) => (write(store, log, save).await, Erased::Records),
+            Err(e) => (Err(e), Erased::Nothing),
+        },
+    }
+}
+
 /// Writes a record of a board without the interface to the store: the model, the history, the
 /// calibration. What that board never writes is [`StoreError::Other`]: a log entry, settings, a
 /// cabinet model ([`write()`] writes them), whose encoders it then leaves out of its flash.

@@ -263,7 +263,12 @@ impl VirtualBoard {
             if let Some(ops) = cut {
                 store.flash_mut().cut_after(ops);
             }
-            let result = block_on(flash::write(store, log, &save));
+            // The firmware's recovery: a corrupt region erased and the record written again,
+            // the records nothing stores on a cadence handed over again.
+            let (result, erased) = block_on(flash::write_or_erase(store, log, &save));
+            if erased == flash::Erased::Records {
+                self.app.records_erased();
+            }
             if cut.is_some() {
                 if store.flash_mut().is_dead() {
                     self.power_cycle();
