@@ -154,6 +154,14 @@ impl Boot {
         self.button_held && !self.stops.fresh && self.reset == ResetCause::Other
     }
 
+    /// Runs the build's calibration constant (firmware `config.rs`'s `CALIBRATION`, which the glue
+    /// applies when no settings are stored) instead of the calibration record: the record's
+    /// refusal, if it was refused, changes nothing and is not reported.
+    pub fn run_calibration_constant(&mut self, cal: TwoPoint) {
+        self.calibration = cal;
+        self.refused &= !crate::persist::Record::Calibration.bit();
+    }
+
     /// The records this boot refused that the stored history does not have as refused
     /// ([`HistoryRecord::refused`]), as [`crate::persist::Record::bit`]s: each one is reported,
     /// as [`EventKind::RecordRefused`] on the log and with the alarm indicator's latch, once. A
@@ -499,9 +507,11 @@ impl App {
                 value,
             }));
         }
-        // The refusals before the pages lost, which the history counts if the outbox drops them.
+        // The refusals before the pages lost, which the history counts if the outbox drops them
+        // (the refusals it keeps as a set: dropped, one would go unreported).
+        let new = boot.newly_refused();
         for r in crate::persist::Record::ALL {
-            if boot.newly_refused() & r.bit() != 0 {
+            if new & r.bit() != 0 {
                 let _ = app_saves.push_back(Save::Log(LogEntry::Event {
                     t_s: record_secs(base_ms),
                     kind: EventKind::RecordRefused(r),
@@ -580,9 +590,8 @@ impl App {
 
     /// The records region was erased (the storage layer found it corrupt and the persist task
     /// wiped it to write again): queues once more what nothing stores on a cadence — the
-    /// settings when any were stored, the calibration that runs, the cabinet
-    /// model — and the history now rather than at
-    /// its next hourly store. Without it a corrupt region lost the setpoint, the calibration
+    /// settings when any were stored, the calibration that runs, the cabinet model — and the
+    /// history now rather than at its next hourly store. Without it a corrupt region lost the setpoint, the calibration
     /// and the cabinet model for good (they are written only when they change). The model
     /// record comes back with the self-tuner's next store.
     #[inline(never)] // called once, from the firmware's loop: −24 B inlined there

@@ -200,9 +200,7 @@ async fn main(spawner: Spawner) {
     if restored.settings.is_err() {
         // No settings stored: this build's calibration constant, if it has one.
         if let Some(cal) = config::CALIBRATION {
-            boot.calibration = cal;
-            // The constant, not the record, runs: a record refused changes nothing.
-            boot.refused &= !hter::persist::Record::Calibration.bit();
+            boot.run_calibration_constant(cal);
             // Stored once, for the images after this one built without it.
             if let Some(cal) = restored.calibration_to_store(cal) {
                 persist::request(persist::Save::Calibration(cal));

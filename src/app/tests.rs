@@ -1713,6 +1713,11 @@ fn a_refused_record_is_reported_once_and_again_only_after_a_good_one() {
         (log, last, h.refused()),
         (vec![Record::Model, Record::Calibration], Indication::Unacknowledged, calibration | Record::Model.bit())
     );
+    // The build's calibration constant runs instead of the record: its refusal is no refusal.
+    let constant = TwoPoint { gain: 1.013, offset_c: -0.42 };
+    let mut with_constant = Boot { refused: calibration | Record::Model.bit(), ..boot() };
+    with_constant.run_calibration_constant(constant);
+    assert_eq!((with_constant.calibration, with_constant.refused), (constant, Record::Model.bit()));
 }
 
 /// Found by fuzzing (`fuzz::the_app_starts_safe_from_arbitrary_stored_records`): a log whose

@@ -815,12 +815,13 @@ impl Restored {
         }
     }
 
-    /// The records this boot refused ([`LoadStatus::Invalid`]: stored, their CRC good, their
-    /// content failing this firmware's checks), as [`crate::persist::Record::bit`]s. A record the
+    /// The records this boot refused ([`LoadStatus::Invalid`]: stored, intact for the storage
+    /// layer, their frame or content failing this firmware's checks), as [`crate::persist::Record::bit`]s. A record the
     /// flash could not give ([`LoadStatus::Flash`]) is not one: the storage layer's repair and the
     /// boot's warning deal with it. Nor is the calibration record when settings were restored:
     /// the settings' calibration runs ([`crate::app::App::new`]), so its refusal changes nothing
-    /// (the glue clears the bit likewise where the build's constant replaces the record).
+    /// (nor where the build's constant replaces the record,
+    /// [`crate::app::Boot::run_calibration_constant`]).
     pub fn refused(&self) -> u8 {
         use crate::persist::Record;
         // By reference: the model's configuration copied out to read its status cost flash.
