@@ -603,6 +603,49 @@ fn a_new_fail_safe_stop_reaches_the_record_before_the_next_stop() {
     assert!(matches!(quiet.history_save(stored), Save::History(_)));
 }
 
+/// The same fault loop on the log: the new stop's `board_fault` row, which the boot's first
+/// sample logs, reaches flash before the stop 20 s in, as its history does; the repeats wait as
+/// their history does. Behind the write gate's hold-off, `history` and `hter report` showed no
+/// board fault at all for a board that stopped within the minute of every boot.
+#[test]
+fn a_new_fail_safe_stops_row_reaches_the_log_before_the_next_stop() {
+    use crate::failsafe::{panic_info, StopInfo, StopKind};
+    use crate::persist::{PendingSaves, WriteGate};
+    let panic = panic_info("src/step.rs", 417);
+    let hard_fault = StopInfo::new(StopKind::HardFault, 0x0800_1234, 0, 0x8200);
+    let mut stored = HistoryRecord::EMPTY;
+    let mut rows = Vec::new();
+    for (n, fault) in [panic; 4].into_iter().chain([hard_fault]).enumerate() {
+        let mut b = Bench::new(&Boot {
+            history: stored,
+            stops: Stops { earlier: None, latest: Some(fault), fresh: true },
+            ..boot()
+        });
+        b.drain();
+        let (mut gate, mut pending) = (WriteGate::firmware(), PendingSaves::EMPTY);
+        // The boot's supply reading, then a sample every Ts until the stop 20 s in.
+        gate.note_supply(0, true);
+        for t in [0, 10_000] {
+            if t > 0 {
+                b.run(1);
+            }
+            gate.note_supply(t, true);
+            for s in b.saves.drain(..) {
+                pending.put(s);
+            }
+            while let Some(s) = pending.next(&gate, t) {
+                match s {
+                    Save::History(h) | Save::AlarmHistory(h) => stored = h,
+                    Save::Log(LogEntry::Event { kind: EventKind::BoardFault(k), .. }) => rows.push((n, k)),
+                    _ => {}
+                }
+            }
+        }
+    }
+    assert_eq!(rows, [(0, StopKind::Panic), (4, StopKind::HardFault)], "the new stops' rows, once each");
+    assert_eq!((stored.stops_of(StopKind::Panic), stored.stops_of(StopKind::HardFault)), (1, 1));
+}
+
 /// A new stop kept as the earlier behind a repeat of the stored history's newest (here an NMI
 /// on a supply under the PVD level, then the loop's panic 20 s into every boot) is stored at
 /// once by the first boot on a good supply, not behind the hold-off: there it waited for a boot

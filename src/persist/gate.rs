@@ -14,7 +14,9 @@
 //! once. A power-bounce loop therefore writes nothing, and the resets of a loop whose boots
 //! never stay up for the hold-off are not counted in the history.
 //!
-//! Cold-chain log entries are not whole states: each waits, in order, up to [`PENDING_LOG`] of
+//! Cold-chain log entries (the builds with the log, feature `cold-chain-log`) wait for the gate
+//! too, except in the hold-off after an alarm history went: the rows of what made it urgent go
+//! with it ([`PendingSaves::next`]). They are not whole states: each waits, in order, up to [`PENDING_LOG`] of
 //! them. Beyond that the oldest waiting entry is dropped (a pop at the queue's front: the
 //! cheapest in flash), and the record says so. The first log entry written when the gate opens
 //! is then one `log_entries_lost` event ([`EventKind::LogEntriesLost`](crate::event::EventKind::LogEntriesLost), [`LogEntry::Lost`])
@@ -134,14 +136,53 @@ pub struct PendingSaves {
     #[cfg(feature = "holdover")]
     cabinet: Option<super::CabinetRecord>,
     history: Option<HistoryRecord>,
-    log: heapless::Deque<LogEntry, PENDING_LOG>,
+    /// The log entries (the builds with the cold-chain log).
+    #[cfg(feature = "cold-chain-log")]
+    rows: Rows,
+    alarm: bool,
+}
+
+/// The log entries waiting in [`PendingSaves`], in order: the newest [`PENDING_LOG`], after a
+/// `log_entries_lost` event when older ones were dropped.
+#[cfg(feature = "cold-chain-log")]
+#[derive(Clone, Debug, PartialEq, Default)]
+struct Rows {
+    entries: heapless::Deque<LogEntry, PENDING_LOG>,
     /// Record time of the newest log entry dropped (because [`PENDING_LOG`] were waiting) since
     /// the last `log_entries_lost` event went out, s, and how many were (saturating); `None`
     /// when none was.
-    log_lost: Option<(u32, u16)>,
-    /// The waiting history holds an alarm not yet stored (stays set when a newer history
-    /// replaces it: the newer one counts the alarm too).
-    alarm: bool,
+    lost: Option<(u32, u16)>,
+    /// When the last alarm history went, ms: the entries of the hold-off after it go as they
+    /// come, not behind it ([`PendingSaves::next`]).
+    alarm_sent_ms: Option<u64>,
+}
+
+#[cfg(feature = "cold-chain-log")]
+impl Rows {
+    const EMPTY: Rows = Rows { entries: heapless::Deque::new(), lost: None, alarm_sent_ms: None };
+
+    fn put(&mut self, e: LogEntry) {
+        if self.entries.is_full() {
+            if let Some(lost) = self.entries.pop_front() {
+                let before = self.lost.map_or(0, |(_, n)| n);
+                self.lost = Some((lost.t_s(), before.saturating_add(1)));
+            }
+        }
+        let _ = self.entries.push_back(e);
+    }
+
+    fn is_empty(&self) -> bool {
+        self.entries.is_empty() && self.lost.is_none()
+    }
+
+    /// The next entry, removed from the queue: a `log_entries_lost` event first if some were
+    /// dropped (every dropped entry is older than every waiting one).
+    fn next(&mut self) -> Option<Save> {
+        if let Some((t_s, entries)) = self.lost.take() {
+            return Some(Save::Log(LogEntry::Lost { t_s, entries }));
+        }
+        self.entries.pop_front().map(Save::Log)
+    }
 }
 
 impl PendingSaves {
@@ -153,8 +194,8 @@ impl PendingSaves {
         #[cfg(feature = "holdover")]
         cabinet: None,
         history: None,
-        log: heapless::Deque::new(),
-        log_lost: None,
+        #[cfg(feature = "cold-chain-log")]
+        rows: Rows::EMPTY,
         alarm: false,
     };
 
@@ -166,21 +207,27 @@ impl PendingSaves {
             Save::Settings(s) => self.settings = Some(s),
             #[cfg(feature = "holdover")]
             Save::Cabinet(c) => self.cabinet = Some(c),
-            Save::Log(e) => {
-                if self.log.is_full() {
-                    if let Some(lost) = self.log.pop_front() {
-                        let before = self.log_lost.map_or(0, |(_, n)| n);
-                        self.log_lost = Some((lost.t_s(), before.saturating_add(1)));
-                    }
-                }
-                let _ = self.log.push_back(e);
-            }
+            #[cfg(feature = "cold-chain-log")]
+            Save::Log(e) => self.rows.put(e),
+            // No log in this build (the default firmware's): nothing logs.
+            #[cfg(not(feature = "cold-chain-log"))]
+            Save::Log(_) => {}
             Save::History(h) => self.history = Some(h),
             Save::AlarmHistory(h) => {
                 self.history = Some(h);
                 self.alarm = true;
             }
         }
+    }
+
+    #[cfg(feature = "cold-chain-log")]
+    fn rows_empty(&self) -> bool {
+        self.rows.is_empty()
+    }
+
+    #[cfg(not(feature = "cold-chain-log"))]
+    fn rows_empty(&self) -> bool {
+        true
     }
 
     /// Whether nothing waits.
@@ -193,8 +240,7 @@ impl PendingSaves {
             && self.calibration.is_none()
             && self.settings.is_none()
             && self.history.is_none()
-            && self.log.is_empty()
-            && self.log_lost.is_none()
+            && self.rows_empty()
     }
 
     /// The next record `gate` lets through at `now_ms`, removed from the queue: an alarm history
@@ -202,6 +248,14 @@ impl PendingSaves {
     /// (a `log_entries_lost` event first if some were dropped), calibration, model. Out of
     /// line: inlined into the firmware's persist task, each kind's record went into the task's
     /// state through a copy of its own (−244 B of flash).
+    ///
+    /// Log entries skip the hold-off, as the alarm history does, for the hold-off after an alarm
+    /// history went: the rows of what made it urgent, which come with the sample that raised it
+    /// or, for a new fail-safe stop, with the boot's first sample (its `board_fault` row), after
+    /// the boot's history went. Behind the hold-off, a board whose every boot stops within it
+    /// stored the new stop in its history and never its row on the log, which `history` and
+    /// `hter report` read. A repeated stop's history waits ([`crate::app::Boot::history_save`]),
+    /// and so do its rows: a fault loop does not write at every boot.
     #[inline(never)]
     pub fn next(&mut self, gate: &WriteGate, now_ms: u64) -> Option<Save> {
         // [`WriteGate::allows`] taken apart: the supply good now (both kinds of record), then the
@@ -211,10 +265,18 @@ impl PendingSaves {
         if self.alarm {
             self.alarm = false;
             if let Some(h) = self.history.take() {
+                #[cfg(feature = "cold-chain-log")]
+                {
+                    self.rows.alarm_sent_ms = Some(now_ms);
+                }
                 return Some(Save::AlarmHistory(h));
             }
         }
         if !gate.held(now_ms, since) {
+            #[cfg(feature = "cold-chain-log")]
+            if self.rows.alarm_sent_ms.is_some_and(|t| !gate.held(now_ms, t)) {
+                return self.rows.next();
+            }
             return None;
         }
         if let Some(s) = self.settings.take() {
@@ -228,12 +290,9 @@ impl PendingSaves {
             self.alarm = false;
             return Some(Save::History(h));
         }
-        // Every dropped entry is older than every waiting one: the event goes first.
-        if let Some((t_s, entries)) = self.log_lost.take() {
-            return Some(Save::Log(LogEntry::Lost { t_s, entries }));
-        }
-        if let Some(e) = self.log.pop_front() {
-            return Some(Save::Log(e));
+        #[cfg(feature = "cold-chain-log")]
+        if let Some(row) = self.rows.next() {
+            return Some(row);
         }
         if let Some(c) = self.calibration.take() {
             return Some(Save::Calibration(c));
@@ -337,6 +396,7 @@ mod tests {
 
     /// The boot's `restarted` event at record time `t0_s`, then `n` accepted setpoints one
     /// second apart.
+    #[cfg(feature = "cold-chain-log")]
     fn boot_then_settings(t0_s: u32, n: u32) -> Vec<LogEntry> {
         let restarted = LogEntry::Event { t_s: t0_s, kind: EventKind::Restarted(crate::persist::ResetCause::Other) };
         let set = |i: u32| LogEntry::Setting {
@@ -348,14 +408,17 @@ mod tests {
     }
 
     /// Everything `gate` lets through at `now_ms`.
+    #[cfg(feature = "cold-chain-log")]
     fn drain(p: &mut PendingSaves, gate: &WriteGate, now_ms: u64) -> Vec<Save> {
         core::iter::from_fn(|| p.next(gate, now_ms)).collect()
     }
 
+    #[cfg(feature = "cold-chain-log")]
     fn lost(t_s: u32, entries: u16) -> Save {
         Save::Log(LogEntry::Lost { t_s, entries })
     }
 
+    #[cfg(feature = "cold-chain-log")]
     #[test]
     fn a_flooded_log_queue_leaves_one_lost_event_before_the_entries_it_kept() {
         let mut gate = WriteGate::firmware();
@@ -406,6 +469,51 @@ mod tests {
         assert_eq!(writes[1..], again[5..].iter().map(|e| Save::Log(*e)).collect::<Vec<_>>());
     }
 
+    /// The rows that come with an alarm history (the boot's first sample logs a new stop's
+    /// `board_fault` row after the boot's history went) skip the hold-off for the hold-off after
+    /// it, as it did: a board that stops again within the minute has them on its log. Later
+    /// ones wait for the gate's hold-off, as every row without an alarm does.
+    #[cfg(feature = "cold-chain-log")]
+    #[test]
+    fn the_log_rows_in_the_hold_off_after_an_alarm_history_go_as_they_come() {
+        let mut gate = WriteGate::firmware();
+        let mut p = PendingSaves::EMPTY;
+        let row = |t_s: u32, kind: EventKind| Save::Log(LogEntry::Event { t_s, kind });
+        gate.note_supply(0, true);
+        p.put(Save::AlarmHistory(history(0)));
+        assert_eq!(drain(&mut p, &gate, 0), [Save::AlarmHistory(history(0))]);
+        // A bad sample at 20 s: the gate's hold-off runs from 30 s to 90 s.
+        gate.note_supply(20_000, false);
+        gate.note_supply(30_000, true);
+        let first = [
+            row(1, EventKind::Restarted(crate::persist::ResetCause::Other)),
+            row(1, EventKind::BoardFault(crate::failsafe::StopKind::Panic)),
+        ];
+        p.put(Save::History(history(30)));
+        p.put(Save::Calibration(TwoPoint::IDENTITY));
+        for r in first {
+            p.put(r);
+        }
+        assert_eq!(drain(&mut p, &gate, 30_000), first, "the rows only, at once");
+        // Past the alarm's hold-off and before the gate's: a row waits, with the others.
+        gate.note_supply(70_000, true);
+        p.put(row(71, EventKind::SensorOpen));
+        assert_eq!(drain(&mut p, &gate, 70_000), []);
+        gate.note_supply(90_000, true);
+        assert_eq!(
+            drain(&mut p, &gate, 90_000),
+            [Save::History(history(30)), row(71, EventKind::SensorOpen), Save::Calibration(TwoPoint::IDENTITY)]
+        );
+        // Without an alarm history the rows wait for the hold-off (the fault loop's repeats).
+        let (mut gate, mut p) = (WriteGate::firmware(), PendingSaves::EMPTY);
+        gate.note_supply(0, true);
+        p.put(Save::History(history(0)));
+        p.put(first[1]);
+        gate.note_supply(10_000, true);
+        assert_eq!(drain(&mut p, &gate, 10_000), []);
+    }
+
+    #[cfg(feature = "cold-chain-log")]
     #[test]
     fn a_full_log_queue_that_did_not_overflow_has_no_lost_event() {
         let mut gate = WriteGate::firmware();
