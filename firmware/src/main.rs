@@ -274,6 +274,38 @@ fn log_alarm(a: &hter::coldchain::Alarm) {
     );
 }
 
+/// The stored cold-chain record the boot goes on from, in one line: on a board without the
+/// interface the boot log is the only place a technician reads what the carrier went through
+/// before this boot (the hourly `coldchain` line counts this boot alone).
+fn log_stored(h: &hter::persist::HistoryRecord) {
+    use hter::coldchain::AlarmKind;
+    use hter::failsafe::StopKind;
+    use hter::persist::ResetCause;
+    info!(
+        "stored record: {=u32} s, min={=f32} max={=f32} °C, below2_s={=u32} above8_s={=u32} excursions={=u32}; alarms heat_10h={=u16} freeze_60min={=u16} ship_45c_1h={=u16} ship_30c_10h={=u16}; boots watchdog={=u16} brown-out={=u16} other={=u16}; stops panic={=u16} hard_fault={=u16} nmi={=u16} unexpected_interrupt={=u16} control_stall={=u16}; flash_pages_lost={=u16} latched={=bool}",
+        h.recorded_s,
+        h.min_c.unwrap_or(f32::NAN),
+        h.max_c.unwrap_or(f32::NAN),
+        h.below_2_s,
+        h.above_8_s,
+        h.excursions,
+        h.alarms_of(AlarmKind::Heat10h),
+        h.alarms_of(AlarmKind::Freeze60min),
+        h.alarms_of(AlarmKind::Ship45c1h),
+        h.alarms_of(AlarmKind::Ship30c10h),
+        h.resets_by(ResetCause::Watchdog),
+        h.resets_by(ResetCause::BrownOut),
+        h.resets_by(ResetCause::Other),
+        h.stops_of(StopKind::Panic),
+        h.stops_of(StopKind::HardFault),
+        h.stops_of(StopKind::Nmi),
+        h.stops_of(StopKind::UnexpectedInterrupt),
+        h.stops_of(StopKind::ControlStall),
+        h.flash_pages_lost,
+        h.unacknowledged()
+    );
+}
+
 /// The step, built from the constant profile, so that its derived sample counts fold at compile
 /// time; only the calibration (and the self-tuner's start model) come from flash. Out of line:
 /// inlined into the control task, its constants were stored field by field into the task's
@@ -299,6 +331,7 @@ async fn control(boot: &'static Boot, mut heartbeat_pin: Output<'static>) {
     let mut annunciator = {
         // The boot counted, the sensor offset and a shorted SSR resumed.
         let history = boot.resume(&mut carrier, &mut recorder);
+        log_stored(&history);
         for _ in 0..boot.pages_lost {
             if EVENTS.try_send(Event { t_ms: 0, kind: hter::event::EventKind::FlashPageLost }).is_err() {
                 warn!("event queue full, dropped FlashPageLost");
@@ -414,6 +447,7 @@ async fn control(boot: &'static Boot, mut heartbeat_pin: Output<'static>) {
 #[embassy_executor::task]
 async fn control(boot: &'static Boot, mut heartbeat_pin: Output<'static>) {
     let mut app = App::new(config::APP, boot);
+    log_stored(&app.recorder().history());
     // The boot's history now, not after the first step: a new fail-safe stop in it is stored at
     // once (`Boot::history_save`), before the first step can stop the board again.
     while let Some(save) = app.next_save() {
