@@ -46,6 +46,8 @@ pub fn needs_attention(kind: EventKind) -> bool {
                 // A stored record refused at boot: the carrier runs a default in its place (a
                 // calibration or a setpoint set on it is not the one in force).
                 | EventKind::RecordRefused(_)
+                // The flash keeps refusing writes: the record is not being kept.
+                | EventKind::StoreFailed
         )
 }
 
@@ -131,6 +133,12 @@ impl Annunciator {
         }
     }
 
+    /// An event from outside the step (the board application's [`EventKind::StoreFailed`]):
+    /// latches as the step's own events do when it asks for a person.
+    pub fn note(&mut self, kind: EventKind) {
+        self.latched |= needs_attention(kind);
+    }
+
     /// Something latched that a person has not acknowledged yet.
     pub fn latched(&self) -> bool {
         self.latched
@@ -205,7 +213,7 @@ mod tests {
     }
 
     #[test]
-    fn exactly_the_faults_a_watchdog_bite_a_fail_safe_stop_and_a_refused_record_ask_for_attention() {
+    fn exactly_the_faults_a_watchdog_bite_a_fail_safe_stop_a_refused_record_and_a_failing_flash_ask_for_attention() {
         use crate::failsafe::StopKind;
         use crate::persist::{Record, ResetCause};
         use EventKind::*;
@@ -234,6 +242,7 @@ mod tests {
             RecordRefused(Record::History),
             RecordRefused(Record::Settings),
             RecordRefused(Record::Cabinet),
+            StoreFailed,
         ];
         for k in EventKind::ALL {
             assert_eq!(needs_attention(k), attention.contains(&k), "{k:?}");

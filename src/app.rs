@@ -353,6 +353,8 @@ pub struct App {
     commissioned: Option<Result<(), CommissionError>>,
     /// The cabinet model (commissioned or uploaded; the holdover's), if the carrier has one.
     cabinet: Option<Model>,
+    /// Whether the flash keeps failing ([`Self::note_store_failures`]).
+    store: crate::persist::StoreWatch,
 }
 
 /// Samples in one block of [`DutyMean`]: 30 minutes at Ts = 10 s.
@@ -540,6 +542,7 @@ impl App {
             duty_mean: DutyMean::NEW,
             commissioned: None,
             cabinet,
+            store: crate::persist::StoreWatch::NEW,
         }
     }
 
@@ -607,6 +610,20 @@ impl App {
             self.save(Save::Cabinet(rec));
         }
         self.save(Save::History(self.recorder.history()));
+    }
+
+    /// The persist task's count of stores failed in a row (0 after one that succeeded), before
+    /// each sample: when it reaches [`crate::persist::STORE_FAILURES`] the flash is failing,
+    /// which latches the indicator and logs `store_failed` (kept if the log region still
+    /// writes), once per run of failures; `status` shows `flash=failing` until a store succeeds.
+    /// Before, a board whose flash refused every write kept no record and said so only in its
+    /// RTT log, which nobody reads in the field.
+    pub fn note_store_failures(&mut self, failed_in_a_row: u8) {
+        if self.store.observe(failed_in_a_row) {
+            self.annunciator.note(EventKind::StoreFailed);
+            let t_s = self.record_s(self.last_t_ms);
+            self.save(Save::Log(LogEntry::Event { t_s, kind: EventKind::StoreFailed }));
+        }
     }
 
     /// Out of line: inlined, each of its dozen call sites moved a whole `Save` (a history record
@@ -1095,7 +1112,8 @@ impl App {
             (_, Some(Err(e))) => put!(out, "failed:", e.name())?,
             (_, None) => out.str("idle")?,
         }
-        put!(out, "\r\nsettings_version=", self.settings.seq, "\r\n")
+        put!(out, "\r\nsettings_version=", self.settings.seq, "\r\n")?;
+        put!(out, "flash=", if self.store.failing() { "failing" } else { "ok" }, "\r\n")
     }
 }
 

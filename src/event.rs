@@ -93,11 +93,17 @@ pub enum EventKind {
     /// the one in force. Reported once per refusal ([`crate::persist::HistoryRecord::refused`]);
     /// the record stays in flash as it is until a new one of its kind replaces it.
     RecordRefused(crate::persist::Record),
+    /// The board's flash writes keep failing: [`crate::persist::STORE_FAILURES`] stores in a row
+    /// failed (a write-protected or worn region, a flash driver fault), so the cold-chain
+    /// record and the settings are not being kept; a restart would lose what RAM holds. Not a
+    /// step event: the board application raises it ([`crate::app::App::note_store_failures`])
+    /// from the persist task's count, once per run of failures. Asks for a person.
+    StoreFailed,
 }
 
 impl EventKind {
     /// Every kind, in declaration order (each reset cause and fail-safe stop its own kind).
-    pub const ALL: [EventKind; 35] = {
+    pub const ALL: [EventKind; 36] = {
         use crate::failsafe::StopKind;
         use crate::persist::{Record, ResetCause};
         [
@@ -136,6 +142,7 @@ impl EventKind {
             EventKind::RecordRefused(Record::History),
             EventKind::RecordRefused(Record::Settings),
             EventKind::RecordRefused(Record::Cabinet),
+            EventKind::StoreFailed,
         ]
     };
 
@@ -199,6 +206,7 @@ impl EventKind {
             EventKind::RecordRefused(crate::persist::Record::History) => "record_refused_history",
             EventKind::RecordRefused(crate::persist::Record::Settings) => "record_refused_settings",
             EventKind::RecordRefused(crate::persist::Record::Cabinet) => "record_refused_cabinet",
+            EventKind::StoreFailed => "store_failed",
         }
     }
 
@@ -234,6 +242,7 @@ impl EventKind {
             EventKind::ReferenceOutOfRange => 23,
             EventKind::LogEntriesLost => 24,
             EventKind::RecordRefused(r) => 0x50 + u32::from(r as u8),
+            EventKind::StoreFailed => 25,
         }
     }
 }

@@ -35,7 +35,9 @@ pub(crate) mod fuzz;
 mod gate;
 pub mod log;
 
-pub use gate::{PendingSaves, Save, WriteGate, PENDING_LOG, SUPPLY_FRESH_MS, SUPPLY_HOLD_OFF_MS};
+pub use gate::{
+    PendingSaves, Save, StoreWatch, WriteGate, PENDING_LOG, STORE_FAILURES, SUPPLY_FRESH_MS, SUPPLY_HOLD_OFF_MS,
+};
 
 /// Why stored bytes were not accepted as a record.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -704,7 +706,8 @@ impl Default for HistoryRecord {
     }
 }
 
-fn alarm_index(kind: AlarmKind) -> usize {
+/// `kind`'s slot in [`HistoryRecord::alarms`].
+pub const fn alarm_index(kind: AlarmKind) -> usize {
     match kind {
         AlarmKind::Heat10h => 0,
         AlarmKind::Freeze60min => 1,
@@ -713,11 +716,20 @@ fn alarm_index(kind: AlarmKind) -> usize {
     }
 }
 
-fn stop_index(kind: StopKind) -> usize {
-    StopKind::ALL.iter().position(|k| *k == kind).unwrap_or(0)
+/// `kind`'s slot in [`HistoryRecord::stops`], its place in [`StopKind::ALL`] (a test holds the
+/// two together).
+pub const fn stop_index(kind: StopKind) -> usize {
+    match kind {
+        StopKind::Panic => 0,
+        StopKind::HardFault => 1,
+        StopKind::Nmi => 2,
+        StopKind::UnexpectedInterrupt => 3,
+        StopKind::ControlStall => 4,
+    }
 }
 
-fn reset_index(cause: ResetCause) -> usize {
+/// `cause`'s slot in [`HistoryRecord::resets`].
+pub const fn reset_index(cause: ResetCause) -> usize {
     match cause {
         ResetCause::Watchdog => 0,
         ResetCause::BrownOut => 1,
@@ -1309,6 +1321,18 @@ mod tests {
 
     fn cfg() -> AdaptiveConfig {
         ADAPTIVE_GPC
+    }
+
+    #[test]
+    fn each_kind_has_its_own_slot_in_the_history_and_the_stops_are_in_their_list_order() {
+        for (i, k) in StopKind::ALL.into_iter().enumerate() {
+            assert_eq!(stop_index(k), i, "{k:?}");
+        }
+        let alarms: Vec<usize> = AlarmKind::ALL.into_iter().map(alarm_index).collect();
+        assert_eq!(alarms, [0, 1, 2, 3]);
+        let resets: Vec<usize> =
+            [ResetCause::Watchdog, ResetCause::BrownOut, ResetCause::Other].into_iter().map(reset_index).collect();
+        assert_eq!(resets, [0, 1, 2]);
     }
 
     /// RCC_CSR values as RM0351 documents them: the reset value after a power-on (BORRSTF and

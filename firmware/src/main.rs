@@ -278,9 +278,12 @@ fn log_alarm(a: &hter::coldchain::Alarm) {
 /// interface the boot log is the only place a technician reads what the carrier went through
 /// before this boot (the hourly `coldchain` line counts this boot alone).
 fn log_stored(h: &hter::persist::HistoryRecord) {
-    use hter::coldchain::AlarmKind;
-    use hter::failsafe::StopKind;
-    use hter::persist::ResetCause;
+    use hter::coldchain::AlarmKind::{Freeze60min, Heat10h, Ship30c10h, Ship45c1h};
+    use hter::failsafe::StopKind::{ControlStall, HardFault, Nmi, Panic, UnexpectedInterrupt};
+    use hter::persist::ResetCause::{BrownOut, Other, Watchdog};
+    use hter::persist::{alarm_index as a, reset_index as r, stop_index as s};
+    // The slots by their kinds, at compile time: an index out of its array fails the build.
+    let (alarms, resets, stops) = (&h.alarms, &h.resets, &h.stops);
     info!(
         "stored record: {=u32} s, min={=f32} max={=f32} °C, below2_s={=u32} above8_s={=u32} excursions={=u32}; alarms heat_10h={=u16} freeze_60min={=u16} ship_45c_1h={=u16} ship_30c_10h={=u16}; boots watchdog={=u16} brown-out={=u16} other={=u16}; stops panic={=u16} hard_fault={=u16} nmi={=u16} unexpected_interrupt={=u16} control_stall={=u16}; flash_pages_lost={=u16} latched={=bool}",
         h.recorded_s,
@@ -289,18 +292,18 @@ fn log_stored(h: &hter::persist::HistoryRecord) {
         h.below_2_s,
         h.above_8_s,
         h.excursions,
-        h.alarms_of(AlarmKind::Heat10h),
-        h.alarms_of(AlarmKind::Freeze60min),
-        h.alarms_of(AlarmKind::Ship45c1h),
-        h.alarms_of(AlarmKind::Ship30c10h),
-        h.resets_by(ResetCause::Watchdog),
-        h.resets_by(ResetCause::BrownOut),
-        h.resets_by(ResetCause::Other),
-        h.stops_of(StopKind::Panic),
-        h.stops_of(StopKind::HardFault),
-        h.stops_of(StopKind::Nmi),
-        h.stops_of(StopKind::UnexpectedInterrupt),
-        h.stops_of(StopKind::ControlStall),
+        alarms[const { a(Heat10h) }],
+        alarms[const { a(Freeze60min) }],
+        alarms[const { a(Ship45c1h) }],
+        alarms[const { a(Ship30c10h) }],
+        resets[const { r(Watchdog) }],
+        resets[const { r(BrownOut) }],
+        resets[const { r(Other) }],
+        stops[const { s(Panic) }],
+        stops[const { s(HardFault) }],
+        stops[const { s(Nmi) }],
+        stops[const { s(UnexpectedInterrupt) }],
+        stops[const { s(ControlStall) }],
         h.flash_pages_lost,
         h.unacknowledged()
     );
@@ -351,6 +354,7 @@ async fn control(boot: &'static Boot, mut heartbeat_pin: Output<'static>) {
         carrier.config().cal.offset_c
     );
     let mut model_cadence = hter::persist::ModelCadence::new(config::MODEL_SAVE_SAMPLES);
+    let mut store_watch = hter::persist::StoreWatch::NEW;
     let mut samples = 0u32;
     failsafe::boot_done();
     board::start_stall_check();
@@ -365,6 +369,15 @@ async fn control(boot: &'static Boot, mut heartbeat_pin: Output<'static>) {
         if ACKNOWLEDGE.try_take().is_some() {
             info!("alarm acknowledged t={=u64:ms}", s.t_ms);
             annunciator.acknowledge();
+        }
+        // The flash refusing its writes: on the log as `event t=… StoreFailed` (what `hter
+        // log2csv` reads), and the indicator latched.
+        if store_watch.observe(persist::failed_in_a_row()) {
+            let kind = hter::event::EventKind::StoreFailed;
+            annunciator.note(kind);
+            if EVENTS.try_send(Event { t_ms: s.t_ms, kind }).is_err() {
+                warn!("event queue full, dropped StoreFailed");
+            }
         }
         let alarm = annunciator.update(&out, &rec.raised);
         recorder.note_carried(&mut rec, annunciator.latched(), carrier.sensor_offset(), carrier.ssr_shorted());
@@ -490,6 +503,7 @@ async fn control(boot: &'static Boot, mut heartbeat_pin: Output<'static>) {
             info!("alarm acknowledged t={=u64:ms}", s.t_ms);
             app.acknowledge();
         }
+        app.note_store_failures(persist::failed_in_a_row());
         let out =
             app.sample(&SampleIn { t_ms: s.t_ms, counts: s.counts, reference_ok: s.reference_ok, board: s.board });
         let step = &out.step;

@@ -169,6 +169,19 @@ static WAKE: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// others: the history and the calibration in force, at the next sample).
 pub static RECORDS_ERASED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
 
+/// Stores failed in a row in each region, the records' then the log's (0 after one that
+/// succeeded), saturating: the control task's `hter::persist::StoreWatch` calls the flash
+/// failed at `hter::persist::STORE_FAILURES` in either ([`failed_in_a_row`]). Counted apart: the
+/// log's 5-minute rows would otherwise end every run of the records region's hourly failures.
+static FAILED_IN_A_ROW: [core::sync::atomic::AtomicU8; 2] =
+    [core::sync::atomic::AtomicU8::new(0), core::sync::atomic::AtomicU8::new(0)];
+
+/// The longer run of stores failed in a row of the two regions.
+pub fn failed_in_a_row() -> u8 {
+    use core::sync::atomic::Ordering::Relaxed;
+    FAILED_IN_A_ROW[0].load(Relaxed).max(FAILED_IN_A_ROW[1].load(Relaxed))
+}
+
 /// What the boot restored: the persist task sends it once, `main` waits for it. A one-slot
 /// channel, not a `Signal`: a signal's empty state is a niche value inside `Restored`, which
 /// puts all 324 bytes of it in `.data` (flash); the channel's empty state is all zeros (`.bss`):
@@ -339,6 +352,11 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
                 }
                 result
             };
+            {
+                use core::sync::atomic::Ordering::Relaxed;
+                let region = &FAILED_IN_A_ROW[usize::from(matches!(save, Save::Log(_)))];
+                region.store(if result.is_ok() { 0 } else { region.load(Relaxed).saturating_add(1) }, Relaxed);
+            }
             match (result, save) {
                 #[cfg(feature = "interface")]
                 (Ok(()), Save::Log(LogEntry::Lost { t_s, entries })) => {

@@ -30,6 +30,9 @@ pub enum MockError {
     NotAligned,
     /// Programming a word that is not erased with anything but zeros (the L4 sets PROGERR).
     NotErased,
+    /// A program or erase in a write-protected flash (the L4's WRPERR: an option byte's WRP
+    /// area over the region).
+    WriteProtected,
     /// The read covered a double word failing its ECC check, at this offset.
     Ecc(u32),
 }
@@ -97,6 +100,8 @@ pub struct MockFlash<const PAGE: usize> {
     pub erases: usize,
     /// Zero programs over programmed words (repairs).
     pub rewrites: usize,
+    /// Every program and erase fails ([`MockError::WriteProtected`]); reads work.
+    pub write_protected: bool,
 }
 
 impl<const PAGE: usize> MockFlash<PAGE> {
@@ -119,6 +124,7 @@ impl<const PAGE: usize> MockFlash<PAGE> {
             ops: 0,
             erases: 0,
             rewrites: 0,
+            write_protected: false,
         }
     }
 
@@ -204,6 +210,9 @@ impl<const PAGE: usize> NorFlash for MockFlash<PAGE> {
         if to > self.bytes.len() {
             return Err(MockError::OutOfBounds);
         }
+        if self.write_protected {
+            return Err(MockError::WriteProtected);
+        }
         for page in (from..to).step_by(PAGE) {
             if self.dead {
                 return Err(MockError::PowerLoss);
@@ -235,6 +244,9 @@ impl<const PAGE: usize> NorFlash for MockFlash<PAGE> {
         }
         if from + data.len() > self.bytes.len() {
             return Err(MockError::OutOfBounds);
+        }
+        if self.write_protected {
+            return Err(MockError::WriteProtected);
         }
         for (i, word) in data.chunks(WORD).enumerate() {
             if self.dead {

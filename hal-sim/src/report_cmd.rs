@@ -236,11 +236,11 @@ pub fn verdict(r: &monitor_cmd::Report, holes: usize) -> (&'static str, &'static
 /// (`hter::event::EventKind::name`; a board history may add `:detail`): restarts, board faults,
 /// sensor, SSR, supply, reference and flash faults, a lid left open (each of the supervisor's
 /// detections sounds the alarm indicator), and the record's own holes (a flash page lost, log
-/// entries lost while flash writes were held off). Settings, alarms (listed on their own) and
+/// entries lost while flash writes were held off, a flash that refused its writes). Settings, alarms (listed on their own) and
 /// recoveries are not.
 fn is_reset_or_fault(e: &Event) -> bool {
     let n = e.name.to_ascii_lowercase();
-    const PREFIXES: [&str; 12] = [
+    const PREFIXES: [&str; 13] = [
         "restart",
         "board_fault",
         "sensor_",
@@ -250,6 +250,7 @@ fn is_reset_or_fault(e: &Event) -> bool {
         "flash_page_lost",
         "log_entries_lost",
         "record_refused",
+        "store_failed",
         "controller_non_finite",
         "freeze_guard_tripped",
         "lid_open",
@@ -640,6 +641,12 @@ fn fault_meaning(name: &str) -> Option<(String, bool)> {
             };
             (format!("{what}: the record has a gap before this time"), false)
         }
+        "store_failed" => (
+            "the controller's memory refused to store the record (several writes in a row \
+                failed): what happened from here may not have been kept, and a restart loses it"
+                .to_owned(),
+            true,
+        ),
         r if r.starts_with("record_refused_") => {
             let what = match &r["record_refused_".len()..] {
                 "calibration" => {

@@ -461,6 +461,57 @@ fn a_record_the_new_firmware_refuses_is_on_the_record_once() {
     assert_eq!(refusals(&mut b), 1);
 }
 
+/// A board whose records region refuses every write (an option byte's write protection over it,
+/// a worn region) keeps no history, no settings and no model: after the third store in a row
+/// that fails, `status` says `flash=failing`, the indicator latches, and the log (which still
+/// writes) has one `store_failed` row. Before, only the RTT log said so, store by store. Lifted,
+/// the next store that succeeds ends it; it is reported again only after a new run of failures.
+#[test]
+fn a_flash_that_refuses_every_write_sounds_the_alarm_and_says_so() {
+    let mut b = virtual_hter1(hal_sim::plant::Load::Full, 28.0, hal_sim::scenario::Start::Holding(4.0));
+    b.write_protect(false, true);
+    let rows = |b: &mut hal_sim::sim::virtual_board::VirtualBoard| {
+        b.request("history").lines().filter(|l| l.ends_with(",store_failed")).count()
+    };
+    let mut samples = 0;
+    while board_status(&mut b, "flash") == "ok" {
+        b.step().unwrap();
+        samples += 1;
+        // The boot's history after the write gate's minute, then the first hour's stores.
+        assert!(samples < 420, "not failing after {samples} samples (70 minutes)");
+        if b.write_errors < 3 {
+            assert_eq!(board_status(&mut b, "alarm"), "off", "{} failed stores", b.write_errors);
+        }
+    }
+    assert!(b.write_errors >= 3);
+    b.step().unwrap();
+    assert_eq!(board_status(&mut b, "alarm"), "unacknowledged");
+    assert_eq!(rows(&mut b), 1);
+    // Acknowledged, it stays quiet while the same run of failures goes on.
+    assert!(b.request("ack").ends_with("ok\r\n"));
+    for _ in 0..2 * 360 {
+        b.step().unwrap();
+    }
+    assert_eq!((board_status(&mut b, "flash").as_str(), board_status(&mut b, "alarm").as_str()), ("failing", "off"));
+    assert_eq!(rows(&mut b), 1);
+    // Lifted: the next store ends it (the hourly history at the latest).
+    b.write_protect(false, false);
+    for _ in 0..361 {
+        b.step().unwrap();
+    }
+    assert_eq!(board_status(&mut b, "flash"), "ok");
+    // A new run of failures is a new report.
+    b.write_protect(false, true);
+    while board_status(&mut b, "flash") == "ok" {
+        b.step().unwrap();
+        samples += 1;
+        assert!(samples < 20 * 360, "not failing again after {samples} samples");
+    }
+    b.step().unwrap();
+    assert_eq!(board_status(&mut b, "alarm"), "unacknowledged");
+    assert_eq!(rows(&mut b), 2);
+}
+
 /// `--fault` rehearses a failure over the interface, as an engineer would before the field: a
 /// relay that shorts after an hour on a board with the module-side sense. `status` shows limp
 /// home and the alarm, `history` the event within two samples of the short. A hung control loop is

@@ -160,6 +160,7 @@ fn status_has_every_field_of_the_contract_in_order() {
         "firmware",
         "commissioning",
         "settings_version",
+        "flash",
     ];
     assert_eq!(keys, want);
     assert_eq!(b.field("controller"), "gpc");
@@ -761,6 +762,37 @@ fn a_stop_and_the_hang_of_the_boot_that_took_it_both_reach_the_record() {
     // Once stored, the next boot finds neither.
     ram.stored();
     assert_eq!(ram.boot(ResetCause::Other), Stops::default());
+}
+
+/// The flash failing: the third store in a row that fails latches the indicator, logs one
+/// `store_failed` row and shows `flash=failing` in `status`, once per run of failures; a store
+/// that succeeds ends the run.
+#[test]
+fn a_flash_that_keeps_failing_latches_the_indicator_once_per_run() {
+    let mut b = Bench::new(&boot());
+    let rows = |b: &Bench| {
+        b.saves.iter().filter(|s| matches!(s, Save::Log(LogEntry::Event { kind: EventKind::StoreFailed, .. }))).count()
+    };
+    for n in [0, 1, 2] {
+        b.app.note_store_failures(n);
+        assert_eq!(b.run(1).alarm, Indication::Off, "{n} in a row");
+        assert_eq!(b.field("flash"), "ok");
+    }
+    for n in [3, 4, 9] {
+        b.app.note_store_failures(n);
+        assert_eq!(b.run(1).alarm, Indication::Unacknowledged, "{n} in a row");
+        assert_eq!(b.field("flash"), "failing");
+    }
+    assert_eq!(rows(&b), 1);
+    b.app.acknowledge();
+    b.app.note_store_failures(10);
+    assert_eq!(b.run(1).alarm, Indication::Off, "acknowledged, the same run");
+    b.app.note_store_failures(0);
+    b.run(1);
+    assert_eq!(b.field("flash"), "ok");
+    b.app.note_store_failures(3);
+    assert_eq!(b.run(1).alarm, Indication::Unacknowledged, "a new run");
+    assert_eq!(rows(&b), 2);
 }
 
 /// A records region erased because the storage layer found it corrupt: the settings, the

@@ -597,6 +597,11 @@ impl<F: NorFlash, E: EccErrors> LogStore<F, E> {
         self.queue.destroy().0.into_inner()
     }
 
+    /// The flash underneath (a test's mock).
+    pub fn flash_mut(&mut self) -> &mut F {
+        self.queue.flash().inner_mut()
+    }
+
     /// ECC damage repaired since the log was opened.
     pub fn repairs(&self) -> Repairs {
         self.repairs

@@ -121,6 +121,41 @@ pub enum Save {
     Log(LogEntry),
 }
 
+/// Stores in a row that fail before the board calls its flash failed
+/// ([`EventKind::StoreFailed`](crate::event::EventKind::StoreFailed)): three, so that one
+/// failure the storage layer recovers from at the next write (noise in a region another
+/// firmware left) is no alarm, and a region that refuses every write is one within three
+/// stores (the history's hourly one, the 5-minute log rows of the interface build).
+pub const STORE_FAILURES: u8 = 3;
+
+/// Whether the board's flash keeps failing, from the persist task's count of stores failed in a
+/// row in one region (reset by each store there that succeeds; the longer run of the records
+/// region's and the log's: the log's 5-minute rows must not end a run of the records' hourly
+/// failures).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StoreWatch {
+    failing: bool,
+}
+
+impl StoreWatch {
+    /// Flash working.
+    pub const NEW: StoreWatch = StoreWatch { failing: false };
+
+    /// The persist task's count of stores failed in a row: true when it reaches
+    /// [`STORE_FAILURES`] (once per run of failures; a store that succeeds ends the run).
+    pub fn observe(&mut self, failed_in_a_row: u8) -> bool {
+        let failing = failed_in_a_row >= STORE_FAILURES;
+        let new = failing && !self.failing;
+        self.failing = failing;
+        new
+    }
+
+    /// The last count observed had reached [`STORE_FAILURES`].
+    pub fn failing(&self) -> bool {
+        self.failing
+    }
+}
+
 /// Log entries that may wait for the [`WriteGate`]: a little over an hour of intervals and
 /// events at a typical rate; beyond it the oldest waiting entry is dropped, and the record gets
 /// a `log_entries_lost` event in its place ([`EventKind::LogEntriesLost`](crate::event::EventKind::LogEntriesLost)).
@@ -362,6 +397,16 @@ mod tests {
         // Supply back at 100 s: the alarm goes at once, before the hold-off.
         let writes = boot(120_000, |t| t >= 100_000, Some(20_000));
         assert_eq!(writes, vec![(100_000, Save::AlarmHistory(history(20)))]);
+    }
+
+    #[test]
+    fn the_flash_is_failing_from_the_third_store_in_a_row_that_fails_once_per_run() {
+        let mut w = StoreWatch::NEW;
+        let seen: Vec<bool> = [0, 1, 2, 3, 4, 5, 0, 1, 0, 1, 2, 3, 255].into_iter().map(|n| w.observe(n)).collect();
+        assert_eq!(seen, [false, false, false, true, false, false, false, false, false, false, false, true, false]);
+        assert!(w.failing());
+        w.observe(0);
+        assert!(!w.failing());
     }
 
     #[test]

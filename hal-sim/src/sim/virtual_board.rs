@@ -94,6 +94,9 @@ pub struct VirtualBoard {
     pub restarts: u32,
     /// Flash writes that failed (each logged to stderr by the server).
     pub write_errors: u32,
+    /// Stores failed in a row in the records region and in the log (the firmware's
+    /// `persist::failed_in_a_row`).
+    failed_in_a_row: [u8; 2],
 }
 
 impl VirtualBoard {
@@ -155,6 +158,7 @@ impl VirtualBoard {
             cut_settings: None,
             restarts: 0,
             write_errors: 0,
+            failed_in_a_row: [0; 2],
         })
     }
 
@@ -177,6 +181,17 @@ impl VirtualBoard {
     /// erases); the board then restarts as after a brown-out and restores what flash holds.
     pub fn cut_next_settings_write(&mut self, ops: usize) {
         self.cut_settings = Some(ops);
+    }
+
+    /// Test hook: the records region (`log`: the log region) refuses every program and erase
+    /// from now on, as a write-protected region does ([`MockError::WriteProtected`](crate::flash::MockError::WriteProtected));
+    /// `false` lifts it.
+    pub fn write_protect(&mut self, log: bool, on: bool) {
+        match (log, self.store.as_mut(), self.log.as_mut()) {
+            (false, Some(store), _) => store.flash_mut().write_protected = on,
+            (true, _, Some(l)) => l.flash_mut().write_protected = on,
+            _ => {}
+        }
     }
 
     /// Test hook: stores `bytes` under `key` (`hter::persist::flash::key`) in the records region
@@ -242,6 +257,7 @@ impl VirtualBoard {
     pub fn step(&mut self) -> Option<SampleOut> {
         let ts = f64::from(hter::step::CarrierConfig::DEFAULT.ts_s);
         let input = self.rig.sample_in(self.t_ms)?;
+        self.app.note_store_failures(self.failed_in_a_row[0].max(self.failed_in_a_row[1]));
         let out = self.app.sample(&input);
         let d = self.rig.actuate(&out.step, self.sim_s);
         self.rig.advance(self.sim_s, d, ts, &mut self.last_on, true);
@@ -277,8 +293,12 @@ impl VirtualBoard {
                 // The write completed before the cut: nothing is armed any more.
                 store.flash_mut().ops_left = None;
             }
+            let region = &mut self.failed_in_a_row[usize::from(matches!(save, Save::Log(_)))];
             if result.is_err() {
                 self.write_errors += 1;
+                *region = region.saturating_add(1);
+            } else {
+                *region = 0;
             }
         }
     }
