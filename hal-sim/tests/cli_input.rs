@@ -442,3 +442,31 @@ fn a_huge_number_in_an_error_is_shown_short() {
     }
     let _ = std::fs::remove_file(&sc);
 }
+
+/// A column the header names twice is refused by every command that reads it: `monitor`,
+/// `report` and `identify` silently read the first `temp_c` of `t_s,temp_c,…,temp_c`, so a
+/// second column of −30 °C (or the same probe in °F) left no trace, and `report` said the record
+/// was clean.
+#[test]
+fn a_column_named_twice_is_refused() {
+    let log = prbs_log("dup-src.csv");
+    let text = std::fs::read_to_string(&log).unwrap();
+    let doubled: String = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| if i == 0 { format!("{l},temp_c\n") } else { format!("{l},-30\n") })
+        .collect();
+    let p = tmp("dup-col.csv");
+    std::fs::write(&p, doubled).unwrap();
+    let html = tmp("dup-col.html");
+    let s = p.to_str().unwrap();
+    for args in [
+        vec!["monitor", "--input", s, "--json"],
+        vec!["report", "--input", s, "--output", html.to_str().unwrap()],
+        vec!["identify", "--input", s, "--json"],
+    ] {
+        assert_error(&args, "column 'temp_c' appears twice in the header");
+    }
+    assert!(!html.exists());
+    let _ = (std::fs::remove_file(&p), std::fs::remove_file(&log));
+}
