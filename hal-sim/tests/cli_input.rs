@@ -470,3 +470,26 @@ fn a_column_named_twice_is_refused() {
     assert!(!html.exists());
     let _ = (std::fs::remove_file(&p), std::fs::remove_file(&log));
 }
+
+/// RELS with a short memory can estimate a noise model C whose root lies outside the unit
+/// circle: its one-step predictor (filtered by 1/C) diverges, and `identify` printed an MSE of
+/// 1.5e161 °C² (or "inf", null in the JSON) as the model's. Such an estimate is refused with
+/// why; with the delay scan, the delays that gave one are left out and the best of the others
+/// is reported, with a finite MSE.
+#[test]
+fn a_rels_noise_model_with_an_unstable_predictor_is_refused() {
+    let log = prbs_log("rels-c.csv");
+    let s = log.to_str().unwrap();
+    assert_error(
+        &["identify", "--input", s, "--method", "rels", "--forgetting", "0.5", "--nk", "3", "--json"],
+        "C(q⁻¹) has a root of modulus 1.142, on or outside the unit circle",
+    );
+    let out = hter(&["identify", "--input", s, "--method", "rels", "--forgetting", "0.5", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+    let mses = std::iter::once(&v["mse"]).chain(v["order_comparison"].as_array().unwrap().iter().map(|r| &r["mse"]));
+    for mse in mses {
+        assert!(mse.as_f64().is_some_and(|m| m < 1.0), "{mse} in {v}");
+    }
+    let _ = std::fs::remove_file(&log);
+}
