@@ -493,3 +493,13 @@ fn a_rels_noise_model_with_an_unstable_predictor_is_refused() {
     }
     let _ = std::fs::remove_file(&log);
 }
+
+/// `identify --auto-order --na 3` reported the comparison's order (na = nb = 1, 2 or 4) and
+/// silently ignored `--na 3`: the two ask for different orders, and are refused together.
+#[test]
+fn auto_order_with_a_given_order_is_refused() {
+    for flag in ["--na", "--nb"] {
+        let e = one_line_error(&["identify", "--input", "/dev/null", "--auto-order", flag, "3"]);
+        assert!(e.contains("'--auto-order' cannot be used with") && e.contains(flag), "{e}");
+    }
+}
