@@ -503,3 +503,13 @@ fn auto_order_with_a_given_order_is_refused() {
         assert!(e.contains("'--auto-order' cannot be used with") && e.contains(flag), "{e}");
     }
 }
+
+/// `compare --controllers pi,pi` ran one controller twice and printed two identical rows as a
+/// comparison: a controller named twice is refused.
+#[test]
+fn compare_refuses_a_controller_named_twice() {
+    assert_error(
+        &["compare", "--controllers", "gpc,pi,pi", "--duration", "100"],
+        "--controllers names pi twice (entries 2 and 3)",
+    );
+}
