@@ -513,3 +513,15 @@ fn compare_refuses_a_controller_named_twice() {
         "--controllers names pi twice (entries 2 and 3)",
     );
 }
+
+/// `log2csv --input DIR` said "'DIR': line 1: not text: Is a directory (os error 21)", as if
+/// the directory were a log with a bad first line; it is refused as what it is, as `monitor`,
+/// `report` and `identify` refuse it, and no output is written.
+#[test]
+fn log2csv_refuses_a_directory_by_name() {
+    let dir = std::env::temp_dir();
+    let out = tmp("from-dir.csv");
+    let e = one_line_error(&["log2csv", "--input", dir.to_str().unwrap(), "--output", out.to_str().unwrap()]);
+    assert!(e.ends_with("': it is a directory") && !e.contains("line 1"), "{e}");
+    assert!(!out.exists());
+}
