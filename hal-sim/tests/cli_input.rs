@@ -525,3 +525,14 @@ fn log2csv_refuses_a_directory_by_name() {
     assert!(e.ends_with("': it is a directory") && !e.contains("line 1"), "{e}");
     assert!(!out.exists());
 }
+
+/// A scenario file whose schedule gives one time twice (`[[0, 4], [0, 5]]`) ran at the later
+/// value and never showed the earlier one, with exit 0: it is refused, naming the field and the
+/// time.
+#[test]
+fn a_scenario_time_given_twice_is_refused() {
+    let sc = tmp("twice.json");
+    std::fs::write(&sc, r#"{"start_c": 4, "setpoints": [[0, 4], [0, 5]], "duration_s": 600}"#).unwrap();
+    assert_error(&["sim", "--scenario", sc.to_str().unwrap(), "--json"], "'setpoints' has two entries at 0 s");
+    let _ = std::fs::remove_file(&sc);
+}
