@@ -536,3 +536,26 @@ fn a_scenario_time_given_twice_is_refused() {
     assert_error(&["sim", "--scenario", sc.to_str().unwrap(), "--json"], "'setpoints' has two entries at 0 s");
     let _ = std::fs::remove_file(&sc);
 }
+
+/// A board history's `alarm:KIND@START` whose START is no record second at or before the alarm
+/// was taken as it came (`@-1e300`: an alarm that started 1e300 s before the record, in
+/// `monitor --json` and the report) or silently replaced by the alarm's time (`@nan`): both
+/// are refused as the corrupt rows they are, and no report is written.
+#[test]
+fn a_carrier_alarm_with_an_impossible_start_is_refused() {
+    for (name, start) in [("alarm-neg.csv", "-1e300"), ("alarm-nan.csv", "nan"), ("alarm-late.csv", "900")] {
+        let p = tmp(name);
+        let rows = "300,4,3.9,4.1,0.5,normal,\n600,4,3.9,4.1,0.5,normal,\n";
+        std::fs::write(&p, format!("t_s,temp_c,min_c,max_c,duty,mode,event\n{rows}700,,,,,,alarm:heat_10h@{start}\n"))
+            .unwrap();
+        let html = tmp(&format!("{name}.html"));
+        for args in [
+            vec!["monitor", "--input", p.to_str().unwrap(), "--json"],
+            vec!["report", "--input", p.to_str().unwrap(), "--output", html.to_str().unwrap()],
+        ] {
+            assert_error(&args, &format!("event 'alarm:heat_10h@{start}' at t_s = 700: its start '{start}'"));
+        }
+        assert!(!html.exists());
+        let _ = std::fs::remove_file(&p);
+    }
+}
