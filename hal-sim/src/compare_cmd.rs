@@ -26,6 +26,17 @@ pub fn run(a: &CompareArgs) -> Result<()> {
     if a.controllers.is_empty() {
         bail!("--controllers is empty");
     }
+    // `--controllers pi,pi` ran the same run twice and printed two identical rows, as if two
+    // controllers had been compared.
+    if let Some((i, c)) = a.controllers.iter().enumerate().find(|(i, c)| a.controllers[..*i].contains(c)) {
+        use clap::ValueEnum;
+        let name = c.to_possible_value().map_or_else(|| format!("{c:?}"), |v| v.get_name().to_string());
+        bail!(
+            "--controllers names {name} twice (entries {} and {}): each controller runs once",
+            a.controllers.iter().position(|x| x == c).unwrap_or(0) + 1,
+            i + 1
+        );
+    }
     // Per-run options compare has no single run for: refused, not silently ignored.
     if a.sim.controller.is_some() {
         bail!("--controller picks hter sim's one controller: compare runs --controllers (comma-separated)");

@@ -41,7 +41,7 @@ pub fn read_cells(path: &Path, names: &[&str]) -> Result<Vec<Vec<Option<f64>>>> 
     let idx: Vec<usize> = names
         .iter()
         .map(|n| {
-            headers.iter().position(|h| h == *n).ok_or_else(|| {
+            column(path, &headers, n)?.ok_or_else(|| {
                 anyhow!(
                     "'{shown}': missing column '{n}' (header has: {})",
                     headers.iter().collect::<Vec<_>>().join(", ")
@@ -78,7 +78,7 @@ pub fn read_text(path: &Path, name: &str) -> Result<Option<Vec<String>>> {
     let file = open(path)?;
     let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(false).trim(csv::Trim::All).from_reader(file);
     let headers = rdr.headers().map_err(|e| anyhow!("'{shown}' line 1: {e}"))?.clone();
-    let Some(j) = headers.iter().position(|h| h == name) else {
+    let Some(j) = column(path, &headers, name)? else {
         return Ok(None);
     };
     rdr.records()
@@ -96,8 +96,22 @@ pub fn has_column(path: &Path, name: &str) -> Result<bool> {
     let shown = path.display();
     let file = open(path)?;
     let mut rdr = csv::ReaderBuilder::new().has_headers(true).trim(csv::Trim::All).from_reader(file);
-    let headers = rdr.headers().map_err(|e| anyhow!("'{shown}' line 1: {e}"))?;
-    Ok(headers.iter().any(|h| h == name))
+    let headers = rdr.headers().map_err(|e| anyhow!("'{shown}' line 1: {e}"))?.clone();
+    Ok(column(path, &headers, name)?.is_some())
+}
+
+/// The index of the column `name` in `headers`, `None` when there is none. A name the header
+/// has twice is refused: which of the two holds the data would be a guess (the first was read
+/// silently, so a second `temp_c` of −30 °C, or a copy in °F, left no trace in the record).
+fn column(path: &Path, headers: &csv::StringRecord, name: &str) -> Result<Option<usize>> {
+    let mut at = headers.iter().enumerate().filter(|(_, h)| *h == name).map(|(i, _)| i + 1);
+    match (at.next(), at.next()) {
+        (Some(first), Some(second)) => bail!(
+            "'{}': column '{name}' appears twice in the header (columns {first} and {second}): which one holds the data is ambiguous",
+            path.display()
+        ),
+        (first, _) => Ok(first.map(|i| i - 1)),
+    }
 }
 
 /// Checks that times strictly increase; names the first offending line.
@@ -220,6 +234,21 @@ mod tests {
         let e = read_columns(&p, &["t_s", "temp_c"]).unwrap_err().to_string();
         assert!(e.contains("line 3"), "{e}");
         assert!(check_increasing(&p, &[0.0, 10.0, 10.0]).unwrap_err().to_string().contains("line 4"));
+    }
+
+    #[test]
+    fn a_column_named_twice_is_refused() {
+        let p = write("dup", "t_s,temp_c,duty,temp_c\n0,4.0,0.5,-30\n10,4.5,0.5,-30\n");
+        for e in [
+            read_cells(&p, &["t_s", "temp_c"]).unwrap_err(),
+            read_text(&p, "temp_c").unwrap_err(),
+            has_column(&p, "temp_c").unwrap_err(),
+        ] {
+            let e = e.to_string();
+            assert!(e.contains("column 'temp_c' appears twice in the header (columns 2 and 4)"), "{e}");
+        }
+        // A column read once is fine beside one that is doubled and not read.
+        assert_eq!(read_columns(&p, &["t_s", "duty"]).unwrap(), vec![vec![0.0, 10.0], vec![0.5, 0.5]]);
     }
 
     #[test]

@@ -472,6 +472,10 @@ pub fn run(args: &Log2CsvArgs) -> Result<()> {
     // `--output carrier.log` replaced the log with its CSV.
     crate::sim_cmd::check_paths(&[("--input", &args.input)], &[("--output", &args.output)])?;
     let shown = args.input.display();
+    // Opened, a directory failed only at the first read, as "line 1: not text: Is a directory".
+    if args.input.is_dir() {
+        bail!("cannot read '{shown}': it is a directory");
+    }
     let f = std::fs::File::open(&args.input).with_context(|| format!("cannot read '{shown}'"))?;
     let c = convert(std::io::BufReader::new(f).lines()).with_context(|| format!("'{shown}'"))?;
     let mut out =

@@ -195,7 +195,7 @@ pub fn record(input: &Input) -> Result<Report> {
         }
     }
     r.carrier_alarms =
-        carrier_alarms(&input.events).into_iter().filter(|b| !r.alarms.iter().any(|a| same_alarm(a, b))).collect();
+        carrier_alarms(&input.events)?.into_iter().filter(|b| !r.alarms.iter().any(|a| same_alarm(a, b))).collect();
     Ok(r)
 }
 
@@ -211,18 +211,34 @@ fn same_alarm(recomputed: &AlarmOut, carrier: &AlarmOut) -> bool {
 
 /// The alarm events of a board history: `alarm:KIND@START` (the firmware's spelling: raised at
 /// the row's `t_s`, its condition from record second START) or `alarm:KIND`. Names the library
-/// does not know are left with the other events.
-pub fn carrier_alarms(events: &[Event]) -> Vec<AlarmOut> {
-    events
-        .iter()
-        .filter_map(|e| {
-            let rest = e.name.strip_prefix("alarm:")?;
-            let (name, start) = rest.split_once('@').map_or((rest, None), |(n, s)| (n, Some(s)));
-            let kind = AlarmKind::ALL.into_iter().find(|k| k.name() == name)?.name();
-            let start_s = start.and_then(|s| s.parse::<f64>().ok()).filter(|s| s.is_finite() && *s <= e.t_s);
-            Some(AlarmOut { kind, start_s: start_s.unwrap_or(e.t_s), trigger_s: e.t_s })
-        })
-        .collect()
+/// does not know are left with the other events. A START that is no record second at or before
+/// the row's `t_s` (not a number, negative, later than the alarm) is a corrupt row and refused:
+/// `alarm:heat_10h@-1e300` was reported as an alarm that started 1e300 s before the record,
+/// `@nan` as one that started when it triggered.
+pub fn carrier_alarms(events: &[Event]) -> Result<Vec<AlarmOut>> {
+    let mut out = Vec::new();
+    for e in events {
+        let Some(rest) = e.name.strip_prefix("alarm:") else { continue };
+        let (name, start) = rest.split_once('@').map_or((rest, None), |(n, s)| (n, Some(s)));
+        let Some(kind) = AlarmKind::ALL.into_iter().find(|k| k.name() == name).map(AlarmKind::name) else {
+            continue;
+        };
+        let start_s = match start {
+            None => e.t_s,
+            Some(s) => match s.parse::<f64>() {
+                Ok(v) if (0.0..=e.t_s).contains(&v) => v,
+                _ => bail!(
+                    "event '{}' at t_s = {}: its start '{}' is not a record second in 0…{} (the alarm's own time)",
+                    log::clip(&e.name),
+                    crate::sim_cmd::shown(e.t_s),
+                    log::clip(s),
+                    crate::sim_cmd::shown(e.t_s)
+                ),
+            },
+        };
+        out.push(AlarmOut { kind, start_s, trigger_s: e.t_s });
+    }
+    Ok(out)
 }
 
 /// One event of a board history (`event` column), or a reset or an event of a `hter log2csv`
@@ -758,7 +774,7 @@ mod tests {
             e(50_000.0, "alarm:dancing@1"),
             e(60_000.0, "set:setpoint_c=4.00"),
         ];
-        let a = carrier_alarms(&events);
+        let a = carrier_alarms(&events).unwrap();
         assert_eq!(
             a,
             [
@@ -771,5 +787,16 @@ mod tests {
         assert!(same_alarm(&means, &a[1]));
         assert!(!same_alarm(&AlarmOut { trigger_s: 47_200.0, ..means.clone() }, &a[1]));
         assert!(!same_alarm(&AlarmOut { kind: "freeze_60min", ..means }, &a[1]));
+    }
+
+    #[test]
+    fn an_alarm_event_whose_start_is_no_record_second_is_refused() {
+        for start in ["-1e300", "nan", "inf", "-5", "700.5", "soon"] {
+            let events = [Event { t_s: 700.0, name: format!("alarm:heat_10h@{start}") }];
+            let e = carrier_alarms(&events).unwrap_err().to_string();
+            assert!(e.contains(&format!("its start '{start}' is not a record second in 0…700")), "{e}");
+        }
+        let ok = [Event { t_s: 700.0, name: "alarm:heat_10h@0".into() }];
+        assert_eq!(carrier_alarms(&ok).unwrap()[0].start_s, 0.0);
     }
 }

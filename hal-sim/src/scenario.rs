@@ -326,6 +326,12 @@ impl ScenarioFile {
             if v.windows(2).any(|w| w[1].0 < w[0].0) {
                 bail!("scenario file '{name}': '{field}' times are not increasing");
             }
+            // The schedule is piecewise constant: of two entries at one time the later replaced
+            // the earlier at once, so `[[0, 4], [0, 5]]` ran at 5 °C and the 4 was never seen.
+            if let Some(w) = v.windows(2).find(|w| w[1].0 == w[0].0) {
+                let t = crate::sim_cmd::shown(w[0].0);
+                bail!("scenario file '{name}': '{field}' has two entries at {t} s; give each time once");
+            }
             if let Some((t, x)) = v.iter().find(|(_, x)| !(lo..=hi).contains(x)) {
                 let (t, x) = (crate::sim_cmd::shown(*t), crate::sim_cmd::shown(*x));
                 bail!("scenario file '{name}': '{field}' at {t} s is {x} {unit}, outside {lo}…{hi} {unit}");
@@ -388,6 +394,20 @@ mod tests {
         }
         let s = file(r#"{"description":"holding 4 °C — one line","setpoints":[[0,4]],"duration_s":100}"#).unwrap();
         assert_eq!(s.description, "holding 4 °C — one line");
+    }
+
+    #[test]
+    fn two_entries_at_one_time_are_refused() {
+        for field in ["setpoints", "ambient", "extra_heat_w", "supply_v"] {
+            let (a, b) = if field == "setpoints" { (4, 5) } else { (5, 6) };
+            let json = if field == "setpoints" {
+                format!(r#"{{"setpoints":[[0,4],[300,{a}],[300,{b}]],"duration_s":600}}"#)
+            } else {
+                format!(r#"{{"setpoints":[[0,4]],"{field}":[[0,{a}],[300,{a}],[300,{b}]],"duration_s":600}}"#)
+            };
+            let e = file(&json).unwrap_err().to_string();
+            assert!(e.contains(&format!("'{field}' has two entries at 300 s")), "{e}");
+        }
     }
 
     #[test]

@@ -442,3 +442,120 @@ fn a_huge_number_in_an_error_is_shown_short() {
     }
     let _ = std::fs::remove_file(&sc);
 }
+
+/// A column the header names twice is refused by every command that reads it: `monitor`,
+/// `report` and `identify` silently read the first `temp_c` of `t_s,temp_c,…,temp_c`, so a
+/// second column of −30 °C (or the same probe in °F) left no trace, and `report` said the record
+/// was clean.
+#[test]
+fn a_column_named_twice_is_refused() {
+    let log = prbs_log("dup-src.csv");
+    let text = std::fs::read_to_string(&log).unwrap();
+    let doubled: String = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| if i == 0 { format!("{l},temp_c\n") } else { format!("{l},-30\n") })
+        .collect();
+    let p = tmp("dup-col.csv");
+    std::fs::write(&p, doubled).unwrap();
+    let html = tmp("dup-col.html");
+    let s = p.to_str().unwrap();
+    for args in [
+        vec!["monitor", "--input", s, "--json"],
+        vec!["report", "--input", s, "--output", html.to_str().unwrap()],
+        vec!["identify", "--input", s, "--json"],
+    ] {
+        assert_error(&args, "column 'temp_c' appears twice in the header");
+    }
+    assert!(!html.exists());
+    let _ = (std::fs::remove_file(&p), std::fs::remove_file(&log));
+}
+
+/// RELS with a short memory can estimate a noise model C whose root lies outside the unit
+/// circle: its one-step predictor (filtered by 1/C) diverges, and `identify` printed an MSE of
+/// 1.5e161 °C² (or "inf", null in the JSON) as the model's. Such an estimate is refused with
+/// why; with the delay scan, the delays that gave one are left out and the best of the others
+/// is reported, with a finite MSE.
+#[test]
+fn a_rels_noise_model_with_an_unstable_predictor_is_refused() {
+    let log = prbs_log("rels-c.csv");
+    let s = log.to_str().unwrap();
+    assert_error(
+        &["identify", "--input", s, "--method", "rels", "--forgetting", "0.5", "--nk", "3", "--json"],
+        "C(q⁻¹) has a root of modulus 1.142, on or outside the unit circle",
+    );
+    let out = hter(&["identify", "--input", s, "--method", "rels", "--forgetting", "0.5", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+    let mses = std::iter::once(&v["mse"]).chain(v["order_comparison"].as_array().unwrap().iter().map(|r| &r["mse"]));
+    for mse in mses {
+        assert!(mse.as_f64().is_some_and(|m| m < 1.0), "{mse} in {v}");
+    }
+    let _ = std::fs::remove_file(&log);
+}
+
+/// `identify --auto-order --na 3` reported the comparison's order (na = nb = 1, 2 or 4) and
+/// silently ignored `--na 3`: the two ask for different orders, and are refused together.
+#[test]
+fn auto_order_with_a_given_order_is_refused() {
+    for flag in ["--na", "--nb"] {
+        let e = one_line_error(&["identify", "--input", "/dev/null", "--auto-order", flag, "3"]);
+        assert!(e.contains("'--auto-order' cannot be used with") && e.contains(flag), "{e}");
+    }
+}
+
+/// `compare --controllers pi,pi` ran one controller twice and printed two identical rows as a
+/// comparison: a controller named twice is refused.
+#[test]
+fn compare_refuses_a_controller_named_twice() {
+    assert_error(
+        &["compare", "--controllers", "gpc,pi,pi", "--duration", "100"],
+        "--controllers names pi twice (entries 2 and 3)",
+    );
+}
+
+/// `log2csv --input DIR` said "'DIR': line 1: not text: Is a directory (os error 21)", as if
+/// the directory were a log with a bad first line; it is refused as what it is, as `monitor`,
+/// `report` and `identify` refuse it, and no output is written.
+#[test]
+fn log2csv_refuses_a_directory_by_name() {
+    let dir = std::env::temp_dir();
+    let out = tmp("from-dir.csv");
+    let e = one_line_error(&["log2csv", "--input", dir.to_str().unwrap(), "--output", out.to_str().unwrap()]);
+    assert!(e.ends_with("': it is a directory") && !e.contains("line 1"), "{e}");
+    assert!(!out.exists());
+}
+
+/// A scenario file whose schedule gives one time twice (`[[0, 4], [0, 5]]`) ran at the later
+/// value and never showed the earlier one, with exit 0: it is refused, naming the field and the
+/// time.
+#[test]
+fn a_scenario_time_given_twice_is_refused() {
+    let sc = tmp("twice.json");
+    std::fs::write(&sc, r#"{"start_c": 4, "setpoints": [[0, 4], [0, 5]], "duration_s": 600}"#).unwrap();
+    assert_error(&["sim", "--scenario", sc.to_str().unwrap(), "--json"], "'setpoints' has two entries at 0 s");
+    let _ = std::fs::remove_file(&sc);
+}
+
+/// A board history's `alarm:KIND@START` whose START is no record second at or before the alarm
+/// was taken as it came (`@-1e300`: an alarm that started 1e300 s before the record, in
+/// `monitor --json` and the report) or silently replaced by the alarm's time (`@nan`): both
+/// are refused as the corrupt rows they are, and no report is written.
+#[test]
+fn a_carrier_alarm_with_an_impossible_start_is_refused() {
+    for (name, start) in [("alarm-neg.csv", "-1e300"), ("alarm-nan.csv", "nan"), ("alarm-late.csv", "900")] {
+        let p = tmp(name);
+        let rows = "300,4,3.9,4.1,0.5,normal,\n600,4,3.9,4.1,0.5,normal,\n";
+        std::fs::write(&p, format!("t_s,temp_c,min_c,max_c,duty,mode,event\n{rows}700,,,,,,alarm:heat_10h@{start}\n"))
+            .unwrap();
+        let html = tmp(&format!("{name}.html"));
+        for args in [
+            vec!["monitor", "--input", p.to_str().unwrap(), "--json"],
+            vec!["report", "--input", p.to_str().unwrap(), "--output", html.to_str().unwrap()],
+        ] {
+            assert_error(&args, &format!("event 'alarm:heat_10h@{start}' at t_s = 700: its start '{start}'"));
+        }
+        assert!(!html.exists());
+        let _ = std::fs::remove_file(&p);
+    }
+}

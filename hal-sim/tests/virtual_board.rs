@@ -674,7 +674,7 @@ fn a_board_historys_heat_run_is_read_at_the_times_the_carrier_saw_it() {
     let _ = std::fs::remove_file(&p);
     let r = monitor_cmd::record(&input).unwrap();
     let heat = |a: &[monitor_cmd::AlarmOut]| a.iter().find(|a| a.kind == "heat_10h").cloned().expect("heat_10h");
-    let (ours, carrier) = (heat(&r.alarms), heat(&monitor_cmd::carrier_alarms(&input.events)));
+    let (ours, carrier) = (heat(&r.alarms), heat(&monitor_cmd::carrier_alarms(&input.events).unwrap()));
     let end = *input.t_s.last().unwrap();
     eprintln!("recomputed {ours:?}, the carrier's {carrier:?}; above 8 °C {} s to {end} s", r.time_above_8_s);
     assert_eq!(input.t_s[0], 0.0, "the first row covers 0 … 300 s");

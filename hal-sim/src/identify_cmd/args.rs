@@ -106,8 +106,9 @@ pub struct IdentifyArgs {
     /// the log starts at rest, else mean).
     #[arg(long, value_enum, default_value = "auto")]
     pub operating_point: OperatingPointChoice,
-    /// Report the order the 1/2/4 comparison chooses (na = nb) instead of --na/--nb.
-    #[arg(long)]
+    /// Report the order the 1/2/4 comparison chooses (na = nb) instead of --na/--nb (refused
+    /// with either: one of the two orders would be silently ignored).
+    #[arg(long, conflicts_with_all = ["na", "nb"])]
     pub auto_order: bool,
     /// Print one JSON object.
     #[arg(long)]

@@ -215,8 +215,22 @@ fn fit_memo(d: &Data, s: &Structure, method: Method, forgetting: f64, memo: &mut
     if theta.iter().any(|v| !v.is_finite()) {
         bail!("the estimate is not finite: the data may be constant or corrupt");
     }
+    // RELS's noise model: a root of C outside the unit circle makes 1/C, the one-step
+    // predictor's filter, unstable. `--forgetting 0.5` printed an MSE of 1.5e161 °C² (and "inf",
+    // null in the JSON, for order 4) as if it were a measure of the model.
+    let mut c_roots = [(0.0, 0.0); 4];
+    let nr = validate::roots_monic(&theta[s.na + s.nb..], &mut c_roots);
+    if let Some(z) = c_roots[..nr].iter().map(|z| validate::abs(*z)).find(|z| *z >= STABLE_ABS_BELOW) {
+        bail!(
+            "the estimate's C(q⁻¹) has a root of modulus {z:.3}, on or outside the unit circle: its one-step \
+             predictor diverges and the model has no meaningful MSE (try --forgetting closer to 1)"
+        );
+    }
     let mut eps = vec![0.0; d.y.len()];
     let mse = validate::one_step(s, &theta, &d.y, &d.u, &mut eps);
+    if !mse.is_finite() {
+        bail!("the one-step prediction error of the estimate is not finite: the data may be corrupt");
+    }
     let mut ysim = vec![0.0; d.y.len()];
     let fit_percent = validate::simulate_fit(s, &theta, &d.y, &d.u, &mut ysim);
     let a = theta[..s.na].to_vec();
