@@ -461,6 +461,43 @@ fn a_record_the_new_firmware_refuses_is_on_the_record_once() {
     assert_eq!(refusals(&mut b), 1);
 }
 
+/// A fault loop faster than the write gate's minute, end to end through the fail-safe's
+/// reset-surviving record (`hter::failsafe::ResetRecords`) as the firmware keeps it: a panic 20 s
+/// into each of five boots, then a HardFault. Each new stop is on the log before the next stop
+/// (`board_fault_panic` from the loop's first boot; the HardFault's boot reports the last panic,
+/// which no history had counted yet, and its own), the loop's repeats write nothing, and the
+/// indicator is latched. Before, the rows waited for the minute: `history` had none.
+#[test]
+fn a_fault_loop_faster_than_the_write_gate_has_its_new_stops_on_the_log() {
+    use hter::failsafe::{panic_info, StopInfo, StopKind};
+    let mut b = virtual_hter1(hal_sim::plant::Load::Full, 28.0, hal_sim::scenario::Start::Holding(4.0));
+    for _ in 0..40 {
+        b.step().unwrap();
+    }
+    let panic = panic_info("src/step.rs", 417);
+    let hard_fault = StopInfo::new(StopKind::HardFault, 0x0800_1234, 0, 0x8200);
+    let rows = |b: &mut hal_sim::sim::virtual_board::VirtualBoard| -> Vec<String> {
+        b.request("history")
+            .lines()
+            .filter_map(|l| l.rsplit(',').next().filter(|e| e.starts_with("board_fault")).map(str::to_string))
+            .collect()
+    };
+    for (n, stop) in [panic; 5].into_iter().chain([hard_fault]).enumerate() {
+        b.fail_safe_stop(stop);
+        b.step().unwrap();
+        b.step().unwrap();
+        let seen = rows(&mut b);
+        let want = if n < 5 { vec!["board_fault_panic"] } else { vec!["board_fault_panic"; 2] };
+        let want: Vec<String> = want
+            .into_iter()
+            .map(str::to_string)
+            .chain((n == 5).then(|| "board_fault_hard_fault".to_string()))
+            .collect();
+        assert_eq!(seen, want, "after the stop of boot {n}");
+        assert_eq!(board_status(&mut b, "alarm"), "unacknowledged");
+    }
+}
+
 /// A board whose records region refuses every write (an option byte's write protection over it,
 /// a worn region) keeps no history, no settings and no model: after the third store in a row
 /// that fails, `status` says `flash=failing`, the indicator latches, and the log (which still

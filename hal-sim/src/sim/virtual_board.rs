@@ -14,6 +14,7 @@ use anyhow::{bail, Result};
 use embassy_futures::block_on;
 use hter::app::{App, AppConfig, Handled, SampleOut};
 use hter::control::adaptive::AdaptiveConfig;
+use hter::failsafe::{ResetRecords, StopInfo, Stops};
 use hter::iface::Law;
 use hter::persist::flash::{self, LogStore, Store};
 use hter::persist::log::{write_csv_row, CSV_HEADER};
@@ -97,6 +98,9 @@ pub struct VirtualBoard {
     /// Stores failed in a row in the records region and in the log (the firmware's
     /// `persist::failed_in_a_row`).
     failed_in_a_row: [u8; 2],
+    /// The fail-safe's reset-surviving record (the firmware's `.uninit` RAM): the stops the
+    /// stored history does not have yet. A reset keeps it, a power cut loses it.
+    ram: ResetRecords,
 }
 
 impl VirtualBoard {
@@ -143,7 +147,7 @@ impl VirtualBoard {
             ..profile::ADAPTIVE_GPC
         };
         let (mut store, mut log) = (open_store(MockFlash::blank(STORE_PAGES)), open_log(MockFlash::blank(LOG_PAGES)));
-        let app = booted(adaptive, &mut store, &mut log, ResetCause::Other, false);
+        let app = booted(adaptive, &mut store, &mut log, ResetCause::Other, false, Stops::default());
         Ok(VirtualBoard {
             rig,
             app,
@@ -159,6 +163,7 @@ impl VirtualBoard {
             restarts: 0,
             write_errors: 0,
             failed_in_a_row: [0; 2],
+            ram: ResetRecords::EMPTY,
         })
     }
 
@@ -219,7 +224,8 @@ impl VirtualBoard {
     /// Powers the board up from what its flash holds: scrub, restore, a new [`App`].
     fn boot(&mut self, reset: ResetCause, button_held: bool) {
         let (Some(store), Some(log)) = (self.store.as_mut(), self.log.as_mut()) else { return };
-        self.app = booted(self.adaptive, store, log, reset, button_held);
+        let stops = self.ram.boot(reset);
+        self.app = booted(self.adaptive, store, log, reset, button_held, stops);
         self.pending = PendingSaves::EMPTY;
         self.gate = WriteGate::firmware();
         self.t_ms = 0;
@@ -229,6 +235,16 @@ impl VirtualBoard {
     /// its flash holds, as after a brown-out.
     pub fn power_cut(&mut self) {
         self.power_cycle();
+    }
+
+    /// A fail-safe stop between two samples (a panic, a fault, a stalled loop): the stop path's
+    /// record in the reset-surviving RAM, the outputs safe, a reset; the board boots again from
+    /// what its flash holds and reports the stop (`board_fault_*`, the indicator latched) until
+    /// a history that counts it is stored ([`hter::failsafe::ResetRecords`], as the firmware's).
+    pub fn fail_safe_stop(&mut self, stop: StopInfo) {
+        self.ram.record(&stop);
+        self.restarts += 1;
+        self.boot(ResetCause::Other, false);
     }
 
     /// A power cut: both flashes power down and up, the board boots again.
@@ -241,6 +257,9 @@ impl VirtualBoard {
             self.log = Some(open_log(b));
         }
         self.restarts += 1;
+        // RAM does not keep the stop record through a power loss (its magic and CRC reject the
+        // noise there).
+        self.ram = ResetRecords::EMPTY;
         self.boot(ResetCause::BrownOut, false);
     }
 
@@ -293,6 +312,11 @@ impl VirtualBoard {
                 // The write completed before the cut: nothing is armed any more.
                 store.flash_mut().ops_left = None;
             }
+            // A history in flash counts the boot's stops: RAM need not keep them (the firmware's
+            // `failsafe::stops_stored`).
+            if result.is_ok() && matches!(save, Save::History(_) | Save::AlarmHistory(_)) {
+                self.ram.stored();
+            }
             let region = &mut self.failed_in_a_row[usize::from(matches!(save, Save::Log(_)))];
             if result.is_err() {
                 self.write_errors += 1;
@@ -342,9 +366,10 @@ fn booted(
     log: &mut MockLog,
     reset: ResetCause,
     button_held: bool,
+    stops: Stops,
 ) -> App {
     let restored = block_on(flash::restore(store, log, Some(adaptive)));
-    App::new(app_config(adaptive), &hter::app::Boot { button_held, ..restored.boot(reset, Default::default()) })
+    App::new(app_config(adaptive), &hter::app::Boot { button_held, ..restored.boot(reset, stops) })
 }
 
 fn open_store(flash: MockFlash<PAGE>) -> MockStore {
