@@ -15,7 +15,9 @@
 //! Acknowledging (the board's user button) clears the latch; what is still true now keeps the
 //! indicator on. A watchdog restart latches too (the loop hung), and so does a fail-safe stop
 //! of the previous boot ([`EventKind::BoardFault`]: a panic, a fault, or the loop stalled,
-//! which the stall check caught before the watchdog would have). Power-on and brown-out
+//! which the stall check caught before the watchdog would have), a stored record the boot
+//! refused ([`EventKind::RecordRefused`]) and a flash that refuses its writes
+//! ([`EventKind::StoreFailed`], [`Annunciator::note`]). Power-on and brown-out
 //! restarts (the STM32L4 flags both alike), freeze-guard actions, mode changes of the
 //! self-tuner and setpoint clamps are not alarms: they are the supervisor doing its job, and
 //! they are in the log.
