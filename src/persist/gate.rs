@@ -174,6 +174,8 @@ pub struct PendingSaves {
     /// The log entries (the builds with the cold-chain log).
     #[cfg(feature = "cold-chain-log")]
     rows: Rows,
+    /// The waiting history holds an alarm not yet stored (stays set when a newer history
+    /// replaces it: the newer one counts the alarm too).
     alarm: bool,
 }
 
