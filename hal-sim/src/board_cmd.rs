@@ -516,7 +516,7 @@ fn history<P: Read + Write>(b: &mut Board<P>, output: &Path, since: Option<f64>)
     }
     let mut text = rows.join("\n");
     text.push('\n');
-    std::fs::write(output, &text).with_context(|| format!("cannot write '{}'", output.display()))?;
+    crate::output::write(output, text.as_bytes())?;
     let (intervals, events) = check_history(&text)
         .with_context(|| format!("wrote '{}' as the board sent it, but it is not the history CSV", output.display()))?;
     println!("wrote {} rows ({intervals} intervals, {events} events) to {}", rows.len() - 1, output.display());

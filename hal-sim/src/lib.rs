@@ -18,6 +18,7 @@ pub mod log2csv_cmd;
 pub mod metrics;
 pub mod mission;
 pub mod monitor_cmd;
+pub mod output;
 pub mod periph;
 pub mod plant;
 pub mod plot;

@@ -39,7 +39,7 @@
 //! sample they came with, by their library names (`ssr_stuck_on`), `;`-separated: what `hter
 //! report` lists with the resets and faults.
 
-use std::io::{BufRead, Write};
+use std::io::BufRead;
 use std::path::PathBuf;
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -478,9 +478,7 @@ pub fn run(args: &Log2CsvArgs) -> Result<()> {
     }
     let f = std::fs::File::open(&args.input).with_context(|| format!("cannot read '{shown}'"))?;
     let c = convert(std::io::BufReader::new(f).lines()).with_context(|| format!("'{shown}'"))?;
-    let mut out =
-        std::fs::File::create(&args.output).with_context(|| format!("cannot write '{}'", args.output.display()))?;
-    out.write_all(csv_text(&c.rows).as_bytes()).with_context(|| format!("cannot write '{}'", args.output.display()))?;
+    crate::output::write(&args.output, csv_text(&c.rows).as_bytes())?;
     for w in &c.warnings {
         eprintln!("warning: '{shown}' {w}");
     }

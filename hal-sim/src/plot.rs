@@ -74,24 +74,27 @@ pub fn panels(path: &Path, title: &str, x_label: &str, panels: &[Panel]) -> Resu
     register_font();
     let height = 300 * panels.len() as u32 + 60;
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
-    if matches!(ext.as_deref(), Some("png" | "svg")) {
-        // The file opened first, as `--csv` opens its own: the backends report a missing
-        // directory as "backend error: Drawing backend error: ImageError(IoError(Os { … }))".
-        std::fs::File::create(path).with_context(|| format!("cannot write '{}'", path.display()))?;
-    }
-    match ext.as_deref() {
-        Some("png") => {
-            let root = BitMapBackend::new(path, (1100, height)).into_drawing_area();
-            draw(&root, title, x_label, panels)?;
-            root.present().map_err(|e| anyhow!("cannot write plot '{}': {e}", path.display()))
-        }
-        Some("svg") => {
-            let root = SVGBackend::new(path, (1100, height)).into_drawing_area();
-            draw(&root, title, x_label, panels)?;
-            root.present().map_err(|e| anyhow!("cannot write plot '{}': {e}", path.display()))
-        }
+    let png = match ext.as_deref() {
+        Some("png") => true,
+        Some("svg") => false,
         _ => bail!("plot file '{}' must end in .png or .svg", path.display()),
-    }
+    };
+    // Drawn into a temporary file beside it, renamed over `path` once complete
+    // ([`crate::output`]). The file is opened first: the backends report a missing directory as
+    // "backend error: Drawing backend error: ImageError(IoError(Os { … }))".
+    crate::output::write_with(path, |tmp| {
+        std::fs::File::create(tmp).with_context(|| format!("cannot write '{}'", path.display()))?;
+        let presented = if png {
+            let root = BitMapBackend::new(tmp, (1100, height)).into_drawing_area();
+            draw(&root, title, x_label, panels)?;
+            root.present().map_err(|e| e.to_string())
+        } else {
+            let root = SVGBackend::new(tmp, (1100, height)).into_drawing_area();
+            draw(&root, title, x_label, panels)?;
+            root.present().map_err(|e| e.to_string())
+        };
+        presented.map_err(|e| anyhow!("cannot write plot '{}': {e}", path.display()))
+    })
 }
 
 /// Draws `panels` stacked vertically, `width` px wide, into an SVG document returned as text

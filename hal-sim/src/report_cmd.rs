@@ -727,7 +727,7 @@ pub fn run(args: &ReportArgs) -> Result<()> {
     let out = args.output.display();
     match ext.as_deref() {
         Some("html" | "htm") => {
-            std::fs::write(&args.output, page).with_context(|| format!("cannot write '{out}'"))?;
+            crate::output::write(&args.output, page.as_bytes())?;
             println!("report written to {out}");
         }
         Some("pdf") => {

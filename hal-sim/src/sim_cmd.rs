@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 
 use hter::control::gpc::{MAX_N2, MAX_NU};
 
@@ -626,12 +626,12 @@ pub fn run(a: &SimArgs) -> Result<()> {
 
 /// The trace, one row per control sample.
 fn write_csv(path: &std::path::Path, out: &SimOutput) -> Result<()> {
-    let mut w = csv::Writer::from_path(path).with_context(|| format!("cannot write '{}'", path.display()))?;
+    let mut w = csv::Writer::from_writer(Vec::new());
     for r in &out.rows {
         w.serialize(r)?;
     }
-    w.flush().with_context(|| format!("cannot write '{}'", path.display()))?;
-    Ok(())
+    let bytes = w.into_inner().map_err(|e| anyhow::anyhow!("cannot write '{}': {}", path.display(), e.error()))?;
+    crate::output::write(path, &bytes)
 }
 
 /// Temperature, duty and, for self-tuning runs, the estimate, to a .png or .svg file.
