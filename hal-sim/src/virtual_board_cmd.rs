@@ -15,6 +15,7 @@ use crate::link::PtyLink;
 use crate::sim::virtual_board::{VirtualBoard, VirtualOptions, HANG_REFUSED};
 use crate::sim::PlantChoice;
 use crate::sim_cmd::{at_least, finite, shown, whole, LoadArg};
+use hter::failsafe::{StopInfo, StopKind};
 
 /// `hter virtual-board` arguments.
 #[derive(clap::Args, Debug, Clone)]
@@ -50,8 +51,11 @@ pub struct VirtualBoardArgs {
     #[arg(long)]
     pub module_sense: bool,
     /// Inject a fault at a simulated time, KIND@T_S (repeatable; the names of `hter sim
-    /// --fault`, but not firmware-hang): to rehearse what `status`, the alarm and `history`
-    /// show when a probe, the relay or the supply fails.
+    /// --fault`, but not firmware-hang, and the board's own fail-safe stops, board-fault-panic,
+    /// board-fault-hard-fault, board-fault-nmi, board-fault-unexpected-interrupt and
+    /// board-fault-control-stall: the stop path's record, a reset, the boot that reports it): to
+    /// rehearse what `status`, the alarm and `history` show when a probe, the relay, the supply
+    /// or the board itself fails.
     #[arg(long = "fault")]
     pub faults: Vec<String>,
 }
@@ -77,8 +81,8 @@ pub fn run(a: &VirtualBoardArgs) -> Result<()> {
         }
         d => d,
     };
-    let mut faults = a.faults.iter().map(|f| Fault::parse(f)).collect::<Result<Vec<_>>>()?;
-    if faults.iter().any(|&(_, f)| f == Fault::FirmwareHang) {
+    let mut faults = a.faults.iter().map(|f| Injection::parse(f)).collect::<Result<Vec<_>>>()?;
+    if faults.iter().any(|&(_, f)| f == Injection::Fault(Fault::FirmwareHang)) {
         bail!("--fault firmware-hang: {HANG_REFUSED}");
     }
     // A fault goes in before the first sample at or after its time; samples start at 0, Ts,
@@ -134,6 +138,60 @@ pub fn run(a: &VirtualBoardArgs) -> Result<()> {
     served
 }
 
+/// What `--fault` injects: a fault of the carrier (`hter sim --fault`'s), or a fail-safe stop of
+/// the board itself (`board-fault-KIND`, the library's stop kinds).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Injection {
+    Fault(Fault),
+    Stop(StopKind),
+}
+
+impl Injection {
+    /// `KIND@T_S`: a `hter sim --fault` name or `board-fault-` and a stop kind's name in
+    /// kebab-case.
+    fn parse(s: &str) -> Result<(f64, Injection)> {
+        let stop = s.split_once('@').and_then(|(kind, t)| {
+            let kind = kind.strip_prefix("board-fault-")?;
+            let k = StopKind::ALL.into_iter().find(|k| k.name().replace('_', "-") == kind)?;
+            Some((k, t))
+        });
+        match stop {
+            Some((k, t)) => match t.parse::<f64>() {
+                Ok(t) if t.is_finite() && t >= 0.0 => Ok((t, Injection::Stop(k))),
+                Ok(_) => bail!("fault '{s}': time must be a finite number of seconds ≥ 0"),
+                Err(_) => bail!("fault '{s}': time '{t}' is not a number"),
+            },
+            None if s.starts_with("board-fault-") => {
+                let names: Vec<String> =
+                    StopKind::ALL.iter().map(|k| format!("board-fault-{}", k.name().replace('_', "-"))).collect();
+                bail!("unknown board fault in '{s}' (expected KIND@T_S, KIND one of {})", names.join(", "))
+            }
+            None => Fault::parse(s).map(|(t, f)| (t, Injection::Fault(f))),
+        }
+    }
+
+    fn name(self) -> String {
+        match self {
+            Injection::Fault(f) => f.name().to_string(),
+            Injection::Stop(k) => format!("board-fault-{}", k.name().replace('_', "-")),
+        }
+    }
+
+    fn inject(self, board: &mut VirtualBoard) -> Result<()> {
+        match self {
+            Injection::Fault(f) => board.inject(f),
+            Injection::Stop(StopKind::Panic) => {
+                board.fail_safe_stop(hter::failsafe::panic_info("virtual-board", 1));
+                Ok(())
+            }
+            Injection::Stop(k) => {
+                board.fail_safe_stop(StopInfo::new(k, 0, 0, 0));
+                Ok(())
+            }
+        }
+    }
+}
+
 /// The signal that asked the board to stop (SIGINT, SIGTERM); 0 while none has.
 static STOP: AtomicI32 = AtomicI32::new(0);
 
@@ -156,7 +214,7 @@ fn catch_stop_signals() {
 fn serve(
     board: &mut VirtualBoard,
     link: &mut PtyLink,
-    faults: Vec<(f64, Fault)>,
+    faults: Vec<(f64, Injection)>,
     period: Duration,
     duration_s: Option<f64>,
 ) -> Result<()> {
@@ -170,7 +228,7 @@ fn serve(
         let now = Instant::now();
         if now >= next {
             while let Some((t, f)) = faults.next_if(|&(t, _)| board.sim_s() >= t) {
-                board.inject(f)?;
+                f.inject(board)?;
                 restarts = board.restarts;
                 eprintln!("virtual board: fault {} injected at t = {} s (asked for {t} s)", f.name(), board.sim_s());
             }

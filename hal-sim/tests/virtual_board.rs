@@ -577,6 +577,36 @@ fn a_fault_injected_on_the_virtual_board_shows_in_status_and_history() {
     assert!(!link.exists());
 }
 
+/// A board fault rehearsed over the interface: `--fault board-fault-hard-fault@600` takes the
+/// virtual board through the fail-safe's stop and reset; `status` shows the latched alarm and a
+/// restart, `history` the `board_fault_hard_fault` row. A board fault kind the library does not
+/// have is refused in one line that lists the kinds.
+#[test]
+fn a_board_fault_rehearsed_on_the_virtual_board_shows_in_status_and_history() {
+    let b = Board::start("boardfault", &["--fault", "board-fault-hard-fault@600"]);
+    let s = b.wait_for("the restart after the stop", 60, |s| s["resets"] == 1);
+    assert_eq!(s["alarm"], "unacknowledged", "{s}");
+    let csv = tmp("boardfault.csv");
+    assert!(b.board(&["history", "--output", csv.to_str().unwrap()]).status.success());
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert_eq!(text.lines().filter(|l| l.ends_with(",board_fault_hard_fault")).count(), 1, "{text}");
+    let _ = std::fs::remove_file(&csv);
+
+    let link = tmp("boardfault-bad");
+    let e = one_line_error(&hter(&[
+        "virtual-board",
+        "--link",
+        link.to_str().unwrap(),
+        "--fault",
+        "board-fault-gremlin@10",
+    ]));
+    assert!(e.contains("board-fault-gremlin") && e.contains("board-fault-control-stall"), "{e}");
+    let e =
+        one_line_error(&hter(&["virtual-board", "--link", link.to_str().unwrap(), "--fault", "board-fault-panic@-1"]));
+    assert!(e.contains("≥ 0"), "{e}");
+    assert!(!link.exists());
+}
+
 /// A supply that drops two hours after the board first started: the model the self-tuner learnt
 /// on this half-loaded carrier was stored after its first trusted hour, so the board restarts
 /// from it, not from the full-load start model (which swung the load 3.2–4.6 °C for a quarter
