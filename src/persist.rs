@@ -36,7 +36,8 @@ mod gate;
 pub mod log;
 
 pub use gate::{
-    PendingSaves, Save, StoreWatch, WriteGate, PENDING_LOG, STORE_FAILURES, SUPPLY_FRESH_MS, SUPPLY_HOLD_OFF_MS,
+    PendingSaves, Save, StoreFailures, StoreWatch, WriteGate, PENDING_LOG, STORE_FAILURES, SUPPLY_FRESH_MS,
+    SUPPLY_HOLD_OFF_MS,
 };
 
 /// Why stored bytes were not accepted as a record.

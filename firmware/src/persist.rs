@@ -169,17 +169,13 @@ static WAKE: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// others: the history and the calibration in force, at the next sample).
 pub static RECORDS_ERASED: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
 
-/// Stores failed in a row in each region, the records' then the log's (0 after one that
-/// succeeded), saturating: the control task's `hter::persist::StoreWatch` calls the flash
-/// failed at `hter::persist::STORE_FAILURES` in either ([`failed_in_a_row`]). Counted apart: the
-/// log's 5-minute rows would otherwise end every run of the records region's hourly failures.
-static FAILED_IN_A_ROW: [core::sync::atomic::AtomicU8; 2] =
-    [core::sync::atomic::AtomicU8::new(0), core::sync::atomic::AtomicU8::new(0)];
+/// The persist task's `hter::persist::StoreFailures::in_a_row` after its latest store, which the
+/// control task's `hter::persist::StoreWatch` reads ([`failed_in_a_row`]).
+static FAILED_IN_A_ROW: core::sync::atomic::AtomicU8 = core::sync::atomic::AtomicU8::new(0);
 
-/// The longer run of stores failed in a row of the two regions.
+/// Stores failed in a row in the region that has failed longest.
 pub fn failed_in_a_row() -> u8 {
-    use core::sync::atomic::Ordering::Relaxed;
-    FAILED_IN_A_ROW[0].load(Relaxed).max(FAILED_IN_A_ROW[1].load(Relaxed))
+    FAILED_IN_A_ROW.load(core::sync::atomic::Ordering::Relaxed)
 }
 
 /// What the boot restored: the persist task sends it once, `main` waits for it. A one-slot
@@ -298,6 +294,7 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
     let restored = flash::restore_records(&mut store, config::ADAPTIVE.as_ref()).await;
     report(&restored);
     send_booted(restored);
+    let mut failures = hter::persist::StoreFailures::NEW;
     loop {
         #[cfg(feature = "interface")]
         if let Either::Second(since_s) = select(WAKE.wait(), HISTORY.wait()).await {
@@ -352,11 +349,8 @@ pub async fn persist(flash: Peri<'static, FLASH>) {
                 }
                 result
             };
-            {
-                use core::sync::atomic::Ordering::Relaxed;
-                let region = &FAILED_IN_A_ROW[usize::from(matches!(save, Save::Log(_)))];
-                region.store(if result.is_ok() { 0 } else { region.load(Relaxed).saturating_add(1) }, Relaxed);
-            }
+            failures.note(&save, result.is_ok());
+            FAILED_IN_A_ROW.store(failures.in_a_row(), core::sync::atomic::Ordering::Relaxed);
             match (result, save) {
                 #[cfg(feature = "interface")]
                 (Ok(()), Save::Log(LogEntry::Lost { t_s, entries })) => {

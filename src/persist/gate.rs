@@ -128,10 +128,31 @@ pub enum Save {
 /// stores (the history's hourly one, the 5-minute log rows of the interface build).
 pub const STORE_FAILURES: u8 = 3;
 
-/// Whether the board's flash keeps failing, from the persist task's count of stores failed in a
-/// row in one region (reset by each store there that succeeds; the longer run of the records
-/// region's and the log's: the log's 5-minute rows must not end a run of the records' hourly
-/// failures).
+/// Stores failed in a row in each flash region, the records' and the log's (the persist task's
+/// side of [`StoreWatch`]): a store that succeeds ends its region's run. Counted apart: the log's
+/// 5-minute rows would otherwise end every run of the records region's hourly failures.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StoreFailures {
+    in_a_row: [u8; 2],
+}
+
+impl StoreFailures {
+    /// No store failed.
+    pub const NEW: StoreFailures = StoreFailures { in_a_row: [0; 2] };
+
+    /// One store of `save` and whether it succeeded.
+    pub fn note(&mut self, save: &Save, ok: bool) {
+        let n = &mut self.in_a_row[usize::from(matches!(save, Save::Log(_)))];
+        *n = if ok { 0 } else { n.saturating_add(1) };
+    }
+
+    /// The longer run of the two regions (saturating): what [`StoreWatch::observe`] takes.
+    pub fn in_a_row(&self) -> u8 {
+        self.in_a_row[0].max(self.in_a_row[1])
+    }
+}
+
+/// Whether the board's flash keeps failing, from the persist task's [`StoreFailures::in_a_row`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct StoreWatch {
     failing: bool,
@@ -257,27 +278,17 @@ impl PendingSaves {
         }
     }
 
-    #[cfg(feature = "cold-chain-log")]
-    fn rows_empty(&self) -> bool {
-        self.rows.is_empty()
-    }
-
-    #[cfg(not(feature = "cold-chain-log"))]
-    fn rows_empty(&self) -> bool {
-        true
-    }
-
     /// Whether nothing waits.
     pub fn is_empty(&self) -> bool {
         #[cfg(feature = "holdover")]
         if self.cabinet.is_some() {
             return false;
         }
-        self.model.is_none()
-            && self.calibration.is_none()
-            && self.settings.is_none()
-            && self.history.is_none()
-            && self.rows_empty()
+        #[cfg(feature = "cold-chain-log")]
+        if !self.rows.is_empty() {
+            return false;
+        }
+        self.model.is_none() && self.calibration.is_none() && self.settings.is_none() && self.history.is_none()
     }
 
     /// The next record `gate` lets through at `now_ms`, removed from the queue: an alarm history
@@ -399,6 +410,28 @@ mod tests {
         // Supply back at 100 s: the alarm goes at once, before the hold-off.
         let writes = boot(120_000, |t| t >= 100_000, Some(20_000));
         assert_eq!(writes, vec![(100_000, Save::AlarmHistory(history(20)))]);
+    }
+
+    #[test]
+    fn each_region_counts_its_own_failures_in_a_row() {
+        let mut f = StoreFailures::NEW;
+        let row = Save::Log(LogEntry::Event { t_s: 1, kind: EventKind::SensorOpen });
+        // The records region fails hourly; the log's rows between succeed: the run goes on.
+        for hour in 1..=3u8 {
+            f.note(&Save::History(history(0)), false);
+            for _ in 0..12 {
+                f.note(&row, true);
+            }
+            assert_eq!(f.in_a_row(), hour);
+        }
+        f.note(&row, false);
+        assert_eq!(f.in_a_row(), 3, "the longer run");
+        f.note(&Save::Calibration(TwoPoint::IDENTITY), true);
+        assert_eq!(f.in_a_row(), 1, "a records store that succeeds ends the records' run");
+        for _ in 0..300 {
+            f.note(&row, false);
+        }
+        assert_eq!(f.in_a_row(), u8::MAX, "saturating");
     }
 
     #[test]

@@ -18,7 +18,7 @@ use hter::failsafe::{ResetRecords, StopInfo, Stops};
 use hter::iface::Law;
 use hter::persist::flash::{self, LogStore, Store};
 use hter::persist::log::{write_csv_row, CSV_HEADER};
-use hter::persist::{PendingSaves, ResetCause, Save, WriteGate};
+use hter::persist::{PendingSaves, ResetCause, Save, StoreFailures, WriteGate};
 use hter::profile;
 use hter::step::ValidConfig;
 
@@ -95,9 +95,8 @@ pub struct VirtualBoard {
     pub restarts: u32,
     /// Flash writes that failed (each logged to stderr by the server).
     pub write_errors: u32,
-    /// Stores failed in a row in the records region and in the log (the firmware's
-    /// `persist::failed_in_a_row`).
-    failed_in_a_row: [u8; 2],
+    /// Stores failed in a row in each region (the firmware's persist task keeps the same).
+    failures: StoreFailures,
     /// The fail-safe's reset-surviving record (the firmware's `.uninit` RAM): the stops the
     /// stored history does not have yet. A reset keeps it, a power cut loses it.
     ram: ResetRecords,
@@ -162,7 +161,7 @@ impl VirtualBoard {
             cut_settings: None,
             restarts: 0,
             write_errors: 0,
-            failed_in_a_row: [0; 2],
+            failures: StoreFailures::NEW,
             ram: ResetRecords::EMPTY,
         })
     }
@@ -276,7 +275,7 @@ impl VirtualBoard {
     pub fn step(&mut self) -> Option<SampleOut> {
         let ts = f64::from(hter::step::CarrierConfig::DEFAULT.ts_s);
         let input = self.rig.sample_in(self.t_ms)?;
-        self.app.note_store_failures(self.failed_in_a_row[0].max(self.failed_in_a_row[1]));
+        self.app.note_store_failures(self.failures.in_a_row());
         let out = self.app.sample(&input);
         let d = self.rig.actuate(&out.step, self.sim_s);
         self.rig.advance(self.sim_s, d, ts, &mut self.last_on, true);
@@ -317,12 +316,9 @@ impl VirtualBoard {
             if result.is_ok() && matches!(save, Save::History(_) | Save::AlarmHistory(_)) {
                 self.ram.stored();
             }
-            let region = &mut self.failed_in_a_row[usize::from(matches!(save, Save::Log(_)))];
+            self.failures.note(&save, result.is_ok());
             if result.is_err() {
                 self.write_errors += 1;
-                *region = region.saturating_add(1);
-            } else {
-                *region = 0;
             }
         }
     }
