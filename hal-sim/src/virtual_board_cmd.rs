@@ -138,6 +138,9 @@ pub fn run(a: &VirtualBoardArgs) -> Result<()> {
     served
 }
 
+/// The `--fault` names of the board's own stops begin so.
+const STOP_PREFIX: &str = "board-fault-";
+
 /// What `--fault` injects: a fault of the carrier (`hter sim --fault`'s), or a fail-safe stop of
 /// the board itself (`board-fault-KIND`, the library's stop kinds).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -147,33 +150,28 @@ enum Injection {
 }
 
 impl Injection {
-    /// `KIND@T_S`: a `hter sim --fault` name or `board-fault-` and a stop kind's name in
-    /// kebab-case.
+    /// `KIND@T_S`, KIND one of [`Self::name`]'s.
     fn parse(s: &str) -> Result<(f64, Injection)> {
-        let stop = s.split_once('@').and_then(|(kind, t)| {
-            let kind = kind.strip_prefix("board-fault-")?;
-            let k = StopKind::ALL.into_iter().find(|k| k.name().replace('_', "-") == kind)?;
-            Some((k, t))
-        });
-        match stop {
-            Some((k, t)) => match t.parse::<f64>() {
-                Ok(t) if t.is_finite() && t >= 0.0 => Ok((t, Injection::Stop(k))),
-                Ok(_) => bail!("fault '{s}': time must be a finite number of seconds ≥ 0"),
-                Err(_) => bail!("fault '{s}': time '{t}' is not a number"),
-            },
-            None if s.starts_with("board-fault-") => {
-                let names: Vec<String> =
-                    StopKind::ALL.iter().map(|k| format!("board-fault-{}", k.name().replace('_', "-"))).collect();
+        if !s.starts_with(STOP_PREFIX) {
+            return Fault::parse(s).map(|(t, f)| (t, Injection::Fault(f)));
+        }
+        let stops = StopKind::ALL.map(Injection::Stop);
+        let found = s.split_once('@').and_then(|(kind, t)| Some((stops.into_iter().find(|i| i.name() == kind)?, t)));
+        match found {
+            Some((stop, t)) => Ok((Fault::time(s, t)?, stop)),
+            None => {
+                let names: Vec<String> = stops.iter().map(|i| i.name()).collect();
                 bail!("unknown board fault in '{s}' (expected KIND@T_S, KIND one of {})", names.join(", "))
             }
-            None => Fault::parse(s).map(|(t, f)| (t, Injection::Fault(f))),
         }
     }
 
+    /// The `--fault` name: `hter sim`'s, or [`STOP_PREFIX`] and the stop kind's name in
+    /// kebab-case.
     fn name(self) -> String {
         match self {
             Injection::Fault(f) => f.name().to_string(),
-            Injection::Stop(k) => format!("board-fault-{}", k.name().replace('_', "-")),
+            Injection::Stop(k) => format!("{STOP_PREFIX}{}", k.name().replace('_', "-")),
         }
     }
 
