@@ -79,6 +79,11 @@ impl StopKind {
     }
 }
 
+/// Sample periods without a completed step after which the glue's stall check stops cooling
+/// and resets the board ([`StopKind::ControlStall`]): the firmware's `config::STALL_LIMIT_MS`,
+/// and how long the simulator's `board-fault-control-stall` hangs the loop before that stop.
+pub const STALL_SAMPLES: u32 = 2;
+
 /// Bytes of text a [`StopInfo`] keeps (a panic's file and message, truncated).
 pub const STOP_TEXT: usize = 48;
 

@@ -528,6 +528,58 @@ fn a_firmware_hang_opens_the_supply_and_sounds_the_alarm_hardware() {
     assert!(out.rows.iter().any(|r| r.t_s > 5400.0 && r.duty > 0.0));
 }
 
+/// The board's own fail-safe stops (`hter sim --fault board-fault-KIND@T`): the stop path, a
+/// reset and a boot that restarts the step from flash. The stop is reported with the boot's first
+/// sample, and only it; the indicator is latched from then to the end (nobody acknowledges); the
+/// boot's history counts the stop and is stored at once (an alarm history: a stop behind the
+/// write gate's minute never reached the record on a board that stopped in every minute); and
+/// control resumes on the setpoint with the load within 2–8 °C. A control stall hangs the loop
+/// for two samples first (the glue's stall check), so the heartbeat's monostable sounds the
+/// alarm hardware on the way; the other stops reset before it can lapse.
+#[test]
+fn a_board_fault_is_reported_latched_and_stored_and_control_resumes() {
+    use hter::failsafe::StopKind;
+    use hter::persist::Save;
+    for kind in StopKind::ALL {
+        let stall = kind == StopKind::ControlStall;
+        // The boot that reports it: at once, or when the stall check stops the hung loop.
+        let boot_s = AT_S + if stall { 2.0 * 10.0 } else { 0.0 };
+        for c in [ControllerChoice::Pi, ControllerChoice::Gpc, ControllerChoice::Onoff] {
+            let out = with_fault(Fault::BoardFault(kind), c);
+            let m = &out.metrics;
+            let case = format!("{kind:?}/{c:?}");
+            let reports: Vec<_> = m
+                .faults_detected
+                .iter()
+                .filter(|f| f.kind != Detected::FirmwareHang)
+                .map(|f| (f.kind, f.t_s))
+                .collect();
+            assert_eq!(reports, [(Detected::Event(EventKind::BoardFault(kind)), boot_s)], "{case}");
+            match m.alarm_hw_first_s {
+                Some(hw) => assert!(stall && hw > AT_S - 10.0 && hw < boot_s, "{case}: alarm hardware at {hw} s"),
+                None => assert!(!stall, "{case}: a 20 s stall outlasts the 15 s monostable"),
+            }
+            let hung: Vec<_> = out.rows.iter().filter(|r| r.mode == RowMode::Hung).map(|r| r.t_s).collect();
+            assert_eq!(hung, if stall { vec![AT_S, AT_S + 10.0] } else { vec![] }, "{case}");
+            assert_eq!(m.alarm_indicator_first_s, Some(boot_s), "{case}");
+            assert!(out.rows.iter().filter(|r| r.t_s >= boot_s).all(|r| r.alarm != Indication::Off), "{case}");
+            let stored = out.stores.iter().find_map(|(t, s)| match s {
+                Save::AlarmHistory(h) if *t == boot_s => Some(*h),
+                _ => None,
+            });
+            let stored = stored.unwrap_or_else(|| panic!("{case}: no alarm history stored at the boot"));
+            assert_eq!(stored.stops_of(kind), 1, "{case}");
+            assert!(m.tracking.min_temp_c > 2.0 && m.tracking.max_temp_c < 8.0, "{case}: {m:?}");
+            let after: Vec<_> = out.rows.iter().filter(|r| r.t_s > boot_s + 1800.0).collect();
+            assert!(after.iter().any(|r| r.duty > 0.0), "{case}: no cooling after the restart");
+            assert!(after.iter().all(|r| (r.true_temp_c - 4.0).abs() < 1.5), "{case}: not back on the setpoint");
+        }
+    }
+    // A brown-out is no stop: it latches nothing (`restarted_brownout` is a record, not an alarm).
+    let out = with_fault(Fault::Brownout, ControllerChoice::Gpc);
+    assert_eq!(out.metrics.alarm_indicator_first_s, None);
+}
+
 /// The SSR's switching disturbance on the ADC: a conversion that starts on the SSR's falling
 /// edge is biased; one at the board's fixed phase, with the duty cleared of the window, is
 /// not (within the front end's 1.5 counts of noise). Counts against the simulator's ideal

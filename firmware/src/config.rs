@@ -193,7 +193,7 @@ pub const VDDA_MAX_V: f32 = 3.6;
 
 /// Control stall limit, ms: two sample periods without a completed step stop cooling and reset
 /// (checked once a second by TIM7's interrupt, which preempts the executor).
-pub const STALL_LIMIT_MS: u32 = 2 * SAMPLE_PERIOD_MS as u32;
+pub const STALL_LIMIT_MS: u32 = hter::failsafe::STALL_SAMPLES * SAMPLE_PERIOD_MS as u32;
 
 /// Where in the SSR PWM period the reference, RTD, reference conversions happen: the last 30 ms
 /// of the 1 s period, with the duty quantised so the SSR's falling edge stays 10 ms clear of it

@@ -6,6 +6,7 @@
 
 use anyhow::{anyhow, bail, Result};
 use hter::event::EventKind;
+use hter::failsafe::{StopInfo, StopKind};
 use hter::persist::ResetCause;
 
 use crate::metrics::Detected;
@@ -39,6 +40,14 @@ pub enum Fault {
     /// The control loop hangs: the step is no longer called, the SSR timer keeps its last duty,
     /// the MCU's pins hold their levels; only the board's heartbeat monostable can stop cooling.
     FirmwareHang,
+    /// The board's own fail-safe stops (`board-fault-panic`, `-hard-fault`, `-nmi`,
+    /// `-unexpected-interrupt`, `-control-stall`): the stop path makes the outputs safe, records
+    /// the stop in the RAM a reset keeps ([`hter::failsafe::ResetRecords`]) and resets the MCU;
+    /// the next boot restarts the step from what flash holds, as after a brown-out, and reports
+    /// the stop (`board_fault_*`, the alarm indicator latched, the stop counted in the stored
+    /// history). A control stall first hangs the loop for [`hter::failsafe::STALL_SAMPLES`]
+    /// sample periods, as `firmware-hang` does, before the glue's stall check stops it.
+    BoardFault(StopKind),
 }
 
 /// Where a fault is, which decides how a randomized mission draws it.
@@ -47,7 +56,8 @@ pub enum FaultClass {
     /// A fault of the carrier's hardware (sensor, SSR, supply, lid) or of the MCU's supply (a
     /// brown-out): a mission carries one with probability 0.2.
     Hardware,
-    /// A fault of the board around the step (the supply switch, a hung control loop): drawn
+    /// A fault of the board around the step (the supply switch, a hung control loop, the
+    /// board's own fail-safe stops): drawn
     /// only in missions without a hardware fault, from a stream of its own.
     Board,
     /// A nuisance the step must ride through (spikes): reported, never judged as a fault.
@@ -67,7 +77,7 @@ pub struct FaultSpec {
 
 impl Fault {
     /// Every fault, in the order of `--fault`'s help and of the mission draws.
-    pub const ALL: [Fault; 12] = [
+    pub const ALL: [Fault; 17] = [
         Fault::SensorOpen,
         Fault::SensorShort,
         Fault::SensorStuck,
@@ -80,6 +90,11 @@ impl Fault {
         Fault::Brownout,
         Fault::SupplySwitchShort,
         Fault::FirmwareHang,
+        Fault::BoardFault(StopKind::Panic),
+        Fault::BoardFault(StopKind::HardFault),
+        Fault::BoardFault(StopKind::Nmi),
+        Fault::BoardFault(StopKind::UnexpectedInterrupt),
+        Fault::BoardFault(StopKind::ControlStall),
     ];
 
     /// The fault table.
@@ -91,7 +106,9 @@ impl Fault {
     /// duty the check looks for); a brown-out is the reset flags the firmware reads at boot
     /// (`restarted_brownout`, handed to the step by `Carrier::note_reset`, as the simulator
     /// does when it restarts the step); a hang is the board's heartbeat monostable expiring,
-    /// not the step.
+    /// not the step; a fail-safe stop is the next boot's report of it (`board_fault_*`), and a
+    /// control stall may sound the monostable first (its 15 s lapses before the stall check's
+    /// two sample periods).
     pub const fn spec(self) -> FaultSpec {
         use Detected::Event;
         use EventKind as E;
@@ -109,6 +126,19 @@ impl Fault {
             Fault::Brownout => ("brownout", Hardware, &[Event(E::Restarted(ResetCause::BrownOut))]),
             Fault::SupplySwitchShort => ("supply-switch-short", Board, &[Event(E::SupplySwitchShorted)]),
             Fault::FirmwareHang => ("firmware-hang", Board, &[Detected::FirmwareHang]),
+            Fault::BoardFault(k) => match k {
+                StopKind::Panic => ("board-fault-panic", Board, &[Event(E::BoardFault(StopKind::Panic))]),
+                StopKind::HardFault => ("board-fault-hard-fault", Board, &[Event(E::BoardFault(StopKind::HardFault))]),
+                StopKind::Nmi => ("board-fault-nmi", Board, &[Event(E::BoardFault(StopKind::Nmi))]),
+                StopKind::UnexpectedInterrupt => {
+                    ("board-fault-unexpected-interrupt", Board, &[Event(E::BoardFault(StopKind::UnexpectedInterrupt))])
+                }
+                StopKind::ControlStall => (
+                    "board-fault-control-stall",
+                    Board,
+                    &[Event(E::BoardFault(StopKind::ControlStall)), Detected::FirmwareHang],
+                ),
+            },
         };
         FaultSpec { name, class, detected_by }
     }
@@ -149,6 +179,21 @@ impl Fault {
     }
 }
 
+/// What the stop path of an injected board fault records ([`Fault::BoardFault`]; the virtual
+/// board's and the simulator's): a panic at a made-up place in the glue, a control stall of
+/// [`hter::failsafe::STALL_SAMPLES`] sample periods (its `detail`, ms: never 0, which is a
+/// boot's stall), the other kinds with no address or status word.
+pub fn stop_info(kind: StopKind) -> StopInfo {
+    match kind {
+        StopKind::Panic => hter::failsafe::panic_info("simulated-board", 1),
+        StopKind::ControlStall => {
+            let ts_ms = hter::step::CarrierConfig::DEFAULT.ts_s as u32 * 1000;
+            StopInfo::new(kind, 0, 0, hter::failsafe::STALL_SAMPLES * ts_ms)
+        }
+        k => StopInfo::new(k, 0, 0, 0),
+    }
+}
+
 impl serde::Serialize for Fault {
     fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
         s.serialize_str(self.name())
@@ -172,6 +217,21 @@ mod tests {
             assert!(Fault::ALL[i + 1..].iter().all(|g| g != f && g.name() != f.name()), "{f:?}");
             assert_eq!(Fault::parse(&format!("{}@5", f.name())).unwrap(), (5.0, *f));
         }
+    }
+
+    #[test]
+    fn each_board_fault_is_named_after_its_stop_kind_and_detected_by_its_report() {
+        for k in StopKind::ALL {
+            let f = Fault::BoardFault(k);
+            assert!(Fault::ALL.contains(&f), "{k:?}");
+            assert_eq!(f.name(), format!("board-fault-{}", k.name().replace('_', "-")));
+            assert_eq!(f.spec().class, FaultClass::Board);
+            assert_eq!(f.spec().detected_by[0], Detected::Event(EventKind::BoardFault(k)));
+            assert_eq!(stop_info(k).kind, k);
+        }
+        // A stall's record is the glue's, not a boot's (`detail` 0 would read as one).
+        assert_eq!(stop_info(StopKind::ControlStall).detail, 20_000);
+        assert!(Fault::parse("board-fault-reboot@5").unwrap_err().to_string().contains("board-fault-control-stall"));
     }
 
     #[test]

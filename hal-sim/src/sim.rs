@@ -20,6 +20,7 @@
 
 use anyhow::{anyhow, bail, Result};
 use hter::alarm::{Annunciator, Indication};
+use hter::app::Boot;
 use hter::control::adaptive::{AdaptiveConfig, SelfTuning};
 use hter::control::excite::PrbsExcitation;
 use hter::control::gpc::GpcConfig;
@@ -27,6 +28,7 @@ use hter::control::mv::{GmvcConfig, IgmvcConfig};
 use hter::control::Controller;
 use hter::control::{AnyController, FixedModel, Law, Pi, PiConfig};
 use hter::event::EventKind;
+use hter::failsafe::{StopKind, Stops};
 use hter::ident::prbs::PrbsConfig;
 use hter::model::Model;
 use hter::persist::{HistoryRecord, ModelCadence, ModelRecord, Recorder, ResetCause, Save};
@@ -364,6 +366,11 @@ fn last_history(stores: &[(f64, Save)]) -> HistoryRecord {
         .unwrap_or(HistoryRecord::EMPTY)
 }
 
+/// What a boot finds after the fail-safe stop of an injected board fault: that stop, new.
+fn fresh_stop(kind: StopKind) -> Stops {
+    Stops { earlier: None, latest: Some(fault::stop_info(kind)), fresh: true }
+}
+
 /// The one-line error of a refused carrier configuration.
 fn config_refused(e: hter::step::ConfigError) -> anyhow::Error {
     anyhow!("the carrier configuration is refused: {e}")
@@ -503,6 +510,9 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
     let (mut alarm_on_s, mut alarm_first_s) = (0.0, None);
     // The step has stopped being called (`firmware-hang`); what the hung MCU's pins still show.
     let mut hung = false;
+    // A control stall (`board-fault-control-stall`): the sample at which the glue's stall check
+    // stops the hung loop and resets the board.
+    let mut stall_stop: Option<i64> = None;
     let mut alarm_hw_first_s: Option<f64> = None;
     let mut freeze_guard_trips = 0u32;
     let mut held: Option<(StepOutput, u32, Indication)> = None;
@@ -513,27 +523,42 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             next_change += 1;
         }
         if k >= 0 {
+            let mut restart = None;
             for &(_, f) in faults_pending.iter().filter(|(ft, _)| *ft <= t_s && *ft > t_s - ts) {
-                if f == Fault::FirmwareHang {
-                    hung = true;
-                } else if f == Fault::Brownout {
-                    // The reset ends a hang too.
-                    hung = false;
-                    // RAM lost: a fresh step, restarted from what flash holds.
-                    carrier = new_carrier(make_controller(persisted.as_ref())?);
-                    // What the firmware reads from RCC_CSR at boot after a brown-out.
-                    carrier.note_reset(ResetCause::BrownOut);
-                    cadence = model_cadence();
-                    recorder = Recorder::new(last_history(&stores), history_every);
-                    let stored = recorder.note_boot(ResetCause::BrownOut, &Default::default());
-                    stores.push((t_s, Save::History(stored)));
-                    // The indicator's latch, the sensor offset and a shorted SSR restart from the
-                    // stored history.
-                    annunciator = Annunciator::restored(&stored);
-                    carrier.resume(&stored);
-                } else {
-                    rig.inject(f);
+                match f {
+                    Fault::FirmwareHang => hung = true,
+                    // What the firmware reads from RCC_CSR at boot after a brown-out; RAM lost,
+                    // so no stop record crosses it.
+                    Fault::Brownout => restart = Some(Stops::default()),
+                    Fault::BoardFault(StopKind::ControlStall) => {
+                        hung = true;
+                        stall_stop = Some(k + i64::from(hter::failsafe::STALL_SAMPLES));
+                    }
+                    // The stop path's record crosses the reset (a pin or software reset).
+                    Fault::BoardFault(kind) => restart = Some(fresh_stop(kind)),
+                    f => rig.inject(f),
                 }
+            }
+            if stall_stop == Some(k) {
+                restart = Some(fresh_stop(StopKind::ControlStall));
+            }
+            if let Some(stops) = restart {
+                // The reset ends a hang too.
+                hung = false;
+                stall_stop = None;
+                // RAM lost: a fresh step, restarted from what flash holds, as the board's boot
+                // restarts it (`Boot::resume`: the reset and the stops reported with the first
+                // sample and counted in the history; the indicator's latch, the sensor offset and
+                // a shorted SSR from the stored history).
+                carrier = new_carrier(make_controller(persisted.as_ref())?);
+                cadence = model_cadence();
+                let history = last_history(&stores);
+                recorder = Recorder::new(history, history_every);
+                let reset = if stops.latest.is_some() { ResetCause::Other } else { ResetCause::BrownOut };
+                let boot = Boot { history, reset, stops, ..Boot::NEW };
+                let stored = boot.resume(&mut carrier, &mut recorder);
+                stores.push((t_s, boot.history_save(stored)));
+                annunciator = Annunciator::restored(&stored);
             }
         }
         let w = if k >= 0 { sc.setpoint_at(t_s) } else { sc.setpoint_at(0.0) };

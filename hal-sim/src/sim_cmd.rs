@@ -106,9 +106,12 @@ pub struct SimArgs {
     /// samples (`hter::supervisor::module`).
     #[arg(long)]
     pub module_sense: bool,
-    /// Inject a hardware fault at a time, KIND@T_S (repeatable): sensor-open, sensor-short,
+    /// Inject a fault at a time, KIND@T_S (repeatable): sensor-open, sensor-short,
     /// sensor-stuck, sensor-spikes, sensor-offset, ssr-stuck-on, ssr-stuck-off, supply-sag,
-    /// lid-open, brownout.
+    /// lid-open, brownout; of the board: supply-switch-short, firmware-hang, and its fail-safe
+    /// stops board-fault-panic, board-fault-hard-fault, board-fault-nmi,
+    /// board-fault-unexpected-interrupt, board-fault-control-stall (the stop, a reset, the
+    /// boot that reports it).
     #[arg(long = "fault")]
     pub faults: Vec<String>,
     /// Write the trace as CSV (one row per control sample).

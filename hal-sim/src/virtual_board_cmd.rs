@@ -15,7 +15,6 @@ use crate::link::PtyLink;
 use crate::sim::virtual_board::{VirtualBoard, VirtualOptions, HANG_REFUSED};
 use crate::sim::PlantChoice;
 use crate::sim_cmd::{at_least, finite, shown, whole, LoadArg};
-use hter::failsafe::{StopInfo, StopKind};
 
 /// `hter virtual-board` arguments.
 #[derive(clap::Args, Debug, Clone)]
@@ -51,11 +50,12 @@ pub struct VirtualBoardArgs {
     #[arg(long)]
     pub module_sense: bool,
     /// Inject a fault at a simulated time, KIND@T_S (repeatable; the names of `hter sim
-    /// --fault`, but not firmware-hang, and the board's own fail-safe stops, board-fault-panic,
+    /// --fault` but firmware-hang, the board's own fail-safe stops board-fault-panic,
     /// board-fault-hard-fault, board-fault-nmi, board-fault-unexpected-interrupt and
-    /// board-fault-control-stall: the stop path's record, a reset, the boot that reports it): to
-    /// rehearse what `status`, the alarm and `history` show when a probe, the relay, the supply
-    /// or the board itself fails.
+    /// board-fault-control-stall included: the stop path's record, a reset, the boot that
+    /// reports it; a stall stops at once, without the loop's two hung samples): to rehearse what
+    /// `status`, the alarm and `history` show when a probe, the relay, the supply or the board
+    /// itself fails.
     #[arg(long = "fault")]
     pub faults: Vec<String>,
 }
@@ -81,8 +81,8 @@ pub fn run(a: &VirtualBoardArgs) -> Result<()> {
         }
         d => d,
     };
-    let mut faults = a.faults.iter().map(|f| Injection::parse(f)).collect::<Result<Vec<_>>>()?;
-    if faults.iter().any(|&(_, f)| f == Injection::Fault(Fault::FirmwareHang)) {
+    let mut faults = a.faults.iter().map(|f| Fault::parse(f)).collect::<Result<Vec<_>>>()?;
+    if faults.iter().any(|&(_, f)| f == Fault::FirmwareHang) {
         bail!("--fault firmware-hang: {HANG_REFUSED}");
     }
     // A fault goes in before the first sample at or after its time; samples start at 0, Ts,
@@ -138,58 +138,6 @@ pub fn run(a: &VirtualBoardArgs) -> Result<()> {
     served
 }
 
-/// The `--fault` names of the board's own stops begin so.
-const STOP_PREFIX: &str = "board-fault-";
-
-/// What `--fault` injects: a fault of the carrier (`hter sim --fault`'s), or a fail-safe stop of
-/// the board itself (`board-fault-KIND`, the library's stop kinds).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Injection {
-    Fault(Fault),
-    Stop(StopKind),
-}
-
-impl Injection {
-    /// `KIND@T_S`, KIND one of [`Self::name`]'s.
-    fn parse(s: &str) -> Result<(f64, Injection)> {
-        if !s.starts_with(STOP_PREFIX) {
-            return Fault::parse(s).map(|(t, f)| (t, Injection::Fault(f)));
-        }
-        let stops = StopKind::ALL.map(Injection::Stop);
-        let found = s.split_once('@').and_then(|(kind, t)| Some((stops.into_iter().find(|i| i.name() == kind)?, t)));
-        match found {
-            Some((stop, t)) => Ok((Fault::time(s, t)?, stop)),
-            None => {
-                let names: Vec<String> = stops.iter().map(|i| i.name()).collect();
-                bail!("unknown board fault in '{s}' (expected KIND@T_S, KIND one of {})", names.join(", "))
-            }
-        }
-    }
-
-    /// The `--fault` name: `hter sim`'s, or [`STOP_PREFIX`] and the stop kind's name in
-    /// kebab-case.
-    fn name(self) -> String {
-        match self {
-            Injection::Fault(f) => f.name().to_string(),
-            Injection::Stop(k) => format!("{STOP_PREFIX}{}", k.name().replace('_', "-")),
-        }
-    }
-
-    fn inject(self, board: &mut VirtualBoard) -> Result<()> {
-        match self {
-            Injection::Fault(f) => board.inject(f),
-            Injection::Stop(StopKind::Panic) => {
-                board.fail_safe_stop(hter::failsafe::panic_info("virtual-board", 1));
-                Ok(())
-            }
-            Injection::Stop(k) => {
-                board.fail_safe_stop(StopInfo::new(k, 0, 0, 0));
-                Ok(())
-            }
-        }
-    }
-}
-
 /// The signal that asked the board to stop (SIGINT, SIGTERM); 0 while none has.
 static STOP: AtomicI32 = AtomicI32::new(0);
 
@@ -212,7 +160,7 @@ fn catch_stop_signals() {
 fn serve(
     board: &mut VirtualBoard,
     link: &mut PtyLink,
-    faults: Vec<(f64, Injection)>,
+    faults: Vec<(f64, Fault)>,
     period: Duration,
     duration_s: Option<f64>,
 ) -> Result<()> {
@@ -226,7 +174,7 @@ fn serve(
         let now = Instant::now();
         if now >= next {
             while let Some((t, f)) = faults.next_if(|&(t, _)| board.sim_s() >= t) {
-                f.inject(board)?;
+                board.inject(f)?;
                 restarts = board.restarts;
                 eprintln!("virtual board: fault {} injected at t = {} s (asked for {t} s)", f.name(), board.sim_s());
             }

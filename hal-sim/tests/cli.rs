@@ -216,6 +216,11 @@ fn small_campaign_reports_the_spec_fields() {
     // step rides through), each with a detector, whether or not this campaign drew it.
     let kinds = v["faults_by_kind"].as_object().unwrap();
     let expected = [
+        "board-fault-control-stall",
+        "board-fault-hard-fault",
+        "board-fault-nmi",
+        "board-fault-panic",
+        "board-fault-unexpected-interrupt",
         "brownout",
         "firmware-hang",
         "lid-open",

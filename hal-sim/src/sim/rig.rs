@@ -205,7 +205,7 @@ impl Rig {
                 Fault::LidOpen => plant.set_extra_heat_w(15.0),
                 Fault::SupplySwitchShort => ssr.switch_shorted = true,
                 // The run loop handles these: they stop or restart the step.
-                Fault::Brownout | Fault::FirmwareHang => {}
+                Fault::Brownout | Fault::FirmwareHang | Fault::BoardFault(_) => {}
             }
         }
     }

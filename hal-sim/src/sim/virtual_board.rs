@@ -215,6 +215,7 @@ impl VirtualBoard {
         match fault {
             Fault::FirmwareHang => bail!(HANG_REFUSED),
             Fault::Brownout => self.power_cut(),
+            Fault::BoardFault(k) => self.fail_safe_stop(crate::fault::stop_info(k)),
             f => self.rig.inject(f),
         }
         Ok(())
