@@ -90,8 +90,8 @@ pub struct CampaignSummary {
     pub freeze_minutes: f64,
     /// Missions with any time below 0 °C.
     pub freeze_missions: u64,
-    /// Fraction of the judged time (after pull-down, before any hardware fault, outside cold
-    /// ambient) with the load outside 2–8 °C.
+    /// Fraction of the judged time (after pull-down, before any fault but a restart the board
+    /// comes back from, outside cold ambient) with the load outside 2–8 °C.
     pub fraction_outside_2_8: f64,
     /// Judged time, h.
     pub judged_hours: f64,
@@ -377,7 +377,10 @@ fn print_table(s: &CampaignSummary) {
     println!("| --- | --- |");
     println!("| minutes below 0 °C (all missions) | {:.1} ({} missions) |", s.freeze_minutes, s.freeze_missions);
     println!("| lowest load temperature | {:.2} °C |", s.worst_min_c);
-    println!("| highest load temperature after pull-down, before faults | {:.2} °C |", s.worst_max_c);
+    println!(
+        "| highest load temperature after pull-down, before faults (restarts judged through) | {:.2} °C |",
+        s.worst_max_c
+    );
     if let (Some(c), Some(seed)) = (s.fault_free_min_c, s.fault_free_min_seed) {
         println!("| freeze margin: lowest load after pull-down, fault-free missions, warm ambient | {c:.2} °C (mission {seed}) |");
     }
@@ -392,7 +395,7 @@ fn print_table(s: &CampaignSummary) {
         );
     }
     println!(
-        "| outside 2–8 °C after pull-down, before faults | {:.4} % ({:.1} min of {:.0} h; {:.1} min above 8 °C at full cooling for 30 min: capacity) |",
+        "| outside 2–8 °C after pull-down, before faults (restarts judged through) | {:.4} % ({:.1} min of {:.0} h; {:.1} min above 8 °C at full cooling for 30 min: capacity) |",
         100.0 * s.fraction_outside_2_8,
         s.outside_minutes,
         s.judged_hours,

@@ -148,6 +148,13 @@ impl Fault {
         self.spec().name
     }
 
+    /// Whether the board restarts through this fault and carries on as before it: a brown-out
+    /// and the fail-safe stops, whose boot restarts the step from flash with every part of the
+    /// carrier still working. A mission goes on being judged after one ([`crate::mission`]).
+    pub const fn restarts(self) -> bool {
+        matches!(self, Fault::Brownout | Fault::BoardFault(_))
+    }
+
     /// Whether `report` counts as this fault's detection.
     pub fn detected_by(self, report: Detected) -> bool {
         self.spec().detected_by.contains(&report)

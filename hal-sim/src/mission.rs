@@ -56,8 +56,9 @@ pub const COLD_AMBIENT_C: f64 = 4.0;
 /// [`COLD_AMBIENT_C`], s (the carrier's slowest time constants are ≈ 1 h).
 pub const COLD_LAG_S: f64 = 7200.0;
 
-/// Largest time outside 2–8 °C after pull-down, before any hardware fault and outside cold
-/// ambient, that a mission may have and still pass, s (one minute: six samples).
+/// Largest time outside 2–8 °C in the judged window (after pull-down, before any fault but a
+/// restart, outside cold ambient) that a mission may have and still pass, s (one minute: six
+/// samples).
 pub const OUTSIDE_TOLERANCE_S: f64 = 60.0;
 
 /// One randomized mission.
@@ -220,8 +221,10 @@ fn is_warning(d: Detected) -> bool {
 /// The verdict on one mission.
 ///
 /// - **Pull-down** ends at the first sample with the true load temperature within 2–8 °C.
-/// - **Judged window**: from the end of pull-down to the hardware fault (or the end), minus
-///   cold-ambient samples (ambient below [`COLD_AMBIENT_C`] now or within [`COLD_LAG_S`]).
+/// - **Judged window**: from the end of pull-down to the fault (or the end), minus
+///   cold-ambient samples (ambient below [`COLD_AMBIENT_C`] now or within [`COLD_LAG_S`]). A
+///   restart the board comes back from (a brown-out, a fail-safe stop: [`Fault::restarts`])
+///   does not end it: the carrier after the boot is held to the same band as before.
 /// - **Fails** when the load is ever below 0 °C (anywhere, faults and cold ambient included),
 ///   or an injected fault that showed in the run (`fault_detectable`) is not detected by the
 ///   end of the run, or the step reports a hardware fault that was not injected, other than
@@ -248,7 +251,8 @@ pub struct MissionReport {
     /// Of `outside_s`, the time above 8 °C after at least 30 min of full cooling: the
     /// carrier's capacity, not its control (no controller can do better there).
     pub capacity_s: f64,
-    /// Cold-ambient time after pull-down and before any hardware fault, s.
+    /// Cold-ambient time in the judged window's span (after pull-down, before any fault but a
+    /// restart), s.
     pub cold_ambient_s: f64,
     /// Of which outside 2–8 °C, s.
     pub cold_outside_s: f64,
@@ -291,6 +295,11 @@ pub struct MissionReport {
 pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
     let ts = out.ts_s;
     let t_fault = m.hardware_fault.map_or(f64::INFINITY, |(t, _)| t);
+    // The judged window ends at a fault, but not at a restart the board comes back from.
+    let judged_until = match m.hardware_fault {
+        Some((_, kind)) if kind.restarts() => f64::INFINITY,
+        _ => t_fault,
+    };
     let mut freeze_s = 0.0;
     let mut judged_s = 0.0;
     let mut outside_s = 0.0;
@@ -333,7 +342,7 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
                 fault_below_2_s += ts;
             }
         }
-        if pulldown_s.is_none() || r.t_s >= t_fault {
+        if pulldown_s.is_none() || r.t_s >= judged_until {
             continue;
         }
         if r.t_s - last_cold <= COLD_LAG_S {
@@ -479,5 +488,33 @@ mod tests {
         carriers.sort_unstable();
         carriers.dedup();
         assert_eq!(carriers.len(), 200, "two seeds drew the same carrier");
+    }
+
+    /// A restart the board comes back from (a brown-out, a fail-safe stop) does not end the
+    /// judged window: the window of such a mission reaches past the fault, where any other
+    /// fault's ends at it. The first missions of each kind without cold ambient.
+    #[test]
+    fn the_judged_window_goes_on_through_a_restart_and_ends_at_any_other_fault() {
+        use crate::sim::{self, ControllerChoice, ControllerSpec};
+        use hter::failsafe::StopKind;
+        let kinds = [Fault::Brownout, Fault::BoardFault(StopKind::Panic), Fault::BoardFault(StopKind::ControlStall)];
+        let others = [Fault::SensorOpen, Fault::FirmwareHang];
+        for kind in kinds.into_iter().chain(others) {
+            let m = (1..)
+                .map(Mission::generate)
+                .find(|m| m.hardware_fault.is_some_and(|(_, k)| k == kind) && m.ambient0_c > 15.0)
+                .unwrap();
+            let (tf, _) = m.hardware_fault.unwrap();
+            let out = sim::run(&m.options(ControllerSpec::new(ControllerChoice::Gpc))).unwrap();
+            let r = evaluate(&m, &out);
+            assert!(r.reasons.is_empty() && r.cold_ambient_s == 0.0, "mission {}: {r:?}", m.seed);
+            let before_fault = tf - r.pulldown_s.unwrap();
+            if kind.restarts() {
+                assert!(r.judged_s > before_fault + 3600.0, "mission {} ({kind:?}): {} s judged", m.seed, r.judged_s);
+            } else {
+                // Up to the sample at or after the fault (faults fall between samples).
+                assert!(r.judged_s <= before_fault + 10.0, "mission {} ({kind:?}): {} s judged", m.seed, r.judged_s);
+            }
+        }
     }
 }
