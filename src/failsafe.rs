@@ -81,7 +81,7 @@ impl StopKind {
 
 /// Sample periods without a completed step after which the glue's stall check stops cooling
 /// and resets the board ([`StopKind::ControlStall`]): the firmware's `config::STALL_LIMIT_MS`,
-/// and how long the simulator's `board-fault-control-stall` hangs the loop before that stop.
+/// and when the simulator's `board-fault-control-stall` stops its hung loop.
 pub const STALL_SAMPLES: u32 = 2;
 
 /// Bytes of text a [`StopInfo`] keeps (a panic's file and message, truncated).

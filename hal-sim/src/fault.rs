@@ -45,8 +45,9 @@ pub enum Fault {
     /// the stop in the RAM a reset keeps ([`hter::failsafe::ResetRecords`]) and resets the MCU;
     /// the next boot restarts the step from what flash holds, as after a brown-out, and reports
     /// the stop (`board_fault_*`, the alarm indicator latched, the stop counted in the stored
-    /// history). A control stall first hangs the loop for [`hter::failsafe::STALL_SAMPLES`]
-    /// sample periods, as `firmware-hang` does, before the glue's stall check stops it.
+    /// history). A control stall first hangs the loop, as `firmware-hang` does, until the glue's
+    /// stall check stops it [`hter::failsafe::STALL_SAMPLES`] sample periods after the last
+    /// completed step: the loop misses one sample, and the heartbeat's monostable lapses first.
     BoardFault(StopKind),
 }
 
@@ -107,8 +108,8 @@ impl Fault {
     /// (`restarted_brownout`, handed to the step by `Carrier::note_reset`, as the simulator
     /// does when it restarts the step); a hang is the board's heartbeat monostable expiring,
     /// not the step; a fail-safe stop is the next boot's report of it (`board_fault_*`), and a
-    /// control stall may sound the monostable first (its 15 s lapses before the stall check's
-    /// two sample periods).
+    /// control stall sounds the monostable first (its 15 s lapse before the stall check's two
+    /// sample periods).
     pub const fn spec(self) -> FaultSpec {
         use Detected::Event;
         use EventKind as E;

@@ -511,7 +511,9 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
     // The step has stopped being called (`firmware-hang`); what the hung MCU's pins still show.
     let mut hung = false;
     // A control stall (`board-fault-control-stall`): the sample at which the glue's stall check
-    // stops the hung loop and resets the board.
+    // has stopped the hung loop and reset the board ([`hter::failsafe::STALL_SAMPLES`] sample
+    // periods after the last completed step, the one before the stall: the loop misses one
+    // sample fewer than that).
     let mut stall_stop: Option<i64> = None;
     let mut alarm_hw_first_s: Option<f64> = None;
     let mut freeze_guard_trips = 0u32;
@@ -522,6 +524,8 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             rig.change(sc.changes[next_change].1);
             next_change += 1;
         }
+        // Whether the loop was hung up to this sample (a reset below may end it).
+        let was_hung = hung;
         if k >= 0 {
             let mut restart = None;
             for &(_, f) in faults_pending.iter().filter(|(ft, _)| *ft <= t_s && *ft > t_s - ts) {
@@ -532,7 +536,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                     Fault::Brownout => restart = Some(Stops::default()),
                     Fault::BoardFault(StopKind::ControlStall) => {
                         hung = true;
-                        stall_stop = Some(k + i64::from(hter::failsafe::STALL_SAMPLES));
+                        stall_stop = Some(k + i64::from(hter::failsafe::STALL_SAMPLES) - 1);
                     }
                     // The stop path's record crosses the reset (a pin or software reset).
                     Fault::BoardFault(kind) => restart = Some(fresh_stop(kind)),
@@ -562,15 +566,16 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             }
         }
         let w = if k >= 0 { sc.setpoint_at(t_s) } else { sc.setpoint_at(0.0) };
+        // The monostable lapsed since the last beat: a hung loop, or a stall that a stop and a
+        // reset ended after the lapse (the boot's first step beats again).
+        if let (true, Some(at), None) = (was_hung || hung, rig.alarm_hw_since(t_s), alarm_hw_first_s) {
+            alarm_hw_first_s = Some(at);
+            faults.push(Stamped { kind: Detected::FirmwareHang, t_s: at });
+        }
         if hung {
             // ---- hung control loop: no step, no actuation, no beat ----
             let duty = rig.gated_duty(t_s);
             switches += rig.advance(t_s, 0.0, ts, &mut last_on, true);
-            let alarm_hw = rig.alarm_hw_since(t_s);
-            if let (Some(at), None) = (alarm_hw, alarm_hw_first_s) {
-                alarm_hw_first_s = Some(at);
-                faults.push(Stamped { kind: Detected::FirmwareHang, t_s: at });
-            }
             let last = held.as_ref();
             if last.is_some_and(|(_, _, i)| i.is_on()) {
                 alarm_on_s += ts;

@@ -53,7 +53,7 @@ pub struct VirtualBoardArgs {
     /// --fault` but firmware-hang, the board's own fail-safe stops board-fault-panic,
     /// board-fault-hard-fault, board-fault-nmi, board-fault-unexpected-interrupt and
     /// board-fault-control-stall included: the stop path's record, a reset, the boot that
-    /// reports it; a stall stops at once, without the loop's two hung samples): to rehearse what
+    /// reports it; a stall stops at once, without the loop's hung sample): to rehearse what
     /// `status`, the alarm and `history` show when a probe, the relay, the supply or the board
     /// itself fails.
     #[arg(long = "fault")]
