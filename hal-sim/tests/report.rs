@@ -429,6 +429,26 @@ fn a_log2csv_output_lists_its_resets() {
     let _ = std::fs::remove_dir_all(&d);
 }
 
+/// `hter sim --csv` carries the step's events in its `events` cell, as `hter log2csv` writes a
+/// board's: a simulated fail-safe stop reaches `hter report` and `hter monitor` as a board's
+/// does, the reset and the stop that needs a service check; a run without a fault lists none.
+#[test]
+fn a_simulated_board_fault_reaches_the_report_as_a_service_check() {
+    let d = dir("sim-board-fault");
+    let (csv, clean) = (d.join("t.csv"), d.join("clean.csv"));
+    let run = ["sim", "--scenario", "disturbance", "--csv"];
+    ok(&hter(&[&run[..], &[s(&csv), "--fault", "board-fault-hard-fault@3000"]].concat()));
+    let page = report_agreeing_with_monitor(&csv, &d.join("r.html"));
+    let service = "SERVICE NEEDED — 1 fault that needs a service check, the first board_fault_hard_fault";
+    assert!(page.contains(service), "the stop needs a service check");
+    assert!(page.contains("Resets and faults</th><td>2:"), "the reset and the stop");
+    assert!(page.contains("<li>restarted") && page.contains("<li>board_fault_hard_fault"), "both listed");
+    ok(&hter(&[&run[..], &[s(&clean)]].concat()));
+    let page = report_agreeing_with_monitor(&clean, &d.join("clean.html"));
+    assert!(!page.contains("SERVICE NEEDED") && !page.contains("<li>restarted"), "a clean run lists no reset");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
 /// A simulated trace whose probe opens 2 h in: the carrier holds its last good reading in
 /// `temp_c` (mode `sensor_fault`) while the load warms towards the ambient. `hter monitor`
 /// counts the 2 h after as no reading: its record is the first 2 h's, to the figure (MKT,

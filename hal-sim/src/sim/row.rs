@@ -4,6 +4,7 @@
 
 use hter::alarm::Indication;
 use hter::control::AdaptiveMode;
+use hter::event::Events;
 use hter::step::{BoardReadings, Mode, StepOutput};
 use serde::Serialize;
 
@@ -35,6 +36,14 @@ impl Serialize for RowMode {
 
 fn indication_name<S: serde::Serializer>(i: &Indication, s: S) -> Result<S::Ok, S::Error> {
     s.serialize_str(i.name())
+}
+
+/// The `events` cell: the step's events of the sample by [`hter::event::EventKind::name`],
+/// `;`-separated, as `hter log2csv` writes the board's (so that `hter monitor` and `hter report`
+/// read a simulated run's restarts and faults as a board's).
+fn event_names<S: serde::Serializer>(e: &Events, s: S) -> Result<S::Ok, S::Error> {
+    let names: Vec<&str> = e.iter().map(|e| e.kind.name()).collect();
+    s.serialize_str(&names.join(";"))
 }
 
 fn adaptive_name<S: serde::Serializer>(m: &Option<AdaptiveMode>, s: S) -> Result<S::Ok, S::Error> {
@@ -100,6 +109,9 @@ pub struct Row {
     /// The self-tuner's reset at rest, °C: what it adds to the setpoint the law aims at
     /// (empty for other controllers; [`hter::control::adaptive`], "Reset at rest").
     pub reset_c: Option<f32>,
+    /// The step's events of this sample (empty while the loop hangs): the `events` cell.
+    #[serde(serialize_with = "event_names")]
+    pub events: Events,
     /// The conversion an ideal ADC would have made of this sample, counts (no noise, no SSR
     /// switching disturbance, not rounded); not in the CSV.
     #[serde(skip)]
@@ -159,6 +171,7 @@ impl Row {
             alarm_hw: rig.alarm_hw,
             holdover_s: out.holdover_s.map(f64::from),
             reset_c: out.status.map(|st| st.reset_c),
+            events: out.events,
             ideal_counts: rig.ideal_counts,
             board_in,
         }
@@ -199,6 +212,7 @@ impl Row {
             alarm_hw: rig.alarm_hw,
             holdover_s: None,
             reset_c: None,
+            events: Events::default(),
             ideal_counts: rig.ideal_counts,
             board_in: BoardReadings::default(),
         }
