@@ -431,10 +431,17 @@ impl<C: Controller> Carrier<C> {
 
         let reading = self.supervisor.check(&self.cfg, t_ms, raw, sensor, &mut self.filter, &mut emit);
         let temp_c = reading.temp_c;
+        // The filter's first reading (after a boot or a sensor fault) was a spike, outvoted this
+        // sample: the samples before fed the controller a temperature nobody measured. This one
+        // runs without the controller, as a sensor fault's do, so that the self-tuner's estimator
+        // waits out a gap (`Controller::skip`). Without it a warm spike on a restart's first
+        // reading (54 °C over a load at 4 °C, mission 42047) took b to −0.74 at the next update,
+        // and the law swung the load 2.1–5.7 °C for two hours.
+        let trusted = self.supervisor.trusts_reading() && !reading.outvoted;
 
         let w = self.setpoint(setpoint_c, &mut emit);
         let ci = ControlInput { y_c: temp_c, w_c: w };
-        let requested = if self.supervisor.trusts_reading() { self.controller.update(&ci) } else { Ok(0.0) };
+        let requested = if trusted { self.controller.update(&ci) } else { Ok(0.0) };
         // A failed controller's request is NaN: the check below applies the safe state and says so.
         let requested = requested.unwrap_or(f32::NAN);
         let duty = if requested.is_finite() {
@@ -449,7 +456,6 @@ impl<C: Controller> Carrier<C> {
         let verdict = self.supervisor.guard(&self.cfg.supervisor, t_ms, &ci, requested, duty, &mut emit);
 
         // Tell the controller what was really applied.
-        let trusted = self.supervisor.trusts_reading();
         if trusted {
             self.controller.track(&ci, verdict.duty.get());
         } else {

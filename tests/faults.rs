@@ -283,6 +283,30 @@ fn campaign_missions_that_once_failed_pass() {
     }
 }
 
+/// Mission 42047 (`--seed 40001`): an NMI stop while holding 4 °C, and the first reading of the
+/// boot after it a sensor spike, 54 °C over a load at 4.01 °C. The two readings after it outvote
+/// it, but the self-tuner had taken the spike in: its next update took b to −0.74 (the stored
+/// model's b0 is −0.0075), and the law, trusting that estimate, swung the load between 2.1 and
+/// 5.7 °C for two hours. The outvote's sample now runs without the controller, as a sensor
+/// fault's do, and the estimator waits out the gap: the estimate stays the stored model's and
+/// the hour after the restart holds 3.09–4.13 °C (the law's own reaction to the spike, which
+/// its histories still hold, takes the load to 3.09 °C once).
+#[test]
+fn a_spike_on_a_restarts_first_reading_does_not_corrupt_the_estimate() {
+    use hal_sim::mission::Mission;
+    let m = Mission::generate(42047);
+    let (tf, kind) = m.hardware_fault.unwrap();
+    assert_eq!(kind, Fault::BoardFault(hter::failsafe::StopKind::Nmi));
+    let out = run(&m.options(ControllerSpec::new(ControllerChoice::Gpc))).unwrap();
+    let hour: Vec<_> = out.rows.iter().filter(|r| r.t_s >= tf && r.t_s < tf + 3600.0).collect();
+    let boot = hour.first().unwrap();
+    assert!(boot.temp_c > 50.0, "the boot's first reading is the spike: {} °C", boot.temp_c);
+    let (lo, hi) = hour.iter().fold((f64::MAX, f64::MIN), |(lo, hi), r| (lo.min(r.true_temp_c), hi.max(r.true_temp_c)));
+    assert!(lo > 3.0 && hi < 4.2, "the hour after the restart: {lo:.2}–{hi:.2} °C");
+    let b0: Vec<f32> = hour.iter().filter_map(|r| r.b0).collect();
+    assert!(b0.iter().all(|b| (-0.01..-0.005).contains(b)), "b0 left the stored model's: {b0:?}");
+}
+
 /// Mission 117730 (`--seed 110001`): after the supply probe found the short, limp home's
 /// thermostat opened and closed the supply all day, and after every off period the heavy load
 /// warmed on at full cooling for 6 min; each was reported as an SSR stuck off too (11 reports,

@@ -145,6 +145,18 @@ pub struct CampaignSummary {
     pub fault_below_2_max_s: f64,
     /// See [`Self::fault_below_2_max_s`].
     pub fault_below_2_minutes: f64,
+    /// The hour after a restart the board comes back from (a brown-out, a fail-safe stop;
+    /// [`MissionReport::restart_span_c`]): the missions watched, and the lowest and the highest
+    /// true load temperature over them, °C, with the mission each was in.
+    pub restart_missions: u64,
+    /// See [`Self::restart_missions`].
+    pub restart_min_c: Option<f64>,
+    /// See [`Self::restart_missions`].
+    pub restart_min_seed: Option<u64>,
+    /// See [`Self::restart_missions`].
+    pub restart_max_c: Option<f64>,
+    /// See [`Self::restart_missions`].
+    pub restart_max_seed: Option<u64>,
     /// Freeze-guard trips after pull-down, before any hardware fault and outside cold ambient
     /// ([`MissionReport::guard_trips`]), over all missions, and the missions that had one.
     pub guard_trips: u64,
@@ -245,6 +257,14 @@ pub fn summarize(
     };
     let free_min = lowest(&|r| if r.fault.is_none() { r.margin_c } else { None });
     let fault_min = lowest(&|r| r.fault_min_c);
+    let restart_min = lowest(&|r| r.restart_span_c.map(|(lo, _)| lo));
+    let restart_max = reports.iter().filter_map(|r| r.restart_span_c.map(|(_, hi)| (hi, r.seed))).reduce(|a, b| {
+        if b.0 > a.0 {
+            b
+        } else {
+            a
+        }
+    });
     CampaignSummary {
         missions: reports.len() as u64,
         controller: format!("{controller:?}").to_lowercase(),
@@ -283,6 +303,11 @@ pub fn summarize(
         fault_min_seed: fault_min.map(|(_, s)| s),
         fault_below_2_max_s: reports.iter().map(|r| r.fault_below_2_s).fold(0.0, f64::max),
         fault_below_2_minutes: sum(&|r| r.fault_below_2_s) / 60.0,
+        restart_missions: reports.iter().filter(|r| r.restart_span_c.is_some()).count() as u64,
+        restart_min_c: restart_min.map(|(c, _)| c),
+        restart_min_seed: restart_min.map(|(_, s)| s),
+        restart_max_c: restart_max.map(|(c, _)| c),
+        restart_max_seed: restart_max.map(|(_, s)| s),
         guard_trips: reports.iter().map(|r| u64::from(r.guard_trips)).sum(),
         guard_trip_missions: reports.iter().filter(|r| r.guard_trips > 0).count() as u64,
         guard_trip_seeds: reports.iter().filter(|r| r.guard_trips > 0).map(|r| r.seed).collect(),
@@ -392,6 +417,14 @@ fn print_table(s: &CampaignSummary) {
         println!(
             "| after a hardware fault, warm ambient: lowest load, time below 2 °C | {c:.2} °C (mission {seed}); {:.1} min in all, at most {:.0} s in one mission |",
             s.fault_below_2_minutes, s.fault_below_2_max_s
+        );
+    }
+    if let (Some(lo), Some(lo_seed), Some(hi), Some(hi_seed)) =
+        (s.restart_min_c, s.restart_min_seed, s.restart_max_c, s.restart_max_seed)
+    {
+        println!(
+            "| the hour after a restart (brown-out, fail-safe stop), warm ambient: lowest / highest load | {lo:.2} °C (mission {lo_seed}) / {hi:.2} °C (mission {hi_seed}), {} missions |",
+            s.restart_missions
         );
     }
     println!(

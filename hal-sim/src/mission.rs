@@ -56,6 +56,10 @@ pub const COLD_AMBIENT_C: f64 = 4.0;
 /// [`COLD_AMBIENT_C`], s (the carrier's slowest time constants are ≈ 1 h).
 pub const COLD_LAG_S: f64 = 7200.0;
 
+/// How long after a restart the campaign watches the load's extremes, s (an hour: the step and
+/// the self-tuner start again from what flash holds, and the load settles well within it).
+pub const RESTART_WATCH_S: f64 = 3600.0;
+
 /// Largest time outside 2–8 °C in the judged window (after pull-down, before any fault but a
 /// restart, outside cold ambient) that a mission may have and still pass, s (one minute: six
 /// samples).
@@ -277,6 +281,10 @@ pub struct MissionReport {
     pub fault_min_c: Option<f64>,
     /// See [`Self::fault_min_c`].
     pub fault_below_2_s: f64,
+    /// After a restart the board comes back from ([`Fault::restarts`]): the lowest and the
+    /// highest true load temperature in the [`RESTART_WATCH_S`] after it, after pull-down,
+    /// cold-ambient samples left out, °C (`None`: no restart, or no such sample).
+    pub restart_span_c: Option<(f64, f64)>,
     /// Freeze-guard trips in the freeze margin's window (after pull-down, before the hardware
     /// fault, cold ambient left out): entries of the step into `freeze_guard` where the
     /// controller alone should have kept the load up, the supervisor acting as the first line.
@@ -311,6 +319,8 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
     let mut min_c = f64::INFINITY;
     let mut max_judged_c: Option<f64> = None;
     let (mut margin_c, mut fault_min_c, mut fault_below_2_s) = (None::<f64>, None::<f64>, 0.0);
+    let restarted = m.hardware_fault.is_some_and(|(_, k)| k.restarts());
+    let mut restart_span_c: Option<(f64, f64)> = None;
     let mut last_cold = f64::NEG_INFINITY;
     let (mut guard_trips, mut guarded) = (0u32, false);
     for r in &out.rows {
@@ -340,6 +350,9 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
             }
             if r.t_s >= t_fault && t < 2.0 {
                 fault_below_2_s += ts;
+            }
+            if restarted && (t_fault..t_fault + RESTART_WATCH_S).contains(&r.t_s) {
+                restart_span_c = Some(restart_span_c.map_or((t, t), |(lo, hi)| (lo.min(t), hi.max(t))));
             }
         }
         if pulldown_s.is_none() || r.t_s >= judged_until {
@@ -444,6 +457,7 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
         margin_c,
         fault_min_c,
         fault_below_2_s,
+        restart_span_c,
         guard_trips,
         fault,
         fault_detectable,
