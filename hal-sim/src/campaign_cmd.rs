@@ -251,20 +251,16 @@ pub fn summarize(
     let faults_detected = by_kind.values().map(|k| k.detected).sum();
     let faults_missed_with_detector =
         by_kind.values().filter(|k| k.detector).map(|k| k.injected - k.detected - k.not_observable).sum();
-    // The lowest (temperature, seed) of `f` over `reports`.
-    let lowest = |f: &dyn Fn(&MissionReport) -> Option<f64>| {
-        reports.iter().filter_map(|r| f(r).map(|c| (c, r.seed))).reduce(|a, b| if b.0 < a.0 { b } else { a })
+    // The (temperature, seed) of `f` over `reports` that `first` puts first: the lowest with
+    // `f64::lt`, the highest with `f64::gt`; the earliest mission of equal ones.
+    let extreme = |f: &dyn Fn(&MissionReport) -> Option<f64>, first: fn(&f64, &f64) -> bool| {
+        reports.iter().filter_map(|r| f(r).map(|c| (c, r.seed))).reduce(|a, b| if first(&b.0, &a.0) { b } else { a })
     };
+    let lowest = |f: &dyn Fn(&MissionReport) -> Option<f64>| extreme(f, f64::lt);
     let free_min = lowest(&|r| if r.fault.is_none() { r.margin_c } else { None });
     let fault_min = lowest(&|r| r.fault_min_c);
     let restart_min = lowest(&|r| r.restart_span_c.map(|(lo, _)| lo));
-    let restart_max = reports.iter().filter_map(|r| r.restart_span_c.map(|(_, hi)| (hi, r.seed))).reduce(|a, b| {
-        if b.0 > a.0 {
-            b
-        } else {
-            a
-        }
-    });
+    let restart_max = extreme(&|r| r.restart_span_c.map(|(_, hi)| hi), f64::gt);
     CampaignSummary {
         missions: reports.len() as u64,
         controller: format!("{controller:?}").to_lowercase(),

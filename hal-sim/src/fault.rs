@@ -174,16 +174,11 @@ impl Fault {
             let names: Vec<&str> = Self::ALL.iter().map(|f| f.name()).collect();
             anyhow!("unknown fault '{kind}' (expected one of {})", names.join(", "))
         })?;
-        Ok((Self::time(s, t)?, fault))
-    }
-
-    /// The time `t` of the fault `s` (`KIND@T_S`): a finite number of seconds ≥ 0.
-    pub fn time(s: &str, t: &str) -> Result<f64> {
         let t: f64 = t.parse().map_err(|_| anyhow!("fault '{s}': time '{t}' is not a number"))?;
         if !(t.is_finite() && t >= 0.0) {
             bail!("fault '{s}': time must be a finite number of seconds ≥ 0");
         }
-        Ok(t)
+        Ok((t, fault))
     }
 }
 

@@ -304,10 +304,8 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
     let ts = out.ts_s;
     let t_fault = m.hardware_fault.map_or(f64::INFINITY, |(t, _)| t);
     // The judged window ends at a fault, but not at a restart the board comes back from.
-    let judged_until = match m.hardware_fault {
-        Some((_, kind)) if kind.restarts() => f64::INFINITY,
-        _ => t_fault,
-    };
+    let restarted = m.hardware_fault.is_some_and(|(_, k)| k.restarts());
+    let judged_until = if restarted { f64::INFINITY } else { t_fault };
     let mut freeze_s = 0.0;
     let mut judged_s = 0.0;
     let mut outside_s = 0.0;
@@ -319,7 +317,6 @@ pub fn evaluate(m: &Mission, out: &SimOutput) -> MissionReport {
     let mut min_c = f64::INFINITY;
     let mut max_judged_c: Option<f64> = None;
     let (mut margin_c, mut fault_min_c, mut fault_below_2_s) = (None::<f64>, None::<f64>, 0.0);
-    let restarted = m.hardware_fault.is_some_and(|(_, k)| k.restarts());
     let mut restart_span_c: Option<(f64, f64)> = None;
     let mut last_cold = f64::NEG_INFINITY;
     let (mut guard_trips, mut guarded) = (0u32, false);

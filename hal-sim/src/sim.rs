@@ -366,9 +366,10 @@ fn last_history(stores: &[(f64, Save)]) -> HistoryRecord {
         .unwrap_or(HistoryRecord::EMPTY)
 }
 
-/// What a boot finds after the fail-safe stop of an injected board fault: that stop, new.
-fn fresh_stop(kind: StopKind) -> Stops {
-    Stops { earlier: None, latest: Some(fault::stop_info(kind)), fresh: true }
+/// What a boot finds after the fail-safe stop of an injected board fault: a pin or software
+/// reset, and that stop, new.
+fn fresh_stop(kind: StopKind) -> (ResetCause, Stops) {
+    (ResetCause::Other, Stops { earlier: None, latest: Some(fault::stop_info(kind)), fresh: true })
 }
 
 /// The one-line error of a refused carrier configuration.
@@ -533,7 +534,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                     Fault::FirmwareHang => hung = true,
                     // What the firmware reads from RCC_CSR at boot after a brown-out; RAM lost,
                     // so no stop record crosses it.
-                    Fault::Brownout => restart = Some(Stops::default()),
+                    Fault::Brownout => restart = Some((ResetCause::BrownOut, Stops::default())),
                     Fault::BoardFault(StopKind::ControlStall) => {
                         hung = true;
                         stall_stop = Some(k + i64::from(hter::failsafe::STALL_SAMPLES) - 1);
@@ -546,7 +547,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             if stall_stop == Some(k) {
                 restart = Some(fresh_stop(StopKind::ControlStall));
             }
-            if let Some(stops) = restart {
+            if let Some((reset, stops)) = restart {
                 // The reset ends a hang too.
                 hung = false;
                 stall_stop = None;
@@ -558,7 +559,6 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                 cadence = model_cadence();
                 let history = last_history(&stores);
                 recorder = Recorder::new(history, history_every);
-                let reset = if stops.latest.is_some() { ResetCause::Other } else { ResetCause::BrownOut };
                 let boot = Boot { history, reset, stops, ..Boot::NEW };
                 let stored = boot.resume(&mut carrier, &mut recorder);
                 stores.push((t_s, boot.history_save(stored)));
