@@ -288,9 +288,10 @@ fn campaign_missions_that_once_failed_pass() {
 /// it, but the self-tuner had taken the spike in: its next update took b to −0.74 (the stored
 /// model's b0 is −0.0075), and the law, trusting that estimate, swung the load between 2.1 and
 /// 5.7 °C for two hours. The outvote's sample now runs without the controller, as a sensor
-/// fault's do, and the estimator waits out the gap: the estimate stays the stored model's and
-/// the hour after the restart holds 3.09–4.13 °C (the law's own reaction to the spike, which
-/// its histories still hold, takes the load to 3.09 °C once).
+/// fault's do, and the estimator waits out the gap: the estimate stays the stored model's. With
+/// that alone the hour after the restart held 3.09–4.13 °C: the law's y history still held the
+/// spike, and its first requests after the outvote cooled at full duty. A skipped sample now
+/// also forgets the law's measured past (`LawState::reprime`): 3.97–4.28 °C.
 #[test]
 fn a_spike_on_a_restarts_first_reading_does_not_corrupt_the_estimate() {
     use hal_sim::mission::Mission;
@@ -302,7 +303,7 @@ fn a_spike_on_a_restarts_first_reading_does_not_corrupt_the_estimate() {
     let boot = hour.first().unwrap();
     assert!(boot.temp_c > 50.0, "the boot's first reading is the spike: {} °C", boot.temp_c);
     let (lo, hi) = hour.iter().fold((f64::MAX, f64::MIN), |(lo, hi), r| (lo.min(r.true_temp_c), hi.max(r.true_temp_c)));
-    assert!(lo > 3.0 && hi < 4.2, "the hour after the restart: {lo:.2}–{hi:.2} °C");
+    assert!(lo > 3.8 && hi < 4.4, "the hour after the restart: {lo:.2}–{hi:.2} °C");
     let b0: Vec<f32> = hour.iter().filter_map(|r| r.b0).collect();
     assert!(b0.iter().all(|b| (-0.01..-0.005).contains(b)), "b0 left the stored model's: {b0:?}");
 }

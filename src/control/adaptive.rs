@@ -321,6 +321,14 @@
 //! before it: on the start model's plant holding 5 °C at duty 0.45 (a 1.3 × stronger cooler), a
 //! two-minute fault took b0 above zero and the law ran `frozen` for the remaining 28 h of the run
 //! (`across_a_sensor_fault_the_estimate_is_not_corrupted`); a five-minute one likewise.
+//! The law's measured past is forgotten as well ([`LawState::reprime`]): its next measurement
+//! fills the y history, as a boot's first does. Its last measurement before the gap may be a
+//! spike the step has just outvoted (a restart's first reading, 54 °C over a load at 4 °C in
+//! mission 42047 of `--seed 40001`: the law cooled at full duty on it and took the load to
+//! 3.09 °C), and after a longer fault the history paired readings minutes apart as consecutive
+//! samples, a trend the law then extrapolated. Across the campaign's restarts the lowest load
+//! in the hour after one went from 2.33 to 3.08 °C (`hter campaign --missions 10000 --seed
+//! 20001 --json`, `restart_min_c`).
 //!
 //! Mode changes are reported through [`Controller::status`] so the step logs each one as an
 //! event (engaged, frozen, fallback). The fallback PI tracks the applied duty all the time, so
@@ -1066,9 +1074,11 @@ impl Controller for SelfTuning {
     }
 
     /// A sample without a trusted reading: the estimator's regressor records the gap (module
-    /// docs, "Across a sensor fault"); the law and the PI resume where they left off.
+    /// docs, "Across a sensor fault"), the law forgets its measured past, and the PI resumes
+    /// where it left off.
     fn skip(&mut self, applied: f32) {
         self.reg.gap(applied);
+        self.law_state.reprime();
     }
 
     fn name(&self) -> &'static str {

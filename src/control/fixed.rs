@@ -121,6 +121,12 @@ impl LawState {
         self.mv.track(applied);
         self.gpc.track(applied);
     }
+
+    /// Forgets the measured past ([`GpcState::reprime`], [`MvState::reprime`]).
+    pub fn reprime(&mut self) {
+        self.mv.reprime();
+        self.gpc.reprime();
+    }
 }
 
 /// A law on a fixed model.

@@ -154,6 +154,12 @@ impl GpcState {
         self.u_prev
     }
 
+    /// Forgets the measured past: the next [`push_y`](Self::push_y) fills the y history with
+    /// its measurement, as the first does (and clears ê's). The Δu history stays.
+    pub fn reprime(&mut self) {
+        self.primed = false;
+    }
+
     /// Takes the new measurement y(t). The first call fills the whole y history with it (the
     /// plant is assumed at rest), so there is no start-up kick.
     pub fn push_y(&mut self, y: f32, m: &Model) -> Result<(), GpcError> {
@@ -162,6 +168,7 @@ impl GpcState {
         }
         if !self.primed {
             self.y = [y; HY];
+            self.e = [0.0; HE];
             self.primed = true;
         } else {
             shift_in(&mut self.y, y);
@@ -1559,6 +1566,42 @@ mod tests {
                 assert_eq!(d.du.to_bits(), du.to_bits(), "du, {m:?} {cfg:?}");
             }
         }
+    }
+
+    /// A reprimed state's prediction depends on its Δu history and the next measurement only:
+    /// a history of spikes (54 °C, a restart's first reading) and one of good readings give the
+    /// same design after it, bit for bit, also through a noise model (ê's history is cleared).
+    #[test]
+    fn a_reprimed_state_forgets_every_measurement_before_it() {
+        let m = Model::new(&[-0.8], &[-0.4, -0.6], &[0.5], 1).unwrap();
+        let fed = |ys: &[f32]| {
+            let mut s = GpcState::new(0.4);
+            for (t, y) in ys.iter().enumerate() {
+                s.push_y(*y, &m).unwrap();
+                s.track(0.4 + 0.1 * (t % 2) as f32);
+            }
+            s
+        };
+        let (mut spiked, mut good) = (fed(&[4.0, 54.0, 54.0, 4.1]), fed(&[4.0, 4.02, 3.98, 4.1]));
+        let design = |s: &GpcState| s.design(&m, &GpcConfig::DEFAULT, 4.0).unwrap();
+        spiked.push_y(4.05, &m).unwrap();
+        good.push_y(4.05, &m).unwrap();
+        assert_ne!(design(&spiked).f, design(&good).f, "the spike is in the prediction");
+        for s in [&mut spiked, &mut good] {
+            s.reprime();
+            s.push_y(4.05, &m).unwrap();
+        }
+        assert_eq!(spiked, good);
+        let bits = |x: &[f32]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&design(&spiked).f), bits(&design(&good).f));
+        // At rest: the free response is the measurement carried on by the past increments alone.
+        let mut rest = GpcState::new(0.4);
+        rest.push_y(4.05, &m).unwrap();
+        rest.track(0.4);
+        rest.reprime();
+        rest.push_y(4.05, &m).unwrap();
+        let f = design(&rest).f;
+        assert!(f.iter().take(GpcConfig::DEFAULT.n2).all(|f| (f - 4.05).abs() < 1e-4), "{f:?}");
     }
 
     #[test]

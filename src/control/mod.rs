@@ -85,10 +85,11 @@ pub trait Controller {
     /// Informs the controller of the duty actually applied this sample, in [0, 1].
     fn track(&mut self, input: &ControlInput, applied: f32);
 
-    /// The step ran a sample without the controller (no trusted reading: a sensor fault) and
-    /// applied `applied`. Nothing by default: a law resumes where it left off. The self-tuner's
-    /// estimator must not regress across the gap ([`adaptive::SelfTuning`], "Across a sensor
-    /// fault").
+    /// The step ran a sample without the controller (no trusted reading: a sensor fault, or a
+    /// first reading outvoted as a spike) and applied `applied`. Nothing by default: a law
+    /// resumes where it left off. The self-tuner's estimator must not regress across the gap,
+    /// and its law forgets the measurements before it ([`adaptive::SelfTuning`], "Across a
+    /// sensor fault").
     fn skip(&mut self, _applied: f32) {}
 
     /// Short name for logs ("onoff", "pi", …).

@@ -153,6 +153,15 @@ impl MvState {
         self.u[0]
     }
 
+    /// Forgets the measured past: the next [`push_y`](Self::push_y) fills the y history with
+    /// its measurement, as the first does, and the estimates made from the old one (the offset,
+    /// the T-filtered prediction) start again. The u history stays.
+    pub fn reprime(&mut self) {
+        self.primed = false;
+        self.d_hat = None;
+        self.phi = None;
+    }
+
     /// Takes y(t).
     pub fn push_y(&mut self, y: f32, m: &Model) -> Result<(), MvError> {
         if !y.is_finite() {
