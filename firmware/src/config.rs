@@ -49,17 +49,20 @@ pub const SETPOINT_C: f32 = 4.0;
 /// The identification build turns off the supply-switch test pulses (its record holds its
 /// excitation and nothing else; the 20 s openings the test once was spoiled the fit, as the
 /// simulator's `prbs` runs showed); its switch is still checked whenever the freeze guard or a
-/// sensor fault opens it.
-pub const CARRIER: CarrierConfig = if cfg!(feature = "identify") {
-    CarrierConfig {
-        supervisor: SupervisorConfig {
-            switch: SwitchConfig { test_interval_s: 0.0, ..SwitchConfig::DEFAULT },
-            ..SupervisorConfig::DEFAULT
+/// sensor fault opens it. The buck build's lid check takes the cooling the duty pumps, not the
+/// duty (`hter::supervisor::lid::LidConfig::BUCK`).
+pub const CARRIER: CarrierConfig = CarrierConfig {
+    supervisor: SupervisorConfig {
+        switch: if cfg!(feature = "identify") {
+            SwitchConfig { test_interval_s: 0.0, ..SwitchConfig::DEFAULT }
+        } else {
+            SwitchConfig::DEFAULT
         },
-        ..CarrierConfig::DEFAULT
-    }
-} else {
-    CarrierConfig::DEFAULT
+        #[cfg(feature = "buck")]
+        lid: hter::supervisor::lid::LidConfig::BUCK,
+        ..SupervisorConfig::DEFAULT
+    },
+    ..CarrierConfig::DEFAULT
 };
 
 /// [`CARRIER`], checked when the firmware is compiled: a setting the step cannot honour (a

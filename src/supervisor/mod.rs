@@ -655,6 +655,8 @@ impl Supervisor {
             slope_c_per_s: self.freeze.slope_c_per_s(),
             normal: mode == Mode::Normal,
             full_duty_run: self.ssr.full_duty_run(),
+            #[cfg(feature = "buck-drive")]
+            supply_v: self.supply.v(),
         };
         self.lid.run(&cfg.lid, self.ts_s, &lid, emit);
         self.ssr.applied(&cfg.ssr, duty, requested, temp_c);
