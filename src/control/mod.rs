@@ -87,9 +87,9 @@ pub trait Controller {
 
     /// The step ran a sample without the controller (no trusted reading: a sensor fault, or a
     /// first reading outvoted as a spike) and applied `applied`. Nothing by default: a law
-    /// resumes where it left off. The self-tuner's estimator must not regress across the gap,
-    /// and its law forgets the measurements before it ([`adaptive::SelfTuning`], "Across a
-    /// sensor fault").
+    /// resumes where it left off. The self-tuner's estimator must not regress across the gap
+    /// ([`adaptive::SelfTuning`], "Across a sensor fault"), and a model-based law, self-tuning or
+    /// on a fixed model, forgets the measurements before it ([`fixed::LawState::reprime`]).
     fn skip(&mut self, _applied: f32) {}
 
     /// Short name for logs ("onoff", "pi", …).
@@ -192,8 +192,10 @@ impl Controller for AnyController {
     }
 
     fn skip(&mut self, applied: f32) {
-        if let AnyController::SelfTuning(c) = self {
-            c.skip(applied);
+        match self {
+            AnyController::SelfTuning(c) => c.skip(applied),
+            AnyController::Fixed(c) => c.skip(applied),
+            _ => {}
         }
     }
 
