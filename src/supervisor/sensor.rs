@@ -477,6 +477,13 @@ impl OffsetWatch {
     }
 }
 
+/// A first reading (after a boot or a sensor fault) below this, °C, is outvoted by two readings
+/// above it that agree, as one above them is by two below: a load below freezing is not what a
+/// carrier that only cools makes of vaccines held at 2–8 °C, and a frozen load keeps reading
+/// frozen. Above it a first reading is trusted over readings above it (module docs, mission
+/// 70549).
+pub const OUTVOTE_UP_BELOW_C: f32 = 0.0;
+
 /// This sample's reading after the sensor checks.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Reading {
@@ -589,15 +596,21 @@ impl SensorChecks {
         // with each other and not with it outvote it, and it restarts from them. Without this a
         // spike on the first reading after a boot or a sensor fault was the filter's value, and
         // the good readings after it spikes, until six of them made a jump: 60 s of full cooling
-        // on a load read at 50 °C, the freeze guard blind, then 3 min of a sensor fault. Only
-        // readings below it outvote it (it read warm, which cools blind): readings above it may
-        // be an offset that began on the second reading, which the offset watch subtracts, and
-        // a first reading too cold holds cooling off.
+        // on a load read at 50 °C, the freeze guard blind, then 3 min of a sensor fault.
+        // Readings below it outvote it (it read warm, which cools blind). Readings above it may
+        // be an offset that began on the second reading, which the offset watch subtracts, or
+        // a front end stuck high right after a boot over a cold load (mission 70549, a load at
+        // 0.6 °C): they outvote only a first reading below freezing ([`OUTVOTE_UP_BELOW_C`]), a
+        // load the carrier cannot have made. A first reading too cold held cooling off until
+        // six readings made a jump, and the jump's sensor fault 3 min more: a light carrier at
+        // 40 °C went from 4.0 to 9.0 °C (mission 65944, `--seed 60001`: −18.6 °C on the first
+        // reading after a brown-out), and the offset it reported sent a technician to the probe.
+        let first = filter.output().unwrap_or(f32::NAN);
         let outvoted = self.spikes.unconfirmed
             && verdict == Spike::Ignored
             && self.spikes.run >= 2
-            // This reading, the spike's (`last_c`), below the filter's.
-            && self.spikes.last_c < filter.output().unwrap_or(f32::NAN);
+            // This reading, the spike's (`last_c`), below the filter's, or the filter's frozen.
+            && (self.spikes.last_c < first || first < OUTVOTE_UP_BELOW_C);
         let jump = verdict == Spike::Jump;
         if jump || outvoted {
             filter.reset();
@@ -1125,6 +1138,24 @@ mod carrier {
         assert!(out[3].3.contains(&EventKind::SensorOffset), "{:?}", out[3]);
         for (k, (temp, ..)) in out.iter().enumerate().skip(4) {
             assert!((temp - 4.0).abs() < 0.05, "{k}: the filter reads {temp}");
+        }
+        // Nor a cold load's first reading with a front end stuck high after it (mission 70549):
+        // a jump, and the sensor fault that distrusts it, cooling off.
+        let mut stuck_high = vec![0.6];
+        stuck_high.extend([55.0; 12]);
+        let out = run_readings(&stuck_high);
+        assert!(out.iter().any(|o| o.3.contains(&EventKind::SensorOffset)), "{out:?}");
+        assert!(out.iter().skip(1).all(|o| o.1 == 0.0), "no cooling on the stuck reading: {out:?}");
+        // But a first reading below freezing is a spike the two readings above it outvote
+        // (mission 65944: −18.6 °C on a brown-out's first reading, over a load at 4.0 °C; it
+        // held cooling off for 4 min, a false offset, and the light carrier at 40 °C warmed to
+        // 9.0 °C): the filter reads the load from the third reading on, as for a warm spike.
+        let mut frozen = vec![-18.6];
+        frozen.extend([4.0; 12]);
+        for (k, (temp, _, mode, events)) in run_readings(&frozen).iter().enumerate().skip(2) {
+            assert!((temp - 4.0).abs() < 0.05, "{k}: the filter reads {temp}");
+            assert_ne!(*mode, Mode::SensorFault, "{k}");
+            assert!(!events.contains(&EventKind::SensorOffset), "{k}: {events:?}");
         }
     }
 
