@@ -175,8 +175,9 @@ mod tests {
     use crate::control::gpc::GpcConfig;
     use crate::control::mv::IgmvcConfig;
 
-    /// After a skipped sample a fixed-model law asks the same whatever it measured before: two
-    /// readings of a 54 °C spike or of the load at 4 °C, with the same duties applied (six: GPC's staged design has run).
+    /// After a skipped sample a fixed-model law asks the same whatever it measured before: six
+    /// readings (GPC's staged design has run) of a 54 °C spike or of the load at 4 °C, with the
+    /// same duties applied.
     #[test]
     fn a_skipped_sample_forgets_the_readings_before_it() {
         let m = Model::new(&[-1.75, 0.75], &[-0.027, -0.03], &[], 5).unwrap();
