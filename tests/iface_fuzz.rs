@@ -912,6 +912,7 @@ enum Owned {
     Line(String),
     TooLong,
     NotPrintable,
+    Lost,
 }
 
 /// The framing rules of docs/interface.md and `hter::iface::line`, written plainly: `\n`, `\r\n`
@@ -970,6 +971,7 @@ fn framed(bytes: &[u8]) -> Result<Vec<Owned>, TestCaseError> {
             Some(fr) => {
                 let e = fr.error().unwrap_or_default();
                 prop_assert!(e.starts_with("err line: ") && e.len() < REPLY_CAP, "{e:?}");
+                prop_assert_ne!(fr, Frame::Lost, "no byte was lost");
                 frames.push(if fr == Frame::TooLong { Owned::TooLong } else { Owned::NotPrintable });
             }
         }
@@ -1008,6 +1010,180 @@ fn bytes_to_board(start: Start, bytes: &[u8]) -> Result<(), TestCaseError> {
     Ok(())
 }
 
+// ---- Typed ahead beyond the board's receive ring ----
+
+/// The firmware's receive ring, bytes (`firmware/src/serial.rs`, `RX_BUF`).
+const RX_BUF: usize = 128;
+
+/// Embassy 0.6's `BufferedUart` receive side as the serial task sees it: a ring of [`RX_BUF`]
+/// bytes whose interrupt handler drops, without a word, a byte that arrives while it is full.
+struct RxRing {
+    bytes: VecDeque<u8>,
+    dropped: usize,
+}
+
+impl RxRing {
+    fn arrive(&mut self, b: u8) {
+        if self.bytes.len() < RX_BUF {
+            self.bytes.push_back(b);
+        } else {
+            self.dropped += 1;
+        }
+    }
+}
+
+/// What came of a script pasted into the board.
+struct TypedAhead {
+    frames: Vec<Owned>,
+    lines: Vec<String>,
+    dropped: usize,
+    full_reads: usize,
+}
+
+/// `script` sent as one paste at the line rate (one byte a tick; `pause[i]` ticks before line
+/// `i`, a person's pause), then, long after, an Enter on an empty line, through the ring into the serial task's loop: a read takes all the
+/// ring holds into a buffer of [`RX_BUF`], the framer takes it byte by byte, each request
+/// holds the task for `reply[i % len]` ticks (the control task's answer, then the reply
+/// drained at the same line rate: `help` ≈ 1 000 byte times), and a read that found the ring
+/// full ends with [`LineFramer::lost`] (`mark_lost`: off, the task before the fix).
+fn type_ahead(script: &[String], pause: &[u64], reply: &[u64], mark_lost: bool) -> TypedAhead {
+    let mut sent: Vec<(u64, u8)> = Vec::new();
+    let mut t = 0u64;
+    for (i, line) in script.iter().enumerate() {
+        t += pause.get(i).copied().unwrap_or(0);
+        for &b in line.as_bytes().iter().chain(b"\r\n") {
+            sent.push((t, b));
+            t += 1;
+        }
+    }
+    let mut ring = RxRing { bytes: VecDeque::new(), dropped: 0 };
+    let mut next = 0;
+    // The bytes sent up to `now` reach the ring.
+    let deliver = |ring: &mut RxRing, next: &mut usize, now: u64| {
+        while let Some(&(_, b)) = sent.get(*next).filter(|(at, _)| *at <= now) {
+            ring.arrive(b);
+            *next += 1;
+        }
+    };
+    let mut out = TypedAhead { frames: Vec::new(), lines: Vec::new(), dropped: 0, full_reads: 0 };
+    let mut framer = LineFramer::new();
+    let mut now = 0u64;
+    let mut served = 0usize;
+    loop {
+        deliver(&mut ring, &mut next, now);
+        if ring.bytes.is_empty() {
+            match sent.get(next) {
+                Some(&(at, _)) => {
+                    now = at;
+                    continue;
+                }
+                None => break,
+            }
+        }
+        let chunk: Vec<u8> = ring.bytes.drain(..).collect();
+        let full = chunk.len() >= RX_BUF;
+        for b in chunk {
+            match framer.push(b) {
+                None => {}
+                Some(Frame::Line(l)) => {
+                    out.lines.push(l.to_string());
+                    out.frames.push(Owned::Line(l.to_string()));
+                    now += reply.get(served % reply.len().max(1)).copied().unwrap_or(0);
+                    served += 1;
+                    deliver(&mut ring, &mut next, now);
+                }
+                Some(fr) => {
+                    out.frames.push(match fr {
+                        Frame::Lost => Owned::Lost,
+                        Frame::TooLong => Owned::TooLong,
+                        _ => Owned::NotPrintable,
+                    });
+                    now += 40;
+                    deliver(&mut ring, &mut next, now);
+                }
+            }
+        }
+        if full {
+            out.full_reads += 1;
+            if mark_lost {
+                framer.lost();
+            }
+        }
+    }
+    // Later, Enter on an empty line: what the paste left pending is answered.
+    for &b in b"\r\n" {
+        if let Some(fr) = framer.push(b) {
+            out.frames.push(if fr == Frame::Lost { Owned::Lost } else { Owned::NotPrintable });
+        }
+    }
+    out.dropped = ring.dropped;
+    out
+}
+
+/// Requests a person might paste, many of them `set`s whose values a lost stretch could turn
+/// into other valid values.
+fn pasted_line() -> impl Strategy<Value = String> {
+    prop_oneof![
+        select(&["status", "help", "get", "ack", "set controller pi", "set controller gpc", "history 86400"][..])
+            .prop_map(str::to_string),
+        (25u32..=75, 0u32..100).prop_map(|(a, b)| format!("set setpoint_c {}.{b:02}", a / 10)),
+        (-5i32..=5, 0u32..100).prop_map(|(a, b)| format!("set cal_ice {a}.{b:02},0.00")),
+    ]
+}
+
+/// Every line the board ran is one that was sent, whole, in order; if any byte was lost, the
+/// board said so; if no read found the ring full, every line ran.
+fn typed_ahead(script: &[String], pause: &[u64], reply: &[u64]) -> Result<(), TestCaseError> {
+    let r = type_ahead(script, pause, reply, true);
+    let mut rest = script.iter();
+    for line in &r.lines {
+        prop_assert!(rest.any(|s| s == line), "ran {line:?}, which was not sent as such (or out of order)");
+    }
+    if r.dropped > 0 {
+        prop_assert!(r.frames.contains(&Owned::Lost), "{} bytes lost without a word", r.dropped);
+    }
+    if r.full_reads == 0 {
+        prop_assert_eq!(r.dropped, 0);
+        prop_assert_eq!(&r.lines, &script.to_vec());
+    }
+    Ok(())
+}
+
+/// The case that made the fix: a paste behind `help`'s reply whose third line loses its
+/// middle. Before it, the board ran `set setpoint_c 5`, a line nobody typed.
+#[test]
+fn a_paste_beyond_the_receive_ring_never_runs_a_line_glued_from_two() {
+    // `help`'s reply holds the task while the next 128 bytes fill the ring, up to the `2` of
+    // `set setpoint_c 2.5`, and the `2.` arrives while it is full.
+    let script: Vec<String> = [
+        "help",
+        "set controller pi",
+        "set cal_ice 0.00,0.00",
+        "set cal_warm 25.0,25.00",
+        "get",
+        "set controller gpc",
+        "set setpoint_c 4.0",
+        "set setpoint_c 2.5",
+        "status",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    let (pause, reply) = ([0; 9], [130, 4, 4, 4, 400, 4, 4, 4, 600]);
+    let before = type_ahead(&script, &pause, &reply, false);
+    assert_eq!(before.dropped, 2, "the paste must overrun the ring");
+    assert!(before.lines.iter().any(|l| l == "set setpoint_c 5"), "without the fix: {:?}", before.lines);
+    let after = type_ahead(&script, &pause, &reply, true);
+    assert_eq!(after.dropped, before.dropped);
+    assert!(after.lines.iter().all(|l| script.contains(l)), "{:?}", after.lines);
+    assert!(after.frames.contains(&Owned::Lost));
+    assert_eq!(after.lines.first().map(String::as_str), Some("help"));
+    // Typed at a person's pace, all of it runs.
+    let slow = type_ahead(&script, &[2_000; 9], &reply, true);
+    assert_eq!((slow.dropped, slow.full_reads), (0, 0));
+    assert_eq!(slow.lines, script);
+}
+
 /// `cases` cases; a failure's seed is kept beside this file (`iface_fuzz.proptest-regressions`)
 /// and run first from then on.
 fn cases(cases: u32) -> ProptestConfig {
@@ -1028,6 +1204,15 @@ proptest! {
     #[test]
     fn any_line_gets_one_final_line_and_a_refusal_changes_nothing(line in any_line()) {
         one_line(&mut Board::new(Start::New), &line)?;
+    }
+
+    #[test]
+    fn a_paste_typed_ahead_runs_whole_lines_only_and_says_when_it_lost_some(
+        script in prop::collection::vec(pasted_line(), 1..16),
+        pause in prop::collection::vec(prop_oneof![3 => Just(0u64), 1 => 0u64..3_000], 16),
+        reply in prop::collection::vec(prop_oneof![0u64..50, 300u64..1_100, 2_000u64..20_000], 1..6),
+    ) {
+        typed_ahead(&script, &pause, &reply)?;
     }
 }
 
@@ -1063,6 +1248,16 @@ proptest! {
     #[ignore = "long: run in release, `cargo test --release --test iface_fuzz -- --ignored`"]
     fn long_any_line_gets_one_final_line_and_a_refusal_changes_nothing(line in any_line()) {
         one_line(&mut Board::new(Start::New), &line)?;
+    }
+
+    #[test]
+    #[ignore = "long: run in release, `cargo test --release --test iface_fuzz -- --ignored`"]
+    fn long_a_paste_typed_ahead_runs_whole_lines_only_and_says_when_it_lost_some(
+        script in prop::collection::vec(pasted_line(), 1..40),
+        pause in prop::collection::vec(prop_oneof![3 => Just(0u64), 1 => 0u64..3_000], 40),
+        reply in prop::collection::vec(prop_oneof![0u64..50, 300u64..1_100, 2_000u64..20_000], 1..10),
+    ) {
+        typed_ahead(&script, &pause, &reply)?;
     }
 }
 

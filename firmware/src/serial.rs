@@ -51,7 +51,8 @@ pub static REPLIED: Signal<CriticalSectionRawMutex, Handled> = Signal::new();
 const HISTORY_QUIET_MS: u64 = 3_000;
 
 /// Receive ring, bytes: more than a request, so one line typed or pasted at 115200 waits whole
-/// while the task handles the one before.
+/// while the task handles the one before. Beyond it, typed-ahead bytes are lost, and the line
+/// the loss falls in is refused (`rx_ring_was_full`).
 pub const RX_BUF: usize = 128;
 /// Transmit ring, bytes (≈ 22 ms at 115200).
 pub const TX_BUF: usize = 256;
@@ -171,7 +172,8 @@ pub async fn serial(pins: board::SerialPins) {
     };
     let (mut tx, mut rx) = uart.split();
     let mut framer = LineFramer::new();
-    let mut chunk = [0u8; 32];
+    // As long as the ring: one read takes all it holds (see `rx_ring_was_full`).
+    let mut chunk = [0u8; RX_BUF];
     loop {
         let n = match rx.read(&mut chunk).await {
             Ok(n) => n,
@@ -180,6 +182,7 @@ pub async fn serial(pins: board::SerialPins) {
                 continue;
             }
         };
+        let full = rx_ring_was_full(n);
         for &b in chunk.get(..n).unwrap_or(&[]) {
             let request = match framer.push(b) {
                 None => continue,
@@ -200,7 +203,27 @@ pub async fn serial(pins: board::SerialPins) {
                 relay_history(&mut tx).await;
             }
         }
+        if full {
+            warn!("serial: receive ring full, bytes typed ahead may be lost");
+            framer.lost();
+        }
     }
+}
+
+/// A read of `n` bytes into a buffer of [`RX_BUF`] found the receive ring full, so bytes that
+/// arrived after them may have been dropped. Embassy 0.6's `BufferedUart` interrupt handler
+/// drops, without a flag or an error, every byte that arrives while its ring is full
+/// (`usart/buffered.rs`, `on_interrupt`: an empty `push_slice`), and a person who pastes
+/// several lines while a long reply (`help`, `status`: ≈ 90 ms) or a `history` goes out fills
+/// its [`RX_BUF`] bytes. Only this task empties the ring, whose capacity is exactly its length
+/// (embassy-hal-internal 0.5's `RingBuffer`), and a read takes all it holds into a buffer as
+/// long: a byte dropped since the last read means the ring is still full at this one, so
+/// `n == RX_BUF`. The converse is not true (a ring filled to its last byte and no more), and
+/// then one good line is refused: the price of never running a line glued from two
+/// (`hter::iface::line::LineFramer::lost`; `tests/iface_fuzz.rs` runs this loop against a model
+/// of the ring).
+fn rx_ring_was_full(n: usize) -> bool {
+    n >= RX_BUF
 }
 
 /// Sends [`REPLY`] in chunks copied out of it (the control task may write the next one only

@@ -10,6 +10,13 @@
 //! remainder could as well have made a valid, unintended request). An empty or all-space line
 //! is nothing. A line longer than [`MAX_LINE`] or with another byte outside printable ASCII is
 //! answered by its [`Frame`] error and dropped whole.
+//!
+//! A transport that can lose bytes says so with [`LineFramer::lost`]: the board's receive ring
+//! (embassy's `BufferedUart`) drops, without a word, every byte that arrives while it is full,
+//! and a person who pastes a script faster than the replies go out fills it. Whatever was lost,
+//! the line the gap falls in is refused ([`Frame::Lost`]): it is the front of one line glued to
+//! the back of another, and `set setpoint_c 2.5` that lost `2.` is `set setpoint_c 5`, a valid
+//! request nobody typed.
 
 use super::MAX_LINE;
 
@@ -22,6 +29,9 @@ pub enum Frame<'a> {
     TooLong,
     /// A byte outside printable ASCII (other than the line ends and the erase keys).
     NotPrintable,
+    /// Input may have been lost inside this line ([`LineFramer::lost`]); whole lines before it
+    /// may have gone too.
+    Lost,
 }
 
 impl Frame<'_> {
@@ -31,6 +41,9 @@ impl Frame<'_> {
             Frame::Line(_) => None,
             Frame::TooLong => Some("err line: too long (at most 96 bytes)"),
             Frame::NotPrintable => Some("err line: a byte outside printable ASCII"),
+            Frame::Lost => {
+                Some("err line: input lost (typed ahead of the replies); this line and any before it may not have run")
+            }
         }
     }
 }
@@ -47,6 +60,8 @@ pub struct LineFramer {
     after_cr: bool,
     /// `buf` holds the line last returned: cleared by the next byte.
     returned: bool,
+    /// Bytes may be missing after those pushed so far ([`Self::lost`]).
+    lost: bool,
 }
 
 impl LineFramer {
@@ -58,12 +73,21 @@ impl LineFramer {
             not_printable: false,
             after_cr: false,
             returned: false,
+            lost: false,
         }
     }
 
     /// Forgets a partial line (a client went away in the middle of one).
     pub fn reset(&mut self) {
         *self = Self::new();
+    }
+
+    /// Bytes may be missing after those pushed so far (the transport dropped some): the line
+    /// they fall in, which ends at the next line end, is refused as [`Frame::Lost`], even when
+    /// nothing of it has arrived yet (the gap may end at a line end). Ctrl-U clears it: what
+    /// follows a line kill is a new line whatever was lost before it.
+    pub fn lost(&mut self) {
+        self.lost = true;
     }
 
     /// Takes one byte; gives a frame when it ends a non-empty line.
@@ -101,6 +125,9 @@ impl LineFramer {
         let (too_long, not_printable) = (self.too_long, self.not_printable);
         (self.too_long, self.not_printable) = (false, false);
         self.returned = true;
+        if core::mem::take(&mut self.lost) {
+            return Some(Frame::Lost);
+        }
         if too_long {
             return Some(Frame::TooLong);
         }
@@ -124,20 +151,49 @@ mod tests {
         Line(String),
         TooLong,
         NotPrintable,
+        Lost,
+    }
+
+    fn owned(fr: Frame<'_>) -> Owned {
+        match fr {
+            Frame::Line(l) => Owned::Line(l.to_string()),
+            Frame::TooLong => Owned::TooLong,
+            Frame::NotPrintable => Owned::NotPrintable,
+            Frame::Lost => Owned::Lost,
+        }
     }
 
     fn frames(bytes: &[u8]) -> Vec<Owned> {
         let mut f = LineFramer::new();
-        bytes
-            .iter()
-            .filter_map(|&b| {
-                f.push(b).map(|fr| match fr {
-                    Frame::Line(l) => Owned::Line(l.to_string()),
-                    Frame::TooLong => Owned::TooLong,
-                    Frame::NotPrintable => Owned::NotPrintable,
-                })
-            })
-            .collect()
+        bytes.iter().filter_map(|&b| f.push(b).map(owned)).collect()
+    }
+
+    /// `before`, then bytes lost, then `after`.
+    fn frames_across_a_gap(before: &[u8], after: &[u8]) -> Vec<Owned> {
+        let mut f = LineFramer::new();
+        let mut out: Vec<Owned> = before.iter().filter_map(|&b| f.push(b).map(owned)).collect();
+        f.lost();
+        out.extend(after.iter().filter_map(|&b| f.push(b).map(owned)));
+        out
+    }
+
+    /// `set setpoint_c 2.5` that lost `2.` would be `set setpoint_c 5`.
+    #[test]
+    fn the_line_a_gap_falls_in_is_refused_and_the_next_one_runs() {
+        let (before, after) = (&b"status\nset setpoint_c "[..], &b"5\nget\n"[..]);
+        assert_eq!(frames(&[before, after].concat()), [line("status"), line("set setpoint_c 5"), line("get")]);
+        assert_eq!(frames_across_a_gap(before, after), [line("status"), Owned::Lost, line("get")]);
+        // A gap at a line end: the next line may be the tail of a lost one.
+        assert_eq!(frames_across_a_gap(b"status\n", b"5\nget\n"), [line("status"), Owned::Lost, line("get")]);
+        // Between the `\r` and the `\n` of one line end.
+        assert_eq!(frames_across_a_gap(b"status\r", b"\n5\r\nget\r\n"), [line("status"), Owned::Lost, line("get")]);
+        // An empty line after the gap says so at once (whole lines may have gone).
+        assert_eq!(frames_across_a_gap(b"status\n", b"\nget\n"), [line("status"), Owned::Lost, line("get")]);
+        // A line too long or unprintable across the gap is reported as lost.
+        assert_eq!(frames_across_a_gap(b"set\tx", b"y\nget\n"), [Owned::Lost, line("get")]);
+        // Ctrl-U begins a new line whatever was lost before it.
+        assert_eq!(frames_across_a_gap(b"set setpoint_c ", b"5\x15get\n"), [line("get")]);
+        assert!(Frame::Lost.error().is_some_and(|e| e.starts_with("err line: ") && !e.contains('\n')));
     }
 
     fn line(s: &str) -> Owned {
