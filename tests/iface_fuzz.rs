@@ -1041,11 +1041,12 @@ struct TypedAhead {
 }
 
 /// `script` sent as one paste at the line rate (one byte a tick; `pause[i]` ticks before line
-/// `i`, a person's pause), then, long after, an Enter on an empty line, through the ring into the serial task's loop: a read takes all the
-/// ring holds into a buffer of [`RX_BUF`], the framer takes it byte by byte, each request
-/// holds the task for `reply[i % len]` ticks (the control task's answer, then the reply
-/// drained at the same line rate: `help` ≈ 1 000 byte times), and a read that found the ring
-/// full ends with [`LineFramer::lost`] (`mark_lost`: off, the task before the fix).
+/// `i`, a person's pause), then, long after, an Enter on an empty line, through the ring into
+/// the serial task's loop: a read takes all the ring holds into a buffer of [`RX_BUF`], the
+/// framer takes it byte by byte, each request holds the task for `reply[i % len]` ticks (the
+/// control task's answer, then the reply drained at the same line rate: `help` ≈ 1 000 byte
+/// times), and a read that found the ring full ends with [`LineFramer::lost`] (`mark_lost`:
+/// off, the task before the fix).
 fn type_ahead(script: &[String], pause: &[u64], reply: &[u64], mark_lost: bool) -> TypedAhead {
     let mut sent: Vec<(u64, u8)> = Vec::new();
     let mut t = 0u64;
@@ -1093,11 +1094,7 @@ fn type_ahead(script: &[String], pause: &[u64], reply: &[u64], mark_lost: bool) 
                     deliver(&mut ring, &mut next, now);
                 }
                 Some(fr) => {
-                    out.frames.push(match fr {
-                        Frame::Lost => Owned::Lost,
-                        Frame::TooLong => Owned::TooLong,
-                        _ => Owned::NotPrintable,
-                    });
+                    out.frames.push(refusal(fr));
                     now += 40;
                     deliver(&mut ring, &mut next, now);
                 }
@@ -1112,12 +1109,26 @@ fn type_ahead(script: &[String], pause: &[u64], reply: &[u64], mark_lost: bool) 
     }
     // Later, Enter on an empty line: what the paste left pending is answered.
     for &b in b"\r\n" {
-        if let Some(fr) = framer.push(b) {
-            out.frames.push(if fr == Frame::Lost { Owned::Lost } else { Owned::NotPrintable });
+        match framer.push(b) {
+            None => {}
+            Some(Frame::Line(l)) => {
+                out.lines.push(l.to_string());
+                out.frames.push(Owned::Line(l.to_string()));
+            }
+            Some(fr) => out.frames.push(refusal(fr)),
         }
     }
     out.dropped = ring.dropped;
     out
+}
+
+/// A framing refusal as [`Owned`].
+fn refusal(fr: Frame<'_>) -> Owned {
+    match fr {
+        Frame::Lost => Owned::Lost,
+        Frame::TooLong => Owned::TooLong,
+        _ => Owned::NotPrintable,
+    }
 }
 
 /// Requests a person might paste, many of them `set`s whose values a lost stretch could turn
