@@ -660,6 +660,24 @@ fn a_lid_left_open_is_found_on_the_buck_drive_too() {
     }
 }
 
+/// Missions 88618 (`hter campaign --missions 10000 --seed 80001`) and 68435 (`--seed 60001
+/// --drive buck`): a lid opened in a room that had been cooling for hours. The holding duty had
+/// been falling, the lid check's slow average lagged 0.045 above its fast one, and the lid's
+/// rise parted them by 0.096 (SSR, check 0.1) and 0.088 (buck, 0.09) at most: never reported.
+/// The slow average is now held at or below the fast one: both are reported.
+#[test]
+fn a_lid_opened_in_a_cooling_room_is_reported() {
+    use hal_sim::mission::{evaluate, Mission};
+    use hal_sim::plant::Drive;
+    for (seed, drive) in [(88618, Drive::Ssr), (68435, Drive::Buck)] {
+        let m = Mission::generate(seed);
+        assert_eq!(m.hardware_fault.map(|(_, f)| f), Some(Fault::LidOpen), "mission {seed}");
+        let out = run(&SimOptions { drive, ..m.options(ControllerSpec::new(ControllerChoice::Gpc)) }).unwrap();
+        let r = evaluate(&m, &out);
+        assert!(r.reasons.is_empty(), "mission {seed} on {drive:?}: {:?}", r.reasons);
+    }
+}
+
 /// `guard_trips` counts the freeze guard's trips in the freeze margin's window only (after
 /// pull-down, before the hardware fault, warm ambient): where the control alone should have
 /// kept the load up. Mission 206 (`--seed 1`: a light carrier from a 5.8 °C ambient, no
