@@ -678,6 +678,28 @@ fn a_lid_opened_in_a_cooling_room_is_reported() {
     }
 }
 
+/// A restart builds the law as the board's boot does: from the fallback PI's bias
+/// (`profile::SelfTuningOrPi::new`, `App::new`), which GPC holds until its first staged design is
+/// complete (four samples). The simulator used the run's start duty, 0 on a mission that starts
+/// from the ambient: mission 108161 (`hter campaign --missions 10000 --seed 100001`), a light
+/// carrier at full duty and 7.3 °C in a 42 °C room, had 40 s without cooling after a control
+/// stall's restart and the load rose to 8.19 °C (120 s above 8 °C). At the board's 0.4 it peaks
+/// at 7.85 °C.
+#[test]
+fn a_restart_starts_the_law_from_the_boards_boot_duty() {
+    use hal_sim::mission::{evaluate, Mission};
+    let m = Mission::generate(108161);
+    let out = run(&m.options(ControllerSpec::new(ControllerChoice::Gpc))).unwrap();
+    let boots: Vec<_> =
+        out.rows.iter().filter(|r| r.events.iter().any(|e| matches!(e.kind, EventKind::Restarted(_)))).collect();
+    assert!(!boots.is_empty(), "the mission restarts");
+    for b in &boots {
+        assert_eq!(b.duty as f32, hter::profile::PI.bias, "the boot's duty at {} s", b.t_s);
+    }
+    let r = evaluate(&m, &out);
+    assert!(r.reasons.is_empty(), "{:?}", r.reasons);
+}
+
 /// `guard_trips` counts the freeze guard's trips in the freeze margin's window only (after
 /// pull-down, before the hardware fault, warm ambient): where the control alone should have
 /// kept the load up. Mission 206 (`--seed 1`: a light carrier from a 5.8 °C ambient, no

@@ -434,7 +434,10 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
         PlantChoice::Custom(p) => p.container == crate::plant::Container::StainlessSteel,
         _ => false,
     };
-    let make_controller = |persisted: Option<&[u8; ModelRecord::LEN]>| -> Result<AnyController> {
+    // `boot`: built by a restart's boot, which starts the law from its fallback PI's bias, as
+    // the board's boot does (`profile::SelfTuningOrPi::new`, `App::new`), not from the run's
+    // start duty.
+    let make_controller = |persisted: Option<&[u8; ModelRecord::LEN]>, boot: bool| -> Result<AnyController> {
         Ok(if sc.excitation {
             let prbs =
                 PrbsConfig { bits: 7, hold: 12, low: (u0 - 0.1).max(0.0) as f32, high: (u0 + 0.1).min(1.0) as f32 };
@@ -453,8 +456,8 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
             // Holding a temperature, the loop starts at the duty that holds it; from ambient
             // the PI's own bias stands (the SSR saturates through the pull-down anyway).
             let bias = match sc.start {
-                Start::Holding(_) => u0 as f32,
-                Start::Ambient => pi.bias,
+                Start::Holding(_) if !boot => u0 as f32,
+                _ => pi.bias,
             };
             spec.pi = Some(PiConfig { bias, ..pi });
             // After a reset: the stored model, if it decodes and is still plausible for this law
@@ -465,7 +468,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                     spec.resumed = true;
                 }
             }
-            spec.build(cfg.ts_s, u0 as f32)?
+            spec.build(cfg.ts_s, if boot { bias } else { u0 as f32 })?
         })
     };
     // The holdover runs on the model the carrier was commissioned with: the start model of its
@@ -480,7 +483,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
         carrier.set_holdover_model(holdover_model);
         carrier
     };
-    let mut carrier = new_carrier(make_controller(None)?);
+    let mut carrier = new_carrier(make_controller(None, false)?);
     let faults_pending = &opts.faults;
     let name = carrier.controller().name().to_string();
 
@@ -559,7 +562,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                 // restarts it (`Boot::resume`: the reset and the stops reported with the first
                 // sample and counted in the history; the indicator's latch, the sensor offset and
                 // a shorted SSR from the stored history).
-                carrier = new_carrier(make_controller(persisted.as_ref())?);
+                carrier = new_carrier(make_controller(persisted.as_ref(), true)?);
                 cadence = model_cadence();
                 let history = last_history(&stores);
                 recorder = Recorder::new(history, history_every);
