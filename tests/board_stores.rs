@@ -107,15 +107,17 @@ fn a_brownout_stores_the_reset_and_restarts_both_counts() {
 /// (`hter::control::adaptive`, "Resumed from a stored model"): the stored model holds no
 /// offset, and with P(0) = I the restart's first error went into B as much as into the offset;
 /// the law on that B swung the load between 3.50 and 4.41 °C for 15 minutes. Resumed, the load
-/// stays within 0.1 °C of its 4 °C, and the estimate is trusted again within the hour and for
-/// the rest of the day.
+/// stays within 0.15 °C of its 4 °C, and the estimate is trusted again within the hour and for
+/// the rest of the day. (0.1 °C until the simulated restart started the law from the board's
+/// boot duty, 0.4, which GPC holds for the four samples its first design takes, where the
+/// holding duty had been used: 0.12 °C of it is that hold, no swing.)
 #[test]
 fn a_brownout_in_a_hold_resumes_from_the_stored_model_without_a_swing() {
     const RESET_S: f64 = 20_000.0;
     let out = day(&["brownout@20000"]);
     let after: Vec<_> = out.rows.iter().filter(|r| r.t_s >= RESET_S).collect();
     let worst = after.iter().map(|r| (r.true_temp_c - r.setpoint_c).abs()).fold(0.0, f64::max);
-    assert!(worst <= 0.1, "{worst:.2} °C from the setpoint after the restart");
+    assert!(worst <= 0.15, "{worst:.2} °C from the setpoint after the restart");
     let mut late = after.iter().filter(|r| r.t_s >= RESET_S + 3600.0);
     assert!(late.all(|r| r.adaptive_mode == Some(AdaptiveMode::Adaptive)), "not adaptive an hour on");
     // The trust decision settles once: frozen at the restart, adaptive when the estimate is
