@@ -158,8 +158,11 @@
 //! was refused and then paused on the refused estimate, `frozen` for the rest of the day.
 //! Resumed, the model's parameters start with P(0) = 0.01·I (the record is a model this
 //! self-tuner trusted) and d with 1: the offset takes the error, the estimate stays the
-//! record's (b0 −0.0176 → −0.0163), and the load holds 3.99–4.02 °C through the restart. A
-//! commissioned model ([`AdaptiveConfig::restored_from`]) still starts with the start's P(0).
+//! record's (b0 −0.0176 → −0.0163), and the load holds 3.99–4.02 °C through the restart
+//! (3.96–4.12 °C since the simulated restart starts the law from the board's boot duty, 0.4,
+//! held for the four samples of GPC's first design, where it had used the holding duty; b0
+//! −0.0210 → −0.0196). A commissioned model ([`AdaptiveConfig::restored_from`]) still starts
+//! with the start's P(0).
 //!
 //! **When the estimate is trusted** (all must hold, else the law runs on the last trusted
 //! model or the one its last rest confirmed ("Frozen on the rest's model"), and with no
