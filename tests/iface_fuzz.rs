@@ -972,7 +972,7 @@ fn framed(bytes: &[u8]) -> Result<Vec<Owned>, TestCaseError> {
                 let e = fr.error().unwrap_or_default();
                 prop_assert!(e.starts_with("err line: ") && e.len() < REPLY_CAP, "{e:?}");
                 prop_assert_ne!(fr, Frame::Lost, "no byte was lost");
-                frames.push(if fr == Frame::TooLong { Owned::TooLong } else { Owned::NotPrintable });
+                frames.push(refusal(fr));
             }
         }
     }
@@ -1035,9 +1035,15 @@ impl RxRing {
 /// What came of a script pasted into the board.
 struct TypedAhead {
     frames: Vec<Owned>,
-    lines: Vec<String>,
     dropped: usize,
     full_reads: usize,
+}
+
+impl TypedAhead {
+    /// The lines the board ran, in order.
+    fn lines(&self) -> Vec<String> {
+        self.frames.iter().filter_map(|f| if let Owned::Line(l) = f { Some(l.clone()) } else { None }).collect()
+    }
 }
 
 /// `script` sent as one paste at the line rate (one byte a tick; `pause[i]` ticks before line
@@ -1066,7 +1072,7 @@ fn type_ahead(script: &[String], pause: &[u64], reply: &[u64], mark_lost: bool) 
             *next += 1;
         }
     };
-    let mut out = TypedAhead { frames: Vec::new(), lines: Vec::new(), dropped: 0, full_reads: 0 };
+    let mut out = TypedAhead { frames: Vec::new(), dropped: 0, full_reads: 0 };
     let mut framer = LineFramer::new();
     let mut now = 0u64;
     let mut served = 0usize;
@@ -1087,7 +1093,6 @@ fn type_ahead(script: &[String], pause: &[u64], reply: &[u64], mark_lost: bool) 
             match framer.push(b) {
                 None => {}
                 Some(Frame::Line(l)) => {
-                    out.lines.push(l.to_string());
                     out.frames.push(Owned::Line(l.to_string()));
                     now += reply.get(served % reply.len().max(1)).copied().unwrap_or(0);
                     served += 1;
@@ -1112,7 +1117,6 @@ fn type_ahead(script: &[String], pause: &[u64], reply: &[u64], mark_lost: bool) 
         match framer.push(b) {
             None => {}
             Some(Frame::Line(l)) => {
-                out.lines.push(l.to_string());
                 out.frames.push(Owned::Line(l.to_string()));
             }
             Some(fr) => out.frames.push(refusal(fr)),
@@ -1147,7 +1151,7 @@ fn pasted_line() -> impl Strategy<Value = String> {
 fn typed_ahead(script: &[String], pause: &[u64], reply: &[u64]) -> Result<(), TestCaseError> {
     let r = type_ahead(script, pause, reply, true);
     let mut rest = script.iter();
-    for line in &r.lines {
+    for line in &r.lines() {
         prop_assert!(rest.any(|s| s == line), "ran {line:?}, which was not sent as such (or out of order)");
     }
     if r.dropped > 0 {
@@ -1155,7 +1159,7 @@ fn typed_ahead(script: &[String], pause: &[u64], reply: &[u64]) -> Result<(), Te
     }
     if r.full_reads == 0 {
         prop_assert_eq!(r.dropped, 0);
-        prop_assert_eq!(&r.lines, &script.to_vec());
+        prop_assert_eq!(&r.lines(), &script.to_vec());
     }
     Ok(())
 }
@@ -1183,16 +1187,16 @@ fn a_paste_beyond_the_receive_ring_never_runs_a_line_glued_from_two() {
     let (pause, reply) = ([0; 9], [130, 4, 4, 4, 400, 4, 4, 4, 600]);
     let before = type_ahead(&script, &pause, &reply, false);
     assert_eq!(before.dropped, 2, "the paste must overrun the ring");
-    assert!(before.lines.iter().any(|l| l == "set setpoint_c 5"), "without the fix: {:?}", before.lines);
+    assert!(before.lines().iter().any(|l| l == "set setpoint_c 5"), "without the fix: {:?}", before.lines());
     let after = type_ahead(&script, &pause, &reply, true);
     assert_eq!(after.dropped, before.dropped);
-    assert!(after.lines.iter().all(|l| script.contains(l)), "{:?}", after.lines);
+    assert!(after.lines().iter().all(|l| script.contains(l)), "{:?}", after.lines());
     assert!(after.frames.contains(&Owned::Lost));
-    assert_eq!(after.lines.first().map(String::as_str), Some("help"));
+    assert_eq!(after.lines().first().map(String::as_str), Some("help"));
     // Typed at a person's pace, all of it runs.
     let slow = type_ahead(&script, &[2_000; 9], &reply, true);
     assert_eq!((slow.dropped, slow.full_reads), (0, 0));
-    assert_eq!(slow.lines, script);
+    assert_eq!(slow.lines(), script);
 }
 
 /// `cases` cases; a failure's seed is kept beside this file (`iface_fuzz.proptest-regressions`)

@@ -8,17 +8,17 @@
 //! d_s(k) = min(d_f(k), d_s(k−1) + (d(k) − d_s(k−1))·max(Ts/τ_s, 1/n))
 //! ```
 //!
-//! (n: samples since the start), each beginning as the running mean of the samples so far (the weight of at least 1/n), so a
-//! fresh start is not biased toward its first sample. d_f − d_s above `duty_rise` while the
-//! load is held near its setpoint is a lid opening (a slow ambient swing moves both together; a
-//! setpoint change or a pull-down is not "holding"). The slow average is held at or below the
-//! fast one: in a room that cools for hours the holding duty falls, a slow average left to lag
-//! above the fast one by 0.03–0.05 took that much off a lid opened then, and two lids of 50 000
-//! missions went unreported for it (`hter campaign --missions 10000 --seed 80001`, mission
-//! 88618: 0.096 at most; `--seed 60001 --drive buck`, 68435: 0.088 against the buck's 0.09). In
-//! a room that warms the slow one lags below, and the minimum changes nothing. Or, for a
-//! controller at its limit (whose duty cannot jump any more), full cooling for 10 min no longer
-//! holds the load within 1 °C.
+//! (n: samples since the start), each beginning as the running mean of the samples so far (the
+//! weight of at least 1/n), so a fresh start is not biased toward its first sample. d_f − d_s
+//! above `duty_rise` while the load is held near its setpoint is a lid opening (a slow ambient
+//! swing moves both together; a setpoint change or a pull-down is not "holding"). The slow
+//! average is held at or below the fast one: in a room that cools for hours the holding duty
+//! falls, a slow average left to lag above the fast one by 0.03–0.05 took that much off a lid
+//! opened then, and two lids of 50 000 missions went unreported for it (`hter campaign
+//! --missions 10000 --seed 80001`, mission 88618: 0.096 at most; `--seed 60001 --drive buck`,
+//! 68435: 0.088 against the buck's 0.09). In a room that warms the slow one lags below, and the
+//! minimum changes nothing. Or, for a controller at its limit (whose duty cannot jump any more),
+//! full cooling for 10 min no longer holds the load within 1 °C.
 //!
 //! "Holding": the load reached this setpoint at least one fast time constant ago. The averages
 //! start afresh when a pull-down reaches the setpoint, so they never carry its full duty (which
@@ -41,9 +41,9 @@
 //! scaled to the measured supply: 0, 1 and 1 unreported (44050's lid came while the report of a
 //! brief opening 13 min before still stood), with 55, 72 and 71 missions reporting a lid and none
 //! left open (63, 72 and 85 before); with the slow average held at or below the fast one, 0, 0
-//! and 2 (44050, and 40432 likewise) and 59, 72 and 74. The map neglects the modules' Seebeck voltage, which
-//! steepens the buck's cooling near the hold point (≈ 1.4 × the SSR's there, the map says
-//! ≈ 1.2): hence 0.09 and not the SSR's 0.1 (0.1: 2, 3 and 3 unreported).
+//! and 2 (44050, and 40432 likewise) and 59, 72 and 74. The map neglects the modules' Seebeck
+//! voltage, which steepens the buck's cooling near the hold point (≈ 1.4 × the SSR's there, the
+//! map says ≈ 1.2): hence 0.09 and not the SSR's 0.1 (0.1: 2, 3 and 3 unreported).
 
 use super::{samples_u16, since};
 use crate::event::EventKind;
