@@ -109,8 +109,9 @@ fn a_brownout_stores_the_reset_and_restarts_both_counts() {
 /// the law on that B swung the load between 3.50 and 4.41 °C for 15 minutes. Resumed, the load
 /// stays within 0.15 °C of its 4 °C, and the estimate is trusted again within the hour and for
 /// the rest of the day. (0.1 °C until the simulated restart started the law from the board's
-/// boot duty, 0.4, which GPC holds for the four samples its first design takes, where the
-/// holding duty had been used: 0.12 °C of it is that hold, no swing.)
+/// boot duty, 0.4, which GPC held for the four samples its first design takes, where the
+/// holding duty had been used: 0.12 °C of it is that start, no swing; the same with the fallback
+/// PI driving those four samples, `hter::control::adaptive`, "The first samples".)
 #[test]
 fn a_brownout_in_a_hold_resumes_from_the_stored_model_without_a_swing() {
     const RESET_S: f64 = 20_000.0;

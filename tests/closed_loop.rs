@@ -276,14 +276,17 @@ fn at_rest_the_reset_brings_the_half_load_back_to_its_setpoint() {
 /// --mission-seed 4207`) pulls a light carrier down from 13.9 °C, its duty banging between the
 /// rails on box-limited plans, and a hold there kept the duty at 0 at 120 s when the load
 /// needed cooling: after the pull-down it rose back to 8.29 °C, 40 s above 8 °C. Clipped into
-/// the box as before the hold, the load peaks at 8.01 °C (10 s above).
+/// the box as before the hold, the load peaked at 8.01 °C (10 s above). Since the fallback PI
+/// drives the first four samples (`hter::control::adaptive`, "The first samples") the pull-down
+/// starts 40 s sooner at full duty, the bang between the rails comes at other readings, and the
+/// load peaks at 8.16 °C (20 s above) after first crossing 8 °C 40 s sooner.
 #[test]
 fn the_sample_that_may_not_skip_holds_the_duty_only_after_a_floor_sample() {
     use hal_sim::mission::{evaluate, Mission};
     let m = Mission::generate(4207);
     let r = evaluate(&m, &run(&m.options(ControllerSpec::new(ControllerChoice::Gpc))).unwrap());
     let max = r.max_judged_c.unwrap_or(f64::NAN);
-    assert!(max <= 8.05 && r.outside_s <= 10.0, "highest {max} °C, {} s outside 2–8 °C", r.outside_s);
+    assert!(max <= 8.2 && r.outside_s <= 20.0, "highest {max} °C, {} s outside 2–8 °C", r.outside_s);
 }
 
 /// A refused estimate freezes the law on the model its last rest confirmed

@@ -50,7 +50,8 @@ pub const SETPOINT_C: f32 = 4.0;
 /// excitation and nothing else; the 20 s openings the test once was spoiled the fit, as the
 /// simulator's `prbs` runs showed); its switch is still checked whenever the freeze guard or a
 /// sensor fault opens it. The buck build's lid check takes the cooling the duty pumps, not the
-/// duty (`hter::supervisor::lid::LidConfig::BUCK`).
+/// duty (`hter::supervisor::lid::LidConfig::BUCK`), and its shorted-drive check waits 45 min
+/// for a second trip (`hter::supervisor::ssr::StuckOnConfig::BUCK`).
 pub const CARRIER: CarrierConfig = CarrierConfig {
     supervisor: SupervisorConfig {
         switch: if cfg!(feature = "identify") {
@@ -60,6 +61,11 @@ pub const CARRIER: CarrierConfig = CarrierConfig {
         },
         #[cfg(feature = "buck")]
         lid: hter::supervisor::lid::LidConfig::BUCK,
+        #[cfg(feature = "buck")]
+        ssr: hter::supervisor::ssr::SsrConfig {
+            stuck_on: hter::supervisor::ssr::StuckOnConfig::BUCK,
+            ..hter::supervisor::ssr::SsrConfig::DEFAULT
+        },
         ..SupervisorConfig::DEFAULT
     },
     ..CarrierConfig::DEFAULT

@@ -161,7 +161,8 @@
 //! record's (b0 −0.0176 → −0.0163), and the load holds 3.99–4.02 °C through the restart
 //! (3.96–4.12 °C since the simulated restart starts the law from the board's boot duty, 0.4,
 //! held for the four samples of GPC's first design, where it had used the holding duty; b0
-//! −0.0210 → −0.0196). A commissioned model ([`AdaptiveConfig::restored_from`]) still starts
+//! −0.0210 → −0.0196; the same range with the fallback PI driving those four samples, "The
+//! first samples", b0 −0.0180 at the end of the day). A commissioned model ([`AdaptiveConfig::restored_from`]) still starts
 //! with the start's P(0).
 //!
 //! **When the estimate is trusted** (all must hold, else the law runs on the last trusted
@@ -316,6 +317,17 @@
 //! 200–230 s later from 28 °C and 110–280 s later from 9 °C (H-TER I–II; `hter sim --scenario
 //! step --no-approach-lead`). Regulation and setpoint changes
 //! after the first approach are not touched.
+//!
+//! **The first samples.** GPC's first staged design takes four samples ([`super::gpc::GpcStaged`]),
+//! in which the law holds the duty it starts from. A board starts it at the fallback PI's bias,
+//! 0.4, after every boot (`profile::SelfTuningOrPi::new`), whatever the reading: a load at 2.1–2.4
+//! °C in a cold room (0.9–3 °C), restarted by a brown-out or a fail-safe stop, was cooled at 0.4
+//! for 40 s, fell to 1.3–1.7 °C, and the freeze guard's trip while it fell fast was taken for a
+//! shorted SSR, a false report that is stored (campaign missions 60267, 66503, 68757 of `--seed
+//! 60001`). Until the design is complete the fallback PI drives, on the reading (it runs every
+//! sample anyway); the mode does not change, and the law takes over from the duty the PI applied,
+//! which its history tracks. Those boots now ask for no cooling and the load stays at 1.84–2.14 °C
+//! over the next half hour.
 //!
 //! **Across a sensor fault** ([`GAP_SETTLE_SAMPLES`]). While the step has no trusted reading it
 //! runs no controller; it tells the self-tuner what it applied instead ([`Controller::skip`]), and
@@ -1016,9 +1028,10 @@ pub fn plausible_model(cfg: &AdaptiveConfig, m: &Model) -> bool {
         && m.static_gain().is_some_and(|g| (cfg.gain_min_c_per_duty..=cfg.gain_max_c_per_duty).contains(&g))
 }
 
-/// [`plausible_model`] out of line, for the checks off the per-sample path (a start model, a
-/// stored record): one copy for both instead of one inlined into each, −120 B of the default
-/// firmware; the per-sample check in `update` keeps its inlined copy.
+/// [`plausible_model`] out of line: one copy for the start model's check, a stored record's and
+/// the per-sample one in `update`, instead of one inlined into each (−120 B of the default
+/// firmware for the first two; −176 B of the calibrated module-sense build for `update`'s, for a
+/// call per sample).
 #[inline(never)]
 pub(crate) fn plausible_model_cold(cfg: &AdaptiveConfig, m: &Model) -> bool {
     plausible_model(cfg, m)
@@ -1029,7 +1042,7 @@ impl Controller for SelfTuning {
         self.count_rest(input);
         let healthy = self.estimate_step(input.y_c);
         if healthy && self.updates >= self.cfg.warmup_samples {
-            if let Some(m) = self.estimate().filter(|m| plausible_model(&self.cfg, m)) {
+            if let Some(m) = self.estimate().filter(|m| plausible_model_cold(&self.cfg, m)) {
                 self.trusted = Some(m);
                 self.mode = AdaptiveMode::Adaptive;
             } else if self.trusted.is_some() {
@@ -1056,10 +1069,24 @@ impl Controller for SelfTuning {
             }
             other => other,
         };
+        // Until GPC's first staged design is complete (four samples after a start) the law would
+        // hold its start duty, the board's boot duty, whatever the reading: the fallback PI drives
+        // on the reading instead, and the mode stays (module docs, "The first samples"). Without
+        // `mv-laws` the law is GPC (−88 B of flash against the `matches!`).
+        #[cfg(not(feature = "mv-laws"))]
+        let designed = self.law_state.gpc().model().is_some();
+        #[cfg(feature = "mv-laws")]
+        let designed = !matches!(law, Law::Gpc(_)) || self.law_state.gpc().model().is_some();
         let law_u = self.law_state.update(&law, self.trusted.as_ref(), input.y_c, w);
         let pi_u = self.fallback.update(input);
         match law_u {
-            Ok(u) if self.mode != AdaptiveMode::Fallback => Ok(u),
+            Ok(u) if self.mode != AdaptiveMode::Fallback => {
+                if designed {
+                    Ok(u)
+                } else {
+                    pi_u
+                }
+            }
             _ => {
                 self.mode = AdaptiveMode::Fallback;
                 pi_u
@@ -1673,6 +1700,36 @@ mod tests {
         assert!(t + 1 >= cfg.warmup_samples as usize + 2, "engaged at {t}, inside the warm-up");
         assert_eq!(c.mode(), AdaptiveMode::Adaptive);
         assert_eq!(c.trusted_model(), c.estimate());
+    }
+
+    /// A board boots the self-tuner at the PI's bias, 0.4, and GPC's first staged design takes
+    /// four samples, in which the law would hold that duty whatever the reading: a load already
+    /// at 2.1–2.4 °C in a cold room fell to 1.3–1.7 °C under it, and the freeze guard's trip was
+    /// taken for a shorted SSR (campaign missions 60267, 66503 and 68757, `--seed 60001`). Until
+    /// the design is complete the fallback PI drives, bit for bit, on the reading, and the mode
+    /// stays the self-tuner's; from the fifth sample on the law drives.
+    #[test]
+    fn until_the_first_design_is_complete_the_pi_drives_on_the_reading() {
+        let u0 = crate::profile::PI.bias;
+        let mut c = SelfTuning::new(ADAPTIVE_GPC, TS_S, u0).unwrap();
+        let mut pi = Pi::new(PiConfig { bias: u0, ..ADAPTIVE_GPC.fallback }, TS_S);
+        pi.track(&ControlInput { y_c: 0.0, w_c: 0.0 }, u0);
+        // 1.8 °C below the setpoint: no cooling is wanted.
+        let input = ControlInput { y_c: W_C - 1.8, w_c: W_C };
+        for t in 0..4 {
+            assert!(c.law_state.gpc().model().is_none(), "sample {t}: the design is not complete");
+            let u = c.update(&input).unwrap();
+            assert_eq!(u.to_bits(), pi.update(&input).unwrap().to_bits(), "sample {t}");
+            assert!(u.clamp(0.0, 1.0) < u0, "sample {t}: {u} cools at the boot duty or more");
+            assert_eq!(c.mode(), AdaptiveMode::Frozen, "sample {t}: the self-tuner's mode");
+            let applied = u.clamp(0.0, 1.0);
+            c.track(&input, applied);
+            pi.track(&input, applied);
+        }
+        assert!(c.law_state.gpc().model().is_some(), "the first design is complete");
+        let u = c.update(&input).unwrap();
+        assert_ne!(u.to_bits(), pi.update(&input).unwrap().to_bits(), "the law drives");
+        assert_eq!(c.mode(), AdaptiveMode::Frozen);
     }
 
     #[test]

@@ -95,7 +95,7 @@ pub struct StuckOnConfig {
     pub unrequested_duty: f32,
     /// Path 1: a second unrequested trip within this time of the first is a short; path 2 only
     /// looks this long after a trip, s (half an hour: a hot ambient on a shorted SSR trips
-    /// every ≈ 15 min).
+    /// every ≈ 15 min; 45 min on the buck, [`Self::BUCK`]).
     pub trip_window_s: f32,
     /// Paths 1 and 2: the freeze guard's smoothed slope below this is falling fast, °C/s
     /// (−0.18 °C/min).
@@ -130,6 +130,16 @@ impl StuckOnConfig {
         drop_c: 0.3,
         keep_pace: 0.95,
     };
+
+    /// The buck drive's (the firmware's `buck` build, `hter sim --drive buck`): path 1's window
+    /// 45 min. A shorted buck's trips in a 29 °C room came 30.2–31.8 min apart (the guard's hold,
+    /// then the fall at full cooling), just past half an hour, and the load was held at
+    /// 1.5–3 °C by the guard alone for 5.7 h without a report (campaign mission 83165,
+    /// `hter campaign --missions 10000 --seed 80001 --drive buck`). With 45 min the five buck
+    /// sets of seeds 1 … 80 001 find every short and no false one more (README, "On the buck
+    /// drive").
+    #[cfg(feature = "buck-drive")]
+    pub const BUCK: StuckOnConfig = StuckOnConfig { trip_window_s: 2700.0, ..Self::DEFAULT };
 }
 
 /// Settings of the stuck-off (open SSR or modules) check.
