@@ -1072,8 +1072,8 @@ impl Controller for SelfTuning {
         // Until GPC's first staged design is complete (four samples after a start, and after a
         // change of horizons) the law would hold its last duty, after a boot the board's boot
         // duty, whatever the reading: the fallback PI drives on the reading instead, and the mode
-        // stays (module docs, "The first samples"). Without `mv-laws` the law is GPC (−88 B of
-        // flash against the `matches!`).
+        // stays (module docs, "The first samples"). Without `mv-laws` the law is GPC: no match on
+        // it (−56 B of flash on the calibrated module-sense build).
         #[cfg(not(feature = "mv-laws"))]
         let designed = self.law_state.gpc().model().is_some();
         #[cfg(feature = "mv-laws")]
