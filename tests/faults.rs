@@ -710,17 +710,14 @@ fn a_shorted_buck_tripping_every_half_hour_is_found() {
 #[test]
 fn a_restart_starts_from_the_boards_boot_duty_and_the_pi_drives_until_the_first_design() {
     use hal_sim::mission::{evaluate, Mission};
-    let boots = |out: &SimOutput| -> Vec<usize> {
-        let restarted = |r: &hal_sim::sim::Row| r.events.iter().any(|e| matches!(e.kind, EventKind::Restarted(_)));
-        out.rows.iter().enumerate().filter(|(_, r)| restarted(r)).map(|(i, _)| i).collect()
-    };
     // Near the setpoint the boot's first duty is the PI's first output from its bias,
     // bias + (kp + kp·Ts/Ti)·(y − w), to the PWM's step of 0.001.
     let out = gpc_disturbance(&[(3000.0, Fault::Brownout)], Some(4000.0));
     let pi = hter::profile::PI;
     let [i] = boots(&out)[..] else { panic!("one restart") };
     let r = &out.rows[i];
-    let gain = f64::from(pi.kp_per_c) * (1.0 + 10.0 / f64::from(pi.ti_s));
+    let ts = f64::from(hter::step::CarrierConfig::DEFAULT.ts_s);
+    let gain = f64::from(pi.kp_per_c) * (1.0 + ts / f64::from(pi.ti_s));
     let expected = f64::from(pi.bias) + gain * (r.temp_c - r.setpoint_c);
     assert!((r.duty - expected).abs() <= 1e-3, "boot duty {} at {} °C, expected {expected}", r.duty, r.temp_c);
     // Far above it, the PI cools fully through the four samples.
@@ -743,6 +740,12 @@ fn a_restart_starts_from_the_boards_boot_duty_and_the_pi_drives_until_the_first_
     assert!(r.reasons.is_empty(), "{:?}", r.reasons);
 }
 
+/// The rows of `out` a restart's boot reports (`restarted_*`), in order.
+fn boots(out: &SimOutput) -> Vec<usize> {
+    let restarted = |r: &hal_sim::sim::Row| r.events.iter().any(|e| matches!(e.kind, EventKind::Restarted(_)));
+    out.rows.iter().enumerate().filter(|(_, r)| restarted(r)).map(|(i, _)| i).collect()
+}
+
 /// A load at 2.1–2.4 °C in a cold room (0.9–3 °C), the supply switch open with nothing asked,
 /// restarted by a brown-out or a fail-safe stop: GPC held the boot duty, 0.4, for the four
 /// samples of its first design, the load fell to 1.3–1.7 °C, and the freeze guard's trip while
@@ -763,8 +766,7 @@ fn a_boot_on_a_cold_load_is_not_taken_for_a_shorted_ssr() {
             r.misreported,
             r.spurious
         );
-        let boot = out.rows.iter().position(|r| r.events.iter().any(|e| matches!(e.kind, EventKind::Restarted(_))));
-        let boot = boot.expect("the mission restarts");
+        let &[boot, ..] = &boots(&out)[..] else { panic!("mission {seed} restarts") };
         assert!(out.rows[boot..boot + 4].iter().all(|r| r.duty == 0.0), "mission {seed}: the boot cools");
     }
 }

@@ -49,9 +49,9 @@ pub const SETPOINT_C: f32 = 4.0;
 /// The identification build turns off the supply-switch test pulses (its record holds its
 /// excitation and nothing else; the 20 s openings the test once was spoiled the fit, as the
 /// simulator's `prbs` runs showed); its switch is still checked whenever the freeze guard or a
-/// sensor fault opens it. The buck build's lid check takes the cooling the duty pumps, not the
-/// duty (`hter::supervisor::lid::LidConfig::BUCK`), and its shorted-drive check waits 45 min
-/// for a second trip (`hter::supervisor::ssr::StuckOnConfig::BUCK`).
+/// sensor fault opens it. The buck build's supervisor is the buck's
+/// (`hter::supervisor::SupervisorConfig::BUCK`: the lid check takes the cooling the duty pumps,
+/// not the duty, and the shorted-drive check waits 45 min for a second trip).
 pub const CARRIER: CarrierConfig = CarrierConfig {
     supervisor: SupervisorConfig {
         switch: if cfg!(feature = "identify") {
@@ -59,17 +59,16 @@ pub const CARRIER: CarrierConfig = CarrierConfig {
         } else {
             SwitchConfig::DEFAULT
         },
-        #[cfg(feature = "buck")]
-        lid: hter::supervisor::lid::LidConfig::BUCK,
-        #[cfg(feature = "buck")]
-        ssr: hter::supervisor::ssr::SsrConfig {
-            stuck_on: hter::supervisor::ssr::StuckOnConfig::BUCK,
-            ..hter::supervisor::ssr::SsrConfig::DEFAULT
-        },
-        ..SupervisorConfig::DEFAULT
+        ..SUPERVISOR
     },
     ..CarrierConfig::DEFAULT
 };
+
+/// The drive's supervisor settings, before this build's own (above).
+#[cfg(feature = "buck")]
+const SUPERVISOR: SupervisorConfig = SupervisorConfig::BUCK;
+#[cfg(not(feature = "buck"))]
+const SUPERVISOR: SupervisorConfig = SupervisorConfig::DEFAULT;
 
 /// [`CARRIER`], checked when the firmware is compiled: a setting the step cannot honour (a
 /// supervisor window longer than its detector's history, say) fails the build, not the board.

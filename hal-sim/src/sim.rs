@@ -394,10 +394,8 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
     let sc = &opts.scenario;
     let mut cfg = CarrierConfig::DEFAULT;
     if opts.drive == Drive::Buck {
-        // As the firmware's `buck` build: the lid check in the SSR's units of cooling, and the
-        // shorted drive's trip window.
-        cfg.supervisor.lid = hter::supervisor::lid::LidConfig::BUCK;
-        cfg.supervisor.ssr.stuck_on = hter::supervisor::ssr::StuckOnConfig::BUCK;
+        // As the firmware's `buck` build.
+        cfg.supervisor = hter::supervisor::SupervisorConfig::BUCK;
     }
     if let PlantChoice::Arx(_) = opts.plant {
         // Ideal measurement: no filter between the model's output and the controller.

@@ -1072,12 +1072,10 @@ impl Controller for SelfTuning {
         // Until GPC's first staged design is complete (four samples after a start, and after a
         // change of horizons) the law would hold its last duty, after a boot the board's boot
         // duty, whatever the reading: the fallback PI drives on the reading instead, and the mode
-        // stays (module docs, "The first samples"). Without `mv-laws` the law is GPC: no match on
-        // it (−56 B of flash on the calibrated module-sense build).
-        #[cfg(not(feature = "mv-laws"))]
-        let designed = self.law_state.gpc().model().is_some();
-        #[cfg(feature = "mv-laws")]
-        let designed = !matches!(law, Law::Gpc(_)) || self.law_state.gpc().model().is_some();
+        // stays (module docs, "The first samples"). Without `mv-laws` the law is GPC, and the
+        // match folds away (−56 B of flash on the calibrated module-sense build against matching).
+        let other_law = cfg!(feature = "mv-laws") && !matches!(law, Law::Gpc(_));
+        let designed = other_law || self.law_state.gpc().model().is_some();
         let law_u = self.law_state.update(&law, self.trusted.as_ref(), input.y_c, w);
         let pi_u = self.fallback.update(input);
         match law_u {

@@ -122,6 +122,17 @@ impl SupervisorConfig {
         switch: SwitchConfig::DEFAULT,
         lid: LidConfig::DEFAULT,
     };
+
+    /// A board whose modules are on a buck drive (the firmware's `buck` build, `hter sim --drive
+    /// buck`): the lid check in the SSR's units of cooling ([`LidConfig::BUCK`]) and the
+    /// shorted drive's 45 min trip window ([`ssr::StuckOnConfig::BUCK`]); the rest as
+    /// [`Self::DEFAULT`].
+    #[cfg(feature = "buck-drive")]
+    pub const BUCK: SupervisorConfig = SupervisorConfig {
+        ssr: SsrConfig { stuck_on: ssr::StuckOnConfig::BUCK, ..SsrConfig::DEFAULT },
+        lid: LidConfig::BUCK,
+        ..Self::DEFAULT
+    };
 }
 
 /// A supervisor setting its detectors cannot honour at the sample period: the field, as its
