@@ -111,14 +111,20 @@ fn a_brownout_stores_the_reset_and_restarts_both_counts() {
 /// the rest of the day. (0.1 °C until the simulated restart started the law from the board's
 /// boot duty, 0.4, which GPC held for the four samples its first design takes, where the
 /// holding duty had been used: 0.12 °C of it is that start, no swing; the same with the fallback
-/// PI driving those four samples, `hter::control::adaptive`, "The first samples".)
+/// PI driving those four samples, `hter::control::adaptive`, "The first samples".) Since the
+/// boot starts every law from the board's boot duty, 0.2 (`profile::BOOT_DUTY`), under the 0.46
+/// this load holds at, the load warms by up to 0.55 °C in the first minutes after the restart,
+/// never more than 0.15 °C below the setpoint, and within 0.15 °C of it from 10 minutes on.
 #[test]
 fn a_brownout_in_a_hold_resumes_from_the_stored_model_without_a_swing() {
     const RESET_S: f64 = 20_000.0;
     let out = day(&["brownout@20000"]);
     let after: Vec<_> = out.rows.iter().filter(|r| r.t_s >= RESET_S).collect();
-    let worst = after.iter().map(|r| (r.true_temp_c - r.setpoint_c).abs()).fold(0.0, f64::max);
-    assert!(worst <= 0.15, "{worst:.2} °C from the setpoint after the restart");
+    let error = |r: &&hal_sim::sim::Row| r.true_temp_c - r.setpoint_c;
+    let (low, high) = after.iter().map(error).fold((0.0, 0.0), |(l, h), e| (f64::min(l, e), f64::max(h, e)));
+    assert!(low >= -0.15 && high <= 0.6, "{low:.2} … {high:.2} °C from the setpoint after the restart");
+    let settled = after.iter().filter(|r| r.t_s >= RESET_S + 600.0).map(error).fold(0.0, |w, e| f64::max(w, e.abs()));
+    assert!(settled <= 0.15, "{settled:.2} °C from the setpoint 10 minutes after the restart");
     let mut late = after.iter().filter(|r| r.t_s >= RESET_S + 3600.0);
     assert!(late.all(|r| r.adaptive_mode == Some(AdaptiveMode::Adaptive)), "not adaptive an hour on");
     // The trust decision settles once: frozen at the restart, adaptive when the estimate is

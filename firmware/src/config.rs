@@ -271,7 +271,7 @@ pub fn controller(adaptive: Option<AdaptiveConfig>) -> Ctl {
         Some(a) => ADAPTIVE_DEFAULT.with_restored(&a),
         None => ADAPTIVE_DEFAULT,
     };
-    // Starts from the PI's bias: the duty that holds the load near 4 °C.
+    // Starts from the profile's boot duty (`profile::BOOT_DUTY`), the fallback PI's bias.
     let (ctl, refused) = profile::SelfTuningOrPi::new(cfg, CARRIER.ts_s);
     if let Some(e) = refused {
         // The controller's name is logged at start, so the log shows the PI.

@@ -103,7 +103,8 @@ pub struct ControllerSpec {
     pub initial: Option<Model>,
     /// PI tuning (`--kp`, `--ti`); `None`: the carrier's own ([`PlantChoice::default_pi`]).
     /// Its bias is replaced by the plant's steady duty when the run starts holding a
-    /// temperature.
+    /// temperature, and by the board's boot duty (`profile::BOOT_DUTY`) from ambient and after
+    /// a restart.
     pub pi: Option<PiConfig>,
     /// Model the holdover estimate runs on ([`hter::holdover`]); `None`: [`Self::initial`], or
     /// the carrier's start model. Set apart from `initial` for a model the self-tuner would not
@@ -434,9 +435,10 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
         PlantChoice::Custom(p) => p.container == crate::plant::Container::StainlessSteel,
         _ => false,
     };
-    // `boot`: built by a restart's boot, which starts the law from its fallback PI's bias, as
-    // the board's boot does (`profile::SelfTuningOrPi::new`, `App::new`), not from the run's
-    // start duty.
+    // `boot`: built by a restart's boot, which starts the law from the board's boot duty
+    // (`profile::BOOT_DUTY`, the fallback PI's bias: `profile::SelfTuningOrPi::new`, `App::new`),
+    // not from the run's start duty. A run from ambient starts as a board's power-up does, from
+    // the boot duty too; one holding a temperature starts bumplessly from the duty that holds it.
     let make_controller = |persisted: Option<&[u8; ModelRecord::LEN]>, boot: bool| -> Result<AnyController> {
         Ok(if sc.excitation {
             let prbs =
@@ -453,11 +455,9 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                 spec.initial = Some(profile::START_MODEL_HTER2);
             }
             let pi = spec.pi.unwrap_or_else(|| opts.plant.default_pi());
-            // Holding a temperature, the loop starts at the duty that holds it; from ambient
-            // the PI's own bias stands (the SSR saturates through the pull-down anyway).
             let bias = match sc.start {
                 Start::Holding(_) if !boot => u0 as f32,
-                _ => pi.bias,
+                _ => profile::BOOT_DUTY,
             };
             spec.pi = Some(PiConfig { bias, ..pi });
             // After a reset: the stored model, if it decodes and is still plausible for this law
@@ -468,7 +468,7 @@ pub fn run_with(opts: &SimOptions, board: &BoardOptions) -> Result<SimOutput> {
                     spec.resumed = true;
                 }
             }
-            spec.build(cfg.ts_s, if boot { bias } else { u0 as f32 })?
+            spec.build(cfg.ts_s, bias)?
         })
     };
     // The holdover runs on the model the carrier was commissioned with: the start model of its

@@ -246,16 +246,16 @@ fn small_campaign_reports_the_spec_fields() {
 
 #[test]
 fn a_campaign_mission_replays_with_hter_sim() {
-    // Mission 116 with PI fails (it leaves 2–8 °C for ≈ 17 min); mission 115 carries a dead SSR
+    // Mission 681 with PI fails (it leaves 2–8 °C for ≈ 19 min); mission 115 carries a dead SSR
     // at 61 071 s that the step reports. A replay must show what the campaign judged.
-    for (seed, controller) in [("116", "pi"), ("115", "gpc")] {
+    for (seed, controller) in [("681", "pi"), ("115", "gpc")] {
         let c = json(&["campaign", "--missions", "1", "--seed", seed, "--controller", controller, "--json"]);
         let s = json(&["sim", "--mission-seed", seed, "--controller", controller, "--json"]);
         assert_eq!(c["worst_min_c"].as_f64(), s["min_temp_c"].as_f64(), "{c}\n{s}");
-        if seed == "116" {
-            assert_eq!(c["failures"], serde_json::json!([116]), "{c}");
+        if seed == "681" {
+            assert_eq!(c["failures"], serde_json::json!([681]), "{c}");
             let replay = c["failure_details"][0]["replay"].as_str().unwrap();
-            assert_eq!(replay, "hter sim --mission-seed 116 --controller pi --json");
+            assert_eq!(replay, "hter sim --mission-seed 681 --controller pi --json");
             assert!(s["time_outside_2_8_s"].as_f64().unwrap() > 600.0, "{s}");
         } else {
             assert_eq!(c["failures"], serde_json::json!([]), "{c}");
@@ -272,17 +272,17 @@ fn a_campaign_mission_replays_with_hter_sim() {
 
 #[test]
 fn a_buck_campaign_mission_replays_with_its_drive() {
-    // Mission 116 with PI fails on the buck drive too (≈ 18 min outside 2–8 °C); its replay line
+    // Mission 681 with PI fails on the buck drive too (≈ 20 min outside 2–8 °C); its replay line
     // must name the drive, and running that line must show what the campaign judged.
-    let c = json(&["campaign", "--missions", "1", "--seed", "116", "--controller", "pi", "--drive", "buck", "--json"]);
+    let c = json(&["campaign", "--missions", "1", "--seed", "681", "--controller", "pi", "--drive", "buck", "--json"]);
     assert_eq!(c["drive"], "buck", "{c}");
-    assert_eq!(c["failures"], serde_json::json!([116]), "{c}");
+    assert_eq!(c["failures"], serde_json::json!([681]), "{c}");
     let replay = c["failure_details"][0]["replay"].as_str().unwrap();
-    assert_eq!(replay, "hter sim --mission-seed 116 --controller pi --drive buck --json");
+    assert_eq!(replay, "hter sim --mission-seed 681 --controller pi --drive buck --json");
     let args: Vec<&str> = replay.split_whitespace().skip(1).collect();
     let s = json(&args);
     assert_eq!(c["worst_min_c"].as_f64(), s["min_temp_c"].as_f64(), "{c}\n{s}");
-    let ssr = json(&["sim", "--mission-seed", "116", "--controller", "pi", "--json"]);
+    let ssr = json(&["sim", "--mission-seed", "681", "--controller", "pi", "--json"]);
     assert_ne!(s["energy_wh"], ssr["energy_wh"], "the replay ran on the SSR: {s}\n{ssr}");
 }
 

@@ -240,8 +240,8 @@ fn run() -> Result<(), &'static str> {
     let mut rls7 = Rls::new(&acfg.rls, theta7);
     let mut rls5 = Rls::new(&acfg.rls, theta5);
     // The self-tuner's own regressor type, fed beside it as the self-tuner feeds its own.
-    let mut reg = SecondOrderRegressor::new(acfg.k, PI_BIAS).map_err(|_| "the profile's delay is refused")?;
-    let mut gpc = GpcState::new(PI_BIAS);
+    let mut reg = SecondOrderRegressor::new(acfg.k, BOOT_DUTY).map_err(|_| "the profile's delay is refused")?;
+    let mut gpc = GpcState::new(BOOT_DUTY);
     // Kept between samples, as `LawState` does.
     let mut gpc_design = GpcStaged::NEW;
     // The firmware's record and indicator, timed beside the step as the control task runs them.
@@ -342,8 +342,8 @@ fn run() -> Result<(), &'static str> {
     out.flush()
 }
 
-/// The PI's bias (the holding duty), where the self-tuning controller starts.
-const PI_BIAS: f32 = hter::profile::PI.bias;
+/// The board's boot duty, where the self-tuning controller starts.
+const BOOT_DUTY: f32 = hter::profile::BOOT_DUTY;
 
 /// The measured step, as a call: the firmware calls `Carrier::step` out of line too, and the
 /// count then holds the step and the call, whether or not the compiler would have inlined the

@@ -64,13 +64,13 @@ fn kind(code: u32) -> Option<Kind> {
 }
 
 /// The controller of kind `code`, from the board profile as the firmware builds it: at the
-/// step's sample period, a self-tuner starting from the PI's bias.
+/// step's sample period, a self-tuner starting from the board's boot duty.
 pub fn controller(code: u32) -> Option<AnyController> {
     let ts_s = CARRIER.get().ts_s;
     if code == KIND_GPC_DAMPED {
-        return SelfTuning::new(DAMPED, ts_s, profile::PI.bias).ok().map(AnyController::SelfTuning);
+        return SelfTuning::new(DAMPED, ts_s, profile::BOOT_DUTY).ok().map(AnyController::SelfTuning);
     }
-    profile::controller(kind(code)?, ts_s, profile::PI.bias).ok()
+    profile::controller(kind(code)?, ts_s, profile::BOOT_DUTY).ok()
 }
 
 /// How many samples GPC's soft floor has moved the plan on, modulo 256, for a self-tuning

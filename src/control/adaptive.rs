@@ -162,7 +162,10 @@
 //! (3.96–4.12 °C since the simulated restart starts the law from the board's boot duty, 0.4,
 //! held for the four samples of GPC's first design, where it had used the holding duty; b0
 //! −0.0210 → −0.0196; the same range with the fallback PI driving those four samples, "The
-//! first samples", b0 −0.0180 at the end of the day). A commissioned model ([`AdaptiveConfig::restored_from`]) still starts
+//! first samples", b0 −0.0180 at the end of the day; 3.97–4.47 °C since the boot starts every
+//! law from [`crate::profile::BOOT_DUTY`], 0.2, under the 0.46 that holds this load: the PI
+//! takes 40 s to find the hold and the load peaks 140 s after the restart, within 3.97–4.04 °C
+//! from 1 000 s on, b0 −0.0167 at the end of the day). A commissioned model ([`AdaptiveConfig::restored_from`]) still starts
 //! with the start's P(0).
 //!
 //! **When the estimate is trusted** (all must hold, else the law runs on the last trusted
@@ -319,15 +322,17 @@
 //! after the first approach are not touched.
 //!
 //! **The first samples.** GPC's first staged design takes four samples ([`super::gpc::GpcStaged`]),
-//! in which the law holds the duty it starts from. A board starts it at the fallback PI's bias,
-//! 0.4, after every boot (`profile::SelfTuningOrPi::new`), whatever the reading: a load at 2.1–2.4
+//! in which the law holds the duty it starts from. A board started it at the fallback PI's bias,
+//! then 0.4, after every boot (`profile::SelfTuningOrPi::new`), whatever the reading: a load at 2.1–2.4
 //! °C in a cold room (0.9–3 °C), restarted by a brown-out or a fail-safe stop, was cooled at 0.4
 //! for 40 s, fell to 1.3–1.7 °C, and the freeze guard's trip while it fell fast was taken for a
 //! shorted SSR, a false report that is stored (campaign missions 60267, 66503, 68757 of `--seed
 //! 60001`). Until the design is complete the fallback PI drives, on the reading (it runs every
 //! sample anyway); the mode does not change, and the law takes over from the duty the PI applied,
 //! which its history tracks. Those boots now ask for no cooling and the load stays at 1.84–2.14 °C
-//! over the next half hour.
+//! over the next half hour. The PI itself starts from its bias, the board's boot duty
+//! ([`crate::profile::BOOT_DUTY`], 0.2 since a light carrier holding at a few hundredths was
+//! cooled for three samples from 0.4 and tripped the freeze guard).
 //!
 //! **Across a sensor fault** ([`GAP_SETTLE_SAMPLES`]). While the step has no trusted reading it
 //! runs no controller; it tells the self-tuner what it applied instead ([`Controller::skip`]), and
@@ -1701,7 +1706,7 @@ mod tests {
         assert_eq!(c.trusted_model(), c.estimate());
     }
 
-    /// A board boots the self-tuner at the PI's bias, 0.4, and GPC's first staged design takes
+    /// A board boots the self-tuner at its fallback PI's bias (then 0.4), and GPC's first staged design takes
     /// four samples, in which the law would hold that duty whatever the reading: a load already
     /// at 2.1–2.4 °C in a cold room fell to 1.3–1.7 °C under it, and the freeze guard's trip was
     /// taken for a shorted SSR (campaign missions 60267, 66503 and 68757, `--seed 60001`). Until
@@ -1709,7 +1714,7 @@ mod tests {
     /// stays the self-tuner's; from the fifth sample on the law drives.
     #[test]
     fn until_the_first_design_is_complete_the_pi_drives_on_the_reading() {
-        let u0 = crate::profile::PI.bias;
+        let u0 = ADAPTIVE_GPC.fallback.bias;
         let mut c = SelfTuning::new(ADAPTIVE_GPC, TS_S, u0).unwrap();
         let mut pi = Pi::new(PiConfig { bias: u0, ..ADAPTIVE_GPC.fallback }, TS_S);
         pi.track(&ControlInput { y_c: 0.0, w_c: 0.0 }, u0);

@@ -14,6 +14,7 @@ use anyhow::{bail, Result};
 use embassy_futures::block_on;
 use hter::app::{App, AppConfig, Handled, SampleOut};
 use hter::control::adaptive::AdaptiveConfig;
+use hter::control::PiConfig;
 use hter::failsafe::{ResetRecords, StopInfo, Stops};
 use hter::iface::Law;
 use hter::persist::flash::{self, LogStore, Store};
@@ -142,7 +143,8 @@ impl VirtualBoard {
         let adaptive = AdaptiveConfig {
             initial: Some(initial),
             k: initial.k(),
-            fallback: opts.plant.default_pi(),
+            // The carrier's PI, booted as the board's profile boots it.
+            fallback: PiConfig { bias: profile::BOOT_DUTY, ..opts.plant.default_pi() },
             ..profile::ADAPTIVE_GPC
         };
         let (mut store, mut log) = (open_store(MockFlash::blank(STORE_PAGES)), open_log(MockFlash::blank(LOG_PAGES)));
