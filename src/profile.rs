@@ -40,6 +40,10 @@ pub const PI: PiConfig = PiConfig { kp_per_c: 0.3, ti_s: 410.0, bias: 0.4 };
 /// the worse failure.
 pub const BOOT_DUTY: f32 = 0.2;
 
+/// [`PI`] as a board boots it, from [`BOOT_DUTY`]: every self-tuner's fallback and the `pi`
+/// build's controller ([`pi`]).
+pub const BOOT_PI: PiConfig = PiConfig { bias: BOOT_DUTY, ..PI };
+
 /// The PI of the H-TER II carrier (stainless-steel wall): SIMC with τc = θ (Skogestad 2003)
 /// on the first-order-plus-dead-time model of its simulated open-loop step (K = −40.4 °C/duty,
 /// θ = 103 s, τ = 3650 s by the reaction curve of [`crate::control::zn`]) ⇒ Kp = τ/(2|K|θ)
@@ -116,7 +120,7 @@ pub const fn adaptive(law: Law) -> AdaptiveConfig {
         warmup_samples: 30,
         gain_min_c_per_duty: -1000.0,
         gain_max_c_per_duty: -10.0,
-        fallback: PiConfig { bias: BOOT_DUTY, ..PI },
+        fallback: BOOT_PI,
         t_filter: GPC_T_FILTER,
     }
 }
@@ -186,7 +190,7 @@ impl Kind {
 
 /// The PI at sample period `ts_s`, as a board boots it: from [`BOOT_DUTY`].
 pub fn pi(ts_s: f32) -> Pi {
-    Pi::new(PiConfig { bias: BOOT_DUTY, ..PI }, ts_s)
+    Pi::new(BOOT_PI, ts_s)
 }
 
 /// The controller of `kind` at sample period `ts_s`, a self-tuner starting from duty `u0`
@@ -284,7 +288,7 @@ mod tests {
         for cfg in [ADAPTIVE_GPC, ADAPTIVE_IGMVC, ADAPTIVE_GMVC] {
             assert_eq!(cfg.validate(), Ok(()));
             assert_eq!(cfg.k, 5);
-            assert_eq!(cfg.fallback, PiConfig { bias: BOOT_DUTY, ..PI });
+            assert_eq!(cfg.fallback, BOOT_PI);
         }
         assert_eq!(START_MODEL_HTER2.k(), 6);
     }

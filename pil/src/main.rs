@@ -35,6 +35,8 @@ use hter::control::gpc::{GpcConfig, GpcStaged, GpcState};
 use hter::control::{AnyController, ControlInput, Controller};
 use hter::ident::rls::Rls;
 use hter::persist::{HistoryRecord, Recorder};
+// The board's boot duty, where the self-tuning controller starts.
+use hter::profile::BOOT_DUTY;
 use hter::step::{BoardReadings, Carrier, StepInput, StepOutput};
 use nalgebra::SVector;
 
@@ -341,9 +343,6 @@ fn run() -> Result<(), &'static str> {
     out.word(state as u32)?;
     out.flush()
 }
-
-/// The board's boot duty, where the self-tuning controller starts.
-const BOOT_DUTY: f32 = hter::profile::BOOT_DUTY;
 
 /// The measured step, as a call: the firmware calls `Carrier::step` out of line too, and the
 /// count then holds the step and the call, whether or not the compiler would have inlined the
